@@ -1,0 +1,1 @@
+"""envfuse fingerprints package (see DESIGN.md §2)."""

@@ -1,0 +1,1 @@
+"""envfuse models package (see DESIGN.md §2)."""

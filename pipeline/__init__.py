@@ -1,0 +1,1 @@
+"""Running envfuse: the CLI, fusing walks, evaluating many, reports and plots."""

@@ -1,0 +1,102 @@
+"""The ``envfuse`` command line: a thin layer over library functions.
+
+Every sub-command lives in a module of :mod:`pipeline.commands` that defines
+``GROUP`` (the first word: ``simulate``, ``features``, ...) and
+``register(subparsers)``. Domain errors become one line on stderr and exit
+status 1; usage errors one line and status 2; never a traceback (set
+``ENVFUSE_DEBUG=1`` to see one for an internal error).
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import os
+import pkgutil
+import sys
+
+from features.errors import EnvfuseError
+
+__all__ = ["main", "build_parser", "CliParser"]
+
+GROUPS = {
+    "simulate": "write a synthetic substation, walk or survey in device formats",
+    "features": "extract features, fixes and steps from raw device files",
+    "train": "fit environment and fusion models",
+    "survey": "fingerprint survey of a substation",
+    "evaluate": "evaluate fusion methods on walk logs",
+}
+
+
+class UsageError(Exception):
+    """Raised by :class:`CliParser` instead of printing usage and exiting."""
+
+
+class CliParser(argparse.ArgumentParser):
+    """ArgumentParser whose errors are one line, not a usage dump."""
+
+    def error(self, message):  # noqa: D401 - argparse API
+        raise UsageError(f"{self.prog}: {message} (see '{self.prog} --help')")
+
+
+def build_parser() -> CliParser:
+    parser = CliParser(
+        prog="envfuse",
+        description="Environment-aware GNSS / acoustic / PDR positioning for substations.",
+        epilog="Example: envfuse simulate site --seed 1 --out site1 --plot",
+    )
+    sub = parser.add_subparsers(dest="group", metavar="COMMAND", parser_class=CliParser)
+    group_parsers = {}
+    modules = sorted(m.name for m in pkgutil.iter_modules(importlib.import_module("pipeline.commands").__path__))
+    for name in modules:
+        module = importlib.import_module(f"pipeline.commands.{name}")
+        group = getattr(module, "GROUP", None)
+        if group is None:
+            continue
+        if group not in group_parsers:
+            gp = sub.add_parser(group, help=GROUPS.get(group, ""), description=GROUPS.get(group, ""))
+            group_parsers[group] = gp.add_subparsers(dest="command", metavar="SUBCOMMAND", parser_class=CliParser)
+            group_parsers[group].required = True
+            gp.set_defaults(_group_parser=gp)
+        module.register(group_parsers[group])
+    # Commands that stand alone (e.g. ``demo``) register on the top level.
+    for name in modules:
+        module = importlib.import_module(f"pipeline.commands.{name}")
+        if hasattr(module, "register_top"):
+            module.register_top(sub)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = sys.argv[1:] if argv is None else argv
+    try:
+        parser = build_parser()
+        args = parser.parse_args(argv)
+        if not hasattr(args, "func"):
+            (getattr(args, "_group_parser", None) or parser).print_help()
+            return 2
+        result = args.func(args)
+        return int(result or 0)
+    except UsageError as exc:
+        print(exc, file=sys.stderr)
+        return 2
+    except EnvfuseError as exc:
+        print(f"envfuse: error: {exc}", file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        print("envfuse: interrupted; files already written are complete, nothing half-written was kept",
+              file=sys.stderr)
+        return 130
+    except (OSError, MemoryError) as exc:
+        print(f"envfuse: error: {exc}", file=sys.stderr)
+        return 1
+    except Exception as exc:  # pragma: no cover - last resort for bugs
+        if os.environ.get("ENVFUSE_DEBUG"):
+            raise
+        print(f"envfuse: internal error: {type(exc).__name__}: {exc} (set ENVFUSE_DEBUG=1 for a traceback)",
+              file=sys.stderr)
+        return 3
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

@@ -1,0 +1,1 @@
+"""envfuse training package (see DESIGN.md §2)."""
