@@ -1,0 +1,120 @@
+"""``envfuse simulate site|walk|survey``: synthetic substations in device formats."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from features.errors import ConfigError
+
+GROUP = "simulate"
+
+
+def _seed(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"seed must be a non-negative integer, got {text!r}") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"seed must be a non-negative integer, got {text!r}")
+    return value
+
+
+def _positive(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a positive number, got {text!r}") from None
+    if not value > 0:
+        raise argparse.ArgumentTypeError(f"expected a positive number, got {text!r}")
+    return value
+
+
+def register(sub) -> None:
+    p = sub.add_parser("site", help="generate a substation layout (site.toml)",
+                       description="Generate a 220 kV-class substation: layout, beacons, environment truth.",
+                       epilog="Example: envfuse simulate site --seed 1 --out site1 --plot")
+    p.add_argument("--seed", type=_seed, required=True, help="layout seed (same seed, same site)")
+    p.add_argument("--out", type=Path, required=True, help="output directory (gets site.toml)")
+    p.add_argument("--plot", action="store_true", help="also write site.png (layout, beacons, class map)")
+    p.add_argument("--no-emi", action="store_true", help="no EMI zones round the transformers")
+    p.add_argument("--force", action="store_true", help="replace a non-empty output directory")
+    p.set_defaults(func=_site)
+
+    p = sub.add_parser("walk", help="simulate a walk log (walk.toml, gnss.nmea, truth.csv, ...)",
+                       description="Simulate a person walking the site's aisles, writing every device stream.",
+                       epilog="Example: envfuse simulate walk site1 --seed 7 --duration 300 --out walk7")
+    p.add_argument("site", type=Path, help="site directory or site.toml")
+    p.add_argument("--seed", type=_seed, required=True, help="walk seed")
+    p.add_argument("--duration", type=_positive, default=300.0, help="seconds (default 300)")
+    p.add_argument("--person", type=_seed, default=None, help="walker identity: same person, same gait (default: seed)")
+    p.add_argument("--start", default=None, help="start time, ISO 8601 UTC (default: drawn from the seed)")
+    p.add_argument("--no-corrections", action="store_true", help="GNSS without RTK/DGNSS corrections")
+    p.add_argument("--out", type=Path, required=True, help="output walk directory")
+    p.add_argument("--force", action="store_true", help="replace a non-empty output directory")
+    p.set_defaults(func=_walk)
+
+    p = sub.add_parser("survey", help="simulate a grid fingerprint survey (cells/<id>/...)",
+                       description="Simulate a crew's static captures on a grid of cells over the site.",
+                       epilog="Example: envfuse simulate survey site1 --out survey1 --cell-size 5 --capture-s 30")
+    p.add_argument("site", type=Path, help="site directory or site.toml")
+    p.add_argument("--out", type=Path, required=True, help="output survey directory")
+    p.add_argument("--cell-size", type=_positive, default=None, help="cell size in metres (default: site grid, 5)")
+    p.add_argument("--capture-s", type=_positive, default=30.0, help="capture length per cell, s (default 30)")
+    p.add_argument("--seed", type=_seed, default=0, help="survey seed (default 0)")
+    p.add_argument("--start", default=None, help="start time, ISO 8601 UTC")
+    p.add_argument("--no-corrections", action="store_true", help="GNSS without RTK/DGNSS corrections")
+    p.add_argument("--force", action="store_true", help="replace a non-empty output directory")
+    p.set_defaults(func=_survey)
+
+
+def _site(args) -> int:
+    from features.fileio import atomic_directory
+    from features.site import save_site
+    from simulation.layout import LayoutConfig, class_shares, generate_site
+
+    site = generate_site(args.seed, LayoutConfig(emi_zones=not args.no_emi))
+    with atomic_directory(args.out, overwrite=args.force) as tmp:
+        save_site(site, tmp / "site.toml")
+        if args.plot:
+            from pipeline.plots import plot_site
+            plot_site(site, tmp / "site.png")
+    shares = class_shares(site)
+    kinds = {}
+    for b in site.layout:
+        kinds[b.kind] = kinds.get(b.kind, 0) + 1
+    print(f"site {site.name}: {site.grid.east_max_m:.0f} x {site.grid.north_max_m:.0f} m, "
+          + ", ".join(f"{n} {k}" for k, n in sorted(kinds.items()))
+          + f"; {len(site.beacons)} beacons in {site.acoustic.n_slots} slots; "
+          f"area open {100 * shares[0]:.0f} % / light {100 * shares[1]:.0f} % / heavy {100 * shares[2]:.0f} %")
+    print(f"wrote {args.out / 'site.toml'}" + (f" and {args.out / 'site.png'}" if args.plot else ""))
+    return 0
+
+
+def _options(args) -> dict:
+    return {"gnss_corrections": not args.no_corrections}
+
+
+def _walk(args) -> int:
+    from simulation.walk import parse_utc, simulate_walk
+
+    start = parse_utc(args.start) if args.start else None
+    out = simulate_walk(args.site, args.out, seed=args.seed, duration_s=args.duration, person=args.person,
+                        start_utc=start, overwrite=args.force, options=_options(args))
+    files = sorted(p.name for p in out.iterdir())
+    print(f"walk {out}: {args.duration:.0f} s, files: {', '.join(files)}")
+    return 0
+
+
+def _survey(args) -> int:
+    from simulation.walk import parse_utc
+    from simulation.survey import simulate_survey
+
+    if args.capture_s > 3600:
+        raise ConfigError(f"--capture-s {args.capture_s} is longer than an hour per cell")
+    start = parse_utc(args.start) if args.start else None
+    out = simulate_survey(args.site, args.out, seed=args.seed, cell_size_m=args.cell_size, capture_s=args.capture_s,
+                          start_utc=start, overwrite=args.force, options=_options(args))
+    n = len(list((out / "cells").iterdir()))
+    print(f"survey {out}: {n} cells")
+    return 0

@@ -1,0 +1,64 @@
+"""Figures people look at (PNG, matplotlib's Agg backend: no display needed)."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+from matplotlib.colors import ListedColormap  # noqa: E402
+from matplotlib.patches import Patch, Rectangle  # noqa: E402
+
+from features.fileio import atomic_path  # noqa: E402
+from features.site import ENV_CLASSES, Site  # noqa: E402
+
+__all__ = ["CLASS_COLOURS", "plot_site", "save_figure"]
+
+CLASS_COLOURS = {"open": "#cfe8cf", "light": "#f6d98b", "heavy": "#e58a7a"}
+_KIND_COLOURS = {"transformer": "#4a5a6a", "firewall": "#8b8b8b", "building": "#a06a4a", "gantry": "#5b7fa6",
+                 "equipment": "#33424f"}
+
+
+def save_figure(fig, path: str | os.PathLike, dpi: int = 130) -> Path:
+    """Save a figure atomically as PNG and close it."""
+    path = Path(path)
+    with atomic_path(path, suffix=".png") as tmp:
+        fig.savefig(tmp, dpi=dpi, bbox_inches="tight", format="png")
+    plt.close(fig)
+    return path
+
+
+def plot_site(site: Site, path: str | os.PathLike, resolution_m: float = 0.5, title: str | None = None) -> Path:
+    """Layout, beacons (with TDMA slot) and the ground-truth environment class map."""
+    from simulation.environment import class_map, classify_share  # pipeline may import simulation
+    east, north, share = class_map(site, resolution_m=resolution_m)
+    cls = np.where(np.isfinite(share), classify_share(np.nan_to_num(share)), -1).astype(float)
+    cls[cls < 0] = np.nan
+    shares = [np.mean(cls[np.isfinite(cls)] == k) for k in range(3)]
+    fig, ax = plt.subplots(figsize=(10, 10 * (north[-1] - north[0] + 1) / (east[-1] - east[0] + 1) + 0.8))
+    cmap = ListedColormap([CLASS_COLOURS[c] for c in ENV_CLASSES])
+    ax.imshow(cls, origin="lower", extent=(site.grid.east_min_m, site.grid.east_max_m, site.grid.north_min_m,
+                                           site.grid.north_max_m), cmap=cmap, vmin=0, vmax=2, interpolation="nearest")
+    for b in site.layout:
+        ax.add_patch(Rectangle((b.east_min_m, b.north_min_m), b.east_max_m - b.east_min_m, b.north_max_m - b.north_min_m,
+                               facecolor="none" if b.porous else _KIND_COLOURS[b.kind],
+                               edgecolor=_KIND_COLOURS[b.kind], hatch="////" if b.porous else None, lw=1.0))
+    for z in site.emi_zones:
+        ax.add_patch(plt.Circle((z.east_m, z.north_m), z.radius_m, fill=False, ls=":", color="purple", lw=0.8))
+    for bc in site.beacons:
+        ax.plot(bc.east_m, bc.north_m, marker="^", color="black", ms=7)
+        ax.annotate(f"{bc.id}/s{bc.slot}", (bc.east_m, bc.north_m), xytext=(3, 3), textcoords="offset points",
+                    fontsize=7)
+    handles = [Patch(color=CLASS_COLOURS[c], label=f"{c} ({100 * s:.0f} %)") for c, s in zip(ENV_CLASSES, shares)]
+    handles += [Patch(color=_KIND_COLOURS[k], label=k) for k in _KIND_COLOURS]
+    handles += [plt.Line2D([], [], marker="^", color="black", ls="", label="beacon id/slot")]
+    ax.legend(handles=handles, loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8)
+    ax.set_xlabel("east (m)")
+    ax.set_ylabel("north (m)")
+    ax.set_aspect("equal")
+    ax.set_title(title or f"{site.name}: layout, beacons and environment class (blocked sky share)")
+    return save_figure(fig, path)

@@ -1,0 +1,98 @@
+"""Simulated walk logs: ``walk.toml``, ``truth.csv`` and every sensor stream (DESIGN.md §4)."""
+
+from __future__ import annotations
+
+import os
+from datetime import datetime, timedelta, timezone
+from pathlib import Path
+
+import numpy as np
+
+from features.fileio import atomic_directory, write_toml
+from features.site import load_site
+
+from .environment import environment_class
+from .rng import stream_rng
+from .route import RouteConfig, plan_route, route_trajectory
+from .streams import STREAM_WRITERS, StreamContext, run_stream_writers
+
+__all__ = ["DEFAULT_EPOCH_UTC", "default_start_utc", "write_truth_csv", "simulate_walk"]
+
+DEFAULT_EPOCH_UTC = datetime(2026, 6, 1, tzinfo=timezone.utc)
+"""Day on which simulated walks start unless told otherwise."""
+
+
+def default_start_utc(seed: int) -> datetime:
+    """A start time on :data:`DEFAULT_EPOCH_UTC`, drawn from the seed so walks see different skies."""
+    rng = stream_rng(seed, "start-time")
+    return DEFAULT_EPOCH_UTC + timedelta(seconds=int(rng.integers(0, 86_400 // 10)) * 10)
+
+
+def parse_utc(text: str) -> datetime:
+    """Parse an ISO 8601 time; a naive time is taken as UTC."""
+    from features.errors import ConfigError
+    try:
+        t = datetime.fromisoformat(text.replace("Z", "+00:00"))
+    except ValueError:
+        raise ConfigError(f"start time {text!r} is not ISO 8601 (e.g. 2026-06-01T08:00:00Z)") from None
+    return t if t.tzinfo else t.replace(tzinfo=timezone.utc)
+
+
+def format_utc(t: datetime) -> str:
+    return t.astimezone(timezone.utc).isoformat(timespec="milliseconds").replace("+00:00", "Z")
+
+
+def write_truth_csv(path: Path, site, trajectory, rate_hz: float = 10.0) -> None:
+    """``truth.csv``: t_s, east_m, north_m, env_class at ``rate_hz`` (class by the blocked-sky rule)."""
+    step = max(1, int(round(trajectory.rate_hz / rate_hz)))
+    t = trajectory.t_s[::step]
+    e = trajectory.east_m[::step]
+    n = trajectory.north_m[::step]
+    cls = environment_class(site, e, n)
+    lines = ["t_s,east_m,north_m,env_class"]
+    lines += [f"{ti:.2f},{ei:.3f},{ni:.3f},{ci}" for ti, ei, ni, ci in zip(t, e, n, cls)]
+    path.write_text("\n".join(lines) + "\n")
+
+
+def simulate_walk(site_path: str | os.PathLike, out_dir: str | os.PathLike, seed: int, duration_s: float = 300.0,
+                  person: int | None = None, start_utc: datetime | None = None, overwrite: bool = False,
+                  options: dict | None = None, writers: tuple[str, ...] = STREAM_WRITERS,
+                  route: RouteConfig = RouteConfig()) -> Path:
+    """Simulate one walk through the site at ``site_path`` into the directory ``out_dir``.
+
+    The directory is built under a temporary name and renamed into place only
+    when every stream is written. Returns the output path.
+    """
+    from features.errors import ConfigError
+    if not duration_s > 0 or not np.isfinite(duration_s):
+        raise ConfigError(f"--duration must be a positive number of seconds, got {duration_s}")
+    if duration_s > 6 * 3600:
+        raise ConfigError(f"--duration {duration_s} s is longer than the 6 h a walk log may span")
+    site_path = Path(site_path)
+    site_file = site_path / "site.toml" if site_path.is_dir() else site_path
+    site = load_site(site_file)
+    if not site.layout:
+        raise ConfigError(f"{site_file}: has no [[layout]]; walks can only be simulated on a simulated site")
+    person = seed if person is None else person
+    start = start_utc or default_start_utc(seed)
+    poly, stops, speed = plan_route(site, stream_rng(seed, "route"), duration_s, route)
+    traj = route_trajectory(poly, stops, speed, duration_s, start, site.device_height_m, route)
+    out_dir = Path(out_dir)
+    with atomic_directory(out_dir, overwrite=overwrite) as tmp:
+        ctx = StreamContext(site=site, trajectory=traj, out_dir=tmp, seed=seed, kind="walk", person_seed=person,
+                            options=dict(options or {}))
+        meta = run_stream_writers(ctx, writers)
+        write_truth_csv(tmp / "truth.csv", site, traj)
+        walk = {
+            "name": out_dir.name,
+            "site": os.path.relpath(site_file.resolve(), out_dir.resolve()),
+            "site_name": site.name,
+            "start_utc": format_utc(start),
+            "duration_s": float(duration_s),
+            "seed": int(seed),
+            "person": int(person),
+            "device_placement": "waist",
+        }
+        walk.update(meta)
+        write_toml(tmp / "walk.toml", walk)
+    return out_dir
