@@ -1,0 +1,195 @@
+"""NMEA 0183 v4.10 sentences as a GPS + BeiDou receiver writes them (RMC, GGA, GSA, GSV).
+
+Per epoch, in the order a u-blox receiver emits them:
+
+* ``$GNRMC`` — time, status, position, speed (knots), course, date, mode
+  indicator (N/A/D/R/F) and navigational status (4.10).
+* ``$GNGGA`` — time, position, fix quality (0/1/2/4/5), satellites used, HDOP,
+  altitude, geoid separation, age of corrections and station id.
+* ``$GNGSA`` — one or more per system (system id 1 = GPS, 4 = BeiDou, the
+  4.10 trailing field), at most 12 satellites each; the PRNs are each system's
+  own numbers. The GGA count equals the number of PRNs listed in all GSA lines.
+* ``$GPGSV`` / ``$GBGSV`` — satellites in view, four per sentence, with the
+  signal id field (1 = GPS L1 C/A, 1 = BeiDou B1I); tracked satellites carry
+  their C/N0 in dB-Hz, in-view untracked ones an empty SNR field.
+
+Latitude and longitude carry 7 decimals of minutes (≈ 0.2 mm) as
+high-precision RTK receivers write them, so centimetre errors survive.
+Checksums (XOR of the characters between ``$`` and ``*``) are computed for all
+lines at once with numpy; lines end with CRLF.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from datetime import datetime, timezone
+
+import numpy as np
+
+__all__ = ["NmeaEpochs", "format_nmea", "nmea_checksum", "NMEA_SYSTEM_GPS", "NMEA_SYSTEM_BDS"]
+
+NMEA_SYSTEM_GPS = 1
+NMEA_SYSTEM_BDS = 4
+_TALKER = {NMEA_SYSTEM_GPS: "GP", NMEA_SYSTEM_BDS: "GB"}
+_SIGNAL_ID = {NMEA_SYSTEM_GPS: "1", NMEA_SYSTEM_BDS: "1"}
+_RMC_MODE = {0: "N", 1: "A", 2: "D", 4: "R", 5: "F"}
+_MS_TO_KNOTS = 3600.0 / 1852.0
+
+
+@dataclass(frozen=True, eq=False)
+class NmeaEpochs:
+    """What the receiver reports, per epoch (n) and satellite (k).
+
+    unix_s : (n,) UTC POSIX seconds of each epoch
+    lat_deg, lon_deg, alt_m : (n,) fix position, WGS-84 (alt above the geoid); NaN without a fix
+    quality : (n,) int GGA fix quality (0, 1, 2, 4, 5)
+    hdop, vdop, pdop : (n,)
+    speed_m_s, course_deg : (n,) speed over ground and course (from north, clockwise); course NaN = empty
+    sat_system : (k,) NMEA system id (1 GPS, 4 BeiDou); sat_prn : (k,) the system's own number
+    el_deg, az_deg : (n, k); in_view, used : (n, k) bool
+    snr_dbhz : (n, k) reported C/N0, NaN where untracked
+    """
+
+    unix_s: np.ndarray
+    lat_deg: np.ndarray
+    lon_deg: np.ndarray
+    alt_m: np.ndarray
+    quality: np.ndarray
+    hdop: np.ndarray
+    vdop: np.ndarray
+    pdop: np.ndarray
+    speed_m_s: np.ndarray
+    course_deg: np.ndarray
+    sat_system: np.ndarray
+    sat_prn: np.ndarray
+    el_deg: np.ndarray
+    az_deg: np.ndarray
+    in_view: np.ndarray
+    used: np.ndarray
+    snr_dbhz: np.ndarray
+    geoid_sep_m: float = 0.0
+    diff_age_s: float = 1.0
+    station_id: int = 0
+
+    def __post_init__(self):
+        n = len(self.unix_s)
+        k = len(self.sat_prn)
+        for name in ("lat_deg", "lon_deg", "alt_m", "quality", "hdop", "vdop", "pdop", "speed_m_s", "course_deg"):
+            if np.shape(getattr(self, name)) != (n,):
+                raise ValueError(f"NmeaEpochs.{name} has shape {np.shape(getattr(self, name))}, expected ({n},)")
+        for name in ("el_deg", "az_deg", "in_view", "used", "snr_dbhz"):
+            if np.shape(getattr(self, name)) != (n, k):
+                raise ValueError(f"NmeaEpochs.{name} has shape {np.shape(getattr(self, name))}, expected ({n}, {k})")
+        if np.any(self.used & ~self.in_view):
+            raise ValueError("NmeaEpochs: a used satellite must be in view")
+        if not set(np.unique(self.sat_system)) <= set(_TALKER):
+            raise ValueError(f"NmeaEpochs.sat_system must hold ids {sorted(_TALKER)}")
+
+
+def nmea_checksum(body: str) -> str:
+    """Two-hex-digit XOR checksum of the characters between ``$`` and ``*``.
+
+    >>> nmea_checksum("GNGSA,A,3,13,16,21,15,10,29,27,20,,,,,1.05,0.64,0.83,1")
+    '03'
+    """
+    x = 0
+    for b in body.encode("ascii"):
+        x ^= b
+    return f"{x:02X}"
+
+
+def _lat_field(lat: float) -> tuple[str, str]:
+    mins = round(abs(lat) * 60.0, 7)
+    d = int(mins // 60.0)
+    return f"{d:02d}{mins - 60.0 * d:010.7f}", ("N" if lat >= 0 else "S")
+
+
+def _lon_field(lon: float) -> tuple[str, str]:
+    mins = round(abs(lon) * 60.0, 7)
+    d = int(mins // 60.0)
+    return f"{d:03d}{mins - 60.0 * d:010.7f}", ("E" if lon >= 0 else "W")
+
+
+def _dop(x: float) -> str:
+    return "" if not np.isfinite(x) else f"{min(x, 99.99):.2f}"
+
+
+def format_nmea(ep: NmeaEpochs) -> str:
+    """All sentences of all epochs as one string with CRLF line ends (see the module docstring)."""
+    n = len(ep.unix_s)
+    cs = np.round(np.asarray(ep.unix_s, float) * 100.0).astype(np.int64)
+    day = cs // 8_640_000
+    sod_cs = cs - day * 8_640_000
+    hh, rem = np.divmod(sod_cs, 360_000)
+    mm, rem = np.divmod(rem, 6000)
+    ss, cc = np.divmod(rem, 100)
+    day_str: dict[int, str] = {}
+    prn_str = [f"{p:02d}" for p in np.asarray(ep.sat_prn, int)]
+    el_i = np.clip(np.rint(ep.el_deg), 0, 90).astype(int)
+    az_i = np.mod(np.rint(ep.az_deg), 360).astype(int)
+    snr_i = np.where(np.isfinite(ep.snr_dbhz), np.clip(np.rint(np.nan_to_num(ep.snr_dbhz)), 0, 99), -1).astype(int)
+    snr_tab = [f"{v:02d}" for v in range(100)] + [""]  # index −1 → empty
+    systems = [s for s in (NMEA_SYSTEM_GPS, NMEA_SYSTEM_BDS) if np.any(ep.sat_system == s)]
+    sys_cols = {s: np.flatnonzero(ep.sat_system == s) for s in systems}
+    sys_cols = {s: c[np.argsort(np.asarray(ep.sat_prn)[c], kind="stable")] for s, c in sys_cols.items()}
+    bodies: list[str] = []
+    add = bodies.append
+    for i in range(n):
+        t = f"{hh[i]:02d}{mm[i]:02d}{ss[i]:02d}.{cc[i]:02d}"
+        d = int(day[i])
+        if d not in day_str:
+            day_str[d] = datetime.fromtimestamp(d * 86400, tz=timezone.utc).strftime("%d%m%y")
+        q = int(ep.quality[i])
+        has_fix = q > 0 and np.isfinite(ep.lat_deg[i])
+        if has_fix:
+            la, ns = _lat_field(float(ep.lat_deg[i]))
+            lo, ew = _lon_field(float(ep.lon_deg[i]))
+            alt = f"{ep.alt_m[i]:.3f}"
+        else:
+            la = ns = lo = ew = alt = ""
+        spd = f"{ep.speed_m_s[i] * _MS_TO_KNOTS:.3f}" if has_fix else ""
+        crs = f"{ep.course_deg[i]:.2f}" if has_fix and np.isfinite(ep.course_deg[i]) else ""
+        add(f"GNRMC,{t},{'A' if has_fix else 'V'},{la},{ns},{lo},{ew},{spd},{crs},{day_str[d]},,,"
+            f"{_RMC_MODE.get(q, 'N') if has_fix else 'N'},V")
+        used_i = ep.used[i]
+        n_used = int(used_i.sum()) if has_fix else 0
+        diff = has_fix and q in (2, 4, 5)
+        age = f"{ep.diff_age_s:.1f}" if diff else ""
+        sid = f"{ep.station_id:04d}" if diff else ""
+        sep = f"{ep.geoid_sep_m:.1f}" if has_fix else ""
+        add(f"GNGGA,{t},{la},{ns},{lo},{ew},{q if has_fix else 0},{n_used:02d},{_dop(ep.hdop[i]) if has_fix else ''},"
+            f"{alt},{'M' if has_fix else ''},{sep},{'M' if has_fix else ''},{age},{sid}")
+        dops = f"{_dop(ep.pdop[i])},{_dop(ep.hdop[i])},{_dop(ep.vdop[i])}" if has_fix else ",,"
+        mode = "3" if has_fix else "1"
+        for s in systems:
+            cols = sys_cols[s]
+            prns = [prn_str[c] for c in cols if used_i[c]] if has_fix else []
+            for j0 in range(0, max(1, len(prns)), 12):
+                chunk = prns[j0:j0 + 12]
+                add(f"GNGSA,A,{mode},{','.join(chunk + [''] * (12 - len(chunk)))},{dops},{s}")
+        el_r, az_r, snr_r, view_r = el_i[i], az_i[i], snr_i[i], ep.in_view[i]
+        for s in systems:
+            cols = [c for c in sys_cols[s] if view_r[c]]
+            n_view = len(cols)
+            n_msg = max(1, -(-n_view // 4))
+            talker = _TALKER[s]
+            sig = _SIGNAL_ID[s]
+            for mnum in range(n_msg):
+                part = cols[4 * mnum:4 * mnum + 4]
+                sats = "".join(f",{prn_str[c]},{el_r[c]:02d},{az_r[c]:03d},{snr_tab[snr_r[c]]}" for c in part)
+                add(f"{talker}GSV,{n_msg},{mnum + 1},{n_view:02d}{sats},{sig}")
+    return _finish(bodies)
+
+
+def _finish(bodies: list[str]) -> str:
+    """Add ``$``, ``*hh`` and CRLF to every body; checksums by XOR-reduce over each line's bytes."""
+    if not bodies:
+        return ""
+    joined = ("\n".join(bodies) + "\n").encode("ascii")
+    buf = np.frombuffer(joined, np.uint8)
+    lengths = np.fromiter((len(b) + 1 for b in bodies), np.int64, len(bodies))
+    starts = np.concatenate([[0], np.cumsum(lengths)[:-1]])
+    # Each segment holds one trailing "\n" (0x0A); XOR it out again.
+    sums = np.bitwise_xor.reduceat(buf, starts) ^ 0x0A
+    hexes = [f"{v:02X}" for v in range(256)]
+    return "".join(f"${b}*{hexes[c]}\r\n" for b, c in zip(bodies, sums.tolist()))
