@@ -201,19 +201,21 @@ def route_trajectory(poly: np.ndarray, stops: np.ndarray, speed_m_s: float, dura
         if st > 0:
             extra[k:] += st
     t_knots = t_path + extra
-    # Duplicate knots at stops so position holds during the stop.
-    t_k, s_k = [], []
+    # Duplicate knots at stops so position holds (and speed is 0) during the stop.
+    t_k, s_k, v_k = [], [], []
     for i in range(len(s)):
         if i > 0 and extra[i] > extra[i - 1]:
             t_k.append(t_path[i] + extra[i - 1])
             s_k.append(s[i])
+            v_k.append(0.0)
         t_k.append(t_knots[i])
         s_k.append(s[i])
-    t_k = np.array(t_k)
-    s_k = np.array(s_k)
-    # Standing start before the first knot
-    t_k = np.concatenate([[0.0], t_k + stops[0]]) if stops[0] > 0 else t_k
-    s_k = np.concatenate([[0.0], s_k]) if stops[0] > 0 else s_k
+        v_k.append(v[i])
+    t_k, s_k, v_k = np.array(t_k), np.array(s_k), np.array(v_k)
+    if stops[0] > 0:  # standing start before the first knot
+        t_k = np.concatenate([[0.0], t_k + stops[0]])
+        s_k = np.concatenate([[0.0], s_k])
+        v_k = np.concatenate([[0.0], v_k])
     t = np.arange(0.0, duration_s + 1e-9, 1.0 / cfg.rate_hz)
     s_t = np.interp(t, t_k, s_k)
     east = np.interp(s_t, s, xy[:, 0])
@@ -221,8 +223,7 @@ def route_trajectory(poly: np.ndarray, stops: np.ndarray, speed_m_s: float, dura
     heading_path = np.arctan2(d[:, 0], d[:, 1])
     heading = np.interp(s_t, s, np.unwrap(heading_path))
     heading = np.mod(heading, 2 * np.pi)
-    speed = np.abs(np.gradient(s_t, 1.0 / cfg.rate_hz))
-    speed[speed < 1e-3] = 0.0
+    speed = np.interp(t, t_k, v_k)
     return Trajectory(t_s=t, east_m=east, north_m=north, up_m=np.full_like(t, z_m), heading_rad=heading,
                       speed_m_s=speed, start_utc=start_utc, rate_hz=cfg.rate_hz)
 

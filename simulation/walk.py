@@ -10,13 +10,14 @@ import numpy as np
 
 from features.fileio import atomic_directory, write_toml
 from features.site import load_site
+from features.walk import parse_utc
 
 from .environment import environment_class
 from .rng import stream_rng
 from .route import RouteConfig, plan_route, route_trajectory
 from .streams import STREAM_WRITERS, StreamContext, run_stream_writers
 
-__all__ = ["DEFAULT_EPOCH_UTC", "default_start_utc", "write_truth_csv", "simulate_walk"]
+__all__ = ["DEFAULT_EPOCH_UTC", "default_start_utc", "parse_utc", "format_utc", "write_truth_csv", "simulate_walk"]
 
 DEFAULT_EPOCH_UTC = datetime(2026, 6, 1, tzinfo=timezone.utc)
 """Day on which simulated walks start unless told otherwise."""
@@ -26,16 +27,6 @@ def default_start_utc(seed: int) -> datetime:
     """A start time on :data:`DEFAULT_EPOCH_UTC`, drawn from the seed so walks see different skies."""
     rng = stream_rng(seed, "start-time")
     return DEFAULT_EPOCH_UTC + timedelta(seconds=int(rng.integers(0, 86_400 // 10)) * 10)
-
-
-def parse_utc(text: str) -> datetime:
-    """Parse an ISO 8601 time; a naive time is taken as UTC."""
-    from features.errors import ConfigError
-    try:
-        t = datetime.fromisoformat(text.replace("Z", "+00:00"))
-    except ValueError:
-        raise ConfigError(f"start time {text!r} is not ISO 8601 (e.g. 2026-06-01T08:00:00Z)") from None
-    return t if t.tzinfo else t.replace(tzinfo=timezone.utc)
 
 
 def format_utc(t: datetime) -> str:

@@ -1,0 +1,46 @@
+"""Shared fixtures: small simulated sites, walks and surveys (built once per session)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+SHARED_DATA = REPO.parent / "shared" / "data"
+
+
+def shared_data(*parts: str) -> Path:
+    """Path into ../shared/data, skipping the test with a reason when it is absent."""
+    p = SHARED_DATA.joinpath(*parts)
+    if not p.exists():
+        pytest.skip(f"real-data folder {p} is absent (tests read ../shared/data beside the repo)")
+    return p
+
+
+@pytest.fixture(scope="session")
+def site_dir(tmp_path_factory) -> Path:
+    """A generated site (seed 3) written as site.toml."""
+    from features.site import save_site
+    from simulation.layout import generate_site
+
+    d = tmp_path_factory.mktemp("site3")
+    save_site(generate_site(3), d / "site.toml")
+    return d
+
+
+@pytest.fixture(scope="session")
+def walk_dir(site_dir, tmp_path_factory) -> Path:
+    """A 60 s walk with every registered stream."""
+    from simulation.walk import simulate_walk
+
+    return simulate_walk(site_dir, tmp_path_factory.mktemp("walks") / "w11", seed=11, duration_s=60.0)
+
+
+@pytest.fixture(scope="session")
+def survey_dir(site_dir, tmp_path_factory) -> Path:
+    """A coarse survey: 10 m cells, 10 s captures, every registered stream."""
+    from simulation.survey import simulate_survey
+
+    return simulate_survey(site_dir, tmp_path_factory.mktemp("surveys") / "s3", seed=5, cell_size_m=10.0,
+                           capture_s=10.0, progress=False)
