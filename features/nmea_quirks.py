@@ -169,7 +169,7 @@ def gsv_fields(talker: str, data: list[str]) -> GsvFields:
     >>> g = gsv_fields("GP", "3,3,12,26,04,276,,27,15,218,31,29,24,004,13,30,00,159,,1".split(","))
     >>> g.signal, [s.prn for s in g.satellites], g.satellites[1].cn0_dbhz
     (1, [26, 27, 29, 30], 31.0)
-    >>> [s.prn for s in gsv_fields("GP", "3,3,09,33,62,034,08,7".split(",")).satellites]
+    >>> [s.prn for s in gsv_fields("GA", "3,3,09,33,62,034,08,7".split(",")).satellites]
     [33]
     """
     if len(data) < 3:
