@@ -1,0 +1,133 @@
+"""``envfuse features gnss``: NMEA → GNSS feature windows (CSV), decoded epochs (JSON lines), ENU fixes (CSV)."""
+
+from __future__ import annotations
+
+import argparse
+import datetime as dt
+import io
+import json
+import math
+import sys
+from pathlib import Path
+
+from features.errors import ConfigError
+
+GROUP = "features"
+
+
+def _positive(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a positive number, got {text!r}") from None
+    if not (value > 0 and math.isfinite(value)):
+        raise argparse.ArgumentTypeError(f"expected a positive number, got {text!r}")
+    return value
+
+
+def register(sub) -> None:
+    p = sub.add_parser(
+        "gnss", help="GNSS features per window from an NMEA file",
+        description="Read an NMEA 0183 file into epochs and write the five GNSS environment features "
+                    "(att_mean_db, att_std_db, fluct_per_s, invisible_ratio, dop_growth) per window, "
+                    "optionally the decoded epochs (JSON lines) and the fixes in site ENU (CSV).",
+        epilog="Example: envfuse features gnss walk7/gnss.nmea --site site1 --out gnss_features.csv "
+               "--epochs epochs.jsonl --positions fixes.csv")
+    p.add_argument("nmea", type=Path, help="NMEA 0183 file")
+    p.add_argument("--out", type=Path, required=True, help="feature CSV, one row per window")
+    p.add_argument("--site", type=Path, default=None, help="site directory or site.toml (needed for --positions)")
+    p.add_argument("--window-s", type=_positive, default=2.0, help="window length, s (default 2)")
+    p.add_argument("--hop-s", type=_positive, default=1.0, help="window hop, s (default 1)")
+    p.add_argument("--elevation-mask-deg", type=float, default=10.0, help="elevation mask, degrees (default 10)")
+    p.add_argument("--cn0-reference", type=Path, default=None,
+                   help="JSON file with a fitted C_ref model {intercept_dbhz, slope_dbhz} (default: built-in)")
+    p.add_argument("--start-utc", default=None,
+                   help="t_s origin, ISO 8601 UTC (e.g. the walk's start_utc); default: the first epoch")
+    p.add_argument("--epochs", type=Path, default=None, help="also write each decoded epoch as a JSON line")
+    p.add_argument("--positions", type=Path, default=None, help="also write fixes in site ENU with sigma (CSV)")
+    p.set_defaults(func=_run)
+
+
+def _fmt(value) -> str:
+    if isinstance(value, float):
+        return "" if math.isnan(value) else f"{value:.6g}"
+    return str(value)
+
+
+def _csv(columns: dict, names) -> str:
+    buf = io.StringIO()
+    buf.write(",".join(names) + "\n")
+    arrays = [columns[n] for n in names]
+    for row in zip(*arrays):
+        buf.write(",".join(_fmt(v.item() if hasattr(v, "item") else v) for v in row) + "\n")
+    return buf.getvalue()
+
+
+def _t_shift(epochs, start_utc: str | None) -> float:
+    """Seconds to add to the reader's t_s so that 0 is ``start_utc``."""
+    if start_utc is None:
+        return 0.0
+    try:
+        start = dt.datetime.fromisoformat(start_utc.replace("Z", "+00:00"))
+    except ValueError:
+        raise ConfigError(f"--start-utc {start_utc!r} is not an ISO 8601 time") from None
+    if start.tzinfo is None:
+        start = start.replace(tzinfo=dt.timezone.utc)
+    dated = next((e for e in epochs if e.time_utc is not None), None)
+    if dated is None:
+        raise ConfigError("--start-utc given but the NMEA file carries no date (no RMC/ZDA)")
+    return (dated.time_utc - start).total_seconds() - dated.t_s
+
+
+def _run(args) -> int:
+    import dataclasses
+
+    import numpy as np
+
+    from features.fileio import atomic_write_text
+    from features.gnss_features import (
+        COUNT_COLUMNS, FEATURE_COLUMNS, Cn0Reference, GnssFeatureConfig, gnss_features, sky_arrays,
+    )
+    from features.nmea import read_nmea
+
+    config = GnssFeatureConfig(window_s=args.window_s, hop_s=args.hop_s, elevation_mask_deg=args.elevation_mask_deg)
+    reference = Cn0Reference()
+    if args.cn0_reference is not None:
+        try:
+            reference = Cn0Reference.from_dict(json.loads(args.cn0_reference.read_text()))
+        except (OSError, json.JSONDecodeError) as exc:
+            raise ConfigError(f"cannot read C/N0 reference {args.cn0_reference}: {exc}") from None
+    site = None
+    if args.site is not None:
+        from features.site import load_site
+        site = load_site(args.site)
+    elif args.positions is not None:
+        raise ConfigError("--positions needs --site (the ENU origin)")
+
+    epochs, stats = read_nmea(args.nmea)
+    shift = _t_shift(epochs, args.start_utc)
+    if shift:
+        epochs = [dataclasses.replace(e, t_s=e.t_s + shift) for e in epochs]
+    sky = sky_arrays(epochs)
+    table = gnss_features(sky, config, reference)
+    names = ("t_s",) + FEATURE_COLUMNS + COUNT_COLUMNS
+    atomic_write_text(args.out, _csv(table, names))
+    if args.epochs is not None:
+        atomic_write_text(args.epochs, "".join(json.dumps(e.to_json_dict()) + "\n" for e in epochs))
+    n_pos = None
+    if args.positions is not None:
+        from features.gnss_positions import fixes_to_enu
+        o = site.origin
+        pos = fixes_to_enu(epochs, o.lat_deg, o.lon_deg, o.alt_m)
+        atomic_write_text(args.positions, _csv({n: getattr(pos, n) for n in pos.COLUMNS}, pos.COLUMNS))
+        n_pos = len(pos)
+    n_with_sky = int(sky.n_epochs)
+    msg = (f"{args.nmea}: {len(epochs)} epochs ({n_with_sky} with satellites, "
+           f"{sum(e.fix.has_position for e in epochs)} with a fix); {stats.summary()}; "
+           f"{len(table['t_s'])} windows -> {args.out}")
+    if n_pos is not None:
+        msg += f"; {n_pos} positions -> {args.positions}"
+    if n_with_sky == 0:
+        msg += "; no GSV in the file, so every feature is empty"
+    print(msg)
+    return 0
