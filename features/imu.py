@@ -1,0 +1,280 @@
+"""IMU CSV reader and repair: one uniform time base, every defect counted.
+
+Format (DESIGN.md §4): header line, columns ``t_s, ax, ay, az`` (m/s², body
+frame, gravity included) required; ``gx, gy, gz`` (rad/s) and ``mx, my, mz``
+(µT) optional, each triple all-or-none. Extra columns are ignored.
+
+Repair (never an exception for a few bad samples; counts in
+:class:`ImuRepairReport`):
+
+- rows whose time is not a finite number are dropped;
+- unsorted rows are sorted (stable); duplicated timestamps keep the first row;
+- NaN / non-numeric channel values are interpolated from their neighbours;
+- samples at or beyond the stated full scale (or runs of ≥ 3 equal samples at
+  the channel's extreme) are flagged as saturated (kept: the true value is
+  unknown) and counted;
+- the record is resampled onto a uniform grid at the nominal rate (the median
+  sample interval unless given) by linear interpolation; gaps longer than
+  ``max_gap_s`` are counted and flagged in ``valid`` (False inside them).
+
+A file without the required columns raises one :class:`ImuError` naming them.
+"""
+
+from __future__ import annotations
+
+import io
+import math
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from .errors import ImuError
+
+__all__ = ["ImuData", "ImuRepairReport", "RepairConfig", "read_imu_csv", "repair_imu", "REQUIRED_COLUMNS"]
+
+REQUIRED_COLUMNS = ("t_s", "ax", "ay", "az")
+GYRO_COLUMNS = ("gx", "gy", "gz")
+MAG_COLUMNS = ("mx", "my", "mz")
+
+
+@dataclass(frozen=True)
+class RepairConfig:
+    """Repair parameters.
+
+    ``rate_hz`` None → nominal rate from the median sample interval.
+    Full-scale values default to ±16 g and ±2000 °/s (common MEMS ranges).
+    """
+
+    rate_hz: float | None = None
+    max_gap_s: float = 0.5
+    acc_full_scale_m_s2: float = 16.0 * 9.80665
+    gyro_full_scale_rad_s: float = math.radians(2000.0)
+    clip_run_samples: int = 3
+
+    def __post_init__(self):
+        if self.rate_hz is not None and not (math.isfinite(self.rate_hz) and 1.0 <= self.rate_hz <= 10_000.0):
+            raise ImuError(f"rate_hz must lie in [1, 10000], got {self.rate_hz}")
+        if not (self.max_gap_s > 0 and math.isfinite(self.max_gap_s)):
+            raise ImuError(f"max_gap_s must be positive, got {self.max_gap_s}")
+        if self.clip_run_samples < 2:
+            raise ImuError(f"clip_run_samples must be >= 2, got {self.clip_run_samples}")
+
+
+@dataclass
+class ImuRepairReport:
+    """Counts of what the repair found and did."""
+
+    n_rows: int = 0
+    n_bad_time: int = 0
+    n_bad_lines: int = 0
+    n_unsorted: int = 0
+    n_duplicate_t: int = 0
+    n_nan_acc: int = 0
+    n_nan_gyro: int = 0
+    n_nan_mag: int = 0
+    n_saturated_acc: int = 0
+    n_saturated_gyro: int = 0
+    n_gaps: int = 0
+    gap_total_s: float = 0.0
+    n_output: int = 0
+
+    def summary(self) -> str:
+        """One line listing the non-zero counts."""
+        parts = [f"{k}={v:.3g}" if isinstance(v, float) else f"{k}={v}" for k, v in vars(self).items() if v]
+        return ", ".join(parts) if parts else "clean"
+
+
+@dataclass(frozen=True)
+class ImuData:
+    """IMU samples on a uniform time base.
+
+    Attributes
+    ----------
+    t_s : ndarray of shape (n,)
+        Sample times, s, uniform at ``rate_hz`` from the first valid sample.
+    acc_m_s2 : ndarray of shape (n, 3)
+        Specific force, body frame, m/s².
+    gyro_rad_s, mag_ut : ndarray of shape (n, 3) or None
+        Angular rate (rad/s) and magnetic field (µT), None when absent.
+    valid : ndarray of bool, shape (n,)
+        False inside gaps longer than ``max_gap_s`` (interpolated, not measured).
+    saturated : ndarray of bool, shape (n,)
+        True where any accelerometer or gyro axis was clipped.
+    rate_hz : float
+    report : ImuRepairReport
+    """
+
+    t_s: np.ndarray
+    acc_m_s2: np.ndarray
+    gyro_rad_s: np.ndarray | None
+    mag_ut: np.ndarray | None
+    valid: np.ndarray
+    saturated: np.ndarray
+    rate_hz: float
+    report: ImuRepairReport = field(default_factory=ImuRepairReport)
+
+    def __len__(self) -> int:
+        return len(self.t_s)
+
+
+def _fill_nan(x: np.ndarray) -> int:
+    """Interpolate NaNs of every column in place (edges take the nearest value); return the count."""
+    bad = ~np.isfinite(x)
+    n_bad = int(bad.any(axis=1).sum())
+    if n_bad == 0:
+        return 0
+    idx = np.arange(len(x))
+    for j in range(x.shape[1]):
+        ok = ~bad[:, j]
+        x[:, j] = np.interp(idx, idx[ok], x[ok, j]) if ok.any() else 0.0
+    return n_bad
+
+
+def _saturation(x: np.ndarray, full_scale: float, run: int) -> np.ndarray:
+    """Samples at/over full scale, or in runs of ≥ ``run`` equal values at the column's extreme."""
+    flag = np.abs(x) >= full_scale
+    for j in range(x.shape[1]):
+        col = x[:, j]
+        for extreme in (np.nanmax(col), np.nanmin(col)):
+            at = col == extreme
+            if at.sum() >= run:
+                d = np.diff(np.r_[0, at.astype(np.int8), 0])
+                for s, e in zip(np.nonzero(d == 1)[0], np.nonzero(d == -1)[0]):
+                    if e - s >= run:
+                        flag[s:e, j] = True
+    return flag.any(axis=1)
+
+
+def repair_imu(t_s, acc_m_s2, gyro_rad_s=None, mag_ut=None, config: RepairConfig = RepairConfig(),
+               report: ImuRepairReport | None = None) -> ImuData:
+    """Repair raw samples (see module docstring) and resample them to a uniform grid.
+
+    Parameters
+    ----------
+    t_s : array of shape (n,)
+    acc_m_s2 : array of shape (n, 3)
+    gyro_rad_s, mag_ut : array of shape (n, 3) or None
+
+    >>> d = repair_imu([0.0, 0.02, 0.01, 0.01, 0.03], [[0, 0, -9.8]] * 5, config=RepairConfig(rate_hz=100))
+    >>> d.report.n_unsorted, d.report.n_duplicate_t, len(d)
+    (1, 1, 4)
+    """
+    report = report or ImuRepairReport()
+    t = np.asarray(t_s, dtype=float).ravel()
+    chans = {"acc": np.array(acc_m_s2, dtype=float, ndmin=2)}
+    if gyro_rad_s is not None:
+        chans["gyro"] = np.array(gyro_rad_s, dtype=float, ndmin=2)
+    if mag_ut is not None:
+        chans["mag"] = np.array(mag_ut, dtype=float, ndmin=2)
+    for name, x in chans.items():
+        if x.shape != (len(t), 3):
+            raise ImuError(f"{name} must have shape ({len(t)}, 3), got {x.shape}")
+    report.n_rows = report.n_rows or len(t)
+    ok = np.isfinite(t)
+    report.n_bad_time += int((~ok).sum())
+    t = t[ok]
+    chans = {k: v[ok] for k, v in chans.items()}
+    if len(t) < 2:
+        raise ImuError(f"fewer than 2 samples with a valid time ({len(t)})")
+    if np.any(np.diff(t) < 0):
+        order = np.argsort(t, kind="stable")
+        report.n_unsorted += int((np.diff(t) < 0).sum())
+        t = t[order]
+        chans = {k: v[order] for k, v in chans.items()}
+    keep = np.r_[True, np.diff(t) > 0]
+    report.n_duplicate_t += int((~keep).sum())
+    t = t[keep]
+    chans = {k: v[keep] for k, v in chans.items()}
+    if len(t) < 2:
+        raise ImuError("fewer than 2 distinct sample times")
+    for name, x in chans.items():
+        n_nan = _fill_nan(x)
+        setattr(report, f"n_nan_{name}", getattr(report, f"n_nan_{name}") + n_nan)
+    sat = _saturation(chans["acc"], config.acc_full_scale_m_s2, config.clip_run_samples)
+    report.n_saturated_acc += int(sat.sum())
+    if "gyro" in chans:
+        sat_g = _saturation(chans["gyro"], config.gyro_full_scale_rad_s, config.clip_run_samples)
+        report.n_saturated_gyro += int(sat_g.sum())
+        sat |= sat_g
+
+    dt_raw = np.diff(t)
+    rate = config.rate_hz or 1.0 / float(np.median(dt_raw))
+    dt = 1.0 / rate
+    gaps = dt_raw > max(config.max_gap_s, 2.5 * dt)
+    report.n_gaps += int(gaps.sum())
+    report.gap_total_s += float(dt_raw[gaps].sum())
+    n_out = int(math.floor((t[-1] - t[0]) * rate + 1e-6)) + 1
+    tu = t[0] + np.arange(n_out) * dt
+    out = {k: np.stack([np.interp(tu, t, v[:, j]) for j in range(3)], axis=1) for k, v in chans.items()}
+    seg = np.searchsorted(t, tu, side="right") - 1
+    seg = np.clip(seg, 0, len(dt_raw) - 1)
+    valid = ~gaps[seg] | np.isin(tu, t)
+    sat_u = np.interp(tu, t, sat.astype(float)) > 0
+    report.n_output = n_out
+    return ImuData(t_s=tu, acc_m_s2=out["acc"], gyro_rad_s=out.get("gyro"), mag_ut=out.get("mag"),
+                   valid=valid, saturated=sat_u, rate_hz=float(rate), report=report)
+
+
+def _parse_table(text: str, path: str) -> tuple[list[str], np.ndarray, int]:
+    lines = text.splitlines()
+    while lines and not lines[0].strip():
+        lines.pop(0)
+    if not lines:
+        raise ImuError(f"{path}: empty file; need columns {', '.join(REQUIRED_COLUMNS)}")
+    header = [h.strip().lower() for h in lines[0].split(",")]
+    body = [ln for ln in lines[1:] if ln.strip() and not ln.lstrip().startswith("#")]
+    ncol = len(header)
+    try:
+        data = np.loadtxt(io.StringIO("\n".join(body)), delimiter=",", ndmin=2) if body else np.zeros((0, ncol))
+        if data.shape[1] != ncol:
+            raise ValueError
+        return header, data, 0
+    except ValueError:
+        pass
+    rows, n_bad = [], 0
+    for ln in body:
+        parts = ln.split(",")
+        if len(parts) != ncol:
+            n_bad += 1
+            continue
+        row = []
+        for p in parts:
+            try:
+                row.append(float(p))
+            except ValueError:
+                row.append(math.nan)
+        rows.append(row)
+    return header, np.asarray(rows, dtype=float).reshape(-1, ncol), n_bad
+
+
+def read_imu_csv(path: str | os.PathLike, config: RepairConfig = RepairConfig()) -> ImuData:
+    """Read ``imu.csv`` (columns per module docstring), repair it, return :class:`ImuData`."""
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8", errors="replace")
+    except FileNotFoundError:
+        raise ImuError(f"{path}: file not found") from None
+    except IsADirectoryError:
+        raise ImuError(f"{path}: is a directory, expected an IMU CSV file") from None
+    header, data, n_bad = _parse_table(text, str(path))
+    missing = [c for c in REQUIRED_COLUMNS if c not in header]
+    if missing:
+        raise ImuError(f"{path}: missing required column(s) {', '.join(missing)} "
+                       f"(have: {', '.join(header) or 'none'}; need {', '.join(REQUIRED_COLUMNS)})")
+    col = {name: i for i, name in enumerate(header)}
+
+    def triple(names):
+        present = [n in col for n in names]
+        if all(present):
+            return data[:, [col[n] for n in names]]
+        if any(present):
+            raise ImuError(f"{path}: columns {', '.join(names)} must all be present or all absent")
+        return None
+
+    report = ImuRepairReport(n_rows=len(data), n_bad_lines=n_bad)
+    if len(data) < 2:
+        raise ImuError(f"{path}: fewer than 2 data rows")
+    return repair_imu(data[:, col["t_s"]], data[:, [col["ax"], col["ay"], col["az"]]],
+                      triple(GYRO_COLUMNS), triple(MAG_COLUMNS), config=config, report=report)
