@@ -80,8 +80,17 @@ class ImuRepairReport:
     gap_total_s: float = 0.0
     n_output: int = 0
 
+    @property
+    def n_defects(self) -> int:
+        """Number of defects found (bad times/lines, disorder, duplicates, NaN, saturation, gaps)."""
+        return sum(v for k, v in vars(self).items() if k.startswith("n_") and k not in ("n_rows", "n_output"))
+
     def summary(self) -> str:
-        """One line listing the non-zero counts."""
+        """One line listing the non-zero counts.
+
+        >>> ImuRepairReport(n_rows=10, n_gaps=1, gap_total_s=0.75).summary()
+        'n_rows=10, n_gaps=1, gap_total_s=0.75'
+        """
         parts = [f"{k}={v:.3g}" if isinstance(v, float) else f"{k}={v}" for k, v in vars(self).items() if v]
         return ", ".join(parts) if parts else "clean"
 

@@ -86,6 +86,7 @@ class StreamContext:
 
 STREAM_WRITERS: tuple[str, ...] = (
     "simulation.gnss_stream:write_gnss",
+    "simulation.imu_stream:write_imu",
 )
 """Writers run in order for every walk and survey cell, as ``"module:function"``."""
 

@@ -1,0 +1,89 @@
+"""``envfuse features imu``: IMU CSV → one row per step (time, length, heading, PDR position)."""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+from pathlib import Path
+
+GROUP = "features"
+
+
+def _finite(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"expected a finite number, got {text!r}")
+    return value
+
+
+def _positive(text: str) -> float:
+    value = _finite(text)
+    if value <= 0:
+        raise argparse.ArgumentTypeError(f"expected a positive number, got {text!r}")
+    return value
+
+
+def register(sub) -> None:
+    p = sub.add_parser(
+        "imu", help="steps, step lengths, heading and PDR track from an IMU CSV",
+        description="Read imu.csv (t_s, ax, ay, az [, gx, gy, gz] [, mx, my, mz]), repair gaps, duplicates, "
+                    "NaN and saturation (counts on stderr), detect steps, estimate step length (Weinberg) "
+                    "and heading (gyro + magnetometer complementary filter), and dead-reckon from the start "
+                    "point. Accelerometer-only files give steps and lengths with empty heading/position.",
+        epilog="Example: envfuse features imu walk7/imu.csv --start-east 12.5 --start-north 3.0 --k 0.48 "
+               "--out steps.csv")
+    p.add_argument("imu", type=Path, help="IMU CSV file")
+    p.add_argument("--out", type=Path, required=True, help="steps CSV: t_s,step_length_m,heading_rad,east_m,north_m")
+    p.add_argument("--start-east", type=_finite, default=0.0, help="start east, m (default 0)")
+    p.add_argument("--start-north", type=_finite, default=0.0, help="start north, m (default 0)")
+    p.add_argument("--k", type=_positive, default=None, help="Weinberg constant K (default 0.47; calibrate it)")
+    p.add_argument("--declination-deg", type=_finite, default=None,
+                   help="magnetic declination, degrees east (default: [imu] declination_deg of walk.toml "
+                        "beside the file, else 0)")
+    p.add_argument("--calibrate-distance-m", type=_positive, default=None,
+                   help="the walk's known length, m: fit K to it and print it (overrides --k)")
+    p.set_defaults(func=_run)
+
+
+def _declination_deg(imu_path: Path, given: float | None) -> float:
+    if given is not None:
+        return given
+    walk_toml = imu_path.parent / "walk.toml"
+    if walk_toml.is_file():
+        from features.fileio import read_toml
+
+        imu_table = read_toml(walk_toml).get("imu", {})
+        value = imu_table.get("declination_deg") if isinstance(imu_table, dict) else None
+        if isinstance(value, (int, float)) and math.isfinite(value):
+            return float(value)
+    return 0.0
+
+
+def _run(args) -> int:
+    from features.heading import HeadingConfig
+    from features.imu import read_imu_csv
+    from features.pdr import PdrConfig, run_pdr, write_steps_csv
+    from features.steps import StepLengthModel, calibrate_weinberg_k
+
+    imu = read_imu_csv(args.imu)
+    if imu.report.n_defects:
+        print(f"envfuse: {args.imu}: repaired: {imu.report.summary()}", file=sys.stderr)
+    heading = HeadingConfig(declination_rad=math.radians(_declination_deg(args.imu, args.declination_deg)))
+    length = StepLengthModel() if args.k is None else StepLengthModel(k=args.k)
+    config = PdrConfig(length=length, heading=heading)
+    result = run_pdr(imu, args.start_east, args.start_north, config)
+    if args.calibrate_distance_m is not None:
+        k = calibrate_weinberg_k(result.steps, args.calibrate_distance_m)
+        result = run_pdr(imu, args.start_east, args.start_north,
+                         PdrConfig(length=StepLengthModel(k=k), heading=heading))
+        print(f"K = {k:.4f} (Weinberg, from {args.calibrate_distance_m:g} m)")
+    write_steps_csv(args.out, result)
+    if result.heading is None:
+        print(f"envfuse: {args.imu}: no gyro/magnetometer columns: heading and positions left empty",
+              file=sys.stderr)
+    print(f"{len(result)} steps, {result.distance_m:.1f} m -> {args.out}")
+    return 0
