@@ -285,12 +285,18 @@ def _reflections(scene: Scene, src: np.ndarray, rx: np.ndarray, direct_m: float)
     if len(idx) == 0:
         return np.zeros(0), np.zeros(0), np.zeros(0, int)
     p[np.arange(len(idx)), ax] += sign[idx] * _NUDGE_M       # step off the face onto the outer side
-    s_rep = np.broadcast_to(src, p.shape)
-    r_rep = np.broadcast_to(rx, p.shape)
-    visible = ~(_blocked(scene, s_rep, p) | _blocked(scene, p, r_rep))
-    idx, p = idx[visible], p[visible]
-    gain = (f[idx, 6] / length[idx] * _porous_gain(scene, np.broadcast_to(src, p.shape), p)
-            * _porous_gain(scene, p, np.broadcast_to(rx, p.shape)))
+    # both legs in one call: rows [src→p_i ..., p_i→rx ...]
+    n = len(idx)
+    a = np.vstack([np.broadcast_to(src, p.shape), p])
+    b = np.vstack([p, np.broadcast_to(rx, p.shape)])
+    blocked = _blocked(scene, a, b)
+    visible = ~(blocked[:n] | blocked[n:])
+    if not visible.any():
+        return np.zeros(0), np.zeros(0), np.zeros(0, int)
+    idx = idx[visible]
+    legs = np.concatenate([visible, visible])
+    porous = _porous_gain(scene, a[legs], b[legs])
+    gain = f[idx, 6] / length[idx] * porous[:len(idx)] * porous[len(idx):]
     return length[idx], gain, scene.solid_index[scene.face_box[idx]]
 
 
@@ -350,10 +356,17 @@ def clutter_index(scene: Scene, rx_en, n_azimuths: int = 72) -> float:
     An enclosure measure: 0 in the open, ≈ 0.5 in an aisle between two rows of
     equipment, → 1 in a court closed on all sides.
     """
-    if scene.solid.shape[0] == 0:
+    p = np.asarray(rx_en, float)[:2]
+    bx = scene.solid
+    if bx.shape[0] == 0:
+        return 0.0
+    gap_e = np.maximum(np.maximum(bx[:, 0] - p[0], p[0] - bx[:, 1]), 0.0)
+    gap_n = np.maximum(np.maximum(bx[:, 2] - p[1], p[1] - bx[:, 3]), 0.0)
+    near = bx[np.hypot(gap_e, gap_n) <= scene.config.clutter_radius_m]
+    if near.shape[0] == 0:
         return 0.0
     az = (np.arange(n_azimuths) + 0.5) * (2.0 * np.pi / n_azimuths)
-    t_in, _ = footprint_entry(np.asarray(rx_en, float)[None, :2], az, scene.solid)
+    t_in, _ = footprint_entry(p[None], az, near)
     return float((t_in[0].min(axis=1) <= scene.config.clutter_radius_m).mean())
 
 
