@@ -38,8 +38,9 @@ models the RTK engine's behaviour. RTK fixed (4) needs many satellites in
 continuous lock, PDOP ≤ ≈ 3 and few biased (NLOS) phases — biased phases make
 the ambiguity ratio test fail — held for a time-to-fix of a few seconds; its
 error is the carrier-phase WLS error (cm). RTK float (5) needs ≥ 5 satellites in
-lock; its error is the carrier error plus a share of the code error that decays
-as the float ambiguities converge. DGNSS (2) otherwise; autonomous (1) when
+lock; each satellite's float ambiguity converges from its code error as its
+lock ages (share 1 → ``float_floor`` with ``float_conv_tau_s``), and cycle slips
+— frequent on weak and reflected carriers — restart it. DGNSS (2) otherwise; autonomous (1) when
 corrections are off; no fix (0) when the geometry cannot be solved (fewer than
 4 satellites, or fewer than 3 + the number of systems).
 """
@@ -49,10 +50,11 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.signal import lfilter
 from scipy.stats import chi2
 
 __all__ = ["FixConfig", "FixResult", "code_sigma_m", "carrier_sigma_m", "klobuchar_obliquity",
-           "gauss_markov", "pseudorange_errors", "solve_fixes", "QUALITY_NONE", "QUALITY_AUTONOMOUS",
+           "gauss_markov", "pseudorange_errors", "slip_probability", "solve_fixes", "QUALITY_NONE", "QUALITY_AUTONOMOUS",
            "QUALITY_DGNSS", "QUALITY_RTK_FIXED", "QUALITY_RTK_FLOAT"]
 
 QUALITY_NONE, QUALITY_AUTONOMOUS, QUALITY_DGNSS, QUALITY_RTK_FIXED, QUALITY_RTK_FLOAT = 0, 1, 2, 4, 5
@@ -95,6 +97,10 @@ class FixConfig:
     float_conv_tau_s: float = 30.0
     float_floor: float = 0.1
     warm_start_lock_s: float = 60.0
+    slip_nlos_prob: float = 0.2
+    slip_weak_prob: float = 0.5
+    slip_weak_scale_db: float = 3.0
+    rtk_atm_fraction: float = 0.003
 
     def __post_init__(self):
         for name, value in vars(self).items():
@@ -142,6 +148,14 @@ def gauss_markov(rng: np.random.Generator, phi: np.ndarray, shape: tuple[int, in
     n, k = shape
     w = rng.standard_normal((n, k))
     phi = np.broadcast_to(np.asarray(phi, float), (n,))
+    if n > 1 and np.all(phi[1:] == phi[1]):
+        # Constant φ: the same recursion as a first-order IIR filter, run in C.
+        p = float(phi[1])
+        x = np.empty((n, k))
+        x[0] = w[0]
+        if n > 1:
+            x[1:], _ = lfilter([np.sqrt(1.0 - p * p)], [1.0, -p], w[1:], axis=0, zi=(p * w[0])[None])
+        return x
     out = np.empty((n, k))
     x = w[0]
     out[0] = x
@@ -251,13 +265,13 @@ def _wls(g: np.ndarray, w: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.nd
     which is the same as removing that unknown.
     """
     gw = g * w[..., None]
-    nmat = np.einsum("nki,nkj->nij", gw, g)
+    nmat = np.matmul(gw.transpose(0, 2, 1), g)
     for c in (3, 4):
         empty = nmat[:, c, c] <= 0.0
         nmat[empty, c, c] = 1.0
     nmat = nmat + 1e-12 * np.eye(5)[None]
     ninv = np.linalg.inv(nmat)
-    theta = np.einsum("nij,nj->ni", ninv, np.einsum("nki,nk->ni", gw, y))
+    theta = np.matmul(ninv, np.matmul(gw.transpose(0, 2, 1), y[..., None]))[..., 0]
     return theta, ninv
 
 
@@ -269,16 +283,36 @@ def _dops(g: np.ndarray, used: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.n
     return hdop, vdop, pdop
 
 
-def _lock_age_s(tracked: np.ndarray, dt_s: float, warm_s: float) -> np.ndarray:
-    """Seconds of continuous tracking up to each epoch, (n, k); satellites tracked at epoch 0 start at ``warm_s``."""
+def _lock_age_s(tracked: np.ndarray, slip: np.ndarray, dt_s: float, warm_s: float) -> np.ndarray:
+    """Seconds of continuous carrier-phase lock up to each epoch, (n, k).
+
+    Lock restarts at 0 after a loss of track or a cycle slip (``slip``, bool
+    (n, k)); satellites tracked at epoch 0 without a slip start at ``warm_s``.
+    """
     n, k = tracked.shape
     age = np.empty((n, k))
-    a = np.where(tracked[0], warm_s, 0.0)
+    a = np.where(tracked[0] & ~slip[0], warm_s, 0.0)
     age[0] = a
     for i in range(1, n):
-        a = np.where(tracked[i], a + dt_s, 0.0)
+        a = np.where(tracked[i] & ~slip[i], a + dt_s, 0.0)
         age[i] = a
     return age
+
+
+def slip_probability(cn0_dbhz: np.ndarray, nlos: np.ndarray, cfg: FixConfig = FixConfig()) -> np.ndarray:
+    """Per-epoch probability of a cycle slip, (n, k).
+
+    Weak signals slip more, p = p_w·exp(−(C/N0 − 25)/s), and reflected (NLOS)
+    carriers, whose phase follows the moving reflection geometry, slip often
+    (a behavioural model; cf. Groves 2013, *Principles of GNSS, Inertial, and
+    Multisensor Integrated Navigation Systems*, 2nd ed., §9.2.4 and §10.4).
+
+    >>> [round(float(x), 3) for x in slip_probability(np.array([25.0, 40.0]), np.array([False, True]))]
+    [0.5, 0.203]
+    """
+    c = np.nan_to_num(np.asarray(cn0_dbhz, float), nan=0.0)
+    p = cfg.slip_weak_prob * np.exp(-np.maximum(c - 25.0, 0.0) / cfg.slip_weak_scale_db)
+    return np.clip(p + np.where(nlos, cfg.slip_nlos_prob, 0.0), 0.0, 1.0)
 
 
 def solve_fixes(rng: np.random.Generator, az_rad: np.ndarray, el_rad: np.ndarray, sys_idx: np.ndarray,
@@ -308,7 +342,7 @@ def solve_fixes(rng: np.random.Generator, az_rad: np.ndarray, el_rad: np.ndarray
     for _ in range(cfg.raim_max_exclusions + 1):
         w = np.where(used & ok[:, None], w_all, 0.0)
         theta, ninv = _wls(g, w, code_err)
-        resid = code_err - np.einsum("nki,ni->nk", g, theta)
+        resid = code_err - np.matmul(g, theta[..., None])[..., 0]
         n_sys = (used[:, sys_idx == 0].any(axis=1).astype(int) + used[:, sys_idx == 1].any(axis=1))
         dof = used.sum(axis=1) - 3 - n_sys
         test = (w * resid ** 2).sum(axis=1)
@@ -317,7 +351,7 @@ def solve_fixes(rng: np.random.Generator, az_rad: np.ndarray, el_rad: np.ndarray
         if not fail.any():
             break
         # Standardised residual w·r²/(1 − h), h = w·gᵀ(GᵀWG)⁻¹g (hat-matrix diagonal).
-        h = w * np.einsum("nki,nij,nkj->nk", g, ninv, g)
+        h = w * (np.matmul(g, ninv) * g).sum(axis=-1)
         std = np.where(used, w * resid ** 2 / np.maximum(1.0 - h, 1e-6), -1.0)
         worst = std.argmax(axis=1)
         rows = np.flatnonzero(fail)
@@ -326,7 +360,9 @@ def solve_fixes(rng: np.random.Generator, az_rad: np.ndarray, el_rad: np.ndarray
     used &= ok[:, None]
     w = np.where(used, w_all, 0.0)
     theta_code, _ = _wls(g, w, code_err)
-    theta_car, _ = _wls(g, w, errors["carrier"])
+    # Double-differenced carrier: the base a few km away leaves ≈ 1 ppm of the atmosphere (rtk_atm_fraction).
+    carrier_dd = errors["carrier"] + cfg.rtk_atm_fraction * errors["atmosphere"]
+    theta_car, _ = _wls(g, w, carrier_dd)
     hdop, vdop, pdop = _dops(g, used)
 
     quality = np.zeros(n, int)
@@ -335,7 +371,8 @@ def solve_fixes(rng: np.random.Generator, az_rad: np.ndarray, el_rad: np.ndarray
         quality[ok] = QUALITY_AUTONOMOUS
         err[ok] = theta_code[ok, :3]
     else:
-        lock = _lock_age_s(tracked, dt_s, cfg.warm_start_lock_s)
+        slip = rng.random((n, k)) < slip_probability(cn0_reported_dbhz, nlos, cfg)
+        lock = _lock_age_s(tracked, slip, dt_s, cfg.warm_start_lock_s)
         locked = used & (lock >= cfg.phase_lock_s)
         n_lock = locked.sum(axis=1)
         n_used = used.sum(axis=1)
@@ -344,10 +381,8 @@ def solve_fixes(rng: np.random.Generator, az_rad: np.ndarray, el_rad: np.ndarray
         float_ok = ok & (n_lock >= cfg.float_min_sats)
         ttf_draws = rng.uniform(cfg.ttf_min_s, cfg.ttf_max_s, n)
         fixed = np.zeros(n, bool)
-        t_float = np.zeros(n)
         # Warm start: the receiver was running in the same surroundings before the first epoch.
         held, need = 0.0, 0.0
-        tf = cfg.warm_start_lock_s if float_ok[0] else 0.0
         for i in range(n):
             if fixed_ok[i]:
                 if held == 0.0 and i > 0:
@@ -356,15 +391,16 @@ def solve_fixes(rng: np.random.Generator, az_rad: np.ndarray, el_rad: np.ndarray
                 fixed[i] = held >= need
             else:
                 held = 0.0
-            tf = tf + dt_s if float_ok[i] else 0.0
-            t_float[i] = tf
         quality[ok] = QUALITY_DGNSS
         quality[float_ok] = QUALITY_RTK_FLOAT
         quality[fixed] = QUALITY_RTK_FIXED
-        share = cfg.float_floor + (1.0 - cfg.float_floor) * np.exp(-t_float / cfg.float_conv_tau_s)
         err[ok] = theta_code[ok, :3]
+        # Float: each satellite's ambiguity converges from its code error as its lock ages, so a
+        # satellite that keeps slipping (NLOS) carries most of its code error into the solution.
+        share = cfg.float_floor + (1.0 - cfg.float_floor) * np.exp(-lock / cfg.float_conv_tau_s)
+        theta_float, _ = _wls(g, w, carrier_dd + share * code_err)
         fl = quality == QUALITY_RTK_FLOAT
-        err[fl] = theta_car[fl, :3] + share[fl, None] * theta_code[fl, :3]
+        err[fl] = theta_float[fl, :3]
         err[fixed] = theta_car[fixed, :3]
     hdop = np.where(ok, hdop, np.nan)
     vdop = np.where(ok, vdop, np.nan)

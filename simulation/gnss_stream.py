@@ -83,6 +83,25 @@ def _epoch_times(traj: Trajectory, rate_hz: float) -> np.ndarray:
     return traj.t_s[0] + dt * np.arange(n)
 
 
+def _key_epochs(t_s: np.ndarray, p_en: np.ndarray, up_m: np.ndarray, move_m: float = 0.05,
+                max_dt_s: float = 1.0) -> np.ndarray:
+    """Epochs at which the ray–box tests are redone: the receiver moved ≥ ``move_m`` or ``max_dt_s`` passed.
+
+    In between, the satellites move by < 0.01° (MEO angular rate ≈ 0.008°/s),
+    so a standing receiver reuses the last test; a walker (≈ 0.3 m per epoch)
+    gets a fresh test every epoch. Returns sorted indices starting at 0.
+    """
+    keys = [0]
+    last = 0
+    pe, pn, pu, tt = p_en[:, 0].tolist(), p_en[:, 1].tolist(), up_m.tolist(), t_s.tolist()
+    for i in range(1, len(tt)):
+        if (tt[i] - tt[last] >= max_dt_s - 1e-9
+                or (pe[i] - pe[last]) ** 2 + (pn[i] - pn[last]) ** 2 + (pu[i] - pu[last]) ** 2 >= move_m ** 2):
+            keys.append(i)
+            last = i
+    return np.asarray(keys, int)
+
+
 def simulate_gnss(site, traj: Trajectory, seed: int, corrections: bool = True, rate_hz: float = DEFAULT_RATE_HZ,
                   signal_cfg: gnss_signal.SignalConfig = gnss_signal.SignalConfig(),
                   fix_cfg: gnss_fix.FixConfig = gnss_fix.FixConfig()) -> GnssSimulation:
@@ -107,20 +126,30 @@ def simulate_gnss(site, traj: Trajectory, seed: int, corrections: bool = True, r
     speed = np.interp(t, traj.t_s, traj.speed_m_s)
     p_en = np.stack([east, north], axis=1)
 
+    cfg = signal_cfg
     sats = all_satellites()
-    k = len(sats)
+    k_all = len(sats)
     az, el = azel(unix, site.origin, sats)
     boxes = boxes_array(site.layout)
     porous = np.array([b.porous for b in site.layout], bool)
     m = boxes.shape[0]
-    cfg = signal_cfg
+    # Per-satellite draws for the whole constellation, so a satellite's draws do not depend on which others rise.
+    offset = cfg.sat_offset_sigma_db * stream_rng(seed, "gnss", "sat_offset").standard_normal(k_all)
+    refl = stream_rng(seed, "gnss", "nlos_loss").uniform(cfg.nlos_loss_min_db, cfg.nlos_loss_max_db, (k_all, m))
+    por = stream_rng(seed, "gnss", "porous_loss").uniform(cfg.porous_loss_min_db, cfg.porous_loss_max_db, (k_all, m))
+    excess = stream_rng(seed, "gnss", "nlos_excess").exponential(cfg.nlos_excess_mean_m, (k_all, m))
+    # Work only on satellites above the in-view mask at some epoch: the others never appear in any output.
+    rises = np.flatnonzero((el > np.radians(cfg.in_view_mask_deg)).any(axis=0))
+    sats = sats.select(rises)
+    az, el = az[:, rises], el[:, rises]
+    offset, refl, por, excess = offset[rises], refl[rises], por[rises], excess[rises]
+    k = len(sats)
 
-    offset = cfg.sat_offset_sigma_db * stream_rng(seed, "gnss", "sat_offset").standard_normal(k)
-    refl = stream_rng(seed, "gnss", "nlos_loss").uniform(cfg.nlos_loss_min_db, cfg.nlos_loss_max_db, (k, m))
-    por = stream_rng(seed, "gnss", "porous_loss").uniform(cfg.porous_loss_min_db, cfg.porous_loss_max_db, (k, m))
-    excess = stream_rng(seed, "gnss", "nlos_excess").exponential(cfg.nlos_excess_mean_m, (k, m))
-
-    blk = gnss_signal.blockage(p_en, up, az, el, boxes, porous, refl, por, excess, cfg)
+    key = _key_epochs(t, p_en, up)
+    blk = gnss_signal.blockage(p_en[key], up[key], az[key], el[key], boxes, porous, refl, por, excess, cfg)
+    fill = np.searchsorted(key, np.arange(n), side="right") - 1
+    blk = gnss_signal.Blockage(*(getattr(blk, f)[fill] for f in (
+        "loss_db", "nlos", "solid_blocked", "nlos_extra_m", "diffraction_db")))
     emi = gnss_signal.emi_loss_db(p_en, site.emi_zones)
     clutter = gnss_signal.clutter_index(p_en, boxes, porous, cfg.clutter_scale_m)
     cn0_open = gnss_signal.open_sky_cn0_dbhz(el, sats.a_m[None, :], cfg) + offset[None, :]

@@ -111,73 +111,99 @@ def _lon_field(lon: float) -> tuple[str, str]:
 
 
 def _dop(x: float) -> str:
-    return "" if not np.isfinite(x) else f"{min(x, 99.99):.2f}"
+    return "" if x != x else f"{min(x, 99.99):.2f}"
+
+
+def _time_fields(unix_s: np.ndarray) -> tuple[list[str], list[str]]:
+    """UTC ``hhmmss.ss`` and ``ddmmyy`` strings per epoch."""
+    cs = np.round(np.asarray(unix_s, float) * 100.0).astype(np.int64)
+    day = cs // 8_640_000
+    hh, rem = np.divmod(cs - day * 8_640_000, 360_000)
+    mm, rem = np.divmod(rem, 6000)
+    ss, cc = np.divmod(rem, 100)
+    times = [f"{a:02d}{b:02d}{c:02d}.{d:02d}" for a, b, c, d in zip(hh.tolist(), mm.tolist(), ss.tolist(), cc.tolist())]
+    day_str = {d: datetime.fromtimestamp(d * 86400, tz=timezone.utc).strftime("%d%m%y") for d in np.unique(day).tolist()}
+    return times, [day_str[d] for d in day.tolist()]
+
+
+def _gsv_groups(ep: NmeaEpochs, prn_str: list[str]) -> tuple[list[str], np.ndarray]:
+    """The ``,prn,el,az,snr`` group of every (epoch, satellite), each distinct one formatted once.
+
+    Returns (groups, index (n, k) into groups).
+    """
+    el_i = np.clip(np.rint(ep.el_deg), 0, 90).astype(np.int64)
+    az_i = np.mod(np.rint(ep.az_deg), 360).astype(np.int64)
+    snr_i = np.where(np.isfinite(ep.snr_dbhz), np.clip(np.rint(np.nan_to_num(ep.snr_dbhz)), 0, 99), -1).astype(np.int64)
+    code = ((np.arange(len(prn_str))[None, :] * 91 + el_i) * 360 + az_i) * 101 + (snr_i + 1)
+    uniq, inv = np.unique(code, return_inverse=True)
+    snr_tab = [f"{v:02d}" for v in range(100)] + [""]  # index −1 → empty
+    groups = [f",{prn_str[c]},{e:02d},{a:03d},{snr_tab[q]}" for c, e, a, q in zip(
+        (uniq // (101 * 360 * 91)).tolist(), ((uniq // (101 * 360)) % 91).tolist(),
+        ((uniq // 101) % 360).tolist(), (uniq % 101 - 1).tolist())]
+    return groups, inv.reshape(code.shape)
 
 
 def format_nmea(ep: NmeaEpochs) -> str:
     """All sentences of all epochs as one string with CRLF line ends (see the module docstring)."""
     n = len(ep.unix_s)
-    cs = np.round(np.asarray(ep.unix_s, float) * 100.0).astype(np.int64)
-    day = cs // 8_640_000
-    sod_cs = cs - day * 8_640_000
-    hh, rem = np.divmod(sod_cs, 360_000)
-    mm, rem = np.divmod(rem, 6000)
-    ss, cc = np.divmod(rem, 100)
-    day_str: dict[int, str] = {}
-    prn_str = [f"{p:02d}" for p in np.asarray(ep.sat_prn, int)]
-    el_i = np.clip(np.rint(ep.el_deg), 0, 90).astype(int)
-    az_i = np.mod(np.rint(ep.az_deg), 360).astype(int)
-    snr_i = np.where(np.isfinite(ep.snr_dbhz), np.clip(np.rint(np.nan_to_num(ep.snr_dbhz)), 0, 99), -1).astype(int)
-    snr_tab = [f"{v:02d}" for v in range(100)] + [""]  # index −1 → empty
+    times, dates = _time_fields(ep.unix_s)
+    prn_str = [f"{p:02d}" for p in np.asarray(ep.sat_prn, int).tolist()]
+    groups, gidx = _gsv_groups(ep, prn_str)
+    quality = np.asarray(ep.quality, int)
+    has_fix = (quality > 0) & np.isfinite(ep.lat_deg) & np.isfinite(ep.lon_deg)
+    fix_l = has_fix.tolist()
+    q_l = np.where(has_fix, quality, 0).tolist()
+    lat = np.where(has_fix, ep.lat_deg, 0.0).tolist()
+    lon = np.where(has_fix, ep.lon_deg, 0.0).tolist()
+    alt = np.where(has_fix, ep.alt_m, 0.0).tolist()
+    spd = (np.nan_to_num(ep.speed_m_s) * _MS_TO_KNOTS).tolist()
+    crs = ep.course_deg.tolist()
+    hdop, vdop, pdop = ep.hdop.tolist(), ep.vdop.tolist(), ep.pdop.tolist()
+    n_used = np.where(has_fix, ep.used.sum(axis=1), 0).tolist()
     systems = [s for s in (NMEA_SYSTEM_GPS, NMEA_SYSTEM_BDS) if np.any(ep.sat_system == s)]
     sys_cols = {s: np.flatnonzero(ep.sat_system == s) for s in systems}
     sys_cols = {s: c[np.argsort(np.asarray(ep.sat_prn)[c], kind="stable")] for s, c in sys_cols.items()}
+    sep = f"{ep.geoid_sep_m:.1f}"
+    age = f"{ep.diff_age_s:.1f}"
+    sid = f"{ep.station_id:04d}"
+    empty12 = [""] * 12
     bodies: list[str] = []
     add = bodies.append
     for i in range(n):
-        t = f"{hh[i]:02d}{mm[i]:02d}{ss[i]:02d}.{cc[i]:02d}"
-        d = int(day[i])
-        if d not in day_str:
-            day_str[d] = datetime.fromtimestamp(d * 86400, tz=timezone.utc).strftime("%d%m%y")
-        q = int(ep.quality[i])
-        has_fix = q > 0 and np.isfinite(ep.lat_deg[i])
-        if has_fix:
-            la, ns = _lat_field(float(ep.lat_deg[i]))
-            lo, ew = _lon_field(float(ep.lon_deg[i]))
-            alt = f"{ep.alt_m[i]:.3f}"
+        t = times[i]
+        if fix_l[i]:
+            q = q_l[i]
+            la, ns = _lat_field(lat[i])
+            lo, ew = _lon_field(lon[i])
+            c = crs[i]
+            add(f"GNRMC,{t},A,{la},{ns},{lo},{ew},{spd[i]:.3f},{'' if c != c else f'{c:.2f}'},{dates[i]},,,"
+                f"{_RMC_MODE.get(q, 'A')},V")
+            diff = q in (2, 4, 5)
+            add(f"GNGGA,{t},{la},{ns},{lo},{ew},{q},{n_used[i]:02d},{_dop(hdop[i])},{alt[i]:.3f},M,{sep},M,"
+                f"{age if diff else ''},{sid if diff else ''}")
+            tail = f"{_dop(pdop[i])},{_dop(hdop[i])},{_dop(vdop[i])}"
+            used_i = ep.used[i]
+            for s in systems:
+                cols = sys_cols[s]
+                prns = [prn_str[c] for c in cols[used_i[cols]].tolist()]
+                for j0 in range(0, max(1, len(prns)), 12):
+                    chunk = prns[j0:j0 + 12]
+                    add(f"GNGSA,A,3,{','.join(chunk + empty12[len(chunk):])},{tail},{s}")
         else:
-            la = ns = lo = ew = alt = ""
-        spd = f"{ep.speed_m_s[i] * _MS_TO_KNOTS:.3f}" if has_fix else ""
-        crs = f"{ep.course_deg[i]:.2f}" if has_fix and np.isfinite(ep.course_deg[i]) else ""
-        add(f"GNRMC,{t},{'A' if has_fix else 'V'},{la},{ns},{lo},{ew},{spd},{crs},{day_str[d]},,,"
-            f"{_RMC_MODE.get(q, 'N') if has_fix else 'N'},V")
-        used_i = ep.used[i]
-        n_used = int(used_i.sum()) if has_fix else 0
-        diff = has_fix and q in (2, 4, 5)
-        age = f"{ep.diff_age_s:.1f}" if diff else ""
-        sid = f"{ep.station_id:04d}" if diff else ""
-        sep = f"{ep.geoid_sep_m:.1f}" if has_fix else ""
-        add(f"GNGGA,{t},{la},{ns},{lo},{ew},{q if has_fix else 0},{n_used:02d},{_dop(ep.hdop[i]) if has_fix else ''},"
-            f"{alt},{'M' if has_fix else ''},{sep},{'M' if has_fix else ''},{age},{sid}")
-        dops = f"{_dop(ep.pdop[i])},{_dop(ep.hdop[i])},{_dop(ep.vdop[i])}" if has_fix else ",,"
-        mode = "3" if has_fix else "1"
+            add(f"GNRMC,{t},V,,,,,,,{dates[i]},,,N,V")
+            add(f"GNGGA,{t},,,,,0,00,,,,,,,")
+            for s in systems:
+                add(f"GNGSA,A,1,,,,,,,,,,,,,,,,{s}")
+        g_r, view_r = gidx[i], ep.in_view[i]
         for s in systems:
             cols = sys_cols[s]
-            prns = [prn_str[c] for c in cols if used_i[c]] if has_fix else []
-            for j0 in range(0, max(1, len(prns)), 12):
-                chunk = prns[j0:j0 + 12]
-                add(f"GNGSA,A,{mode},{','.join(chunk + [''] * (12 - len(chunk)))},{dops},{s}")
-        el_r, az_r, snr_r, view_r = el_i[i], az_i[i], snr_i[i], ep.in_view[i]
-        for s in systems:
-            cols = [c for c in sys_cols[s] if view_r[c]]
-            n_view = len(cols)
+            grp = [groups[g] for g in g_r[cols[view_r[cols]]].tolist()]
+            n_view = len(grp)
             n_msg = max(1, -(-n_view // 4))
-            talker = _TALKER[s]
-            sig = _SIGNAL_ID[s]
+            head = f"{_TALKER[s]}GSV,{n_msg},"
+            tail_sig = _SIGNAL_ID[s]
             for mnum in range(n_msg):
-                part = cols[4 * mnum:4 * mnum + 4]
-                sats = "".join(f",{prn_str[c]},{el_r[c]:02d},{az_r[c]:03d},{snr_tab[snr_r[c]]}" for c in part)
-                add(f"{talker}GSV,{n_msg},{mnum + 1},{n_view:02d}{sats},{sig}")
+                add(f"{head}{mnum + 1},{n_view:02d}{''.join(grp[4 * mnum:4 * mnum + 4])},{tail_sig}")
     return _finish(bodies)
 
 
