@@ -219,8 +219,10 @@ def repair_imu(t_s, acc_m_s2, gyro_rad_s=None, mag_ut=None, config: RepairConfig
     out = {k: np.stack([np.interp(tu, t, v[:, j]) for j in range(3)], axis=1) for k, v in chans.items()}
     seg = np.searchsorted(t, tu, side="right") - 1
     seg = np.clip(seg, 0, len(dt_raw) - 1)
-    valid = ~gaps[seg] | np.isin(tu, t)
-    sat_u = np.interp(tu, t, sat.astype(float)) > 0
+    tol = 1e-3 * dt
+    valid = ~(gaps[seg] & (tu > t[seg] + tol) & (tu < t[seg + 1] - tol))
+    nearest = np.where(tu - t[seg] <= t[np.minimum(seg + 1, len(t) - 1)] - tu, seg, np.minimum(seg + 1, len(t) - 1))
+    sat_u = sat[nearest]
     report.n_output = n_out
     return ImuData(t_s=tu, acc_m_s2=out["acc"], gyro_rad_s=out.get("gyro"), mag_ut=out.get("mag"),
                    valid=valid, saturated=sat_u, rate_hz=float(rate), report=report)

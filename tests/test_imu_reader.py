@@ -1,0 +1,108 @@
+"""IMU CSV reader and repair: defects counted, never an exception; one clear error for missing columns."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from features.errors import ImuError
+from features.imu import RepairConfig, read_imu_csv, repair_imu
+from features.pdr import run_pdr
+from pipeline.cli import main
+
+DATA = Path(__file__).resolve().parent / "data"
+
+
+def test_good_file_reads_clean_at_100_hz():
+    d = read_imu_csv(DATA / "imu_good.csv")
+    assert d.report.n_defects == 0
+    assert len(d) == 1567 and d.rate_hz == pytest.approx(100.0, rel=1e-6)
+    assert d.gyro_rad_s.shape == (1567, 3) and d.mag_ut.shape == (1567, 3)
+    assert d.valid.all() and not d.saturated.any()
+    # standing at the start: specific force ≈ −g along body down (FRD), |f| ≈ 9.81
+    assert np.linalg.norm(d.acc_m_s2[:100], axis=1).mean() == pytest.approx(9.81, abs=0.1)
+
+
+def test_bad_file_is_repaired_with_every_defect_counted():
+    """imu_bad.csv: the good file with a 1 s gap, 5 duplicated rows, two swaps, NaN, a text token, clipping."""
+    d = read_imu_csv(DATA / "imu_bad.csv")
+    r = d.report
+    assert (r.n_rows, r.n_duplicate_t, r.n_unsorted) == (1472, 5, 4)
+    assert (r.n_nan_acc, r.n_nan_gyro, r.n_saturated_acc) == (2, 1, 5)
+    assert r.n_gaps == 1 and r.gap_total_s == pytest.approx(1.01, abs=1e-6)
+    assert np.all(np.diff(d.t_s) > 0) and np.isfinite(d.acc_m_s2).all() and np.isfinite(d.gyro_rad_s).all()
+    assert (~d.valid).sum() == 100            # the gap's interior is flagged, not invented
+    assert d.saturated.sum() == 5
+    good = read_imu_csv(DATA / "imu_good.csv")
+    np.testing.assert_allclose(d.acc_m_s2[:300], good.acc_m_s2[:300])   # untouched before the defects
+    # steps are still found outside the gap (20 in the clean file)
+    n_bad, n_good = len(run_pdr(d)), len(run_pdr(good))
+    assert n_good == 20 and 16 <= n_bad <= n_good
+
+
+def test_missing_columns_one_error_naming_them():
+    with pytest.raises(ImuError, match=r"missing required column\(s\) t_s, az"):
+        read_imu_csv(DATA / "imu_missing_columns.csv")
+
+
+def test_partial_triple_and_empty_file_are_errors(tmp_path):
+    p = tmp_path / "x.csv"
+    p.write_text("t_s,ax,ay,az,gx\n0,0,0,-9.8,0\n0.01,0,0,-9.8,0\n")
+    with pytest.raises(ImuError, match="gx, gy, gz must all be present"):
+        read_imu_csv(p)
+    p.write_text("")
+    with pytest.raises(ImuError, match="empty file"):
+        read_imu_csv(p)
+    with pytest.raises(ImuError, match="not found"):
+        read_imu_csv(tmp_path / "nope.csv")
+
+
+def test_accelerometer_only_gives_steps_and_lengths_without_heading():
+    d = read_imu_csv(DATA / "imu_acc_only.csv")
+    assert d.gyro_rad_s is None and d.mag_ut is None
+    r = run_pdr(d)
+    full = run_pdr(read_imu_csv(DATA / "imu_good.csv"))
+    assert len(r) == len(full) == 20
+    np.testing.assert_allclose(r.step_length_m, full.step_length_m, rtol=1e-4)
+    assert np.isnan(r.heading_rad).all() and np.isnan(r.east_m).all() and r.heading is None
+
+
+def test_repair_in_memory_nan_everywhere_in_one_column_and_unsorted():
+    t = np.array([0.03, 0.0, 0.01, 0.02, 0.02])
+    acc = np.tile([0.0, 0.0, -9.8], (5, 1))
+    acc[2, 0] = np.nan
+    d = repair_imu(t, acc, config=RepairConfig(rate_hz=100.0))
+    assert (d.report.n_unsorted, d.report.n_duplicate_t, d.report.n_nan_acc, len(d)) == (1, 1, 1, 4)
+    assert np.isfinite(d.acc_m_s2).all()
+    with pytest.raises(ImuError, match="fewer than 2"):
+        repair_imu([np.nan, 1.0], [[0, 0, 0], [0, 0, 0]])
+
+
+def test_cli_writes_steps_and_reports_repairs(tmp_path, capsys):
+    out = tmp_path / "steps.csv"
+    rc = main(["features", "imu", str(DATA / "imu_bad.csv"), "--start-east", "10", "--start-north", "-5",
+               "--k", "0.45", "--out", str(out)])
+    assert rc == 0
+    err = capsys.readouterr().err
+    assert "n_gaps=1" in err and "n_duplicate_t=5" in err
+    rows = out.read_text().splitlines()
+    assert rows[0] == "t_s,step_length_m,heading_rad,east_m,north_m"
+    vals = np.array([[float(x) for x in r.split(",")] for r in rows[1:]])
+    assert len(vals) >= 16 and np.all(np.diff(vals[:, 0]) > 0)
+    # the walk starts north from (10, -5): the first step lies within a step length of the start
+    assert np.hypot(vals[0, 3] - 10.0, vals[0, 4] + 5.0) == pytest.approx(vals[0, 1], abs=0.05)
+
+
+def test_cli_acc_only_leaves_heading_empty_and_missing_columns_fail_cleanly(tmp_path, capsys):
+    out = tmp_path / "steps.csv"
+    assert main(["features", "imu", str(DATA / "imu_acc_only.csv"), "--out", str(out)]) == 0
+    rows = out.read_text().splitlines()[1:]
+    assert len(rows) == 20 and all(r.endswith(",,,") for r in rows)
+    capsys.readouterr()
+    out2 = tmp_path / "none.csv"
+    assert main(["features", "imu", str(DATA / "imu_missing_columns.csv"), "--out", str(out2)]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "missing required column(s) t_s, az" in err[0]
+    assert not out2.exists()
