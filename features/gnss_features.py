@@ -324,7 +324,7 @@ def gnss_features(sky: SkyArrays, config: GnssFeatureConfig | None = None,
         sigma = np.sqrt(np.maximum(var, 0.0))
         beta = _window_sums(c_ext, lo, hi) / n_sat_trk / config.window_s
         zeta = 1.0 - n_pairs_trk / n_pairs_view
-        lam_w = _window_sums(c_lam, lo, hi) / _window_sums(c_lam_n, lo, hi)
+        lam_w = np.clip(_window_sums(c_lam, lo, hi) / _window_sums(c_lam_n, lo, hi), 0.0, config.dop_growth_cap)
     no_trk = n_pairs_trk == 0
     for arr in (mu, sigma, beta):
         arr[no_trk] = np.nan
