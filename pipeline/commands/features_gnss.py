@@ -50,7 +50,7 @@ def register(sub) -> None:
 
 def _fmt(value) -> str:
     if isinstance(value, float):
-        return "" if math.isnan(value) else f"{value:.6g}"
+        return "" if math.isnan(value) else f"{value:.10g}"
     return str(value)
 
 
