@@ -46,31 +46,27 @@ def footprint_entry(p_en: np.ndarray, az_rad: np.ndarray, boxes: np.ndarray) -> 
     p = np.asarray(p_en, float)
     az = np.asarray(az_rad, float)
     if az.ndim == 1:
-        az = np.broadcast_to(az, (p.shape[0], az.shape[0]))
+        az = az[None, :]
+    # A direction component of exactly 0 is nudged to 1e-12: the slab bounds
+    # then become ±1e12-scale numbers, which the min/max logic treats exactly
+    # like the infinite slab of a parallel ray (Williams et al. 2005).
     de = np.sin(az)[..., None]
     dn = np.cos(az)[..., None]
+    de = np.where(np.abs(de) < 1e-12, 1e-12, de)
+    dn = np.where(np.abs(dn) < 1e-12, 1e-12, dn)
+    inv_e = 1.0 / de
+    inv_n = 1.0 / dn
     pe = p[:, 0][:, None, None]
     pn = p[:, 1][:, None, None]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        inv_e = np.where(np.abs(de) > 1e-12, 1.0 / de, np.inf)
-        inv_n = np.where(np.abs(dn) > 1e-12, 1.0 / dn, np.inf)
-        t1 = (boxes[:, 0] - pe) * inv_e
-        t2 = (boxes[:, 1] - pe) * inv_e
-        t3 = (boxes[:, 2] - pn) * inv_n
-        t4 = (boxes[:, 3] - pn) * inv_n
-    # Rays parallel to a slab: inside the slab → (-inf, inf), outside → empty.
-    par_e = ~np.isfinite(inv_e)
-    par_n = ~np.isfinite(inv_n)
-    in_e = (pe >= boxes[:, 0]) & (pe <= boxes[:, 1])
-    in_n = (pn >= boxes[:, 2]) & (pn <= boxes[:, 3])
-    lo_e = np.where(par_e, np.where(in_e, -np.inf, np.inf), np.minimum(t1, t2))
-    hi_e = np.where(par_e, np.where(in_e, np.inf, -np.inf), np.maximum(t1, t2))
-    lo_n = np.where(par_n, np.where(in_n, -np.inf, np.inf), np.minimum(t3, t4))
-    hi_n = np.where(par_n, np.where(in_n, np.inf, -np.inf), np.maximum(t3, t4))
-    t_lo = np.maximum(lo_e, lo_n)
-    t_hi = np.minimum(hi_e, hi_n)
-    hit = (t_hi >= np.maximum(t_lo, 0.0))
-    t_in = np.where(hit, np.maximum(t_lo, 0.0), np.inf)
+    t1 = (boxes[:, 0] - pe) * inv_e
+    t2 = (boxes[:, 1] - pe) * inv_e
+    t3 = (boxes[:, 2] - pn) * inv_n
+    t4 = (boxes[:, 3] - pn) * inv_n
+    t_lo = np.maximum(np.minimum(t1, t2), np.minimum(t3, t4))
+    t_hi = np.minimum(np.maximum(t1, t2), np.maximum(t3, t4))
+    np.maximum(t_lo, 0.0, out=t_lo)
+    hit = t_hi >= t_lo
+    t_in = np.where(hit, t_lo, np.inf)
     t_out = np.where(hit, t_hi, np.inf)
     return t_in, t_out
 
@@ -86,27 +82,50 @@ def horizon_elevation(p_en: np.ndarray, az_rad: np.ndarray, boxes: np.ndarray, z
         return np.zeros((np.asarray(p_en).shape[0], az.shape[-1]))
     t_in, _ = footprint_entry(p_en, az_rad, boxes)
     dz = boxes[:, 4] - z0_m
+    # max over boxes of tan(elevation) = dz / t_in (t_in = 0 inside → +inf → π/2)
     with np.errstate(divide="ignore"):
-        el = np.arctan2(dz, t_in)  # t_in=inf → 0; t_in=0 → π/2 (when dz > 0)
-    el = np.where(np.isfinite(t_in) & (dz > 0), el, 0.0)
-    return el.max(axis=-1)
+        tan_el = np.where(dz > 0, dz / t_in, 0.0).max(axis=-1)
+    return np.arctan(tan_el)
 
 
 def sky_blocked_fraction(p_en: np.ndarray, boxes: np.ndarray, z0_m: float, mask_deg: float = 10.0,
-                         n_az: int = 360, chunk: int = 512) -> np.ndarray:
+                         n_az: int = 360, tile_m: float = 8.0) -> np.ndarray:
     """Share of the sky above the elevation mask hidden by ``boxes``, per point.
 
     Solid-angle weighted: the sky between the mask and elevation ``e`` along one
     azimuth spans ∫cos(e')de' = sin(e) − sin(mask), the whole sky above the mask
     2π(1 − sin(mask)). Returns ndarray of shape (n,) in [0, 1].
+
+    Points are processed in square tiles of ``tile_m``; a box is tested only
+    against tiles within its reach (h − z0)/tan(mask), beyond which it cannot
+    rise above the mask — the result is exact, only faster.
     """
     p = np.atleast_2d(np.asarray(p_en, float))
     az = (np.arange(n_az) + 0.5) * (2.0 * np.pi / n_az)
-    s_mask = np.sin(np.radians(mask_deg))
-    out = np.empty(p.shape[0])
-    for i in range(0, p.shape[0], chunk):
-        hor = horizon_elevation(p[i:i + chunk], az, boxes, z0_m)
-        out[i:i + chunk] = np.clip(np.sin(hor) - s_mask, 0.0, None).mean(axis=1) / (1.0 - s_mask)
+    mask = np.radians(mask_deg)
+    s_mask = np.sin(mask)
+    out = np.zeros(p.shape[0])
+    tall = boxes[boxes[:, 4] > z0_m] if boxes.shape[0] else boxes
+    if tall.shape[0] == 0 or p.shape[0] == 0:
+        return out
+    reach = (tall[:, 4] - z0_m) / max(np.tan(mask), 1e-6)
+    tiles = np.floor(p / tile_m).astype(np.int64)
+    keys, inverse = np.unique(tiles, axis=0, return_inverse=True)
+    inverse = inverse.ravel()
+    order = np.argsort(inverse, kind="stable")
+    bounds = np.searchsorted(inverse[order], np.arange(len(keys) + 1))
+    for k in range(len(keys)):
+        idx = order[bounds[k]:bounds[k + 1]]
+        lo = keys[k] * tile_m
+        hi = lo + tile_m
+        # distance from the tile's square to each footprint
+        de = np.maximum(0.0, np.maximum(tall[:, 0] - hi[0], lo[0] - tall[:, 1]))
+        dn = np.maximum(0.0, np.maximum(tall[:, 2] - hi[1], lo[1] - tall[:, 3]))
+        near = np.hypot(de, dn) <= reach
+        if not near.any():
+            continue
+        hor = horizon_elevation(p[idx], az, tall[near], z0_m)
+        out[idx] = np.clip(np.sin(hor) - s_mask, 0.0, None).mean(axis=1) / (1.0 - s_mask)
     return out
 
 

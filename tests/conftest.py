@@ -44,3 +44,12 @@ def survey_dir(site_dir, tmp_path_factory) -> Path:
 
     return simulate_survey(site_dir, tmp_path_factory.mktemp("surveys") / "s3", seed=5, cell_size_m=10.0,
                            capture_s=10.0, progress=False)
+
+
+@pytest.fixture(scope="session")
+def gnss_survey_dir(site_dir, tmp_path_factory) -> Path:
+    """A GNSS-only survey (10 m cells, 10 s captures): cheap enough for GNSS statistics by class."""
+    from simulation.survey import simulate_survey
+
+    return simulate_survey(site_dir, tmp_path_factory.mktemp("gsurveys") / "g3", seed=5, cell_size_m=10.0,
+                           capture_s=10.0, progress=False, writers=("simulation.gnss_stream:write_gnss",))
