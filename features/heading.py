@@ -27,7 +27,9 @@ accelerometer reads specific force (≈ −g·down at rest).
   record's median by more than 5 % or its dip by more than 3° (steel,
   transformers), the magnetometer heading is replaced by the gyro-propagated
   heading from the last undisturbed sample, so the filter coasts on the gyro
-  there (the idea of imufusion's magnetic rejection, Madgwick 2020).
+  there (the idea of imufusion's magnetic rejection, Madgwick 2020). A second
+  gate flags spells where the magnetometer heading turns while the gyro does
+  not (quasi-static field test, see :func:`_inconsistent_with_gyro`).
 
 Why not a library: ``ahrs.filters.Mahony`` runs a Python loop (≈ 20 µs per
 sample here, 500× real time at 100 Hz); ``imufusion.Ahrs`` is compiled C but
@@ -42,7 +44,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import signal
+from scipy import ndimage, signal
 
 __all__ = ["HeadingConfig", "HeadingResult", "down_in_body", "yaw_rate", "magnetic_heading",
            "complementary_heading", "estimate_heading", "imufusion_heading", "wrap_pi"]
@@ -61,7 +63,7 @@ def wrap_pi(angle_rad):
 class HeadingConfig:
     """Heading estimation parameters.
 
-    ``kp_per_s`` / ``ki_per_s2``: Mahony gains. Time constant 1/kP = 20 s,
+    ``kp_per_s`` / ``ki_per_s2``: Mahony gains. Time constant 1/kP = 50 s,
     longer than a walker spends passing one transformer, so residual
     (ungated) disturbances average out while gyro drift over minutes is
     corrected; kI = kP²/4 makes the yaw loop critically damped.
@@ -70,12 +72,14 @@ class HeadingConfig:
     declination_rad: float = 0.0
     gravity_lowpass_hz: float = 0.3
     mag_lowpass_hz: float = 1.0
-    kp_per_s: float = 0.05
-    ki_per_s2: float = 0.000625
+    kp_per_s: float = 0.02
+    ki_per_s2: float = 0.0001
     gate_intensity_frac: float = 0.05
     gate_dip_rad: float = math.radians(3.0)
     static_start_s: float = 1.0
     initial_heading_rad: float = 0.0
+    consistency_window_s: float = 1.0
+    consistency_rad: float = math.radians(2.0)
 
     def __post_init__(self):
         for name in ("gravity_lowpass_hz", "mag_lowpass_hz", "kp_per_s", "gate_intensity_frac", "gate_dip_rad",
@@ -185,6 +189,28 @@ def _static_start(acc: np.ndarray, gyro: np.ndarray, rate_hz: float, seconds: fl
     return m if m >= n else 0
 
 
+def _inconsistent_with_gyro(mag_unwrapped: np.ndarray, gyro_heading: np.ndarray, rate_hz: float,
+                           config: HeadingConfig) -> np.ndarray:
+    """Samples whose magnetometer heading change over ``consistency_window_s`` disagrees with the gyro's.
+
+    A quasi-static field turns only when the device turns (Afzal et al. 2011,
+    "Magnetic field based heading estimation for pedestrian navigation
+    environments", IPIN): a walker passing steel sees the field swing while the
+    gyro says straight. Every sample of a window whose two heading changes
+    differ by more than ``consistency_rad`` is flagged, shape (n,) bool.
+    """
+    w = max(int(round(config.consistency_window_s * rate_hz)), 1)
+    n = len(mag_unwrapped)
+    if n <= w:
+        return np.zeros(n, bool)
+    diff = (mag_unwrapped[w:] - mag_unwrapped[:-w]) - (gyro_heading[w:] - gyro_heading[:-w])
+    bad_start = np.abs(wrap_pi(diff)) > config.consistency_rad
+    # window k covers samples k..k+w: flag them all (running maximum over w+1 starts)
+    flag = np.zeros(n, bool)
+    flag[:n - w] = bad_start
+    return ndimage.maximum_filter1d(flag, w + 1, origin=-(w // 2)) | flag
+
+
 def estimate_heading(acc_m_s2: np.ndarray, gyro_rad_s: np.ndarray | None, mag_ut: np.ndarray | None,
                      rate_hz: float, config: HeadingConfig = HeadingConfig()) -> HeadingResult | None:
     """Gyro-only, magnetometer-only and complementary heading, per sample (see module docstring).
@@ -216,6 +242,8 @@ def estimate_heading(acc_m_s2: np.ndarray, gyro_rad_s: np.ndarray | None, mag_ut
         psi_g = config.initial_heading_rad + np.r_[0.0, np.cumsum((r[1:] - bias0) * dt)]
         return HeadingResult(wrap_pi(psi_g), wrap_pi(psi_g), nan, disturbed, np.full(n, bias0))
     m_unw = np.unwrap(mag_psi)
+    psi_rel = np.r_[0.0, np.cumsum((r[1:] - bias0) * dt)]
+    disturbed |= _inconsistent_with_gyro(m_unw, psi_rel, rate_hz, config)
     n0 = max(int(round(config.static_start_s * rate_hz)), 1)
     good0 = ~disturbed[:n0]
     psi0 = float(np.mean(m_unw[:n0][good0])) if good0.any() else float(m_unw[0])
