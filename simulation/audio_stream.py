@@ -463,7 +463,7 @@ def _truth_csv(rows: list[tuple]) -> str:
     w.writerow(["beacon_id", "slot", "emit_t_s", "arrival_t_s", "arrival_sample", "first_path", "first_path_m",
                 "direct_m", "los", "rx_east_m", "rx_north_m", "rx_up_m", "level_db_spl", "doppler"])
     for r in rows:
-        w.writerow([r[0], r[1], f"{r[2]:.6f}", f"{r[3]:.7f}", f"{r[4]:.3f}", r[5], f"{r[6]:.4f}", f"{r[7]:.4f}",
+        w.writerow([r[0], r[1], f"{r[2]:.9f}", f"{r[3]:.9f}", f"{r[4]:.3f}", r[5], f"{r[6]:.4f}", f"{r[7]:.4f}",
                     r[8], f"{r[9]:.3f}", f"{r[10]:.3f}", f"{r[11]:.3f}", f"{r[12]:.1f}", f"{r[13]:.6f}"])
     return buf.getvalue()
 

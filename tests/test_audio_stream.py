@@ -1,0 +1,215 @@
+"""The simulated audio.wav: arrivals, levels, noise, clock, determinism and the stream-writer contract."""
+
+from __future__ import annotations
+
+import csv
+import io
+import math
+import tomllib
+from dataclasses import replace
+from datetime import datetime, timezone
+from pathlib import Path
+
+import numpy as np
+import pytest
+import soundfile as sf
+from scipy.signal import fftconvolve, hilbert
+
+from features.errors import ConfigError
+from features.site import AcousticConfig, Atmosphere, Beacon, Box, Origin, Site, save_site
+from simulation.acoustics import absorption_db_per_m
+from simulation.audio_stream import AudioConfig, render_audio, write_audio
+from simulation.chirp import beacon_chirp, reference_chirp
+from simulation.streams import StreamContext, Trajectory
+
+FS = 48_000
+START = datetime(2026, 6, 1, 8, 0, 0, tzinfo=timezone.utc)
+QUIET = AudioConfig(noise_db_spl=-40.0, hum_db_spl_1m=-200.0, corona_rate_hz=0.0)
+
+BEACONS = (Beacon(1, 0.0, 0.0, 3.0, 0), Beacon(2, 30.0, 0.0, 2.8, 1), Beacon(3, 0.0, 30.0, 2.6, 2),
+           Beacon(4, 30.0, 30.0, 3.0, 3))
+
+
+def _site(layout=(), beacons=BEACONS) -> Site:
+    return Site(name="t", origin=Origin(31.0, 118.0), beacons=beacons, acoustic=AcousticConfig(n_slots=4),
+                layout=tuple(layout))
+
+
+def _static(e: float, n: float, duration_s: float = 2.0) -> Trajectory:
+    t = np.arange(0.0, duration_s + 1e-9, 0.01)
+    return Trajectory(t_s=t, east_m=np.full_like(t, e), north_m=np.full_like(t, n), up_m=np.ones_like(t),
+                      heading_rad=np.zeros_like(t), speed_m_s=np.zeros_like(t), start_utc=START, rate_hz=100.0)
+
+
+def _truth(result) -> list[dict]:
+    return list(csv.DictReader(io.StringIO(result.truth_csv)))
+
+
+def _matched_filter(path: Path, site: Site) -> np.ndarray:
+    x, fs = sf.read(path, dtype="int16")
+    assert fs == FS
+    ref = reference_chirp(beacon_chirp(site, site.beacons[0]), FS)
+    return np.abs(hilbert(fftconvolve(x / 32768.0, ref[::-1])[len(ref) - 1:]))
+
+
+def test_los_arrivals_in_the_wav_at_the_true_delay(tmp_path):
+    """A static receiver 10–25 m from four beacons in the open: the matched-filter peak of every
+    recorded chirp lies within one sample of the true direct-path arrival, and the peak ratio of
+    two beacons follows spherical spreading with ISO 9613-1 absorption over the band."""
+    site = _site()
+    res = render_audio(site, _static(12.0, 14.0), 5, tmp_path / "a.wav", QUIET)
+    mf = _matched_filter(tmp_path / "a.wav", site)
+    rows = _truth(res)
+    assert len(rows) >= 16 and {r["first_path"] for r in rows} == {"direct"}
+    peaks = {}
+    for r in rows:
+        s = float(r["arrival_sample"])
+        i0 = int(s)
+        k = int(np.argmax(mf[i0 - 100:i0 + 100])) + i0 - 100
+        assert abs(k - s) <= 1.0
+        assert 10.0 <= float(r["direct_m"]) <= 25.0
+        peaks.setdefault(r["beacon_id"], []).append(mf[k])
+    # closed form of the matched-filter peak for a real gain H(f): Σ|C(f)|²·H(f), H = 10^(−α(f)·d/20)/d
+    spec = beacon_chirp(site, site.beacons[0])
+    c_f = np.abs(np.fft.rfft(reference_chirp(spec, FS), 8192)) ** 2
+    f = np.fft.rfftfreq(8192, 1.0 / FS)
+    alpha = absorption_db_per_m(f, site.atmosphere)
+
+    def expected(d):
+        return (c_f * 10.0 ** (-alpha * d / 20.0)).sum() / d
+
+    d = {r["beacon_id"]: float(r["direct_m"]) for r in rows}
+    got_db = 20 * math.log10(np.median(peaks["1"]) / np.median(peaks["4"]))
+    want_db = 20 * math.log10(expected(d["1"]) / expected(d["4"]))
+    assert got_db == pytest.approx(want_db, abs=0.5)
+    assert want_db > 20 * math.log10(d["4"] / d["1"])          # absorption adds to spreading
+
+
+def test_clock_offset_and_drift_are_within_the_stated_bounds(tmp_path):
+    cfg = replace(QUIET, start_s=0.5, start_uncertainty_s=0.03, clock_drift_ppm=50.0)
+    starts = []
+    for seed in range(4):
+        res = render_audio(_site(), _static(12.0, 14.0), seed, tmp_path / f"{seed}.wav", cfg)
+        assert abs(res.true_start_s - 0.5) <= 0.03 and abs(res.drift_ppm) <= 50.0
+        starts.append(res.true_start_s)
+        for r in _truth(res):
+            want = (float(r["arrival_t_s"]) - res.true_start_s) * FS * (1.0 + res.drift_ppm * 1e-6)
+            assert float(r["arrival_sample"]) == pytest.approx(want, abs=2e-3)
+    assert len(set(starts)) == 4                                   # the offset really is random per seed
+
+
+def test_same_seed_same_bytes_and_block_size_does_not_matter(tmp_path):
+    site = _site([Box("transformer", "steel", False, 14.0, 22.0, 16.0, 21.0, 5.5)])
+    traj = _static(12.0, 14.0, 1.5)
+    cfg = replace(AudioConfig(), corona_rate_hz=30.0)
+    render_audio(site, traj, 11, tmp_path / "a.wav", cfg)
+    render_audio(site, traj, 11, tmp_path / "b.wav", replace(cfg, block_samples=4096))
+    render_audio(site, traj, 12, tmp_path / "c.wav", cfg)
+    a, b, c = ((tmp_path / n).read_bytes() for n in ("a.wav", "b.wav", "c.wav"))
+    assert a == b
+    assert a != c
+
+
+def test_ambient_noise_and_hum_levels(tmp_path):
+    """No beacons: the 17–23 kHz band holds the configured noise level, 100 Hz the hum at 1/r."""
+    tank = Box("transformer", "steel", False, 20.0, 28.0, 0.0, 5.0, 5.5)
+    site = _site([tank], beacons=())
+    cfg = replace(AudioConfig(), corona_rate_hz=0.0, noise_db_spl=40.0, hum_db_spl_1m=75.0)
+    render_audio(site, _static(16.0, 2.5, 4.0), 3, tmp_path / "n.wav", cfg)     # 4 m from the tank
+    x, _ = sf.read(tmp_path / "n.wav", dtype="int16")
+    spec = np.fft.rfft(x / 32767.0)
+    f = np.fft.rfftfreq(len(x), 1.0 / FS)
+    power = 2.0 * np.abs(spec) ** 2 / len(x) ** 2                 # mean-square per bin (one-sided)
+
+    def level_db(mask):
+        return cfg.full_scale_db_spl + 10 * math.log10(power[mask].sum() * 2.0)   # full-scale sine ↔ FS dB
+
+    assert level_db((f >= 17_000) & (f <= 23_000)) == pytest.approx(40.0, abs=0.5)
+    assert level_db((f > 98) & (f < 102)) == pytest.approx(75.0 - 20 * math.log10(4.0), abs=0.5)
+
+
+def test_corona_clicks_near_hv_equipment(tmp_path):
+    tank = Box("transformer", "steel", False, 20.0, 28.0, 0.0, 5.0, 5.5)
+    site = _site([tank], beacons=())
+    cfg = replace(QUIET, corona_rate_hz=20.0, corona_peak_db_spl=(80.0, 80.0))
+
+    def clicks(e):
+        render_audio(site, _static(e, 2.5, 3.0), 4, tmp_path / "k.wav", cfg)
+        x, _ = sf.read(tmp_path / "k.wav", dtype="int16")
+        loud = np.flatnonzero(np.abs(x) > 0.1 * np.abs(x).max()) if np.abs(x).max() > 50 else np.zeros(0, int)
+        return int(np.count_nonzero(np.diff(loud) > FS * 0.002)) + (len(loud) > 0)
+
+    near = clicks(19.0)                    # 1 m from the tank: rate 20·e^(−0.1) ≈ 18/s → ≈ 54 in 3 s
+    assert 25 <= near <= 85
+    assert clicks(19.0 - 60.0) == 0        # 61 m away: 20·e^(−6.1)·3 s ≈ 0.13 expected, levels −36 dB
+
+
+def test_doppler_of_a_walker_closing_on_a_beacon(tmp_path):
+    site = _site(beacons=(Beacon(1, 0.0, 0.0, 3.0, 0),))
+    t = np.arange(0.0, 2.0 + 1e-9, 0.01)
+    traj = Trajectory(t_s=t, east_m=20.0 - 1.5 * t, north_m=np.zeros_like(t), up_m=np.ones_like(t),
+                      heading_rad=np.full_like(t, -np.pi / 2), speed_m_s=np.full_like(t, 1.5), start_utc=START,
+                      rate_hz=100.0)
+    res = render_audio(site, traj, 1, tmp_path / "d.wav", QUIET)
+    rows = _truth(res)
+    c = 343.21
+    for r in rows:
+        e = float(r["rx_east_m"])
+        cos_ = e / math.hypot(e, 2.0)                           # closing speed = 1.5·cos(elevation)
+        assert float(r["doppler"]) == pytest.approx(1.0 + 1.5 * cos_ / c, abs=1e-5)
+        # position at arrival time, not at emission
+        assert e == pytest.approx(20.0 - 1.5 * float(r["arrival_t_s"]), abs=2e-3)
+
+
+def test_clipping_only_when_really_loud(tmp_path):
+    site = _site(beacons=(Beacon(1, 0.0, 0.0, 1.2, 0),))
+    ok = render_audio(site, _static(5.0, 0.0, 1.0), 1, tmp_path / "a.wav", QUIET)
+    assert ok.n_clipped == 0
+    loud = replace(site, acoustic=replace(site.acoustic, source_level_db=125.0))
+    res = render_audio(loud, _static(0.3, 0.0, 1.0), 1, tmp_path / "b.wav", QUIET)
+    x, _ = sf.read(tmp_path / "b.wav", dtype="int16")
+    assert res.n_clipped > 0 and int(np.abs(x.astype(int)).max()) >= 32767
+
+
+def test_writer_contract(tmp_path):
+    out = tmp_path / "walk"
+    out.mkdir()
+    ctx = StreamContext(site=_site(), trajectory=_static(12.0, 14.0, 1.0), out_dir=out, seed=3, kind="survey",
+                        options={"audio": {"start_uncertainty_s": 0.05}})
+    meta = write_audio(ctx)
+    assert meta == {"audio": {"file": "audio.wav", "fs_hz": 48000, "start_s": 0.0, "start_uncertainty_s": 0.05}}
+    info = sf.info(out / "audio.wav")
+    assert (info.samplerate, info.channels, info.subtype, info.frames) == (48000, 1, "PCM_16", 48000)
+    header = (out / "audio_truth.csv").read_text().splitlines()[0]
+    assert header.startswith("beacon_id,slot,emit_t_s,arrival_t_s,arrival_sample,first_path")
+    assert sorted(p.name for p in out.iterdir()) == ["audio.wav", "audio_truth.csv"]     # no temp files left
+    with pytest.raises(ConfigError, match="unknown key"):
+        write_audio(replace(ctx, options={"audio": {"noise_dbspl": 3}}))
+    with pytest.raises(ConfigError, match="block_samples"):
+        AudioConfig(block_samples=5000)
+
+
+def test_simulated_walk_carries_audio(tmp_path):
+    """The lead's walk generator with this writer: walk.toml [audio] and a WAV of the walk's length."""
+    layout = pytest.importorskip("simulation.layout")
+    walk = pytest.importorskip("simulation.walk")
+    site = layout.generate_site(2)
+    save_site(site, tmp_path / "site.toml")
+    out = walk.simulate_walk(tmp_path / "site.toml", tmp_path / "w", seed=4, duration_s=6.0,
+                             writers=("simulation.audio_stream:write_audio",))
+    meta = tomllib.loads((out / "walk.toml").read_text())
+    assert meta["audio"]["file"] == "audio.wav" and meta["audio"]["fs_hz"] == 48000
+    info = sf.info(out / "audio.wav")
+    assert info.frames == pytest.approx(6.0 * FS, abs=FS * 0.02)
+    rows = list(csv.DictReader((out / "audio_truth.csv").open()))
+    assert len(rows) > 10
+
+
+def test_atmosphere_changes_arrival_through_sound_speed(tmp_path):
+    cold = replace(_site(), atmosphere=Atmosphere(-10.0, 60.0, 101.325))
+    warm = replace(_site(), atmosphere=Atmosphere(30.0, 60.0, 101.325))
+    a = _truth(render_audio(cold, _static(12.0, 14.0, 0.5), 1, tmp_path / "c.wav", QUIET))
+    b = _truth(render_audio(warm, _static(12.0, 14.0, 0.5), 1, tmp_path / "w.wav", QUIET))
+    da = float(a[0]["arrival_t_s"]) - float(a[0]["emit_t_s"])
+    db = float(b[0]["arrival_t_s"]) - float(b[0]["emit_t_s"])
+    assert da / db == pytest.approx(math.sqrt(303.15 / 263.15), rel=1e-6)
