@@ -48,7 +48,7 @@ def main(argv=None) -> None:
     t_sim = t_fmt = 0.0
     n_epochs = n_bytes = 0
     rows = {c: [] for c in range(3)}
-    cn0_los, cn0_nlos = [], []
+    cn0_los, cn0_nlos, cn0_clear, cn0_blocked = [], [], [], []
     err_by_q: dict[int, list] = {}
     for i, ((cid, e, n), lab) in enumerate(zip(cells, labels)):
         traj = static_trajectory(e, n, site.device_height_m, args.capture_s, start + timedelta(seconds=50 * i))
@@ -73,6 +73,8 @@ def main(argv=None) -> None:
         ))
         cn0_los.append(sim.cn0_reported_dbhz[trk & sim.los])
         cn0_nlos.append(sim.cn0_reported_dbhz[trk & sim.nlos])
+        cn0_clear.append(sim.cn0_reported_dbhz[trk & ~sim.blocked])
+        cn0_blocked.append(sim.cn0_reported_dbhz[trk & sim.blocked])
         for q in np.unique(sim.quality):
             err_by_q.setdefault(int(q), []).append(herr[sim.quality == q])
 
@@ -91,6 +93,10 @@ def main(argv=None) -> None:
     nlos = np.concatenate(cn0_nlos)
     print(f"tracked C/N0: LOS {los.mean():.1f} +- {los.std():.1f} dB-Hz (n={los.size}), "
           f"NLOS {nlos.mean():.1f} +- {nlos.std():.1f} dB-Hz (n={nlos.size}); smartLoc: 43.8 +- 4.5 vs 31.4 +- 7.9")
+    clear = np.concatenate(cn0_clear)
+    blocked = np.concatenate(cn0_blocked)
+    print(f"tracked C/N0 by geometric ray test (as smartLoc labels): clear {clear.mean():.1f} +- {clear.std():.1f}, "
+          f"blocked {blocked.mean():.1f} +- {blocked.std():.1f} dB-Hz (n={blocked.size})")
     names = {0: "none", 1: "autonomous", 2: "DGNSS", 4: "RTK fixed", 5: "RTK float"}
     for q in sorted(err_by_q):
         e = np.concatenate(err_by_q[q])

@@ -118,7 +118,7 @@ def code_sigma_m(cn0_dbhz, a_m: float = 0.2, b_m_sqrt_hz: float = 47.4) -> np.nd
     """Code (pseudorange) noise σ, m: SIGMA-ε σ² = a² + b²·10^(−C/N0/10) (Hartinger & Brunner 1999).
 
     >>> [round(float(code_sigma_m(c)), 2) for c in (45.0, 30.0)]
-    [0.34, 1.51]
+    [0.33, 1.51]
     """
     c = np.asarray(cn0_dbhz, float)
     return np.sqrt(a_m ** 2 + b_m_sqrt_hz ** 2 * 10.0 ** (-c / 10.0))
@@ -133,7 +133,7 @@ def klobuchar_obliquity(el_rad) -> np.ndarray:
     """Ionospheric obliquity factor F = 1 + 16·(0.53 − E)³, E in semicircles (IS-GPS-200 §20.3.3.5.2.5).
 
     >>> round(float(klobuchar_obliquity(np.pi / 2)), 3), round(float(klobuchar_obliquity(np.radians(10.0))), 2)
-    (1.0, 2.53)
+    (1.0, 2.71)
     """
     e = np.clip(np.asarray(el_rad, float), 0.0, np.pi / 2) / np.pi
     return 1.0 + 16.0 * (0.53 - e) ** 3

@@ -130,7 +130,7 @@ def open_sky_cn0_dbhz(el_rad, orbit_radius_m=_GPS_RADIUS_M, cfg: SignalConfig = 
 
     >>> c = open_sky_cn0_dbhz(np.radians([5.0, 30.0, 90.0]))
     >>> [round(float(x), 1) for x in c]
-    [38.0, 45.7, 50.0]
+    [38.0, 45.9, 50.0]
     """
     el = np.clip(np.asarray(el_rad, float), 0.0, np.pi / 2)
     low = np.radians(cfg.low_el_deg)
@@ -159,7 +159,7 @@ def knife_edge_loss_db(nu) -> np.ndarray:
     J(ν) = 6.9 + 20·log10(sqrt((ν − 0.1)² + 1) + ν − 0.1).
 
     >>> [round(float(knife_edge_loss_db(v)), 2) for v in (-1.0, 0.0, 1.0, 3.0)]
-    [0.0, 6.02, 13.95, 22.66]
+    [0.0, 6.03, 13.93, 22.42]
     """
     v = np.asarray(nu, float)
     with np.errstate(invalid="ignore", over="ignore"):

@@ -41,7 +41,9 @@ class GnssSimulation:
     truth_enu_m, fix_enu_m : (n, 3) true and reported positions (fix NaN when quality 0)
     quality, n_used : (n,) int; hdop, vdop, pdop : (n,)
     system : (k,) "GPS"/"BDS"; prn : (k,)
-    az_rad, el_rad : (n, k); in_view, tracked, used, los, nlos : (n, k) bool
+    az_rad, el_rad : (n, k); in_view, tracked, used : (n, k) bool
+    los, nlos : (n, k) bool, in view and received directly or diffracted (los) or by reflection (nlos)
+    blocked : (n, k) bool, in view with a solid box in the geometric direct path (diffracted or NLOS)
     cn0_open_dbhz : (n, k) open-sky C/N0 (with the satellite's offset)
     attenuation_db : (n, k) blockage + EMI loss (no fading), dB
     cn0_true_dbhz : (n, k) epoch-mean C/N0 with fading; cn0_reported_dbhz : (n, k) integer, NaN untracked
@@ -65,6 +67,7 @@ class GnssSimulation:
     used: np.ndarray
     los: np.ndarray
     nlos: np.ndarray
+    blocked: np.ndarray
     cn0_open_dbhz: np.ndarray
     attenuation_db: np.ndarray
     cn0_true_dbhz: np.ndarray
@@ -185,7 +188,7 @@ def simulate_gnss(site, traj: Trajectory, seed: int, corrections: bool = True, r
         t_s=t, unix_s=unix, truth_enu_m=truth, fix_enu_m=truth + fix.error_enu_m, quality=fix.quality,
         n_used=fix.n_used, hdop=fix.hdop, vdop=fix.vdop, pdop=fix.pdop, system=sats.system, prn=sats.prn,
         az_rad=az, el_rad=el, in_view=in_view, tracked=tracked, used=fix.used, los=in_view & ~blk.nlos,
-        nlos=in_view & blk.nlos, cn0_open_dbhz=cn0_open, attenuation_db=attenuation, cn0_true_dbhz=cn0_true,
+        nlos=in_view & blk.nlos, blocked=in_view & blk.solid_blocked, cn0_open_dbhz=cn0_open, attenuation_db=attenuation, cn0_true_dbhz=cn0_true,
         cn0_reported_dbhz=reported)
 
 
