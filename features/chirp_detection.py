@@ -1,0 +1,600 @@
+"""Streaming beacon-chirp detection: which beacon was heard when, and its CIR.
+
+Beacon protocol (docs/beacon_protocol.md; written by the transmit side in
+``simulation/chirp.py``): frames of ``frame_s = n_slots·slot_s`` start at
+integer multiples of ``frame_s`` of POSIX UTC time; beacon ``b`` starts its
+chirp ``slot_b·slot_s`` after each frame start. On the walk's time base
+(seconds since ``start_utc``) a chirp leaves beacon ``b`` at
+``t_tx = frame_phase + k·frame_s + slot_b·slot_s`` with
+``frame_phase = (−POSIX(start_utc)) mod frame_s``. The receiver states the walk
+time of its first audio sample (``start_s``) only to within
+``start_uncertainty_s``.
+
+Association. Beacons share one chirp and are told apart by time alone, so
+the search window of each (frame, beacon) is narrowed as soon as the receiver
+knows where it is: see :class:`_Tracker` (acquisition, then tracking of the
+position and the drifting clock offset from the previous frames' fixes).
+
+Detection (Neyman–Pearson on the matched-filter envelope; Kay, "Fundamentals
+of Statistical Signal Processing, Vol. II: Detection", 1998, §7.6). For each
+(frame, beacon) the chirp must start inside its window (in acquisition
+``[t_tx − u, t_tx + u + r_max/c]``, u = start uncertainty, r_max = largest
+range at which a beacon is heard). In noise alone the envelope of the analytic
+matched-filter output is Rayleigh with scale σ, P(env > γ) = exp(−γ²/2σ²).
+σ comes from the 25th percentile of the envelope over the preceding frame,
+σ = q₂₅ / sqrt(−2 ln 0.75) — a quantile that stays on noise while up to three
+quarters of the frame holds signal. The envelope decorrelates after about 1/B
+(B = chirp bandwidth), so a window of W seconds holds N ≈ W·B independent
+cells; requiring a false-alarm probability ``p_fa`` per window gives
+
+    γ = σ · sqrt(2 ln(N / p_fa))
+
+(union bound). With the defaults (p_fa = 1e-6, W ≈ 0.1 s, B = 6 kHz) γ ≈ 6.4σ,
+16 dB above the noise scale: about one false chirp per 300 hours of audio.
+
+A detected chirp's CIR is the full-rate envelope from ``max_lead_s`` before
+the strongest tap to ``cir_span_s`` after it; :func:`features.cir.analyse_cir`
+finds the first arrival and the nine features.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass
+from datetime import datetime, timezone
+from typing import Iterator
+
+import numpy as np
+import scipy.signal
+
+from .acoustic_positions import AcousticFix, BeaconRange, PositionConfig, solve_position, toa_range_sigma_m
+from .audio import CLIP_LEVEL, AudioBlock, audio_info, iter_audio_blocks
+from .cir import CirFeatures, analyse_cirs
+from .constants import AUDIO_FS_HZ, SPEED_OF_SOUND_0C_M_S
+from .errors import ConfigError
+from .matched_filter import ChirpSpec, MatchedFilterBank, StreamingMatchedFilter
+from .site import Beacon, Site
+
+__all__ = ["AudioTiming", "DetectorConfig", "ChirpDetection", "FrameResult", "AudioStats", "speed_of_sound_m_s",
+           "frame_phase_s", "beacon_chirp_spec", "detect_frames", "frame_fix", "max_site_range_m"]
+
+_EPOCH = datetime(1970, 1, 1, tzinfo=timezone.utc)
+_RAYLEIGH_Q25 = math.sqrt(-2.0 * math.log(0.75))
+"""25th percentile of a unit-scale Rayleigh variable."""
+
+
+def speed_of_sound_m_s(temperature_c: float) -> float:
+    """c = 331.3·sqrt(1 + T/273.15) m/s (ideal gas; Cramer 1993, JASA 93(5)).
+
+    >>> round(speed_of_sound_m_s(20.0), 2)
+    343.21
+    """
+    return SPEED_OF_SOUND_0C_M_S * math.sqrt(1.0 + temperature_c / 273.15)
+
+
+def frame_phase_s(start_utc: datetime, frame_s: float) -> float:
+    """Walk time of the first frame start at or after ``start_utc``: (−POSIX seconds) mod frame_s.
+
+    Integer microseconds, so POSIX times of 1.8e9 s lose nothing.
+
+    >>> frame_phase_s(datetime(2026, 5, 1, 8, 0, 0, 300000, tzinfo=timezone.utc), 0.8)
+    0.5
+    """
+    if start_utc.tzinfo is None:
+        raise ConfigError(f"start_utc must be timezone-aware (UTC), got {start_utc!r}")
+    delta = start_utc - _EPOCH
+    start_us = (delta.days * 86_400 + delta.seconds) * 1_000_000 + delta.microseconds
+    frame_us = int(round(frame_s * 1e6))
+    if frame_us <= 0:
+        raise ConfigError(f"frame_s must be positive, got {frame_s}")
+    return ((-start_us) % frame_us) / 1e6
+
+
+@dataclass(frozen=True)
+class AudioTiming:
+    """How the audio's samples map onto the walk's time base and the beacon frames.
+
+    ``start_s``: stated walk time of the first sample; ``start_uncertainty_s``:
+    its stated uncertainty (half-width); ``frame_phase_s``: walk time of a frame
+    start (see :func:`frame_phase_s`).
+    """
+
+    start_s: float = 0.0
+    start_uncertainty_s: float = 0.01
+    frame_phase_s: float = 0.0
+
+    def __post_init__(self):
+        for name in ("start_s", "start_uncertainty_s", "frame_phase_s"):
+            if not math.isfinite(getattr(self, name)):
+                raise ConfigError(f"audio timing {name} must be finite, got {getattr(self, name)!r}")
+        if self.start_uncertainty_s < 0:
+            raise ConfigError(f"start_uncertainty_s must be >= 0, got {self.start_uncertainty_s}")
+
+
+@dataclass(frozen=True)
+class DetectorConfig:
+    """Detection and CIR parameters (see the module docstring)."""
+
+    p_fa: float = 1e-6
+    max_range_m: float | None = None
+    cir_span_s: float = 0.030
+    max_lead_s: float = 0.0025
+    block_s: float = 4.0
+    fs_hz: int = AUDIO_FS_HZ
+
+    def __post_init__(self):
+        if not 0 < self.p_fa < 1:
+            raise ConfigError(f"p_fa must lie in (0, 1), got {self.p_fa}")
+        if self.max_range_m is not None and not self.max_range_m > 0:
+            raise ConfigError(f"max_range_m must be positive, got {self.max_range_m}")
+        for name in ("cir_span_s", "max_lead_s", "block_s"):
+            if not getattr(self, name) > 0:
+                raise ConfigError(f"{name} must be positive, got {getattr(self, name)}")
+
+
+@dataclass(frozen=True)
+class ChirpDetection:
+    """One beacon chirp heard by the receiver.
+
+    ``frame`` counts frames on the walk time base (frame 0 starts at
+    ``frame_phase_s``); ``tx_s`` is the emission time and ``arrival_s`` the first
+    arrival, both walk time (``arrival_s`` on the receiver's stated clock);
+    ``snr_db`` is the strongest tap's power over the noise power; ``associated``
+    is False for a chirp heard in an acquisition window that could not be tied
+    to its beacon (its features count, its time of arrival does not).
+    """
+
+    frame: int
+    beacon_id: int
+    tx_s: float
+    arrival_s: float
+    snr_db: float
+    features: CirFeatures
+    associated: bool = True
+
+
+@dataclass
+class AudioStats:
+    """Per-bin statistics of the samples, for flagging windows (bins of ``bin_s``)."""
+
+    bin_s: float
+    n_samples: list
+    n_clipped: list
+    sum_sq: list
+    truncated: bool = False
+    duration_s: float = 0.0
+
+    def add(self, block: AudioBlock, fs_hz: float) -> None:
+        """Fold one block into the per-bin counts (bins of ``bin_s`` from the stream's first sample)."""
+        bin_len = int(round(self.bin_s * fs_hz))
+        x = block.samples
+        if len(x) == 0:
+            return
+        first_bin = block.start_index // bin_len
+        head = min(len(x), (first_bin + 1) * bin_len - block.start_index)
+        parts = [(first_bin, x[:head])]
+        body = x[head:]
+        n_full = len(body) // bin_len
+        need = first_bin + 1 + n_full + (1 if len(body) % bin_len else 0)
+        for lst in (self.n_samples, self.n_clipped, self.sum_sq):
+            lst.extend([0] * (need - len(lst)))
+        for b, seg in parts + [(first_bin + 1 + n_full, body[n_full * bin_len:])]:
+            if len(seg):
+                self.n_samples[b] += len(seg)
+                self.n_clipped[b] += int(np.count_nonzero(np.abs(seg) >= CLIP_LEVEL))
+                self.sum_sq[b] += float(np.dot(seg, seg))
+        if n_full:
+            full = body[: n_full * bin_len].reshape(n_full, bin_len)
+            clipped = np.count_nonzero(np.abs(full) >= CLIP_LEVEL, axis=1)
+            energy = np.einsum("ij,ij->i", full, full, dtype=np.float64)
+            for k in range(n_full):
+                b = first_bin + 1 + k
+                self.n_samples[b] += bin_len
+                self.n_clipped[b] += int(clipped[k])
+                self.sum_sq[b] += float(energy[k])
+
+
+def beacon_chirp_spec(site: Site, beacon: Beacon) -> ChirpSpec:
+    """The chirp of ``beacon``: its own band/duration where given, else the site's ``[acoustic]``."""
+    ac = site.acoustic
+    return ChirpSpec(ac.f0_hz if beacon.f0_hz is None else beacon.f0_hz,
+                     ac.f1_hz if beacon.f1_hz is None else beacon.f1_hz,
+                     ac.chirp_duration_s if beacon.chirp_duration_s is None else beacon.chirp_duration_s,
+                     ac.taper_fraction)
+
+
+def max_site_range_m(site: Site) -> float:
+    """Largest beacon-to-receiver distance on the site's grid (3-D, device at its height), m."""
+    g = site.grid
+    corners = [(e, n) for e in (g.east_min_m, g.east_max_m) for n in (g.north_min_m, g.north_max_m)]
+    best = 0.0
+    for b in site.beacons:
+        for e, n in corners:
+            best = max(best, math.dist((b.east_m, b.north_m, b.up_m), (e, n, site.device_height_m)))
+    return best
+
+
+@dataclass(frozen=True)
+class _Window:
+    """Where a beacon's chirp may start: sample indices [lo, hi] of the stream."""
+
+    beacon_index: int
+    tx_s: float
+    lo: int
+    hi: int
+    associated: bool = True
+
+
+@dataclass(frozen=True)
+class FrameResult:
+    """One TDMA frame: the chirps detected in it and the position fix (None if none)."""
+
+    frame: int
+    frame_start_s: float
+    detections: tuple
+    fix: AcousticFix | None
+    tracking: bool
+
+
+class _Tracker:
+    """Acquisition, then tracking, of the receiver's clock offset and position.
+
+    Acquisition (no recent fix): beacon ``b``'s chirp may start anywhere in
+    ``[tx − u, tx + u + min(r_max/c, slot_s)]``. Neighbouring windows overlap
+    when ``u`` is large or a beacon is far, so a fix from acquisition is
+    trusted only when at least four beacons pass the residual test.
+
+    Tracking (a fix at most ``track_timeout_s`` old): the window is centred on
+    the arrival predicted from the last fix, ``tx + ‖p − s_b‖/c + δ``, with a
+    half-width that grows with the fix's 3σ, a walking speed of
+    ``max_speed_m_s`` and a clock drift of ``max_drift_ppm`` over the elapsed
+    time; an NLOS first arrival may come up to ``nlos_slack_m`` later. Beacons
+    predicted beyond ``r_max`` are not searched. The clock offset drifts (a
+    sample clock off by 10 ppm gains 6 ms in 10 minutes), so it is tracked
+    rather than estimated once.
+    """
+
+    max_speed_m_s = 2.5
+    max_drift_ppm = 100.0
+    nlos_slack_m = 10.0
+    track_timeout_s = 4.0
+
+    def __init__(self, site: Site, timing: AudioTiming, fs_hz: float, c: float, r_max: float,
+                 positions: PositionConfig):
+        self.site, self.timing, self.fs, self.c, self.r_max = site, timing, fs_hz, c, r_max
+        self.positions = positions
+        self.order = sorted(range(len(site.beacons)), key=lambda i: (site.beacons[i].slot, site.beacons[i].id))
+        self.last_fix: AcousticFix | None = None
+
+    def tracking_at(self, t_s: float) -> bool:
+        return self.last_fix is not None and t_s - self.last_fix.t_s <= self.track_timeout_s
+
+    def windows(self, frame_start_s: float) -> list[_Window]:
+        ac, u, fs = self.site.acoustic, self.timing.start_uncertainty_s, self.fs
+        out = []
+        tracking = self.tracking_at(frame_start_s)
+        for i in self.order:
+            b = self.site.beacons[i]
+            tx = frame_start_s + b.slot * ac.slot_s
+            if tracking:
+                fix = self.last_fix
+                dt = max(0.0, tx - fix.t_s)
+                cov = fix.covariance
+                radius_m = 3.0 * math.sqrt(max(cov[0, 0], cov[1, 1], 0.0)) + self.max_speed_m_s * dt + 0.5
+                clock_s = 3.0 * math.sqrt(max(cov[2, 2], 0.0)) + self.max_drift_ppm * 1e-6 * dt + 5e-4
+                r = math.dist((fix.east_m, fix.north_m, self.site.device_height_m), (b.east_m, b.north_m, b.up_m))
+                if r - radius_m > self.r_max:
+                    continue
+                centre = tx + r / self.c + fix.clock_offset_s
+                lo_s = centre - radius_m / self.c - clock_s
+                hi_s = centre + (radius_m + self.nlos_slack_m) / self.c + clock_s
+            else:
+                lo_s = tx - u
+                hi_s = tx + u + self.r_max / self.c
+            lo = int(math.floor((lo_s - self.timing.start_s) * fs))
+            hi = int(math.ceil((hi_s - self.timing.start_s) * fs))
+            out.append(_Window(i, tx, lo, hi))
+        return out
+
+    def acquire(self, candidates: dict) -> dict:
+        """Associate candidate arrivals with beacons by a Hough vote over position and clock offset.
+
+        ``candidates`` maps a beacon index to a list of (tx_s, stated arrival
+        times, s) of local envelope maxima in its acquisition window. For each
+        point p of a grid over the site (1 m or coarser), each candidate implies
+        a clock offset δ = (c·(t − tx) − ‖p − s_b‖)/c; the (p, δ) on which the
+        most beacons agree within ``tol`` wins (a Hough transform, Duda & Hart
+        1972, CACM 15(1); ties go to the smallest δ, since echoes agree with
+        each other too, only later), and each beacon keeps its earliest
+        candidate within ``tol`` of that δ.
+        Returns beacon index → chosen arrival time.
+        """
+        items = [(i, tx, t) for i, (tx, times) in candidates.items() for t in times]
+        if len({i for i, _, _ in items}) < 3:
+            return {}
+        g = self.site.grid
+        step = max(1.0, math.sqrt((g.east_max_m - g.east_min_m) * (g.north_max_m - g.north_min_m) / 10_000))
+        ee, nn = np.meshgrid(np.arange(g.east_min_m, g.east_max_m + step, step),
+                             np.arange(g.north_min_m, g.north_max_m + step, step))
+        pe, pn = ee.ravel(), nn.ravel()
+        bi = np.array([i for i, _, _ in items])
+        rho = self.c * np.array([t - tx for _, tx, t in items])
+        bpos = np.array([[self.site.beacons[i].east_m, self.site.beacons[i].north_m, self.site.beacons[i].up_m]
+                         for i in bi])
+        r = np.sqrt((pe[:, None] - bpos[None, :, 0]) ** 2 + (pn[:, None] - bpos[None, :, 1]) ** 2
+                    + (self.site.device_height_m - bpos[None, :, 2]) ** 2)
+        delta = (rho[None, :] - r) / self.c                      # (n_grid, n_cand)
+        tol = step * math.sqrt(2.0) / self.c + 5e-4
+        close = np.abs(delta[:, :, None] - delta[:, None, :]) <= tol   # (n_grid, anchor, other)
+        same = bi[:, None] == np.arange(len(self.site.beacons))[None, :]  # (n_cand, n_beacons)
+        votes = (close.astype(np.int32) @ same.astype(np.int32)) > 0     # beacons agreeing per anchor
+        score = votes.sum(axis=2)
+        top = score.max()
+        if top < 3:
+            return {}
+        # Ties: the smallest clock offset, since echoes agree with each other too, but later.
+        tied = np.flatnonzero(score.ravel() == top)
+        best = np.unravel_index(int(tied[np.argmin(delta.ravel()[tied])]), score.shape)
+        d0 = delta[best[0], best[1]]
+        chosen = {}
+        for k, i in enumerate(bi):
+            # Within the tolerance, the earliest candidate: echoes come later.
+            if abs(delta[best[0], k] - d0) <= tol and (i not in chosen or items[k][2] < chosen[i]):
+                chosen[i] = items[k][2]
+        return chosen
+
+    def frame_done(self, frame_start_s: float, detections: list[ChirpDetection],
+                   bandwidth: dict) -> AcousticFix | None:
+        tracking = self.tracking_at(frame_start_s)
+        fix = frame_fix(detections, self.site, self.c, bandwidth, self.positions,
+                        self.last_fix if tracking else None)
+        if fix is not None and (tracking or fix.n_beacons >= 4):
+            self.last_fix = fix
+            return fix
+        return fix if tracking else None
+
+
+def frame_fix(detections: list[ChirpDetection], site: Site, c: float, bandwidth: dict,
+              config: PositionConfig, start: AcousticFix | None = None) -> AcousticFix | None:
+    """Position fix from one frame's detections (None when fewer than three beacons)."""
+    by_id = {b.id: b for b in site.beacons}
+    ranges = [BeaconRange(d.beacon_id, by_id[d.beacon_id].east_m, by_id[d.beacon_id].north_m,
+                          by_id[d.beacon_id].up_m, c * (d.arrival_s - d.tx_s),
+                          toa_range_sigma_m(d.snr_db, bandwidth[d.beacon_id], c), d.arrival_s)
+              for d in detections if d.associated]
+    if len(ranges) < 3:
+        return None
+    x0 = None if start is None else np.array([start.east_m, start.north_m, start.clock_offset_s])
+    return solve_position(ranges, site, c, config, x0)
+
+
+class _Stream:
+    """Raw samples and decimated envelopes of the recent past, read on demand."""
+
+    def __init__(self, path, config: DetectorConfig, mf: StreamingMatchedFilter, stats: AudioStats | None):
+        self.blocks = iter_audio_blocks(path, block_s=config.block_s, fs_out_hz=int(config.fs_hz))
+        self.mf, self.stats, self.fs = mf, stats, float(config.fs_hz)
+        self.raw = np.zeros(0, dtype=np.float32)
+        self.raw_start = 0
+        self.env = np.zeros((mf.bank.n_templates, 0), dtype=np.float32)
+        self.env_j0 = 0
+        self.eof = False
+
+    @property
+    def raw_end(self) -> int:
+        return self.raw_start + len(self.raw)
+
+    def ensure(self, upto: int) -> None:
+        """Read until raw samples reach index ``upto`` (and their envelopes exist) or the file ends."""
+        while not self.eof and self.raw_end < upto:
+            block = next(self.blocks, None)
+            if block is None:
+                self.eof = True
+                _, e = self.mf.flush()
+            else:
+                if self.stats is not None:
+                    self.stats.add(block, self.fs)
+                self.raw = np.concatenate([self.raw, block.samples])
+                _, e = self.mf.process(block.samples)
+            self.env = np.concatenate([self.env, e], axis=1) if self.env.shape[1] else e
+
+    def env_range(self, j_lo: int, j_hi: int) -> tuple[int, np.ndarray]:
+        a = max(j_lo - self.env_j0, 0)
+        b = max(min(j_hi - self.env_j0, self.env.shape[1]), a)
+        return self.env_j0 + a, self.env[:, a:b]
+
+    def trim(self, keep_from: int) -> None:
+        cut = keep_from - self.raw_start
+        if cut > 0:
+            self.raw = self.raw[cut:]
+            self.raw_start += cut
+        cut_env = (keep_from + self.mf.bank.delay_samples) // self.mf.decimation - self.env_j0
+        if cut_env > 0:
+            self.env = self.env[:, cut_env:]
+            self.env_j0 += cut_env
+
+
+def detect_frames(path: str | os.PathLike, site: Site, timing: AudioTiming,
+                  config: DetectorConfig = DetectorConfig(), stats: AudioStats | None = None,
+                  positions: PositionConfig | None = None) -> Iterator[FrameResult]:
+    """Stream ``path`` frame by frame: the chirps detected in each TDMA frame and its fix.
+
+    Memory is bounded by one audio block plus about two frames of history,
+    whatever the file length. ``stats`` (optional) receives per-bin sample
+    counts, clipping and energy for window flags. ``positions`` defaults to a
+    clock-offset bound of the stated start uncertainty plus 50 ms.
+    """
+    if not site.beacons:
+        return
+    fs = float(config.fs_hz)
+    info = audio_info(path)
+    n_total = int(math.ceil(info.n_frames * fs / info.fs_hz))
+    if stats is not None:
+        stats.truncated = info.truncated
+        stats.duration_s = n_total / fs
+    if positions is None:
+        positions = PositionConfig(max_clock_offset_s=timing.start_uncertainty_s + 0.05)
+    c = speed_of_sound_m_s(site.atmosphere.temperature_c)
+    r_max = config.max_range_m if config.max_range_m is not None else max_site_range_m(site)
+
+    specs = [beacon_chirp_spec(site, b) for b in site.beacons]
+    unique = sorted(set(specs), key=lambda s: (s.f0_hz, s.f1_hz, s.duration_s))
+    template_of = [unique.index(s) for s in specs]
+    bandwidth = {b.id: s.bandwidth_hz for b, s in zip(site.beacons, specs)}
+    bank = MatchedFilterBank(unique, fs)
+    mf = StreamingMatchedFilter(bank)
+    dec = mf.decimation
+    lead = int(math.ceil(config.max_lead_s * fs))
+    span = int(math.ceil(config.cir_span_s * fs))
+    history = int(math.ceil(site.acoustic.frame_s * fs))
+    stream = _Stream(path, config, mf, stats)
+    tracker = _Tracker(site, timing, fs, c, r_max, positions)
+
+    def noise_scales(windows: list[_Window]) -> np.ndarray:
+        """Rayleigh scale σ per template from the envelope of the frame before and under ``windows``."""
+        j_hi = (max(w.hi for w in windows) + bank.delay_samples) // dec + 1
+        j_lo = min((min(w.lo for w in windows) + bank.delay_samples) // dec, j_hi - history // dec)
+        _, seg = stream.env_range(j_lo, j_hi)
+        if seg.shape[1] == 0:
+            return np.zeros(bank.n_templates)
+        # Every 4th output: neighbours are correlated over ~1/B anyway, and it is 4× cheaper.
+        return np.percentile(seg[:, ::4], 25, axis=1) / _RAYLEIGH_Q25
+
+    def peaks(w: _Window, sigma: float) -> tuple[np.ndarray, np.ndarray]:
+        """Chirp-start indices (ascending) and heights of envelope maxima in ``w`` above the threshold.
+
+        The threshold is γ (see the module docstring), raised to 25 dB below the
+        window's strongest peak so that range sidelobes (−34.6 dB) of a strong
+        arrival never pass for an earlier one.
+        """
+        t = template_of[w.beacon_index]
+        j_lo = -(-(w.lo + bank.delay_samples) // dec)
+        j_hi = (w.hi + bank.delay_samples) // dec + 1
+        j_first, seg = stream.env_range(j_lo, j_hi)
+        seg = seg[t]
+        if len(seg) < 3:
+            return np.zeros(0, int), np.zeros(0)
+        n_cells = max(1.0, (w.hi - w.lo) / fs * bandwidth[site.beacons[w.beacon_index].id])
+        gamma = max(sigma * math.sqrt(2.0 * math.log(n_cells / config.p_fa)), 1e-9, float(seg.max()) * 10 ** (-25 / 20))
+        padded = np.concatenate([[0.0], seg, [0.0]])
+        idx = np.flatnonzero((padded[1:-1] > padded[:-2]) & (padded[1:-1] >= padded[2:]) & (seg > gamma))
+        return mf.chirp_start(j_first + idx).astype(int), seg[idx]
+
+    def locate(w: _Window, sigma: float) -> int | None:
+        """Chirp start of the detection in ``w``: its earliest peak (strongest, when not associated)."""
+        starts, heights = peaks(w, sigma)
+        if len(starts) == 0:
+            return None
+        return int(starts[0] if w.associated else starts[np.argmax(heights)])
+
+    toa_len = 2 * lead + 16
+    cir_taps = (lead + 8 + span) // dec
+
+    def analyse(found: list[tuple[_Window, int]], sigmas: np.ndarray, frame: int) -> list[ChirpDetection]:
+        """Arrival times and CIR features of all chirps located in a frame, batched per template.
+
+        The first arrival comes from the full-rate envelope of a short snippet
+        around the located peak (sub-sample timing); the nine features from the
+        decimated envelope over ``cir_span_s`` (taps ``decimation/fs`` apart,
+        ample for delay spreads of milliseconds), which the stream already holds.
+        """
+        out = []
+        for t in sorted({template_of[w.beacon_index] for w, _ in found}):
+            group = [(w, sp) for w, sp in found if template_of[w.beacon_index] == t]
+            n = len(group)
+            snippets = np.zeros((n, toa_len + bank.kernel_len), dtype=np.float32)
+            cirs = np.zeros((n, cir_taps), dtype=np.float32)
+            starts = np.empty(n, dtype=int)
+            lo_rel = np.empty(n, dtype=int)
+            cir_lo = np.empty(n, dtype=int)
+            for r, (w, sp) in enumerate(group):
+                a = sp - lead - 8
+                starts[r] = a
+                src_lo, src_hi = max(a, stream.raw_start), min(a + snippets.shape[1], stream.raw_end)
+                if src_hi > src_lo:
+                    snippets[r, src_lo - a: src_hi - a] = stream.raw[src_lo - stream.raw_start: src_hi - stream.raw_start]
+                lo_rel[r] = max(0, w.lo - a, stream.raw_start - a)
+                j_a = -(-(a + bank.delay_samples) // dec)
+                j_got, seg = stream.env_range(j_a, j_a + cir_taps)
+                cirs[r, j_got - j_a: j_got - j_a + seg.shape[1]] = seg[t]
+                cir_lo[r] = max(0, -(-(w.lo + bank.delay_samples) // dec) - j_a, j_got - j_a)
+            noise_power = 2.0 * float(sigmas[t]) ** 2   # Rayleigh envelope of scale σ: E[env²] = 2σ²
+            toa = analyse_cirs(bank.envelope(snippets, t)[:, :toa_len], 1.0 / fs, noise_power=noise_power,
+                               max_lead_s=config.max_lead_s, search_start=np.minimum(lo_rel, lead + 8))
+            feats = analyse_cirs(cirs, dec / fs, noise_power=noise_power, max_lead_s=config.max_lead_s,
+                                 pulse_width_s=float(bank.mainlobe_s[t]),
+                                 search_start=np.minimum(cir_lo, (lead + 8) // dec),
+                                 search_stop=(2 * lead + 9) // dec + 1)
+            for r, (w, _) in enumerate(group):
+                if not (toa.valid[r] and feats.valid[r]):
+                    continue
+                arrival_s = timing.start_s + float(starts[r] + toa.first_arrival_tap[r]) / fs
+                out.append(ChirpDetection(frame, site.beacons[w.beacon_index].id, w.tx_s, arrival_s,
+                                          float(toa.peak_snr_db[r]), CirFeatures(*feats.features[r].tolist()),
+                                          w.associated))
+        return out
+
+    def candidates(w: _Window, sigma: float, max_candidates: int = 4) -> list[float]:
+        """Stated arrival times of the strongest envelope maxima above γ in ``w`` (acquisition)."""
+        starts, heights = peaks(w, sigma)
+        # At most one candidate per 2 ms, strongest first.
+        keep = []
+        for k in np.argsort(heights)[::-1]:
+            if all(abs(starts[k] - starts[q]) > 0.002 * fs for q in keep):
+                keep.append(k)
+            if len(keep) == max_candidates:
+                break
+        top = starts[keep]
+        return [timing.start_s + float(x) / fs for x in top]
+
+    frame_s = site.acoustic.frame_s
+    u = timing.start_uncertainty_s
+    end_s = timing.start_s + n_total / fs
+    k = math.floor((timing.start_s - u - min(r_max / c, frame_s) - timing.frame_phase_s) / frame_s)
+    while True:
+        frame_start = timing.frame_phase_s + k * frame_s
+        if frame_start - u > end_s:
+            return
+        windows = [w for w in tracker.windows(frame_start) if w.hi >= 0 and w.lo < n_total]
+        tracking = tracker.tracking_at(frame_start)
+        detections = []
+        if windows:
+            stream.ensure(max(w.hi for w in windows) + span + bank.kernel_len + dec)
+            sigmas = noise_scales(windows)
+            if not tracking:
+                windows = _acquisition_windows(
+                    windows, lambda w: candidates(w, sigmas[template_of[w.beacon_index]]), tracker, timing, fs, lead)
+            found = []
+            for w in windows:
+                s_peak = locate(w, sigmas[template_of[w.beacon_index]])
+                # One physical arrival is one chirp, even where windows overlap.
+                if s_peak is not None and all(abs(s_peak - f) > 0.001 * fs for _, f in found):
+                    found.append((w, s_peak))
+            if found:
+                detections = analyse(found, sigmas, k)
+                detections.sort(key=lambda d: d.tx_s)
+        fix = tracker.frame_done(frame_start, detections, bandwidth)
+        yield FrameResult(k, frame_start, tuple(detections), fix, tracking)
+        next_lo = int(math.floor((frame_start + frame_s - u - 0.05 - timing.start_s) * fs))
+        stream.trim(next_lo - history - lead - 64)
+        k += 1
+
+
+def _acquisition_windows(windows: list[_Window], candidates, tracker: _Tracker, timing: AudioTiming,
+                         fs: float, lead: int) -> list[_Window]:
+    """Narrow each acquisition window to the arrival the Hough vote associates with its beacon.
+
+    Windows of beacons left unassociated keep their full extent (their strongest
+    peak still yields CIR features, not a position).
+    """
+    cand = {w.beacon_index: (w.tx_s, candidates(w)) for w in windows}
+    chosen = tracker.acquire({i: v for i, v in cand.items() if v[1]})
+    out = []
+    for w in windows:
+        if w.beacon_index in chosen:
+            s_peak = int(round((chosen[w.beacon_index] - timing.start_s) * fs))
+            out.append(_Window(w.beacon_index, w.tx_s, s_peak - lead, s_peak + 8))
+        else:
+            out.append(_Window(w.beacon_index, w.tx_s, w.lo, w.hi, associated=False))
+    return out
