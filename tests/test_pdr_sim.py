@@ -78,24 +78,39 @@ def test_step_count_within_1_percent_and_distance_within_3_percent_after_calibra
     assert err.mean() < 0.05 * true_dist          # PDR-only drift stays a few % of distance over 5 min
 
 
-def test_complementary_heading_beats_gyro_and_magnetometer_near_steel(site, walks):
-    """Near steel (disturbance > 2 µT): fused < magnetometer-only and < raw gyro-only (turn-on bias
-    uncorrected); against the gyro with its bias calibrated on the standing start it is on par."""
+@pytest.fixture(scope="module")
+def long_walks(site):
+    """Two 15-min walks of the same person: long enough for gyro drift to matter."""
+    out = {}
     for seed in (21, 22):
-        ctx, imu, _ = walks[seed]
-        res = _pdr(site, walks[seed])
+        ctx = _walk(site, seed, duration_s=900.0)
+        out[seed] = (ctx, *simulate_imu(ctx))
+    return out
+
+
+def test_complementary_heading_beats_gyro_and_magnetometer_near_steel(site, long_walks):
+    """Near steel (disturbance > 2 µT) on 15-min walks: fused < gyro-only (turn-on bias calibrated on
+    the standing start) and < magnetometer-only. Pinned figures (deg, seeds 21/22): fused 4.1/5.1,
+    gyro 4.6/7.8, magnetometer 11.2/10.9."""
+    pinned = {21: (4.1, 4.6, 11.2), 22: (5.1, 7.8, 10.9)}
+    for seed, sim in long_walks.items():
+        ctx, imu, _ = sim
+        res = _pdr(site, sim)
         near = imu.mag_disturbance_ut > 2.0
         assert near.mean() > 0.1, "the route should pass steel equipment"
         truth = ctx.trajectory.heading_rad
 
-        def rms(h):
-            return float(np.sqrt(np.mean(wrap_pi(h - truth)[near] ** 2)))
+        def rms_deg(h):
+            return math.degrees(float(np.sqrt(np.mean(wrap_pi(h - truth)[near] ** 2))))
 
+        fused, gyro, mag = (rms_deg(res.heading.fused), rms_deg(res.heading.gyro_only),
+                            rms_deg(res.heading.mag_only))
+        assert fused < gyro and fused < mag, (fused, gyro, mag)
+        np.testing.assert_allclose((fused, gyro, mag), pinned[seed], atol=0.06)
+        # raw gyro (turn-on bias not removed) is far worse still
         rate = yaw_rate(imu.gyro_rad_s, down_in_body(imu.acc_m_s2, 100.0))
-        raw_gyro = res.heading.fused[0] + np.r_[0.0, np.cumsum(rate[1:]) / 100.0]
-        fused, mag, gyro_cal = rms(res.heading.fused), rms(res.heading.mag_only), rms(res.heading.gyro_only)
-        assert fused < mag and fused < rms(raw_gyro), (fused, mag, rms(raw_gyro))
-        assert fused < gyro_cal + math.radians(1.0) and fused < math.radians(8.0), (fused, gyro_cal)
+        raw = res.heading.fused[0] + np.r_[0.0, np.cumsum(rate[1:]) / 100.0]
+        assert rms_deg(raw) > gyro
 
 
 def test_same_seed_same_samples_same_person_same_gait(site):
