@@ -1,0 +1,133 @@
+"""``envfuse features audio``: beacon recording → acoustic feature windows (CSV) and positions (CSV)."""
+
+from __future__ import annotations
+
+import argparse
+import io
+import math
+import sys
+import warnings
+from pathlib import Path
+
+from features.errors import ConfigError
+
+GROUP = "features"
+
+
+def _positive(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a positive number, got {text!r}") from None
+    if not (value > 0 and math.isfinite(value)):
+        raise argparse.ArgumentTypeError(f"expected a positive number, got {text!r}")
+    return value
+
+
+def _non_negative(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number >= 0, got {text!r}") from None
+    if not (value >= 0 and math.isfinite(value)):
+        raise argparse.ArgumentTypeError(f"expected a number >= 0, got {text!r}")
+    return value
+
+
+def register(sub) -> None:
+    p = sub.add_parser(
+        "audio", help="acoustic CIR features per window and beacon positions from a WAV file",
+        description="Band-pass and matched-filter a beacon recording (48 kHz; other rates are resampled with "
+                    "a warning), detect each beacon chirp in its TDMA slot, and write the nine CIR features "
+                    "per window (windows without a chirp flagged 'no_chirp'); optionally the acoustic "
+                    "position, clock offset and covariance per frame.",
+        epilog="Example: envfuse features audio walk7/audio.wav --site site1 --walk walk7/walk.toml "
+               "--out audio_features.csv --positions audio_positions.csv")
+    p.add_argument("wav", type=Path, help="audio file (WAV; mono or first channel)")
+    p.add_argument("--site", type=Path, required=True, help="site directory or site.toml (beacons, chirps, frames)")
+    p.add_argument("--walk", type=Path, default=None,
+                   help="walk.toml or cell.toml: [audio] start_s / start_uncertainty_s and start_utc place the "
+                        "samples on the walk time base and the beacon frames (default: the first sample at t=0 "
+                        "on a frame boundary, see --start-uncertainty-s)")
+    p.add_argument("--start-uncertainty-s", type=_non_negative, default=None,
+                   help="stated uncertainty of the audio start, s (default: from --walk, else 0.05)")
+    p.add_argument("--out", type=Path, required=True, help="feature CSV, one row per window")
+    p.add_argument("--positions", type=Path, default=None, help="also write one position row per frame (CSV)")
+    p.add_argument("--window-s", type=_positive, default=2.0, help="window length, s (default 2)")
+    p.add_argument("--hop-s", type=_positive, default=1.0, help="window hop, s (default 1)")
+    p.add_argument("--max-range-m", type=_positive, default=None,
+                   help="largest range at which a beacon is searched, m (default: the site's extent)")
+    p.add_argument("--p-fa", type=float, default=1e-6, help="false-alarm probability per search window (1e-6)")
+    p.set_defaults(func=_run)
+
+
+def _fmt(value) -> str:
+    if isinstance(value, float):
+        return "" if math.isnan(value) else f"{value:.10g}"
+    return str(value)
+
+
+def _csv(rows: list[dict], names) -> str:
+    buf = io.StringIO()
+    buf.write(",".join(names) + "\n")
+    for row in rows:
+        buf.write(",".join(_fmt(row[n]) for n in names) + "\n")
+    return buf.getvalue()
+
+
+def timing_from_walk(walk_path: Path | None, site, uncertainty_override: float | None):
+    """:class:`AudioTiming` from a walk.toml / cell.toml (or the documented defaults without one)."""
+    from features.chirp_detection import AudioTiming, frame_phase_s
+
+    if walk_path is None:
+        u = 0.05 if uncertainty_override is None else uncertainty_override
+        return AudioTiming(start_s=0.0, start_uncertainty_s=u, frame_phase_s=0.0)
+    from features.walk import load_walk
+
+    walk = load_walk(walk_path)
+    table = walk.streams.get("audio", {})
+    start_s = table.get("start_s", 0.0)
+    u = table.get("start_uncertainty_s", 0.05)
+    for name, value in (("start_s", start_s), ("start_uncertainty_s", u)):
+        if not isinstance(value, (int, float)) or isinstance(value, bool) or not math.isfinite(value):
+            raise ConfigError(f"{walk.directory}: [audio] {name} must be a finite number, got {value!r}")
+    fs = table.get("fs_hz")
+    if fs is not None and fs != 48_000:
+        print(f"envfuse: warning: [audio] fs_hz is {fs}; the file's own header rate is used", file=sys.stderr)
+    if uncertainty_override is not None:
+        u = uncertainty_override
+    return AudioTiming(start_s=float(start_s), start_uncertainty_s=float(u),
+                       frame_phase_s=frame_phase_s(walk.start_utc, site.acoustic.frame_s))
+
+
+def _run(args) -> int:
+    from features.acoustic_features import FEATURE_COLUMNS, WindowConfig, analyse_audio
+    from features.acoustic_positions import POSITION_COLUMNS
+    from features.audio import AudioWarning
+    from features.chirp_detection import DetectorConfig
+    from features.fileio import atomic_write_text
+    from features.site import load_site
+
+    site = load_site(args.site)
+    if not site.beacons:
+        raise ConfigError(f"{args.site}: the site lists no [[beacons]]")
+    timing = timing_from_walk(args.walk, site, args.start_uncertainty_s)
+    if not 0 < args.p_fa < 1:
+        raise ConfigError(f"--p-fa must lie in (0, 1), got {args.p_fa}")
+    detector = DetectorConfig(p_fa=args.p_fa, max_range_m=args.max_range_m)
+    windows = WindowConfig(window_s=args.window_s, hop_s=args.hop_s)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", AudioWarning)
+        result = analyse_audio(args.wav, site, timing, detector, windows)
+    for w in caught:
+        if issubclass(w.category, AudioWarning):
+            print(f"envfuse: warning: {w.message}", file=sys.stderr)
+    atomic_write_text(args.out, _csv(result.rows, FEATURE_COLUMNS))
+    msg = (f"{args.wav}: {result.duration_s:.1f} s, {result.n_detections} chirps detected, "
+           f"{sum(r['acoustic_available'] for r in result.rows)}/{len(result.rows)} windows with a chirp "
+           f"-> {args.out}")
+    if args.positions is not None:
+        atomic_write_text(args.positions, _csv([f.as_row() for f in result.fixes], POSITION_COLUMNS))
+        msg += f"; {len(result.fixes)} positions -> {args.positions}"
+    print(msg)
+    return 0
