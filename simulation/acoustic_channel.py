@@ -38,7 +38,6 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.sparse.csgraph import dijkstra
 
 from features.errors import ConfigError
 from features.site import Site
@@ -214,6 +213,29 @@ def _plan_hits(p: np.ndarray, q: np.ndarray, boxes: np.ndarray) -> np.ndarray:
     return segment_hits_boxes(a, b, tall).any(axis=1)
 
 
+def _dijkstra_dense(w: np.ndarray, source: int) -> tuple[np.ndarray, np.ndarray]:
+    """Shortest distances and predecessors from ``source`` over a dense (k, k) weight matrix (inf = no edge).
+
+    Dijkstra (1959) with an O(k²) array scan: the graphs here have a handful of
+    corner nodes, for which scipy.sparse.csgraph's validation costs more than the search.
+    """
+    k = w.shape[0]
+    dist = np.full(k, np.inf)
+    pred = np.full(k, -1)
+    done = np.zeros(k, bool)
+    dist[source] = 0.0
+    for _ in range(k):
+        u = int(np.argmin(np.where(done, np.inf, dist)))
+        if not np.isfinite(dist[u]):
+            break
+        done[u] = True
+        alt = dist[u] + w[u]
+        better = (alt < dist) & ~done
+        dist[better] = alt[better]
+        pred[better] = u
+    return dist, pred
+
+
 def _lateral_length(scene: Scene, src: np.ndarray, rx: np.ndarray, blockers: np.ndarray) -> float:
     """Shortest path round the vertical edges (plan visibility graph of box corners), 3-D length.
 
@@ -234,11 +256,11 @@ def _lateral_length(scene: Scene, src: np.ndarray, rx: np.ndarray, blockers: np.
         k = len(nodes)
         ii, jj = np.triu_indices(k, 1)
         free = ~_plan_hits(nodes[ii], nodes[jj], ob)
-        w = np.zeros((k, k))
+        w = np.full((k, k), np.inf)
         lengths = np.hypot(*(nodes[jj] - nodes[ii]).T)
         w[ii[free], jj[free]] = lengths[free]
-        w = w + w.T
-        dist, pred = dijkstra(w, directed=False, indices=0, return_predecessors=True)
+        w[jj[free], ii[free]] = lengths[free]
+        dist, pred = _dijkstra_dense(w, 0)
         if not np.isfinite(dist[1]):
             return math.inf
         route = [1]
@@ -316,10 +338,17 @@ def channel_paths(scene: Scene, src_xyz, rx_xyz) -> PathSet:
     rx = np.asarray(rx_xyz, float)
     d = float(np.linalg.norm(rx - src))
     kinds, lengths, gains, detours, boxes = [], [], [], [], []
-    s1, r1 = src[None], rx[None]
-    hit = segment_hits_boxes(s1, r1, scene.solid)[0] if scene.solid.shape[0] else np.zeros(0, bool)
+    # direct path and both legs of the ground reflection (image source at z = −z_src) in one test
+    img = src * np.array([1.0, 1.0, -1.0])
+    lg = float(np.linalg.norm(rx - img))
+    u = src[2] / (src[2] + rx[2]) if src[2] > 0 and rx[2] > 0 else 0.0
+    gp = (src + u * (rx - src)) * np.array([1.0, 1.0, 0.0]) + np.array([0.0, 0.0, _NUDGE_M])
+    a, b = np.vstack([src, src, gp]), np.vstack([rx, gp, rx])
+    hits = segment_hits_boxes(a, b, scene.solid) if scene.solid.shape[0] else np.zeros((3, 0), bool)
+    porous3 = _porous_gain(scene, a, b)
+    hit = hits[0]
     los = not hit.any()
-    porous = float(_porous_gain(scene, s1, r1)[0])
+    porous = float(porous3[0])
     if los:
         kinds.append(0), lengths.append(d), gains.append(porous / max(d, 1e-3)), detours.append(0.0), boxes.append(-1)
     else:
@@ -328,16 +357,9 @@ def channel_paths(scene: Scene, src_xyz, rx_xyz) -> PathSet:
             first = int(scene.solid_index[np.flatnonzero(hit)[0]])
             kinds.append(3), lengths.append(path), gains.append(porous / max(d, 1e-3))
             detours.append(max(path - d, 0.0)), boxes.append(first)
-    # ground reflection: image source at z = −z_src
-    img = src * np.array([1.0, 1.0, -1.0])
-    lg = float(np.linalg.norm(rx - img))
-    if src[2] > 0 and rx[2] > 0:
-        u = src[2] / (src[2] + rx[2])
-        p = (src + u * (rx - src)) * np.array([1.0, 1.0, 0.0]) + np.array([0.0, 0.0, _NUDGE_M])
-        p1 = p[None]
-        if not (_blocked(scene, s1, p1)[0] or _blocked(scene, p1, r1)[0]):
-            g = scene.ground_r / lg * _porous_gain(scene, s1, p1)[0] * _porous_gain(scene, p1, r1)[0]
-            kinds.append(1), lengths.append(lg), gains.append(g), detours.append(0.0), boxes.append(-1)
+    if u > 0 and not (hits[1].any() or hits[2].any()):
+        g = scene.ground_r / lg * porous3[1] * porous3[2]
+        kinds.append(1), lengths.append(lg), gains.append(g), detours.append(0.0), boxes.append(-1)
     rl, rg, rb = _reflections(scene, src, rx, d)
     kinds += [2] * len(rl)
     lengths += rl.tolist()

@@ -62,7 +62,7 @@ from .streams import StreamContext, Trajectory
 __all__ = ["AudioConfig", "AudioResult", "render_audio", "write_audio", "detection_range_m"]
 
 _HV_KINDS = ("transformer", "gantry", "equipment")
-_CHUNK = 4096             # ambient noise is drawn per chunk of this many samples
+_CHUNK = 16384            # ambient noise is drawn per chunk of this many samples
 _PRE_SAMPLES = 64          # segment margin before the first arrival (zero-phase filters smear both ways)
 _POST_SAMPLES = 64
 
@@ -327,9 +327,14 @@ class _Ambient:
             t_true = self.true_start + (b0 + np.arange(n)) / self.fs_true
             d = np.maximum(_distance_to_boxes(pos, self.tanks), 1.0)
             amp = np.interp(t_true, grid, _db_to_digital_rms(cfg.hum_db_spl_1m, cfg) * math.sqrt(2.0) / d)
-            for h in range(4):       # 2·mains and harmonics (magnetostriction), −3 dB per harmonic
-                f_h = 2.0 * cfg.mains_hz * (h + 1)
-                out[:n] += amp * 10.0 ** (-3.0 * h / 20.0) * np.sin(2.0 * np.pi * f_h * t_true + self.hum_phase[h])
+            # 2·mains and its harmonics (magnetostriction), −3 dB per harmonic: Im(z^h·e^{jφ_h}), z = e^{j2π·2f_m·t}
+            z = np.exp(2j * np.pi * 2.0 * cfg.mains_hz * t_true)
+            zh = np.ones(n, complex)
+            hum = np.zeros(n)
+            for h in range(4):
+                zh *= z
+                hum += 10.0 ** (-3.0 * h / 20.0) * (zh * np.exp(1j * self.hum_phase[h])).imag
+            out[:n] += amp * hum
         if self.hv.shape[0] and cfg.corona_rate_hz > 0:
             d_mid = float(_distance_to_boxes(pos[1:2], self.hv)[0])
             rate = cfg.corona_rate_hz * math.exp(-d_mid / cfg.corona_scale_m)

@@ -103,7 +103,7 @@ def test_same_seed_same_bytes_and_block_size_does_not_matter(tmp_path):
     traj = _static(12.0, 14.0, 1.5)
     cfg = replace(AudioConfig(), corona_rate_hz=30.0)
     render_audio(site, traj, 11, tmp_path / "a.wav", cfg)
-    render_audio(site, traj, 11, tmp_path / "b.wav", replace(cfg, block_samples=4096))
+    render_audio(site, traj, 11, tmp_path / "b.wav", replace(cfg, block_samples=16384))
     render_audio(site, traj, 12, tmp_path / "c.wav", cfg)
     a, b, c = ((tmp_path / n).read_bytes() for n in ("a.wav", "b.wav", "c.wav"))
     assert a == b
@@ -186,7 +186,7 @@ def test_writer_contract(tmp_path):
     with pytest.raises(ConfigError, match="unknown key"):
         write_audio(replace(ctx, options={"audio": {"noise_dbspl": 3}}))
     with pytest.raises(ConfigError, match="block_samples"):
-        AudioConfig(block_samples=5000)
+        AudioConfig(block_samples=20000)
 
 
 def test_simulated_walk_carries_audio(tmp_path):
