@@ -25,6 +25,7 @@ from __future__ import annotations
 import io
 import math
 import os
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -216,6 +217,11 @@ def repair_imu(t_s, acc_m_s2, gyro_rad_s=None, mag_ut=None, config: RepairConfig
     report.gap_total_s += float(dt_raw[gaps].sum())
     n_out = int(math.floor((t[-1] - t[0]) * rate + 1e-6)) + 1
     tu = t[0] + np.arange(n_out) * dt
+    if n_out == len(t) and np.max(np.abs(t - tu)) <= 1e-3 * dt:
+        # already uniform (the common case): keep the samples, no interpolation
+        report.n_output = n_out
+        return ImuData(t_s=tu, acc_m_s2=chans["acc"], gyro_rad_s=chans.get("gyro"), mag_ut=chans.get("mag"),
+                       valid=np.ones(n_out, bool), saturated=sat, rate_hz=float(rate), report=report)
     out = {k: np.stack([np.interp(tu, t, v[:, j]) for j in range(3)], axis=1) for k, v in chans.items()}
     seg = np.searchsorted(t, tu, side="right") - 1
     seg = np.clip(seg, 0, len(dt_raw) - 1)
@@ -229,23 +235,28 @@ def repair_imu(t_s, acc_m_s2, gyro_rad_s=None, mag_ut=None, config: RepairConfig
 
 
 def _parse_table(text: str, path: str) -> tuple[list[str], np.ndarray, int]:
-    lines = text.splitlines()
-    while lines and not lines[0].strip():
-        lines.pop(0)
-    if not lines:
+    """Header names and the numeric table; a table with bad lines is parsed line by line (bad ones counted)."""
+    text = text.lstrip()
+    if not text:
         raise ImuError(f"{path}: empty file; need columns {', '.join(REQUIRED_COLUMNS)}")
-    header = [h.strip().lower() for h in lines[0].split(",")]
-    body = [ln for ln in lines[1:] if ln.strip() and not ln.lstrip().startswith("#")]
+    cut = text.find("\n")
+    head, body = (text, "") if cut < 0 else (text[:cut], text[cut + 1:])
+    header = [h.strip().lower() for h in head.split(",")]
     ncol = len(header)
-    try:
-        data = np.loadtxt(io.StringIO("\n".join(body)), delimiter=",", ndmin=2) if body else np.zeros((0, ncol))
-        if data.shape[1] != ncol:
-            raise ValueError
-        return header, data, 0
+    try:  # fast path: numpy's C parser (blank lines and '#' comments skipped)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            data = np.loadtxt(io.StringIO(body), delimiter=",", ndmin=2, comments="#")
+        if data.size == 0:
+            return header, np.zeros((0, ncol)), 0
+        if data.shape[1] == ncol:
+            return header, data, 0
     except ValueError:
         pass
     rows, n_bad = [], 0
-    for ln in body:
+    for ln in body.splitlines():
+        if not ln.strip() or ln.lstrip().startswith("#"):
+            continue
         parts = ln.split(",")
         if len(parts) != ncol:
             n_bad += 1
