@@ -140,27 +140,23 @@ class SkyArrays:
 def sky_arrays(epochs: Sequence) -> SkyArrays:
     """Stack the epochs that reported a sky into :class:`SkyArrays` (one column per satellite)."""
     sky = [e for e in epochs if e.sky_reported]
+    flat = [(i, s) for i, e in enumerate(sky) for s in e.satellites]
     index: dict = {}
-    rows, cols, els, azs, cn0s, useds = [], [], [], [], [], []
-    for i, e in enumerate(sky):
-        for s in e.satellites:
-            key = (s.system, s.prn)
-            j = index.setdefault(key, len(index))
-            rows.append(i)
-            cols.append(j)
-            els.append(np.nan if s.el_deg is None else s.el_deg)
-            azs.append(np.nan if s.az_deg is None else s.az_deg)
-            cn0s.append(np.nan if s.cn0_dbhz is None else s.cn0_dbhz)
-            useds.append(s.used)
+    cols = [index.setdefault((s[0], s[1]), len(index)) for _, s in flat]
     n, m = len(sky), len(index)
     el = np.full((n, m), np.nan)
     az = np.full((n, m), np.nan)
     cn0 = np.full((n, m), np.nan)
     in_view = np.zeros((n, m), dtype=bool)
     used = np.zeros((n, m), dtype=bool)
-    if rows:
-        r, c = np.asarray(rows), np.asarray(cols)
-        el_v, az_v, cn0_v = np.asarray(els), np.asarray(azs), np.asarray(cn0s)
+    if flat:
+        r = np.fromiter((i for i, _ in flat), dtype=np.intp, count=len(flat))
+        c = np.asarray(cols, dtype=np.intp)
+        # Satellite fields: (system, prn, signal, el_deg, az_deg, cn0_dbhz, used); None → NaN
+        el_v = np.array([s[3] for _, s in flat], dtype=float)
+        az_v = np.array([s[4] for _, s in flat], dtype=float)
+        cn0_v = np.array([s[5] for _, s in flat], dtype=float)
+        used_v = np.array([s[6] for _, s in flat], dtype=bool)
         # Several signals of one satellite: C/N0 = max over signals (fmax ignores NaN),
         # el/az from any listing that has them.
         np.fmax.at(cn0, (r, c), cn0_v)
@@ -169,7 +165,7 @@ def sky_arrays(epochs: Sequence) -> SkyArrays:
         has_az = ~np.isnan(az_v)
         az[r[has_az], c[has_az]] = az_v[has_az]
         in_view[r, c] = True
-        np.logical_or.at(used, (r, c), np.asarray(useds, dtype=bool))
+        np.logical_or.at(used, (r, c), used_v)
     hdop = np.array([np.nan if e.fix.hdop is None else e.fix.hdop for e in sky], dtype=float)
     t_s = np.array([e.t_s for e in sky], dtype=float)
     return SkyArrays(t_s, tuple(index), el, az, cn0, in_view, used, hdop)

@@ -37,6 +37,8 @@ of RINEX and of gpsd's ``svid``.
 
 from __future__ import annotations
 
+import datetime as _dt
+import functools
 from typing import NamedTuple
 
 __all__ = [
@@ -145,6 +147,10 @@ def satellite_id(talker: str, number: int, system_hint: str | None = None) -> tu
     return None
 
 
+_tuple_new = tuple.__new__
+_satellite_id_cached = functools.lru_cache(maxsize=4096)(satellite_id)
+
+
 def _opt_float(text: str, low: float, high: float) -> float | None:
     """Float of a field, ``None`` when empty; ValueError when outside [low, high]."""
     if not text:
@@ -193,19 +199,27 @@ def gsv_fields(talker: str, data: list[str]) -> GsvFields:
         system_hint = NMEA_SYSTEM_IDS[int(body[-1])]
         body = body[:-2]
     satellites = []
-    for i in range(0, len(body), 4):
-        group = body[i:i + 4]
-        if not group[0]:
+    append = satellites.append
+    sat_id = _satellite_id_cached
+    n_body = len(body)
+    if n_body % 4:
+        body = body + [""] * (4 - n_body % 4)  # a last satellite cut short: its missing fields are empty
+    for i in range(0, n_body, 4):
+        prn_t, el_t, az_t, cn_t = body[i], body[i + 1], body[i + 2], body[i + 3]
+        if not prn_t:
             continue  # empty padding group, or a satellite without number (Quectel): nothing to key it by
-        sat = satellite_id(talker, int(group[0]), system_hint)
-        el = _opt_float(group[1], -90.0, 90.0) if len(group) > 1 else None
-        az = _opt_float(group[2], 0.0, 360.0) if len(group) > 2 else None
-        cn0 = _opt_float(group[3], 0.0, 99.0) if len(group) > 3 else None
+        sat = sat_id(talker, int(prn_t), system_hint)
+        el = float(el_t) if el_t else None
+        az = float(az_t) if az_t else None
+        cn0 = float(cn_t) if cn_t else None
+        if (el is not None and not -90.0 <= el <= 90.0) or (az is not None and not 0.0 <= az <= 360.0) \
+                or (cn0 is not None and not 0.0 <= cn0 <= 99.0):
+            raise ValueError(f"GSV satellite fields {body[i:i + 4]} out of range")
         if sat is None:
             continue
         if cn0 == 0.0:
             cn0 = None  # 0 dB-Hz is "not tracked" for many receivers (NMEA: null when not tracking)
-        satellites.append(GsvSatellite(sat[0], sat[1], el, az, cn0))
+        append(_tuple_new(GsvSatellite, (sat[0], sat[1], el, az, cn0)))  # = GsvSatellite(...), without its Python __new__
     return GsvFields(n_msgs, msg_num, n_in_view, signal, tuple(satellites))
 
 
@@ -241,7 +255,7 @@ def gsa_fields(talker: str, data: list[str]) -> GsaFields:
     used = []
     for text in prn_fields:
         if text:
-            sat = satellite_id(talker, int(text), system)
+            sat = _satellite_id_cached(talker, int(text), system)
             if sat is not None:
                 used.append(sat)
     return GsaFields(mode, tuple(used), _dop(dops[0]), _dop(dops[1]), _dop(dops[2]), system)
@@ -265,8 +279,6 @@ def parse_time_of_day(text: str) -> float | None:
 
 def parse_ddmmyy(text: str):
     """RMC date ``ddmmyy`` → :class:`datetime.date` (years 80-99 → 19xx, else 20xx), None when empty."""
-    import datetime as _dt
-
     if not text:
         return None
     if len(text) != 6 or not text.isdigit():

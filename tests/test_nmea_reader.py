@@ -212,7 +212,7 @@ PINNED = {
     "beidou-bd.log": (10, 2, 5, 64, 36, 0),
     "beidou-gb.log": (5, 5, 2, 139, 86, 0),
     "furuno_gl_ga.log": (16, 16, 16, 288, 224, 0),
-    "gp-320fw-2019-04-07-coldboot.log": (19, 10, 2, 102, 36, 47),
+    "gp-320fw-2019-04-07-coldboot.log": (19, 10, 2, 102, 36, 32),
     "nmea-fuzzy-cases.log": (14, 0, 14, 0, 0, 0),
     "quectel-eg25-g.log": (60, 59, 23, 1598, 524, 74),
     "quectel-l76k-nmea.log": (151, 150, 151, 3852, 2948, 0),
