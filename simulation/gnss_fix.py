@@ -339,7 +339,7 @@ def solve_fixes(rng: np.random.Generator, az_rad: np.ndarray, el_rad: np.ndarray
     sig2 = floor ** 2 + code_sigma_m(np.nan_to_num(cn0_reported_dbhz, nan=0.0),
                                      cfg.code_a_m, cfg.code_b_m_sqrt_hz) ** 2
     w_all = 1.0 / sig2
-    for _ in range(cfg.raim_max_exclusions + 1):
+    for n_excluded in range(cfg.raim_max_exclusions + 1):
         w = np.where(used & ok[:, None], w_all, 0.0)
         theta, ninv = _wls(g, w, code_err)
         resid = code_err - np.matmul(g, theta[..., None])[..., 0]
@@ -348,7 +348,7 @@ def solve_fixes(rng: np.random.Generator, az_rad: np.ndarray, el_rad: np.ndarray
         test = (w * resid ** 2).sum(axis=1)
         thresh = chi2.ppf(1.0 - cfg.raim_pfa, np.maximum(dof, 1))
         fail = ok & (dof >= 2) & (test > thresh)
-        if not fail.any():
+        if not fail.any() or n_excluded == cfg.raim_max_exclusions:
             break
         # Standardised residual w·r²/(1 − h), h = w·gᵀ(GᵀWG)⁻¹g (hat-matrix diagonal).
         h = w * (np.matmul(g, ninv) * g).sum(axis=-1)

@@ -257,9 +257,9 @@ def emi_loss_db(p_en: np.ndarray, zones) -> np.ndarray:
     summed over zones (a modelling choice: in-band interference raises the
     noise floor, ΔC/N0 = 10·log10(1 + I0/N0), strongest beside the source).
 
-    >>> float(emi_loss_db(np.array([[0.0, 0.0], [5.0, 0.0], [20.0, 0.0]]),
-    ...       [type("Z", (), dict(east_m=0.0, north_m=0.0, radius_m=10.0, loss_db=6.0))()])[1])
-    3.0
+    >>> from features.site import EmiZone
+    >>> emi_loss_db(np.array([[0.0, 0.0], [5.0, 0.0], [20.0, 0.0]]), [EmiZone(0.0, 0.0, 10.0, 6.0)]).round(3).tolist()
+    [6.0, 3.0, 0.0]
     """
     p = np.atleast_2d(np.asarray(p_en, float))
     out = np.zeros(p.shape[0])

@@ -132,6 +132,8 @@ class Satellites:
         for name in ("system", "orbit", "a_m", "inc_rad", "raan_rad", "u0_rad", "t_ref_unix_s", "geo_lon_rad"):
             if len(getattr(self, name)) != k:
                 raise ValueError(f"Satellites.{name} has length {len(getattr(self, name))}, expected {k}")
+        for name in ("system", "prn", "orbit", "a_m", "inc_rad", "raan_rad", "u0_rad", "t_ref_unix_s", "geo_lon_rad"):
+            getattr(self, name).flags.writeable = False  # shared through the cache: never altered in place
 
     def __len__(self) -> int:
         return len(self.prn)

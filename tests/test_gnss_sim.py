@@ -11,7 +11,7 @@ from features.errors import ConfigError
 from features.site import Box, EmiZone, Origin, Site
 from simulation import gnss_signal
 from simulation.geometry import boxes_array
-from simulation.gnss_fix import FixConfig, code_sigma_m
+from simulation.gnss_fix import FixConfig, code_sigma_m, solve_fixes
 from simulation.gnss_signal import SignalConfig, blockage, knife_edge_loss_db, open_sky_cn0_dbhz, rician_power, track
 from simulation.gnss_stream import simulate_gnss, write_gnss
 from simulation.route import static_trajectory
@@ -228,3 +228,30 @@ def test_config_validation():
     with pytest.raises(ValueError, match="ttf_max_s"):
         FixConfig(ttf_min_s=5.0, ttf_max_s=2.0)
     assert gnss_signal.emi_loss_db(np.zeros((1, 2)), ()).tolist() == [0.0]
+
+
+def _raim_case(max_exclusions):
+    rng = np.random.default_rng(0)
+    k = 14
+    az = np.tile(np.radians(np.linspace(0.0, 330.0, k)), (50, 1))
+    el = np.tile(np.radians(np.r_[np.linspace(15.0, 80.0, k - 1), 40.0]), (50, 1))
+    sys_idx = np.r_[np.zeros(7, int), np.ones(7, int)]
+    tracked = np.ones((50, k), bool)
+    cn0 = np.full((50, k), 45.0)
+    zero = np.zeros((50, k))
+    noise = 0.2 * rng.standard_normal((50, k))
+    bias = zero.copy()
+    bias[:, 3] = 40.0  # one satellite with a 40 m NLOS bias the receiver cannot see in its C/N0
+    errors = {"noise": noise, "multipath": zero, "nlos_bias": bias, "atmosphere": zero, "carrier": zero}
+    return solve_fixes(np.random.default_rng(1), az, el, sys_idx, tracked, cn0, errors, zero.astype(bool), 0.2,
+                       corrections=False, cfg=FixConfig(raim_max_exclusions=max_exclusions))
+
+
+def test_raim_excludes_the_biased_satellite():
+    with_raim = _raim_case(2)
+    without = _raim_case(0)
+    assert not with_raim.used[:, 3].any() and without.used[:, 3].all()
+    e_with = np.linalg.norm(with_raim.error_enu_m, axis=1)
+    e_without = np.linalg.norm(without.error_enu_m, axis=1)
+    assert np.median(e_with) < 1.0 < 3.0 < np.median(e_without)
+    assert np.all(with_raim.n_used == 13)
