@@ -27,7 +27,7 @@ from simulation.orbits import SYSTEM_GPS, all_satellites, azel
 from simulation.rng import stream_rng
 from simulation.streams import StreamContext, Trajectory
 
-__all__ = ["GnssSimulation", "simulate_gnss", "write_gnss", "GNSS_FILE", "DEFAULT_RATE_HZ"]
+__all__ = ["GnssSimulation", "simulate_gnss", "to_nmea_epochs", "write_gnss", "GNSS_FILE", "DEFAULT_RATE_HZ"]
 
 GNSS_FILE = "gnss.nmea"
 DEFAULT_RATE_HZ = 5.0
@@ -193,7 +193,12 @@ def simulate_gnss(site, traj: Trajectory, seed: int, corrections: bool = True, r
 
 
 def to_nmea_epochs(sim: GnssSimulation, site, seed: int, traj: Trajectory) -> NmeaEpochs:
-    """Receiver-reported quantities for the NMEA writer (geodetic fix, velocity with Doppler-level noise)."""
+    """Receiver-reported quantities for the NMEA writer (geodetic fix, velocity with Doppler-level noise).
+
+    The site origin's ``alt_m`` is taken as the ground's height and written as
+    GGA altitude with a geoid separation of 0.0 (no geoid model is simulated),
+    so altitude + separation is the ellipsoidal height pymap3d used.
+    """
     o = site.origin
     lat, lon, alt = enu_to_geodetic(sim.fix_enu_m[:, 0], sim.fix_enu_m[:, 1], sim.fix_enu_m[:, 2],
                                     o.lat_deg, o.lon_deg, o.alt_m)
