@@ -449,7 +449,9 @@ def render_audio(site: Site, trajectory: Trajectory, seed: int, wav_path, cfg: A
             cell = (int(math.floor(rx[0])), int(math.floor(rx[1])))      # clutter on a 1 m grid
             if cell not in clutter_cache:
                 clutter_cache[cell] = clutter_index(scene, np.array([cell[0] + 0.5, cell[1] + 0.5]))
-            rng = stream_rng(seed, "audio", "tail", bid, i)
+            # the tail realisation belongs to the place (1 cm grid): a static receiver hears the same tail every
+            # frame, a walker (≥ 1 m between a beacon's chirps, ≫ λ/2 ≈ 8 mm) an independent one
+            rng = stream_rng(seed, "audio", "tail", bid, *(int(round(v * 100.0)) + 10**8 for v in rx))
             start, seg = renderer.render(paths, spec, eta, first_sample, clutter_cache[cell], rng, level_scale)
             acc.add(start, seg)
             counts["rendered"] += 1

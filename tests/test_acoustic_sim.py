@@ -59,8 +59,6 @@ def test_absorption_in_beacon_band_default_atmosphere():
     assert a == pytest.approx([0.354, 0.468, 0.591], abs=0.002)
     # drier air absorbs more at these frequencies (below the O2 relaxation peak)
     assert absorption_db_per_m(20e3, Atmosphere(20.0, 30.0)) > absorption_db_per_m(20e3, Atmosphere(20.0, 60.0))
-    # low pressure raises the relaxation-independent classical term but lowers the molar-humidity frequencies
-    assert absorption_db_per_m(20e3, Atmosphere(20.0, 60.0, 90.0)) != pytest.approx(float(a[1]))
 
 
 def test_spreading_is_inverse_distance():
