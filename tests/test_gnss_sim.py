@@ -255,3 +255,25 @@ def test_raim_excludes_the_biased_satellite():
     e_without = np.linalg.norm(without.error_enu_m, axis=1)
     assert np.median(e_with) < 1.0 < 3.0 < np.median(e_without)
     assert np.all(with_raim.n_used == 13)
+
+
+def test_rtk_fix_needs_phase_lock_then_time_to_fix():
+    n, k = 120, 14
+    az = np.tile(np.radians(np.linspace(0.0, 330.0, k)), (n, 1))
+    el = np.tile(np.radians(np.linspace(20.0, 85.0, k)), (n, 1))
+    sys_idx = np.r_[np.zeros(7, int), np.ones(7, int)]
+    tracked = np.ones((n, k), bool)
+    tracked[:10] = False  # the receiver acquires everything at epoch 10 (2 s)
+    cn0 = np.where(tracked, 48.0, np.nan)
+    zero = np.zeros((n, k))
+    errors = {"noise": zero, "multipath": zero, "nlos_bias": zero, "atmosphere": zero, "carrier": zero}
+    cfg = FixConfig(slip_weak_prob=0.0)
+    q = solve_fixes(np.random.default_rng(3), az, el, sys_idx, tracked, cn0, errors, zero.astype(bool), 0.2,
+                    corrections=True, cfg=cfg).quality
+    assert np.all(q[:10] == 0)
+    locked_at = 10 + int(round(cfg.phase_lock_s / 0.2)) - 1  # lock age counts the acquiring epoch as 0.2 s
+    assert np.all(q[10:locked_at] == 2)                     # code-differential until the carriers are locked
+    first_fix = int(np.flatnonzero(q == 4)[0])
+    ttf_s = (first_fix - locked_at) * 0.2
+    assert cfg.ttf_min_s - 0.21 <= ttf_s <= cfg.ttf_max_s + 0.21
+    assert np.all(q[locked_at:first_fix] == 5) and np.all(q[first_fix:] == 4)
