@@ -261,7 +261,7 @@ def test_rtk_fix_needs_phase_lock_then_time_to_fix():
     n, k = 120, 14
     az = np.tile(np.radians(np.linspace(0.0, 330.0, k)), (n, 1))
     el = np.tile(np.radians(np.linspace(20.0, 85.0, k)), (n, 1))
-    sys_idx = np.r_[np.zeros(7, int), np.ones(7, int)]
+    sys_idx = np.arange(k) % 2  # GPS and BeiDou interleaved round the sky: PDOP ≈ 2
     tracked = np.ones((n, k), bool)
     tracked[:10] = False  # the receiver acquires everything at epoch 10 (2 s)
     cn0 = np.where(tracked, 48.0, np.nan)
