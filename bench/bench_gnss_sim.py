@@ -6,7 +6,7 @@ simulation and the NMEA formatting, and prints the calibration figures:
 per-class medians (untracked share, attenuation, C/N0, fix error), LOS/NLOS
 C/N0 against the smartLoc figures of DESIGN.md §6, and error by fix quality.
 
-Usage: .venv/bin/python bench/bench_gnss_sim.py [--site-seed 1] [--cells 0 (all)] [--capture-s 30]
+Usage: .venv/bin/python bench/bench_gnss_sim.py [--site-seed 1] [--cells 0 (all)] [--capture-s 30] [--walk-s 600]
 """
 
 from __future__ import annotations
@@ -27,7 +27,29 @@ from simulation.gnss_stream import simulate_gnss, to_nmea_epochs  # noqa: E402
 from simulation.layout import generate_site  # noqa: E402
 from simulation.nmea_writer import format_nmea  # noqa: E402
 from simulation.route import static_trajectory  # noqa: E402
+from simulation.streams import Trajectory  # noqa: E402
 from simulation.survey import survey_cells  # noqa: E402
+
+
+def _bench_walk(site_seed: int, duration_s: float) -> None:
+    """A walker going back and forth along a row of the yard at 1.3 m/s (fading sub-sampled, a ray test per epoch)."""
+    site = generate_site(site_seed)
+    t = np.arange(0.0, duration_s + 1e-9, 0.01)
+    g = site.grid
+    span = g.east_max_m - g.east_min_m - 20.0
+    east = g.east_min_m + 10.0 + span * np.abs(((t * 1.3 / span) % 2.0) - 1.0)
+    north = np.full_like(t, 0.5 * (g.north_min_m + g.north_max_m))
+    heading = np.where(np.gradient(east) > 0, np.pi / 2, 3 * np.pi / 2)
+    traj = Trajectory(t, east, north, np.full_like(t, site.device_height_m), heading, np.full_like(t, 1.3),
+                      datetime(2026, 5, 1, 2, 0, tzinfo=timezone.utc), 100.0)
+    t0 = time.perf_counter()
+    sim = simulate_gnss(site, traj, seed=1)
+    t1 = time.perf_counter()
+    format_nmea(to_nmea_epochs(sim, site, 1, traj))
+    t2 = time.perf_counter()
+    n = len(sim.t_s)
+    print(f"walk {duration_s:.0f} s ({n} epochs): simulation {t1 - t0:.2f} s ({n / (t1 - t0):,.0f} epochs/s), "
+          f"NMEA {t2 - t1:.2f} s ({n / (t2 - t1):,.0f} epochs/s)")
 
 
 def main(argv=None) -> None:
@@ -37,7 +59,10 @@ def main(argv=None) -> None:
     ap.add_argument("--capture-s", type=float, default=30.0)
     ap.add_argument("--cell-size", type=float, default=5.0)
     ap.add_argument("--no-corrections", action="store_true")
+    ap.add_argument("--walk-s", type=float, default=600.0, help="also time a walk of this length (0 = skip)")
     args = ap.parse_args(argv)
+    if args.walk_s > 0:
+        _bench_walk(args.site_seed, args.walk_s)
 
     site = generate_site(args.site_seed)
     cells = survey_cells(site, args.cell_size)
