@@ -54,8 +54,8 @@ def main(argv=None) -> None:
 
     atm = Atmosphere()
     a = absorption_db_per_m(np.array([17e3, 20e3, 23e3]), atm)
-    print(f"ISO 9613-1 absorption at {atm.temperature_c} °C, {atm.relative_humidity_pct} % RH, {atm.pressure_kpa} kPa: "
-          f"17 kHz {a[0]:.3f}, 20 kHz {a[1]:.3f}, 23 kHz {a[2]:.3f} dB/m")
+    print(f"ISO 9613-1 absorption at {atm.temperature_c} °C, {atm.relative_humidity_pct} % RH, "
+          f"{atm.pressure_kpa} kPa: 17 kHz {a[0]:.3f}, 20 kHz {a[1]:.3f}, 23 kHz {a[2]:.3f} dB/m")
 
     site = generate_site(args.site_seed)
     print(f"site {site.name}: {len(site.layout)} boxes, {len(site.beacons)} beacons, {site.acoustic.n_slots} slots, "

@@ -114,6 +114,10 @@ class AudioConfig:
     channel: ChannelConfig = field(default_factory=ChannelConfig)
 
     def __post_init__(self):
+        for f in fields(self):
+            v = getattr(self, f.name)
+            if isinstance(v, float) and not math.isfinite(v) and f.name != "hum_db_spl_1m":
+                raise ConfigError(f"audio {f.name} must be finite, got {v}")
         if not isinstance(self.fs_hz, int) or self.fs_hz < 8_000:
             raise ConfigError(f"audio fs_hz must be an integer >= 8000, got {self.fs_hz!r}")
         lo, hi = self.noise_band_hz
@@ -124,7 +128,8 @@ class AudioConfig:
         if abs(self.clock_drift_ppm) > 1000:
             raise ConfigError(f"audio clock_drift_ppm must be below 1000, got {self.clock_drift_ppm}")
         if not isinstance(self.block_samples, int) or self.block_samples < _CHUNK or self.block_samples % _CHUNK:
-            raise ConfigError(f"audio block_samples must be a positive multiple of {_CHUNK}, got {self.block_samples!r}")
+            raise ConfigError(f"audio block_samples must be a positive multiple of {_CHUNK}, "
+                              f"got {self.block_samples!r}")
         if not self.max_excess_delay_s > 0:
             raise ConfigError(f"audio max_excess_delay_s must be positive, got {self.max_excess_delay_s}")
 
@@ -327,7 +332,7 @@ class _Ambient:
             t_true = self.true_start + (b0 + np.arange(n)) / self.fs_true
             d = np.maximum(_distance_to_boxes(pos, self.tanks), 1.0)
             amp = np.interp(t_true, grid, _db_to_digital_rms(cfg.hum_db_spl_1m, cfg) * math.sqrt(2.0) / d)
-            # 2·mains and its harmonics (magnetostriction), −3 dB per harmonic: Im(z^h·e^{jφ_h}), z = e^{j2π·2f_m·t}
+            # 2·mains and harmonics (magnetostriction), −3 dB each: Im(z^h·e^{jφ_h}), z = e^{j2π·2f_m·t}
             z = np.exp(2j * np.pi * 2.0 * cfg.mains_hz * t_true)
             zh = np.ones(n, complex)
             hum = np.zeros(n)
@@ -358,7 +363,8 @@ def _emissions(site: Site, start_utc, t_begin_s: float, t_end_s: float) -> list[
     return out
 
 
-def render_audio(site: Site, trajectory: Trajectory, seed: int, wav_path, cfg: AudioConfig | None = None) -> AudioResult:
+def render_audio(site: Site, trajectory: Trajectory, seed: int, wav_path,
+                 cfg: AudioConfig | None = None) -> AudioResult:
     """Simulate the recording along ``trajectory`` into the int16 WAV at ``wav_path`` (atomic).
 
     Randomness comes only from ``stream_rng(seed, "audio", ...)``: the same
@@ -431,7 +437,9 @@ def render_audio(site: Site, trajectory: Trajectory, seed: int, wav_path, cfg: A
             if sl_db - 20.0 * math.log10(max(d, 1e-3)) - alpha_min[spec] * d < cfg.noise_db_spl - cfg.skip_margin_db:
                 continue          # even in free field it could not rise out of the noise
             paths = paths_at(bid, src, rx)
-            if len(paths) and paths.length_m[0] - d > 0.5:     # a detour delays the arrival: look again
+            speed = float(np.interp(t_a, trajectory.t_s, trajectory.speed_m_s))
+            if len(paths) and speed * (paths.length_m[0] - d) / c > 0.005:
+                # a detour delays the arrival long enough for the walker to move: look again there
                 rx = _position_at(trajectory, t_e + paths.length_m[0] / c)
                 paths = paths_at(bid, src, rx)
             if len(paths) == 0:

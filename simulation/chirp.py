@@ -126,7 +126,8 @@ def reference_chirp(spec: ChirpSpec, fs_hz: float) -> np.ndarray:
     """The documented reference with scipy's own Tukey window (equals ``chirp_waveform`` at η = 1)."""
     n = int(round(spec.duration_s * fs_hz))
     t = np.arange(n) / fs_hz
-    return tukey(n, alpha=spec.taper_fraction) * np.sin(2.0 * np.pi * (spec.f0_hz * t + 0.5 * spec.sweep_rate_hz_s * t * t))
+    phase = 2.0 * np.pi * (spec.f0_hz * t + 0.5 * spec.sweep_rate_hz_s * t * t)
+    return tukey(n, alpha=spec.taper_fraction) * np.sin(phase)
 
 
 def frame_phase_s(start_utc: datetime, frame_s: float) -> float:
@@ -158,7 +159,8 @@ def emission_times_s(site: Site, beacon: Beacon, start_utc: datetime, t_begin_s:
     >>> from features.site import Site, Origin, Beacon
     >>> b = Beacon(id=1, east_m=0.0, north_m=0.0, up_m=3.0, slot=2)
     >>> site = Site(name="t", origin=Origin(31.0, 118.0), beacons=(b,))
-    >>> emission_times_s(site, b, datetime(2026, 5, 1, 8, 0, 0, 100000, tzinfo=timezone.utc), 0.0, 2.0).round(6).tolist()
+    >>> start = datetime(2026, 5, 1, 8, 0, 0, 100000, tzinfo=timezone.utc)
+    >>> emission_times_s(site, b, start, 0.0, 2.0).round(6).tolist()
     [0.1, 0.9, 1.7]
     """
     ac = site.acoustic

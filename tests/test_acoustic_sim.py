@@ -161,8 +161,8 @@ def test_nlos_first_arrival_and_reflection_geometry_on_generated_site():
 
 def test_clutter_and_tail_grow_with_enclosure():
     open_site = build_scene(_site())
-    court = [Box("building", "concrete", False, -12, -10, -12, 12, 6), Box("building", "concrete", False, 10, 12, -12, 12, 6),
-             Box("building", "concrete", False, -12, 12, 10, 12, 6), Box("building", "concrete", False, -12, 12, -12, -10, 6)]
+    court = [Box("building", "concrete", False, *extent, 6.0)
+             for extent in ((-12, -10, -12, 12), (10, 12, -12, 12), (-12, 12, 10, 12), (-12, 12, -12, -10))]
     closed = build_scene(_site(court))
     aisle = build_scene(_site(court[:2]))
     c_open, c_aisle, c_closed = (clutter_index(s, (0.0, 0.0)) for s in (open_site, aisle, closed))
