@@ -183,8 +183,10 @@ def _hdop(el_rad: np.ndarray, az_rad: np.ndarray, weight: np.ndarray) -> np.ndar
     ok = count >= 4
     if ok.any():
         sub = a[ok]
-        cond = np.linalg.cond(sub)
-        good = np.isfinite(cond) & (cond < 1e10)
+        # singular geometry (e.g. all satellites on one cone): |det(GᵀG)| negligible against its scale
+        # count⁴ (entries are O(count)); LU determinant, cheaper than an SVD condition number
+        det = np.linalg.det(sub)
+        good = np.isfinite(det) & (np.abs(det) > 1e-10 * count[ok].astype(float) ** 4)
         q = np.full_like(sub, np.nan)
         if good.any():
             q[good] = np.linalg.inv(sub[good])

@@ -107,6 +107,9 @@ def test_dop_growth_closed_form_and_cap():
     assert lam[1] == pytest.approx(hdop([0, 1, 3, 4]) / hdop([0, 1, 2, 3, 4]) - 1.0, rel=1e-9)
     assert lam[1] > 0.1
     assert lam[2] == 10.0
+    # degenerate geometry (every satellite in one direction): singular, capped rather than NaN/inf
+    same = np.full((1, 6), 30.0)
+    assert epoch_dop_growth(same, same, np.ones((1, 6), bool), np.ones((1, 6), bool)).tolist() == [10.0]
     # rotating every azimuth leaves HDOP ratios unchanged
     rot = epoch_dop_growth(el, np.mod(az + 37.0, 360.0), view, tracked)
     np.testing.assert_allclose(rot, lam, atol=1e-9)

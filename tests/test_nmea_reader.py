@@ -18,7 +18,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from features.errors import NmeaError
-from features.nmea import ReadStats, iter_epochs, parse_sentence, read_nmea
+from features.nmea import ReadStats, epochs_from_bytes, iter_epochs, parse_sentence, read_nmea
 from features.nmea_quirks import gsa_fields, gsv_fields, parse_time_of_day, satellite_id
 
 DATA = Path(__file__).resolve().parent / "data"
@@ -258,6 +258,27 @@ def test_fast_path_equals_pynmea2_path(name):
     assert s_fast.skipped == s_ref.skipped
 
 
+@pytest.mark.parametrize("name", sorted(PINNED) + ["../gnss_lib_py/pixel6.nmea"])
+def test_whole_file_path_equals_streaming_path(name):
+    """read_nmea's vectorised splitter and checksums against iter_epochs over lines."""
+    _need_gpsd()
+    path = GPSD / name
+    fast, s_fast = read_nmea(path)
+    stats = ReadStats()
+    with path.open("rb") as fh:
+        streamed = list(iter_epochs(fh, stats))
+    assert fast == streamed
+    assert s_fast == stats
+
+
+@pytest.mark.parametrize("name", sorted(p.name for p in DATA.glob("*.nmea")))
+def test_whole_file_path_equals_streaming_path_on_hand_made_files(name):
+    fast, s_fast = read_nmea(DATA / name)
+    stats = ReadStats()
+    assert list(iter_epochs((DATA / name).read_bytes().splitlines(keepends=True), stats)) == fast
+    assert s_fast == stats
+
+
 def _gpsd_cycles(chk: Path):
     """gpsd's last SKY report (with satellites) per fix time, the time read from the raw lines the .chk echoes."""
     out, tod = [], None
@@ -377,12 +398,19 @@ def _resign(raw: bytes) -> bytes:
 @settings(max_examples=200, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(st.lists(_mutated(), min_size=1, max_size=12), st.booleans())
 def test_fuzzed_real_lines_never_raise(mutated, resign):
-    lines = [_resign(m) if resign else m for m in mutated] + [ln.encode() for ln in _LINES[:6]]
+    buf = b"\n".join([_resign(m) if resign else m for m in mutated] + [ln.encode() for ln in _LINES[:6]]) + b"\n"
+    lines = buf.split(b"\n")[:-1]  # as a file iterated in binary mode: split at \n only
+    results = {}
     for parser in ("fast", "pynmea2"):
         stats = ReadStats()
         epochs = list(iter_epochs(lines, stats, parser=parser))
         assert all(e.t_s >= 0 for e in epochs)
         assert stats.sentences >= 6
+        results[parser] = (epochs, stats)
+    # the whole-file path (vectorised splitting and checksums) sees exactly what the line path sees
+    stats = ReadStats()
+    whole = epochs_from_bytes(buf, stats)
+    assert whole == results["fast"][0] and stats == results["fast"][1]
 
 
 def test_parse_sentence_contract():
