@@ -60,6 +60,8 @@ __all__ = ["AudioTiming", "DetectorConfig", "ChirpDetection", "FrameResult", "Au
            "frame_phase_s", "beacon_chirp_spec", "detect_frames", "frame_fix", "max_site_range_m"]
 
 _EPOCH = datetime(1970, 1, 1, tzinfo=timezone.utc)
+_SIDELOBE_GUARD = 10 ** (25 / 20)
+"""A maximum this much (25 dB) weaker than a neighbour within one chirp length is a sidelobe."""
 _RAYLEIGH_Q25 = math.sqrt(-2.0 * math.log(0.75))
 """25th percentile of a unit-scale Rayleigh variable."""
 
@@ -243,7 +245,8 @@ class _Tracker:
     Acquisition (no recent fix): beacon ``b``'s chirp may start anywhere in
     ``[tx − u, tx + u + min(r_max/c, slot_s)]``. Neighbouring windows overlap
     when ``u`` is large or a beacon is far, so a fix from acquisition is
-    trusted only when at least four beacons pass the residual test.
+    trusted only when at least five beacons pass the residual test (two
+    degrees of freedom left for it).
 
     Tracking (a fix at most ``track_timeout_s`` old): the window is centred on
     the arrival predicted from the last fix, ``tx + ‖p − s_b‖/c + δ``, with a
@@ -259,6 +262,7 @@ class _Tracker:
     max_drift_ppm = 100.0
     nlos_slack_m = 10.0
     track_timeout_s = 4.0
+    acquisition_min_beacons = 5
 
     def __init__(self, site: Site, timing: AudioTiming, fs_hz: float, c: float, r_max: float,
                  positions: PositionConfig):
@@ -266,6 +270,17 @@ class _Tracker:
         self.positions = positions
         self.order = sorted(range(len(site.beacons)), key=lambda i: (site.beacons[i].slot, site.beacons[i].id))
         self.last_fix: AcousticFix | None = None
+
+    @property
+    def grid_step_m(self) -> float:
+        """Spacing of the acquisition grid, m: 1 m, coarser on sites above 10 000 m²."""
+        g = self.site.grid
+        return max(1.0, math.sqrt((g.east_max_m - g.east_min_m) * (g.north_max_m - g.north_min_m) / 10_000))
+
+    @property
+    def tolerance_s(self) -> float:
+        """Agreement tolerance of the vote: the range error of the nearest grid point, plus 0.5 ms."""
+        return self.grid_step_m * math.sqrt(2.0) / self.c + 5e-4
 
     def tracking_at(self, t_s: float) -> bool:
         return self.last_fix is not None and t_s - self.last_fix.t_s <= self.track_timeout_s
@@ -300,56 +315,99 @@ class _Tracker:
     def acquire(self, candidates: dict) -> dict:
         """Associate candidate arrivals with beacons by a Hough vote over position and clock offset.
 
-        ``candidates`` maps a beacon index to a list of (tx_s, stated arrival
-        times, s) of local envelope maxima in its acquisition window. For each
-        point p of a grid over the site (1 m or coarser), each candidate implies
-        a clock offset δ = (c·(t − tx) − ‖p − s_b‖)/c; the (p, δ) on which the
-        most beacons agree within ``tol`` wins (a Hough transform, Duda & Hart
-        1972, CACM 15(1); ties go to the smallest δ, since echoes agree with
-        each other too, only later), and each beacon keeps its earliest
-        candidate within ``tol`` of that δ.
-        Returns beacon index → chosen arrival time.
+        ``candidates`` maps a beacon index to (tx_s, stated arrival times, s) of
+        the envelope maxima in its acquisition window. For each point p of a
+        grid over the site, each candidate implies a clock offset
+        δ = (c·(t − tx) − ‖p − s_b‖)/c; the (p, δ) on which the most beacons
+        agree within ``tol`` wins (a Hough transform, Duda & Hart 1972, CACM
+        15(1)); ties go to the smallest δ, since echoes agree with each other
+        too, only later. The vote runs on a 4 m grid, then on a 1 m grid round
+        the best coarse points. Each beacon keeps its earliest candidate within
+        ``tol`` after the winning δ. Returns beacon index → chosen arrival time.
         """
         items = [(i, tx, t) for i, (tx, times) in candidates.items() for t in times]
         if len({i for i, _, _ in items}) < 3:
             return {}
-        g = self.site.grid
-        step = max(1.0, math.sqrt((g.east_max_m - g.east_min_m) * (g.north_max_m - g.north_min_m) / 10_000))
-        ee, nn = np.meshgrid(np.arange(g.east_min_m, g.east_max_m + step, step),
-                             np.arange(g.north_min_m, g.north_max_m + step, step))
-        pe, pn = ee.ravel(), nn.ravel()
         bi = np.array([i for i, _, _ in items])
         rho = self.c * np.array([t - tx for _, tx, t in items])
         bpos = np.array([[self.site.beacons[i].east_m, self.site.beacons[i].north_m, self.site.beacons[i].up_m]
                          for i in bi])
-        r = np.sqrt((pe[:, None] - bpos[None, :, 0]) ** 2 + (pn[:, None] - bpos[None, :, 1]) ** 2
-                    + (self.site.device_height_m - bpos[None, :, 2]) ** 2)
-        delta = (rho[None, :] - r) / self.c                      # (n_grid, n_cand)
-        tol = step * math.sqrt(2.0) / self.c + 5e-4
-        close = np.abs(delta[:, :, None] - delta[:, None, :]) <= tol   # (n_grid, anchor, other)
-        same = bi[:, None] == np.arange(len(self.site.beacons))[None, :]  # (n_cand, n_beacons)
-        votes = (close.astype(np.int32) @ same.astype(np.int32)) > 0     # beacons agreeing per anchor
-        score = votes.sum(axis=2)
-        top = score.max()
-        if top < 3:
+        g = self.site.grid
+        coarse = 4.0 * self.grid_step_m
+        ee, nn = np.meshgrid(np.arange(g.east_min_m, g.east_max_m + coarse, coarse),
+                             np.arange(g.north_min_m, g.north_max_m + coarse, coarse))
+        hyps = self._vote(ee.ravel(), nn.ravel(), bi, rho, bpos, coarse * math.sqrt(2.0) / self.c + 5e-4)
+        if not hyps:
             return {}
-        # Ties: the smallest clock offset, since echoes agree with each other too, but later.
-        tied = np.flatnonzero(score.ravel() == top)
-        best = np.unravel_index(int(tied[np.argmin(delta.ravel()[tied])]), score.shape)
-        d0 = delta[best[0], best[1]]
+        fine = self.grid_step_m
+        offsets = np.arange(-coarse, coarse + fine / 2, fine)
+        oe, on = np.meshgrid(offsets, offsets)
+        seeds = []
+        for h in hyps:
+            if h[2] not in [s[2] for s in seeds]:
+                seeds.append(h)
+            if len(seeds) == 5:
+                break
+        pe = np.concatenate([s[2][0] + oe.ravel() for s in seeds])
+        pn = np.concatenate([s[2][1] + on.ravel() for s in seeds])
+        hyps = self._vote(pe, pn, bi, rho, bpos, self.tolerance_s)
+        if not hyps or hyps[0][0] < 3:
+            return {}
+        _, d0, point, _ = hyps[0]
+        r = np.sqrt((point[0] - bpos[:, 0]) ** 2 + (point[1] - bpos[:, 1]) ** 2
+                    + (self.site.device_height_m - bpos[:, 2]) ** 2)
+        delta = (rho - r) / self.c
         chosen = {}
         for k, i in enumerate(bi):
             # Within the tolerance, the earliest candidate: echoes come later.
-            if abs(delta[best[0], k] - d0) <= tol and (i not in chosen or items[k][2] < chosen[i]):
-                chosen[i] = items[k][2]
-        return chosen
+            if d0 - 1e-9 <= delta[k] <= d0 + self.tolerance_s and (i not in chosen or items[k][2] < chosen[i][0]):
+                chosen[i] = (items[k][2], abs(delta[k] - d0))
+        # One arrival belongs to one beacon: where two beacons took the same arrival (within
+        # 1 ms), the one whose δ fits the vote better keeps it.
+        kept = {}
+        for i, (t, err) in sorted(chosen.items(), key=lambda kv: kv[1][1]):
+            if all(abs(t - t2) > 1e-3 for t2 in kept.values()):
+                kept[i] = t
+        return kept
+
+    def _vote(self, pe, pn, bi, rho, bpos, tol, n_best: int = 200) -> list:
+        """Hypotheses (distinct beacons, δ, (east, north), anchor) sorted best first.
+
+        Candidates agreeing with an anchor's δ within [δ, δ + tol] are counted
+        for all (point, anchor) pairs at once — each row sorted, then one global
+        searchsorted on rows offset far apart — and the ``n_best`` largest counts
+        are recounted as distinct beacons (a beacon's echoes must not vote twice).
+        """
+        r = np.sqrt((pe[:, None] - bpos[None, :, 0]) ** 2 + (pn[:, None] - bpos[None, :, 1]) ** 2
+                    + (self.site.device_height_m - bpos[None, :, 2]) ** 2)
+        delta = (rho[None, :] - r) / self.c                      # (n_points, n_candidates)
+        order = np.argsort(delta, axis=1)
+        sorted_delta = np.take_along_axis(delta, order, axis=1)
+        offset = 2.0 * (np.abs(delta).max() + tol + 1.0)
+        flat = (sorted_delta + offset * np.arange(len(pe))[:, None]).ravel()
+        hi = np.searchsorted(flat, flat + tol, side="right")
+        count = hi - np.arange(flat.size)
+        top = np.argsort(-count, kind="stable")[:n_best]
+        hyps = []
+        n_cand = delta.shape[1]
+        for f in top:
+            row, k = divmod(int(f), n_cand)
+            members = order[row, k: k + int(count[f])]
+            hyps.append((len(set(bi[members].tolist())), float(sorted_delta[row, k]),
+                         (float(pe[row]), float(pn[row])), int(order[row, k])))
+        hyps.sort(key=lambda h: (-h[0], h[1]))
+        return hyps
 
     def frame_done(self, frame_start_s: float, detections: list[ChirpDetection],
                    bandwidth: dict) -> AcousticFix | None:
         tracking = self.tracking_at(frame_start_s)
         fix = frame_fix(detections, self.site, self.c, bandwidth, self.positions,
                         self.last_fix if tracking else None)
-        if fix is not None and (tracking or fix.n_beacons >= 4):
+        if fix is None:
+            return None
+        # Acquisition locks only on a fix whose residuals were tested with two or more
+        # degrees of freedom; tracking follows fixes tested with at least one.
+        if fix.n_beacons >= (4 if tracking else self.acquisition_min_beacons):
             self.last_fix = fix
             return fix
         return fix if tracking else None
@@ -464,9 +522,9 @@ def detect_frames(path: str | os.PathLike, site: Site, timing: AudioTiming,
     def peaks(w: _Window, sigma: float) -> tuple[np.ndarray, np.ndarray]:
         """Chirp-start indices (ascending) and heights of envelope maxima in ``w`` above the threshold.
 
-        The threshold is γ (see the module docstring), raised to 25 dB below the
-        window's strongest peak so that range sidelobes (−34.6 dB) of a strong
-        arrival never pass for an earlier one.
+        The threshold is γ (see the module docstring); a maximum within one chirp
+        length of a maximum 25 dB stronger is dropped, so that the range
+        sidelobes (−34.6 dB) of a strong arrival never pass for an earlier one.
         """
         t = template_of[w.beacon_index]
         j_lo = -(-(w.lo + bank.delay_samples) // dec)
@@ -476,9 +534,13 @@ def detect_frames(path: str | os.PathLike, site: Site, timing: AudioTiming,
         if len(seg) < 3:
             return np.zeros(0, int), np.zeros(0)
         n_cells = max(1.0, (w.hi - w.lo) / fs * bandwidth[site.beacons[w.beacon_index].id])
-        gamma = max(sigma * math.sqrt(2.0 * math.log(n_cells / config.p_fa)), 1e-9, float(seg.max()) * 10 ** (-25 / 20))
+        gamma = max(sigma * math.sqrt(2.0 * math.log(n_cells / config.p_fa)), 1e-9)
         padded = np.concatenate([[0.0], seg, [0.0]])
         idx = np.flatnonzero((padded[1:-1] > padded[:-2]) & (padded[1:-1] >= padded[2:]) & (seg > gamma))
+        if len(idx) > 1:
+            h = seg[idx]
+            near = np.abs(idx[:, None] - idx[None, :]) * dec <= bank.template_len
+            idx = idx[~np.any(near & (h[None, :] > h[:, None] * _SIDELOBE_GUARD), axis=1)]
         return mf.chirp_start(j_first + idx).astype(int), seg[idx]
 
     def locate(w: _Window, sigma: float) -> int | None:
@@ -535,13 +597,14 @@ def detect_frames(path: str | os.PathLike, site: Site, timing: AudioTiming,
                                           w.associated))
         return out
 
-    def candidates(w: _Window, sigma: float, max_candidates: int = 4) -> list[float]:
+    def candidates(w: _Window, sigma: float, max_candidates: int = 10) -> list[float]:
         """Stated arrival times of the strongest envelope maxima above γ in ``w`` (acquisition)."""
         starts, heights = peaks(w, sigma)
-        # At most one candidate per 2 ms, strongest first.
+        # Strongest first, at least 2 ms apart.
         keep = []
+        spacing = 0.002 * fs
         for k in np.argsort(heights)[::-1]:
-            if all(abs(starts[k] - starts[q]) > 0.002 * fs for q in keep):
+            if all(abs(starts[k] - starts[q]) > spacing for q in keep):
                 keep.append(k)
             if len(keep) == max_candidates:
                 break

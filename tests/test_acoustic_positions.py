@@ -1,0 +1,147 @@
+"""Acoustic positions: Gauss-Newton on exact geometry, NLOS exclusion, and the LOS must-show on
+hand-synthesised recordings (straight-line delays, 1/r amplitudes, a ground echo, noise)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from features.acoustic_positions import BeaconRange, PositionConfig, solve_position, toa_range_sigma_m
+from features.chirp_detection import AudioTiming, DetectorConfig, detect_frames, speed_of_sound_m_s
+from features.site import AcousticConfig, Beacon, Grid, Origin, Site
+from tests.acoustic_synth import static_capture, write_wav
+
+C = speed_of_sound_m_s(20.0)
+
+
+def _ring_site() -> Site:
+    """Eight beacons round a 30 m square (corners and mid-sides, poles of 3 m), one slot each."""
+    pts = [(0, 0), (15, 0), (30, 0), (30, 15), (30, 30), (15, 30), (0, 30), (0, 15)]
+    beacons = tuple(Beacon(id=i + 1, east_m=float(e), north_m=float(n), up_m=3.0, slot=i) for i, (e, n) in enumerate(pts))
+    return Site(name="ring", origin=Origin(31.0, 118.0), device_height_m=1.0,
+                grid=Grid(5.0, -5.0, 35.0, -5.0, 35.0), acoustic=AcousticConfig(n_slots=8), beacons=beacons)
+
+
+def _ranges(site, east, north, clock_s, bias=None, sigma=0.01):
+    bias = bias or {}
+    out = []
+    for b in site.beacons:
+        d = math.dist((east, north, site.device_height_m), (b.east_m, b.north_m, b.up_m))
+        out.append(BeaconRange(b.id, b.east_m, b.north_m, b.up_m, d + bias.get(b.id, 0.0) + C * clock_s, sigma,
+                               d / C))
+    return out
+
+
+def test_exact_ranges_give_exact_fix_and_spd_covariance():
+    site = _ring_site()
+    fix = solve_position(_ranges(site, 12.3, 17.9, 0.0123), site, C)
+    assert fix.east_m == pytest.approx(12.3, abs=1e-6)
+    assert fix.north_m == pytest.approx(17.9, abs=1e-6)
+    assert fix.clock_offset_s == pytest.approx(0.0123, abs=1e-9)
+    assert fix.n_beacons == 8 and fix.rejected_ids == ()
+    cov = fix.covariance
+    np.testing.assert_allclose(cov, cov.T)
+    assert np.all(np.linalg.eigvalsh(cov) > 0)
+    # 8 ranges of σ = 1 cm round the receiver: horizontal σ of about 1/sqrt(8/2) cm.
+    assert 0.003 < math.sqrt(cov[0, 0]) < 0.012
+
+
+def test_covariance_matches_monte_carlo_scatter():
+    site = _ring_site()
+    rng = np.random.default_rng(4)
+    errs = []
+    for _ in range(300):
+        ranges = [BeaconRange(r.beacon_id, r.east_m, r.north_m, r.up_m, r.pseudorange_m + rng.normal(0, 0.02), 0.02,
+                              r.arrival_s) for r in _ranges(site, 10.0, 20.0, 0.0)]
+        fix = solve_position(ranges, site, C, PositionConfig(chi2_alpha=1e-9))
+        errs.append((fix.east_m - 10.0, fix.north_m - 20.0))
+        cov = fix.covariance
+    scatter = np.cov(np.array(errs).T)
+    assert scatter[0, 0] == pytest.approx(cov[0, 0], rel=0.25)
+    assert scatter[1, 1] == pytest.approx(cov[1, 1], rel=0.25)
+
+
+def test_nlos_biased_beacon_is_rejected():
+    site = _ring_site()
+    rng = np.random.default_rng(1)
+    ranges = [BeaconRange(r.beacon_id, r.east_m, r.north_m, r.up_m, r.pseudorange_m + rng.normal(0, 0.01), 0.01,
+                          r.arrival_s) for r in _ranges(site, 8.0, 11.0, -0.004, bias={3: 2.5})]
+    fix = solve_position(ranges, site, C)
+    assert fix.rejected_ids == (3,)
+    assert math.hypot(fix.east_m - 8.0, fix.north_m - 11.0) < 0.03
+    # Without exclusion the 2.5 m bias drags the fix by decimetres.
+    naive = solve_position(ranges, site, C, PositionConfig(chi2_alpha=1e-300))
+    assert math.hypot(naive.east_m - 8.0, naive.north_m - 11.0) > 0.1
+
+
+def test_three_beacons_exactly_determined_and_two_refused():
+    site = _ring_site()
+    r = _ranges(site, 15.0, 14.0, 0.002)
+    fix = solve_position([r[0], r[2], r[5]], site, C)
+    assert fix.n_beacons == 3 and fix.east_m == pytest.approx(15.0, abs=1e-5)
+    assert solve_position(r[:2], site, C) is None
+
+
+def test_toa_sigma_falls_with_snr_to_the_floor():
+    assert toa_range_sigma_m(0.0, 6000.0, C) > toa_range_sigma_m(10.0, 6000.0, C) >= 0.01
+    assert toa_range_sigma_m(40.0, 6000.0, C) == 0.01
+
+
+@pytest.fixture(scope="module")
+def los_runs(tmp_path_factory):
+    """Six static receivers 10–25 m from all eight beacons; unknown clock offset within ±20 ms."""
+    site = _ring_site()
+    rng = np.random.default_rng(2026)
+    tmp = tmp_path_factory.mktemp("los")
+    runs = []
+    for k in range(6):
+        east, north = 15.0 + rng.uniform(-3, 3), 15.0 + rng.uniform(-3, 3)
+        clock = rng.uniform(-0.02, 0.02)
+        cap = static_capture(site, east, north, 4.0, clock_offset_s=clock, noise_rms=0.003, seed=k,
+                             echoes=((0.0035, 0.35), (0.011, 0.2)))
+        path = tmp / f"los{k}.wav"
+        write_wav(path, cap.samples)
+        frames = list(detect_frames(path, site, AudioTiming(0.0, 0.02, 0.0), DetectorConfig()))
+        runs.append((site, east, north, clock, frames))
+    return runs
+
+
+def test_los_range_and_position_errors_must_show(los_runs):
+    """Must-show (before the simulator): LOS at 10–25 m, range error median < 3 cm,
+    position error median < 10 cm with >= 4 beacons."""
+    range_err, pos_err = [], []
+    for site, east, north, clock, frames in los_runs:
+        by_id = {b.id: b for b in site.beacons}
+        for fr in frames:
+            for d in fr.detections:
+                b = by_id[d.beacon_id]
+                true_m = math.dist((east, north, 1.0), (b.east_m, b.north_m, b.up_m))
+                assert 10.0 <= true_m <= 25.0
+                range_err.append(C * (d.arrival_s - d.tx_s - clock) - true_m)
+            if fr.fix is not None and fr.fix.n_beacons >= 4:
+                pos_err.append(math.hypot(fr.fix.east_m - east, fr.fix.north_m - north))
+                assert fr.fix.clock_offset_s == pytest.approx(clock, abs=2e-4)
+    assert len(range_err) > 150 and len(pos_err) >= 20
+    assert np.median(np.abs(range_err)) < 0.03
+    assert np.median(pos_err) < 0.10
+    assert np.max(pos_err) < 0.3
+
+
+def test_los_figures(los_runs, capsys):
+    """Print the measured figures (for the issue note); asserts only that they exist."""
+    range_err, pos_err = [], []
+    for site, east, north, clock, frames in los_runs:
+        by_id = {b.id: b for b in site.beacons}
+        for fr in frames:
+            for d in fr.detections:
+                b = by_id[d.beacon_id]
+                range_err.append(C * (d.arrival_s - d.tx_s - clock)
+                                 - math.dist((east, north, 1.0), (b.east_m, b.north_m, b.up_m)))
+            if fr.fix is not None and fr.fix.n_beacons >= 4:
+                pos_err.append(math.hypot(fr.fix.east_m - east, fr.fix.north_m - north))
+    with capsys.disabled():
+        print(f"\nLOS synthetic: range error median |e| {1e3 * np.median(np.abs(range_err)):.2f} mm "
+              f"(n={len(range_err)}), position error median {1e3 * np.median(pos_err):.2f} mm (n={len(pos_err)})")
+    assert range_err and pos_err
