@@ -43,7 +43,7 @@ from features.errors import ConfigError
 from features.site import Site
 
 from .acoustics import GROUND_MATERIAL, reflection_coefficient, speed_of_sound_m_s
-from .geometry import boxes_array, footprint_entry, segment_hits_boxes
+from .geometry import boxes_array, footprint_entry, segment_hits_boxes as _segment_hits_all
 
 __all__ = ["PATH_KINDS", "PathSet", "ChannelConfig", "Scene", "build_scene", "channel_paths", "clutter_index",
            "TailModel", "tail_model", "beacon_arrivals"]
@@ -151,6 +151,26 @@ def build_scene(site: Site, config: ChannelConfig | None = None) -> Scene:
     return Scene(solid=solid, solid_index=np.asarray(solid_idx, int), porous=porous,
                  faces=np.asarray(faces, float).reshape(-1, 7), face_box=np.asarray(face_box, int),
                  ground_r=reflection_coefficient(config.ground_material), config=config)
+
+
+def segment_hits_boxes(a: np.ndarray, b: np.ndarray, boxes: np.ndarray) -> np.ndarray:
+    """``simulation.geometry.segment_hits_boxes`` restricted to boxes overlapping the segments' bounding box.
+
+    Same result, shape (n, m); only the candidate columns are tested (most of
+    a yard's boxes lie far from any one beacon–receiver pair).
+    """
+    a = np.asarray(a, float)
+    b = np.asarray(b, float)
+    out = np.zeros((a.shape[0], boxes.shape[0]), bool)
+    if a.shape[0] == 0 or boxes.shape[0] == 0:
+        return out
+    lo = np.minimum(a.min(axis=0), b.min(axis=0))
+    hi = np.maximum(a.max(axis=0), b.max(axis=0))
+    near = ((boxes[:, 0] <= hi[0]) & (boxes[:, 1] >= lo[0]) & (boxes[:, 2] <= hi[1]) & (boxes[:, 3] >= lo[1])
+            & (boxes[:, 4] >= lo[2]))
+    if near.any():
+        out[:, near] = _segment_hits_all(a, b, boxes[near])
+    return out
 
 
 def _porous_gain(scene: Scene, a: np.ndarray, b: np.ndarray) -> np.ndarray:
