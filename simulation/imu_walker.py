@@ -18,7 +18,8 @@ Gait (per person, from ``stream_rng(person_seed, "person")``)
     step length both grow with speed; exponent after Grieve & Gear 1966's
     step-length ∝ speed^0.6 relation). Steps are placed by integrating the
     cadence while moving (v > 0.15 m/s), with ±3 % per-step timing jitter; a
-    final step closes a walking bout when more than 30 % of a step is left.
+    final step closes a walking bout when more than 30 % of a nominal step's
+    path is left (else the last step absorbs the rest).
     The true step length is the path length between consecutive steps.
 
     Vertical acceleration per step k is a_up = A_k·sin(2π·c(t)) with c the
@@ -199,8 +200,14 @@ def place_steps(traj: Trajectory, gait: Gait, rng: np.random.Generator) -> tuple
         targets += gait.timing_jitter * rng.standard_normal(n_full).clip(-3, 3)
         targets = targets[(targets > 0.5) & (targets < phase[-1])]
         times = np.interp(targets, phase, t[i0:i1])
-        if phase[-1] - n_full > 0.3 or len(times) == 0:
-            times = np.r_[times, t[i1 - 1]]
+        # close the bout: a last short step if enough path is left, else the last step absorbs the rest
+        step_nominal_m = REFERENCE_SPEED_M_S / gait.step_freq_hz
+        t_end = t[i1 - 1]
+        left_m = dist_m[i1 - 1] - (np.interp(times[-1], t, dist_m) if len(times) else dist_m[i0])
+        if len(times) == 0 or (left_m > 0.3 * step_nominal_m and t_end - times[-1] > 0.35):
+            times = np.r_[times, t_end]
+        else:
+            times[-1] = t_end
         anchors_t += [float(t[i0])] + list(times)
         anchors_c += [float(total)] + list(total + np.arange(1, len(times) + 1, dtype=float))
         total += len(times)
