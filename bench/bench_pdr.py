@@ -142,22 +142,26 @@ def simulated(quick: bool) -> None:
     edges = np.arange(0, seg.max() + 2) * 30.0
     seg_dist = np.diff(np.interp(edges, truth_c.t_s, cum[1:]))
     improved = fit_improved_model(cal.steps, seg, seg_dist)
+    forced = fit_improved_model(cal.steps, seg, seg_dist, select=False)
     print(f"simulated, person {PERSON}, site 3: K calibrated on walk 21 = {k:.4f} (true "
           f"{__import__('simulation.imu_walker', fromlist=['person_gait']).person_gait(PERSON).weinberg_k:.4f}); "
-          f"improved model K = {improved.k:.4f}, β = {improved.beta:.5f}")
+          f"improved model fitted on 30-s segments K = {forced.k:.4f}, β = {forced.beta:.5f}; "
+          f"kept after leave-one-segment-out selection: K = {improved.k:.4f}, β = {improved.beta:.5f}")
     seeds = (22, 23) if quick else (22, 23, 24, 25, 26)
-    print("  walk  steps true/det  count %  dist % (Weinberg / improved)  PDR error mean / final (% of distance)")
+    print("  walk  steps true/det  count %  dist % (Weinberg / improved forced / selected)  PDR error mean / final (% of distance)")
     for seed in seeds:
         traj, imu, truth = _walk(site, seed, 300.0)
         data = repair_imu(imu.t_s, imu.acc_m_s2, imu.gyro_rad_s, imu.mag_ut)
         res = run_pdr(data, traj.east_m[0], traj.north_m[0], PdrConfig(length=StepLengthModel(k=k), heading=hcfg))
-        res_i = run_pdr(data, traj.east_m[0], traj.north_m[0], PdrConfig(length=improved, heading=hcfg))
+        res_i = run_pdr(data, traj.east_m[0], traj.north_m[0], PdrConfig(length=forced, heading=hcfg))
+        res_s = run_pdr(data, traj.east_m[0], traj.north_m[0], PdrConfig(length=improved, heading=hcfg))
         dist = float(truth.step_length_m.sum())
         err = np.hypot(res.east_m - np.interp(res.t_s, traj.t_s, traj.east_m),
                        res.north_m - np.interp(res.t_s, traj.t_s, traj.north_m))
         walked = np.interp(res.t_s, truth.t_s, np.cumsum(truth.step_length_m))
         print(f"  {seed:4d}  {len(truth.t_s):5d}/{len(res):5d}  {100 * (len(res) - len(truth.t_s)) / len(truth.t_s):+6.2f}"
               f"   {100 * (res.distance_m - dist) / dist:+6.2f} / {100 * (res_i.distance_m - dist) / dist:+6.2f}"
+              f" / {100 * (res_s.distance_m - dist) / dist:+6.2f}"
               f"              {100 * err.mean() / dist:5.2f} / {100 * err[-1] / dist:5.2f}"
               f"   (final {err[-1]:.1f} m of {dist:.0f} m; max ratio err/walked after 50 m "
               f"{100 * np.max(err[walked > 50] / walked[walked > 50]):.1f} %)")

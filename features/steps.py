@@ -243,7 +243,8 @@ def calibrate_weinberg_k(steps: Steps, distance_m: float) -> float:
     return distance_m / total
 
 
-def fit_improved_model(steps: Steps, segment_of_step: np.ndarray, segment_distance_m: np.ndarray) -> StepLengthModel:
+def fit_improved_model(steps: Steps, segment_of_step: np.ndarray, segment_distance_m: np.ndarray,
+                       select: bool = True) -> StepLengthModel:
     """Least-squares (K, β) of the improved model from segments of known length.
 
     Parameters
@@ -251,15 +252,31 @@ def fit_improved_model(steps: Steps, segment_of_step: np.ndarray, segment_distan
     steps : Steps
     segment_of_step : int ndarray of shape (n_steps,), segment id per step (−1: not in any)
     segment_distance_m : ndarray of shape (n_segments,), true length of each segment (GNSS / survey)
+    select : bool
+        Keep the β term only if it lowers the leave-one-segment-out prediction
+        error against Weinberg alone (K = ΣD/ΣF); otherwise return Weinberg
+        (β = 0) — the extra term must earn its place on held-out segments.
 
-    Needs at least two segments; solves D_j = K·Σ_j F_k + β·Σ_j G_k.
+    Needs at least three segments; solves D_j = K·Σ_j F_k + β·Σ_j G_k.
     """
     seg = np.asarray(segment_of_step, dtype=int)
     dist = np.asarray(segment_distance_m, dtype=float)
-    if len(dist) < 2:
-        raise DataError("the improved step-length model needs at least two calibration segments")
+    if len(dist) < 3:
+        raise DataError("the improved step-length model needs at least three calibration segments")
     ok = seg >= 0
     f = np.bincount(seg[ok], steps.weinberg_feature[ok], minlength=len(dist))
     g = np.bincount(seg[ok], steps.change_rate_feature[ok], minlength=len(dist))
-    (k, beta), *_ = np.linalg.lstsq(np.stack([f, g], axis=1), dist, rcond=None)
-    return StepLengthModel(k=float(k), beta=float(beta))
+    design = np.stack([f, g], axis=1)
+    (k, beta), *_ = np.linalg.lstsq(design, dist, rcond=None)
+    if not select:
+        return StepLengthModel(k=float(k), beta=float(beta))
+    err_w = err_i = 0.0
+    for j in range(len(dist)):
+        rest = np.arange(len(dist)) != j
+        k_w = dist[rest].sum() / max(f[rest].sum(), 1e-12)
+        coef, *_ = np.linalg.lstsq(design[rest], dist[rest], rcond=None)
+        err_w += (dist[j] - k_w * f[j]) ** 2
+        err_i += (dist[j] - design[j] @ coef) ** 2
+    if err_i < err_w:
+        return StepLengthModel(k=float(k), beta=float(beta))
+    return StepLengthModel(k=float(dist.sum() / max(f.sum(), 1e-12)), beta=0.0)

@@ -14,7 +14,8 @@ from features.heading import (HeadingConfig, complementary_heading, down_in_body
 from features.imu import repair_imu
 from features.pdr import PdrConfig, run_pdr
 from features.site import load_site
-from features.steps import StepLengthModel, calibrate_weinberg_k
+from features.errors import DataError
+from features.steps import StepLengthModel, calibrate_weinberg_k, fit_improved_model
 from simulation.imu_stream import simulate_imu, write_imu
 from simulation.imu_walker import person_gait
 from simulation.magnetic import earth_field_ned_ut, field_elements
@@ -167,3 +168,18 @@ def test_tilt_compensated_heading_is_yaw_of_a_rotated_field():
         decl, incl, total = field_elements(b)
         assert float(wrap_pi(psi[0] + decl - yaw)) == pytest.approx(0.0, abs=1e-9)
         assert intensity[0] == pytest.approx(total) and dip[0] == pytest.approx(incl)
+
+
+def test_improved_model_fit_recovers_a_known_beta_and_falls_back_to_weinberg(site, walks):
+    """Segments built from S = K·F + β·G exactly: the fit returns (K, β); with β = 0 truth it keeps Weinberg."""
+    res = _pdr(site, walks[21])
+    steps = res.steps
+    seg = np.floor(steps.t_s / 30.0).astype(int)
+    f, g = steps.weinberg_feature, steps.change_rate_feature
+    for k_true, beta_true in ((0.40, 0.05), (0.48, 0.0)):
+        dist = np.bincount(seg, k_true * f + beta_true * g)
+        model = fit_improved_model(steps, seg, dist)
+        assert model.k == pytest.approx(k_true, rel=1e-6)
+        assert model.beta == pytest.approx(beta_true, abs=1e-6)
+    with pytest.raises(DataError, match="three calibration segments"):
+        fit_improved_model(steps, np.zeros(len(steps), int), np.array([10.0]))
