@@ -71,7 +71,8 @@ class GnssFeatureConfig:
             if not isinstance(value, (int, float)) or not math.isfinite(value) or value <= 0:
                 raise ConfigError(f"GnssFeatureConfig.{name} must be a positive number, got {value!r}")
         if not 0.0 <= self.elevation_mask_deg < 90.0:
-            raise ConfigError(f"GnssFeatureConfig.elevation_mask_deg must lie in [0, 90), got {self.elevation_mask_deg}")
+            raise ConfigError("GnssFeatureConfig.elevation_mask_deg must lie in [0, 90), "
+                              f"got {self.elevation_mask_deg}")
 
 
 @dataclass(frozen=True)

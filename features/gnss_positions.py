@@ -63,7 +63,10 @@ def sigma_axis_m(quality: int, hdop: float) -> float:
 
 @dataclass(frozen=True)
 class GnssPositions:
-    """Fix positions on the site's ENU frame; every array of shape (n,). ``sigma_en_m`` is σ per horizontal axis (east and north alike)."""
+    """Fix positions on the site's ENU frame; every array of shape (n,).
+
+    ``sigma_en_m`` is σ per horizontal axis (east and north alike).
+    """
 
     t_s: np.ndarray
     east_m: np.ndarray

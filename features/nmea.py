@@ -16,35 +16,32 @@ reset its clock) is accepted as a new time base spliced one epoch interval
 after the last epoch, so ``t_s`` never decreases. A file with no usable epoch
 raises :class:`~features.errors.NmeaError`.
 
-Parsing path. pynmea2 (the field's reference parser) costs about 11 µs per
-sentence here, while a checksum and a ``str.split`` cost about 4 µs; since the
-whole GNSS path must run at no less than 40 % of pynmea2's bare rate (see
-``bench/bench_gnss.py``), the default ``parser="fast"`` tokenises itself and
-interprets fields with :mod:`features.nmea_quirks`. ``parser="pynmea2"``
-tokenises with ``pynmea2.parse(line, check=True)`` and feeds the same
-interpreters; tests assert that both give identical epochs on every real log.
+Parsing: :mod:`features.nmea_tokens` turns bytes into checked sentences (a
+vectorised whole-file path by default, pynmea2 on request, both equal on every
+real log); :mod:`features.nmea_quirks` interprets their fields.
 """
 
 from __future__ import annotations
 
 import datetime as dt
 import os
-from collections import Counter
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Iterable, Iterator, Literal, NamedTuple
 
-import numpy as np
 
 from .errors import NmeaError
+from .nmea_tokens import (  # noqa: F401 - ReadStats and parse_sentence are re-exported
+    TIMED_TYPES, USED_TYPES, ReadStats, fields_from_buffer, fields_from_lines, parse_sentence, pynmea2_fields,
+)
 from .nmea_quirks import (
     FIX_QUALITY_FROM_MODE, gsa_fields, gsv_fields, parse_ddmmyy, parse_latlon, parse_time_of_day,
 )
 
 __all__ = ["Satellite", "Fix", "Epoch", "ReadStats", "read_nmea", "iter_epochs", "epochs_from_bytes", "parse_sentence"]
 
-_TIMED = frozenset(("GGA", "RMC", "GNS", "GLL", "ZDA", "GST", "GBS"))
-_USED_TYPES = _TIMED | {"GSA", "GSV"}
+_TIMED = TIMED_TYPES
+_USED_TYPES = USED_TYPES
 _FIX_TYPES = frozenset(("GGA", "RMC", "GNS", "ZDA"))  # timed sentences that carry more than the time
 _EPOCH_GAP_DEFAULT_S = 1.0
 _tuple_new = tuple.__new__  # builds a NamedTuple without its Python-level __new__ (hot loop)
@@ -130,124 +127,6 @@ class Epoch:
         }
 
 
-@dataclass
-class ReadStats:
-    """What the reader saw and skipped. ``skipped`` sums the sentence-level failures.
-
-    ``no_time``: a GGA/RMC/GNS/GLL/ZDA/GST/GBS whose time field is empty
-    (receivers before their first fix); ``other_types``: valid sentences of
-    types the reader does not use (VTG, TXT, vendor messages), not skipped.
-    """
-
-    lines: int = 0
-    sentences: int = 0
-    used_sentences: int = 0
-    comment_lines: int = 0
-    non_nmea_lines: int = 0
-    bad_checksum: int = 0
-    no_checksum: int = 0
-    truncated: int = 0
-    malformed: int = 0
-    no_time: int = 0
-    time_jumps: int = 0
-    time_resets: int = 0
-    gsv_incomplete: int = 0
-    other_types: Counter = field(default_factory=Counter)
-
-    @property
-    def skipped(self) -> int:
-        return (self.non_nmea_lines + self.bad_checksum + self.no_checksum + self.truncated
-                + self.malformed + self.no_time + self.time_jumps)
-
-    def summary(self) -> str:
-        """One line for a user, e.g. ``skipped 3 (bad checksum 2, truncated 1)``."""
-        parts = [(n, getattr(self, n)) for n in ("bad_checksum", "no_checksum", "truncated", "malformed",
-                                                 "no_time", "time_jumps", "non_nmea_lines")]
-        detail = ", ".join(f"{n.replace('_', ' ')} {v}" for n, v in parts if v)
-        text = f"{self.sentences} sentences, {self.used_sentences} used, skipped {self.skipped}"
-        if detail:
-            text += f" ({detail})"
-        if self.time_resets:
-            text += f"; time base reset {self.time_resets}x"
-        if self.gsv_incomplete:
-            text += f"; {self.gsv_incomplete} incomplete GSV groups"
-        return text
-
-
-def _checksum_ok(body: str, given: str) -> bool:
-    """XOR of the body's bytes against the two hex digits given (a plain loop: measured faster
-    here than folding one big integer or a numpy reduction on 80-byte sentences)."""
-    c = 0
-    for byte in body.encode("latin-1", "replace"):
-        c ^= byte
-    try:
-        return c == int(given, 16)
-    except ValueError:
-        return False
-
-
-def parse_sentence(fragment: str, stats: ReadStats, require_checksum: bool = True) -> list[str] | None:
-    """Check and split one sentence (text after ``$``); None (and counted) when unusable.
-
-    Returns the comma-split fields, first the address (``GPGSV``).
-
-    >>> parse_sentence("GPGSA,A,1,,,,,,,,,,,,,,,*1E", ReadStats())[:3]
-    ['GPGSA', 'A', '1']
-    """
-    star = fragment.rfind("*")
-    if star < 0:
-        if require_checksum:  # missing, or cut off with the end of the line: indistinguishable
-            stats.no_checksum += 1
-            return None
-        body = fragment
-    else:
-        body = fragment[:star]
-        given = fragment[star + 1:star + 3]
-        if len(given) < 2:
-            stats.truncated += 1
-            return None
-        if not _checksum_ok(body, given):
-            stats.bad_checksum += 1
-            return None
-    fields = body.split(",")
-    address = fields[0]
-    if len(address) < 3 or not address.isalnum():
-        stats.truncated += 1
-        return None
-    return fields
-
-
-def _pynmea2_fields(fragment: str, stats: ReadStats, require_checksum: bool = True) -> list[str] | None:
-    """Same contract as :func:`parse_sentence`, tokenised by ``pynmea2.parse(check=True)``.
-
-    pynmea2 has no class for some sentences (Quectel ``$PQGSV``, vendor
-    messages); for a sentence whose checksum pynmea2 accepted but whose format
-    it rejects, the raw comma split is returned, as the fast path does.
-    """
-    import pynmea2
-
-    star = fragment.rfind("*")
-    if star < 0 and require_checksum:
-        stats.no_checksum += 1
-        return None
-    if star >= 0:
-        fragment = fragment[:star + 3]
-    try:
-        msg = pynmea2.parse("$" + fragment, check=require_checksum)
-    except pynmea2.ChecksumError:
-        stats.bad_checksum += 1
-        return None
-    except Exception:  # ParseError, and bare ValueError/TypeError/AttributeError on some garbage
-        fields = parse_sentence(fragment, ReadStats(), require_checksum)
-        if fields is None or fields[0][-3:] in _USED_TYPES and fields[0][0] != "P":
-            stats.truncated += 1
-            return None
-        return fields
-    if isinstance(msg, pynmea2.ProprietarySentence) or not hasattr(msg, "talker"):
-        return fragment[:star].split(",") if star >= 0 else fragment.split(",")
-    return [msg.talker + msg.sentence_type, *msg.data]
-
-
 class _Clock:
     """Orders fix times: time of day plus midnight rollovers (a decrease of more than 12 h).
 
@@ -321,132 +200,6 @@ def _opt_num(text: str) -> float | None:
     return float(text) if text else None
 
 
-def _is_unused(head: str) -> bool:
-    """True for addresses of sentence types the reader does not use (VTG, TXT, vendor messages)."""
-    kind = head[2:] if len(head) == 5 else head[-3:]
-    return kind not in _USED_TYPES or (head[:1] == "P" and head[:2] != "PQ")
-
-
-def _fields_from_lines(lines: Iterable[bytes | str], stats: ReadStats, tokenise, require_checksum: bool):
-    """Checked, comma-split sentences of the used types from lines of text (the streaming path)."""
-    for raw in lines:
-        stats.lines += 1
-        line = raw.decode("latin-1") if isinstance(raw, (bytes, bytearray)) else raw
-        line = line.strip()
-        if not line:
-            continue
-        if line[0] == "#":
-            stats.comment_lines += 1
-            continue
-        pieces = line.split("$")
-        if len(pieces) == 1:
-            stats.non_nmea_lines += 1
-            continue
-        for fragment in pieces[1:]:
-            if len(pieces) > 2:
-                fragment = fragment.strip()
-            if not fragment:
-                continue
-            stats.sentences += 1
-            # Types the reader does not use are counted by address and not validated:
-            # checking a sentence nobody reads costs a third of the parse.
-            head = fragment[:fragment.find(",")] if "," in fragment else fragment
-            if _is_unused(head):
-                stats.other_types[head[:8]] += 1
-                continue
-            fields = tokenise(fragment, stats, require_checksum)
-            if fields is not None:
-                yield fields
-
-
-_HEX = np.full(256, -1, dtype=np.int16)
-for _i, _ch in enumerate(b"0123456789ABCDEF"):
-    _HEX[_ch] = _i
-for _i, _ch in enumerate(b"abcdef"):
-    _HEX[_ch] = 10 + _i
-
-
-def _fields_from_buffer(buf: bytes, stats: ReadStats, require_checksum: bool):
-    """:func:`_fields_from_lines` over a whole file, with the line and ``$`` splitting and the
-    checksums vectorised (numpy): the XOR of body bytes [a, b) is P[b] ^ P[a], P the prefix XOR
-    of the file. Counts exactly what the line path counts (a test holds them equal on every log).
-    """
-    data = np.frombuffer(buf, dtype=np.uint8)
-    n = data.size
-    if n == 0:
-        return
-    text = buf.decode("latin-1")
-    nl = np.flatnonzero(data == 10)
-    line_start = np.concatenate([[0], nl + 1])
-    line_end = np.concatenate([nl, [n]])
-    if line_start[-1] == n:  # nothing after the final newline
-        line_start, line_end = line_start[:-1], line_end[:-1]
-    stats.lines += int(line_start.size)
-    dollars = np.flatnonzero(data == 36)
-    line_of = np.searchsorted(line_start, dollars, side="right") - 1
-    has_dollar = np.zeros(line_start.size, dtype=bool)
-    has_dollar[line_of] = True
-    # lines whose first character decides their kind: '#' comments, blank lines, no '$' at all
-    first = data[np.minimum(line_start, n - 1)]
-    comment = np.zeros(line_start.size, dtype=bool)
-    for i in np.flatnonzero(~has_dollar | (first <= 32) | (first == 35)).tolist():
-        stripped = text[line_start[i]:line_end[i]].strip()
-        if not stripped:
-            continue
-        if stripped[0] == "#":
-            comment[i] = True
-        elif not has_dollar[i]:
-            stats.non_nmea_lines += 1
-    stats.comment_lines += int(comment.sum())
-    keep = ~comment[line_of]
-    dollars, line_of = dollars[keep], line_of[keep]
-    if dollars.size == 0:
-        return
-    end = np.minimum(np.concatenate([dollars[1:], [n]]), line_end[line_of])  # next '$' or end of line
-    stars = np.flatnonzero(data == 42)
-    k = np.searchsorted(stars, end, side="left") - 1  # last '*' before the fragment's end
-    star = np.where(k >= 0, stars[np.maximum(k, 0)], -1) if stars.size else np.full(dollars.size, -1)
-    has_star = star > dollars
-    digits = has_star & (star + 3 <= end)
-    g1 = _HEX[data[np.clip(star + 1, 0, n - 1)]]
-    g2 = _HEX[data[np.clip(star + 2, 0, n - 1)]]
-    given = np.where(digits & (g1 >= 0) & (g2 >= 0), g1 * 16 + g2, -1)
-    prefix = np.concatenate([[0], np.bitwise_xor.accumulate(data)]).astype(np.int16)
-    ok = digits & (given == (prefix[np.where(has_star, star, 0)] ^ prefix[dollars + 1]))
-    multi = np.zeros(dollars.size, dtype=bool)  # several '$' on one line: fragments are stripped
-    same = line_of[1:] == line_of[:-1]
-    multi[1:] |= same
-    multi[:-1] |= same
-    for d, e, st_, has, dig, good, strip in zip(dollars.tolist(), end.tolist(), star.tolist(), has_star.tolist(),
-                                                digits.tolist(), ok.tolist(), multi.tolist()):
-        fragment = text[d + 1:e]
-        fragment = fragment.strip() if strip else fragment.rstrip()
-        if not fragment:
-            continue
-        stats.sentences += 1
-        head = fragment[:fragment.find(",")] if "," in fragment else fragment
-        if _is_unused(head):
-            stats.other_types[head[:8]] += 1
-            continue
-        if not has:
-            if require_checksum:
-                stats.no_checksum += 1
-                continue
-            fields = fragment.split(",")
-        elif not dig:
-            stats.truncated += 1
-            continue
-        elif not good:
-            stats.bad_checksum += 1
-            continue
-        else:
-            fields = text[d + 1:st_].split(",")
-        if len(fields[0]) < 3 or not fields[0].isalnum():
-            stats.truncated += 1
-            continue
-        yield fields
-
-
 def iter_epochs(lines: Iterable[bytes | str], stats: ReadStats | None = None, *,
                 parser: Literal["fast", "pynmea2"] = "fast", require_checksum: bool = True,
                 resync_after: int = 5) -> Iterator[Epoch]:
@@ -459,8 +212,8 @@ def iter_epochs(lines: Iterable[bytes | str], stats: ReadStats | None = None, *,
     ``stats`` (a :class:`ReadStats`) is filled in as the lines are consumed.
     """
     stats = ReadStats() if stats is None else stats
-    tokenise = parse_sentence if parser == "fast" else _pynmea2_fields
-    return _assemble(_fields_from_lines(lines, stats, tokenise, require_checksum), stats, resync_after)
+    tokenise = parse_sentence if parser == "fast" else pynmea2_fields
+    return _assemble(fields_from_lines(lines, stats, tokenise, require_checksum), stats, resync_after)
 
 
 def _assemble(sentences: Iterable[list[str]], stats: ReadStats, resync_after: int) -> Iterator[Epoch]:
@@ -584,7 +337,10 @@ def _assemble(sentences: Iterable[list[str]], stats: ReadStats, resync_after: in
 
 
 def _timed_payload(kind: str, data: list[str]):
-    """Fix content of a timed sentence: GGA/GNS → (lat, lon, alt, sep, quality, n_used, hdop); RMC → (lat, lon, quality)."""
+    """Fix content of a timed sentence.
+
+    GGA/GNS → (lat, lon, alt, sep, quality, n_used, hdop); RMC → (lat, lon, quality); others None.
+    """
     if kind == "GGA":
         lat = parse_latlon(data[1], data[2], True)
         lon = parse_latlon(data[3], data[4], False)
@@ -622,7 +378,7 @@ def epochs_from_bytes(buf: bytes, stats: ReadStats | None = None, *, require_che
     Gives exactly what :func:`iter_epochs` gives on the same bytes split into lines.
     """
     stats = ReadStats() if stats is None else stats
-    return list(_assemble(_fields_from_buffer(bytes(buf), stats, require_checksum), stats, resync_after))
+    return list(_assemble(fields_from_buffer(bytes(buf), stats, require_checksum), stats, resync_after))
 
 
 def read_nmea(path: str | os.PathLike, *, parser: Literal["fast", "pynmea2"] = "fast",

@@ -151,16 +151,6 @@ _tuple_new = tuple.__new__
 _satellite_id_cached = functools.lru_cache(maxsize=4096)(satellite_id)
 
 
-def _opt_float(text: str, low: float, high: float) -> float | None:
-    """Float of a field, ``None`` when empty; ValueError when outside [low, high]."""
-    if not text:
-        return None
-    value = float(text)
-    if not low <= value <= high:  # also rejects NaN
-        raise ValueError(f"value {text!r} outside [{low}, {high}]")
-    return value
-
-
 def _single_hex(text: str) -> int | None:
     if len(text) == 1 and text in "0123456789ABCDEFabcdef":
         return int(text, 16)
@@ -219,7 +209,8 @@ def gsv_fields(talker: str, data: list[str]) -> GsvFields:
             continue
         if cn0 == 0.0:
             cn0 = None  # 0 dB-Hz is "not tracked" for many receivers (NMEA: null when not tracking)
-        append(_tuple_new(GsvSatellite, (sat[0], sat[1], el, az, cn0)))  # = GsvSatellite(...), without its Python __new__
+        # = GsvSatellite(...), skipping its Python-level __new__ (hot loop)
+        append(_tuple_new(GsvSatellite, (sat[0], sat[1], el, az, cn0)))
     return GsvFields(n_msgs, msg_num, n_in_view, signal, tuple(satellites))
 
 

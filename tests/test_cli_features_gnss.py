@@ -62,3 +62,22 @@ def test_positions_need_a_site(tmp_path, capsys):
     assert rc == 1 and "--positions needs --site" in capsys.readouterr().err
     rc = main(["features", "gnss", str(DATA / "good.nmea"), "--out", str(tmp_path / "f.csv"), "--window-s", "-1"])
     assert rc == 2
+
+
+def test_fit_reference_round_trip(tmp_path, capsys):
+    gpsd = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "nmea" / "gpsd"
+    log = gpsd / "quectel-l76k-nmea.log"
+    if not log.exists():
+        pytest.skip(f"{log} absent")
+    ref = tmp_path / "ref.json"
+    assert main(["features", "gnss", str(log), "--out", str(tmp_path / "a.csv"), "--fit-cn0-reference", str(ref)]) == 0
+    model = json.loads(ref.read_text())
+    assert "C_ref fitted" in capsys.readouterr().out and 15 < model["intercept_dbhz"] < 45
+    # feeding the fitted model back: attenuation is measured against it, so it drops against the default's
+    assert main(["features", "gnss", str(log), "--out", str(tmp_path / "b.csv"), "--cn0-reference", str(ref)]) == 0
+    mean = [sum(float(r["att_mean_db"]) for r in csv.DictReader((tmp_path / n).open()) if r["att_mean_db"])
+            for n in ("a.csv", "b.csv")]
+    assert mean[1] < 0.5 * mean[0]
+    bad = tmp_path / "bad.json"
+    bad.write_text("{}")
+    assert main(["features", "gnss", str(log), "--out", str(tmp_path / "c.csv"), "--cn0-reference", str(bad)]) == 1

@@ -206,3 +206,21 @@ def test_simulated_survey_features_order_classes(simulated_survey):
     for k in ("att_mean_db", "invisible_ratio", "dop_growth"):
         assert medians["heavy"][k] > medians["light"][k] > medians["open"][k], (k, medians)
     assert medians["heavy"]["att_std_db"] > medians["open"]["att_std_db"]
+
+
+def test_reference_fitted_on_open_cells_recovers_the_simulated_open_sky_model(simulated_survey):
+    """The simulator draws open-sky C/N0 round 38 dB-Hz at 5° to 50 at zenith (DESIGN.md §6): the
+    median fit on open cells finds that line; the default upper quantile sits a few dB above it."""
+    els, cn0s = [], []
+    for cell in sorted((simulated_survey / "cells").iterdir()):
+        meta = tomllib.loads((cell / "cell.toml").read_text())
+        if meta["map_label"] == "open":
+            sky = sky_arrays(read_nmea(cell / meta["gnss"]["file"])[0])
+            els.append(sky.el_deg.ravel())
+            cn0s.append(sky.cn0_dbhz.ravel())
+    el, cn0 = np.concatenate(els), np.concatenate(cn0s)
+    median = fit_cn0_reference(el, cn0, quantile=0.5)
+    np.testing.assert_allclose(median.cref_dbhz([10.0, 30.0, 90.0]), REF.cref_dbhz([10.0, 30.0, 90.0]), atol=1.5)
+    upper = fit_cn0_reference(el, cn0)
+    gap = upper.cref_dbhz([10.0, 30.0, 90.0]) - median.cref_dbhz([10.0, 30.0, 90.0])
+    assert ((gap > 0.5) & (gap < 6.0)).all()

@@ -41,6 +41,8 @@ def register(sub) -> None:
     p.add_argument("--elevation-mask-deg", type=float, default=10.0, help="elevation mask, degrees (default 10)")
     p.add_argument("--cn0-reference", type=Path, default=None,
                    help="JSON file with a fitted C_ref model {intercept_dbhz, slope_dbhz} (default: built-in)")
+    p.add_argument("--fit-cn0-reference", type=Path, default=None, metavar="JSON",
+                   help="fit C_ref(el) to this file's tracked satellites (use an open-sky log) and write it as JSON")
     p.add_argument("--start-utc", default=None,
                    help="t_s origin, ISO 8601 UTC (e.g. the walk's start_utc); default: the first epoch")
     p.add_argument("--epochs", type=Path, default=None, help="also write each decoded epoch as a JSON line")
@@ -82,11 +84,9 @@ def _t_shift(epochs, start_utc: str | None) -> float:
 def _run(args) -> int:
     import dataclasses
 
-    import numpy as np
-
     from features.fileio import atomic_write_text
     from features.gnss_features import (
-        COUNT_COLUMNS, FEATURE_COLUMNS, Cn0Reference, GnssFeatureConfig, gnss_features, sky_arrays,
+        COUNT_COLUMNS, FEATURE_COLUMNS, Cn0Reference, GnssFeatureConfig, fit_cn0_reference, gnss_features, sky_arrays,
     )
     from features.nmea import read_nmea
 
@@ -114,6 +114,9 @@ def _run(args) -> int:
     atomic_write_text(args.out, _csv(table, names))
     if args.epochs is not None:
         atomic_write_text(args.epochs, "".join(json.dumps(e.to_json_dict()) + "\n" for e in epochs))
+    if args.fit_cn0_reference is not None:
+        fitted = fit_cn0_reference(sky.el_deg, sky.cn0_dbhz)
+        atomic_write_text(args.fit_cn0_reference, json.dumps(fitted.to_dict(), indent=2) + "\n")
     n_pos = None
     if args.positions is not None:
         from features.gnss_positions import fixes_to_enu
@@ -127,6 +130,9 @@ def _run(args) -> int:
            f"{len(table['t_s'])} windows -> {args.out}")
     if n_pos is not None:
         msg += f"; {n_pos} positions -> {args.positions}"
+    if args.fit_cn0_reference is not None:
+        msg += (f"; C_ref fitted: {fitted.intercept_dbhz:.2f} + {fitted.slope_dbhz:.2f}*sin(el) dB-Hz "
+                f"-> {args.fit_cn0_reference}")
     if n_with_sky == 0:
         msg += "; no GSV in the file, so every feature is empty"
     print(msg)
