@@ -100,20 +100,26 @@ class AudioAnalysis:
     n_detections: int
     duration_s: float
     truncated: bool
+    frames: list | None = None
 
 
 def analyse_audio(path: str | os.PathLike, site: Site, timing: AudioTiming,
                   detector: DetectorConfig = DetectorConfig(), windows: WindowConfig = WindowConfig(),
-                  positions: PositionConfig | None = None) -> AudioAnalysis:
+                  positions: PositionConfig | None = None, keep_frames: bool = False) -> AudioAnalysis:
     """Stream ``path`` once: feature windows and per-frame acoustic positions.
 
     ``positions``: solver settings (default: see :func:`features.chirp_detection.detect_frames`).
+    ``keep_frames`` also returns every :class:`~features.chirp_detection.FrameResult`
+    (for evaluation; memory then grows with the file).
     """
     stats = AudioStats(bin_s=0.1, n_samples=[], n_clipped=[], sum_sq=[])
     bins = _HopBins()
     fixes: list[AcousticFix] = []
     n_det = 0
+    kept = [] if keep_frames else None
     for frame in detect_frames(path, site, timing, detector, stats, positions):
+        if kept is not None:
+            kept.append(frame)
         for det in frame.detections:
             n_det += 1
             k = math.floor((det.arrival_s - timing.start_s) / windows.hop_s)
@@ -122,7 +128,7 @@ def analyse_audio(path: str | os.PathLike, site: Site, timing: AudioTiming,
         if frame.fix is not None:
             fixes.append(frame.fix)
     rows = _window_rows(bins, stats, timing, windows)
-    return AudioAnalysis(rows, fixes, n_det, stats.duration_s, stats.truncated)
+    return AudioAnalysis(rows, fixes, n_det, stats.duration_s, stats.truncated, kept)
 
 
 def _window_rows(bins: _HopBins, stats: AudioStats, timing: AudioTiming, cfg: WindowConfig) -> list[dict]:
