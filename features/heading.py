@@ -46,6 +46,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import ndimage, signal
 
+from .errors import ConfigError
+
 __all__ = ["HeadingConfig", "HeadingResult", "down_in_body", "yaw_rate", "magnetic_heading",
            "complementary_heading", "estimate_heading", "imufusion_heading", "wrap_pi"]
 
@@ -86,11 +88,11 @@ class HeadingConfig:
                      "static_start_s"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0):
-                raise ValueError(f"HeadingConfig.{name} must be positive, got {value}")
+                raise ConfigError(f"HeadingConfig.{name} must be positive, got {value}")
         if not (math.isfinite(self.ki_per_s2) and self.ki_per_s2 >= 0):
-            raise ValueError(f"HeadingConfig.ki_per_s2 must be >= 0, got {self.ki_per_s2}")
+            raise ConfigError(f"HeadingConfig.ki_per_s2 must be >= 0, got {self.ki_per_s2}")
         if not math.isfinite(self.declination_rad) or not math.isfinite(self.initial_heading_rad):
-            raise ValueError("declination_rad and initial_heading_rad must be finite")
+            raise ConfigError("declination_rad and initial_heading_rad must be finite")
 
 
 @dataclass(frozen=True)

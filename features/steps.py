@@ -42,7 +42,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import ndimage, signal
 
-from .errors import DataError
+from .errors import ConfigError, DataError
 
 __all__ = ["StepDetectorConfig", "Steps", "StepLengthModel", "filtered_norm", "detect_steps",
            "weinberg_length", "calibrate_weinberg_k", "fit_improved_model"]
@@ -67,11 +67,11 @@ class StepDetectorConfig:
                      "min_prominence_m_s2", "prominence_rms_factor"):
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
-                raise ValueError(f"StepDetectorConfig.{name} must be a positive number, got {value!r}")
+                raise ConfigError(f"StepDetectorConfig.{name} must be a positive number, got {value!r}")
         if self.max_interval_s <= self.min_interval_s:
-            raise ValueError(f"max_interval_s ({self.max_interval_s}) must exceed min_interval_s ({self.min_interval_s})")
+            raise ConfigError(f"max_interval_s ({self.max_interval_s}) must exceed min_interval_s ({self.min_interval_s})")
         if not 1 <= self.filter_order <= 10 or self.min_bout_steps < 1:
-            raise ValueError("filter_order must lie in [1, 10] and min_bout_steps >= 1")
+            raise ConfigError("filter_order must lie in [1, 10] and min_bout_steps >= 1")
 
 
 @dataclass(frozen=True)
@@ -221,9 +221,9 @@ class StepLengthModel:
 
     def __post_init__(self):
         if not (math.isfinite(self.k) and 0.05 <= self.k <= 3.0):
-            raise ValueError(f"StepLengthModel.k must lie in [0.05, 3], got {self.k}")
+            raise ConfigError(f"StepLengthModel.k must lie in [0.05, 3], got {self.k}")
         if not math.isfinite(self.beta):
-            raise ValueError(f"StepLengthModel.beta must be finite, got {self.beta}")
+            raise ConfigError(f"StepLengthModel.beta must be finite, got {self.beta}")
 
     def predict(self, steps: Steps) -> np.ndarray:
         """Step lengths, m, shape (n_steps,), never negative."""

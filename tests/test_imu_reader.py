@@ -106,3 +106,14 @@ def test_cli_acc_only_leaves_heading_empty_and_missing_columns_fail_cleanly(tmp_
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "missing required column(s) t_s, az" in err[0]
     assert not out2.exists()
+
+
+def test_cli_calibrates_k_from_a_known_distance_and_rejects_a_bad_k(tmp_path, capsys):
+    out = tmp_path / "steps.csv"
+    assert main(["features", "imu", str(DATA / "imu_good.csv"), "--calibrate-distance-m", "13.4",
+                 "--out", str(out)]) == 0
+    lengths = np.array([float(r.split(",")[1]) for r in out.read_text().splitlines()[1:]])
+    assert lengths.sum() == pytest.approx(13.4, abs=0.01)
+    assert "K = " in capsys.readouterr().out
+    assert main(["features", "imu", str(DATA / "imu_good.csv"), "--k", "5", "--out", str(tmp_path / "x.csv")]) == 1
+    assert "StepLengthModel.k must lie in [0.05, 3], got 5.0" in capsys.readouterr().err
