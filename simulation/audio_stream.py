@@ -20,7 +20,8 @@ free-field level could not rise above the noise floor are skipped.
 Added to the sum of chirps, per block of samples (memory stays bounded for
 any length of walk):
 
-* ambient in-band noise, white Gaussian at ``noise_db_spl`` within 17–23 kHz
+* in-band noise, white Gaussian: the acoustic ambient (``noise_db_spl``) and
+  the recorder's own floor (``device_noise_dbfs``, measured on real phone audio)
   (see :class:`AudioConfig` for the level's justification);
 * transformer hum (100 Hz and harmonics for a 50 Hz grid, magnetostriction)
   falling 1/r from the nearest tank — far out of band, it only tests the
@@ -71,13 +72,18 @@ _POST_SAMPLES = 64
 class AudioConfig:
     """Receiver, noise and rendering parameters of the audio stream.
 
-    noise_db_spl : ambient plus microphone self-noise within ``noise_band_hz``,
-        dB SPL. 35 dB: a MEMS microphone of 65 dB SNR (e.g. InvenSense
-        ICS-43434, −26 dBFS at 94 dB SPL) has 29 dB(A) self-noise over 20 kHz, of
-        which the 6 kHz band holds ≈ 24 dB; outdoors at 17–23 kHz wind in
-        equipment, gravel steps and corona hiss add broadband noise of the same
-        order (transformer hum, 60–75 dB(A), lies below 2 kHz). An assumed level,
-        not a measurement; raise it to stress the receiver.
+    noise_db_spl : acoustic ambient noise within ``noise_band_hz``, dB SPL.
+        35 dB: outdoors at 17–23 kHz wind in equipment, gravel steps and corona
+        hiss give broadband noise (transformer hum, 60–75 dB(A), lies below
+        2 kHz). An assumed level, not a measurement.
+    device_noise_dbfs : the recorder's own noise (microphone, preamp, ADC)
+        within ``noise_band_hz``, dB re. full scale squared (mean square of
+        samples scaled to ±1). −63 dB is measured: the median over the five
+        Galaxy S3 recordings in ../shared/data/audio_ultrasense of the Welch
+        PSD in 17–19.5 and 20.5–22 kHz (clear of their 20 kHz tone) times 6 kHz
+        (−62.3 … −63.3 dB). With ``full_scale_db_spl`` = 110 it equals 50 dB SPL
+        at the microphone and dominates the ambient term, which puts the
+        free-field detection range near 47 m (:func:`detection_range_m`).
     full_scale_db_spl : SPL of a full-scale sine (RMS): 110 dB, i.e. a 120 dB
         SPL AOP microphone with 10 dB of recording gain.
     start_s, start_uncertainty_s : the stated audio start on the walk's time
@@ -97,6 +103,7 @@ class AudioConfig:
 
     fs_hz: int = 48_000
     noise_db_spl: float = 35.0
+    device_noise_dbfs: float = -63.0
     noise_band_hz: tuple[float, float] = (17_000.0, 23_000.0)
     full_scale_db_spl: float = 110.0
     start_s: float = 0.0
@@ -132,6 +139,12 @@ class AudioConfig:
                               f"got {self.block_samples!r}")
         if not self.max_excess_delay_s > 0:
             raise ConfigError(f"audio max_excess_delay_s must be positive, got {self.max_excess_delay_s}")
+
+    @property
+    def inband_noise_db_spl(self) -> float:
+        """Total in-band noise (ambient + device), dB SPL (a full-scale sine, mean square ½, is full_scale_db_spl)."""
+        device_db_spl = self.full_scale_db_spl + self.device_noise_dbfs + 10.0 * math.log10(2.0)
+        return 10.0 * math.log10(10.0 ** (self.noise_db_spl / 10.0) + 10.0 ** (device_db_spl / 10.0))
 
     @classmethod
     def from_options(cls, options: dict | None) -> "AudioConfig":
@@ -312,7 +325,7 @@ class _Ambient:
         fs = cfg.fs_hz
         band = cfg.noise_band_hz[1] - cfg.noise_band_hz[0]
         # white noise over 0..fs/2 whose share within the band has the stated level
-        self.noise_rms = _db_to_digital_rms(cfg.noise_db_spl, cfg) * math.sqrt((fs / 2.0) / band)
+        self.noise_rms = _db_to_digital_rms(cfg.inband_noise_db_spl, cfg) * math.sqrt((fs / 2.0) / band)
         self.hv = boxes_array([b for b in site.layout if b.kind in _HV_KINDS])
         self.tanks = boxes_array([b for b in site.layout if b.kind == "transformer"])
         self.hum_phase = stream_rng(seed, "audio", "hum").uniform(0.0, 2.0 * np.pi, 4)
@@ -384,6 +397,7 @@ def render_audio(site: Site, trajectory: Trajectory, seed: int, wav_path,
     ambient = _Ambient(site, trajectory, seed, cfg, true_start, fs_true)
     c = renderer.c
     sl_db = site.acoustic.source_level_db
+    noise_floor_db = cfg.inband_noise_db_spl
     level_scale = 10.0 ** ((sl_db - cfg.full_scale_db_spl) / 20.0)
     v_east, v_north = _velocity_table(trajectory)
     emissions = _emissions(site, trajectory.start_utc, true_start - 0.5, t_end)
@@ -434,7 +448,7 @@ def render_audio(site: Site, trajectory: Trajectory, seed: int, wav_path,
                 t_a = t_e + float(np.linalg.norm(src - _position_at(trajectory, t_a))) / c
             rx = _position_at(trajectory, t_a)
             d = float(np.linalg.norm(src - rx))
-            if sl_db - 20.0 * math.log10(max(d, 1e-3)) - alpha_min[spec] * d < cfg.noise_db_spl - cfg.skip_margin_db:
+            if sl_db - 20.0 * math.log10(max(d, 1e-3)) - alpha_min[spec] * d < noise_floor_db - cfg.skip_margin_db:
                 continue          # even in free field it could not rise out of the noise
             paths = paths_at(bid, src, rx)
             speed = float(np.interp(t_a, trajectory.t_s, trajectory.speed_m_s))
@@ -447,7 +461,7 @@ def render_audio(site: Site, trajectory: Trajectory, seed: int, wav_path,
             t_a = t_e + paths.length_m[0] / c
             best_db = sl_db + 20.0 * math.log10(max(paths.gain.max(), 1e-12)) - alpha_min[spec] * paths.length_m[0]
             first_sample = (t_a - true_start) * fs_true
-            if best_db < cfg.noise_db_spl - cfg.skip_margin_db or not -fs <= first_sample < n_total:
+            if best_db < noise_floor_db - cfg.skip_margin_db or not -fs <= first_sample < n_total:
                 continue
             eta = 1.0
             if cfg.doppler:       # moving observer: η = 1 + v·u/c, u the unit vector to the beacon

@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import soundfile as sf
-from scipy.signal import fftconvolve, hilbert
+from scipy.signal import fftconvolve, hilbert, welch
 
 from features.errors import ConfigError
 from features.site import AcousticConfig, Atmosphere, Beacon, Box, Origin, Site, save_site
@@ -24,7 +24,7 @@ from simulation.streams import StreamContext, Trajectory
 
 FS = 48_000
 START = datetime(2026, 6, 1, 8, 0, 0, tzinfo=timezone.utc)
-QUIET = AudioConfig(noise_db_spl=-40.0, hum_db_spl_1m=-200.0, corona_rate_hz=0.0)
+QUIET = AudioConfig(noise_db_spl=-40.0, device_noise_dbfs=-160.0, hum_db_spl_1m=-200.0, corona_rate_hz=0.0)
 
 BEACONS = (Beacon(1, 0.0, 0.0, 3.0, 0), Beacon(2, 30.0, 0.0, 2.8, 1), Beacon(3, 0.0, 30.0, 2.6, 2),
            Beacon(4, 30.0, 30.0, 3.0, 3))
@@ -114,7 +114,7 @@ def test_ambient_noise_and_hum_levels(tmp_path):
     """No beacons: the 17–23 kHz band holds the configured noise level, 100 Hz the hum at 1/r."""
     tank = Box("transformer", "steel", False, 20.0, 28.0, 0.0, 5.0, 5.5)
     site = _site([tank], beacons=())
-    cfg = replace(AudioConfig(), corona_rate_hz=0.0, noise_db_spl=40.0, hum_db_spl_1m=75.0)
+    cfg = replace(AudioConfig(), corona_rate_hz=0.0, noise_db_spl=40.0, device_noise_dbfs=-160.0, hum_db_spl_1m=75.0)
     render_audio(site, _static(16.0, 2.5, 4.0), 3, tmp_path / "n.wav", cfg)     # 4 m from the tank
     x, _ = sf.read(tmp_path / "n.wav", dtype="int16")
     spec = np.fft.rfft(x / 32767.0)
@@ -126,6 +126,17 @@ def test_ambient_noise_and_hum_levels(tmp_path):
 
     assert level_db((f >= 17_000) & (f <= 23_000)) == pytest.approx(40.0, abs=0.5)
     assert level_db((f > 98) & (f < 102)) == pytest.approx(75.0 - 20 * math.log10(4.0), abs=0.5)
+
+
+def test_device_noise_floor_reproduces_the_measured_phone_floor(tmp_path):
+    """Default recorder floor: −63 dB re. full scale² in 17–23 kHz, as measured on the UltraSense phone audio."""
+    cfg = replace(AudioConfig(), noise_db_spl=-40.0, hum_db_spl_1m=-200.0, corona_rate_hz=0.0)
+    render_audio(_site(beacons=()), _static(5.0, 5.0, 4.0), 8, tmp_path / "n.wav", cfg)
+    x, _ = sf.read(tmp_path / "n.wav", dtype="int16")
+    f, psd = welch(x / 32768.0, FS, nperseg=4096)
+    band = (f > 17_000) & (f < 19_500) | (f > 20_500) & (f < 22_000)     # the bands measured on the real files
+    assert 10 * math.log10(psd[band].mean() * 6000.0) == pytest.approx(-63.0, abs=0.3)
+    assert cfg.inband_noise_db_spl == pytest.approx(110.0 - 63.0 + 10 * math.log10(2.0), abs=0.01)
 
 
 def test_corona_clicks_near_hv_equipment(tmp_path):
