@@ -39,6 +39,8 @@ def register(sub) -> None:
     p.add_argument("--window-s", type=_positive, default=2.0, help="window length, s (default 2)")
     p.add_argument("--hop-s", type=_positive, default=1.0, help="window hop, s (default 1)")
     p.add_argument("--elevation-mask-deg", type=float, default=10.0, help="elevation mask, degrees (default 10)")
+    p.add_argument("--fluct-threshold-dbhz", type=_positive, default=1.0,
+                   help="smallest C/N0 swing counted as a fluctuation, dB-Hz (default 1)")
     p.add_argument("--cn0-reference", type=Path, default=None,
                    help="JSON file with a fitted C_ref model {intercept_dbhz, slope_dbhz} (default: built-in)")
     p.add_argument("--fit-cn0-reference", type=Path, default=None, metavar="JSON",
@@ -90,7 +92,8 @@ def _run(args) -> int:
     )
     from features.nmea import read_nmea
 
-    config = GnssFeatureConfig(window_s=args.window_s, hop_s=args.hop_s, elevation_mask_deg=args.elevation_mask_deg)
+    config = GnssFeatureConfig(window_s=args.window_s, hop_s=args.hop_s, elevation_mask_deg=args.elevation_mask_deg,
+                               fluct_threshold_dbhz=args.fluct_threshold_dbhz)
     reference = Cn0Reference()
     if args.cn0_reference is not None:
         try:
