@@ -18,7 +18,8 @@ raises :class:`~features.errors.NmeaError`.
 
 Parsing: :mod:`features.nmea_tokens` turns bytes into checked sentences (a
 vectorised whole-file path by default, pynmea2 on request, both equal on every
-real log); :mod:`features.nmea_quirks` interprets their fields.
+real log; types not used, e.g. VTG and vendor messages, are counted, not
+validated); :mod:`features.nmea_quirks` interprets their fields.
 """
 
 from __future__ import annotations
@@ -29,8 +30,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Iterable, Iterator, Literal, NamedTuple
 
-
-from .errors import NmeaError
+from .errors import ConfigError, NmeaError
 from .nmea_tokens import (  # noqa: F401 - ReadStats and parse_sentence are re-exported
     TIMED_TYPES, USED_TYPES, ReadStats, fields_from_buffer, fields_from_lines, parse_sentence, pynmea2_fields,
 )
@@ -38,7 +38,8 @@ from .nmea_quirks import (
     FIX_QUALITY_FROM_MODE, gsa_fields, gsv_fields, parse_ddmmyy, parse_latlon, parse_time_of_day,
 )
 
-__all__ = ["Satellite", "Fix", "Epoch", "ReadStats", "read_nmea", "iter_epochs", "epochs_from_bytes", "parse_sentence"]
+__all__ = ["Satellite", "Fix", "Epoch", "ReadStats", "read_nmea", "iter_epochs", "epochs_from_bytes",
+           "parse_sentence"]
 
 _TIMED = TIMED_TYPES
 _USED_TYPES = USED_TYPES
@@ -200,6 +201,13 @@ def _opt_num(text: str) -> float | None:
     return float(text) if text else None
 
 
+def _check_options(parser: str, resync_after: int) -> None:
+    if parser not in ("fast", "pynmea2"):
+        raise ConfigError(f"NMEA parser must be 'fast' or 'pynmea2', got {parser!r}")
+    if not isinstance(resync_after, int) or resync_after < 1:
+        raise ConfigError(f"resync_after must be a positive integer, got {resync_after!r}")
+
+
 def iter_epochs(lines: Iterable[bytes | str], stats: ReadStats | None = None, *,
                 parser: Literal["fast", "pynmea2"] = "fast", require_checksum: bool = True,
                 resync_after: int = 5) -> Iterator[Epoch]:
@@ -212,6 +220,7 @@ def iter_epochs(lines: Iterable[bytes | str], stats: ReadStats | None = None, *,
     ``stats`` (a :class:`ReadStats`) is filled in as the lines are consumed.
     """
     stats = ReadStats() if stats is None else stats
+    _check_options(parser, resync_after)
     tokenise = parse_sentence if parser == "fast" else pynmea2_fields
     return _assemble(fields_from_lines(lines, stats, tokenise, require_checksum), stats, resync_after)
 
@@ -389,6 +398,7 @@ def read_nmea(path: str | os.PathLike, *, parser: Literal["fast", "pynmea2"] = "
     reported sky), DataError subclasses only; never a parsing exception.
     """
     path = Path(path)
+    _check_options(parser, resync_after)
     stats = ReadStats()
     try:
         if parser == "fast":
