@@ -288,6 +288,8 @@ def gnss_features(sky: SkyArrays, config: GnssFeatureConfig | None = None,
     if sky.n_epochs == 0:
         return {k: np.zeros(0) for k in names}
     t = sky.t_s
+    if not np.all(np.isfinite(t)) or np.any(np.diff(t) <= 0):
+        raise DataError("GNSS epochs must have finite, strictly increasing t_s")
     with np.errstate(invalid="ignore"):
         view = sky.in_view & (sky.el_deg >= config.elevation_mask_deg)
     tracked = view & np.isfinite(sky.cn0_dbhz)

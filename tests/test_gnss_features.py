@@ -146,6 +146,8 @@ def test_windows_and_missing_values():
     assert all(v.size == 0 for v in empty.values())
     with pytest.raises(ConfigError):
         GnssFeatureConfig(window_s=0.0)
+    with pytest.raises(DataError):
+        gnss_features(_sky([0.0, 0.0], el[:2], az[:2], cn0[:2]))
 
 
 def test_sky_arrays_merge_signals_of_one_satellite():
