@@ -15,9 +15,9 @@ __all__ = ["geodetic_to_enu", "enu_to_geodetic", "ecef_to_enu", "azel_to_unit_en
 def geodetic_to_enu(lat_deg, lon_deg, alt_m, lat0_deg: float, lon0_deg: float, alt0_m: float):
     """Geodetic (WGS-84) to ENU metres about the origin.
 
-    >>> e, n, u = geodetic_to_enu(30.0, 120.0, 10.0, 30.0, 120.0, 10.0)
-    >>> round(float(e), 6), round(float(n), 6), round(float(u), 6)
-    (0.0, 0.0, 0.0)
+    >>> e, n, u = geodetic_to_enu(30.001, 120.0, 10.0, 30.0, 120.0, 10.0)
+    >>> print(f"{float(e):.3f} {float(n):.1f} {float(u):.3f}")
+    0.000 110.9 -0.001
     """
     return pymap3d.geodetic2enu(lat_deg, lon_deg, alt_m, lat0_deg, lon0_deg, alt0_m)
 
