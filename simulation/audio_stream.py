@@ -479,10 +479,21 @@ def render_audio(site: Site, trajectory: Trajectory, seed: int, wav_path,
             counts["rendered"] += 1
             if first_sample >= 0:
                 rows.append((bid, b.slot, t_e, t_a, first_sample, PATH_KINDS[paths.kind[0]], paths.length_m[0],
-                             paths.direct_m, int(paths.los), *rx, best_db, eta))
+                             paths.direct_m, int(paths.los), *rx, _first_path_db_spl(paths, spec, sl_db, renderer),
+                             eta))
         flush_until(float(n_total))
     return AudioResult(true_start_s=true_start, drift_ppm=drift_ppm, n_samples=n_total, n_emissions=len(emissions),
                        n_rendered=counts["rendered"], n_clipped=counts["clipped"], truth_csv=_truth_csv(rows))
+
+
+def _first_path_db_spl(paths: PathSet, spec: ChirpSpec, source_level_db: float, renderer: _Renderer) -> float:
+    """Level of the first path at the band centre: SL + 20·log10(g) − α(f_c)·L − ΔL_Maekawa(f_c), dB SPL."""
+    f_c = 0.5 * (spec.f0_hz + spec.f1_hz)
+    level = (source_level_db + 20.0 * math.log10(max(float(paths.gain[0]), 1e-12))
+             - float(absorption_db_per_m(f_c, renderer.atmosphere)) * float(paths.length_m[0]))
+    if paths.kind[0] == 3:
+        level -= float(maekawa_loss_db(fresnel_number(paths.detour_m[0], f_c, renderer.c)))
+    return level
 
 
 def _truth_csv(rows: list[tuple]) -> str:
@@ -490,7 +501,7 @@ def _truth_csv(rows: list[tuple]) -> str:
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
     w.writerow(["beacon_id", "slot", "emit_t_s", "arrival_t_s", "arrival_sample", "first_path", "first_path_m",
-                "direct_m", "los", "rx_east_m", "rx_north_m", "rx_up_m", "level_db_spl", "doppler"])
+                "direct_m", "los", "rx_east_m", "rx_north_m", "rx_up_m", "first_path_db_spl", "doppler"])
     for r in rows:
         w.writerow([r[0], r[1], f"{r[2]:.9f}", f"{r[3]:.9f}", f"{r[4]:.3f}", r[5], f"{r[6]:.4f}", f"{r[7]:.4f}",
                     r[8], f"{r[9]:.3f}", f"{r[10]:.3f}", f"{r[11]:.3f}", f"{r[12]:.1f}", f"{r[13]:.6f}"])

@@ -68,6 +68,9 @@ def test_los_arrivals_in_the_wav_at_the_true_delay(tmp_path):
         k = int(np.argmax(mf[i0 - 100:i0 + 100])) + i0 - 100
         assert abs(k - s) <= 1.0
         assert 10.0 <= float(r["direct_m"]) <= 25.0
+        dm = float(r["direct_m"])
+        want_level = 100.0 - 20 * math.log10(dm) - float(absorption_db_per_m(20_000.0, site.atmosphere)) * dm
+        assert float(r["first_path_db_spl"]) == pytest.approx(want_level, abs=0.06)   # CSV keeps 0.1 dB
         peaks.setdefault(r["beacon_id"], []).append(mf[k])
     # closed form of the matched-filter peak for a real gain H(f): Σ|C(f)|²·H(f), H = 10^(−α(f)·d/20)/d
     spec = beacon_chirp(site, site.beacons[0])
