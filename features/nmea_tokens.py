@@ -177,7 +177,7 @@ def fields_from_lines(lines: Iterable[bytes | str], stats: ReadStats, tokenise, 
             continue
         for fragment in pieces[1:]:
             if len(pieces) > 2:
-                fragment = fragment.strip()
+                fragment = fragment.rstrip()  # right only: what follows '$' is the sentence, as sent
             if not fragment:
                 continue
             stats.sentences += 1
@@ -197,6 +197,8 @@ for _i, _ch in enumerate(b"0123456789ABCDEF"):
     _HEX[_ch] = _i
 for _i, _ch in enumerate(b"abcdef"):
     _HEX[_ch] = 10 + _i
+_SPACE = np.array([chr(_i).isspace() for _i in range(256)])
+"""Bytes that ``str.strip`` removes from Latin-1 text (includes \\x85 and \\xa0)."""
 
 
 def fields_from_buffer(buf: bytes, stats: ReadStats, require_checksum: bool):
@@ -222,7 +224,7 @@ def fields_from_buffer(buf: bytes, stats: ReadStats, require_checksum: bool):
     # lines whose first character decides their kind: '#' comments, blank lines, no '$' at all
     first = data[np.minimum(line_start, n - 1)]
     comment = np.zeros(line_start.size, dtype=bool)
-    for i in np.flatnonzero(~has_dollar | (first <= 32) | (first == 35)).tolist():
+    for i in np.flatnonzero(~has_dollar | _SPACE[first] | (first == 35)).tolist():
         stripped = text[line_start[i]:line_end[i]].strip()
         if not stripped:
             continue
@@ -240,22 +242,16 @@ def fields_from_buffer(buf: bytes, stats: ReadStats, require_checksum: bool):
     k = np.searchsorted(stars, end, side="left") - 1  # last '*' before the fragment's end
     star = np.where(k >= 0, stars[np.maximum(k, 0)], -1) if stars.size else np.full(dollars.size, -1)
     has_star = star > dollars
-    digits = has_star & (star + 3 <= end)
     g1 = _HEX[data[np.clip(star + 1, 0, n - 1)]]
     g2 = _HEX[data[np.clip(star + 2, 0, n - 1)]]
-    given = np.where(digits & (g1 >= 0) & (g2 >= 0), g1 * 16 + g2, -1)
+    given = np.where(has_star & (g1 >= 0) & (g2 >= 0), g1 * 16 + g2, -1)
     prefix = np.concatenate([[0], np.bitwise_xor.accumulate(data)]).astype(np.int16)
-    ok = digits & (given == (prefix[np.where(has_star, star, 0)] ^ prefix[dollars + 1]))
-    multi = np.zeros(dollars.size, dtype=bool)  # several '$' on one line: fragments are stripped
-    same = line_of[1:] == line_of[:-1]
-    multi[1:] |= same
-    multi[:-1] |= same
-    for d, e, st_, has, dig, good, strip in zip(dollars.tolist(), end.tolist(), star.tolist(), has_star.tolist(),
-                                                digits.tolist(), ok.tolist(), multi.tolist()):
-        fragment = text[d + 1:e]
-        fragment = fragment.strip() if strip else fragment.rstrip()
+    ok = has_star & (given == (prefix[np.where(has_star, star, 0)] ^ prefix[dollars + 1]))
+    for d, e, st_, has, good in zip(dollars.tolist(), end.tolist(), star.tolist(), has_star.tolist(), ok.tolist()):
+        fragment = text[d + 1:e].rstrip()
         if not fragment:
             continue
+        dig = has and st_ + 3 <= d + 1 + len(fragment)  # two characters after '*' before trailing space
         stats.sentences += 1
         head = fragment[:fragment.find(",")] if "," in fragment else fragment
         if _is_unused(head):

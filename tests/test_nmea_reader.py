@@ -362,7 +362,7 @@ _LINES = _real_lines() if GPSD.is_dir() else [_s("GPGGA,120000.00,3000.0,N,12000
 @st.composite
 def _mutated(draw):
     line = draw(st.sampled_from(_LINES))
-    op = draw(st.sampled_from(["flip", "cut", "swap", "dup", "insert"]))
+    op = draw(st.sampled_from(["flip", "cut", "swap", "dup", "insert", "space"]))
     b = bytearray(line.encode("latin-1"))
     if op == "flip" and b:
         i = draw(st.integers(0, len(b) - 1))
@@ -380,6 +380,10 @@ def _mutated(draw):
         i = draw(st.integers(0, len(fields) - 1))
         fields.insert(i, fields[i])
         b = bytearray(",".join(fields).encode("latin-1"))
+    elif op == "space":  # whitespace (str.strip's Latin-1 set) and '$' / '*' / '#' where they hurt
+        i = draw(st.integers(0, len(b)))
+        b[i:i] = draw(st.lists(st.sampled_from([b" ", b"\t", b"\r", b"\xa0", b"\x85", b"$", b"*", b"#"]),
+                               min_size=1, max_size=3).map(b"".join))
     else:
         i = draw(st.integers(0, len(b)))
         b[i:i] = draw(st.binary(min_size=1, max_size=8))
