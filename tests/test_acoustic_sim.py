@@ -263,3 +263,26 @@ def test_paths_are_reciprocal_on_a_generated_site():
         n_nlos += not ab.los
         n_refl += int((ab.kind == 2).sum())
     assert n_nlos >= 5 and n_refl >= 5            # the sample exercised diffraction and reflections
+
+
+def test_documented_reference_chirp_runs_and_matches():
+    """The numpy snippet of docs/beacon_protocol.md §1 builds exactly the transmitted chirp."""
+    import re
+    from pathlib import Path
+    doc = (Path(__file__).resolve().parents[1] / "docs" / "beacon_protocol.md").read_text()
+    snippet = re.search(r"```python\n(.*?)```", doc, re.S).group(1)
+    spec = ChirpSpec(18_000.0, 22_500.0, 0.008, 0.3)
+    env = {"T": spec.duration_s, "fs": 48_000.0, "f0": spec.f0_hz, "f1": spec.f1_hz, "taper": spec.taper_fraction}
+    exec(snippet, env)
+    assert env["s"] == pytest.approx(chirp_waveform(spec, 48_000.0), abs=1e-9)
+
+
+def test_receiver_template_equals_transmitted_chirp():
+    """Interface check with the receiver half: its template is the waveform the simulator transmits."""
+    mf = pytest.importorskip("features.matched_filter")
+    if not hasattr(mf, "chirp_template"):
+        pytest.skip("features.matched_filter has no chirp_template")
+    for f0, f1, dur, taper in ((17_000.0, 23_000.0, 0.010, 0.2), (18_000.0, 21_000.0, 0.02, 0.5)):
+        theirs = mf.chirp_template(mf.ChirpSpec(f0, f1, dur, taper), 48_000)
+        ours = chirp_waveform(ChirpSpec(f0, f1, dur, taper), 48_000.0)
+        assert theirs == pytest.approx(ours, abs=1e-9)
