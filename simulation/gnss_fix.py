@@ -53,6 +53,8 @@ import numpy as np
 from scipy.signal import lfilter
 from scipy.stats import chi2
 
+from features.errors import ConfigError
+
 __all__ = ["FixConfig", "FixResult", "code_sigma_m", "carrier_sigma_m", "klobuchar_obliquity",
            "gauss_markov", "pseudorange_errors", "slip_probability", "solve_fixes", "QUALITY_NONE", "QUALITY_AUTONOMOUS",
            "QUALITY_DGNSS", "QUALITY_RTK_FIXED", "QUALITY_RTK_FLOAT"]
@@ -105,13 +107,13 @@ class FixConfig:
     def __post_init__(self):
         for name, value in vars(self).items():
             if not np.isfinite(value) or value < 0:
-                raise ValueError(f"FixConfig.{name} must be finite and non-negative, got {value!r}")
+                raise ConfigError(f"FixConfig.{name} must be finite and non-negative, got {value!r}")
         if self.ttf_max_s < self.ttf_min_s:
-            raise ValueError(f"FixConfig.ttf_max_s ({self.ttf_max_s}) < ttf_min_s ({self.ttf_min_s})")
+            raise ConfigError(f"FixConfig.ttf_max_s ({self.ttf_max_s}) < ttf_min_s ({self.ttf_min_s})")
         if not 0.0 < self.raim_pfa < 1.0:
-            raise ValueError(f"FixConfig.raim_pfa must lie in (0, 1), got {self.raim_pfa}")
+            raise ConfigError(f"FixConfig.raim_pfa must lie in (0, 1), got {self.raim_pfa}")
         if self.rtk_min_sats < 4 or self.float_min_sats < 4:
-            raise ValueError("FixConfig.rtk_min_sats and float_min_sats must be >= 4")
+            raise ConfigError("FixConfig.rtk_min_sats and float_min_sats must be >= 4")
 
 
 def code_sigma_m(cn0_dbhz, a_m: float = 0.2, b_m_sqrt_hz: float = 47.4) -> np.ndarray:

@@ -47,6 +47,7 @@ import numpy as np
 from scipy.signal import lfilter
 
 from features.constants import GPS_L1_HZ, SPEED_OF_LIGHT_M_S, WGS84_A_M
+from features.errors import ConfigError
 from simulation.geometry import ray_blockers
 
 __all__ = [
@@ -93,21 +94,21 @@ class SignalConfig:
     def __post_init__(self):
         for name, value in vars(self).items():
             if not np.isfinite(value):
-                raise ValueError(f"SignalConfig.{name} must be finite, got {value!r}")
+                raise ConfigError(f"SignalConfig.{name} must be finite, got {value!r}")
         if not self.cn0_low_dbhz < self.cn0_zenith_dbhz:
-            raise ValueError(f"SignalConfig needs cn0_low_dbhz < cn0_zenith_dbhz, got {self.cn0_low_dbhz}, "
+            raise ConfigError(f"SignalConfig needs cn0_low_dbhz < cn0_zenith_dbhz, got {self.cn0_low_dbhz}, "
                              f"{self.cn0_zenith_dbhz}")
         if not 0.0 < self.low_el_deg < 90.0:
-            raise ValueError(f"SignalConfig.low_el_deg must lie in (0, 90), got {self.low_el_deg}")
+            raise ConfigError(f"SignalConfig.low_el_deg must lie in (0, 90), got {self.low_el_deg}")
         if not 0 <= self.nlos_loss_min_db <= self.nlos_loss_max_db:
-            raise ValueError("SignalConfig needs 0 <= nlos_loss_min_db <= nlos_loss_max_db")
+            raise ConfigError("SignalConfig needs 0 <= nlos_loss_min_db <= nlos_loss_max_db")
         if not 0 <= self.porous_loss_min_db <= self.porous_loss_max_db:
-            raise ValueError("SignalConfig needs 0 <= porous_loss_min_db <= porous_loss_max_db")
+            raise ConfigError("SignalConfig needs 0 <= porous_loss_min_db <= porous_loss_max_db")
         if self.track_acquire_dbhz < self.track_lose_dbhz:
-            raise ValueError(f"SignalConfig.track_acquire_dbhz ({self.track_acquire_dbhz}) must be >= "
+            raise ConfigError(f"SignalConfig.track_acquire_dbhz ({self.track_acquire_dbhz}) must be >= "
                              f"track_lose_dbhz ({self.track_lose_dbhz})")
         if self.n_sinusoids < 4 or self.estimator_tau_s <= 0 or self.wavelength_m <= 0:
-            raise ValueError("SignalConfig needs n_sinusoids >= 4, estimator_tau_s > 0, wavelength_m > 0")
+            raise ConfigError("SignalConfig needs n_sinusoids >= 4, estimator_tau_s > 0, wavelength_m > 0")
 
 
 def _slant_range_m(el_rad, orbit_radius_m) -> np.ndarray:

@@ -223,9 +223,9 @@ def test_corrections_option_and_bad_options(tmp_path):
 
 
 def test_config_validation():
-    with pytest.raises(ValueError, match="track_acquire_dbhz"):
+    with pytest.raises(ConfigError, match="track_acquire_dbhz"):
         SignalConfig(track_lose_dbhz=30.0, track_acquire_dbhz=28.0)
-    with pytest.raises(ValueError, match="ttf_max_s"):
+    with pytest.raises(ConfigError, match="ttf_max_s"):
         FixConfig(ttf_min_s=5.0, ttf_max_s=2.0)
     assert gnss_signal.emi_loss_db(np.zeros((1, 2)), ()).tolist() == [0.0]
 
