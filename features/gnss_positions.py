@@ -5,22 +5,25 @@ separation (NMEA 0183 GGA fields 9 and 11; when the separation is empty the
 altitude is taken as ellipsoidal, as receivers without a geoid model report
 it); ENU about the site origin via :mod:`features.geodesy` (pymap3d).
 
-Standard deviation per horizontal axis, σ = k(quality) · HDOP, from the
-classic error budget σ_pos = UERE · DOP (Kaplan & Hegarty, *Understanding
-GPS*, 2nd ed. 2006, §7.3.1, eq. 7.33), with the per-axis share of the
-horizontal error taken as 1/√2 of UERE·HDOP:
+Standard deviation per horizontal axis, σ = UERE(quality) · HDOP / √2, from
+the classic error model σ_position = UERE · DOP (Kaplan & Hegarty,
+*Understanding GPS*, 2nd ed. 2006, ch. 7), the horizontal error split
+equally between east and north. The UERE per fix mode are order-of-magnitude
+values of typical error budgets and receiver datasheets, chosen here, not
+measured: they only seed the fusion filter, whose per-class measurement
+noise is learnt from training walks (DESIGN.md §7).
 
 =======  ==========================  ============  =========================================
-quality  mode (GGA field 6)          UERE (1σ)     reasoning / source
+quality  mode (GGA field 6)          UERE (1σ)     reasoning
 =======  ==========================  ============  =========================================
-1        autonomous (SPS)            4.0 m         single-frequency SPS budget, Kaplan &
-                                                   Hegarty Table 7.4 (≈ 4-5 m with iono)
-2, 9     DGNSS / SBAS                1.0 m         code DGPS at short baselines, ≈ 1 m
-                                                   (Kaplan & Hegarty §8.2; Misra & Enge §5)
-3        PPS                         2.8 m         as autonomous with dual-frequency iono
-4        RTK fixed                   0.03 m        carrier-phase, cm level (Takasu & Yasuda
-                                                   2009, RTKLIB; receiver specs 1 cm + 1 ppm)
-5        RTK float                   0.4 m         float ambiguities, decimetres
+1        autonomous (SPS)            4.0 m         single-frequency code, broadcast
+                                                   ionosphere: metres
+2, 9     DGNSS / SBAS                1.0 m         code corrections from a nearby base or
+                                                   SBAS remove most common-mode error
+3        PPS                         2.8 m         as autonomous, dual-frequency ionosphere
+4        RTK fixed                   0.03 m        carrier phase, integer ambiguities:
+                                                   datasheets quote ≈ 1 cm + 1 ppm
+5        RTK float                   0.4 m         float ambiguities: decimetres
 6        dead reckoning              15 m          estimated, not measured: weak update
 =======  ==========================  ============  =========================================
 
