@@ -51,7 +51,7 @@ SYSTEMS = ("GPS", "SBAS", "GLONASS", "Galileo", "BeiDou", "QZSS", "NavIC")
 """Constellation names used in epochs and JSON output."""
 
 NMEA_SYSTEM_IDS = {1: "GPS", 2: "GLONASS", 3: "Galileo", 4: "BeiDou", 5: "QZSS", 6: "NavIC"}
-"""GNSS system id of NMEA 4.11 GSA/GSV fields (NMEA 0183 v4.11, Table 20)."""
+"""GNSS system id of the NMEA 4.11 GSA/GSV system-id field (also used by u-blox and Quectel)."""
 
 _TALKER_SYSTEM = {
     "GL": "GLONASS", "GA": "Galileo", "GB": "BeiDou", "BD": "BeiDou", "PQ": "BeiDou",
