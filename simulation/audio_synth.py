@@ -16,8 +16,8 @@ of Gaussian amplitude on integer samples, absorbed over the direct distance).
 Ambient sound (:class:`AmbientNoise`), drawn per fixed chunk of samples:
 
 * in-band noise, white Gaussian: the acoustic ambient (``noise_db_spl``) and
-  the recorder's own floor (``device_noise_dbfs``, measured on real phone
-  audio); see :class:`AudioConfig` for the levels' justification;
+  the recorder's own floor (``device_noise_dbfs``, a MEMS datasheet figure,
+  bounded above by real phone audio); see :class:`AudioConfig`;
 * transformer hum (100 Hz and harmonics for a 50 Hz grid, magnetostriction)
   falling 1/r from the nearest tank — far out of band, it only tests the
   receiver's band-pass;
@@ -63,12 +63,17 @@ class AudioConfig:
         2 kHz). An assumed level, not a measurement.
     device_noise_dbfs : the recorder's own noise (microphone, preamp, ADC)
         within ``noise_band_hz``, dB re. full scale squared (mean square of
-        samples scaled to ±1). −63 dB is measured: the median over the five
-        Galaxy S3 recordings in ../shared/data/audio_ultrasense of the Welch
-        PSD in 17–19.5 and 20.5–22 kHz (clear of their 20 kHz tone) times 6 kHz
-        (−62.3 … −63.3 dB). With ``full_scale_db_spl`` = 110 it equals 50 dB SPL
-        at the microphone and dominates the ambient term, which puts the
-        free-field detection range near 47 m (:func:`detection_range_m`).
+        samples scaled to ±1). −85 dB from a datasheet: a MEMS microphone of
+        65 dB(A) SNR at −26 dBFS/94 dB SPL (InvenSense ICS-43434) has a
+        −91 dBFS(A) floor over 20 kHz, ≈ −96 dBFS within the 6 kHz band,
+        −86 dB after 10 dB of gain (28 dB SPL equivalent, below the ambient).
+        Upper bound from real audio: the five Galaxy S3 recordings in
+        ../shared/data/audio_ultrasense show −63 dB (median Welch PSD over
+        17–19.5 and 20.5–22 kHz × 6 kHz; −62.3 … −63.3 dB), but they were made
+        while the phone's own speaker played a 20 kHz tone at −20 … −24 dB re.
+        full scale², 40 dB above that floor, so the emitting chain's noise is
+        in it. Set −63 to stress the receiver: detection range falls from
+        ≈ 70 m to ≈ 47 m (:func:`detection_range_m`).
     full_scale_db_spl : SPL of a full-scale sine (RMS): 110 dB, i.e. a 120 dB
         SPL AOP microphone with 10 dB of recording gain.
     start_s, start_uncertainty_s : the stated audio start on the walk's time
@@ -88,7 +93,7 @@ class AudioConfig:
 
     fs_hz: int = 48_000
     noise_db_spl: float = 35.0
-    device_noise_dbfs: float = -63.0
+    device_noise_dbfs: float = -85.0
     noise_band_hz: tuple[float, float] = (17_000.0, 23_000.0)
     full_scale_db_spl: float = 110.0
     start_s: float = 0.0

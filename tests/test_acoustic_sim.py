@@ -220,25 +220,29 @@ def test_detection_range_and_slot_reuse_of_generated_sites():
     """Slot-mates must be ≥ 2 × detection range apart to be unambiguous everywhere.
 
     Link budget: 100 dB SPL at 1 m, T·B = 60, 12 dB detection threshold,
-    20 °C / 60 %. With the default in-band noise (measured phone floor, 50 dB
-    SPL equivalent) the free-field range is ≈ 47 m and the generator's 100 m
-    reuse distance suffices; a quieter recorder limited by 35 dB SPL of ambient
-    noise hears beacons to ≈ 73 m and would need ≈ 146 m.
+    20 °C / 60 %. With the default in-band noise (35 dB SPL ambient + a MEMS
+    floor, 35.8 dB SPL) the free-field range is ≈ 70 m, so ≈ 141 m of reuse
+    distance would be needed; the generator's 100 m leaves a band between
+    slot-mates where both are heard. Only with the noisy phone floor measured on
+    real audio (50 dB SPL, range ≈ 47 m) does 100 m suffice.
     """
     from simulation.audio_stream import AudioConfig
     spec = ChirpSpec(17_000.0, 23_000.0, 0.010, 0.2)
     r_default = detection_range_m(100.0, AudioConfig().inband_noise_db_spl, spec, Atmosphere())
-    r_quiet = detection_range_m(100.0, 35.0, spec, Atmosphere())
-    assert r_default == pytest.approx(47.3, abs=1.0)
-    assert r_quiet == pytest.approx(73.0, abs=2.0)
+    r_noisy = detection_range_m(100.0, AudioConfig(device_noise_dbfs=-63.0).inband_noise_db_spl, spec, Atmosphere())
+    assert r_default == pytest.approx(70.5, abs=1.0)
+    assert r_noisy == pytest.approx(47.3, abs=1.0)
     layout = pytest.importorskip("simulation.layout")
     cfg = layout.LayoutConfig()
-    assert cfg.reuse_distance_m >= 2.0 * r_default
+    assert 2.0 * r_noisy <= cfg.reuse_distance_m < 2.0 * r_default
+    n_ambiguous = 0
     for seed in (1, 2, 3):
         site = layout.generate_site(seed)
         assert slot_reuse_conflicts(site, cfg.reuse_distance_m) == []         # the generator keeps its promise
-        ambiguous = slot_reuse_conflicts(site, 2.0 * r_quiet)
-        assert all(cfg.reuse_distance_m <= d < 2.0 * r_quiet for _, _, d in ambiguous)
+        ambiguous = slot_reuse_conflicts(site, 2.0 * r_default)
+        assert all(cfg.reuse_distance_m <= d < 2.0 * r_default for _, _, d in ambiguous)
+        n_ambiguous += len(ambiguous)
+    assert n_ambiguous > 0            # the finding: slot-mates that a receiver somewhere hears together
 
 
 def test_paths_are_reciprocal_on_a_generated_site():
