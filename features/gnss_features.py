@@ -7,8 +7,13 @@ elevation mask (default 10°):
    attenuation = max(0, C_ref(el) − C/N0) (Xue, Han & Wang 2023, §2.1);
 2. ``att_std_db`` σ — its (population) standard deviation;
 3. ``fluct_per_s`` β — local extrema of each tracked satellite's C/N0 series
-   whose swing from the previous extremum is ≥ 1 dB-Hz, per second, averaged
-   over the satellites tracked in the window;
+   whose swing from the previous extremum is ≥ 2 dB-Hz, per second, averaged
+   over the satellites tracked in the window. DESIGN.md says 1 dB-Hz, but NMEA
+   reports C/N0 in whole dB-Hz, so a 1 dB-Hz swing is a single quantisation
+   step: it counts the estimator flicker of strong line-of-sight signals and
+   the feature then orders the classes backwards (open > heavy on simulated
+   surveys). 2 dB-Hz, the smallest swing above one step, restores
+   heavy > light > open; ``fluct_threshold_dbhz`` sets it;
 4. ``invisible_ratio`` ζ — in-view-but-untracked (satellite, epoch) pairs over
    all in-view pairs;
 5. ``dop_growth`` λ — HDOP of the tracked satellites over HDOP of all in-view
@@ -65,7 +70,7 @@ class GnssFeatureConfig:
     window_s: float = 2.0
     hop_s: float = 1.0
     elevation_mask_deg: float = ELEVATION_MASK_DEG
-    fluct_threshold_dbhz: float = 1.0
+    fluct_threshold_dbhz: float = 2.0  # not DESIGN's 1.0: see the module docstring (integer C/N0)
     dop_growth_cap: float = 10.0
 
     def __post_init__(self):

@@ -39,8 +39,8 @@ def register(sub) -> None:
     p.add_argument("--window-s", type=_positive, default=2.0, help="window length, s (default 2)")
     p.add_argument("--hop-s", type=_positive, default=1.0, help="window hop, s (default 1)")
     p.add_argument("--elevation-mask-deg", type=float, default=10.0, help="elevation mask, degrees (default 10)")
-    p.add_argument("--fluct-threshold-dbhz", type=_positive, default=1.0,
-                   help="smallest C/N0 swing counted as a fluctuation, dB-Hz (default 1)")
+    p.add_argument("--fluct-threshold-dbhz", type=_positive, default=2.0,
+                   help="smallest C/N0 swing counted as a fluctuation, dB-Hz (default 2: NMEA C/N0 is in whole dB-Hz)")
     p.add_argument("--cn0-reference", type=Path, default=None,
                    help="JSON file with a fitted C_ref model {intercept_dbhz, slope_dbhz} (default: built-in)")
     p.add_argument("--fit-cn0-reference", type=Path, default=None, metavar="JSON",
