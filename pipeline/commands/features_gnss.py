@@ -35,7 +35,7 @@ def register(sub) -> None:
                "--epochs epochs.jsonl --positions fixes.csv")
     p.add_argument("nmea", type=Path, help="NMEA 0183 file")
     p.add_argument("--out", type=Path, required=True, help="feature CSV, one row per window")
-    p.add_argument("--site", type=Path, default=None, help="site directory or site.toml (needed for --positions)")
+    p.add_argument("--site", type=Path, default=None, help="site directory or site.toml (for --positions; default: the site named by walk.toml beside the file)")
     p.add_argument("--window-s", type=_positive, default=2.0, help="window length, s (default 2)")
     p.add_argument("--hop-s", type=_positive, default=1.0, help="window hop, s (default 1)")
     p.add_argument("--elevation-mask-deg", type=float, default=10.0, help="elevation mask, degrees (default 10)")
@@ -46,7 +46,8 @@ def register(sub) -> None:
     p.add_argument("--fit-cn0-reference", type=Path, default=None, metavar="JSON",
                    help="fit C_ref(el) to this file's tracked satellites (use an open-sky log) and write it as JSON")
     p.add_argument("--start-utc", default=None,
-                   help="t_s origin, ISO 8601 UTC (e.g. the walk's start_utc); default: the first epoch")
+                   help="t_s origin, ISO 8601 UTC; default: start_utc of the walk.toml/cell.toml beside the file, "
+                        "else the first epoch")
     p.add_argument("--epochs", type=Path, default=None, help="also write each decoded epoch as a JSON line")
     p.add_argument("--positions", type=Path, default=None, help="also write fixes in site ENU with sigma (CSV)")
     p.set_defaults(func=_run)
@@ -65,6 +66,15 @@ def _csv(columns: dict, names) -> str:
     for row in zip(*arrays):
         buf.write(",".join(_fmt(v.item() if hasattr(v, "item") else v) for v in row) + "\n")
     return buf.getvalue()
+
+
+def _walk_beside(nmea: Path):
+    """The walk.toml / cell.toml in the NMEA file's directory, if any (its start time and site)."""
+    from features.walk import load_walk
+    d = Path(nmea).parent
+    if (d / "walk.toml").is_file() or (d / "cell.toml").is_file():
+        return load_walk(d)
+    return None
 
 
 def _t_shift(epochs, start_utc: str | None) -> float:
@@ -104,9 +114,14 @@ def _run(args) -> int:
     if args.site is not None:
         from features.site import load_site
         site = load_site(args.site)
-    elif args.positions is not None:
+    elif args.positions is not None and (_walk_beside(args.nmea) is None or _walk_beside(args.nmea).site_ref is None):
         raise ConfigError("--positions needs --site (the ENU origin)")
 
+    walk = _walk_beside(args.nmea)
+    if args.start_utc is None and walk is not None:
+        args.start_utc = walk.start_utc.isoformat()  # t_s on the walk's time base
+    if site is None and walk is not None and walk.site_ref is not None and args.positions is not None:
+        site = walk.load_site()
     epochs, stats = read_nmea(args.nmea)
     shift = _t_shift(epochs, args.start_utc)
     if shift:
