@@ -32,9 +32,13 @@ cells; requiring a false-alarm probability ``p_fa`` per window gives
 (union bound). With the defaults (p_fa = 1e-6, W ≈ 0.1 s, B = 6 kHz) γ ≈ 6.4σ,
 16 dB above the noise scale: about one false chirp per 300 hours of audio.
 
-A detected chirp's CIR is the full-rate envelope from ``max_lead_s`` before
-the strongest tap to ``cir_span_s`` after it; :func:`features.cir.analyse_cir`
-finds the first arrival and the nine features.
+A detected chirp's CIR spans ``max_lead_s`` before to ``cir_span_s`` (15 ms,
+5 m of excess path) after the located arrival; :func:`features.cir.analyse_cirs`
+finds the first arrival and the nine features. The span is short on purpose:
+slots are 0.1 s apart but ranges differ by tens of metres, so a 30 ms span
+often takes in another beacon's chirp, which in open areas (many audible
+beacons) inflated the mean excess delay above that of heavy cells (simulated
+survey, 94 cells: 4.1 vs 3.6 ms with 30 ms; 1.0 vs 2.6 ms with 15 ms).
 """
 
 from __future__ import annotations
@@ -62,6 +66,8 @@ __all__ = ["AudioTiming", "DetectorConfig", "ChirpDetection", "FrameResult", "Au
 _EPOCH = datetime(1970, 1, 1, tzinfo=timezone.utc)
 _SIDELOBE_GUARD = 10 ** (25 / 20)
 """A maximum this much (25 dB) weaker than a neighbour within one chirp length is a sidelobe."""
+_ECHO_SPAN_S = 0.015
+"""Acquisition ignores maxima this soon after a stronger one (its echoes and diffuse tail), s."""
 _RAYLEIGH_Q25 = math.sqrt(-2.0 * math.log(0.75))
 """25th percentile of a unit-scale Rayleigh variable."""
 
@@ -120,7 +126,7 @@ class DetectorConfig:
 
     p_fa: float = 1e-6
     max_range_m: float | None = None
-    cir_span_s: float = 0.030
+    cir_span_s: float = 0.015
     max_lead_s: float = 0.0025
     block_s: float = 4.0
     fs_hz: int = AUDIO_FS_HZ
@@ -246,7 +252,8 @@ class _Tracker:
     ``[tx − u, tx + u + min(r_max/c, slot_s)]``. Neighbouring windows overlap
     when ``u`` is large or a beacon is far, so a fix from acquisition is
     trusted only when at least five beacons pass the residual test (two
-    degrees of freedom left for it).
+    degrees of freedom left for it), or when two consecutive frames give
+    agreeing four-beacon fixes.
 
     Tracking (a fix at most ``track_timeout_s`` old): the window is centred on
     the arrival predicted from the last fix, ``tx + ‖p − s_b‖/c + δ``, with a
@@ -270,6 +277,7 @@ class _Tracker:
         self.positions = positions
         self.order = sorted(range(len(site.beacons)), key=lambda i: (site.beacons[i].slot, site.beacons[i].id))
         self.last_fix: AcousticFix | None = None
+        self._pending: AcousticFix | None = None
 
     @property
     def grid_step_m(self) -> float:
@@ -323,7 +331,8 @@ class _Tracker:
         15(1)); ties go to the smallest δ, since echoes agree with each other
         too, only later. The vote runs on a 4 m grid, then on a 1 m grid round
         the best coarse points. Each beacon keeps its earliest candidate within
-        ``tol`` after the winning δ. Returns beacon index → chosen arrival time.
+        ``tol`` of the median δ of the winning group, and :meth:`_refine`
+        re-associates after a least-squares fix. Returns beacon index → arrival time.
         """
         items = [(i, tx, t) for i, (tx, times) in candidates.items() for t in times]
         if len({i for i, _, _ in items}) < 3:
@@ -336,7 +345,8 @@ class _Tracker:
         coarse = 4.0 * self.grid_step_m
         ee, nn = np.meshgrid(np.arange(g.east_min_m, g.east_max_m + coarse, coarse),
                              np.arange(g.north_min_m, g.north_max_m + coarse, coarse))
-        hyps = self._vote(ee.ravel(), nn.ravel(), bi, rho, bpos, coarse * math.sqrt(2.0) / self.c + 5e-4)
+        arrivals = np.array([t for _, _, t in items])
+        hyps = self._vote(ee.ravel(), nn.ravel(), bi, rho, bpos, coarse * math.sqrt(2.0) / self.c + 5e-4, arrivals)
         if not hyps:
             return {}
         fine = self.grid_step_m
@@ -344,23 +354,43 @@ class _Tracker:
         oe, on = np.meshgrid(offsets, offsets)
         seeds = []
         for h in hyps:
-            if h[2] not in [s[2] for s in seeds]:
-                seeds.append(h)
-            if len(seeds) == 5:
+            if h[0] >= 3 and h[2] not in seeds:
+                seeds.append(h[2])
+            if len(seeds) == 30:
                 break
-        pe = np.concatenate([s[2][0] + oe.ravel() for s in seeds])
-        pn = np.concatenate([s[2][1] + on.ravel() for s in seeds])
-        hyps = self._vote(pe, pn, bi, rho, bpos, self.tolerance_s)
-        if not hyps or hyps[0][0] < 3:
+        if not seeds:
             return {}
-        _, d0, point, _ = hyps[0]
+        pe = np.concatenate([s[0] + oe.ravel() for s in seeds])
+        pn = np.concatenate([s[1] + on.ravel() for s in seeds])
+        hyps = self._vote(pe, pn, bi, rho, bpos, self.tolerance_s, arrivals, n_best=400)
+        # Verify the best distinct hypotheses by least squares (RANSAC-style, Fischler & Bolles
+        # 1981): the one whose fix keeps the most beacons, then the smallest residual, wins.
+        best, best_key, tried = {}, None, []
+        for n, _, point, member_delta in hyps:
+            if n < 3 or len(tried) >= 20:
+                break
+            d0 = float(np.median(member_delta))
+            if any(abs(point[0] - p[0]) < 2 and abs(point[1] - p[1]) < 2 and abs(d0 - q) < 2e-3 for p, q in tried):
+                continue
+            tried.append((point, d0))
+            kept = self._associate(point, d0, bi, rho, bpos, items)
+            refined, fix = self._refine(kept, candidates)
+            if fix is None:
+                continue
+            key = (fix.n_beacons, -fix.rms_residual_m)
+            if best_key is None or key > best_key:
+                best, best_key = refined, key
+        return best
+
+    def _associate(self, point, d0, bi, rho, bpos, items) -> dict:
+        """Each beacon's earliest candidate within ``tol`` of δ = d0 at ``point``; one arrival, one beacon."""
         r = np.sqrt((point[0] - bpos[:, 0]) ** 2 + (point[1] - bpos[:, 1]) ** 2
                     + (self.site.device_height_m - bpos[:, 2]) ** 2)
         delta = (rho - r) / self.c
         chosen = {}
         for k, i in enumerate(bi):
             # Within the tolerance, the earliest candidate: echoes come later.
-            if d0 - 1e-9 <= delta[k] <= d0 + self.tolerance_s and (i not in chosen or items[k][2] < chosen[i][0]):
+            if abs(delta[k] - d0) <= self.tolerance_s and (i not in chosen or items[k][2] < chosen[i][0]):
                 chosen[i] = (items[k][2], abs(delta[k] - d0))
         # One arrival belongs to one beacon: where two beacons took the same arrival (within
         # 1 ms), the one whose δ fits the vote better keeps it.
@@ -370,13 +400,40 @@ class _Tracker:
                 kept[i] = t
         return kept
 
-    def _vote(self, pe, pn, bi, rho, bpos, tol, n_best: int = 200) -> list:
-        """Hypotheses (distinct beacons, δ, (east, north), anchor) sorted best first.
+    def _refine(self, kept: dict, candidates: dict):
+        """Least-squares refinement of a voted association, then re-association: (association, fix).
+
+        The vote's grid leaves each beacon's δ off by up to the tolerance, so an
+        echo 4 ms late can pass for the first path. A Gauss-Newton fix (with
+        exclusion) on the voted arrivals gives position and δ to centimetres;
+        each beacon then takes the candidate nearest its predicted arrival,
+        within 1.5 ms. Without a fix (fewer than four beacons, or none
+        plausible) the association is returned with ``None``.
+        """
+        b = self.site.beacons
+        ranges = [BeaconRange(b[i].id, b[i].east_m, b[i].north_m, b[i].up_m, self.c * (t - candidates[i][0]), 0.05, t)
+                  for i, t in kept.items()]
+        fix = solve_position(ranges, self.site, self.c, self.positions) if len(ranges) >= 4 else None
+        if fix is None or fix.n_beacons < 4:
+            return kept, None
+        out = {}
+        for i, (tx, times) in candidates.items():
+            pred = tx + math.dist((fix.east_m, fix.north_m, self.site.device_height_m),
+                                  (b[i].east_m, b[i].north_m, b[i].up_m)) / self.c + fix.clock_offset_s
+            t_best = min(times, key=lambda t: abs(t - pred))
+            if abs(t_best - pred) <= 1.5e-3:
+                out[i] = t_best
+        return (out if len(out) >= fix.n_beacons else kept), fix
+
+    def _vote(self, pe, pn, bi, rho, bpos, tol, arrivals, n_best: int = 200) -> list:
+        """Hypotheses (distinct beacons, anchor δ, (east, north), δ of the agreeing) best first.
 
         Candidates agreeing with an anchor's δ within [δ, δ + tol] are counted
         for all (point, anchor) pairs at once — each row sorted, then one global
         searchsorted on rows offset far apart — and the ``n_best`` largest counts
-        are recounted as distinct beacons (a beacon's echoes must not vote twice).
+        are recounted as distinct beacons (a beacon's echoes must not vote twice)
+        using distinct arrivals (one arrival heard in several beacons' windows
+        must not vote for each of them).
         """
         r = np.sqrt((pe[:, None] - bpos[None, :, 0]) ** 2 + (pn[:, None] - bpos[None, :, 1]) ** 2
                     + (self.site.device_height_m - bpos[None, :, 2]) ** 2)
@@ -393,10 +450,11 @@ class _Tracker:
         for f in top:
             row, k = divmod(int(f), n_cand)
             members = order[row, k: k + int(count[f])]
-            hyps.append((len(set(bi[members].tolist())), float(sorted_delta[row, k]),
-                         (float(pe[row]), float(pn[row])), int(order[row, k])))
+            # Distinct beacons, but one physical arrival cannot serve two beacons.
+            n_distinct = min(len(set(bi[members].tolist())), len(set(np.round(arrivals[members], 4).tolist())))
+            hyps.append((n_distinct, float(sorted_delta[row, k]), row, members))
         hyps.sort(key=lambda h: (-h[0], h[1]))
-        return hyps
+        return [(n, d, (float(pe[row]), float(pn[row])), delta[row, members]) for n, d, row, members in hyps]
 
     def frame_done(self, frame_start_s: float, detections: list[ChirpDetection],
                    bandwidth: dict) -> AcousticFix | None:
@@ -405,12 +463,22 @@ class _Tracker:
                         self.last_fix if tracking else None)
         if fix is None:
             return None
-        # Acquisition locks only on a fix whose residuals were tested with two or more
-        # degrees of freedom; tracking follows fixes tested with at least one.
-        if fix.n_beacons >= (4 if tracking else self.acquisition_min_beacons):
+        if tracking:
+            # Tracking follows fixes whose residuals were tested (one degree of freedom or more).
+            if fix.n_beacons >= 4:
+                self.last_fix = fix
+            return fix
+        # Acquisition locks at once on a fix tested with two or more degrees of freedom, or on
+        # two consecutive four-beacon fixes that agree (M-of-N confirmation).
+        confirmed = (self._pending is not None and fix.n_beacons >= 4
+                     and math.hypot(fix.east_m - self._pending.east_m, fix.north_m - self._pending.north_m)
+                     <= 1.0 + self.max_speed_m_s * (fix.t_s - self._pending.t_s)
+                     and abs(fix.clock_offset_s - self._pending.clock_offset_s) <= 1e-3)
+        self._pending = fix if fix.n_beacons >= 4 else None
+        if fix.n_beacons >= self.acquisition_min_beacons or confirmed:
             self.last_fix = fix
             return fix
-        return fix if tracking else None
+        return None
 
 
 def frame_fix(detections: list[ChirpDetection], site: Site, c: float, bandwidth: dict,
@@ -597,19 +665,22 @@ def detect_frames(path: str | os.PathLike, site: Site, timing: AudioTiming,
                                           w.associated))
         return out
 
-    def candidates(w: _Window, sigma: float, max_candidates: int = 10) -> list[float]:
-        """Stated arrival times of the strongest envelope maxima above γ in ``w`` (acquisition)."""
+    def candidates(w: _Window, sigma: float, max_candidates: int = 12) -> list[float]:
+        """Stated arrival times of candidate first arrivals in ``w`` (acquisition).
+
+        Maxima within ``_ECHO_SPAN_S`` after a stronger one are taken for its echoes
+        and tail and left out, so that weak arrivals of far beacons, separate in
+        time, are not crowded out by the echoes of near ones; of the rest, the
+        strongest ``max_candidates``.
+        """
         starts, heights = peaks(w, sigma)
-        # Strongest first, at least 2 ms apart.
-        keep = []
-        spacing = 0.002 * fs
-        for k in np.argsort(heights)[::-1]:
-            if all(abs(starts[k] - starts[q]) > spacing for q in keep):
-                keep.append(k)
-            if len(keep) == max_candidates:
-                break
-        top = starts[keep]
-        return [timing.start_s + float(x) / fs for x in top]
+        if len(starts) == 0:
+            return []
+        lag = starts[None, :] - starts[:, None]          # [i, j]: j after i
+        shadowed = np.any((lag > 0) & (lag <= _ECHO_SPAN_S * fs) & (heights[:, None] > heights[None, :]), axis=0)
+        keep = np.flatnonzero(~shadowed)
+        keep = keep[np.argsort(heights[keep])[::-1][:max_candidates]]
+        return [timing.start_s + float(x) / fs for x in starts[keep]]
 
     frame_s = site.acoustic.frame_s
     u = timing.start_uncertainty_s
@@ -629,7 +700,9 @@ def detect_frames(path: str | os.PathLike, site: Site, timing: AudioTiming,
                 windows = _acquisition_windows(
                     windows, lambda w: candidates(w, sigmas[template_of[w.beacon_index]]), tracker, timing, fs, lead)
             found = []
-            for w in windows:
+            # Associated windows first: an arrival belongs to its beacon before it can be
+            # claimed, for features only, by an unassociated window that also contains it.
+            for w in sorted(windows, key=lambda w: not w.associated):
                 s_peak = locate(w, sigmas[template_of[w.beacon_index]])
                 # One physical arrival is one chirp, even where windows overlap.
                 if s_peak is not None and all(abs(s_peak - f) > 0.001 * fs for _, f in found):

@@ -28,7 +28,7 @@ def survey(tmp_path_factory):
     root = tmp_path_factory.mktemp("survey")
     assert main(["simulate", "site", "--seed", "3", "--out", str(root / "site")]) == 0
     assert main(["simulate", "survey", str(root / "site"), "--out", str(root / "survey"), "--cell-size", "20",
-                 "--capture-s", "4", "--seed", "1"]) == 0
+                 "--capture-s", "6", "--seed", "1"]) == 0
     return root / "survey"
 
 

@@ -1,0 +1,144 @@
+"""Acoustic receiver speed and memory: audio seconds processed per wall second, one core.
+
+Generates synthetic recordings (8 beacons round a 30 m square, a static receiver
+10–25 m from all of them, two echoes per arrival, white noise; written block by
+block so generation stays flat too), then times
+
+* the streaming matched filter alone (decimated batched overlap-save), against
+  ``scipy.signal.correlate(method="fft")`` and ``scipy.signal.oaconvolve`` of
+  the same kernel over the same samples (full rate, whole file in memory);
+* the whole receiver, ``features.acoustic_features.analyse_audio``: reading,
+  matched filter, detection, CIR features per window and positions per frame;
+
+and the peak resident memory of the receiver on files of 1, 5 and 10 minutes,
+each in its own process (``resource.getrusage(RUSAGE_SELF).ru_maxrss``).
+
+Run: ``.venv/bin/python bench/bench_audio.py`` (prints a table; no assertions).
+"""
+
+from __future__ import annotations
+
+import os
+
+for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ[_var] = "1"          # one core, set before numpy loads
+
+import json
+import math
+import resource
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+import numpy as np
+import scipy.signal
+import soundfile as sf
+
+from features.acoustic_features import analyse_audio
+from features.chirp_detection import AudioTiming, DetectorConfig
+from features.matched_filter import ChirpSpec, MatchedFilterBank, StreamingMatchedFilter, chirp_template
+from features.site import AcousticConfig, Beacon, Grid, Origin, Site
+
+FS = 48_000
+C = 331.3 * math.sqrt(1 + 20 / 273.15)
+
+
+def ring_site() -> Site:
+    pts = [(0, 0), (15, 0), (30, 0), (30, 15), (30, 30), (15, 30), (0, 30), (0, 15)]
+    beacons = tuple(Beacon(id=i + 1, east_m=float(e), north_m=float(n), up_m=3.0, slot=i)
+                    for i, (e, n) in enumerate(pts))
+    return Site(name="bench", origin=Origin(31.0, 118.0), grid=Grid(5.0, -5.0, 35.0, -5.0, 35.0),
+                acoustic=AcousticConfig(n_slots=8), beacons=beacons)
+
+
+def write_recording(path: Path, minutes: float, seed: int = 0) -> None:
+    """A static receiver at (13, 17): one 8 s pattern of chirps repeated, fresh noise per block."""
+    site = ring_site()
+    rng = np.random.default_rng(seed)
+    block_n = int(10 * site.acoustic.frame_s * FS)
+    pattern = np.zeros(block_n + FS)
+    spec = ChirpSpec(17_000.0, 23_000.0, 0.010, 0.2)
+    s = chirp_template(spec, FS)
+    for k in range(10):
+        for b in site.beacons:
+            d = math.dist((13.0, 17.0, 1.0), (b.east_m, b.north_m, b.up_m))
+            for extra_s, g in ((0.0, 1.0), (0.004, 0.35), (0.012, 0.2)):
+                t = k * site.acoustic.frame_s + b.slot * site.acoustic.slot_s + d / C + 0.007 + extra_s
+                n0 = int(round(t * FS))
+                pattern[n0: n0 + len(s)] += g * 2.0 / d * s
+    pattern[:FS] += pattern[block_n:]          # chirps spilling past the block wrap round (periodic)
+    pattern = pattern[:block_n]
+    total = int(minutes * 60 * FS)
+    with sf.SoundFile(str(path), "w", FS, 1, subtype="PCM_16") as fh:
+        done = 0
+        while done < total:
+            n = min(block_n, total - done)
+            x = pattern[:n] + rng.normal(0, 0.003, n)
+            fh.write(np.clip(x, -1, 0.9999))
+            done += n
+
+
+def receiver(path: Path) -> tuple[float, float, int, int]:
+    """(audio s, wall s, windows, fixes) of one full receiver run."""
+    site = ring_site()
+    t0 = time.perf_counter()
+    res = analyse_audio(path, site, AudioTiming(0.0, 0.02, 0.0), DetectorConfig())
+    return res.duration_s, time.perf_counter() - t0, len(res.rows), len(res.fixes)
+
+
+def child(path: str) -> None:
+    dur, wall, n_rows, n_fix = receiver(Path(path))
+    peak_kib = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    print(json.dumps({"audio_s": dur, "wall_s": wall, "rows": n_rows, "fixes": n_fix, "peak_mib": peak_kib / 1024}))
+
+
+def matched_filter_rates(path: Path) -> dict:
+    x, _ = sf.read(str(path), dtype="int16")
+    x = x.astype(np.float32) / 32768
+    bank = MatchedFilterBank([ChirpSpec(17_000.0, 23_000.0, 0.010, 0.2)], FS)
+    h = bank.kernels[0].astype(np.float32)
+    out = {}
+    mf = StreamingMatchedFilter(bank)
+    t0 = time.perf_counter()
+    for i in range(0, len(x), 4 * FS):
+        mf.process(x[i: i + 4 * FS])
+    out["streaming decimated overlap-save (envelope)"] = len(x) / FS / (time.perf_counter() - t0)
+    t0 = time.perf_counter()
+    scipy.signal.oaconvolve(x, h)
+    out["scipy oaconvolve (real output only)"] = len(x) / FS / (time.perf_counter() - t0)
+    t0 = time.perf_counter()
+    scipy.signal.correlate(x, h[::-1], method="fft")
+    out["scipy correlate fft (real output only)"] = len(x) / FS / (time.perf_counter() - t0)
+    return out
+
+
+def main() -> None:
+    if len(sys.argv) == 3 and sys.argv[1] == "--child":
+        child(sys.argv[2])
+        return
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp = Path(tmp)
+        files = {}
+        for minutes in (1, 5, 10):
+            files[minutes] = tmp / f"rec_{minutes}min.wav"
+            write_recording(files[minutes], minutes)
+        print("matched filter alone, 1-min file, one core (x real time):")
+        for name, rate in matched_filter_rates(files[1]).items():
+            print(f"  {name:48s} {rate:8.0f}x")
+        print("\nfull receiver (read, matched filter, detection, CIR features, positions), one core:")
+        print(f"  {'file':>8s} {'audio s':>8s} {'wall s':>8s} {'x real time':>12s} {'windows':>8s} {'fixes':>6s} "
+              f"{'peak RSS MiB':>13s}")
+        for minutes, path in files.items():
+            run = subprocess.run([sys.executable, __file__, "--child", str(path)], capture_output=True, text=True,
+                                 check=True)
+            r = json.loads(run.stdout.strip().splitlines()[-1])
+            print(f"  {minutes:>5d}min {r['audio_s']:8.0f} {r['wall_s']:8.2f} {r['audio_s'] / r['wall_s']:12.0f} "
+                  f"{r['rows']:8d} {r['fixes']:6d} {r['peak_mib']:13.1f}")
+
+
+if __name__ == "__main__":
+    main()
