@@ -43,6 +43,7 @@ survey, 94 cells: 4.1 vs 3.6 ms with 30 ms; 1.0 vs 2.6 ms with 15 ms).
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import os
 from dataclasses import dataclass
@@ -456,18 +457,35 @@ class _Tracker:
         hyps.sort(key=lambda h: (-h[0], h[1]))
         return [(n, d, (float(pe[row]), float(pn[row])), delta[row, members]) for n, d, row, members in hyps]
 
+    def _clock_plausible(self, fix: AcousticFix) -> bool:
+        """|δ| within the stated start uncertainty, plus 5 ms and the drift allowed since the start."""
+        bound = self.timing.start_uncertainty_s + 5e-3 + self.max_drift_ppm * 1e-6 * abs(fix.t_s - self.timing.start_s)
+        return abs(fix.clock_offset_s) <= bound
+
     def frame_done(self, frame_start_s: float, detections: list[ChirpDetection],
                    bandwidth: dict) -> AcousticFix | None:
         tracking = self.tracking_at(frame_start_s)
         fix = frame_fix(detections, self.site, self.c, bandwidth, self.positions,
                         self.last_fix if tracking else None)
-        if fix is None:
+        if fix is None or not self._clock_plausible(fix):
             return None
         if tracking:
-            # Tracking follows fixes whose residuals were tested (one degree of freedom or more).
+            # A tracked fix must continue the track: clock offset and position within what
+            # drift and walking allow since the last fix. Tracking follows fixes whose
+            # residuals were tested (four beacons or more); an exactly determined
+            # three-beacon fix is reported only when nothing was excluded to reach it.
+            last = self.last_fix
+            dt = max(0.0, fix.t_s - last.t_s)
+            clock_ok = abs(fix.clock_offset_s - last.clock_offset_s) <= (
+                3.0 * math.sqrt(max(last.covariance[2, 2], 0.0)) + self.max_drift_ppm * 1e-6 * dt + 1e-3)
+            moved_ok = math.hypot(fix.east_m - last.east_m, fix.north_m - last.north_m) <= (
+                3.0 * math.sqrt(max(last.covariance[0, 0], last.covariance[1, 1], 0.0)) + self.max_speed_m_s * dt + 1.0)
+            if not (clock_ok and moved_ok):
+                return None
             if fix.n_beacons >= 4:
                 self.last_fix = fix
-            return fix
+                return fix
+            return fix if not fix.rejected_ids else None
         # Acquisition locks at once on a fix tested with two or more degrees of freedom, or on
         # two consecutive four-beacon fixes that agree (M-of-N confirmation).
         confirmed = (self._pending is not None and fix.n_beacons >= 4
@@ -491,6 +509,11 @@ def frame_fix(detections: list[ChirpDetection], site: Site, c: float, bandwidth:
               for d in detections if d.associated]
     if len(ranges) < 3:
         return None
+    if config.motion_speed_m_s > 0:
+        # Walking during the frame: σᵢ² += ½·(v·(tᵢ − t̄))² (see PositionConfig).
+        t_mean = float(np.mean([r.arrival_s for r in ranges]))
+        ranges = [dataclasses.replace(r, sigma_m=math.sqrt(r.sigma_m ** 2 + 0.5 * (
+            config.motion_speed_m_s * (r.arrival_s - t_mean)) ** 2)) for r in ranges]
     x0 = None if start is None else np.array([start.east_m, start.north_m, start.clock_offset_s])
     return solve_position(ranges, site, c, config, x0)
 
