@@ -77,8 +77,11 @@ class PositionConfig:
     max_clock_offset_s: float | None = None
     bounds_margin_m: float = 20.0
     motion_speed_m_s: float = 0.0
+    max_excluded: int = 4
 
     def __post_init__(self):
+        if not isinstance(self.max_excluded, int) or self.max_excluded < 0:
+            raise ConfigError(f"max_excluded must be an integer >= 0, got {self.max_excluded!r}")
         if not 0 <= self.motion_speed_m_s < 10:
             raise ConfigError(f"motion_speed_m_s must lie in [0, 10), got {self.motion_speed_m_s}")
         if not 0 < self.chi2_alpha < 1:
@@ -225,14 +228,15 @@ def solve_position(ranges: list[BeaconRange], site: Site, speed_m_s: float,
 def _exclude(ranges: list[BeaconRange], h: float, c: float, config: PositionConfig, start):
     """Largest subset (of four or more) whose residuals pass the chi-square test; ties: smallest chi².
 
-    Subsets are tried by decreasing size, at most :data:`_MAX_SUBSETS` in all.
+    Subsets are tried by decreasing size, at most ``config.max_excluded``
+    beacons left out and :data:`_MAX_SUBSETS` subsets tried in all.
     Returns (kept indices, Gauss-Newton solution) or None. With n − k beacons
     kept, k NLOS-biased beacons can be excluded, which the classic one-at-a-time
     leave-one-out cannot do reliably once two are biased.
     """
     n = len(ranges)
     tried = 0
-    for size in range(n - 1, 3, -1):
+    for size in range(n - 1, max(3, n - 1 - config.max_excluded), -1):
         best = None
         for keep in itertools.combinations(range(n), size):
             tried += 1

@@ -279,6 +279,9 @@ class _Tracker:
         self.order = sorted(range(len(site.beacons)), key=lambda i: (site.beacons[i].slot, site.beacons[i].id))
         self.last_fix: AcousticFix | None = None
         self._pending: AcousticFix | None = None
+        # Verifying a hypothesis may drop one wrongly associated beacon; more is a new hypothesis.
+        self._verify_config = dataclasses.replace(positions, max_excluded=1)
+        self._skip_acquisition = False
 
     @property
     def grid_step_m(self) -> float:
@@ -368,7 +371,7 @@ class _Tracker:
         # 1981): the one whose fix keeps the most beacons, then the smallest residual, wins.
         best, best_key, tried = {}, None, []
         for n, _, point, member_delta in hyps:
-            if n < 3 or len(tried) >= 20:
+            if n < 3 or len(tried) >= 12:
                 break
             d0 = float(np.median(member_delta))
             if any(abs(point[0] - p[0]) < 2 and abs(point[1] - p[1]) < 2 and abs(d0 - q) < 2e-3 for p, q in tried):
@@ -414,7 +417,7 @@ class _Tracker:
         b = self.site.beacons
         ranges = [BeaconRange(b[i].id, b[i].east_m, b[i].north_m, b[i].up_m, self.c * (t - candidates[i][0]), 0.05, t)
                   for i, t in kept.items()]
-        fix = solve_position(ranges, self.site, self.c, self.positions) if len(ranges) >= 4 else None
+        fix = solve_position(ranges, self.site, self.c, self._verify_config) if len(ranges) >= 4 else None
         if fix is None or fix.n_beacons < 4:
             return kept, None
         out = {}
@@ -456,6 +459,12 @@ class _Tracker:
             hyps.append((n_distinct, float(sorted_delta[row, k]), row, members))
         hyps.sort(key=lambda h: (-h[0], h[1]))
         return [(n, d, (float(pe[row]), float(pn[row])), delta[row, members]) for n, d, row, members in hyps]
+
+    def skip_acquisition(self) -> bool:
+        """After a failed attempt the next frame skips acquisition (halves its cost while unlocked)."""
+        skip = self._skip_acquisition
+        self._skip_acquisition = not skip
+        return skip
 
     def _clock_plausible(self, fix: AcousticFix) -> bool:
         """|δ| within the stated start uncertainty, plus 5 ms and the drift allowed since the start."""
@@ -719,7 +728,9 @@ def detect_frames(path: str | os.PathLike, site: Site, timing: AudioTiming,
         if windows:
             stream.ensure(max(w.hi for w in windows) + span + bank.kernel_len + dec)
             sigmas = noise_scales(windows)
-            if not tracking:
+            if not tracking and tracker.skip_acquisition():
+                windows = [dataclasses.replace(w, associated=False) for w in windows]
+            elif not tracking:
                 windows = _acquisition_windows(
                     windows, lambda w: candidates(w, sigmas[template_of[w.beacon_index]]), tracker, timing, fs, lead)
             found = []
