@@ -65,6 +65,11 @@ __all__ = ["AudioTiming", "DetectorConfig", "ChirpDetection", "FrameResult", "Au
            "frame_phase_s", "beacon_chirp_spec", "detect_frames", "frame_fix", "max_site_range_m"]
 
 _EPOCH = datetime(1970, 1, 1, tzinfo=timezone.utc)
+_FEATURE_BATCH_FRAMES = 8
+"""Frames whose CIR features are computed in one batch (results are yielded that much later)."""
+
+_NO_FEATURES = CirFeatures(*([float("nan")] * 9))
+
 _SIDELOBE_GUARD = 10 ** (25 / 20)
 """A maximum this much (25 dB) weaker than a neighbour within one chirp length is a sidelobe."""
 _ECHO_SPAN_S = 0.015
@@ -653,13 +658,17 @@ def detect_frames(path: str | os.PathLike, site: Site, timing: AudioTiming,
     toa_len = 2 * lead + 16
     cir_taps = (lead + 8 + span) // dec
 
-    def analyse(found: list[tuple[_Window, int]], sigmas: np.ndarray, frame: int) -> list[ChirpDetection]:
-        """Arrival times and CIR features of all chirps located in a frame, batched per template.
+    pending_cirs: list = []      # (frame list index, detection index, template, cir row, search start, noise power)
+
+    def analyse(found: list[tuple[_Window, int]], sigmas: np.ndarray, frame: int, slot: int) -> list[ChirpDetection]:
+        """Arrival times of all chirps located in a frame, batched per template; CIRs queued for features.
 
         The first arrival comes from the full-rate envelope of a short snippet
-        around the located peak (sub-sample timing); the nine features from the
-        decimated envelope over ``cir_span_s`` (taps ``decimation/fs`` apart,
-        ample for delay spreads of milliseconds), which the stream already holds.
+        around the located peak (sub-sample timing), now, because tracking needs
+        it for the next frame. The nine features come later, for many frames in
+        one batch (:func:`flush_features`), from the decimated envelope over
+        ``cir_span_s`` (taps ``decimation/fs`` apart, ample for delay spreads of
+        milliseconds), copied out of the stream here.
         """
         out = []
         for t in sorted({template_of[w.beacon_index] for w, _ in found}):
@@ -683,19 +692,29 @@ def detect_frames(path: str | os.PathLike, site: Site, timing: AudioTiming,
                 cir_lo[r] = max(0, -(-(w.lo + bank.delay_samples) // dec) - j_a, j_got - j_a)
             noise_power = 2.0 * float(sigmas[t]) ** 2   # Rayleigh envelope of scale σ: E[env²] = 2σ²
             toa = analyse_cirs(bank.envelope(snippets, t)[:, :toa_len], 1.0 / fs, noise_power=noise_power,
-                               max_lead_s=config.max_lead_s, search_start=np.minimum(lo_rel, lead + 8))
-            feats = analyse_cirs(cirs, dec / fs, noise_power=noise_power, max_lead_s=config.max_lead_s,
-                                 pulse_width_s=float(bank.mainlobe_s[t]),
-                                 search_start=np.minimum(cir_lo, (lead + 8) // dec),
-                                 search_stop=(2 * lead + 9) // dec + 1)
+                               max_lead_s=config.max_lead_s, search_start=np.minimum(lo_rel, lead + 8),
+                               with_features=False)
             for r, (w, _) in enumerate(group):
-                if not (toa.valid[r] and feats.valid[r]):
+                if not toa.valid[r]:
                     continue
                 arrival_s = timing.start_s + float(starts[r] + toa.first_arrival_tap[r]) / fs
+                pending_cirs.append((slot, len(out), t, cirs[r], min(int(cir_lo[r]), (lead + 8) // dec), noise_power))
                 out.append(ChirpDetection(frame, site.beacons[w.beacon_index].id, w.tx_s, arrival_s,
-                                          float(toa.peak_snr_db[r]), CirFeatures(*feats.features[r].tolist()),
-                                          w.associated))
+                                          float(toa.peak_snr_db[r]), _NO_FEATURES, w.associated))
         return out
+
+    def flush_features(frames: list[list]) -> None:
+        """Compute the queued CIR features in one batch per template and put them into ``frames``."""
+        for t in sorted({q[2] for q in pending_cirs}):
+            rows = [q for q in pending_cirs if q[2] == t]
+            feats = analyse_cirs(np.array([q[3] for q in rows]), dec / fs,
+                                 noise_power=np.array([q[5] for q in rows]), max_lead_s=config.max_lead_s,
+                                 pulse_width_s=float(bank.mainlobe_s[t]), search_start=np.array([q[4] for q in rows]),
+                                 search_stop=(2 * lead + 9) // dec + 1)
+            for (slot, i, _, _, _, _), f in zip(rows, feats.features):
+                dets = frames[slot][2]
+                dets[i] = dataclasses.replace(dets[i], features=CirFeatures(*f.tolist()))
+        pending_cirs.clear()
 
     def candidates(w: _Window, sigma: float, max_candidates: int = 12) -> list[float]:
         """Stated arrival times of candidate first arrivals in ``w`` (acquisition).
@@ -714,6 +733,14 @@ def detect_frames(path: str | os.PathLike, site: Site, timing: AudioTiming,
         keep = keep[np.argsort(heights[keep])[::-1][:max_candidates]]
         return [timing.start_s + float(x) / fs for x in starts[keep]]
 
+    held: list = []              # frames waiting for their CIR features: [k, start, detections, fix, tracking]
+
+    def release():
+        flush_features(held)
+        for k_, start_, dets_, fix_, tracking_ in held:
+            yield FrameResult(k_, start_, tuple(sorted(dets_, key=lambda d: d.tx_s)), fix_, tracking_)
+        held.clear()
+
     frame_s = site.acoustic.frame_s
     u = timing.start_uncertainty_s
     end_s = timing.start_s + n_total / fs
@@ -721,6 +748,7 @@ def detect_frames(path: str | os.PathLike, site: Site, timing: AudioTiming,
     while True:
         frame_start = timing.frame_phase_s + k * frame_s
         if frame_start - u > end_s:
+            yield from release()
             return
         windows = [w for w in tracker.windows(frame_start) if w.hi >= 0 and w.lo < n_total]
         tracking = tracker.tracking_at(frame_start)
@@ -742,10 +770,11 @@ def detect_frames(path: str | os.PathLike, site: Site, timing: AudioTiming,
                 if s_peak is not None and all(abs(s_peak - f) > 0.001 * fs for _, f in found):
                     found.append((w, s_peak))
             if found:
-                detections = analyse(found, sigmas, k)
-                detections.sort(key=lambda d: d.tx_s)
+                detections = analyse(found, sigmas, k, len(held))
         fix = tracker.frame_done(frame_start, detections, bandwidth)
-        yield FrameResult(k, frame_start, tuple(detections), fix, tracking)
+        held.append([k, frame_start, detections, fix, tracking])
+        if len(held) >= _FEATURE_BATCH_FRAMES:
+            yield from release()
         next_lo = int(math.floor((frame_start + frame_s - u - 0.05 - timing.start_s) * fs))
         stream.trim(next_lo - history - lead - 64)
         k += 1

@@ -196,12 +196,14 @@ class CirBatch:
 
 
 def analyse_cirs(amplitude: np.ndarray, tap_s: float, *, noise_power=None, max_lead_s: float | None = None,
-                 pulse_width_s: float | None = None, search_start=0, search_stop=None) -> CirBatch:
+                 pulse_width_s: float | None = None, search_start=0, search_stop=None,
+                 with_features: bool = True) -> CirBatch:
     """Vectorised :func:`analyse_cir` over the rows of ``amplitude`` (n, L).
 
     ``noise_power``, ``search_start`` and ``search_stop`` may be scalars or
     arrays of shape (n,). Written with masks rather than a loop so that a
     frame's chirps, or a whole UWB log, cost a handful of numpy calls.
+    ``with_features=False`` stops after the first arrival (features NaN).
     """
     a = np.asarray(amplitude, dtype=float)
     if a.ndim != 2 or a.shape[1] == 0:
@@ -249,6 +251,11 @@ def analyse_cirs(amplitude: np.ndarray, tap_s: float, *, noise_power=None, max_l
     amp0 = np.exp(y0 - 0.25 * (ym - yp) * delta)
 
     sel = (power >= threshold[:, None]) & (idx >= edge[:, None]) & valid[:, None]
+    if not with_features:
+        return CirBatch(valid=valid, features=np.full((n, len(FEATURE_NAMES)), np.nan), first_arrival_tap=tau0,
+                        first_arrival_amplitude=amp0, peak_tap=peak,
+                        peak_snr_db=10.0 * np.log10(np.maximum(p_peak, 1e-300) / np.maximum(noise, 1e-300)),
+                        threshold_power=threshold, noise_power=noise, tap_mask=sel)
     weight = np.where(sel, power, 0.0)
     delay = idx * tap_s + np.zeros((n, 1))
     mean_excess, rms, kurt, skew = _masked_moments(delay, weight, tau0 * tap_s)
