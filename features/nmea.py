@@ -39,6 +39,7 @@ from .nmea_quirks import (
 )
 
 __all__ = ["Satellite", "Fix", "Epoch", "ReadStats", "read_nmea", "iter_epochs", "epochs_from_bytes",
+           "epochs_on_time_base",
            "parse_sentence"]
 
 _TIMED = TIMED_TYPES
@@ -416,3 +417,24 @@ def read_nmea(path: str | os.PathLike, *, parser: Literal["fast", "pynmea2"] = "
         raise NmeaError(f"{path}: no usable epoch (no fix and no satellites in view) in "
                         f"{stats.lines} lines; {stats.summary()}")
     return epochs, stats
+
+
+def epochs_on_time_base(epochs: list[Epoch], start_utc) -> list[Epoch]:
+    """Shift the epochs' ``t_s`` so that 0 is ``start_utc`` (a walk's time base).
+
+    ``start_utc`` is a timezone-aware datetime (naive is taken as UTC). The
+    shift comes from the first epoch that carries a date (RMC/ZDA); a file
+    without any date raises :class:`NmeaError`.
+    """
+    import dataclasses
+    import datetime as dt
+
+    if start_utc.tzinfo is None:
+        start_utc = start_utc.replace(tzinfo=dt.timezone.utc)
+    dated = next((e for e in epochs if e.time_utc is not None), None)
+    if dated is None:
+        raise NmeaError("the NMEA file carries no date (no RMC/ZDA), so it cannot be put on the walk's time base")
+    shift = (dated.time_utc - start_utc).total_seconds() - dated.t_s
+    if shift == 0.0:
+        return list(epochs)
+    return [dataclasses.replace(e, t_s=e.t_s + shift) for e in epochs]

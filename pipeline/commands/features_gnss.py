@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import datetime as dt
 import io
 import json
 import math
@@ -77,25 +76,16 @@ def _walk_beside(nmea: Path):
     return None
 
 
-def _t_shift(epochs, start_utc: str | None) -> float:
-    """Seconds to add to the reader's t_s so that 0 is ``start_utc``."""
+def _on_time_base(epochs, start_utc: str | None):
+    """Epochs with t_s re-based to ``start_utc`` (ISO 8601); unchanged when None."""
     if start_utc is None:
-        return 0.0
-    try:
-        start = dt.datetime.fromisoformat(start_utc.replace("Z", "+00:00"))
-    except ValueError:
-        raise ConfigError(f"--start-utc {start_utc!r} is not an ISO 8601 time") from None
-    if start.tzinfo is None:
-        start = start.replace(tzinfo=dt.timezone.utc)
-    dated = next((e for e in epochs if e.time_utc is not None), None)
-    if dated is None:
-        raise ConfigError("--start-utc given but the NMEA file carries no date (no RMC/ZDA)")
-    return (dated.time_utc - start).total_seconds() - dated.t_s
+        return epochs
+    from features.nmea import epochs_on_time_base
+    from features.walk import parse_utc
+    return epochs_on_time_base(epochs, parse_utc(start_utc, "--start-utc"))
 
 
 def _run(args) -> int:
-    import dataclasses
-
     from features.fileio import atomic_write_text
     from features.gnss_features import (
         COUNT_COLUMNS, FEATURE_COLUMNS, Cn0Reference, GnssFeatureConfig, fit_cn0_reference, gnss_features, sky_arrays,
@@ -123,9 +113,7 @@ def _run(args) -> int:
     if site is None and walk is not None and walk.site_ref is not None and args.positions is not None:
         site = walk.load_site()
     epochs, stats = read_nmea(args.nmea)
-    shift = _t_shift(epochs, args.start_utc)
-    if shift:
-        epochs = [dataclasses.replace(e, t_s=e.t_s + shift) for e in epochs]
+    epochs = _on_time_base(epochs, args.start_utc)
     sky = sky_arrays(epochs)
     table = gnss_features(sky, config, reference)
     names = ("t_s",) + FEATURE_COLUMNS + COUNT_COLUMNS
