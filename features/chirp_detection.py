@@ -12,8 +12,8 @@ time of its first audio sample (``start_s``) only to within
 
 Association. Beacons share one chirp and are told apart by time alone, so
 the search window of each (frame, beacon) is narrowed as soon as the receiver
-knows where it is: see :class:`_Tracker` (acquisition, then tracking of the
-position and the drifting clock offset from the previous frames' fixes).
+knows where it is: see :mod:`features.acoustic_tracking` (acquisition, then
+tracking of the position and the drifting clock offset).
 
 Detection (Neyman–Pearson on the matched-filter envelope; Kay, "Fundamentals
 of Statistical Signal Processing, Vol. II: Detection", 1998, §7.6). For each
@@ -41,22 +41,23 @@ beacons) inflated the mean excess delay above that of heavy cells (simulated
 survey, 94 cells: 4.1 vs 3.6 ms with 30 ms; 1.0 vs 2.6 ms with 15 ms).
 """
 
+
 from __future__ import annotations
 
 import dataclasses
 import math
 import os
 from dataclasses import dataclass
-from datetime import datetime, timezone
 from typing import Iterator
 
 import numpy as np
-import scipy.signal
 
-from .acoustic_positions import AcousticFix, BeaconRange, PositionConfig, solve_position, toa_range_sigma_m
+from .acoustic_positions import AcousticFix, PositionConfig
+from .acoustic_timing import AudioTiming, ChirpDetection, SearchWindow, frame_phase_s, speed_of_sound_m_s
+from .acoustic_tracking import ClockPositionTracker, acquisition_windows, frame_fix
 from .audio import CLIP_LEVEL, AudioBlock, audio_info, iter_audio_blocks
 from .cir import CirFeatures, analyse_cirs
-from .constants import AUDIO_FS_HZ, SPEED_OF_SOUND_0C_M_S
+from .constants import AUDIO_FS_HZ
 from .errors import ConfigError
 from .matched_filter import ChirpSpec, MatchedFilterBank, StreamingMatchedFilter
 from .site import Beacon, Site
@@ -64,7 +65,6 @@ from .site import Beacon, Site
 __all__ = ["AudioTiming", "DetectorConfig", "ChirpDetection", "FrameResult", "AudioStats", "speed_of_sound_m_s",
            "frame_phase_s", "beacon_chirp_spec", "detect_frames", "frame_fix", "max_site_range_m"]
 
-_EPOCH = datetime(1970, 1, 1, tzinfo=timezone.utc)
 _FEATURE_BATCH_FRAMES = 8
 """Frames whose CIR features are computed in one batch (results are yielded that much later)."""
 
@@ -78,52 +78,6 @@ _RAYLEIGH_Q25 = math.sqrt(-2.0 * math.log(0.75))
 """25th percentile of a unit-scale Rayleigh variable."""
 
 
-def speed_of_sound_m_s(temperature_c: float) -> float:
-    """c = 331.3·sqrt(1 + T/273.15) m/s (ideal gas; Cramer 1993, JASA 93(5)).
-
-    >>> round(speed_of_sound_m_s(20.0), 2)
-    343.21
-    """
-    return SPEED_OF_SOUND_0C_M_S * math.sqrt(1.0 + temperature_c / 273.15)
-
-
-def frame_phase_s(start_utc: datetime, frame_s: float) -> float:
-    """Walk time of the first frame start at or after ``start_utc``: (−POSIX seconds) mod frame_s.
-
-    Integer microseconds, so POSIX times of 1.8e9 s lose nothing.
-
-    >>> frame_phase_s(datetime(2026, 5, 1, 8, 0, 0, 300000, tzinfo=timezone.utc), 0.8)
-    0.5
-    """
-    if start_utc.tzinfo is None:
-        raise ConfigError(f"start_utc must be timezone-aware (UTC), got {start_utc!r}")
-    delta = start_utc - _EPOCH
-    start_us = (delta.days * 86_400 + delta.seconds) * 1_000_000 + delta.microseconds
-    frame_us = int(round(frame_s * 1e6))
-    if frame_us <= 0:
-        raise ConfigError(f"frame_s must be positive, got {frame_s}")
-    return ((-start_us) % frame_us) / 1e6
-
-
-@dataclass(frozen=True)
-class AudioTiming:
-    """How the audio's samples map onto the walk's time base and the beacon frames.
-
-    ``start_s``: stated walk time of the first sample; ``start_uncertainty_s``:
-    its stated uncertainty (half-width); ``frame_phase_s``: walk time of a frame
-    start (see :func:`frame_phase_s`).
-    """
-
-    start_s: float = 0.0
-    start_uncertainty_s: float = 0.01
-    frame_phase_s: float = 0.0
-
-    def __post_init__(self):
-        for name in ("start_s", "start_uncertainty_s", "frame_phase_s"):
-            if not math.isfinite(getattr(self, name)):
-                raise ConfigError(f"audio timing {name} must be finite, got {getattr(self, name)!r}")
-        if self.start_uncertainty_s < 0:
-            raise ConfigError(f"start_uncertainty_s must be >= 0, got {self.start_uncertainty_s}")
 
 
 @dataclass(frozen=True)
@@ -146,26 +100,6 @@ class DetectorConfig:
             if not getattr(self, name) > 0:
                 raise ConfigError(f"{name} must be positive, got {getattr(self, name)}")
 
-
-@dataclass(frozen=True)
-class ChirpDetection:
-    """One beacon chirp heard by the receiver.
-
-    ``frame`` counts frames on the walk time base (frame 0 starts at
-    ``frame_phase_s``); ``tx_s`` is the emission time and ``arrival_s`` the first
-    arrival, both walk time (``arrival_s`` on the receiver's stated clock);
-    ``snr_db`` is the strongest tap's power over the noise power; ``associated``
-    is False for a chirp heard in an acquisition window that could not be tied
-    to its beacon (its features count, its time of arrival does not).
-    """
-
-    frame: int
-    beacon_id: int
-    tx_s: float
-    arrival_s: float
-    snr_db: float
-    features: CirFeatures
-    associated: bool = True
 
 
 @dataclass
@@ -209,6 +143,7 @@ class AudioStats:
                 self.sum_sq[b] += float(energy[k])
 
 
+
 def beacon_chirp_spec(site: Site, beacon: Beacon) -> ChirpSpec:
     """The chirp of ``beacon``: its own band/duration where given, else the site's ``[acoustic]``."""
     ac = site.acoustic
@@ -229,16 +164,6 @@ def max_site_range_m(site: Site) -> float:
     return best
 
 
-@dataclass(frozen=True)
-class _Window:
-    """Where a beacon's chirp may start: sample indices [lo, hi] of the stream."""
-
-    beacon_index: int
-    tx_s: float
-    lo: int
-    hi: int
-    associated: bool = True
-
 
 @dataclass(frozen=True)
 class FrameResult:
@@ -249,287 +174,6 @@ class FrameResult:
     detections: tuple
     fix: AcousticFix | None
     tracking: bool
-
-
-class _Tracker:
-    """Acquisition, then tracking, of the receiver's clock offset and position.
-
-    Acquisition (no recent fix): beacon ``b``'s chirp may start anywhere in
-    ``[tx − u, tx + u + min(r_max/c, slot_s)]``. Neighbouring windows overlap
-    when ``u`` is large or a beacon is far, so a fix from acquisition is
-    trusted only when at least five beacons pass the residual test (two
-    degrees of freedom left for it), or when two consecutive frames give
-    agreeing four-beacon fixes.
-
-    Tracking (a fix at most ``track_timeout_s`` old): the window is centred on
-    the arrival predicted from the last fix, ``tx + ‖p − s_b‖/c + δ``, with a
-    half-width that grows with the fix's 3σ, a walking speed of
-    ``max_speed_m_s`` and a clock drift of ``max_drift_ppm`` over the elapsed
-    time; an NLOS first arrival may come up to ``nlos_slack_m`` later. Beacons
-    predicted beyond ``r_max`` are not searched. The clock offset drifts (a
-    sample clock off by 10 ppm gains 6 ms in 10 minutes), so it is tracked
-    rather than estimated once.
-    """
-
-    max_speed_m_s = 2.5
-    max_drift_ppm = 100.0
-    nlos_slack_m = 10.0
-    track_timeout_s = 4.0
-    acquisition_min_beacons = 5
-
-    def __init__(self, site: Site, timing: AudioTiming, fs_hz: float, c: float, r_max: float,
-                 positions: PositionConfig):
-        self.site, self.timing, self.fs, self.c, self.r_max = site, timing, fs_hz, c, r_max
-        self.positions = positions
-        self.order = sorted(range(len(site.beacons)), key=lambda i: (site.beacons[i].slot, site.beacons[i].id))
-        self.last_fix: AcousticFix | None = None
-        self._pending: AcousticFix | None = None
-        # Verifying a hypothesis may drop one wrongly associated beacon; more is a new hypothesis.
-        self._verify_config = dataclasses.replace(positions, max_excluded=1)
-        self._skip_acquisition = False
-
-    @property
-    def grid_step_m(self) -> float:
-        """Spacing of the acquisition grid, m: 1 m, coarser on sites above 10 000 m²."""
-        g = self.site.grid
-        return max(1.0, math.sqrt((g.east_max_m - g.east_min_m) * (g.north_max_m - g.north_min_m) / 10_000))
-
-    @property
-    def tolerance_s(self) -> float:
-        """Agreement tolerance of the vote: the range error of the nearest grid point, plus 0.5 ms."""
-        return self.grid_step_m * math.sqrt(2.0) / self.c + 5e-4
-
-    def tracking_at(self, t_s: float) -> bool:
-        return self.last_fix is not None and t_s - self.last_fix.t_s <= self.track_timeout_s
-
-    def windows(self, frame_start_s: float) -> list[_Window]:
-        ac, u, fs = self.site.acoustic, self.timing.start_uncertainty_s, self.fs
-        out = []
-        tracking = self.tracking_at(frame_start_s)
-        for i in self.order:
-            b = self.site.beacons[i]
-            tx = frame_start_s + b.slot * ac.slot_s
-            if tracking:
-                fix = self.last_fix
-                dt = max(0.0, tx - fix.t_s)
-                cov = fix.covariance
-                radius_m = 3.0 * math.sqrt(max(cov[0, 0], cov[1, 1], 0.0)) + self.max_speed_m_s * dt + 0.5
-                clock_s = 3.0 * math.sqrt(max(cov[2, 2], 0.0)) + self.max_drift_ppm * 1e-6 * dt + 5e-4
-                r = math.dist((fix.east_m, fix.north_m, self.site.device_height_m), (b.east_m, b.north_m, b.up_m))
-                if r - radius_m > self.r_max:
-                    continue
-                centre = tx + r / self.c + fix.clock_offset_s
-                lo_s = centre - radius_m / self.c - clock_s
-                hi_s = centre + (radius_m + self.nlos_slack_m) / self.c + clock_s
-            else:
-                lo_s = tx - u
-                hi_s = tx + u + self.r_max / self.c
-            lo = int(math.floor((lo_s - self.timing.start_s) * fs))
-            hi = int(math.ceil((hi_s - self.timing.start_s) * fs))
-            out.append(_Window(i, tx, lo, hi))
-        return out
-
-    def acquire(self, candidates: dict) -> dict:
-        """Associate candidate arrivals with beacons by a Hough vote over position and clock offset.
-
-        ``candidates`` maps a beacon index to (tx_s, stated arrival times, s) of
-        the envelope maxima in its acquisition window. For each point p of a
-        grid over the site, each candidate implies a clock offset
-        δ = (c·(t − tx) − ‖p − s_b‖)/c; the (p, δ) on which the most beacons
-        agree within ``tol`` wins (a Hough transform, Duda & Hart 1972, CACM
-        15(1)); ties go to the smallest δ, since echoes agree with each other
-        too, only later. The vote runs on a 4 m grid, then on a 1 m grid round
-        the best coarse points. Each beacon keeps its earliest candidate within
-        ``tol`` of the median δ of the winning group, and :meth:`_refine`
-        re-associates after a least-squares fix. Returns beacon index → arrival time.
-        """
-        items = [(i, tx, t) for i, (tx, times) in candidates.items() for t in times]
-        if len({i for i, _, _ in items}) < 3:
-            return {}
-        bi = np.array([i for i, _, _ in items])
-        rho = self.c * np.array([t - tx for _, tx, t in items])
-        bpos = np.array([[self.site.beacons[i].east_m, self.site.beacons[i].north_m, self.site.beacons[i].up_m]
-                         for i in bi])
-        g = self.site.grid
-        coarse = 4.0 * self.grid_step_m
-        ee, nn = np.meshgrid(np.arange(g.east_min_m, g.east_max_m + coarse, coarse),
-                             np.arange(g.north_min_m, g.north_max_m + coarse, coarse))
-        arrivals = np.array([t for _, _, t in items])
-        hyps = self._vote(ee.ravel(), nn.ravel(), bi, rho, bpos, coarse * math.sqrt(2.0) / self.c + 5e-4, arrivals)
-        if not hyps:
-            return {}
-        fine = self.grid_step_m
-        offsets = np.arange(-coarse, coarse + fine / 2, fine)
-        oe, on = np.meshgrid(offsets, offsets)
-        seeds = []
-        for h in hyps:
-            if h[0] >= 3 and h[2] not in seeds:
-                seeds.append(h[2])
-            if len(seeds) == 30:
-                break
-        if not seeds:
-            return {}
-        pe = np.concatenate([s[0] + oe.ravel() for s in seeds])
-        pn = np.concatenate([s[1] + on.ravel() for s in seeds])
-        hyps = self._vote(pe, pn, bi, rho, bpos, self.tolerance_s, arrivals, n_best=400)
-        # Verify the best distinct hypotheses by least squares (RANSAC-style, Fischler & Bolles
-        # 1981): the one whose fix keeps the most beacons, then the smallest residual, wins.
-        best, best_key, tried = {}, None, []
-        for n, _, point, member_delta in hyps:
-            if n < 3 or len(tried) >= 12:
-                break
-            d0 = float(np.median(member_delta))
-            if any(abs(point[0] - p[0]) < 2 and abs(point[1] - p[1]) < 2 and abs(d0 - q) < 2e-3 for p, q in tried):
-                continue
-            tried.append((point, d0))
-            kept = self._associate(point, d0, bi, rho, bpos, items)
-            refined, fix = self._refine(kept, candidates)
-            if fix is None:
-                continue
-            key = (fix.n_beacons, -fix.rms_residual_m)
-            if best_key is None or key > best_key:
-                best, best_key = refined, key
-        return best
-
-    def _associate(self, point, d0, bi, rho, bpos, items) -> dict:
-        """Each beacon's earliest candidate within ``tol`` of δ = d0 at ``point``; one arrival, one beacon."""
-        r = np.sqrt((point[0] - bpos[:, 0]) ** 2 + (point[1] - bpos[:, 1]) ** 2
-                    + (self.site.device_height_m - bpos[:, 2]) ** 2)
-        delta = (rho - r) / self.c
-        chosen = {}
-        for k, i in enumerate(bi):
-            # Within the tolerance, the earliest candidate: echoes come later.
-            if abs(delta[k] - d0) <= self.tolerance_s and (i not in chosen or items[k][2] < chosen[i][0]):
-                chosen[i] = (items[k][2], abs(delta[k] - d0))
-        # One arrival belongs to one beacon: where two beacons took the same arrival (within
-        # 1 ms), the one whose δ fits the vote better keeps it.
-        kept = {}
-        for i, (t, err) in sorted(chosen.items(), key=lambda kv: kv[1][1]):
-            if all(abs(t - t2) > 1e-3 for t2 in kept.values()):
-                kept[i] = t
-        return kept
-
-    def _refine(self, kept: dict, candidates: dict):
-        """Least-squares refinement of a voted association, then re-association: (association, fix).
-
-        The vote's grid leaves each beacon's δ off by up to the tolerance, so an
-        echo 4 ms late can pass for the first path. A Gauss-Newton fix (with
-        exclusion) on the voted arrivals gives position and δ to centimetres;
-        each beacon then takes the candidate nearest its predicted arrival,
-        within 1.5 ms. Without a fix (fewer than four beacons, or none
-        plausible) the association is returned with ``None``.
-        """
-        b = self.site.beacons
-        ranges = [BeaconRange(b[i].id, b[i].east_m, b[i].north_m, b[i].up_m, self.c * (t - candidates[i][0]), 0.05, t)
-                  for i, t in kept.items()]
-        fix = solve_position(ranges, self.site, self.c, self._verify_config) if len(ranges) >= 4 else None
-        if fix is None or fix.n_beacons < 4:
-            return kept, None
-        out = {}
-        for i, (tx, times) in candidates.items():
-            pred = tx + math.dist((fix.east_m, fix.north_m, self.site.device_height_m),
-                                  (b[i].east_m, b[i].north_m, b[i].up_m)) / self.c + fix.clock_offset_s
-            t_best = min(times, key=lambda t: abs(t - pred))
-            if abs(t_best - pred) <= 1.5e-3:
-                out[i] = t_best
-        return (out if len(out) >= fix.n_beacons else kept), fix
-
-    def _vote(self, pe, pn, bi, rho, bpos, tol, arrivals, n_best: int = 200) -> list:
-        """Hypotheses (distinct beacons, anchor δ, (east, north), δ of the agreeing) best first.
-
-        Candidates agreeing with an anchor's δ within [δ, δ + tol] are counted
-        for all (point, anchor) pairs at once — each row sorted, then one global
-        searchsorted on rows offset far apart — and the ``n_best`` largest counts
-        are recounted as distinct beacons (a beacon's echoes must not vote twice)
-        using distinct arrivals (one arrival heard in several beacons' windows
-        must not vote for each of them).
-        """
-        r = np.sqrt((pe[:, None] - bpos[None, :, 0]) ** 2 + (pn[:, None] - bpos[None, :, 1]) ** 2
-                    + (self.site.device_height_m - bpos[None, :, 2]) ** 2)
-        delta = (rho[None, :] - r) / self.c                      # (n_points, n_candidates)
-        order = np.argsort(delta, axis=1)
-        sorted_delta = np.take_along_axis(delta, order, axis=1)
-        offset = 2.0 * (np.abs(delta).max() + tol + 1.0)
-        flat = (sorted_delta + offset * np.arange(len(pe))[:, None]).ravel()
-        hi = np.searchsorted(flat, flat + tol, side="right")
-        count = hi - np.arange(flat.size)
-        top = np.argsort(-count, kind="stable")[:n_best]
-        hyps = []
-        n_cand = delta.shape[1]
-        for f in top:
-            row, k = divmod(int(f), n_cand)
-            members = order[row, k: k + int(count[f])]
-            # Distinct beacons, but one physical arrival cannot serve two beacons.
-            n_distinct = min(len(set(bi[members].tolist())), len(set(np.round(arrivals[members], 4).tolist())))
-            hyps.append((n_distinct, float(sorted_delta[row, k]), row, members))
-        hyps.sort(key=lambda h: (-h[0], h[1]))
-        return [(n, d, (float(pe[row]), float(pn[row])), delta[row, members]) for n, d, row, members in hyps]
-
-    def skip_acquisition(self) -> bool:
-        """After a failed attempt the next frame skips acquisition (halves its cost while unlocked)."""
-        skip = self._skip_acquisition
-        self._skip_acquisition = not skip
-        return skip
-
-    def _clock_plausible(self, fix: AcousticFix) -> bool:
-        """|δ| within the stated start uncertainty, plus 5 ms and the drift allowed since the start."""
-        bound = self.timing.start_uncertainty_s + 5e-3 + self.max_drift_ppm * 1e-6 * abs(fix.t_s - self.timing.start_s)
-        return abs(fix.clock_offset_s) <= bound
-
-    def frame_done(self, frame_start_s: float, detections: list[ChirpDetection],
-                   bandwidth: dict) -> AcousticFix | None:
-        tracking = self.tracking_at(frame_start_s)
-        fix = frame_fix(detections, self.site, self.c, bandwidth, self.positions,
-                        self.last_fix if tracking else None)
-        if fix is None or not self._clock_plausible(fix):
-            return None
-        if tracking:
-            # A tracked fix must continue the track: clock offset and position within what
-            # drift and walking allow since the last fix. Tracking follows fixes whose
-            # residuals were tested (four beacons or more); an exactly determined
-            # three-beacon fix is reported only when nothing was excluded to reach it.
-            last = self.last_fix
-            dt = max(0.0, fix.t_s - last.t_s)
-            clock_ok = abs(fix.clock_offset_s - last.clock_offset_s) <= (
-                3.0 * math.sqrt(max(last.covariance[2, 2], 0.0)) + self.max_drift_ppm * 1e-6 * dt + 1e-3)
-            moved_ok = math.hypot(fix.east_m - last.east_m, fix.north_m - last.north_m) <= (
-                3.0 * math.sqrt(max(last.covariance[0, 0], last.covariance[1, 1], 0.0)) + self.max_speed_m_s * dt + 1.0)
-            if not (clock_ok and moved_ok):
-                return None
-            if fix.n_beacons >= 4:
-                self.last_fix = fix
-                return fix
-            return fix if not fix.rejected_ids else None
-        # Acquisition locks at once on a fix tested with two or more degrees of freedom, or on
-        # two consecutive four-beacon fixes that agree (M-of-N confirmation).
-        confirmed = (self._pending is not None and fix.n_beacons >= 4
-                     and math.hypot(fix.east_m - self._pending.east_m, fix.north_m - self._pending.north_m)
-                     <= 1.0 + self.max_speed_m_s * (fix.t_s - self._pending.t_s)
-                     and abs(fix.clock_offset_s - self._pending.clock_offset_s) <= 1e-3)
-        self._pending = fix if fix.n_beacons >= 4 else None
-        if fix.n_beacons >= self.acquisition_min_beacons or confirmed:
-            self.last_fix = fix
-            return fix
-        return None
-
-
-def frame_fix(detections: list[ChirpDetection], site: Site, c: float, bandwidth: dict,
-              config: PositionConfig, start: AcousticFix | None = None) -> AcousticFix | None:
-    """Position fix from one frame's detections (None when fewer than three beacons)."""
-    by_id = {b.id: b for b in site.beacons}
-    ranges = [BeaconRange(d.beacon_id, by_id[d.beacon_id].east_m, by_id[d.beacon_id].north_m,
-                          by_id[d.beacon_id].up_m, c * (d.arrival_s - d.tx_s),
-                          toa_range_sigma_m(d.snr_db, bandwidth[d.beacon_id], c), d.arrival_s)
-              for d in detections if d.associated]
-    if len(ranges) < 3:
-        return None
-    if config.motion_speed_m_s > 0:
-        # Walking during the frame: σᵢ² += ½·(v·(tᵢ − t̄))² (see PositionConfig).
-        t_mean = float(np.mean([r.arrival_s for r in ranges]))
-        ranges = [dataclasses.replace(r, sigma_m=math.sqrt(r.sigma_m ** 2 + 0.5 * (
-            config.motion_speed_m_s * (r.arrival_s - t_mean)) ** 2)) for r in ranges]
-    x0 = None if start is None else np.array([start.east_m, start.north_m, start.clock_offset_s])
-    return solve_position(ranges, site, c, config, x0)
 
 
 class _Stream:
@@ -578,6 +222,7 @@ class _Stream:
             self.env_j0 += cut_env
 
 
+
 def detect_frames(path: str | os.PathLike, site: Site, timing: AudioTiming,
                   config: DetectorConfig = DetectorConfig(), stats: AudioStats | None = None,
                   positions: PositionConfig | None = None) -> Iterator[FrameResult]:
@@ -612,9 +257,9 @@ def detect_frames(path: str | os.PathLike, site: Site, timing: AudioTiming,
     span = int(math.ceil(config.cir_span_s * fs))
     history = int(math.ceil(site.acoustic.frame_s * fs))
     stream = _Stream(path, config, mf, stats)
-    tracker = _Tracker(site, timing, fs, c, r_max, positions)
+    tracker = ClockPositionTracker(site, timing, fs, c, r_max, positions)
 
-    def noise_scales(windows: list[_Window]) -> np.ndarray:
+    def noise_scales(windows: list[SearchWindow]) -> np.ndarray:
         """Rayleigh scale σ per template from the envelope of the frame before and under ``windows``."""
         j_hi = (max(w.hi for w in windows) + bank.delay_samples) // dec + 1
         j_lo = min((min(w.lo for w in windows) + bank.delay_samples) // dec, j_hi - history // dec)
@@ -624,7 +269,7 @@ def detect_frames(path: str | os.PathLike, site: Site, timing: AudioTiming,
         # Every 4th output: neighbours are correlated over ~1/B anyway, and it is 4× cheaper.
         return np.percentile(seg[:, ::4], 25, axis=1) / _RAYLEIGH_Q25
 
-    def peaks(w: _Window, sigma: float) -> tuple[np.ndarray, np.ndarray]:
+    def peaks(w: SearchWindow, sigma: float) -> tuple[np.ndarray, np.ndarray]:
         """Chirp-start indices (ascending) and heights of envelope maxima in ``w`` above the threshold.
 
         The threshold is γ (see the module docstring); a maximum within one chirp
@@ -648,7 +293,7 @@ def detect_frames(path: str | os.PathLike, site: Site, timing: AudioTiming,
             idx = idx[~np.any(near & (h[None, :] > h[:, None] * _SIDELOBE_GUARD), axis=1)]
         return mf.chirp_start(j_first + idx).astype(int), seg[idx]
 
-    def locate(w: _Window, sigma: float) -> int | None:
+    def locate(w: SearchWindow, sigma: float) -> int | None:
         """Chirp start of the detection in ``w``: its earliest peak (strongest, when not associated)."""
         starts, heights = peaks(w, sigma)
         if len(starts) == 0:
@@ -660,7 +305,7 @@ def detect_frames(path: str | os.PathLike, site: Site, timing: AudioTiming,
 
     pending_cirs: list = []      # (frame list index, detection index, template, cir row, search start, noise power)
 
-    def analyse(found: list[tuple[_Window, int]], sigmas: np.ndarray, frame: int, slot: int) -> list[ChirpDetection]:
+    def analyse(found: list[tuple[SearchWindow, int]], sigmas: np.ndarray, frame: int, slot: int) -> list[ChirpDetection]:
         """Arrival times of all chirps located in a frame, batched per template; CIRs queued for features.
 
         The first arrival comes from the full-rate envelope of a short snippet
@@ -716,7 +361,7 @@ def detect_frames(path: str | os.PathLike, site: Site, timing: AudioTiming,
                 dets[i] = dataclasses.replace(dets[i], features=CirFeatures(*f.tolist()))
         pending_cirs.clear()
 
-    def candidates(w: _Window, sigma: float, max_candidates: int = 12) -> list[float]:
+    def candidates(w: SearchWindow, sigma: float, max_candidates: int = 12) -> list[float]:
         """Stated arrival times of candidate first arrivals in ``w`` (acquisition).
 
         Maxima within ``_ECHO_SPAN_S`` after a stronger one are taken for its echoes
@@ -759,7 +404,7 @@ def detect_frames(path: str | os.PathLike, site: Site, timing: AudioTiming,
             if not tracking and tracker.skip_acquisition():
                 windows = [dataclasses.replace(w, associated=False) for w in windows]
             elif not tracking:
-                windows = _acquisition_windows(
+                windows = acquisition_windows(
                     windows, lambda w: candidates(w, sigmas[template_of[w.beacon_index]]), tracker, timing, fs, lead)
             found = []
             # Associated windows first: an arrival belongs to its beacon before it can be
@@ -779,21 +424,3 @@ def detect_frames(path: str | os.PathLike, site: Site, timing: AudioTiming,
         stream.trim(next_lo - history - lead - 64)
         k += 1
 
-
-def _acquisition_windows(windows: list[_Window], candidates, tracker: _Tracker, timing: AudioTiming,
-                         fs: float, lead: int) -> list[_Window]:
-    """Narrow each acquisition window to the arrival the Hough vote associates with its beacon.
-
-    Windows of beacons left unassociated keep their full extent (their strongest
-    peak still yields CIR features, not a position).
-    """
-    cand = {w.beacon_index: (w.tx_s, candidates(w)) for w in windows}
-    chosen = tracker.acquire({i: v for i, v in cand.items() if v[1]})
-    out = []
-    for w in windows:
-        if w.beacon_index in chosen:
-            s_peak = int(round((chosen[w.beacon_index] - timing.start_s) * fs))
-            out.append(_Window(w.beacon_index, w.tx_s, s_peak - lead, s_peak + 8))
-        else:
-            out.append(_Window(w.beacon_index, w.tx_s, w.lo, w.hi, associated=False))
-    return out

@@ -1,0 +1,325 @@
+"""Which beacon was heard: acquisition, then tracking, of the receiver's position and clock offset.
+
+Beacons share one chirp and are told apart by time alone (docs/beacon_protocol.md:
+propagation crosses slots, slots are reused), so the search window of each
+(frame, beacon) is narrowed as soon as the receiver knows where it is.
+:class:`ClockPositionTracker` acquires by a Hough vote over position and clock
+offset verified by least squares, then tracks position and the drifting clock
+offset from fix to fix; :func:`frame_fix` turns a frame's detections into a fix.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+
+from .acoustic_positions import AcousticFix, BeaconRange, PositionConfig, solve_position, toa_range_sigma_m
+from .acoustic_timing import AudioTiming, ChirpDetection, SearchWindow
+from .site import Site
+
+__all__ = ["ClockPositionTracker", "frame_fix", "acquisition_windows"]
+
+
+class ClockPositionTracker:
+    """Acquisition, then tracking, of the receiver's clock offset and position.
+
+    Acquisition (no recent fix): beacon ``b``'s chirp may start anywhere in
+    ``[tx − u, tx + u + min(r_max/c, slot_s)]``. Neighbouring windows overlap
+    when ``u`` is large or a beacon is far, so a fix from acquisition is
+    trusted only when at least five beacons pass the residual test (two
+    degrees of freedom left for it), or when two consecutive frames give
+    agreeing four-beacon fixes.
+
+    Tracking (a fix at most ``track_timeout_s`` old): the window is centred on
+    the arrival predicted from the last fix, ``tx + ‖p − s_b‖/c + δ``, with a
+    half-width that grows with the fix's 3σ, a walking speed of
+    ``max_speed_m_s`` and a clock drift of ``max_drift_ppm`` over the elapsed
+    time; an NLOS first arrival may come up to ``nlos_slack_m`` later. Beacons
+    predicted beyond ``r_max`` are not searched. The clock offset drifts (a
+    sample clock off by 10 ppm gains 6 ms in 10 minutes), so it is tracked
+    rather than estimated once.
+    """
+
+    max_speed_m_s = 2.5
+    max_drift_ppm = 100.0
+    nlos_slack_m = 10.0
+    track_timeout_s = 4.0
+    acquisition_min_beacons = 5
+
+    def __init__(self, site: Site, timing: AudioTiming, fs_hz: float, c: float, r_max: float,
+                 positions: PositionConfig):
+        self.site, self.timing, self.fs, self.c, self.r_max = site, timing, fs_hz, c, r_max
+        self.positions = positions
+        self.order = sorted(range(len(site.beacons)), key=lambda i: (site.beacons[i].slot, site.beacons[i].id))
+        self.last_fix: AcousticFix | None = None
+        self._pending: AcousticFix | None = None
+        # Verifying a hypothesis may drop one wrongly associated beacon; more is a new hypothesis.
+        self._verify_config = dataclasses.replace(positions, max_excluded=1)
+        self._skip_acquisition = False
+
+    @property
+    def grid_step_m(self) -> float:
+        """Spacing of the acquisition grid, m: 1 m, coarser on sites above 10 000 m²."""
+        g = self.site.grid
+        return max(1.0, math.sqrt((g.east_max_m - g.east_min_m) * (g.north_max_m - g.north_min_m) / 10_000))
+
+    @property
+    def tolerance_s(self) -> float:
+        """Agreement tolerance of the vote: the range error of the nearest grid point, plus 0.5 ms."""
+        return self.grid_step_m * math.sqrt(2.0) / self.c + 5e-4
+
+    def tracking_at(self, t_s: float) -> bool:
+        return self.last_fix is not None and t_s - self.last_fix.t_s <= self.track_timeout_s
+
+    def windows(self, frame_start_s: float) -> list[SearchWindow]:
+        ac, u, fs = self.site.acoustic, self.timing.start_uncertainty_s, self.fs
+        out = []
+        tracking = self.tracking_at(frame_start_s)
+        for i in self.order:
+            b = self.site.beacons[i]
+            tx = frame_start_s + b.slot * ac.slot_s
+            if tracking:
+                fix = self.last_fix
+                dt = max(0.0, tx - fix.t_s)
+                cov = fix.covariance
+                radius_m = 3.0 * math.sqrt(max(cov[0, 0], cov[1, 1], 0.0)) + self.max_speed_m_s * dt + 0.5
+                clock_s = 3.0 * math.sqrt(max(cov[2, 2], 0.0)) + self.max_drift_ppm * 1e-6 * dt + 5e-4
+                r = math.dist((fix.east_m, fix.north_m, self.site.device_height_m), (b.east_m, b.north_m, b.up_m))
+                if r - radius_m > self.r_max:
+                    continue
+                centre = tx + r / self.c + fix.clock_offset_s
+                lo_s = centre - radius_m / self.c - clock_s
+                hi_s = centre + (radius_m + self.nlos_slack_m) / self.c + clock_s
+            else:
+                lo_s = tx - u
+                hi_s = tx + u + self.r_max / self.c
+            lo = int(math.floor((lo_s - self.timing.start_s) * fs))
+            hi = int(math.ceil((hi_s - self.timing.start_s) * fs))
+            out.append(SearchWindow(i, tx, lo, hi))
+        return out
+
+    def acquire(self, candidates: dict) -> dict:
+        """Associate candidate arrivals with beacons by a Hough vote over position and clock offset.
+
+        ``candidates`` maps a beacon index to (tx_s, stated arrival times, s) of
+        the envelope maxima in its acquisition window. For each point p of a
+        grid over the site, each candidate implies a clock offset
+        δ = (c·(t − tx) − ‖p − s_b‖)/c; the (p, δ) on which the most beacons
+        agree within ``tol`` wins (a Hough transform, Duda & Hart 1972, CACM
+        15(1)); ties go to the smallest δ, since echoes agree with each other
+        too, only later. The vote runs on a 4 m grid, then on a 1 m grid round
+        the best coarse points. Each beacon keeps its earliest candidate within
+        ``tol`` of the median δ of the winning group, and :meth:`_refine`
+        re-associates after a least-squares fix. Returns beacon index → arrival time.
+        """
+        items = [(i, tx, t) for i, (tx, times) in candidates.items() for t in times]
+        if len({i for i, _, _ in items}) < 3:
+            return {}
+        bi = np.array([i for i, _, _ in items])
+        rho = self.c * np.array([t - tx for _, tx, t in items])
+        bpos = np.array([[self.site.beacons[i].east_m, self.site.beacons[i].north_m, self.site.beacons[i].up_m]
+                         for i in bi])
+        g = self.site.grid
+        coarse = 4.0 * self.grid_step_m
+        ee, nn = np.meshgrid(np.arange(g.east_min_m, g.east_max_m + coarse, coarse),
+                             np.arange(g.north_min_m, g.north_max_m + coarse, coarse))
+        arrivals = np.array([t for _, _, t in items])
+        hyps = self._vote(ee.ravel(), nn.ravel(), bi, rho, bpos, coarse * math.sqrt(2.0) / self.c + 5e-4, arrivals)
+        if not hyps:
+            return {}
+        fine = self.grid_step_m
+        offsets = np.arange(-coarse, coarse + fine / 2, fine)
+        oe, on = np.meshgrid(offsets, offsets)
+        seeds = []
+        for h in hyps:
+            if h[0] >= 3 and h[2] not in seeds:
+                seeds.append(h[2])
+            if len(seeds) == 30:
+                break
+        if not seeds:
+            return {}
+        pe = np.concatenate([s[0] + oe.ravel() for s in seeds])
+        pn = np.concatenate([s[1] + on.ravel() for s in seeds])
+        hyps = self._vote(pe, pn, bi, rho, bpos, self.tolerance_s, arrivals, n_best=400)
+        # Verify the best distinct hypotheses by least squares (RANSAC-style, Fischler & Bolles
+        # 1981): the one whose fix keeps the most beacons, then the smallest residual, wins.
+        best, best_key, tried = {}, None, []
+        for n, _, point, member_delta in hyps:
+            if n < 3 or len(tried) >= 12:
+                break
+            d0 = float(np.median(member_delta))
+            if any(abs(point[0] - p[0]) < 2 and abs(point[1] - p[1]) < 2 and abs(d0 - q) < 2e-3 for p, q in tried):
+                continue
+            tried.append((point, d0))
+            kept = self._associate(point, d0, bi, rho, bpos, items)
+            refined, fix = self._refine(kept, candidates)
+            if fix is None:
+                continue
+            key = (fix.n_beacons, -fix.rms_residual_m)
+            if best_key is None or key > best_key:
+                best, best_key = refined, key
+        return best
+
+    def _associate(self, point, d0, bi, rho, bpos, items) -> dict:
+        """Each beacon's earliest candidate within ``tol`` of δ = d0 at ``point``; one arrival, one beacon."""
+        r = np.sqrt((point[0] - bpos[:, 0]) ** 2 + (point[1] - bpos[:, 1]) ** 2
+                    + (self.site.device_height_m - bpos[:, 2]) ** 2)
+        delta = (rho - r) / self.c
+        chosen = {}
+        for k, i in enumerate(bi):
+            # Within the tolerance, the earliest candidate: echoes come later.
+            if abs(delta[k] - d0) <= self.tolerance_s and (i not in chosen or items[k][2] < chosen[i][0]):
+                chosen[i] = (items[k][2], abs(delta[k] - d0))
+        # One arrival belongs to one beacon: where two beacons took the same arrival (within
+        # 1 ms), the one whose δ fits the vote better keeps it.
+        kept = {}
+        for i, (t, err) in sorted(chosen.items(), key=lambda kv: kv[1][1]):
+            if all(abs(t - t2) > 1e-3 for t2 in kept.values()):
+                kept[i] = t
+        return kept
+
+    def _refine(self, kept: dict, candidates: dict):
+        """Least-squares refinement of a voted association, then re-association: (association, fix).
+
+        The vote's grid leaves each beacon's δ off by up to the tolerance, so an
+        echo 4 ms late can pass for the first path. A Gauss-Newton fix (with
+        exclusion) on the voted arrivals gives position and δ to centimetres;
+        each beacon then takes the candidate nearest its predicted arrival,
+        within 1.5 ms. Without a fix (fewer than four beacons, or none
+        plausible) the association is returned with ``None``.
+        """
+        b = self.site.beacons
+        ranges = [BeaconRange(b[i].id, b[i].east_m, b[i].north_m, b[i].up_m, self.c * (t - candidates[i][0]), 0.05, t)
+                  for i, t in kept.items()]
+        fix = solve_position(ranges, self.site, self.c, self._verify_config) if len(ranges) >= 4 else None
+        if fix is None or fix.n_beacons < 4:
+            return kept, None
+        out = {}
+        for i, (tx, times) in candidates.items():
+            pred = tx + math.dist((fix.east_m, fix.north_m, self.site.device_height_m),
+                                  (b[i].east_m, b[i].north_m, b[i].up_m)) / self.c + fix.clock_offset_s
+            t_best = min(times, key=lambda t: abs(t - pred))
+            if abs(t_best - pred) <= 1.5e-3:
+                out[i] = t_best
+        return (out if len(out) >= fix.n_beacons else kept), fix
+
+    def _vote(self, pe, pn, bi, rho, bpos, tol, arrivals, n_best: int = 200) -> list:
+        """Hypotheses (distinct beacons, anchor δ, (east, north), δ of the agreeing) best first.
+
+        Candidates agreeing with an anchor's δ within [δ, δ + tol] are counted
+        for all (point, anchor) pairs at once — each row sorted, then one global
+        searchsorted on rows offset far apart — and the ``n_best`` largest counts
+        are recounted as distinct beacons (a beacon's echoes must not vote twice)
+        using distinct arrivals (one arrival heard in several beacons' windows
+        must not vote for each of them).
+        """
+        r = np.sqrt((pe[:, None] - bpos[None, :, 0]) ** 2 + (pn[:, None] - bpos[None, :, 1]) ** 2
+                    + (self.site.device_height_m - bpos[None, :, 2]) ** 2)
+        delta = (rho[None, :] - r) / self.c                      # (n_points, n_candidates)
+        order = np.argsort(delta, axis=1)
+        sorted_delta = np.take_along_axis(delta, order, axis=1)
+        offset = 2.0 * (np.abs(delta).max() + tol + 1.0)
+        flat = (sorted_delta + offset * np.arange(len(pe))[:, None]).ravel()
+        hi = np.searchsorted(flat, flat + tol, side="right")
+        count = hi - np.arange(flat.size)
+        top = np.argsort(-count, kind="stable")[:n_best]
+        hyps = []
+        n_cand = delta.shape[1]
+        for f in top:
+            row, k = divmod(int(f), n_cand)
+            members = order[row, k: k + int(count[f])]
+            # Distinct beacons, but one physical arrival cannot serve two beacons.
+            n_distinct = min(len(set(bi[members].tolist())), len(set(np.round(arrivals[members], 4).tolist())))
+            hyps.append((n_distinct, float(sorted_delta[row, k]), row, members))
+        hyps.sort(key=lambda h: (-h[0], h[1]))
+        return [(n, d, (float(pe[row]), float(pn[row])), delta[row, members]) for n, d, row, members in hyps]
+
+    def skip_acquisition(self) -> bool:
+        """After a failed attempt the next frame skips acquisition (halves its cost while unlocked)."""
+        skip = self._skip_acquisition
+        self._skip_acquisition = not skip
+        return skip
+
+    def _clock_plausible(self, fix: AcousticFix) -> bool:
+        """|δ| within the stated start uncertainty, plus 5 ms and the drift allowed since the start."""
+        bound = self.timing.start_uncertainty_s + 5e-3 + self.max_drift_ppm * 1e-6 * abs(fix.t_s - self.timing.start_s)
+        return abs(fix.clock_offset_s) <= bound
+
+    def frame_done(self, frame_start_s: float, detections: list[ChirpDetection],
+                   bandwidth: dict) -> AcousticFix | None:
+        tracking = self.tracking_at(frame_start_s)
+        fix = frame_fix(detections, self.site, self.c, bandwidth, self.positions,
+                        self.last_fix if tracking else None)
+        if fix is None or not self._clock_plausible(fix):
+            return None
+        if tracking:
+            # A tracked fix must continue the track: clock offset and position within what
+            # drift and walking allow since the last fix. Tracking follows fixes whose
+            # residuals were tested (four beacons or more); an exactly determined
+            # three-beacon fix is reported only when nothing was excluded to reach it.
+            last = self.last_fix
+            dt = max(0.0, fix.t_s - last.t_s)
+            clock_ok = abs(fix.clock_offset_s - last.clock_offset_s) <= (
+                3.0 * math.sqrt(max(last.covariance[2, 2], 0.0)) + self.max_drift_ppm * 1e-6 * dt + 1e-3)
+            moved_ok = math.hypot(fix.east_m - last.east_m, fix.north_m - last.north_m) <= (
+                3.0 * math.sqrt(max(last.covariance[0, 0], last.covariance[1, 1], 0.0)) + self.max_speed_m_s * dt + 1.0)
+            if not (clock_ok and moved_ok):
+                return None
+            if fix.n_beacons >= 4:
+                self.last_fix = fix
+                return fix
+            return fix if not fix.rejected_ids else None
+        # Acquisition locks at once on a fix tested with two or more degrees of freedom, or on
+        # two consecutive four-beacon fixes that agree (M-of-N confirmation).
+        confirmed = (self._pending is not None and fix.n_beacons >= 4
+                     and math.hypot(fix.east_m - self._pending.east_m, fix.north_m - self._pending.north_m)
+                     <= 1.0 + self.max_speed_m_s * (fix.t_s - self._pending.t_s)
+                     and abs(fix.clock_offset_s - self._pending.clock_offset_s) <= 1e-3)
+        self._pending = fix if fix.n_beacons >= 4 else None
+        if fix.n_beacons >= self.acquisition_min_beacons or confirmed:
+            self.last_fix = fix
+            return fix
+        return None
+
+
+
+def frame_fix(detections: list[ChirpDetection], site: Site, c: float, bandwidth: dict,
+              config: PositionConfig, start: AcousticFix | None = None) -> AcousticFix | None:
+    """Position fix from one frame's detections (None when fewer than three beacons)."""
+    by_id = {b.id: b for b in site.beacons}
+    ranges = [BeaconRange(d.beacon_id, by_id[d.beacon_id].east_m, by_id[d.beacon_id].north_m,
+                          by_id[d.beacon_id].up_m, c * (d.arrival_s - d.tx_s),
+                          toa_range_sigma_m(d.snr_db, bandwidth[d.beacon_id], c), d.arrival_s)
+              for d in detections if d.associated]
+    if len(ranges) < 3:
+        return None
+    if config.motion_speed_m_s > 0:
+        # Walking during the frame: σᵢ² += ½·(v·(tᵢ − t̄))² (see PositionConfig).
+        t_mean = float(np.mean([r.arrival_s for r in ranges]))
+        ranges = [dataclasses.replace(r, sigma_m=math.sqrt(r.sigma_m ** 2 + 0.5 * (
+            config.motion_speed_m_s * (r.arrival_s - t_mean)) ** 2)) for r in ranges]
+    x0 = None if start is None else np.array([start.east_m, start.north_m, start.clock_offset_s])
+    return solve_position(ranges, site, c, config, x0)
+
+
+
+def acquisition_windows(windows: list[SearchWindow], candidates, tracker: ClockPositionTracker, timing: AudioTiming,
+                         fs: float, lead: int) -> list[SearchWindow]:
+    """Narrow each acquisition window to the arrival the Hough vote associates with its beacon.
+
+    Windows of beacons left unassociated keep their full extent (their strongest
+    peak still yields CIR features, not a position).
+    """
+    cand = {w.beacon_index: (w.tx_s, candidates(w)) for w in windows}
+    chosen = tracker.acquire({i: v for i, v in cand.items() if v[1]})
+    out = []
+    for w in windows:
+        if w.beacon_index in chosen:
+            s_peak = int(round((chosen[w.beacon_index] - timing.start_s) * fs))
+            out.append(SearchWindow(w.beacon_index, w.tx_s, s_peak - lead, s_peak + 8))
+        else:
+            out.append(SearchWindow(w.beacon_index, w.tx_s, w.lo, w.hi, associated=False))
+    return out
+
