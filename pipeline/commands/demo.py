@@ -55,5 +55,23 @@ def run_demo(args) -> int:
         p = walk.path(stream)
         if p is not None:
             print(f"[{stream}]{' ' * (6 - len(stream))}{p.name}: {p.stat().st_size / 1e6:.1f} MB")
+
+    from pipeline.walk_report import error_table, plot_walk, walk_sources
+    src = walk_sources(walk_dir)
+    feats = src.gnss_features
+    if feats is not None and len(feats["t_s"]):
+        cls = truth.class_at(feats["t_s"])
+        print("[features] GNSS medians per truth class (att_mean_db / invisible_ratio / dop_growth):")
+        for k, c in enumerate(("open", "light", "heavy")):
+            sel = cls == k
+            if sel.any():
+                print(f"           {c:5s}: " + " / ".join(f"{np.nanmedian(feats[f][sel]):.2f}" for f in
+                                                        ("att_mean_db", "invisible_ratio", "dop_growth")))
+    print("[errors] horizontal error per source, median (p95) in m:   all | open | light | heavy")
+    for name, row in error_table(src).items():
+        cells = [f"{row[c][2]:.2f} ({row[c][3]:.2f})" if c in row else "-" for c in ("all", "open", "light", "heavy")]
+        print(f"           {name:8s} " + " | ".join(cells))
+    png = plot_walk(src, out / "walk.png", title=f"{site.name}, walk seed {args.seed}")
+    print(f"[plot]   {png}")
     print(f"done: outputs in {out}")
     return 0

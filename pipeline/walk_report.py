@@ -1,0 +1,162 @@
+"""One walk, every raw position source, against the truth: figures and a summary.
+
+Reads only the walk directory's files (as for a real device's log): the
+NMEA fixes, the acoustic positions from the audio, the PDR track from the IMU,
+and ``truth.csv`` when present. Fusion comes in its own module; this report
+shows what each sensor gives on its own, per environment class.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from features.site import ENV_CLASSES
+from features.walk import load_walk, read_truth
+
+__all__ = ["SourceTrack", "WalkSources", "walk_sources", "error_table", "plot_walk"]
+
+
+@dataclass(frozen=True)
+class SourceTrack:
+    """Positions of one source on the walk's time base; arrays of shape (n,)."""
+
+    name: str
+    t_s: np.ndarray
+    east_m: np.ndarray
+    north_m: np.ndarray
+    info: dict = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class WalkSources:
+    site: object
+    tracks: dict
+    truth: object | None
+    gnss_features: dict | None
+    quality: np.ndarray | None
+
+
+def _gnss(walk, site):
+    from features.gnss_features import gnss_features, sky_arrays
+    from features.gnss_positions import fixes_to_enu
+    from features.nmea import epochs_on_time_base, read_nmea
+
+    epochs, stats = read_nmea(walk.path("gnss"))
+    epochs = epochs_on_time_base(epochs, walk.start_utc)
+    o = site.origin
+    pos = fixes_to_enu(epochs, o.lat_deg, o.lon_deg, o.alt_m)
+    feats = gnss_features(sky_arrays(epochs))
+    return SourceTrack("GNSS", pos.t_s, pos.east_m, pos.north_m, {"skipped": stats.summary()}), feats, pos.quality
+
+
+def _pdr(walk, start_en, k: float | None):
+    from features.heading import HeadingConfig
+    from features.imu import read_imu_csv
+    from features.pdr import PdrConfig, run_pdr
+    from features.steps import StepLengthModel
+
+    imu = read_imu_csv(walk.path("imu"))
+    decl = float(walk.streams["imu"].get("declination_deg", 0.0))
+    cfg = PdrConfig(heading=HeadingConfig(declination_rad=np.radians(decl)))
+    if k is not None:
+        cfg = PdrConfig(length=StepLengthModel(k=k), heading=cfg.heading)
+    res = run_pdr(imu, start_en[0], start_en[1], cfg)
+    return SourceTrack("PDR", res.t_s, res.east_m, res.north_m, {"steps": len(res), "distance_m": res.distance_m})
+
+
+def walk_sources(walk_dir: str | os.PathLike, pdr_k: float | None = None) -> WalkSources:
+    """Extract every available position source of a walk directory."""
+    walk = load_walk(walk_dir)
+    site = walk.load_site()
+    truth = read_truth(walk.directory) if (walk.directory / "truth.csv").is_file() else None
+    tracks, feats, quality = {}, None, None
+    if walk.path("gnss") is not None:
+        tracks["GNSS"], feats, quality = _gnss(walk, site)
+    if walk.path("imu") is not None:
+        if truth is not None:
+            start = (float(truth.east_m[0]), float(truth.north_m[0]))
+        elif "GNSS" in tracks and len(tracks["GNSS"].t_s):
+            start = (float(tracks["GNSS"].east_m[0]), float(tracks["GNSS"].north_m[0]))
+        else:
+            start = (0.0, 0.0)
+        tracks["PDR"] = _pdr(walk, start, pdr_k)
+    return WalkSources(site=site, tracks=tracks, truth=truth, gnss_features=feats, quality=quality)
+
+
+def error_table(src: WalkSources) -> dict:
+    """Horizontal error statistics per source and class: {source: {class|'all': (n, mean, median, p95)}}."""
+    out = {}
+    if src.truth is None:
+        return out
+    for name, tr in src.tracks.items():
+        ok = np.isfinite(tr.east_m) & (tr.t_s >= src.truth.t_s[0]) & (tr.t_s <= src.truth.t_s[-1])
+        if not ok.any():
+            continue
+        te, tn = src.truth.at(tr.t_s[ok])
+        err = np.hypot(tr.east_m[ok] - te, tr.north_m[ok] - tn)
+        cls = src.truth.class_at(tr.t_s[ok])
+        row = {"all": _stats(err)}
+        for k, c in enumerate(ENV_CLASSES):
+            if (cls == k).any():
+                row[c] = _stats(err[cls == k])
+        out[name] = row
+    return out
+
+
+def _stats(err):
+    return (int(err.size), float(np.mean(err)), float(np.median(err)), float(np.percentile(err, 95)))
+
+
+_SRC_STYLE = {"GNSS": dict(color="#d62728", s=6), "acoustic": dict(color="#ff7f0e", s=6),
+              "PDR": dict(color="#1f77b4", s=4)}
+
+
+def plot_walk(src: WalkSources, path: str | os.PathLike, title: str = "") -> Path:
+    """Map of the sources against truth, and their errors over time with the truth class shaded."""
+    import matplotlib.pyplot as plt
+    from matplotlib.patches import Rectangle
+
+    from .plots import CLASS_COLOURS, save_figure
+
+    fig, (ax, ax2) = plt.subplots(1, 2, figsize=(15, 6), gridspec_kw={"width_ratios": [1.1, 1]})
+    for b in src.site.layout:
+        ax.add_patch(Rectangle((b.east_min_m, b.north_min_m), b.east_max_m - b.east_min_m,
+                               b.north_max_m - b.north_min_m, facecolor="none" if b.porous else "#cccccc",
+                               edgecolor="#999999", hatch="//" if b.porous else None, lw=0.6))
+    for bc in src.site.beacons:
+        ax.plot(bc.east_m, bc.north_m, "k^", ms=5)
+    if src.truth is not None:
+        ax.plot(src.truth.east_m, src.truth.north_m, "k-", lw=1.2, label="truth")
+    for name, tr in src.tracks.items():
+        style = _SRC_STYLE.get(name, {})
+        if name == "PDR":
+            ax.plot(tr.east_m, tr.north_m, "-", color=style["color"], lw=1, label=name)
+        else:
+            ax.scatter(tr.east_m, tr.north_m, label=name, alpha=0.6, **style)
+    ax.set_xlim(src.site.grid.east_min_m, src.site.grid.east_max_m)
+    ax.set_ylim(src.site.grid.north_min_m, src.site.grid.north_max_m)
+    ax.set_aspect("equal")
+    ax.set_xlabel("east (m)")
+    ax.set_ylabel("north (m)")
+    ax.legend(loc="upper right", fontsize=8)
+    ax.set_title(title or "walk: sources against truth")
+    if src.truth is not None:
+        t = src.truth.t_s
+        c = src.truth.env_class
+        edges = np.flatnonzero(np.diff(c)) + 1
+        for a, b in zip(np.r_[0, edges], np.r_[edges, len(t)]):
+            ax2.axvspan(t[a], t[min(b, len(t) - 1)], color=CLASS_COLOURS[ENV_CLASSES[c[a]]], lw=0)
+        for name, tr in src.tracks.items():
+            ok = np.isfinite(tr.east_m)
+            te, tn = src.truth.at(tr.t_s[ok])
+            ax2.semilogy(tr.t_s[ok], np.maximum(np.hypot(tr.east_m[ok] - te, tr.north_m[ok] - tn), 1e-3), ".",
+                         ms=2, color=_SRC_STYLE.get(name, {}).get("color"), label=name)
+        ax2.set_xlabel("t (s)")
+        ax2.set_ylabel("horizontal error (m)")
+        ax2.set_title("error over time; background = truth class (open / light / heavy)")
+        ax2.legend(fontsize=8)
+    return save_figure(fig, path)
