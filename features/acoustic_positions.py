@@ -148,11 +148,13 @@ def _chi2_limit(dof: int, alpha: float) -> float:
 
 
 def _gauss_newton(ranges: list[BeaconRange], height_m: float, c: float, iterations: int,
-                  start: np.ndarray | None = None):
-    """(x = [e, n, δ], covariance (3, 3), residuals (n,), sigmas (n,)) or None if singular.
+                  start: np.ndarray | None = None, clock_prior: tuple[float, float] | None = None):
+    """(x = [e, n, δ], covariance (3, 3), residuals (n,), sigmas (n,), chi²) or None if singular.
 
     Starts from ``start`` (e.g. the previous fix) or from the weighted centroid
-    of the beacons with the median clock offset.
+    of the beacons with the median clock offset. ``clock_prior`` = (δ₀, σ_δ)
+    adds the pseudo-measurement δ = δ₀ ± σ_δ (a tracked clock), which enters
+    the normal equations and chi² like one more range.
     """
     s = np.array([[r.east_m, r.north_m, r.up_m] for r in ranges])
     rho = np.array([r.pseudorange_m for r in ranges])
@@ -174,10 +176,15 @@ def _gauss_newton(ranges: list[BeaconRange], height_m: float, c: float, iteratio
         jac[:, 0], jac[:, 1] = de / r, dn / r
         res = rho - (r + c * x[2])
         normal = jac.T @ (w[:, None] * jac)
+        gradient = jac.T @ (w * res)
+        if clock_prior is not None:
+            # Prior row: δ₀ − δ with weight 1/σ_δ² (J row [0, 0, 1]).
+            normal[2, 2] += 1.0 / clock_prior[1] ** 2
+            gradient[2] += (clock_prior[0] - x[2]) / clock_prior[1] ** 2
         if it == iterations:
             break
         try:
-            step = np.linalg.solve(normal, jac.T @ (w * res))
+            step = np.linalg.solve(normal, gradient)
         except np.linalg.LinAlgError:
             return None
         x = x + step
@@ -190,30 +197,37 @@ def _gauss_newton(ranges: list[BeaconRange], height_m: float, c: float, iteratio
         return None
     if not np.all(np.isfinite(cov)) or np.any(np.diag(cov) <= 0) or cov[0, 0] + cov[1, 1] > 1e8:
         return None
-    return x, 0.5 * (cov + cov.T), res, sig
+    chi2 = float(np.sum((res / sig) ** 2))
+    if clock_prior is not None:
+        chi2 += ((clock_prior[0] - x[2]) / clock_prior[1]) ** 2
+    return x, 0.5 * (cov + cov.T), res, sig, chi2
 
 
 def solve_position(ranges: list[BeaconRange], site: Site, speed_m_s: float,
-                   config: PositionConfig = PositionConfig(), start: np.ndarray | None = None) -> AcousticFix | None:
-    """Gauss-Newton fix with NLOS exclusion; None when fewer than 3 beacons or no plausible solution.
+                   config: PositionConfig = PositionConfig(), start: np.ndarray | None = None,
+                   clock_prior: tuple[float, float] | None = None) -> AcousticFix | None:
+    """Gauss-Newton fix with NLOS exclusion; None when too few beacons or no plausible solution.
 
     ``start``: optional initial (east_m, north_m, clock_offset_s), e.g. the previous fix.
+    ``clock_prior``: optional (clock_offset_s, sigma_s) from a tracked clock; with it
+    three beacons leave one degree of freedom for the residual test.
     """
     ranges = list(ranges)
     h = site.device_height_m
+    n_prior = 0 if clock_prior is None else 1
     if len(ranges) < 3:
         return None
-    sol = _gauss_newton(ranges, h, speed_m_s, config.max_iterations, start)
+    sol = _gauss_newton(ranges, h, speed_m_s, config.max_iterations, start, clock_prior)
     if sol is None:
         return None
-    x, cov, res, sig = sol
-    dof = len(ranges) - 3
+    x, cov, res, sig, chi2 = sol
+    dof = len(ranges) + n_prior - 3
     rejected: list[int] = []
-    if dof > 0 and float(np.sum((res / sig) ** 2)) > _chi2_limit(dof, config.chi2_alpha):
-        found = _exclude(ranges, h, speed_m_s, config, start)
+    if dof > 0 and chi2 > _chi2_limit(dof, config.chi2_alpha):
+        found = _exclude(ranges, h, speed_m_s, config, start, clock_prior)
         if found is None:
             return None
-        keep, (x, cov, res, sig) = found
+        keep, (x, cov, res, sig, _) = found
         rejected = [r.beacon_id for i, r in enumerate(ranges) if i not in keep]
         ranges = [ranges[i] for i in keep]
     if not _plausible(x, site, config):
@@ -225,7 +239,7 @@ def solve_position(ranges: list[BeaconRange], site: Site, speed_m_s: float,
                        used_ids=tuple(r.beacon_id for r in ranges), rejected_ids=tuple(rejected))
 
 
-def _exclude(ranges: list[BeaconRange], h: float, c: float, config: PositionConfig, start):
+def _exclude(ranges: list[BeaconRange], h: float, c: float, config: PositionConfig, start, clock_prior=None):
     """Largest subset (of four or more) whose residuals pass the chi-square test; ties: smallest chi².
 
     Subsets are tried by decreasing size, at most ``config.max_excluded``
@@ -235,19 +249,20 @@ def _exclude(ranges: list[BeaconRange], h: float, c: float, config: PositionConf
     leave-one-out cannot do reliably once two are biased.
     """
     n = len(ranges)
+    n_prior = 0 if clock_prior is None else 1
+    smallest = 4 - n_prior            # one degree of freedom left for the test
     tried = 0
-    for size in range(n - 1, max(3, n - 1 - config.max_excluded), -1):
+    for size in range(n - 1, max(smallest - 1, n - 1 - config.max_excluded), -1):
         best = None
         for keep in itertools.combinations(range(n), size):
             tried += 1
             if tried > _MAX_SUBSETS:
                 return None
-            sol = _gauss_newton([ranges[i] for i in keep], h, c, config.max_iterations, start)
+            sol = _gauss_newton([ranges[i] for i in keep], h, c, config.max_iterations, start, clock_prior)
             if sol is None:
                 continue
-            _, _, res, sig = sol
-            chi2 = float(np.sum((res / sig) ** 2))
-            if chi2 <= _chi2_limit(size - 3, config.chi2_alpha) and (best is None or chi2 < best[0]):
+            chi2 = sol[4]
+            if chi2 <= _chi2_limit(size + n_prior - 3, config.chi2_alpha) and (best is None or chi2 < best[0]):
                 best = (chi2, keep, sol)
         if best is not None:
             return best[1], best[2]

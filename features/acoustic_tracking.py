@@ -29,8 +29,8 @@ class ClockPositionTracker:
     ``[tx − u, tx + u + min(r_max/c, slot_s)]``. Neighbouring windows overlap
     when ``u`` is large or a beacon is far, so a fix from acquisition is
     trusted only when at least five beacons pass the residual test (two
-    degrees of freedom left for it), or when two consecutive frames give
-    agreeing four-beacon fixes.
+    degrees of freedom left for it), under the static model whatever the
+    motion prior.
 
     Tracking (a fix at most ``track_timeout_s`` old): the window is centred on
     the arrival predicted from the last fix, ``tx + ‖p − s_b‖/c + δ``, with a
@@ -39,7 +39,9 @@ class ClockPositionTracker:
     time; an NLOS first arrival may come up to ``nlos_slack_m`` later. Beacons
     predicted beyond ``r_max`` are not searched. The clock offset drifts (a
     sample clock off by 10 ppm gains 6 ms in 10 minutes), so it is tracked
-    rather than estimated once.
+    rather than estimated once: each tracked fix takes the last offset as a
+    prior widened by ``clock_drift_prior_ppm`` over the elapsed time, which
+    leaves three beacons a degree of freedom for the residual test.
     """
 
     max_speed_m_s = 2.5
@@ -47,6 +49,7 @@ class ClockPositionTracker:
     nlos_slack_m = 10.0
     track_timeout_s = 4.0
     acquisition_min_beacons = 5
+    clock_drift_prior_ppm = 20.0
 
     def __init__(self, site: Site, timing: AudioTiming, fs_hz: float, c: float, r_max: float,
                  positions: PositionConfig):
@@ -54,9 +57,11 @@ class ClockPositionTracker:
         self.positions = positions
         self.order = sorted(range(len(site.beacons)), key=lambda i: (site.beacons[i].slot, site.beacons[i].id))
         self.last_fix: AcousticFix | None = None
-        self._pending: AcousticFix | None = None
         # Verifying a hypothesis may drop one wrongly associated beacon; more is a new hypothesis.
-        self._verify_config = dataclasses.replace(positions, max_excluded=1)
+        # Acquisition keeps the static model whatever the motion prior: its tight residual
+        # test is what rejects wrong associations; tracking uses ``positions`` as given.
+        self._acquire_config = dataclasses.replace(positions, motion_speed_m_s=0.0)
+        self._verify_config = dataclasses.replace(self._acquire_config, max_excluded=1)
         self._skip_acquisition = False
 
     @property
@@ -250,8 +255,16 @@ class ClockPositionTracker:
     def frame_done(self, frame_start_s: float, detections: list[ChirpDetection],
                    bandwidth: dict) -> AcousticFix | None:
         tracking = self.tracking_at(frame_start_s)
-        fix = frame_fix(detections, self.site, self.c, bandwidth, self.positions,
-                        self.last_fix if tracking else None)
+        prior = None
+        if tracking:
+            # The sample clock drifts slowly: the last fix's offset, widened by the drift since.
+            last = self.last_fix
+            dt = max(0.0, frame_start_s - last.t_s)
+            prior = (last.clock_offset_s, math.sqrt(max(last.covariance[2, 2], 0.0) + (
+                self.clock_drift_prior_ppm * 1e-6 * dt) ** 2 + 1e-10))
+        fix = frame_fix(detections, self.site, self.c, bandwidth,
+                        self.positions if tracking else self._acquire_config,
+                        self.last_fix if tracking else None, prior)
         if fix is None or not self._clock_plausible(fix):
             return None
         if tracking:
@@ -271,14 +284,11 @@ class ClockPositionTracker:
                 self.last_fix = fix
                 return fix
             return fix if not fix.rejected_ids else None
-        # Acquisition locks at once on a fix tested with two or more degrees of freedom, or on
-        # two consecutive four-beacon fixes that agree (M-of-N confirmation).
-        confirmed = (self._pending is not None and fix.n_beacons >= 4
-                     and math.hypot(fix.east_m - self._pending.east_m, fix.north_m - self._pending.north_m)
-                     <= 1.0 + self.max_speed_m_s * (fix.t_s - self._pending.t_s)
-                     and abs(fix.clock_offset_s - self._pending.clock_offset_s) <= 1e-3)
-        self._pending = fix if fix.n_beacons >= 4 else None
-        if fix.n_beacons >= self.acquisition_min_beacons or confirmed:
+        # Acquisition locks only on a fix tested with two or more degrees of freedom. (Two
+        # agreeing four-beacon fixes from consecutive frames are not independent evidence: a
+        # receiver standing still repeats the same wrong association; on a simulated walk
+        # that locked 12 m off.)
+        if fix.n_beacons >= self.acquisition_min_beacons:
             self.last_fix = fix
             return fix
         return None
@@ -286,8 +296,12 @@ class ClockPositionTracker:
 
 
 def frame_fix(detections: list[ChirpDetection], site: Site, c: float, bandwidth: dict,
-              config: PositionConfig, start: AcousticFix | None = None) -> AcousticFix | None:
-    """Position fix from one frame's detections (None when fewer than three beacons)."""
+              config: PositionConfig, start: AcousticFix | None = None,
+              clock_prior: tuple[float, float] | None = None) -> AcousticFix | None:
+    """Position fix from one frame's detections (None when fewer than three beacons).
+
+    ``start``: the previous fix (initial value); ``clock_prior``: (δ, σ_δ) of a tracked clock.
+    """
     by_id = {b.id: b for b in site.beacons}
     ranges = [BeaconRange(d.beacon_id, by_id[d.beacon_id].east_m, by_id[d.beacon_id].north_m,
                           by_id[d.beacon_id].up_m, c * (d.arrival_s - d.tx_s),
@@ -301,8 +315,7 @@ def frame_fix(detections: list[ChirpDetection], site: Site, c: float, bandwidth:
         ranges = [dataclasses.replace(r, sigma_m=math.sqrt(r.sigma_m ** 2 + 0.5 * (
             config.motion_speed_m_s * (r.arrival_s - t_mean)) ** 2)) for r in ranges]
     x0 = None if start is None else np.array([start.east_m, start.north_m, start.clock_offset_s])
-    return solve_position(ranges, site, c, config, x0)
-
+    return solve_position(ranges, site, c, config, x0, clock_prior)
 
 
 def acquisition_windows(windows: list[SearchWindow], candidates, tracker: ClockPositionTracker, timing: AudioTiming,

@@ -58,6 +58,9 @@ def register(sub) -> None:
     p.add_argument("--max-range-m", type=_positive, default=None,
                    help="largest range at which a beacon is searched, m (default: the site's extent)")
     p.add_argument("--p-fa", type=float, default=1e-6, help="false-alarm probability per search window (1e-6)")
+    p.add_argument("--motion-speed-m-s", type=_non_negative, default=None,
+                   help="walking-speed prior for positions, m/s (default: 0 for a survey cell.toml, whose capture "
+                        "is static, else 1.4)")
     p.set_defaults(func=_run)
 
 
@@ -102,7 +105,7 @@ def timing_from_walk(walk_path: Path | None, site, uncertainty_override: float |
 
 def _run(args) -> int:
     from features.acoustic_features import FEATURE_COLUMNS, WindowConfig, analyse_audio
-    from features.acoustic_positions import POSITION_COLUMNS
+    from features.acoustic_positions import POSITION_COLUMNS, PositionConfig
     from features.audio import AudioWarning
     from features.chirp_detection import DetectorConfig
     from features.fileio import atomic_write_text
@@ -115,10 +118,15 @@ def _run(args) -> int:
     if not 0 < args.p_fa < 1:
         raise ConfigError(f"--p-fa must lie in (0, 1), got {args.p_fa}")
     detector = DetectorConfig(p_fa=args.p_fa, max_range_m=args.max_range_m)
+    motion = args.motion_speed_m_s
+    if motion is None:
+        static = args.walk is not None and (args.walk.name == "cell.toml" or (args.walk / "cell.toml").is_file())
+        motion = 0.0 if static else 1.4
+    positions = PositionConfig(max_clock_offset_s=timing.start_uncertainty_s + 0.05, motion_speed_m_s=motion)
     windows = WindowConfig(window_s=args.window_s, hop_s=args.hop_s)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", AudioWarning)
-        result = analyse_audio(args.wav, site, timing, detector, windows)
+        result = analyse_audio(args.wav, site, timing, detector, windows, positions)
     for w in caught:
         if issubclass(w.category, AudioWarning):
             print(f"envfuse: warning: {w.message}", file=sys.stderr)
