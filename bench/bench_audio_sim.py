@@ -3,7 +3,8 @@
 Renders a walk (default 300 s) along an aisle route of a generated site and a
 static 30 s survey capture, and prints real-time factors, the peak of Python
 heap allocations (tracemalloc) and, for reference, absorption in the beacon
-band and example path sets.
+band and example path sets. Memory holds one block of audio (65 536 samples)
+plus arrays the size of the 100 Hz trajectory, never the recording.
 
     .venv/bin/python bench/bench_audio_sim.py [--duration 300] [--site-seed 3] [--seed 1]
 """
@@ -37,7 +38,7 @@ def _timed(site, traj, seed, path, traced: bool):
     if traced:
         tracemalloc.start()
     t0 = time.perf_counter()
-    res = render_audio(site, traj, seed, path, AudioConfig())
+    res = render_audio(site, traj, seed, path, AudioConfig(), truth_path=path.with_suffix(".csv"))
     wall = time.perf_counter() - t0
     peak = tracemalloc.get_traced_memory()[1] if traced else 0
     if traced:
@@ -79,11 +80,13 @@ def main(argv=None) -> None:
               f"{res.n_rendered}/{res.n_emissions} emissions rendered, {res.n_clipped} clipped samples")
         res, wall, _ = _timed(site, cell, args.seed, Path(tmp) / "cell.wav", traced=False)
         print(f"static cell 30 s: {wall:.2f} s wall, {30.0 / wall:.1f}x real time")
-        for dur in (60.0, 2 * 60.0):
+        for dur in (60.0, 240.0, 600.0):
             w = route_trajectory(*plan_route(site, stream_rng(args.seed, "route"), dur, route), dur, START,
                                  site.device_height_m, route)
             _, wall, peak = _timed(site, w, args.seed, Path(tmp) / "m.wav", traced=True)
-            print(f"walk {dur:.0f} s under tracemalloc: peak Python heap {peak / 2**20:.1f} MiB")
+            print(f"walk {dur:.0f} s under tracemalloc: peak Python heap {peak / 2**20:.1f} MiB "
+                  f"(audio written: {dur * 48_000 * 2 / 2**20:.1f} MiB; trajectory arrays "
+                  f"{6 * w.t_s.nbytes / 2**20:.1f} MiB)")
 
 
 if __name__ == "__main__":

@@ -20,15 +20,18 @@ evaluation; a receiver never reads it.
 
 from __future__ import annotations
 
+import contextlib
 import csv
+import heapq
 import io
 import math
 from dataclasses import dataclass
+from typing import Iterator
 
 import numpy as np
 import soundfile as sf
 
-from features.fileio import atomic_path, atomic_write_text
+from features.fileio import atomic_path
 from features.site import Site
 
 from .acoustic_channel import PATH_KINDS, PathSet, build_scene, channel_paths, clutter_index
@@ -53,7 +56,7 @@ class AudioResult:
     n_emissions: int
     n_rendered: int
     n_clipped: int
-    truth_csv: str
+    truth_csv: str | None
 
 
 class _Accumulator:
@@ -92,24 +95,28 @@ def _velocity_table(traj: Trajectory) -> tuple[np.ndarray, np.ndarray]:
     return traj.speed_m_s * np.sin(traj.heading_rad), traj.speed_m_s * np.cos(traj.heading_rad)
 
 
-def _emissions(site: Site, start_utc, t_begin_s: float, t_end_s: float) -> list[tuple]:
-    """Every (t_emit_s, beacon_id, index, beacon, spec) in [t_begin_s, t_end_s), in emission order."""
-    out = []
-    for b in site.beacons:
+def _emissions(site: Site, start_utc, t_begin_s: float, t_end_s: float) -> Iterator[tuple]:
+    """Every (t_emit_s, beacon_id, index, beacon, spec) in [t_begin_s, t_end_s), in emission order.
+
+    A lazy k-way merge of the beacons' schedules: memory per beacon, not per emission.
+    """
+    def one(b):
         spec = beacon_chirp(site, b)
         for i, t_e in enumerate(emission_times_s(site, b, start_utc, t_begin_s, t_end_s)):
-            out.append((float(t_e), b.id, i, b, spec))
-    out.sort(key=lambda e: (e[0], e[1]))
-    return out
+            yield float(t_e), b.id, i, b, spec
+
+    return heapq.merge(*(one(b) for b in site.beacons), key=lambda e: (e[0], e[1]))
 
 
 def render_audio(site: Site, trajectory: Trajectory, seed: int, wav_path,
-                 cfg: AudioConfig | None = None) -> AudioResult:
+                 cfg: AudioConfig | None = None, truth_path=None) -> AudioResult:
     """Simulate the recording along ``trajectory`` into the int16 WAV at ``wav_path`` (atomic).
 
+    The per-emission truth goes to ``truth_path`` (``audio_truth.csv``, atomic)
+    as it is produced, or, without a path, into ``AudioResult.truth_csv``.
     Randomness comes only from ``stream_rng(seed, "audio", ...)``: the same
-    seed gives the same bytes, whatever ``block_samples``. Memory is bounded by
-    the block size, not the recording's length. Returns an :class:`AudioResult`.
+    seed gives the same bytes, whatever ``block_samples``. With a truth path,
+    memory is bounded by the block size, not the recording's length.
     """
     cfg = cfg or AudioConfig()
     fs = cfg.fs_hz
@@ -132,21 +139,26 @@ def render_audio(site: Site, trajectory: Trajectory, seed: int, wav_path,
     clutter_cache: dict[tuple[int, int], float] = {}
     path_cache: dict[tuple, PathSet] = {}         # a static receiver sees the same geometry every frame
     acc = _Accumulator(cfg.block_samples, n_total)
-    rows = []
-    counts = {"rendered": 0, "clipped": 0}
+    counts = {"emissions": 0, "rendered": 0, "clipped": 0}
     next_chunk = 0
     carry = np.zeros(0)
 
     def paths_at(bid: int, src: np.ndarray, rx: np.ndarray) -> PathSet:
         key = (bid, *np.round(rx, 4).tolist())
         if key not in path_cache:
-            if len(path_cache) > 4096:
+            if len(path_cache) > 512:
                 path_cache.clear()
             path_cache[key] = channel_paths(scene, src, rx)
         return path_cache[key]
 
-    with atomic_path(wav_path, suffix=".wav") as tmp, \
-            sf.SoundFile(tmp, "w", samplerate=fs, channels=1, subtype="PCM_16", format="WAV") as out:
+    with contextlib.ExitStack() as stack:
+        tmp = stack.enter_context(atomic_path(wav_path, suffix=".wav"))
+        out = stack.enter_context(sf.SoundFile(tmp, "w", samplerate=fs, channels=1, subtype="PCM_16", format="WAV"))
+        if truth_path is None:
+            truth_file = io.StringIO()
+        else:
+            truth_file = stack.enter_context(open(stack.enter_context(atomic_path(truth_path)), "w", newline=""))
+        truth = _TruthWriter(truth_file)
 
         def flush_until(sample: float) -> None:
             nonlocal next_chunk, carry
@@ -165,6 +177,7 @@ def render_audio(site: Site, trajectory: Trajectory, seed: int, wav_path,
                 out.write(np.clip(q, -32768, 32767).astype(np.int16))
 
         for t_e, bid, i, b, spec in emissions:
+            counts["emissions"] += 1
             flush_until((t_e - true_start) * fs_true - _PRE_SAMPLES - 2)
             src = np.array([b.east_m, b.north_m, b.up_m])
             if spec not in alpha_min:
@@ -205,12 +218,13 @@ def render_audio(site: Site, trajectory: Trajectory, seed: int, wav_path,
             acc.add(start, seg)
             counts["rendered"] += 1
             if first_sample >= 0:
-                rows.append((bid, b.slot, t_e, t_a, first_sample, PATH_KINDS[paths.kind[0]], paths.length_m[0],
-                             paths.direct_m, int(paths.los), *rx, _first_path_db_spl(paths, spec, sl_db, renderer),
-                             eta))
+                truth.row(bid, b.slot, t_e, t_a, first_sample, PATH_KINDS[paths.kind[0]], paths.length_m[0],
+                          paths.direct_m, int(paths.los), rx, _first_path_db_spl(paths, spec, sl_db, renderer), eta)
         flush_until(float(n_total))
-    return AudioResult(true_start_s=true_start, drift_ppm=drift_ppm, n_samples=n_total, n_emissions=len(emissions),
-                       n_rendered=counts["rendered"], n_clipped=counts["clipped"], truth_csv=_truth_csv(rows))
+        text = truth_file.getvalue() if truth_path is None else None
+    return AudioResult(true_start_s=true_start, drift_ppm=drift_ppm, n_samples=n_total,
+                       n_emissions=counts["emissions"],
+                       n_rendered=counts["rendered"], n_clipped=counts["clipped"], truth_csv=text)
 
 
 def _first_path_db_spl(paths: PathSet, spec: ChirpSpec, source_level_db: float,
@@ -224,22 +238,27 @@ def _first_path_db_spl(paths: PathSet, spec: ChirpSpec, source_level_db: float,
     return level
 
 
-def _truth_csv(rows: list[tuple]) -> str:
+class _TruthWriter:
     """``audio_truth.csv``: one row per recorded emission (true first arrival, for evaluation only)."""
-    buf = io.StringIO()
-    w = csv.writer(buf, lineterminator="\n")
-    w.writerow(["beacon_id", "slot", "emit_t_s", "arrival_t_s", "arrival_sample", "first_path", "first_path_m",
-                "direct_m", "los", "rx_east_m", "rx_north_m", "rx_up_m", "first_path_db_spl", "doppler"])
-    for r in rows:
-        w.writerow([r[0], r[1], f"{r[2]:.9f}", f"{r[3]:.9f}", f"{r[4]:.3f}", r[5], f"{r[6]:.4f}", f"{r[7]:.4f}",
-                    r[8], f"{r[9]:.3f}", f"{r[10]:.3f}", f"{r[11]:.3f}", f"{r[12]:.1f}", f"{r[13]:.6f}"])
-    return buf.getvalue()
+
+    HEADER = ("beacon_id", "slot", "emit_t_s", "arrival_t_s", "arrival_sample", "first_path", "first_path_m",
+              "direct_m", "los", "rx_east_m", "rx_north_m", "rx_up_m", "first_path_db_spl", "doppler")
+
+    def __init__(self, stream):
+        self._w = csv.writer(stream, lineterminator="\n")
+        self._w.writerow(self.HEADER)
+
+    def row(self, beacon_id, slot, emit_t_s, arrival_t_s, arrival_sample, first_path, first_path_m, direct_m, los,
+            rx, level_db_spl, doppler) -> None:
+        self._w.writerow([beacon_id, slot, f"{emit_t_s:.9f}", f"{arrival_t_s:.9f}", f"{arrival_sample:.3f}",
+                          first_path, f"{first_path_m:.4f}", f"{direct_m:.4f}", los, f"{rx[0]:.3f}", f"{rx[1]:.3f}",
+                          f"{rx[2]:.3f}", f"{level_db_spl:.1f}", f"{doppler:.6f}"])
 
 
 def write_audio(ctx: StreamContext) -> dict:
     """Stream writer: ``audio.wav`` and ``audio_truth.csv`` into ``ctx.out_dir``; returns the ``[audio]`` table."""
     cfg = AudioConfig.from_options(ctx.options)
-    result = render_audio(ctx.site, ctx.trajectory, ctx.seed, ctx.out_dir / "audio.wav", cfg)
-    atomic_write_text(ctx.out_dir / "audio_truth.csv", result.truth_csv)
+    render_audio(ctx.site, ctx.trajectory, ctx.seed, ctx.out_dir / "audio.wav", cfg,
+                 truth_path=ctx.out_dir / "audio_truth.csv")
     return {"audio": {"file": "audio.wav", "fs_hz": cfg.fs_hz, "start_s": cfg.start_s,
                       "start_uncertainty_s": cfg.start_uncertainty_s}}

@@ -185,7 +185,7 @@ class ChirpRenderer:
         self.fs = float(cfg.fs_hz)
         self.c = speed_of_sound_m_s(site.atmosphere.temperature_c)
         self.atmosphere = site.atmosphere
-        self._alpha_cache: dict[tuple[int, int, int], np.ndarray] = {}
+        self._alpha_cache: dict[int, np.ndarray] = {}
 
     def _band(self, n_fft: int, spec: ChirpSpec, eta: float) -> tuple[int, int]:
         df = self.fs / n_fft
@@ -194,10 +194,10 @@ class ChirpRenderer:
         return k0, k1 + 1
 
     def _alpha(self, n_fft: int, k0: int, k1: int) -> np.ndarray:
-        key = (n_fft, k0, k1)
-        if key not in self._alpha_cache:
-            self._alpha_cache[key] = absorption_db_per_m(np.arange(k0, k1) * self.fs / n_fft, self.atmosphere)
-        return self._alpha_cache[key]
+        """ISO 9613-1 α (dB/m) on bins k0..k1 of an n_fft grid; cached per n_fft (a handful of fast lengths)."""
+        if n_fft not in self._alpha_cache:
+            self._alpha_cache[n_fft] = absorption_db_per_m(np.arange(n_fft // 2 + 1) * self.fs / n_fft, self.atmosphere)
+        return self._alpha_cache[n_fft][k0:k1]
 
     def render(self, paths: PathSet, spec: ChirpSpec, eta: float, first_sample: float, clutter: float,
                rng: np.random.Generator, level_scale: float) -> tuple[int, np.ndarray]:
