@@ -77,7 +77,7 @@ class PositionConfig:
     max_clock_offset_s: float | None = None
     bounds_margin_m: float = 20.0
     motion_speed_m_s: float = 0.0
-    max_excluded: int = 4
+    max_excluded: int = 3
 
     def __post_init__(self):
         if not isinstance(self.max_excluded, int) or self.max_excluded < 0:
@@ -224,7 +224,7 @@ def solve_position(ranges: list[BeaconRange], site: Site, speed_m_s: float,
     dof = len(ranges) + n_prior - 3
     rejected: list[int] = []
     if dof > 0 and chi2 > _chi2_limit(dof, config.chi2_alpha):
-        found = _exclude(ranges, h, speed_m_s, config, start, clock_prior)
+        found = _exclude(ranges, h, speed_m_s, config, x, clock_prior)
         if found is None:
             return None
         keep, (x, cov, res, sig, _) = found

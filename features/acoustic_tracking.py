@@ -62,6 +62,7 @@ class ClockPositionTracker:
         # test is what rejects wrong associations; tracking uses ``positions`` as given.
         self._acquire_config = dataclasses.replace(positions, motion_speed_m_s=0.0)
         self._verify_config = dataclasses.replace(self._acquire_config, max_excluded=1)
+        self._track_config = positions
         self._skip_acquisition = False
 
     @property
@@ -263,7 +264,7 @@ class ClockPositionTracker:
             prior = (last.clock_offset_s, math.sqrt(max(last.covariance[2, 2], 0.0) + (
                 self.clock_drift_prior_ppm * 1e-6 * dt) ** 2 + 1e-10))
         fix = frame_fix(detections, self.site, self.c, bandwidth,
-                        self.positions if tracking else self._acquire_config,
+                        self._track_config if tracking else self._acquire_config,
                         self.last_fix if tracking else None, prior)
         if fix is None or not self._clock_plausible(fix):
             return None
