@@ -147,6 +147,27 @@ def _chi2_limit(dof: int, alpha: float) -> float:
     return float(scipy.stats.chi2.ppf(1.0 - alpha, dof))
 
 
+def _inverse3(m: np.ndarray) -> np.ndarray | None:
+    """Inverse of a symmetric 3×3 matrix by its adjugate (Cramer), None when nearly singular.
+
+    Written out because numpy's general solver costs ~30 µs of call overhead on
+    a 3×3 system, and the exclusion search solves thousands of them.
+
+    >>> a = np.array([[4.0, 1.0, 0.5], [1.0, 3.0, 0.2], [0.5, 0.2, 2.0]])
+    >>> bool(np.allclose(_inverse3(a) @ a, np.eye(3)))
+    True
+    """
+    (a, b, c), (d, e, f), (g, h, i) = m.tolist()
+    c00, c01, c02 = e * i - f * h, c * h - b * i, b * f - c * e
+    det = a * c00 + d * c01 + g * c02
+    scale = abs(a) + abs(e) + abs(i)
+    if not math.isfinite(det) or abs(det) <= 1e-14 * scale ** 3:
+        return None
+    return np.array([[c00, c01, c02],
+                     [f * g - d * i, a * i - c * g, c * d - a * f],
+                     [d * h - e * g, b * g - a * h, a * e - b * d]]) / det
+
+
 def _gauss_newton(ranges: list[BeaconRange], height_m: float, c: float, iterations: int,
                   start: np.ndarray | None = None, clock_prior: tuple[float, float] | None = None):
     """(x = [e, n, δ], covariance (3, 3), residuals (n,), sigmas (n,), chi²) or None if singular.
@@ -183,17 +204,16 @@ def _gauss_newton(ranges: list[BeaconRange], height_m: float, c: float, iteratio
             gradient[2] += (clock_prior[0] - x[2]) / clock_prior[1] ** 2
         if it == iterations:
             break
-        try:
-            step = np.linalg.solve(normal, gradient)
-        except np.linalg.LinAlgError:
+        inv = _inverse3(normal)
+        if inv is None:
             return None
+        step = inv @ gradient
         x = x + step
         if step[0] * step[0] + step[1] * step[1] < 1e-12 and abs(step[2]) * c < 1e-6:
             iterations = it + 1
     # Covariance of the weighted LS estimate: (JᵀWJ)⁻¹ (refused when nearly singular).
-    try:
-        cov = np.linalg.inv(normal)
-    except np.linalg.LinAlgError:
+    cov = _inverse3(normal)
+    if cov is None:
         return None
     if not np.all(np.isfinite(cov)) or np.any(np.diag(cov) <= 0) or cov[0, 0] + cov[1, 1] > 1e8:
         return None
