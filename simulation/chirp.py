@@ -73,10 +73,15 @@ class ChirpSpec:
 def beacon_chirp(site: Site, beacon: Beacon) -> ChirpSpec:
     """The chirp of ``beacon``: its own band/duration where given, else the site's ``[acoustic]``."""
     ac = site.acoustic
-    return ChirpSpec(f0_hz=ac.f0_hz if beacon.f0_hz is None else beacon.f0_hz,
+    spec = ChirpSpec(f0_hz=ac.f0_hz if beacon.f0_hz is None else beacon.f0_hz,
                      f1_hz=ac.f1_hz if beacon.f1_hz is None else beacon.f1_hz,
                      duration_s=ac.chirp_duration_s if beacon.chirp_duration_s is None else beacon.chirp_duration_s,
                      taper_fraction=ac.taper_fraction)
+    if spec.f1_hz > 24_000.0:
+        raise ConfigError(f"beacon {beacon.id}: f1_hz {spec.f1_hz} lies above the 24 kHz Nyquist limit of 48 kHz audio")
+    if spec.duration_s >= ac.slot_s:
+        raise ConfigError(f"beacon {beacon.id}: chirp_duration_s {spec.duration_s} does not fit its {ac.slot_s} s slot")
+    return spec
 
 
 def _tukey_continuous(x: np.ndarray, alpha: float) -> np.ndarray:

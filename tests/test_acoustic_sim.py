@@ -196,6 +196,10 @@ def test_beacon_overrides_band_and_duration():
     assert beacon_chirp(site, site.beacons[1]) == ChirpSpec(17_000.0, 23_000.0, 0.01, 0.2)
     with pytest.raises(ConfigError):
         ChirpSpec(20_000.0, 18_000.0, 0.01, 0.2)
+    with pytest.raises(ConfigError, match="Nyquist"):
+        beacon_chirp(site, Beacon(9, 0.0, 0.0, 3.0, 0, f1_hz=25_000.0))
+    with pytest.raises(ConfigError, match="slot"):
+        beacon_chirp(site, Beacon(9, 0.0, 0.0, 3.0, 0, chirp_duration_s=0.15))
 
 
 def test_tdma_schedule_on_walk_time_base():

@@ -231,3 +231,21 @@ def test_atmosphere_changes_arrival_through_sound_speed(tmp_path):
     da = float(a[0]["arrival_t_s"]) - float(a[0]["emit_t_s"])
     db = float(b[0]["arrival_t_s"]) - float(b[0]["emit_t_s"])
     assert da / db == pytest.approx(math.sqrt(303.15 / 263.15), rel=1e-6)
+
+
+def test_per_beacon_band_and_schedule_in_the_recording(tmp_path):
+    """A beacon with its own band (frequency division) transmits in that band; every frame of the
+    schedule that can reach the recording is counted, one emission per beacon per frame."""
+    fdma = Beacon(2, 15.0, 0.0, 3.0, 0, f0_hz=18_000.0, f1_hz=20_000.0, chirp_duration_s=0.02)
+    site = _site(beacons=(fdma,))
+    res = render_audio(site, _static(5.0, 5.0, 2.0), 2, tmp_path / "f.wav", QUIET)
+    x, _ = sf.read(tmp_path / "f.wav", dtype="int16")
+    f, psd = welch(x / 32768.0, FS, nperseg=4096)
+    assert psd[(f > 18_100) & (f < 19_900)].sum() / psd.sum() > 0.95
+    frame = site.acoustic.frame_s                       # 0.4 s; emissions from 0.5 s before the start
+    assert res.n_emissions == pytest.approx((2.0 + 0.5) / frame, abs=1.0)
+    rows = _truth(res)
+    assert all(0.0 <= float(r["arrival_sample"]) < res.n_samples for r in rows)   # rows: arrivals inside the file
+    assert len(rows) == 5                               # 2 s of 0.4 s frames, 17 ms of flight
+    emits = sorted(float(r["emit_t_s"]) for r in rows)
+    assert np.diff(emits) == pytest.approx(np.full(len(emits) - 1, frame), abs=1e-9)
