@@ -43,7 +43,7 @@ from features.errors import ConfigError
 from features.site import Site
 
 from .acoustics import GROUND_MATERIAL, reflection_coefficient, speed_of_sound_m_s
-from .geometry import boxes_array, footprint_entry, segment_hits_boxes as _segment_hits_all
+from .geometry import boxes_array, footprint_entry, segment_hits_boxes
 
 __all__ = ["PATH_KINDS", "PathSet", "ChannelConfig", "Scene", "build_scene", "channel_paths", "clutter_index",
            "TailModel", "tail_model", "beacon_arrivals"]
@@ -153,7 +153,7 @@ def build_scene(site: Site, config: ChannelConfig | None = None) -> Scene:
                  ground_r=reflection_coefficient(config.ground_material), config=config)
 
 
-def segment_hits_boxes(a: np.ndarray, b: np.ndarray, boxes: np.ndarray) -> np.ndarray:
+def _segment_hits(a: np.ndarray, b: np.ndarray, boxes: np.ndarray) -> np.ndarray:
     """``simulation.geometry.segment_hits_boxes`` restricted to boxes overlapping the segments' bounding box.
 
     Same result, shape (n, m); only the candidate columns are tested (most of
@@ -169,7 +169,7 @@ def segment_hits_boxes(a: np.ndarray, b: np.ndarray, boxes: np.ndarray) -> np.nd
     near = ((boxes[:, 0] <= hi[0]) & (boxes[:, 1] >= lo[0]) & (boxes[:, 2] <= hi[1]) & (boxes[:, 3] >= lo[1])
             & (boxes[:, 4] >= lo[2]))
     if near.any():
-        out[:, near] = _segment_hits_all(a, b, boxes[near])
+        out[:, near] = segment_hits_boxes(a, b, boxes[near])
     return out
 
 
@@ -177,7 +177,7 @@ def _porous_gain(scene: Scene, a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Pressure factor 10^(−n·loss/20) for segments a→b (n, 3) crossing n porous boxes; shape (n,)."""
     if scene.porous.shape[0] == 0 or scene.config.porous_loss_db == 0:
         return np.ones(a.shape[0])
-    n_cross = segment_hits_boxes(a, b, scene.porous).sum(axis=1)
+    n_cross = _segment_hits(a, b, scene.porous).sum(axis=1)
     return 10.0 ** (-n_cross * scene.config.porous_loss_db / 20.0)
 
 
@@ -185,7 +185,7 @@ def _blocked(scene: Scene, a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Whether segments a→b (n, 3) pass through a solid box; shape (n,)."""
     if scene.solid.shape[0] == 0:
         return np.zeros(a.shape[0], bool)
-    return segment_hits_boxes(a, b, scene.solid).any(axis=1)
+    return _segment_hits(a, b, scene.solid).any(axis=1)
 
 
 def _upper_hull_length(points_uz: np.ndarray) -> float:
@@ -230,7 +230,7 @@ def _plan_hits(p: np.ndarray, q: np.ndarray, boxes: np.ndarray) -> np.ndarray:
     tall[:, 4] = 1e9
     a = np.column_stack([p, np.ones(len(p))])
     b = np.column_stack([q, np.ones(len(q))])
-    return segment_hits_boxes(a, b, tall).any(axis=1)
+    return _segment_hits(a, b, tall).any(axis=1)
 
 
 def _dijkstra_dense(w: np.ndarray, source: int) -> tuple[np.ndarray, np.ndarray]:
@@ -293,7 +293,7 @@ def _lateral_length(scene: Scene, src: np.ndarray, rx: np.ndarray, blockers: np.
         total = cum[-1]
         z = src[2] + dz * cum / max(total, 1e-9)
         pts = np.column_stack([plan, z])
-        hits = segment_hits_boxes(pts[:-1], pts[1:], scene.solid).any(axis=0)
+        hits = _segment_hits(pts[:-1], pts[1:], scene.solid).any(axis=0)
         new = set(np.flatnonzero(hits).tolist()) - obstacles
         if not new:
             return math.hypot(total, dz)
@@ -364,7 +364,7 @@ def channel_paths(scene: Scene, src_xyz, rx_xyz) -> PathSet:
     u = src[2] / (src[2] + rx[2]) if src[2] > 0 and rx[2] > 0 else 0.0
     gp = (src + u * (rx - src)) * np.array([1.0, 1.0, 0.0]) + np.array([0.0, 0.0, _NUDGE_M])
     a, b = np.vstack([src, src, gp]), np.vstack([rx, gp, rx])
-    hits = segment_hits_boxes(a, b, scene.solid) if scene.solid.shape[0] else np.zeros((3, 0), bool)
+    hits = _segment_hits(a, b, scene.solid) if scene.solid.shape[0] else np.zeros((3, 0), bool)
     porous3 = _porous_gain(scene, a, b)
     hit = hits[0]
     los = not hit.any()

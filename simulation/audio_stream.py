@@ -60,7 +60,7 @@ class AudioResult:
 
 
 class _Accumulator:
-    """A rolling float buffer of device samples; finished blocks leave through ``emit``."""
+    """A rolling float buffer of device samples; finished blocks leave through :meth:`pop_block`."""
 
     def __init__(self, block: int, n_total: int):
         self.block = block
