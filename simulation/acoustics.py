@@ -145,7 +145,10 @@ def maekawa_loss_db(fresnel_n: float | np.ndarray) -> np.ndarray:
     """Barrier insertion loss ΔL = 10·log10(3 + 20N) dB for N ≥ 0 (Maekawa 1968, Appl. Acoust. 1(3),
     in the closed form of ISO 9613-2:1996 eq. 14 with C2 = 20, C3 = 1).
 
-    Defined for the shadow zone (N ≥ 0; N = 0 is the grazing path, 4.8 dB). No
+    Defined for the shadow zone (N ≥ 0; N = 0 is the grazing path, 4.8 dB).
+    Maekawa's lit-zone branch (loss falling to 0 by N ≈ −0.3) is left out: at
+    20 kHz it spans under 3 mm of path difference, so a walker crosses it
+    within one step. No
     upper cap: the 20–25 dB limit of ISO 9613-2 stands for turbulent scattering
     over long outdoor ranges, not for the 10–100 m paths of a yard, and the
     diffuse tail of the channel already carries the scattered energy.
