@@ -213,7 +213,7 @@ def render_audio(site: Site, trajectory: Trajectory, seed: int, wav_path,
                 clutter_cache[cell] = clutter_index(scene, np.array([cell[0] + 0.5, cell[1] + 0.5]))
             # the tail realisation belongs to the place (1 cm grid): a static receiver hears the same tail every
             # frame, a walker (≥ 1 m between a beacon's chirps, ≫ λ/2 ≈ 8 mm) an independent one
-            rng = stream_rng(seed, "audio", "tail", bid, *(int(round(v * 100.0)) + 10**8 for v in rx))
+            rng = stream_rng(seed, "audio", "tail", bid, *(int(round(x_m * 100.0)) + 10**8 for x_m in rx))
             start, seg = renderer.render(paths, spec, eta, first_sample, clutter_cache[cell], rng, level_scale)
             acc.add(start, seg)
             counts["rendered"] += 1
