@@ -25,12 +25,13 @@ __all__ = ["ClockPositionTracker", "frame_fix", "acquisition_windows"]
 class ClockPositionTracker:
     """Acquisition, then tracking, of the receiver's clock offset and position.
 
-    Acquisition (no recent fix): beacon ``b``'s chirp may start anywhere in
-    ``[tx − u, tx + u + min(r_max/c, slot_s)]``. Neighbouring windows overlap
-    when ``u`` is large or a beacon is far, so a fix from acquisition is
-    trusted only when at least five beacons pass the residual test (two
-    degrees of freedom left for it), under the static model whatever the
-    motion prior.
+    Acquisition (no recent fix, attempted every other frame): beacon ``b``'s
+    chirp may start anywhere in ``[tx − u, tx + u + r_max/c]``. These windows
+    overlap several slots, so the arrivals in them are associated with beacons
+    by :meth:`acquire` (Hough vote, least-squares verification), and a fix
+    from acquisition is trusted only when at least five beacons pass the
+    residual test (two degrees of freedom left for it), under the static model
+    whatever the motion prior.
 
     Tracking (a fix at most ``track_timeout_s`` old): the window is centred on
     the arrival predicted from the last fix, ``tx + ‖p − s_b‖/c + δ``, with a
