@@ -101,3 +101,28 @@ def static_capture(site: Site, east_m: float, north_m: float, duration_s: float,
 def write_wav(path, samples: np.ndarray, fs_hz: int = FS_HZ, subtype: str = "PCM_16") -> None:
     """Write float samples in [-1, 1) as a WAV file (clipped to full scale)."""
     sf.write(str(path), np.clip(samples, -1.0, 32767 / 32768), fs_hz, subtype=subtype)
+
+
+def moving_capture(site: Site, start_en: tuple, velocity_en: tuple, duration_s: float, *,
+                   clock_offset_s: float = 0.0, noise_rms: float = 0.002, seed: int = 0,
+                   amplitude_at_1m: float = 2.0, fs_hz=FS_HZ) -> np.ndarray:
+    """A receiver walking a straight line at constant velocity (m/s); each chirp's delay from the
+    position when it arrives (fixed point of t_a = t_e + |p(t_a) − s|/c, two iterations)."""
+    rng = np.random.default_rng(seed)
+    x = rng.normal(0.0, noise_rms, int(round(duration_s * fs_hz)))
+    ac = site.acoustic
+    for b in site.beacons:
+        k = 0
+        while True:
+            tx = k * ac.frame_s + b.slot * ac.slot_s
+            if tx > duration_s:
+                break
+            t_a = tx
+            for _ in range(3):
+                e, n = start_en[0] + velocity_en[0] * t_a, start_en[1] + velocity_en[1] * t_a
+                d = math.dist((e, n, site.device_height_m), (b.east_m, b.north_m, b.up_m))
+                t_a = tx + d / C_20C_M_S
+            add_chirp(x, t_a + clock_offset_s, amplitude_at_1m / d, fs_hz)
+            add_chirp(x, t_a + clock_offset_s + 0.004, 0.3 * amplitude_at_1m / d, fs_hz)
+            k += 1
+    return x
