@@ -65,12 +65,15 @@ class ChannelConfig:
         are dropped (≥ 120 ms late, and 1/r weaker): they belong to the tail.
     clutter_radius_m : radius within which solid faces count as clutter.
     ground_material : key of ``simulation.acoustics.ABSORPTION_COEFFICIENTS``.
+    tail_offset_db : added to the diffuse tail's level of :func:`tail_model`
+        (0 = the model; −100 ≈ no tail, for tests of the discrete paths).
     """
 
     porous_loss_db: float = 1.5
     max_excess_m: float = 40.0
     clutter_radius_m: float = 15.0
     ground_material: str = GROUND_MATERIAL
+    tail_offset_db: float = 0.0
 
     def __post_init__(self):
         if not 0.0 <= self.porous_loss_db < 40.0:
@@ -79,6 +82,8 @@ class ChannelConfig:
             raise ConfigError(f"max_excess_m must be positive, got {self.max_excess_m}")
         if not self.clutter_radius_m > 0:
             raise ConfigError(f"clutter_radius_m must be positive, got {self.clutter_radius_m}")
+        if not -200.0 <= self.tail_offset_db <= 20.0:
+            raise ConfigError(f"tail_offset_db must lie in [-200, 20], got {self.tail_offset_db}")
 
 
 @dataclass(frozen=True)

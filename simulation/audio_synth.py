@@ -228,7 +228,8 @@ class ChirpRenderer:
         n_taps = rng.poisson(tail.density_per_ms * 5.0 * tail.decay_ms)
         if n_taps:
             t_ms = rng.uniform(0.0, 5.0 * tail.decay_ms, n_taps)
-            e_target = 10.0 ** (tail.level_db / 10.0) / max(paths.direct_m, 1e-3) ** 2
+            level_db = tail.level_db + self.cfg.channel.tail_offset_db
+            e_target = 10.0 ** (level_db / 10.0) / max(paths.direct_m, 1e-3) ** 2
             scale = math.sqrt(e_target / (tail.density_per_ms * tail.decay_ms / 2.0))
             amp = rng.standard_normal(n_taps) * np.exp(-t_ms / tail.decay_ms) * scale
             taps = np.zeros(n_fft)
