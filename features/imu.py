@@ -10,9 +10,12 @@ Repair (never an exception for a few bad samples; counts in
 - rows whose time is not a finite number are dropped;
 - unsorted rows are sorted (stable); duplicated timestamps keep the first row;
 - NaN / non-numeric channel values are interpolated from their neighbours;
-- samples at or beyond the stated full scale (or runs of ≥ 3 equal samples at
-  the channel's extreme) are flagged as saturated (kept: the true value is
-  unknown) and counted;
+- clipped samples — at or beyond the stated full scale, or in runs of ≥ 3
+  equal samples at the channel's extreme — and absurd magnetometer values
+  (beyond ``mag_full_scale_ut``) are treated like NaN: counted, replaced by
+  interpolation from their unclipped neighbours *before* any filtering (a
+  ±16 g spike would otherwise dominate the low-passed norm and the step
+  amplitude), and flagged in ``saturated`` and as not ``valid``;
 - the record is resampled onto a uniform grid at the nominal rate (the median
   sample interval unless given) by linear interpolation; gaps longer than
   ``max_gap_s`` are counted and flagged in ``valid`` (False inside them).
@@ -45,13 +48,15 @@ class RepairConfig:
     """Repair parameters.
 
     ``rate_hz`` None → nominal rate from the median sample interval.
-    Full-scale values default to ±16 g and ±2000 °/s (common MEMS ranges).
+    Full-scale values default to ±16 g, ±2000 °/s and ±4900 µT (common MEMS
+    ranges, e.g. Bosch BMI160, AKM AK09916).
     """
 
     rate_hz: float | None = None
     max_gap_s: float = 0.5
     acc_full_scale_m_s2: float = 16.0 * 9.80665
     gyro_full_scale_rad_s: float = math.radians(2000.0)
+    mag_full_scale_ut: float = 4900.0
     clip_run_samples: int = 3
 
     def __post_init__(self):
@@ -77,6 +82,7 @@ class ImuRepairReport:
     n_nan_mag: int = 0
     n_saturated_acc: int = 0
     n_saturated_gyro: int = 0
+    n_saturated_mag: int = 0
     n_gaps: int = 0
     gap_total_s: float = 0.0
     n_output: int = 0
@@ -109,9 +115,11 @@ class ImuData:
     gyro_rad_s, mag_ut : ndarray of shape (n, 3) or None
         Angular rate (rad/s) and magnetic field (µT), None when absent.
     valid : ndarray of bool, shape (n,)
-        False inside gaps longer than ``max_gap_s`` (interpolated, not measured).
+        False inside gaps longer than ``max_gap_s`` and at clipped samples
+        (interpolated, not measured).
     saturated : ndarray of bool, shape (n,)
-        True where any accelerometer or gyro axis was clipped.
+        True where any accelerometer, gyro or magnetometer axis was clipped
+        (the value there is interpolated).
     rate_hz : float
     report : ImuRepairReport
     """
@@ -143,18 +151,23 @@ def _fill_nan(x: np.ndarray) -> int:
 
 
 def _saturation(x: np.ndarray, full_scale: float, run: int) -> np.ndarray:
-    """Samples at/over full scale, or in runs of ≥ ``run`` equal values at the column's extreme."""
-    flag = np.abs(x) >= full_scale
+    """Clipped samples per axis, bool (n, 3): |x| ≥ full scale, or runs of ≥ ``run`` equal values at the
+    column's (finite) extreme. NaN entries are not flagged (they are counted as NaN)."""
+    with np.errstate(invalid="ignore"):
+        flag = np.abs(x) >= full_scale
     for j in range(x.shape[1]):
         col = x[:, j]
-        for extreme in (np.nanmax(col), np.nanmin(col)):
+        fin = np.isfinite(col) & ~flag[:, j]
+        if not fin.any():
+            continue
+        for extreme in (col[fin].max(), col[fin].min()):
             at = col == extreme
             if at.sum() >= run:
                 d = np.diff(np.r_[0, at.astype(np.int8), 0])
                 for s, e in zip(np.nonzero(d == 1)[0], np.nonzero(d == -1)[0]):
                     if e - s >= run:
                         flag[s:e, j] = True
-    return flag.any(axis=1)
+    return flag
 
 
 def repair_imu(t_s, acc_m_s2, gyro_rad_s=None, mag_ut=None, config: RepairConfig = RepairConfig(),
@@ -199,15 +212,19 @@ def repair_imu(t_s, acc_m_s2, gyro_rad_s=None, mag_ut=None, config: RepairConfig
     chans = {k: v[keep] for k, v in chans.items()}
     if len(t) < 2:
         raise ImuError("fewer than 2 distinct sample times")
+    # clipped samples become NaN first, so they are interpolated like missing ones (never filtered as data)
+    full_scale = {"acc": config.acc_full_scale_m_s2, "gyro": config.gyro_full_scale_rad_s,
+                  "mag": config.mag_full_scale_ut}
+    sat = np.zeros(len(t), bool)
     for name, x in chans.items():
-        n_nan = _fill_nan(x)
+        clipped = _saturation(x, full_scale[name], config.clip_run_samples)
+        rows = clipped.any(axis=1)
+        setattr(report, f"n_saturated_{name}", getattr(report, f"n_saturated_{name}") + int(rows.sum()))
+        sat |= rows
+        n_nan = int((~np.isfinite(x) & ~clipped).any(axis=1).sum())
+        x[clipped] = np.nan
+        _fill_nan(x)
         setattr(report, f"n_nan_{name}", getattr(report, f"n_nan_{name}") + n_nan)
-    sat = _saturation(chans["acc"], config.acc_full_scale_m_s2, config.clip_run_samples)
-    report.n_saturated_acc += int(sat.sum())
-    if "gyro" in chans:
-        sat_g = _saturation(chans["gyro"], config.gyro_full_scale_rad_s, config.clip_run_samples)
-        report.n_saturated_gyro += int(sat_g.sum())
-        sat |= sat_g
 
     dt_raw = np.diff(t)
     rate = config.rate_hz or 1.0 / float(np.median(dt_raw))
@@ -221,7 +238,7 @@ def repair_imu(t_s, acc_m_s2, gyro_rad_s=None, mag_ut=None, config: RepairConfig
         # already uniform (the common case): keep the samples, no interpolation
         report.n_output = n_out
         return ImuData(t_s=tu, acc_m_s2=chans["acc"], gyro_rad_s=chans.get("gyro"), mag_ut=chans.get("mag"),
-                       valid=np.ones(n_out, bool), saturated=sat, rate_hz=float(rate), report=report)
+                       valid=~sat, saturated=sat, rate_hz=float(rate), report=report)
     out = {k: np.stack([np.interp(tu, t, v[:, j]) for j in range(3)], axis=1) for k, v in chans.items()}
     seg = np.searchsorted(t, tu, side="right") - 1
     seg = np.clip(seg, 0, len(dt_raw) - 1)
@@ -231,7 +248,7 @@ def repair_imu(t_s, acc_m_s2, gyro_rad_s=None, mag_ut=None, config: RepairConfig
     sat_u = sat[nearest]
     report.n_output = n_out
     return ImuData(t_s=tu, acc_m_s2=out["acc"], gyro_rad_s=out.get("gyro"), mag_ut=out.get("mag"),
-                   valid=valid, saturated=sat_u, rate_hz=float(rate), report=report)
+                   valid=valid & ~sat_u, saturated=sat_u, rate_hz=float(rate), report=report)
 
 
 def _parse_table(text: str, path: str) -> tuple[list[str], np.ndarray, int]:

@@ -33,8 +33,8 @@ def test_bad_file_is_repaired_with_every_defect_counted():
     assert (r.n_nan_acc, r.n_nan_gyro, r.n_saturated_acc) == (2, 1, 5)
     assert r.n_gaps == 1 and r.gap_total_s == pytest.approx(1.01, abs=1e-6)
     assert np.all(np.diff(d.t_s) > 0) and np.isfinite(d.acc_m_s2).all() and np.isfinite(d.gyro_rad_s).all()
-    assert (~d.valid).sum() == 100            # the gap's interior is flagged, not invented
-    assert d.saturated.sum() == 5
+    assert (~d.valid).sum() == 105            # the gap's interior and the 5 clipped samples: interpolated
+    assert d.saturated.sum() == 5 and not (d.saturated & d.valid).any()
     good = read_imu_csv(DATA / "imu_good.csv")
     np.testing.assert_allclose(d.acc_m_s2[:300], good.acc_m_s2[:300])   # untouched before the defects
     # steps are still found outside the gap (20 in the clean file)
@@ -117,3 +117,33 @@ def test_cli_calibrates_k_from_a_known_distance_and_rejects_a_bad_k(tmp_path, ca
     assert "K = " in capsys.readouterr().out
     assert main(["features", "imu", str(DATA / "imu_good.csv"), "--k", "5", "--out", str(tmp_path / "x.csv")]) == 1
     assert "StepLengthModel.k must lie in [0.05, 3], got 5.0" in capsys.readouterr().err
+
+
+def _with_every_50th_az(tmp_path, value: str):
+    rows = (DATA / "imu_good.csv").read_text().splitlines()
+    out = [rows[0]]
+    for i, line in enumerate(rows[1:]):
+        parts = line.split(",")
+        if i % 50 == 25:
+            parts[3] = value
+        out.append(",".join(parts))
+    p = tmp_path / f"imu_{value}.csv"
+    p.write_text("\n".join(out) + "\n")
+    return p
+
+
+@pytest.mark.parametrize("value", ["-156.9064", "1e308", "-1e308"])
+def test_clipped_and_absurd_samples_are_interpolated_before_filtering(tmp_path, capsys, value):
+    """Every 50th az at −16 g full scale (or ±1e308): same steps and distance as the clean file, no warning."""
+    good = run_pdr(read_imu_csv(DATA / "imu_good.csv"))
+    d = read_imu_csv(_with_every_50th_az(tmp_path, value))
+    assert d.report.n_saturated_acc == 31 and d.saturated.sum() == 31
+    assert (~d.valid).sum() == 31 and np.abs(d.acc_m_s2).max() < 30.0
+    r = run_pdr(d)
+    assert len(r) == len(good) == 20
+    assert r.distance_m == pytest.approx(good.distance_m, rel=0.02)
+    capsys.readouterr()
+    out = tmp_path / "steps.csv"
+    assert main(["features", "imu", str(_with_every_50th_az(tmp_path, value)), "--out", str(out)]) == 0
+    err = capsys.readouterr().err
+    assert "Warning" not in err and len(err.strip().splitlines()) == 1 and "n_saturated_acc=31" in err
