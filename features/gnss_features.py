@@ -63,6 +63,10 @@ COUNT_COLUMNS = ("n_epochs", "n_in_view", "n_tracked", "n_pairs_in_view", "n_pai
 view and tracked; (satellite, epoch) pairs in view and tracked."""
 
 
+MAX_WINDOWS = 20_000_000
+"""Largest number of windows computed in one call (≈ 230 days at the default 1 s hop)."""
+
+
 @dataclass(frozen=True)
 class GnssFeatureConfig:
     """Window and feature parameters (DESIGN.md §5 defaults)."""
@@ -317,6 +321,9 @@ def gnss_features(sky: SkyArrays, config: GnssFeatureConfig | None = None,
 
     span = t[-1] - t[0]
     n_win = 1 if span < config.window_s else int(math.floor((span - config.window_s) / config.hop_s + 1e-9)) + 2
+    if n_win > MAX_WINDOWS:
+        raise DataError(f"{n_win} windows ({span:.0f} s of epochs at hop {config.hop_s:g} s) exceed the "
+                        f"{MAX_WINDOWS} a feature table may hold; use a larger hop_s")
     starts = t[0] + config.hop_s * np.arange(n_win)
     lo = np.searchsorted(t, starts - 1e-9, side="left")
     hi = np.searchsorted(t, starts + config.window_s - 1e-9, side="left")

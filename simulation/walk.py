@@ -55,8 +55,8 @@ def simulate_walk(site_path: str | os.PathLike, out_dir: str | os.PathLike, seed
     when every stream is written. Returns the output path.
     """
     from features.errors import ConfigError
-    if not duration_s > 0 or not np.isfinite(duration_s):
-        raise ConfigError(f"--duration must be a positive number of seconds, got {duration_s}")
+    if not (np.isfinite(duration_s) and duration_s >= 1.0):
+        raise ConfigError(f"--duration must be at least 1 s, got {duration_s}")
     if duration_s > 6 * 3600:
         raise ConfigError(f"--duration {duration_s} s is longer than the 6 h a walk log may span")
     site_path = Path(site_path)

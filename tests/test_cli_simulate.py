@@ -62,7 +62,10 @@ def test_survey_cells(site_dir, tmp_path, capsys):
     (["simulate", "walk", "{bad}", "--seed", "1", "--out", "{out}"], "malformed TOML"),
     (["simulate", "site", "--seed", "-3", "--out", "{out}"], "non-negative integer"),
     (["simulate", "site", "--seed", "1", "--out", "{out}", "--colour"], "unrecognized arguments: --colour"),
-    (["simulate", "walk", "{site}", "--seed", "1", "--duration", "0", "--out", "{out}"], "positive number"),
+    (["simulate", "walk", "{site}", "--seed", "1", "--duration", "0", "--out", "{out}"], "expected a value in [1, 21600] s"),
+    (["simulate", "walk", "{site}", "--seed", "1", "--start", "9999-12-31T23:59:59Z", "--out", "{out}"], "outside 1980-2099"),
+    (["demo", "--seed", "-1", "--out", "{out}"], "non-negative integer"),
+    (["demo", "--duration", "-5", "--out", "{out}"], "expected a value in [10, 3600] s"),
     (["simulate", "survey", "{site}", "--out", "{out}", "--cell-size", "0.1"], "--cell-size must lie in"),
     (["simulate", "teleport"], "invalid choice"),
 ])
@@ -93,3 +96,32 @@ def test_refuses_to_overwrite_without_force(tmp_path, capsys):
 def test_python_dash_m_pipeline_and_console_script_help():
     r = subprocess.run([sys.executable, "-m", "pipeline", "simulate", "--help"], capture_output=True, text=True)
     assert r.returncode == 0 and "site" in r.stdout and "walk" in r.stdout and "survey" in r.stdout
+
+
+def test_features_gnss_takes_time_base_and_site_from_walk_toml(tmp_path, capsys):
+    """Without --start-utc/--site, `features gnss` uses the walk.toml beside the NMEA file."""
+    import tomllib
+
+    from pipeline.cli import main as cli
+    site = tmp_path / "site"
+    assert cli(["simulate", "site", "--seed", "2", "--out", str(site)]) == 0
+    assert cli(["simulate", "walk", str(site), "--seed", "3", "--duration", "12", "--out", str(tmp_path / "w")]) == 0
+    capsys.readouterr()
+    code = cli(["features", "gnss", str(tmp_path / "w" / "gnss.nmea"), "--out", str(tmp_path / "f.csv"),
+                "--positions", str(tmp_path / "p.csv")])
+    assert code == 0, capsys.readouterr().err
+    rows = (tmp_path / "p.csv").read_text().splitlines()
+    assert rows[1].split(",")[0] == "0"  # first fix at the walk's start: t_s on the walk's time base
+    truth = (tmp_path / "w" / "truth.csv").read_text().splitlines()[1].split(",")
+    first = rows[1].split(",")
+    assert abs(float(first[1]) - float(truth[1])) < 1.0 and abs(float(first[2]) - float(truth[2])) < 1.0
+    assert tomllib.loads((tmp_path / "w" / "walk.toml").read_text())["gnss"]["file"] == "gnss.nmea"
+
+
+def test_features_gnss_writes_all_outputs_or_none(tmp_path, capsys):
+    nmea = tmp_path / "nogsv.nmea"
+    nmea.write_text("$GPGGA,120000.00,3112.00,N,11848.00,E,1,05,1.0,10.0,M,0.0,M,,*6F\r\n")
+    code = main(["features", "gnss", str(nmea), "--out", str(tmp_path / "g.csv"), "--epochs", "/proc/e.jsonl"])
+    err = capsys.readouterr().err
+    assert code == 1 and "cannot write /proc/e.jsonl" in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "g.csv").exists()

@@ -312,6 +312,7 @@ def test_satellites_agree_with_gpsd_decode():
     _need_gpsd()
     totals = collections.Counter()
     missing = []
+    extras = []
     for log in sorted(GPSD.glob("*.log")):
         epochs, _ = read_nmea(log)
         j = 0
@@ -338,6 +339,10 @@ def test_satellites_agree_with_gpsd_decode():
                 s = ours[key][r]
                 same = (s.el_deg, s.az_deg, s.cn0_dbhz, s.used) == (g.get("el"), g.get("az"), g.get("ss"), g["used"])
                 totals["agree" if same else "differ"] += 1
+            # satellites we decoded that gpsd did not list in that cycle (an invented satellite)
+            extra = sum(len(v) - rank[key] for key, v in ours.items() if len(v) > rank[key])
+            extras.append(extra)
+    assert sum(extras) == 0
     n = sum(totals.values())
     assert n == 16326
     assert totals["agree"] / n >= 0.98
@@ -422,3 +427,16 @@ def test_parse_sentence_contract():
     assert parse_sentence("GPGGA,1*00", stats) is None and stats.bad_checksum == 1
     assert parse_sentence("GPGGA,1*0", stats) is None and stats.truncated == 1
     assert parse_sentence("GPGGA,1", stats) is None and stats.no_checksum == 1
+
+
+@pytest.mark.parametrize("name,counts", [
+    ("pixel6.nmea", (48, 0, 48, 0, 0, 0)),                    # GGA/RMC only: fixes, no sky
+    ("nmea_w_correct_checksum.nmea", (2, 0, 2, 0, 0, 0)),
+    ("nmea_w_wrong_checksum.nmea", (2, 0, 2, 0, 0, 2)),        # the two bad-checksum lines skipped, counted
+])
+def test_gnss_lib_py_files_pinned(name, counts):
+    path = SHARED / "gnss_lib_py" / name
+    if not path.exists():
+        pytest.skip(f"{path} absent")
+    epochs, stats = read_nmea(path)
+    assert _counts(epochs, stats) == counts

@@ -84,3 +84,17 @@ def test_walk_toml_reading(tmp_path):
     (tmp_path / "walk.toml").write_text('name = "w"\n')
     with pytest.raises(ConfigError, match="missing start_utc"):
         load_walk(tmp_path)
+
+
+def test_outputs_get_ordinary_permissions(tmp_path):
+    import os
+    import stat
+    mask = os.umask(0o022)
+    try:
+        atomic_write_text(tmp_path / "f.txt", "x")
+        with atomic_directory(tmp_path / "d") as d:
+            (d / "a").write_text("y")
+    finally:
+        os.umask(mask)
+    assert stat.S_IMODE((tmp_path / "f.txt").stat().st_mode) == 0o644
+    assert stat.S_IMODE((tmp_path / "d").stat().st_mode) == 0o755

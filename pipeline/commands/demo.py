@@ -5,6 +5,8 @@ from __future__ import annotations
 from collections import Counter
 from pathlib import Path
 
+from pipeline.args import bounded, seed
+
 GROUP = None  # a top-level command, registered by register_top
 
 
@@ -13,8 +15,9 @@ def register_top(sub) -> None:
                        description="End-to-end demonstration on a simulated substation.",
                        epilog="Example: envfuse demo --out demo_out")
     p.add_argument("--out", type=Path, default=Path("demo_out"), help="output directory (default demo_out)")
-    p.add_argument("--seed", type=int, default=1, help="site and walk seed (default 1)")
-    p.add_argument("--duration", type=float, default=120.0, help="walk length in seconds (default 120)")
+    p.add_argument("--seed", type=seed, default=1, help="site and walk seed (default 1)")
+    p.add_argument("--duration", type=bounded(10.0, 3600.0, "s"), default=120.0,
+                   help="walk length in seconds, 10 to 3600 (default 120)")
     p.set_defaults(func=run_demo)
 
 

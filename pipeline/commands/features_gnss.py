@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import argparse
 import io
 import json
 import math
@@ -10,18 +9,9 @@ import sys
 from pathlib import Path
 
 from features.errors import ConfigError
+from pipeline.args import bounded, positive
 
 GROUP = "features"
-
-
-def _positive(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a positive number, got {text!r}") from None
-    if not (value > 0 and math.isfinite(value)):
-        raise argparse.ArgumentTypeError(f"expected a positive number, got {text!r}")
-    return value
 
 
 def register(sub) -> None:
@@ -35,10 +25,10 @@ def register(sub) -> None:
     p.add_argument("nmea", type=Path, help="NMEA 0183 file")
     p.add_argument("--out", type=Path, required=True, help="feature CSV, one row per window")
     p.add_argument("--site", type=Path, default=None, help="site directory or site.toml (for --positions; default: the site named by walk.toml beside the file)")
-    p.add_argument("--window-s", type=_positive, default=2.0, help="window length, s (default 2)")
-    p.add_argument("--hop-s", type=_positive, default=1.0, help="window hop, s (default 1)")
+    p.add_argument("--window-s", type=bounded(0.2, 3600.0, "s"), default=2.0, help="window length, s (default 2)")
+    p.add_argument("--hop-s", type=bounded(0.05, 3600.0, "s"), default=1.0, help="window hop, s (default 1)")
     p.add_argument("--elevation-mask-deg", type=float, default=10.0, help="elevation mask, degrees (default 10)")
-    p.add_argument("--fluct-threshold-dbhz", type=_positive, default=2.0,
+    p.add_argument("--fluct-threshold-dbhz", type=positive, default=2.0,
                    help="smallest C/N0 swing counted as a fluctuation, dB-Hz (default 2: NMEA C/N0 is in whole dB-Hz)")
     p.add_argument("--cn0-reference", type=Path, default=None,
                    help="JSON file with a fitted C_ref model {intercept_dbhz, slope_dbhz} (default: built-in)")
@@ -67,6 +57,17 @@ def _csv(columns: dict, names) -> str:
     return buf.getvalue()
 
 
+def _write_all(outputs: dict) -> None:
+    """Write every output or none: all go to temporary files first, renamed only when all are written."""
+    import contextlib
+
+    from features.fileio import atomic_path
+    with contextlib.ExitStack() as stack:
+        for path, text in outputs.items():
+            tmp = stack.enter_context(atomic_path(path))
+            tmp.write_text(text)
+
+
 def _walk_beside(nmea: Path):
     """The walk.toml / cell.toml in the NMEA file's directory, if any (its start time and site)."""
     from features.walk import load_walk
@@ -86,7 +87,6 @@ def _on_time_base(epochs, start_utc: str | None):
 
 
 def _run(args) -> int:
-    from features.fileio import atomic_write_text
     from features.gnss_features import (
         COUNT_COLUMNS, FEATURE_COLUMNS, Cn0Reference, GnssFeatureConfig, fit_cn0_reference, gnss_features, sky_arrays,
     )
@@ -98,8 +98,9 @@ def _run(args) -> int:
     if args.cn0_reference is not None:
         try:
             reference = Cn0Reference.from_dict(json.loads(args.cn0_reference.read_text()))
-        except (OSError, json.JSONDecodeError) as exc:
-            raise ConfigError(f"cannot read C/N0 reference {args.cn0_reference}: {exc}") from None
+        except (OSError, UnicodeDecodeError, ValueError, KeyError, TypeError, AttributeError) as exc:
+            raise ConfigError(f"cannot read C/N0 reference {args.cn0_reference}: "
+                              f"{type(exc).__name__}: {str(exc)[:200]}") from None
     site = None
     if args.site is not None:
         from features.site import load_site
@@ -117,19 +118,20 @@ def _run(args) -> int:
     sky = sky_arrays(epochs)
     table = gnss_features(sky, config, reference)
     names = ("t_s",) + FEATURE_COLUMNS + COUNT_COLUMNS
-    atomic_write_text(args.out, _csv(table, names))
+    outputs = {args.out: _csv(table, names)}
     if args.epochs is not None:
-        atomic_write_text(args.epochs, "".join(json.dumps(e.to_json_dict()) + "\n" for e in epochs))
+        outputs[args.epochs] = "".join(json.dumps(e.to_json_dict()) + "\n" for e in epochs)
     if args.fit_cn0_reference is not None:
         fitted = fit_cn0_reference(sky.el_deg, sky.cn0_dbhz)
-        atomic_write_text(args.fit_cn0_reference, json.dumps(fitted.to_dict(), indent=2) + "\n")
+        outputs[args.fit_cn0_reference] = json.dumps(fitted.to_dict(), indent=2) + "\n"
     n_pos = None
     if args.positions is not None:
         from features.gnss_positions import fixes_to_enu
         o = site.origin
         pos = fixes_to_enu(epochs, o.lat_deg, o.lon_deg, o.alt_m)
-        atomic_write_text(args.positions, _csv({n: getattr(pos, n) for n in pos.COLUMNS}, pos.COLUMNS))
+        outputs[args.positions] = _csv({n: getattr(pos, n) for n in pos.COLUMNS}, pos.COLUMNS)
         n_pos = len(pos)
+    _write_all(outputs)
     n_with_sky = int(sky.n_epochs)
     msg = (f"{args.nmea}: {len(epochs)} epochs ({n_with_sky} with satellites, "
            f"{sum(e.fix.has_position for e in epochs)} with a fix); {stats.summary()}; "

@@ -2,39 +2,19 @@
 
 from __future__ import annotations
 
-import argparse
 from pathlib import Path
 
 from features.errors import ConfigError
+from pipeline.args import bounded, positive, seed
 
 GROUP = "simulate"
-
-
-def _seed(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"seed must be a non-negative integer, got {text!r}") from None
-    if value < 0:
-        raise argparse.ArgumentTypeError(f"seed must be a non-negative integer, got {text!r}")
-    return value
-
-
-def _positive(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a positive number, got {text!r}") from None
-    if not value > 0:
-        raise argparse.ArgumentTypeError(f"expected a positive number, got {text!r}")
-    return value
 
 
 def register(sub) -> None:
     p = sub.add_parser("site", help="generate a substation layout (site.toml)",
                        description="Generate a 220 kV-class substation: layout, beacons, environment truth.",
                        epilog="Example: envfuse simulate site --seed 1 --out site1 --plot")
-    p.add_argument("--seed", type=_seed, required=True, help="layout seed (same seed, same site)")
+    p.add_argument("--seed", type=seed, required=True, help="layout seed (same seed, same site)")
     p.add_argument("--out", type=Path, required=True, help="output directory (gets site.toml)")
     p.add_argument("--plot", action="store_true", help="also write site.png (layout, beacons, class map)")
     p.add_argument("--no-emi", action="store_true", help="no EMI zones round the transformers")
@@ -45,9 +25,9 @@ def register(sub) -> None:
                        description="Simulate a person walking the site's aisles, writing every device stream.",
                        epilog="Example: envfuse simulate walk site1 --seed 7 --duration 300 --out walk7")
     p.add_argument("site", type=Path, help="site directory or site.toml")
-    p.add_argument("--seed", type=_seed, required=True, help="walk seed")
-    p.add_argument("--duration", type=_positive, default=300.0, help="seconds (default 300)")
-    p.add_argument("--person", type=_seed, default=None, help="walker identity: same person, same gait (default: seed)")
+    p.add_argument("--seed", type=seed, required=True, help="walk seed")
+    p.add_argument("--duration", type=bounded(1.0, 21_600.0, "s"), default=300.0, help="seconds, 1 to 21600 (default 300)")
+    p.add_argument("--person", type=seed, default=None, help="walker identity: same person, same gait (default: seed)")
     p.add_argument("--start", default=None, help="start time, ISO 8601 UTC (default: drawn from the seed)")
     p.add_argument("--no-corrections", action="store_true", help="GNSS without RTK/DGNSS corrections")
     p.add_argument("--out", type=Path, required=True, help="output walk directory")
@@ -59,9 +39,9 @@ def register(sub) -> None:
                        epilog="Example: envfuse simulate survey site1 --out survey1 --cell-size 5 --capture-s 30")
     p.add_argument("site", type=Path, help="site directory or site.toml")
     p.add_argument("--out", type=Path, required=True, help="output survey directory")
-    p.add_argument("--cell-size", type=_positive, default=None, help="cell size in metres (default: site grid, 5)")
-    p.add_argument("--capture-s", type=_positive, default=30.0, help="capture length per cell, s (default 30)")
-    p.add_argument("--seed", type=_seed, default=0, help="survey seed (default 0)")
+    p.add_argument("--cell-size", type=positive, default=None, help="cell size in metres (default: site grid, 5)")
+    p.add_argument("--capture-s", type=bounded(1.0, 3600.0, "s"), default=30.0, help="capture length per cell, s, 1 to 3600 (default 30)")
+    p.add_argument("--seed", type=seed, default=0, help="survey seed (default 0)")
     p.add_argument("--start", default=None, help="start time, ISO 8601 UTC")
     p.add_argument("--no-corrections", action="store_true", help="GNSS without RTK/DGNSS corrections")
     p.add_argument("--force", action="store_true", help="replace a non-empty output directory")
@@ -91,14 +71,25 @@ def _site(args) -> int:
     return 0
 
 
+def _start(text: str | None):
+    """--start as a UTC datetime within the GNSS era the orbit model serves (1980-2100)."""
+    if not text:
+        return None
+    from features.walk import parse_utc
+    t = parse_utc(text, "--start")
+    if not 1980 <= t.year <= 2099:
+        raise ConfigError(f"--start {text!r} lies outside 1980-2099")
+    return t
+
+
 def _options(args) -> dict:
     return {"gnss_corrections": not args.no_corrections}
 
 
 def _walk(args) -> int:
-    from simulation.walk import parse_utc, simulate_walk
+    from simulation.walk import simulate_walk
 
-    start = parse_utc(args.start) if args.start else None
+    start = _start(args.start)
     out = simulate_walk(args.site, args.out, seed=args.seed, duration_s=args.duration, person=args.person,
                         start_utc=start, overwrite=args.force, options=_options(args))
     files = sorted(p.name for p in out.iterdir())
@@ -107,12 +98,9 @@ def _walk(args) -> int:
 
 
 def _survey(args) -> int:
-    from simulation.walk import parse_utc
     from simulation.survey import simulate_survey
 
-    if args.capture_s > 3600:
-        raise ConfigError(f"--capture-s {args.capture_s} is longer than an hour per cell")
-    start = parse_utc(args.start) if args.start else None
+    start = _start(args.start)
     out = simulate_survey(args.site, args.out, seed=args.seed, cell_size_m=args.cell_size, capture_s=args.capture_s,
                           start_utc=start, overwrite=args.force, options=_options(args))
     n = len(list((out / "cells").iterdir()))
