@@ -80,6 +80,10 @@ class PositionConfig:
     max_excluded: int = 3
 
     def __post_init__(self):
+        if self.max_clock_offset_s is not None and not self.max_clock_offset_s > 0:
+            raise ConfigError(f"max_clock_offset_s must be positive, got {self.max_clock_offset_s}")
+        if not self.bounds_margin_m >= 0:
+            raise ConfigError(f"bounds_margin_m must be >= 0, got {self.bounds_margin_m}")
         if not isinstance(self.max_excluded, int) or self.max_excluded < 0:
             raise ConfigError(f"max_excluded must be an integer >= 0, got {self.max_excluded!r}")
         if not 0 <= self.motion_speed_m_s < 10:
