@@ -7,7 +7,17 @@ frame, gravity included) required; ``gx, gy, gz`` (rad/s) and ``mx, my, mz``
 Repair (never an exception for a few bad samples; counts in
 :class:`ImuRepairReport`):
 
-- rows whose time is not a finite number are dropped;
+- rows whose time is not a finite number are dropped, and so is an isolated
+  time outlier: a row whose t_s departs from both file-order neighbours by
+  more than ``max_gap_s`` while those neighbours agree with each other (a
+  corrupted timestamp, e.g. 1e9 s inside a 100 Hz record), counted in
+  ``n_bad_time``;
+- the median sample interval must give a rate in [``min_rate_hz``,
+  ``max_rate_hz``] (10-2000 Hz): t_s in milliseconds (100 Hz → 0.1 Hz) is
+  rejected with one clear message rather than guessed at;
+- a remaining gap longer than ``max_fill_gap_s`` (default 600 s) is rejected
+  with one message naming it (split the file there): the uniform grid is
+  never allocated per a corrupt time span;
 - unsorted rows are sorted (stable); duplicated timestamps keep the first row;
 - NaN / non-numeric channel values are interpolated from their neighbours;
 - clipped samples — at or beyond the stated full scale, or in runs of ≥ 3
@@ -41,6 +51,8 @@ __all__ = ["ImuData", "ImuRepairReport", "RepairConfig", "read_imu_csv", "repair
 REQUIRED_COLUMNS = ("t_s", "ax", "ay", "az")
 GYRO_COLUMNS = ("gx", "gy", "gz")
 MAG_COLUMNS = ("mx", "my", "mz")
+HEADER_SHOWN_CHARS = 120
+"""At most this much of a bad header goes into the error message (repr: control bytes escaped)."""
 
 
 @dataclass(frozen=True)
@@ -54,6 +66,9 @@ class RepairConfig:
 
     rate_hz: float | None = None
     max_gap_s: float = 0.5
+    max_fill_gap_s: float = 600.0
+    min_rate_hz: float = 10.0
+    max_rate_hz: float = 2000.0
     acc_full_scale_m_s2: float = 16.0 * 9.80665
     gyro_full_scale_rad_s: float = math.radians(2000.0)
     mag_full_scale_ut: float = 4900.0
@@ -64,6 +79,10 @@ class RepairConfig:
             raise ImuError(f"rate_hz must lie in [1, 10000], got {self.rate_hz}")
         if not (self.max_gap_s > 0 and math.isfinite(self.max_gap_s)):
             raise ImuError(f"max_gap_s must be positive, got {self.max_gap_s}")
+        if not (math.isfinite(self.max_fill_gap_s) and self.max_fill_gap_s >= self.max_gap_s):
+            raise ImuError(f"max_fill_gap_s must be finite and >= max_gap_s, got {self.max_fill_gap_s}")
+        if not (0 < self.min_rate_hz < self.max_rate_hz and math.isfinite(self.max_rate_hz)):
+            raise ImuError(f"need 0 < min_rate_hz < max_rate_hz, got {self.min_rate_hz}, {self.max_rate_hz}")
         if self.clip_run_samples < 2:
             raise ImuError(f"clip_run_samples must be >= 2, got {self.clip_run_samples}")
 
@@ -150,6 +169,31 @@ def _fill_nan(x: np.ndarray) -> int:
     return n_bad
 
 
+def _time_outliers(t: np.ndarray, max_gap_s: float) -> np.ndarray:
+    """Isolated corrupt timestamps in file order, bool (n,).
+
+    Row i is an outlier when |t_i − t_{i−1}| and |t_{i+1} − t_i| both exceed
+    ``max_gap_s`` while |t_{i+1} − t_{i−1}| does not (first/last row: its one
+    neighbour pair, judged against the next interval).
+
+    >>> _time_outliers(np.array([0.0, 0.01, 1e9, 0.03, 0.04]), 0.5).nonzero()[0].tolist()
+    [2]
+    >>> _time_outliers(np.array([0.0, 0.01, 5.0, 5.01, 5.02]), 0.5).any()   # a real gap is kept
+    np.False_
+    """
+    n = len(t)
+    out = np.zeros(n, bool)
+    if n < 3:
+        return out
+    with np.errstate(over="ignore", invalid="ignore"):
+        d = np.abs(np.diff(t))
+        skip = np.abs(t[2:] - t[:-2])
+    out[1:-1] = (d[:-1] > max_gap_s) & (d[1:] > max_gap_s) & (skip <= max_gap_s)
+    out[0] = d[0] > max_gap_s and d[1] <= max_gap_s and n > 3
+    out[-1] = d[-1] > max_gap_s and d[-2] <= max_gap_s and n > 3
+    return out
+
+
 def _saturation(x: np.ndarray, full_scale: float, run: int) -> np.ndarray:
     """Clipped samples per axis, bool (n, 3): |x| ≥ full scale, or runs of ≥ ``run`` equal values at the
     column's (finite) extreme. NaN entries are not flagged (they are counted as NaN)."""
@@ -196,6 +240,7 @@ def repair_imu(t_s, acc_m_s2, gyro_rad_s=None, mag_ut=None, config: RepairConfig
             raise ImuError(f"{name} must have shape ({len(t)}, 3), got {x.shape}")
     report.n_rows = report.n_rows or len(t)
     ok = np.isfinite(t)
+    ok[ok] &= ~_time_outliers(t[ok], config.max_gap_s)
     report.n_bad_time += int((~ok).sum())
     t = t[ok]
     chans = {k: v[ok] for k, v in chans.items()}
@@ -227,7 +272,16 @@ def repair_imu(t_s, acc_m_s2, gyro_rad_s=None, mag_ut=None, config: RepairConfig
         setattr(report, f"n_nan_{name}", getattr(report, f"n_nan_{name}") + n_nan)
 
     dt_raw = np.diff(t)
-    rate = config.rate_hz or 1.0 / float(np.median(dt_raw))
+    median_dt = float(np.median(dt_raw))
+    if not config.min_rate_hz <= 1.0 / median_dt <= config.max_rate_hz:
+        raise ImuError(f"median sample interval {median_dt:.6g} s ({1.0 / median_dt:.4g} Hz) is outside "
+                       f"{config.min_rate_hz:g}-{config.max_rate_hz:g} Hz; t_s must be in seconds "
+                       f"(milliseconds? divide by 1000)")
+    worst = int(np.argmax(dt_raw))
+    if dt_raw[worst] > config.max_fill_gap_s:
+        raise ImuError(f"t_s jumps by {dt_raw[worst]:.6g} s (from {t[worst]:.6g} to {t[worst + 1]:.6g} s), "
+                       f"more than {config.max_fill_gap_s:g} s: split the record there")
+    rate = config.rate_hz or 1.0 / median_dt
     dt = 1.0 / rate
     gaps = dt_raw > max(config.max_gap_s, 2.5 * dt)
     report.n_gaps += int(gaps.sum())
@@ -292,7 +346,7 @@ def read_imu_csv(path: str | os.PathLike, config: RepairConfig = RepairConfig())
     """Read ``imu.csv`` (columns per module docstring), repair it, return :class:`ImuData`."""
     path = Path(path)
     try:
-        text = path.read_text(encoding="utf-8", errors="replace")
+        text = path.read_text(encoding="utf-8-sig", errors="replace")
     except FileNotFoundError:
         raise ImuError(f"{path}: file not found") from None
     except IsADirectoryError:
@@ -300,8 +354,10 @@ def read_imu_csv(path: str | os.PathLike, config: RepairConfig = RepairConfig())
     header, data, n_bad = _parse_table(text, str(path))
     missing = [c for c in REQUIRED_COLUMNS if c not in header]
     if missing:
+        have = ", ".join(header)
+        have = repr(have[:HEADER_SHOWN_CHARS]) + ("…" if len(have) > HEADER_SHOWN_CHARS else "") if have else "none"
         raise ImuError(f"{path}: missing required column(s) {', '.join(missing)} "
-                       f"(have: {', '.join(header) or 'none'}; need {', '.join(REQUIRED_COLUMNS)})")
+                       f"(have: {have}; need {', '.join(REQUIRED_COLUMNS)})")
     col = {name: i for i, name in enumerate(header)}
 
     def triple(names):

@@ -147,3 +147,69 @@ def test_clipped_and_absurd_samples_are_interpolated_before_filtering(tmp_path, 
     assert main(["features", "imu", str(_with_every_50th_az(tmp_path, value)), "--out", str(out)]) == 0
     err = capsys.readouterr().err
     assert "Warning" not in err and len(err.strip().splitlines()) == 1 and "n_saturated_acc=31" in err
+
+
+def _edited(tmp_path, name, edit):
+    """imu_good.csv with ``edit(rows)`` applied to its data rows (list of lists of str)."""
+    lines = (DATA / "imu_good.csv").read_text().splitlines()
+    rows = [ln.split(",") for ln in lines[1:]]
+    header = edit(rows) or lines[0]
+    p = tmp_path / name
+    p.write_text(header + "\n" + "\n".join(",".join(r) for r in rows) + "\n")
+    return p
+
+
+def _cli(path, tmp_path, capsys):
+    capsys.readouterr()
+    out = tmp_path / "steps.csv"
+    rc = main(["features", "imu", str(path), "--out", str(out)])
+    cap = capsys.readouterr()
+    return rc, cap.err.strip().splitlines(), out
+
+
+@pytest.mark.parametrize("row,value", [(700, "1e9"), (700, "1e308"), (1566, "1e308"), (0, "-1e9")])
+def test_isolated_corrupt_timestamp_is_dropped_not_allocated(tmp_path, row, value):
+    def edit(rows):
+        rows[row][0] = value
+    d = read_imu_csv(_edited(tmp_path, "jump.csv", edit))
+    assert d.report.n_bad_time == 1 and len(d) <= 1567 and d.t_s[-1] < 16.0
+    assert len(run_pdr(d)) == 20
+
+
+def test_a_real_huge_gap_is_rejected_with_one_line(tmp_path, capsys):
+    def edit(rows):
+        for r in rows[800:]:
+            r[0] = f"{float(r[0]) + 1e9:.2f}"
+    rc, err, out = _cli(_edited(tmp_path, "gap.csv", edit), tmp_path, capsys)
+    assert rc == 1 and len(err) == 1 and "t_s jumps by 1e+09 s" in err[0] and "split" in err[0]
+    assert not out.exists()
+    # a long but bounded gap (5 min) is bridged and flagged, not rejected
+    def edit2(rows):
+        for r in rows[800:]:
+            r[0] = f"{float(r[0]) + 300:.2f}"
+    d = read_imu_csv(_edited(tmp_path, "gap2.csv", edit2))
+    assert d.report.n_gaps == 1 and (~d.valid).sum() == 30000     # 300.01 s at 100 Hz
+
+
+def test_millisecond_timestamps_are_rejected_clearly(tmp_path, capsys):
+    def edit(rows):
+        for r in rows:
+            r[0] = f"{float(r[0]) * 1000:.0f}"
+    rc, err, _ = _cli(_edited(tmp_path, "ms.csv", edit), tmp_path, capsys)
+    assert rc == 1 and len(err) == 1
+    assert "(0.1 Hz) is outside 10-2000 Hz" in err[0] and "milliseconds" in err[0]
+
+
+def test_utf8_bom_is_read(tmp_path):
+    p = tmp_path / "bom.csv"
+    p.write_bytes(b"\xef\xbb\xbf" + (DATA / "imu_good.csv").read_bytes())
+    d = read_imu_csv(p)
+    assert len(d) == 1567 and d.report.n_defects == 0 and d.mag_ut is not None
+
+
+def test_huge_binary_header_is_truncated_in_the_error(tmp_path, capsys):
+    p = tmp_path / "junk.csv"
+    p.write_bytes(b"\x00\x01\x1b[31m" + b"A,\x07\xff" * 2_000_000 + b"\n1,2,3\n")
+    rc, err, _ = _cli(p, tmp_path, capsys)
+    assert rc == 1 and len(err) == 1 and len(err[0]) < 400
+    assert "missing required column(s) t_s, ax, ay, az" in err[0] and "\\x00" in err[0] and "\x1b" not in err[0]
