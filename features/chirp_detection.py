@@ -411,8 +411,11 @@ def detect_frames(path: str | os.PathLike, site: Site, timing: AudioTiming,
             # claimed, for features only, by an unassociated window that also contains it.
             for w in sorted(windows, key=lambda w: not w.associated):
                 s_peak = locate(w, sigmas[template_of[w.beacon_index]])
-                # One physical arrival is one chirp, even where windows overlap.
-                if s_peak is not None and all(abs(s_peak - f) > 0.001 * fs for _, f in found):
+                # One physical arrival is one chirp, even where windows overlap (per chirp
+                # template: frequency-divided beacons may arrive together).
+                t = template_of[w.beacon_index]
+                if s_peak is not None and all(abs(s_peak - f) > 0.001 * fs for w2, f in found
+                                              if template_of[w2.beacon_index] == t):
                     found.append((w, s_peak))
             if found:
                 detections = analyse(found, sigmas, k, len(held))
