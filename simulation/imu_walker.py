@@ -22,28 +22,43 @@ Gait (per person, from ``stream_rng(person_seed, "person")``)
     path is left (else the last step absorbs the rest).
     The true step length is the path length between consecutive steps.
 
-    Vertical acceleration per step k is a_up = A_k·sin(2π·c(t)) with c the
-    continuous step count, so (a_max − a_min) over the step is 2A_k, and A_k
-    is chosen so that Weinberg's relation holds exactly:
-    S_k = K·(a_max − a_min)^(1/4) ⇒ A_k = ½·(S_k / K)^4
-    (Weinberg 2002, Analog Devices AN-602, eq. 1), except that steps shorter
-    than :data:`MIN_EXCURSION_STEP_M` (starting and stopping) keep that
-    step's amplitude. The vertical peak of step k falls a quarter step after
-    heel strike k−1 (weight acceptance). Forward surge
-    (½A, step frequency), lateral sway (stride frequency, ~0.7 m/s²) and
-    pelvic yaw/roll/pitch oscillation (±4°, ±2°, ±1.5°) ride on top; the
-    magnitudes follow waist-accelerometry studies (Zijlstra & Hof 2003,
-    Gait & Posture 18:1-10: vertical CoM excursion 3-5 cm, lateral sway at
-    stride frequency).
+    Vertical motion: the pelvis (≈ centre of mass) vaults over the stance
+    leg as an inverted pendulum of the person's leg length l (Zijlstra & Hof
+    1997, "Displacement of the pelvis during human walking", Gait & Posture
+    6:249-262): a step of length S raises it by h with
+    S = γ·2·sqrt(2·l·h − h²)  ⇒  h = l − sqrt(l² − (S/2γ)²),
+    γ the person's correction factor of the pendulum model (Zijlstra & Hof
+    2003, Gait & Posture 18:1-10, report ≈ 1.25 on average; drawn per person
+    in [1.15, 1.35]). Each step's excursion varies by N(0, 10 %) (step-to-step
+    variability of trunk motion), so no step-length formula is exact. The
+    height follows z(t) = h_k·(1 − cos 2π·c(t))/2 over step k (c the
+    continuous step count): lowest at heel strike (double support), highest
+    at mid-stance, continuous with its slope at every heel strike. The
+    vertical acceleration is its second derivative (numerical, at 100 Hz), so
+    its amplitude h·2π²·f² follows from the pendulum *and* the instantaneous
+    step frequency f; its maximum (upward) falls at heel strike. Weinberg's
+    S = K·(a_max − a_min)^(1/4) is therefore only approximate (K ∝ f^(1/4)
+    at fixed l, γ) and K must be calibrated, as with real walkers.
+    Steps shorter than :data:`MIN_EXCURSION_STEP_M` (starting and stopping)
+    take the excursion of a step of that length. Forward surge (½ of the
+    vertical amplitude, step frequency), lateral sway (stride frequency,
+    ~0.7 m/s²) and pelvic yaw/roll/pitch oscillation (±4°, ±2°, ±1.5°) ride
+    on top (Zijlstra & Hof 2003: vertical CoM excursion 3-5 cm, lateral sway
+    at stride frequency).
 
 Sensor errors (consumer MEMS, e.g. Bosch BMI160 / AKM AK09916 data sheets)
     accelerometer: white noise 0.02 m/s² rms at 100 Hz, constant bias
     N(0, 0.05 m/s²) per axis, ±16 g clipping; gyro: white noise 0.07 °/s rms,
     turn-on bias N(0, 0.3 °/s) per axis plus a random walk 0.002 °/s/√s,
     scale-factor error N(0, 1 %) per axis,
-    ±2000 °/s clipping; magnetometer: white noise 0.4 µT rms (hard/soft iron
-    assumed calibrated). The device is clipped with a small mounting tilt
-    (N(0, 3°) roll and pitch, no yaw offset).
+    ±2000 °/s clipping; magnetometer: white noise 0.4 µT rms and the residual
+    of a field calibration: hard iron N(0, 1.5 µT) per axis and a symmetric
+    soft-iron matrix I + E, E entries N(0, 2 %) (Renaudin, Afzal & Lachapelle
+    2010, "Complete triaxis magnetometer calibration in the magnetic domain",
+    J. Sensors: residuals of this order after a consumer calibration). The
+    device is clipped on anew for every walk: mounting tilt N(0, 3°) roll
+    and pitch and a mounting yaw offset N(0, 5°) between the device's x axis
+    and the walking direction (drawn from the walk's sensor stream).
 """
 
 from __future__ import annotations
@@ -58,7 +73,7 @@ from scipy import ndimage
 from features.constants import GRAVITY_M_S2, OMEGA_EARTH_RAD_S
 from features.site import Site
 
-from .magnetic import disturbance_ned_ut, earth_field_ned_ut, steel_dipoles
+from .magnetic import disturbance_ned_ut, earth_field_ned_ut, site_steel_dipoles
 from .rng import stream_rng
 from .streams import Trajectory
 
@@ -74,9 +89,9 @@ MOVING_SPEED_M_S = 0.15
 MIN_EXCURSION_STEP_M = 0.5
 """Shorter (starting / stopping) steps get the vertical excursion of a step of this length, m.
 
-Weinberg's relation is fitted to steady walking; gait initiation and
-termination still raise and lower the centre of mass about as a normal step
-does, so their accelerations do not shrink with the fourth power of length."""
+Gait initiation and termination still raise and lower the centre of mass
+about as a normal step does (the pendulum relation describes steady
+walking), so their excursions do not shrink with the step's length."""
 
 
 @dataclass(frozen=True)
@@ -84,7 +99,9 @@ class Gait:
     """One person's gait constants (same person → same values across walks)."""
 
     step_freq_hz: float
-    weinberg_k: float
+    leg_length_m: float = 0.92
+    pendulum_correction: float = 1.25
+    excursion_variability: float = 0.10
     lateral_sway_m_s2: float = 0.7
     yaw_sway_rad: float = math.radians(4.0)
     roll_sway_rad: float = math.radians(2.0)
@@ -95,8 +112,12 @@ class Gait:
     def __post_init__(self):
         if not 1.0 <= self.step_freq_hz <= 3.0:
             raise ValueError(f"step_freq_hz must lie in [1, 3], got {self.step_freq_hz}")
-        if not 0.2 <= self.weinberg_k <= 1.0:
-            raise ValueError(f"weinberg_k must lie in [0.2, 1], got {self.weinberg_k}")
+        if not 0.6 <= self.leg_length_m <= 1.2:
+            raise ValueError(f"leg_length_m must lie in [0.6, 1.2], got {self.leg_length_m}")
+        if not 1.0 <= self.pendulum_correction <= 1.6:
+            raise ValueError(f"pendulum_correction must lie in [1, 1.6], got {self.pendulum_correction}")
+        if not 0.0 <= self.excursion_variability < 0.3:
+            raise ValueError(f"excursion_variability must lie in [0, 0.3), got {self.excursion_variability}")
         if not 0.0 <= self.timing_jitter < 0.2:
             raise ValueError(f"timing_jitter must lie in [0, 0.2), got {self.timing_jitter}")
 
@@ -105,13 +126,26 @@ class Gait:
         v = np.clip(np.asarray(speed_m_s, dtype=float), 0.5, 2.0)
         return self.step_freq_hz * (v / REFERENCE_SPEED_M_S) ** self.cadence_speed_exponent
 
+    def excursion_m(self, step_length_m: np.ndarray) -> np.ndarray:
+        """Pelvis rise h over a step of length S: h = l − sqrt(l² − (S/2γ)²), m (Zijlstra & Hof 1997).
+
+        >>> g = Gait(step_freq_hz=1.8, leg_length_m=0.9, pendulum_correction=1.25)
+        >>> round(float(g.excursion_m(np.array([0.7]))[0]), 4)
+        0.0447
+        """
+        half = np.minimum(np.asarray(step_length_m, float) / (2.0 * self.pendulum_correction),
+                          0.95 * self.leg_length_m)
+        return self.leg_length_m - np.sqrt(self.leg_length_m ** 2 - half ** 2)
+
 
 def person_gait(person_seed: int) -> Gait:
-    """The gait of person ``person_seed``: cadence U(1.6, 2.0) Hz, Weinberg K U(0.42, 0.52), sway amplitudes."""
+    """The gait of person ``person_seed``: cadence U(1.6, 2.0) Hz, leg length U(0.85, 1.0) m,
+    pendulum correction γ U(1.15, 1.35), sway amplitudes."""
     rng = stream_rng(person_seed, "person")
     return Gait(
         step_freq_hz=float(rng.uniform(1.6, 2.0)),
-        weinberg_k=float(rng.uniform(0.42, 0.52)),
+        leg_length_m=float(rng.uniform(0.85, 1.0)),
+        pendulum_correction=float(rng.uniform(1.15, 1.35)),
         lateral_sway_m_s2=float(rng.uniform(0.5, 0.9)),
         yaw_sway_rad=math.radians(float(rng.uniform(3.0, 5.0))),
         roll_sway_rad=math.radians(float(rng.uniform(1.5, 2.5))),
@@ -132,11 +166,15 @@ class SensorErrors:
     gyro_range_rad_s: float = math.radians(2000.0)
     gyro_scale_error: float = 0.01
     mag_noise_ut: float = 0.4
+    mag_hard_iron_ut: float = 1.5
+    mag_soft_iron: float = 0.02
     mount_tilt_rad: float = math.radians(3.0)
+    mount_yaw_rad: float = math.radians(5.0)
 
     def __post_init__(self):
         for name in ("acc_noise_m_s2", "acc_bias_m_s2", "gyro_noise_rad_s", "gyro_bias_rad_s", "gyro_scale_error",
-                     "gyro_bias_walk_rad_s_sqrt_s", "mag_noise_ut", "mount_tilt_rad"):
+                     "gyro_bias_walk_rad_s_sqrt_s", "mag_noise_ut", "mag_hard_iron_ut", "mag_soft_iron",
+                     "mount_tilt_rad", "mount_yaw_rad"):
             value = getattr(self, name)
             if not math.isfinite(value) or value < 0:
                 raise ValueError(f"SensorErrors.{name} must be finite and >= 0, got {value}")
@@ -158,7 +196,8 @@ class ImuSamples:
     """Device output: ``t_s`` (n,), ``acc_m_s2``, ``gyro_rad_s``, ``mag_ut`` (n, 3) in the body frame.
 
     ``mag_disturbance_ut`` (n,) is the magnitude of the steel disturbance at
-    the device, kept for scoring (not written to imu.csv).
+    the device and ``mount_yaw_rad`` the device's mounting yaw offset, kept
+    for scoring (not written to imu.csv).
     """
 
     t_s: np.ndarray
@@ -166,6 +205,7 @@ class ImuSamples:
     gyro_rad_s: np.ndarray
     mag_ut: np.ndarray
     mag_disturbance_ut: np.ndarray
+    mount_yaw_rad: float = 0.0
 
 
 def _segments(mask: np.ndarray) -> list[tuple[int, int]]:
@@ -253,28 +293,34 @@ def synthesise_imu(traj: Trajectory, site: Site, gait: Gait, steps: StepTruth, c
     """Specific force, body rate and magnetic field of the waist device along ``traj``.
 
     ``steps`` and ``count`` come from :func:`place_steps`; ``rng`` draws the
-    device's mounting tilt and sensor errors.
+    per-step excursion variability, the device's mounting tilt and yaw, and
+    the sensor errors.
     """
     t = np.asarray(traj.t_s, dtype=float)
     n = len(t)
     fs = traj.rate_hz
     dt = 1.0 / fs
-    # per-step vertical amplitude A_k = ½(S_k/K)^4 (Weinberg inverted), held over the step
-    amp_step = 0.5 * (np.maximum(steps.step_length_m, MIN_EXCURSION_STEP_M) / gait.weinberg_k) ** 4
-    k_idx = np.clip(np.ceil(count - 1e-9).astype(int) - 1, 0, max(len(amp_step) - 1, 0))
+    # pelvis height z = h_k·(1 − cos 2πc)/2 over step k (inverted pendulum, Zijlstra & Hof 1997)
+    n_steps = len(steps.step_length_m)
+    h_step = gait.excursion_m(np.maximum(steps.step_length_m, MIN_EXCURSION_STEP_M))
+    h_step = h_step * (1.0 + gait.excursion_variability * rng.standard_normal(n_steps).clip(-3, 3))
+    k_idx = np.clip(np.ceil(count - 1e-9).astype(int) - 1, 0, max(n_steps - 1, 0))
     walking = (np.abs(np.gradient(count)) > 1e-9)
-    amp = np.where(walking, amp_step[k_idx], 0.0) if len(amp_step) else np.zeros(n)
-    envelope = np.clip(_smooth(walking.astype(float), 0.15 * fs), 0.0, 1.0)
-    amp_smooth = _smooth(amp, 0.1 * fs)
+    h_t = h_step[k_idx] if n_steps else np.zeros(n)
     two_pi_c = 2.0 * np.pi * count
-    a_up = amp * np.sin(two_pi_c)
-    a_fwd = -0.5 * amp_smooth * np.cos(two_pi_c) * envelope
+    z_up = h_t * 0.5 * (1.0 - np.cos(two_pi_c))
+    a_up = np.gradient(np.gradient(z_up, dt), dt)
+    envelope = np.clip(_smooth(walking.astype(float), 0.15 * fs), 0.0, 1.0)
+    freq = np.gradient(count, dt)
+    amp_smooth = _smooth(h_t * 2.0 * np.pi ** 2 * freq ** 2, 0.1 * fs)
+    a_fwd = -0.5 * amp_smooth * np.sin(two_pi_c) * envelope
     a_lat = gait.lateral_sway_m_s2 * np.sin(0.5 * two_pi_c) * envelope
 
     # route heading: unwrap and smooth over 0.3 s (the body turns over a finite time)
     travel = _smooth(np.unwrap(np.asarray(traj.heading_rad, dtype=float)), 0.3 * fs)
     mount_roll, mount_pitch = rng.normal(0.0, errors.mount_tilt_rad, size=2)
-    yaw = travel + gait.yaw_sway_rad * np.sin(0.5 * two_pi_c) * envelope
+    mount_yaw = rng.normal(0.0, errors.mount_yaw_rad)
+    yaw = travel + mount_yaw + gait.yaw_sway_rad * np.sin(0.5 * two_pi_c) * envelope
     roll = mount_roll + gait.roll_sway_rad * np.sin(0.5 * two_pi_c + 0.5 * np.pi) * envelope
     pitch = mount_pitch + gait.pitch_sway_rad * np.sin(two_pi_c) * envelope
 
@@ -300,7 +346,7 @@ def synthesise_imu(traj: Trajectory, site: Site, gait: Gait, steps: StepTruth, c
 
     # magnetic field: Earth dipole + steel dipoles at the device position
     b_earth = earth_field_ned_ut(site.origin.lat_deg, site.origin.lon_deg)
-    dipoles = steel_dipoles(site, b_earth, stream_rng(site.seed or 0, "steel-remanence"))
+    dipoles = site_steel_dipoles(site)
     pos_ned = np.stack([traj.north_m, traj.east_m, -np.asarray(traj.up_m, float)], axis=1)
     dist = disturbance_ned_ut(dipoles, pos_ned)
     mag = np.einsum("nji,nj->ni", c_bn, b_earth[None, :] + dist)
@@ -311,10 +357,12 @@ def synthesise_imu(traj: Trajectory, site: Site, gait: Gait, steps: StepTruth, c
         rng.normal(0.0, errors.gyro_bias_walk_rad_s_sqrt_s * math.sqrt(dt), size=(n, 3)), axis=0)
     gyro *= 1.0 + rng.normal(0.0, errors.gyro_scale_error, size=3)
     gyro += bias_g + rng.normal(0.0, errors.gyro_noise_rad_s, size=(n, 3))
+    soft = rng.normal(0.0, errors.mag_soft_iron, size=(3, 3))
+    mag = mag @ (np.eye(3) + 0.5 * (soft + soft.T)).T + rng.normal(0.0, errors.mag_hard_iron_ut, size=3)
     mag += rng.normal(0.0, errors.mag_noise_ut, size=(n, 3))
     np.clip(f_body, -errors.acc_range_m_s2, errors.acc_range_m_s2, out=f_body)
     np.clip(gyro, -errors.gyro_range_rad_s, errors.gyro_range_rad_s, out=gyro)
-    return ImuSamples(t, f_body, gyro, mag, np.linalg.norm(dist, axis=1))
+    return ImuSamples(t, f_body, gyro, mag, np.linalg.norm(dist, axis=1), float(mount_yaw))
 
 
 def trajectory_from_waypoints(waypoints_en: np.ndarray, speed_m_s: float = 1.25, rate_hz: float = 100.0,

@@ -37,7 +37,7 @@ import numpy as np
 from features.site import Box, Site
 
 __all__ = ["IGRF13_DIPOLE_NT", "earth_field_ned_ut", "field_elements", "SteelDipoles", "steel_dipoles",
-           "disturbance_ned_ut", "is_magnetic"]
+           "site_steel_dipoles", "disturbance_ned_ut", "is_magnetic"]
 
 IGRF13_DIPOLE_NT = (-29404.8, -1450.9, 4652.5)
 """IGRF-13 degree-1 Gauss coefficients (g10, g11, h11) at 2020.0, nT (Alken et al. 2021, Table 2)."""
@@ -113,6 +113,15 @@ def steel_dipoles(site: Site, earth_ned_ut: np.ndarray, rng: np.random.Generator
         moment[i] = induced + remanent_fraction * np.linalg.norm(induced) * direction
         radius[i] = r
     return SteelDipoles(centre, moment, radius)
+
+
+def site_steel_dipoles(site: Site) -> SteelDipoles:
+    """The site's steel dipoles in its Earth field, remanence drawn from ``stream_rng(site.seed, "steel-remanence")``
+    (the same for every walk on the site; scoring code uses it to know where the field is disturbed)."""
+    from .rng import stream_rng
+
+    return steel_dipoles(site, earth_field_ned_ut(site.origin.lat_deg, site.origin.lon_deg),
+                         stream_rng(site.seed or 0, "steel-remanence"))
 
 
 def disturbance_ned_ut(dipoles: SteelDipoles, pos_ned_m: np.ndarray) -> np.ndarray:

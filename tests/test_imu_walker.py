@@ -9,6 +9,9 @@ import pytest
 
 from features.heading import down_in_body, yaw_rate
 from features.site import Box, Origin, Site
+from dataclasses import replace
+
+from features.heading import magnetic_heading, wrap_pi
 from simulation.imu_walker import (MIN_EXCURSION_STEP_M, SensorErrors, person_gait, place_steps, synthesise_imu,
                                    trajectory_from_waypoints)
 from simulation.magnetic import (SteelDipoles, disturbance_ned_ut, earth_field_ned_ut, field_elements,
@@ -18,14 +21,14 @@ from simulation.rng import stream_rng
 SITE = Site(name="walker-test", origin=Origin(30.0, 114.0, 0.0), seed=2)
 NO_ERRORS = SensorErrors(acc_noise_m_s2=0.0, acc_bias_m_s2=0.0, gyro_noise_rad_s=0.0, gyro_bias_rad_s=0.0,
                          gyro_bias_walk_rad_s_sqrt_s=0.0, gyro_scale_error=0.0, mag_noise_ut=0.0,
-                         mount_tilt_rad=0.0)
+                         mag_hard_iron_ut=0.0, mag_soft_iron=0.0, mount_tilt_rad=0.0, mount_yaw_rad=0.0)
 WAYPOINTS = np.array([[0.0, 0.0], [0.0, 30.0], [20.0, 30.0], [20.0, 10.0]])
 
 
 @pytest.fixture(scope="module")
 def clean_walk():
     traj = trajectory_from_waypoints(WAYPOINTS, 1.3, stops_s={2: 4.0})
-    gait = person_gait(11)
+    gait = replace(person_gait(11), excursion_variability=0.0)
     steps, count = place_steps(traj, gait, stream_rng(1, "steps"))
     imu = synthesise_imu(traj, SITE, gait, steps, count, stream_rng(1, "sensor"), NO_ERRORS)
     return traj, gait, steps, count, imu
@@ -45,8 +48,10 @@ def test_steps_cover_the_path_and_follow_the_cadence(clean_walk):
     assert np.all(intervals[intervals < 1.0] > 0.35)
 
 
-def test_vertical_amplitude_inverts_weinberg(clean_walk):
-    """Level device, no errors: the vertical specific-force swing of step k is (S_k/K)^4 (S_k ≥ 0.5 m)."""
+def test_vertical_motion_is_the_inverted_pendulum_peaking_at_heel_strike(clean_walk):
+    """Level device, no errors, no step variability: over step k the vertical specific-force swing is the
+    second derivative of z = h(1 − cos 2πc)/2, i.e. 4π²·h(S_k)/T_k² with h from Zijlstra & Hof's pendulum,
+    and the upward maximum falls at the heel strike that ends the step."""
     traj, gait, steps, count, imu = clean_walk
     down = down_in_body(imu.acc_m_s2, 100.0)
     vert = -np.einsum("ij,ij->i", imu.acc_m_s2, down)                 # upward specific force ≈ g + a_up
@@ -54,14 +59,42 @@ def test_vertical_amplitude_inverts_weinberg(clean_walk):
     checked = 0
     for k in range(2, len(steps.t_s) - 2):
         s = steps.step_length_m[k]
-        if s < 0.6:
+        period = steps.t_s[k] - steps.t_s[k - 1]
+        if s < 0.6 or period > 1.0:
             continue
         sel = k_idx == k
         swing = vert[sel].max() - vert[sel].min()
-        assert swing == pytest.approx((s / gait.weinberg_k) ** 4, rel=0.12)
+        h = float(gait.excursion_m(np.array([s]))[0])
+        assert swing == pytest.approx(4 * math.pi ** 2 * h / period ** 2, rel=0.12)
+        around = np.abs(traj.t_s - steps.t_s[k]) < 0.25 * period
+        assert abs(traj.t_s[around][np.argmax(vert[around])] - steps.t_s[k]) <= 0.03
         checked += 1
     assert checked > 40
+    # Weinberg's K implied by the pendulum varies with cadence: S/(2A)^(1/4) is not one constant
     assert MIN_EXCURSION_STEP_M == 0.5
+    h07 = float(gait.excursion_m(np.array([0.7]))[0])
+    assert 0.03 <= h07 <= 0.06                                        # 3-6 cm pelvis excursion (Zijlstra & Hof)
+
+
+def test_device_errors_mounting_yaw_and_magnetometer_residual():
+    """The mounting yaw offset turns the magnetometer heading by that angle; hard/soft iron change the
+    intensity far from steel by about their size."""
+    traj = trajectory_from_waypoints(WAYPOINTS, 1.3)
+    gait = person_gait(11)
+    steps, count = place_steps(traj, gait, stream_rng(1, "steps"))
+    yaw_only = replace(NO_ERRORS, mount_yaw_rad=math.radians(5.0))
+    imu = synthesise_imu(traj, SITE, gait, steps, count, stream_rng(3, "sensor"), yaw_only)
+    assert 0.2 < abs(math.degrees(imu.mount_yaw_rad)) < 15.0
+    still = slice(0, 150)
+    b = earth_field_ned_ut(30.0, 114.0)
+    decl = field_elements(b)[0]
+    psi, _, _ = magnetic_heading(imu.mag_ut[still], down_in_body(imu.acc_m_s2, 100.0)[still], decl)
+    offset = float(np.mean(wrap_pi(psi - traj.heading_rad[still])))
+    assert offset == pytest.approx(imu.mount_yaw_rad, abs=math.radians(0.2))
+    iron = replace(NO_ERRORS, mag_hard_iron_ut=1.5, mag_soft_iron=0.02)
+    imu2 = synthesise_imu(traj, SITE, gait, steps, count, stream_rng(3, "sensor"), iron)
+    dev = np.linalg.norm(imu2.mag_ut, axis=1) - field_elements(b)[2]
+    assert 0.1 < np.abs(dev).max() < 4.0 and np.ptp(dev) > 0.1        # heading-dependent residual
 
 
 def test_standing_reads_gravity_and_gyro_follows_the_route(clean_walk):

@@ -1,4 +1,6 @@
-"""PDR on simulated walks: step count, calibrated distance, heading near steel, determinism, filter maths."""
+"""PDR on simulated walks, through the files a user has: simulate walk → imu.csv / truth_steps.csv →
+read_imu_csv → PDR. Step count and timing, calibrated distance, held-out step-length models, heading near
+steel, PDR error growth; determinism and filter maths."""
 
 from __future__ import annotations
 
@@ -11,14 +13,14 @@ import pytest
 
 from features.heading import (HeadingConfig, complementary_heading, down_in_body, magnetic_heading, wrap_pi,
                               yaw_rate)
-from features.imu import repair_imu
+from features.imu import read_imu_csv
 from features.pdr import PdrConfig, run_pdr
 from features.site import load_site
 from features.errors import DataError
 from features.steps import StepLengthModel, calibrate_weinberg_k, fit_improved_model
 from simulation.imu_stream import simulate_imu, write_imu
 from simulation.imu_walker import person_gait
-from simulation.magnetic import earth_field_ned_ut, field_elements
+from simulation.magnetic import disturbance_ned_ut, earth_field_ned_ut, field_elements, site_steel_dipoles
 from simulation.rng import stream_rng
 from simulation.route import plan_route, route_trajectory
 from simulation.streams import StreamContext
@@ -33,73 +35,145 @@ def _walk(site, seed, person=PERSON, duration_s=300.0, kind="walk", out_dir=Path
     return StreamContext(site=site, trajectory=traj, out_dir=out_dir, seed=seed, kind=kind, person_seed=person)
 
 
+class FileWalk:
+    """A simulated walk written to disk and read back as a user would: ``imu`` (ImuData from imu.csv),
+    ``truth`` (t_s, step_length_m, heading_rad columns of truth_steps.csv), ``declination_rad`` (from the
+    [imu] table the writer returns for walk.toml) and the trajectory (truth, for scoring only)."""
+
+    def __init__(self, site, seed, out_dir, duration_s=300.0):
+        out_dir.mkdir(parents=True, exist_ok=True)
+        self.ctx = _walk(site, seed, duration_s=duration_s, out_dir=out_dir)
+        meta = write_imu(self.ctx)
+        self.declination_rad = math.radians(meta["imu"]["declination_deg"])
+        self.imu = read_imu_csv(out_dir / meta["imu"]["file"])
+        self.truth = np.loadtxt(out_dir / "truth_steps.csv", delimiter=",", skiprows=1, ndmin=2)
+        self.traj = self.ctx.trajectory
+
+    @property
+    def distance_m(self) -> float:
+        return float(self.truth[:, 1].sum())
+
+    def pdr(self, length: StepLengthModel = StepLengthModel()):
+        config = PdrConfig(length=length, heading=HeadingConfig(declination_rad=self.declination_rad))
+        return run_pdr(self.imu, self.traj.east_m[0], self.traj.north_m[0], config)
+
+    def horizontal_error_m(self, res) -> np.ndarray:
+        east = np.interp(res.t_s, self.traj.t_s, self.traj.east_m)
+        north = np.interp(res.t_s, self.traj.t_s, self.traj.north_m)
+        return np.hypot(res.east_m - east, res.north_m - north)
+
+
 @pytest.fixture(scope="module")
 def site(site_dir):
     return load_site(site_dir)
 
 
 @pytest.fixture(scope="module")
-def walks(site):
-    """Calibration walk (seed 21) and test walk (seed 22) of the same person, 5 min each."""
-    out = {}
-    for seed in (21, 22):
-        ctx = _walk(site, seed)
-        imu, truth = simulate_imu(ctx)
-        out[seed] = (ctx, imu, truth)
-    return out
-
-
-def _config(site, k=0.47):
-    decl, _, _ = field_elements(earth_field_ned_ut(site.origin.lat_deg, site.origin.lon_deg))
-    return PdrConfig(length=StepLengthModel(k=k), heading=HeadingConfig(declination_rad=decl))
-
-
-def _pdr(site, sim, k=0.47):
-    ctx, imu, _ = sim
-    data = repair_imu(imu.t_s, imu.acc_m_s2, imu.gyro_rad_s, imu.mag_ut)
-    return run_pdr(data, ctx.trajectory.east_m[0], ctx.trajectory.north_m[0], _config(site, k))
-
-
-def test_step_count_within_1_percent_and_distance_within_3_percent_after_calibration(site, walks):
-    cal = _pdr(site, walks[21])
-    k = calibrate_weinberg_k(cal.steps, float(walks[21][2].step_length_m.sum()))
-    # the simulator inverts Weinberg with the person's K: calibration must recover it
-    assert k == pytest.approx(person_gait(PERSON).weinberg_k, rel=0.03)
-    res = _pdr(site, walks[22], k)
-    truth = walks[22][2]
-    assert len(truth.t_s) > 350
-    assert abs(len(res) - len(truth.t_s)) <= 0.01 * len(truth.t_s)
-    true_dist = float(truth.step_length_m.sum())
-    assert abs(res.distance_m - true_dist) <= 0.03 * true_dist
-    # uncalibrated default K is visibly worse than calibrated unless the person happens to have K≈0.47
-    ctx = walks[22][0]
-    east = np.interp(res.t_s, ctx.trajectory.t_s, ctx.trajectory.east_m)
-    north = np.interp(res.t_s, ctx.trajectory.t_s, ctx.trajectory.north_m)
-    err = np.hypot(res.east_m - east, res.north_m - north)
-    assert err.mean() < 0.05 * true_dist          # PDR-only drift stays a few % of distance over 5 min
+def walks(site, tmp_path_factory):
+    """Calibration walk (seed 21) and held-out walks (seeds 22, 23) of the same person, 5 min each."""
+    root = tmp_path_factory.mktemp("pdr_walks")
+    return {seed: FileWalk(site, seed, root / f"w{seed}") for seed in (21, 22, 23)}
 
 
 @pytest.fixture(scope="module")
-def long_walks(site):
+def weinberg_k(walks):
+    """K calibrated on walk 21's known length (as from a surveyed calibration walk)."""
+    return calibrate_weinberg_k(walks[21].pdr().steps, walks[21].distance_m)
+
+
+def test_step_count_within_1_percent_and_times_at_heel_strike(walks):
+    """Count within 1 % of truth_steps.csv; reported step time (peak of the filtered acceleration norm =
+    heel strike, where the pelvis is lowest) within 0.1 s of the true heel strikes (median |Δt|)."""
+    for seed, walk in walks.items():
+        res = walk.pdr()
+        t_true = walk.truth[:, 0]
+        assert len(t_true) > 350
+        assert abs(len(res) - len(t_true)) <= 0.01 * len(t_true), seed
+        j = np.clip(np.searchsorted(t_true, res.t_s), 1, len(t_true) - 1)
+        dt = np.minimum(np.abs(t_true[j] - res.t_s), np.abs(t_true[j - 1] - res.t_s))
+        assert np.median(dt) < 0.1 and np.median(dt) < 0.02, (seed, np.median(dt))
+
+
+def test_distance_within_3_percent_with_k_calibrated_on_another_walk(walks, weinberg_k):
+    """Pinned distance errors with K from walk 21 (%): walk 22 {d22:+.2f}, walk 23 {d23:+.2f}."""
+    errors = {}
+    for seed in (22, 23):
+        res = walks[seed].pdr(StepLengthModel(k=weinberg_k))
+        errors[seed] = 100.0 * (res.distance_m / walks[seed].distance_m - 1.0)
+    assert all(abs(e) <= 3.0 for e in errors.values()), errors
+    np.testing.assert_allclose([errors[22], errors[23]], PINNED_DISTANCE_PCT, atol=0.05)
+    # the default K (0.47, uncalibrated) is not the person's: calibration is needed
+    assert abs(weinberg_k - 0.47) > 0.01
+
+
+def _segments(walk, res, seconds=30.0):
+    """Step → 30-s segment id, and each segment's true length (as GNSS would give) from truth_steps.csv."""
+    seg = np.floor(res.t_s / seconds).astype(int)
+    cum = np.r_[0.0, np.cumsum(walk.truth[:, 1])]
+    edges = np.arange(0, seg.max() + 2) * seconds
+    return seg, np.diff(np.interp(edges, np.r_[0.0, walk.truth[:, 0]], cum))
+
+
+def test_held_out_walks_weinberg_versus_improved_model(walks, weinberg_k):
+    """Both models fitted on walk 21 (Weinberg: its length; improved (K, β): its 30-s segments), scored on
+    walks 22 and 23 at other speeds. Pinned distance errors (%, PINNED_HELD_OUT): Weinberg +2.59 / −0.38,
+    improved −4.18 / +1.81; leave-one-segment-out inside walk 21 wrongly keeps β ("selected"). Selecting
+    on a different walk (23) of known length falls back to Weinberg, which then scores +2.59 on walk 22.
+    The improved model does not generalise across walks, so Weinberg stays the default."""
+    cal = walks[21].pdr()
+    seg, dist = _segments(walks[21], cal)
+    improved = fit_improved_model(cal.steps, seg, dist, select=False)
+    selected = fit_improved_model(cal.steps, seg, dist)
+    err_w, err_i, err_s = [], [], []
+    for seed in (22, 23):
+        steps = walks[seed].pdr().steps
+        d = walks[seed].distance_m
+        err_w.append(100.0 * (StepLengthModel(k=weinberg_k).predict(steps).sum() / d - 1.0))
+        err_i.append(100.0 * (improved.predict(steps).sum() / d - 1.0))
+        err_s.append(100.0 * (selected.predict(steps).sum() / d - 1.0))
+    np.testing.assert_allclose(err_w, PINNED_HELD_OUT["weinberg"], atol=0.05)
+    np.testing.assert_allclose(err_i, PINNED_HELD_OUT["improved"], atol=0.05)
+    np.testing.assert_allclose(err_s, PINNED_HELD_OUT["selected"], atol=0.05)
+    assert StepLengthModel().beta == 0.0                                 # Weinberg is the default
+    assert np.mean(np.abs(err_w)) < np.mean(np.abs(err_i))
+    steps23 = walks[23].pdr().steps
+    by_walk = fit_improved_model(cal.steps, seg, dist, validation=(steps23, walks[23].distance_m))
+    assert by_walk.beta == 0.0 and by_walk.k == pytest.approx(weinberg_k, rel=0.002)
+
+
+def test_pdr_error_growth_over_5_min(walks, weinberg_k):
+    """PDR-only horizontal error, % of distance walked (mean over steps / final), K from walk 21, mounting
+    yaw offset not corrected (unknown without an external heading): pinned in PINNED_PDR_PCT."""
+    figures = []
+    for seed in (22, 23):
+        walk = walks[seed]
+        res = walk.pdr(StepLengthModel(k=weinberg_k))
+        err = walk.horizontal_error_m(res)
+        figures += [100.0 * err.mean() / walk.distance_m, 100.0 * err[-1] / walk.distance_m]
+    np.testing.assert_allclose(figures, PINNED_PDR_PCT, atol=0.05)
+    assert max(figures) < 10.0
+
+
+@pytest.fixture(scope="module")
+def long_walks(site, tmp_path_factory):
     """Two 15-min walks of the same person: long enough for gyro drift to matter."""
-    out = {}
-    for seed in (21, 22):
-        ctx = _walk(site, seed, duration_s=900.0)
-        out[seed] = (ctx, *simulate_imu(ctx))
-    return out
+    root = tmp_path_factory.mktemp("pdr_long")
+    return {seed: FileWalk(site, seed, root / f"w{seed}", duration_s=900.0) for seed in (21, 22)}
 
 
 def test_complementary_heading_beats_gyro_and_magnetometer_near_steel(site, long_walks):
-    """Near steel (disturbance > 2 µT) on 15-min walks: fused < gyro-only (turn-on bias calibrated on
-    the standing start) and < magnetometer-only. Pinned figures (deg, seeds 21/22): fused 4.20/5.04,
-    gyro 4.70/7.75, magnetometer 11.21/10.92."""
-    pinned = {21: (4.20, 4.70, 11.21), 22: (5.04, 7.75, 10.92)}
-    for seed, sim in long_walks.items():
-        ctx, imu, _ = sim
-        res = _pdr(site, sim)
-        near = imu.mag_disturbance_ut > 2.0
+    """Near steel (disturbance > 2 µT) on 15-min walks, heading of the device against the walking direction
+    (so the mounting yaw offset counts against every method): fused < gyro-only (turn-on bias calibrated on
+    the standing start) and < magnetometer-only. Pinned figures (deg): PINNED_HEADING_DEG."""
+    dipoles = site_steel_dipoles(site)
+    for seed, walk in long_walks.items():
+        res = walk.pdr()
+        traj = walk.traj
+        pos = np.stack([traj.north_m, traj.east_m, -np.asarray(traj.up_m)], axis=1)
+        near_traj = np.linalg.norm(disturbance_ned_ut(dipoles, pos), axis=1) > 2.0
+        near = np.interp(walk.imu.t_s, traj.t_s, near_traj.astype(float)) > 0.5
         assert near.mean() > 0.1, "the route should pass steel equipment"
-        truth = ctx.trajectory.heading_rad
+        truth = np.interp(walk.imu.t_s, traj.t_s, np.unwrap(traj.heading_rad))
 
         def rms_deg(h):
             return math.degrees(float(np.sqrt(np.mean(wrap_pi(h - truth)[near] ** 2))))
@@ -107,9 +181,9 @@ def test_complementary_heading_beats_gyro_and_magnetometer_near_steel(site, long
         fused, gyro, mag = (rms_deg(res.heading.fused), rms_deg(res.heading.gyro_only),
                             rms_deg(res.heading.mag_only))
         assert fused < gyro and fused < mag, (fused, gyro, mag)
-        np.testing.assert_allclose((fused, gyro, mag), pinned[seed], atol=0.06)
+        np.testing.assert_allclose((fused, gyro, mag), PINNED_HEADING_DEG[seed], atol=0.06)
         # raw gyro (turn-on bias not removed) is far worse still
-        rate = yaw_rate(imu.gyro_rad_s, down_in_body(imu.acc_m_s2, 100.0))
+        rate = yaw_rate(walk.imu.gyro_rad_s, down_in_body(walk.imu.acc_m_s2, 100.0))
         raw = res.heading.fused[0] + np.r_[0.0, np.cumsum(rate[1:]) / 100.0]
         assert rms_deg(raw) > gyro
 
@@ -170,9 +244,9 @@ def test_tilt_compensated_heading_is_yaw_of_a_rotated_field():
         assert intensity[0] == pytest.approx(total) and dip[0] == pytest.approx(incl)
 
 
-def test_improved_model_fit_recovers_a_known_beta_and_falls_back_to_weinberg(site, walks):
+def test_improved_model_fit_recovers_a_known_beta_and_falls_back_to_weinberg(walks):
     """Segments built from S = K·F + β·G exactly: the fit returns (K, β); with β = 0 truth it keeps Weinberg."""
-    res = _pdr(site, walks[21])
+    res = walks[21].pdr()
     steps = res.steps
     seg = np.floor(steps.t_s / 30.0).astype(int)
     f, g = steps.weinberg_feature, steps.change_rate_feature
@@ -183,3 +257,9 @@ def test_improved_model_fit_recovers_a_known_beta_and_falls_back_to_weinberg(sit
         assert model.beta == pytest.approx(beta_true, abs=1e-6)
     with pytest.raises(DataError, match="three calibration segments"):
         fit_improved_model(steps, np.zeros(len(steps), int), np.array([10.0]))
+
+
+PINNED_DISTANCE_PCT = (2.59, -0.38)
+PINNED_HELD_OUT = {"weinberg": (2.59, -0.38), "improved": (-4.18, 1.81), "selected": (-4.18, 1.81)}
+PINNED_PDR_PCT = (1.24, 1.28, 0.88, 2.27)
+PINNED_HEADING_DEG = {21: (6.38, 13.02, 13.27), 22: (5.01, 19.25, 10.65)}
