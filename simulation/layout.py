@@ -46,7 +46,7 @@ class LayoutConfig:
     n_transformers: tuple[int, int] = (2, 4)
     beacon_spacing_m: tuple[float, float] = (25.0, 35.0)
     beacon_height_m: tuple[float, float] = (2.5, 3.0)
-    reuse_distance_m: float = 100.0
+    reuse_distance_m: float = 145.0  # ≥ 2 × the ≈ 70 m free-field detection range (tests/test_acoustic_sim.py)
     emi_zones: bool = True
     min_class_share: float = 0.04
     max_attempts: int = 20

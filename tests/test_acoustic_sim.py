@@ -225,10 +225,11 @@ def test_detection_range_and_slot_reuse_of_generated_sites():
 
     Link budget: 100 dB SPL at 1 m, T·B = 60, 12 dB detection threshold,
     20 °C / 60 %. With the default in-band noise (35 dB SPL ambient + a MEMS
-    floor, 35.8 dB SPL) the free-field range is ≈ 70 m, so ≈ 141 m of reuse
-    distance would be needed; the generator's 100 m leaves a band between
-    slot-mates where both are heard. Only with the noisy phone floor measured on
-    real audio (50 dB SPL, range ≈ 47 m) does 100 m suffice.
+    floor, 35.8 dB SPL) the free-field range is ≈ 70 m, so slot-mates need
+    ≈ 141 m; the generator's reuse distance (145 m) keeps every pair of
+    slot-mates out of any receiver's joint hearing, so on a 120 × 80 m yard
+    slots are hardly reused (frame ≈ n_beacons × slot_s). With the noisy phone
+    floor measured on real audio (50 dB SPL) the range is ≈ 47 m.
     """
     from simulation.audio_stream import AudioConfig
     spec = ChirpSpec(17_000.0, 23_000.0, 0.010, 0.2)
@@ -238,15 +239,12 @@ def test_detection_range_and_slot_reuse_of_generated_sites():
     assert r_noisy == pytest.approx(47.3, abs=1.0)
     layout = pytest.importorskip("simulation.layout")
     cfg = layout.LayoutConfig()
-    assert 2.0 * r_noisy <= cfg.reuse_distance_m < 2.0 * r_default
-    n_ambiguous = 0
+    assert cfg.reuse_distance_m >= 2.0 * r_default
     for seed in (1, 2, 3):
         site = layout.generate_site(seed)
         assert slot_reuse_conflicts(site, cfg.reuse_distance_m) == []         # the generator keeps its promise
-        ambiguous = slot_reuse_conflicts(site, 2.0 * r_default)
-        assert all(cfg.reuse_distance_m <= d < 2.0 * r_default for _, _, d in ambiguous)
-        n_ambiguous += len(ambiguous)
-    assert n_ambiguous > 0            # the finding: slot-mates that a receiver somewhere hears together
+        assert slot_reuse_conflicts(site, 2.0 * r_default) == []              # no slot-mates heard together
+        assert site.acoustic.frame_s <= 2.5                                    # still a fix every few seconds
 
 
 def test_paths_are_reciprocal_on_a_generated_site():
