@@ -35,12 +35,13 @@ Step length
 
     Held-out status (tests/test_pdr_sim.py, simulated walks of one person at
     different speeds, fitted on one walk, scored on two others): Weinberg
-    +2.59 / −0.38 % distance error, the improved model −4.18 / +1.81 %. Fitted
-    on the 30-s segments of a single walk, β soaks up that walk's speed mix
-    and does not transfer, although leave-one-segment-out inside the walk
-    prefers it. Weinberg is therefore the default (β = 0) and the CLI uses
-    Weinberg only; :func:`fit_improved_model` keeps β only when it beats
-    Weinberg on a *different* walk of known length (``validation``).
+    +2.51 / +0.06 % distance error, the improved model −1.29 / +1.21 % — no
+    held-out advantage (an earlier walker, with Weinberg built in, showed the
+    improved model up to 12 % off). Fitted on the 30-s segments of a single
+    walk, β soaks up that walk's speed mix and need not transfer. Weinberg is
+    therefore the default (β = 0) and the CLI uses Weinberg only;
+    :func:`fit_improved_model` keeps β only when it beats Weinberg on held-out
+    data, best a *different* walk of known length (``validation``).
 
 Step time
     A step is reported at the peak of the filtered acceleration norm. On a

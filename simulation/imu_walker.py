@@ -40,7 +40,11 @@ Gait (per person, from ``stream_rng(person_seed, "person")``)
     S = K·(a_max − a_min)^(1/4) is therefore only approximate (K ∝ f^(1/4)
     at fixed l, γ) and K must be calibrated, as with real walkers.
     Steps shorter than :data:`MIN_EXCURSION_STEP_M` (starting and stopping)
-    take the excursion of a step of that length. Forward surge (½ of the
+    take the excursion of a step of that length. The first step of a bout
+    leaves quiet standing smoothly (its excursion is windowed by u², u its
+    phase), so setting off makes no heel-strike-like peak; after a bout's last
+    heel strike the motion runs on for one cycle windowed by (1 − v)² while
+    the trailing leg is brought alongside (gait termination). Forward surge (½ of the
     vertical amplitude, step frequency), lateral sway (stride frequency,
     ~0.7 m/s²) and pelvic yaw/roll/pitch oscillation (±4°, ±2°, ±1.5°) ride
     on top (Zijlstra & Hof 2003: vertical CoM excursion 3-5 cm, lateral sway
@@ -306,9 +310,34 @@ def synthesise_imu(traj: Trajectory, site: Site, gait: Gait, steps: StepTruth, c
     h_step = h_step * (1.0 + gait.excursion_variability * rng.standard_normal(n_steps).clip(-3, 3))
     k_idx = np.clip(np.ceil(count - 1e-9).astype(int) - 1, 0, max(n_steps - 1, 0))
     walking = (np.abs(np.gradient(count)) > 1e-9)
-    h_t = h_step[k_idx] if n_steps else np.zeros(n)
+    h_t = h_step[k_idx].copy() if n_steps else np.zeros(n)
     two_pi_c = 2.0 * np.pi * count
-    z_up = h_t * 0.5 * (1.0 - np.cos(two_pi_c))
+    # gait initiation: the first step of a bout leaves quiet standing smoothly (window u², u the phase
+    # in that step: no acceleration jump, hence no peak, when the person sets off; unchanged from its
+    # heel strike on)
+    bout = np.cumsum(np.diff(np.r_[0, walking.astype(np.int8)]) == 1)
+    c0 = np.r_[0.0, count[np.diff(np.r_[0, walking.astype(np.int8)]) == 1]][bout]
+    u = count - c0
+    window = np.where(u < 1.0, u * u, 1.0)
+    # gait termination: after a bout's last heel strike the pelvis motion runs on for one windowed cycle
+    # ((1 − v)², v its phase) while the trailing leg is brought alongside, so the last heel strike is a
+    # peak with both flanks, as in real records
+    ends = np.nonzero(np.diff(walking.astype(np.int8)) == -1)[0] + 1
+    phase = count.copy()
+    for i in ends:
+        f_last = float(np.abs(np.gradient(count, dt)[max(i - 5, 0):i]).mean()) if i > 0 else 0.0
+        if f_last <= 0 or n_steps == 0:
+            continue
+        m = min(int(round(fs / f_last)), n - i)
+        v = np.arange(1, m + 1) * f_last * dt
+        v = v[v < 1.0]
+        sl = slice(i, i + len(v))
+        if walking[sl].any():
+            continue
+        phase[sl] = count[i] + v
+        window[sl] = (1.0 - v) ** 2
+        h_t[sl] = h_t[i - 1]
+    z_up = h_t * 0.5 * (1.0 - np.cos(2.0 * np.pi * phase)) * window
     a_up = np.gradient(np.gradient(z_up, dt), dt)
     envelope = np.clip(_smooth(walking.astype(float), 0.15 * fs), 0.0, 1.0)
     freq = np.gradient(count, dt)
