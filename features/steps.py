@@ -33,15 +33,17 @@ Step length
     algorithm using low-cost MEMS inertial sensors"), who fit step length
     linearly in frequency and acceleration variance.
 
-    Held-out status (tests/test_pdr_sim.py, simulated walks of one person at
-    different speeds, fitted on one walk, scored on two others): Weinberg
-    +2.51 / +0.06 % distance error, the improved model −1.29 / +1.21 % — no
-    held-out advantage (an earlier walker, with Weinberg built in, showed the
-    improved model up to 12 % off). Fitted on the 30-s segments of a single
-    walk, β soaks up that walk's speed mix and need not transfer. Weinberg is
-    therefore the default (β = 0) and the CLI uses Weinberg only;
-    :func:`fit_improved_model` keeps β only when it beats Weinberg on held-out
-    data, best a *different* walk of known length (``validation``).
+    Held-out status (tests/test_pdr_sim.py: simulated walks of one person at
+    1.06-1.50 m/s, fitted on one walk, scored on five others): Weinberg
+    +2.51 +0.06 +0.94 +0.80 +2.48 % distance error (mean |e| 1.36 %), the
+    improved model −1.29 +1.21 −0.45 −0.64 −0.28 % (mean |e| 0.77 %). In
+    that walker Weinberg's K drifts with cadence (K ∝ f^¼ for a pendulum)
+    and β partly absorbs it; with an earlier walker that had Weinberg built
+    in, the improved model was up to 12 % off. Its advantage therefore
+    depends on the gait, so Weinberg stays the default (β = 0) and the CLI
+    uses Weinberg only; :func:`fit_improved_model` keeps β only when it
+    beats Weinberg on held-out data, best a *different* walk of known length
+    (``validation``).
 
 Step time
     A step is reported at the peak of the filtered acceleration norm. On a

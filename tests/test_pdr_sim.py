@@ -114,29 +114,39 @@ def _segments(walk, res, seconds=30.0):
     return seg, np.diff(np.interp(edges, np.r_[0.0, walk.truth[:, 0]], cum))
 
 
-def test_held_out_walks_weinberg_versus_improved_model(walks, weinberg_k):
+@pytest.fixture(scope="module")
+def more_walks(site, walks, tmp_path_factory):
+    """Walks 22-26 of the same person (speeds 1.06-1.50 m/s), for held-out step-length scores."""
+    root = tmp_path_factory.mktemp("pdr_more")
+    out = {seed: walks[seed] for seed in (22, 23)}
+    out.update({seed: FileWalk(site, seed, root / f"w{seed}") for seed in (24, 25, 26)})
+    return out
+
+
+def test_held_out_walks_weinberg_versus_improved_model(walks, more_walks, weinberg_k):
     """Both models fitted on walk 21 (Weinberg: its length; improved (K, β): its 30-s segments), scored on
-    walks 22 and 23 at other speeds. Pinned distance errors (%, PINNED_HELD_OUT): Weinberg +2.51 / +0.06,
-    improved −1.29 / +1.21: no held-out advantage (mean |error| 1.29 vs 1.25 %, with walk-to-walk swings
-    of ±1.3 % against Weinberg's), so Weinberg stays the default. Leave-one-segment-out inside walk 21
-    drops β here ("selected": Weinberg with K from the segments); selecting on a different walk (23) of
-    known length also falls back to Weinberg."""
+    walks 22-26 at other speeds (PINNED_HELD_OUT, %): Weinberg +2.51 +0.06 +0.94 +0.80 +2.48 (mean |e|
+    1.36), improved −1.29 +1.21 −0.45 −0.64 −0.28 (mean |e| 0.77). In this walker Weinberg's K drifts with
+    cadence (K ∝ f^¼ for a pendulum), which β partly absorbs; with the earlier walker (Weinberg built in)
+    the improved model was up to 12 % off, so its advantage is model-dependent and Weinberg stays the
+    default until real walks with GNSS segments say otherwise. Leave-one-segment-out inside walk 21 drops
+    β here ("selected"); selecting on walk 23 of known length also falls back to Weinberg."""
     cal = walks[21].pdr()
     seg, dist = _segments(walks[21], cal)
     improved = fit_improved_model(cal.steps, seg, dist, select=False)
     selected = fit_improved_model(cal.steps, seg, dist)
     err_w, err_i, err_s = [], [], []
-    for seed in (22, 23):
-        steps = walks[seed].pdr().steps
-        d = walks[seed].distance_m
+    for seed in sorted(more_walks):
+        steps = more_walks[seed].pdr().steps
+        d = more_walks[seed].distance_m
         err_w.append(100.0 * (StepLengthModel(k=weinberg_k).predict(steps).sum() / d - 1.0))
         err_i.append(100.0 * (improved.predict(steps).sum() / d - 1.0))
         err_s.append(100.0 * (selected.predict(steps).sum() / d - 1.0))
     np.testing.assert_allclose(err_w, PINNED_HELD_OUT["weinberg"], atol=0.05)
     np.testing.assert_allclose(err_i, PINNED_HELD_OUT["improved"], atol=0.05)
     np.testing.assert_allclose(err_s, PINNED_HELD_OUT["selected"], atol=0.05)
-    assert StepLengthModel().beta == 0.0                                 # Weinberg is the default
-    assert max(abs(e) for e in err_i) > 1.0                            # the β term is not a free win
+    assert max(abs(e) for e in err_w) <= 3.0 and max(abs(e) for e in err_i) <= 3.0
+    assert StepLengthModel().beta == 0.0 and selected.beta == 0.0          # Weinberg is the default
     steps23 = walks[23].pdr().steps
     by_walk = fit_improved_model(cal.steps, seg, dist, validation=(steps23, walks[23].distance_m))
     assert by_walk.beta == 0.0 and by_walk.k == pytest.approx(weinberg_k, rel=0.002)
@@ -261,6 +271,7 @@ def test_improved_model_fit_recovers_a_known_beta_and_falls_back_to_weinberg(wal
 
 
 PINNED_DISTANCE_PCT = (2.51, 0.06)
-PINNED_HELD_OUT = {"weinberg": (2.51, 0.06), "improved": (-1.29, 1.21), "selected": (2.39, -0.06)}
+PINNED_HELD_OUT = {"weinberg": (2.51, 0.06, 0.94, 0.80, 2.48), "improved": (-1.29, 1.21, -0.45, -0.64, -0.28),
+                   "selected": (2.39, -0.06, 0.82, 0.67, 2.35)}
 PINNED_PDR_PCT = (1.20, 1.12, 0.93, 2.36)
 PINNED_HEADING_DEG = {21: (6.38, 13.02, 13.27), 22: (5.01, 19.25, 10.65)}
