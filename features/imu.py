@@ -16,8 +16,10 @@ Repair (never an exception for a few bad samples; counts in
   ``max_rate_hz``] (10-2000 Hz): t_s in milliseconds (100 Hz → 0.1 Hz) is
   rejected with one clear message rather than guessed at;
 - a remaining gap longer than ``max_fill_gap_s`` (default 600 s) is rejected
-  with one message naming it (split the file there): the uniform grid is
-  never allocated per a corrupt time span;
+  with one message naming it (split the file there), and so is a record
+  whose gaps would make the uniform grid more than 10× the sample count
+  (plus one ``max_fill_gap_s``): the grid is never allocated per a corrupt
+  time span;
 - unsorted rows are sorted (stable); duplicated timestamps keep the first row;
 - NaN / non-numeric channel values are interpolated from their neighbours;
 - clipped samples — at or beyond the stated full scale, or in runs of ≥ 3
@@ -287,6 +289,10 @@ def repair_imu(t_s, acc_m_s2, gyro_rad_s=None, mag_ut=None, config: RepairConfig
     report.n_gaps += int(gaps.sum())
     report.gap_total_s += float(dt_raw[gaps].sum())
     n_out = int(math.floor((t[-1] - t[0]) * rate + 1e-6)) + 1
+    n_bound = 10 * len(t) + int(rate * config.max_fill_gap_s)
+    if n_out > n_bound:
+        raise ImuError(f"gaps fill {float(dt_raw[gaps].sum()):.6g} s of a {t[-1] - t[0]:.6g} s record with "
+                       f"{len(t)} samples: resampling would need {n_out} samples (> {n_bound}); split the record")
     tu = t[0] + np.arange(n_out) * dt
     if n_out == len(t) and np.max(np.abs(t - tu)) <= 1e-3 * dt:
         # already uniform (the common case): keep the samples, no interpolation

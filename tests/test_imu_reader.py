@@ -183,6 +183,10 @@ def test_a_real_huge_gap_is_rejected_with_one_line(tmp_path, capsys):
     rc, err, out = _cli(_edited(tmp_path, "gap.csv", edit), tmp_path, capsys)
     assert rc == 1 and len(err) == 1 and "t_s jumps by 1e+09 s" in err[0] and "split" in err[0]
     assert not out.exists()
+    # many bounded gaps that together would blow the grid up are rejected too, before any allocation
+    t = (np.arange(2000) % 10) * 0.01 + (np.arange(2000) // 10) * 500.0
+    with pytest.raises(ImuError, match=r"gaps fill 99482.1 s of a 99500.1 s record .* need 99500\d\d samples"):
+        repair_imu(t, np.tile([0.0, 0.0, -9.8], (2000, 1)))
     # a long but bounded gap (5 min) is bridged and flagged, not rejected
     def edit2(rows):
         for r in rows[800:]:
