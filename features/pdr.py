@@ -7,6 +7,16 @@ over the step's samples, which cancels the pelvis's yaw sway); the track is
     east_k = east_{k−1} + S_k·sin ψ_k,   north_k = north_{k−1} + S_k·cos ψ_k
 (heading from north, clockwise), from a given start point.
 
+A step's ``t_s`` is its heel strike: the peak of the filtered acceleration
+norm, where the pelvis is lowest in double support (see :mod:`features.steps`);
+``truth_steps.csv`` of the simulator lists the same event. Samples flagged not
+``valid`` by the reader (gaps, clipped samples) never carry a step.
+
+The heading is that of the device's forward axis: a mounting yaw offset
+between device and walking direction (a few degrees for a belt clip) is not
+observable from the IMU alone and rotates the track about its start; fusion
+with GNSS or acoustic positions removes it.
+
 Without gyro and magnetometer the steps still get times and lengths; heading
 and positions are NaN (written as empty CSV fields).
 """

@@ -31,13 +31,14 @@ def register(sub) -> None:
     p = sub.add_parser(
         "imu", help="steps, step lengths, heading and PDR track from an IMU CSV",
         description="Read imu.csv (t_s, ax, ay, az [, gx, gy, gz] [, mx, my, mz]), repair gaps, duplicates, "
-                    "NaN and saturation (counts on stderr), detect steps, estimate step length (Weinberg) "
+                    "NaN and clipped samples (counts on stderr; t_s must be seconds, 10-2000 Hz), detect steps, estimate step length (Weinberg) "
                     "and heading (gyro + magnetometer complementary filter), and dead-reckon from the start "
                     "point. Accelerometer-only files give steps and lengths with empty heading/position.",
         epilog="Example: envfuse features imu walk7/imu.csv --start-east 12.5 --start-north 3.0 --k 0.48 "
                "--out steps.csv")
     p.add_argument("imu", type=Path, help="IMU CSV file")
-    p.add_argument("--out", type=Path, required=True, help="steps CSV: t_s,step_length_m,heading_rad,east_m,north_m")
+    p.add_argument("--out", type=Path, required=True,
+                   help="steps CSV: t_s (heel strike), step_length_m, heading_rad, east_m, north_m")
     p.add_argument("--start-east", type=_finite, default=0.0, help="start east, m (default 0)")
     p.add_argument("--start-north", type=_finite, default=0.0, help="start north, m (default 0)")
     p.add_argument("--k", type=_positive, default=None, help="Weinberg constant K (default 0.47; calibrate it)")
