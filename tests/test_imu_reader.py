@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -144,7 +145,11 @@ def test_clipped_and_absurd_samples_are_interpolated_before_filtering(tmp_path, 
     assert r.distance_m == pytest.approx(good.distance_m, rel=0.02)
     capsys.readouterr()
     out = tmp_path / "steps.csv"
-    assert main(["features", "imu", str(_with_every_50th_az(tmp_path, value)), "--out", str(out)]) == 0
+    with warnings.catch_warnings(record=True) as caught:        # pytest would otherwise swallow them
+        warnings.simplefilter("always")
+        with np.errstate(all="warn"):
+            assert main(["features", "imu", str(_with_every_50th_az(tmp_path, value)), "--out", str(out)]) == 0
+    assert [str(w.message) for w in caught] == []
     err = capsys.readouterr().err
     assert "Warning" not in err and len(err.strip().splitlines()) == 1 and "n_saturated_acc=31" in err
 
