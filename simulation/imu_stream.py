@@ -5,8 +5,10 @@ GNSS + audio captures) get no IMU: the writer returns ``{}`` for them.
 
 Random draws: the person's gait from ``stream_rng(person_seed, "person")``
 (:func:`simulation.imu_walker.person_gait`), step timing from
-``stream_rng(seed, "imu", "steps")``, device errors from
-``stream_rng(seed, "imu", "sensor")``.
+``stream_rng(seed, "imu", "steps")``, per-step pelvis-excursion variability,
+the device's mounting (tilt, yaw offset) and sensor errors from
+``stream_rng(seed, "imu", "sensor")``. ``truth_steps.csv`` lists heel strikes,
+the event the step detector reports.
 
 ``walk.toml`` gets ``[imu] file, rate_hz, body_frame = "FRD", declination_deg``:
 the declination is stated as a logger would state the WMM value for the
