@@ -27,7 +27,10 @@ Repair (never an exception for a few bad samples; counts in
   (beyond ``mag_full_scale_ut``) are treated like NaN: counted, replaced by
   interpolation from their unclipped neighbours *before* any filtering (a
   ±16 g spike would otherwise dominate the low-passed norm and the step
-  amplitude), and flagged in ``saturated`` and as not ``valid``;
+  amplitude) and flagged in ``saturated``; runs of clipped samples longer
+  than ``max_clip_fill_s`` (40 ms) are also flagged not ``valid`` (no step
+  is placed on an invented peak), while shorter ones, bridged from
+  neighbours a few ms away, stay valid;
 - the record is resampled onto a uniform grid at the nominal rate (the median
   sample interval unless given) by linear interpolation; gaps longer than
   ``max_gap_s`` are counted and flagged in ``valid`` (False inside them).
@@ -69,6 +72,7 @@ class RepairConfig:
     rate_hz: float | None = None
     max_gap_s: float = 0.5
     max_fill_gap_s: float = 600.0
+    max_clip_fill_s: float = 0.04
     min_rate_hz: float = 10.0
     max_rate_hz: float = 2000.0
     acc_full_scale_m_s2: float = 16.0 * 9.80665
@@ -83,6 +87,8 @@ class RepairConfig:
             raise ImuError(f"max_gap_s must be positive, got {self.max_gap_s}")
         if not (math.isfinite(self.max_fill_gap_s) and self.max_fill_gap_s >= self.max_gap_s):
             raise ImuError(f"max_fill_gap_s must be finite and >= max_gap_s, got {self.max_fill_gap_s}")
+        if not (math.isfinite(self.max_clip_fill_s) and self.max_clip_fill_s >= 0):
+            raise ImuError(f"max_clip_fill_s must be finite and >= 0, got {self.max_clip_fill_s}")
         if not (0 < self.min_rate_hz < self.max_rate_hz and math.isfinite(self.max_rate_hz)):
             raise ImuError(f"need 0 < min_rate_hz < max_rate_hz, got {self.min_rate_hz}, {self.max_rate_hz}")
         if self.clip_run_samples < 2:
@@ -136,8 +142,8 @@ class ImuData:
     gyro_rad_s, mag_ut : ndarray of shape (n, 3) or None
         Angular rate (rad/s) and magnetic field (µT), None when absent.
     valid : ndarray of bool, shape (n,)
-        False inside gaps longer than ``max_gap_s`` and at clipped samples
-        (interpolated, not measured).
+        False inside gaps longer than ``max_gap_s`` and in runs of clipped
+        samples longer than ``max_clip_fill_s`` (interpolated, not measured).
     saturated : ndarray of bool, shape (n,)
         True where any accelerometer, gyro or magnetometer axis was clipped
         (the value there is interpolated).
@@ -193,6 +199,20 @@ def _time_outliers(t: np.ndarray, max_gap_s: float) -> np.ndarray:
     out[1:-1] = (d[:-1] > max_gap_s) & (d[1:] > max_gap_s) & (skip <= max_gap_s)
     out[0] = d[0] > max_gap_s and d[1] <= max_gap_s and n > 3
     out[-1] = d[-1] > max_gap_s and d[-2] <= max_gap_s and n > 3
+    return out
+
+
+def _long_runs(mask: np.ndarray, max_samples: float) -> np.ndarray:
+    """The True runs of ``mask`` longer than ``max_samples`` samples, bool (n,).
+
+    >>> _long_runs(np.array([1, 0, 1, 1, 1, 0], bool), 2).astype(int).tolist()
+    [0, 0, 1, 1, 1, 0]
+    """
+    out = np.zeros(len(mask), bool)
+    d = np.diff(np.r_[0, mask.astype(np.int8), 0])
+    for s, e in zip(np.nonzero(d == 1)[0], np.nonzero(d == -1)[0]):
+        if e - s > max_samples:
+            out[s:e] = True
     return out
 
 
@@ -285,6 +305,7 @@ def repair_imu(t_s, acc_m_s2, gyro_rad_s=None, mag_ut=None, config: RepairConfig
                        f"more than {config.max_fill_gap_s:g} s: split the record there")
     rate = config.rate_hz or 1.0 / median_dt
     dt = 1.0 / rate
+    long_clip = _long_runs(sat, config.max_clip_fill_s * rate)
     gaps = dt_raw > max(config.max_gap_s, 2.5 * dt)
     report.n_gaps += int(gaps.sum())
     report.gap_total_s += float(dt_raw[gaps].sum())
@@ -298,7 +319,7 @@ def repair_imu(t_s, acc_m_s2, gyro_rad_s=None, mag_ut=None, config: RepairConfig
         # already uniform (the common case): keep the samples, no interpolation
         report.n_output = n_out
         return ImuData(t_s=tu, acc_m_s2=chans["acc"], gyro_rad_s=chans.get("gyro"), mag_ut=chans.get("mag"),
-                       valid=~sat, saturated=sat, rate_hz=float(rate), report=report)
+                       valid=~long_clip, saturated=sat, rate_hz=float(rate), report=report)
     out = {k: np.stack([np.interp(tu, t, v[:, j]) for j in range(3)], axis=1) for k, v in chans.items()}
     seg = np.searchsorted(t, tu, side="right") - 1
     seg = np.clip(seg, 0, len(dt_raw) - 1)
@@ -308,7 +329,7 @@ def repair_imu(t_s, acc_m_s2, gyro_rad_s=None, mag_ut=None, config: RepairConfig
     sat_u = sat[nearest]
     report.n_output = n_out
     return ImuData(t_s=tu, acc_m_s2=out["acc"], gyro_rad_s=out.get("gyro"), mag_ut=out.get("mag"),
-                   valid=valid & ~sat_u, saturated=sat_u, rate_hz=float(rate), report=report)
+                   valid=valid & ~long_clip[nearest], saturated=sat_u, rate_hz=float(rate), report=report)
 
 
 def _parse_table(text: str, path: str) -> tuple[list[str], np.ndarray, int]:

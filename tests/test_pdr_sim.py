@@ -94,6 +94,26 @@ def test_step_count_within_1_percent_and_times_at_heel_strike(walks):
         assert np.median(dt) < 0.1 and np.median(dt) < 0.02, (seed, np.median(dt))
 
 
+def test_clipped_spikes_in_a_walk_file_change_nothing(walks, tmp_path):
+    """Every 50th az of walk 22's imu.csv set to −16 g (full scale): same steps and distance as the clean file."""
+    clean = walks[22].pdr()
+    lines = (walks[22].ctx.out_dir / "imu.csv").read_text().splitlines()
+    rows = [lines[0]]
+    for i, line in enumerate(lines[1:]):
+        parts = line.split(",")
+        if i % 50 == 25:
+            parts[3] = "-156.9064"
+        rows.append(",".join(parts))
+    path = tmp_path / "imu.csv"
+    path.write_text("\n".join(rows) + "\n")
+    imu = read_imu_csv(path)
+    assert imu.report.n_saturated_acc == len(lines[1:]) // 50
+    config = PdrConfig(heading=HeadingConfig(declination_rad=walks[22].declination_rad))
+    res = run_pdr(imu, walks[22].traj.east_m[0], walks[22].traj.north_m[0], config)
+    assert len(res) == len(clean)
+    assert res.distance_m == pytest.approx(clean.distance_m, rel=0.002)
+
+
 def test_distance_within_3_percent_with_k_calibrated_on_another_walk(walks, weinberg_k):
     """Pinned distance errors with K from walk 21 (%): walk 22 +2.51, walk 23 +0.06."""
     errors = {}
