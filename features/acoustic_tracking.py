@@ -49,8 +49,12 @@ class ClockPositionTracker:
     max_drift_ppm = 100.0
     nlos_slack_m = 10.0
     track_timeout_s = 4.0
-    acquisition_min_beacons = 5
+    acquisition_min_beacons = 4
     clock_drift_prior_ppm = 20.0
+    max_fix_sigma_m = 1.0
+    residual_speed_m_s = 0.5
+    max_turn_speed_m_s = 1.0
+    max_rms_m = 0.5
 
     def __init__(self, site: Site, timing: AudioTiming, fs_hz: float, c: float, r_max: float,
                  positions: PositionConfig):
@@ -61,10 +65,19 @@ class ClockPositionTracker:
         # Verifying a hypothesis may drop one wrongly associated beacon; more is a new hypothesis.
         # Acquisition keeps the static model whatever the motion prior: its tight residual
         # test is what rejects wrong associations; tracking uses ``positions`` as given.
-        self._acquire_config = dataclasses.replace(positions, motion_speed_m_s=0.0)
-        self._verify_config = dataclasses.replace(self._acquire_config, max_excluded=1)
+        self._acquire_config = positions
+        self._verify_config = dataclasses.replace(positions, motion_speed_m_s=0.0, max_excluded=1)
         self._track_config = positions
+        # With the velocity known from the track, what remains of the motion is its change over
+        # a frame (turns, stops): at most ``residual_speed_m_s``.
+        self._compensated_config = dataclasses.replace(
+            positions, motion_speed_m_s=min(positions.motion_speed_m_s, self.residual_speed_m_s))
         self._skip_acquisition = False
+        self.confirmed = False
+        self._previous_fix: AcousticFix | None = None
+        self._confirmed_tentative: AcousticFix | None = None
+        self._tentative_ids: set = set()
+        self._clock_anchor: tuple[float, float] | None = None
 
     @property
     def grid_step_m(self) -> float:
@@ -254,8 +267,40 @@ class ClockPositionTracker:
         bound = self.timing.start_uncertainty_s + 5e-3 + self.max_drift_ppm * 1e-6 * abs(fix.t_s - self.timing.start_s)
         return abs(fix.clock_offset_s) <= bound
 
+    def _continues(self, fix: AcousticFix, last: AcousticFix,
+                   velocity: tuple[float, float] | None = None) -> bool:
+        """Clock offset and position of ``fix`` within what drift and walking allow since ``last``.
+
+        Without a velocity the receiver may have walked ``max_speed_m_s`` in any direction;
+        with one (a confirmed track) the fix must lie near the constant-velocity prediction,
+        within ``max_turn_speed_m_s``·dt (turns, stops) plus both fixes' 3σ: a gate on the
+        innovation that catches a wrong subset kept by the exclusion search under poor geometry.
+        """
+        dt = max(0.0, fix.t_s - last.t_s)
+        clock_ok = abs(fix.clock_offset_s - last.clock_offset_s) <= (
+            3.0 * math.sqrt(max(last.covariance[2, 2], 0.0)) + self.max_drift_ppm * 1e-6 * dt + 1e-3)
+        sigma = math.sqrt(max(last.covariance[0, 0] + last.covariance[1, 1]
+                              + fix.covariance[0, 0] + fix.covariance[1, 1], 0.0))
+        if velocity is None:
+            moved_ok = math.hypot(fix.east_m - last.east_m, fix.north_m - last.north_m) <= (
+                3.0 * sigma + self.max_speed_m_s * dt + 1.0)
+        else:
+            moved_ok = math.hypot(fix.east_m - last.east_m - velocity[0] * dt,
+                                  fix.north_m - last.north_m - velocity[1] * dt) <= (
+                3.0 * sigma + self.max_turn_speed_m_s * dt + 0.5)
+        return clock_ok and moved_ok
+
+    def _sane(self, fix: AcousticFix) -> bool:
+        """A fix worth reporting: horizontal 1σ within ``max_fix_sigma_m``, rms residual within ``max_rms_m``."""
+        cov = fix.covariance
+        # Largest eigenvalue of the 2×2 horizontal covariance.
+        half_tr, det = 0.5 * (cov[0, 0] + cov[1, 1]), cov[0, 0] * cov[1, 1] - cov[0, 1] ** 2
+        lam = half_tr + math.sqrt(max(half_tr * half_tr - det, 0.0))
+        return lam <= self.max_fix_sigma_m ** 2 and fix.rms_residual_m <= self.max_rms_m
+
     def frame_done(self, frame_start_s: float, detections: list[ChirpDetection],
                    bandwidth: dict) -> AcousticFix | None:
+        """Fix of one frame, or None; updates the lock (acquisition → tentative → confirmed)."""
         tracking = self.tracking_at(frame_start_s)
         prior = None
         if tracking:
@@ -264,56 +309,102 @@ class ClockPositionTracker:
             dt = max(0.0, frame_start_s - last.t_s)
             prior = (last.clock_offset_s, math.sqrt(max(last.covariance[2, 2], 0.0) + (
                 self.clock_drift_prior_ppm * 1e-6 * dt) ** 2 + 1e-10))
-        fix = frame_fix(detections, self.site, self.c, bandwidth,
-                        self._track_config if tracking else self._acquire_config,
-                        self.last_fix if tracking else None, prior)
+        elif self.last_fix is not None:
+            self.last_fix, self._previous_fix, self.confirmed = None, None, False   # lock lost: re-acquire
+        velocity = self._velocity() if tracking else None
+        config = self._acquire_config if not tracking else (
+            self._track_config if velocity is None else self._compensated_config)
+        fix = frame_fix(detections, self.site, self.c, bandwidth, config,
+                        self.last_fix if tracking else None, prior, velocity)
         if fix is None or not self._clock_plausible(fix):
+            if tracking and not self.confirmed:
+                self.last_fix = None                         # a tentative lock not confirmed is dropped
             return None
-        if tracking:
-            # A tracked fix must continue the track: clock offset and position within what
-            # drift and walking allow since the last fix. Tracking follows fixes whose
-            # residuals were tested (four beacons or more); an exactly determined
-            # three-beacon fix is reported only when nothing was excluded to reach it.
-            last = self.last_fix
-            dt = max(0.0, fix.t_s - last.t_s)
-            clock_ok = abs(fix.clock_offset_s - last.clock_offset_s) <= (
-                3.0 * math.sqrt(max(last.covariance[2, 2], 0.0)) + self.max_drift_ppm * 1e-6 * dt + 1e-3)
-            moved_ok = math.hypot(fix.east_m - last.east_m, fix.north_m - last.north_m) <= (
-                3.0 * math.sqrt(max(last.covariance[0, 0], last.covariance[1, 1], 0.0)) + self.max_speed_m_s * dt + 1.0)
-            if not (clock_ok and moved_ok):
+        if not tracking:
+            # Acquisition: a tentative lock on four or more beacons that passed the residual test,
+            # reported only once the next frame confirms it. After an earlier confirmed lock the
+            # clock offset is known up to drift, which a wrong association rarely matches.
+            if fix.n_beacons < self.acquisition_min_beacons or not self._clock_continues(fix):
                 return None
-            if fix.n_beacons >= 4:
-                self.last_fix = fix
-                return fix
-            return fix if not fix.rejected_ids else None
-        # Acquisition locks only on a fix tested with two or more degrees of freedom. (Two
-        # agreeing four-beacon fixes from consecutive frames are not independent evidence: a
-        # receiver standing still repeats the same wrong association; on a simulated walk
-        # that locked 12 m off.)
-        if fix.n_beacons >= self.acquisition_min_beacons:
-            self.last_fix = fix
-            return fix
-        return None
+            self.last_fix, self.confirmed, self._tentative_ids = fix, False, set(fix.used_ids)
+            return None
+        last = self.last_fix
+        if not self._continues(fix, last, velocity):
+            if not self.confirmed:
+                self.last_fix = None
+            return None
+        if not self.confirmed:
+            # Confirmation: a second fix on four or more beacons continuing the first, and five
+            # beacons or more between the two, so that a standing receiver repeating one wrong
+            # association of the same four arrivals never confirms it.
+            if fix.n_beacons < 4 or len(self._tentative_ids | set(fix.used_ids)) < 5:
+                self.last_fix = None
+                return None
+            self.confirmed = True
+            if self._sane(last):
+                self._confirmed_tentative = last
+        # Tracking follows fixes whose residuals were tested (four beacons or more); an exactly
+        # determined three-beacon fix is reported only when nothing was excluded to reach it.
+        if not self._sane(fix) or (fix.n_beacons < 4 and fix.rejected_ids):
+            return None
+        if fix.n_beacons >= 4:
+            self._previous_fix, self.last_fix = self.last_fix, fix
+            self._clock_anchor = (fix.t_s, fix.clock_offset_s)
+        return fix
 
+    def take_confirmed_tentative(self) -> AcousticFix | None:
+        """The acquisition fix the last :meth:`frame_done` confirmed (once), for its own frame."""
+        fix, self._confirmed_tentative = self._confirmed_tentative, None
+        return fix
+
+    def _velocity(self) -> tuple[float, float] | None:
+        """Receiver velocity (east, north), m/s, from the last two fixes of a confirmed track.
+
+        None before two fixes at most ``track_timeout_s`` apart; clipped to ``max_speed_m_s``.
+        """
+        a, b = self._previous_fix, self.last_fix
+        if not self.confirmed or a is None or b is None or not 0 < b.t_s - a.t_s <= self.track_timeout_s:
+            return None
+        dt = b.t_s - a.t_s
+        ve, vn = (b.east_m - a.east_m) / dt, (b.north_m - a.north_m) / dt
+        speed = math.hypot(ve, vn)
+        if speed > self.max_speed_m_s:
+            ve, vn = ve * self.max_speed_m_s / speed, vn * self.max_speed_m_s / speed
+        return ve, vn
+
+    def _clock_continues(self, fix: AcousticFix) -> bool:
+        """Clock offset within the drift allowed since the last confirmed fix (always true before one)."""
+        if self._clock_anchor is None:
+            return True
+        t0, d0 = self._clock_anchor
+        return abs(fix.clock_offset_s - d0) <= self.max_drift_ppm * 1e-6 * abs(fix.t_s - t0) + 1e-3
 
 
 def frame_fix(detections: list[ChirpDetection], site: Site, c: float, bandwidth: dict,
               config: PositionConfig, start: AcousticFix | None = None,
-              clock_prior: tuple[float, float] | None = None) -> AcousticFix | None:
+              clock_prior: tuple[float, float] | None = None,
+              velocity_m_s: tuple[float, float] | None = None) -> AcousticFix | None:
     """Position fix from one frame's detections (None when fewer than three beacons).
 
-    ``start``: the previous fix (initial value); ``clock_prior``: (δ, σ_δ) of a tracked clock.
+    ``start``: the previous fix (initial value); ``clock_prior``: (δ, σ_δ) of a tracked clock;
+    ``velocity_m_s``: (east, north) velocity of the receiver during the frame, known from the
+    track. A frame's chirps arrive up to a frame apart, so the receiver at arrival i stood at
+    p + v·(tᵢ − t̄); since ‖p + v·(tᵢ − t̄) − sᵢ‖ = ‖p − (sᵢ − v·(tᵢ − t̄))‖, each beacon is
+    moved by −v·(tᵢ − t̄) and the fix p is the position at the mean arrival time t̄.
     """
     by_id = {b.id: b for b in site.beacons}
-    ranges = [BeaconRange(d.beacon_id, by_id[d.beacon_id].east_m, by_id[d.beacon_id].north_m,
+    used = [d for d in detections if d.associated]
+    if len(used) < 3:
+        return None
+    t_mean = sum(d.arrival_s for d in used) / len(used)
+    ve, vn = (0.0, 0.0) if velocity_m_s is None else velocity_m_s
+    ranges = [BeaconRange(d.beacon_id, by_id[d.beacon_id].east_m - ve * (d.arrival_s - t_mean),
+                          by_id[d.beacon_id].north_m - vn * (d.arrival_s - t_mean),
                           by_id[d.beacon_id].up_m, c * (d.arrival_s - d.tx_s),
                           toa_range_sigma_m(d.snr_db, bandwidth[d.beacon_id], c), d.arrival_s)
-              for d in detections if d.associated]
-    if len(ranges) < 3:
-        return None
+              for d in used]
     if config.motion_speed_m_s > 0:
         # Walking during the frame: σᵢ² += ½·(v·(tᵢ − t̄))² (see PositionConfig).
-        t_mean = float(np.mean([r.arrival_s for r in ranges]))
         ranges = [dataclasses.replace(r, sigma_m=math.sqrt(r.sigma_m ** 2 + 0.5 * (
             config.motion_speed_m_s * (r.arrival_s - t_mean)) ** 2)) for r in ranges]
     x0 = None if start is None else np.array([start.east_m, start.north_m, start.clock_offset_s])

@@ -422,6 +422,9 @@ def detect_frames(path: str | os.PathLike, site: Site, timing: AudioTiming,
             if found:
                 detections = analyse(found, sigmas, k, len(held))
         fix = tracker.frame_done(frame_start, detections, bandwidth)
+        earlier = tracker.take_confirmed_tentative()
+        if earlier is not None and held and held[-1][3] is None:
+            held[-1][3] = earlier          # the acquisition fix this frame confirmed
         held.append([k, frame_start, detections, fix, tracking])
         if len(held) >= _FEATURE_BATCH_FRAMES:
             yield from release()

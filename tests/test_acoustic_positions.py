@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from features.acoustic_positions import BeaconRange, PositionConfig, solve_position, toa_range_sigma_m
+from features.acoustic_positions import RANGE_SIGMA_FLOOR_M, BeaconRange, PositionConfig, solve_position, toa_range_sigma_m
 from features.chirp_detection import AudioTiming, DetectorConfig, detect_frames, speed_of_sound_m_s
 from features.site import AcousticConfig, Beacon, Grid, Origin, Site
 from tests.acoustic_synth import static_capture, write_wav
@@ -85,8 +85,9 @@ def test_three_beacons_exactly_determined_and_two_refused():
 
 
 def test_toa_sigma_falls_with_snr_to_the_floor():
-    assert toa_range_sigma_m(0.0, 6000.0, C) > toa_range_sigma_m(10.0, 6000.0, C) >= 0.01
-    assert toa_range_sigma_m(40.0, 6000.0, C) == 0.01
+    assert toa_range_sigma_m(-15.0, 6000.0, C) > toa_range_sigma_m(-10.0, 6000.0, C) >= RANGE_SIGMA_FLOOR_M
+    assert toa_range_sigma_m(-15.0, 6000.0, C) == pytest.approx(0.1254, abs=1e-4)   # Kay eq. 3.38
+    assert toa_range_sigma_m(40.0, 6000.0, C) == RANGE_SIGMA_FLOOR_M == 0.05
 
 
 @pytest.fixture(scope="module")
