@@ -333,20 +333,20 @@ class ClockPositionTracker:
             if not self.confirmed:
                 self.last_fix = None
             return None
+        if not self._sane(fix) or (fix.n_beacons < 4 and fix.rejected_ids):
+            if not self.confirmed:
+                self.last_fix = None
+            return None
         if not self.confirmed:
-            # Confirmation: a second fix on four or more beacons continuing the first, and five
-            # beacons or more between the two, so that a standing receiver repeating one wrong
-            # association of the same four arrivals never confirms it.
+            # Confirmation: a second sane fix on four or more beacons continuing the first, and
+            # five beacons or more between the two, so that a standing receiver repeating one
+            # wrong association of the same four arrivals never confirms it.
             if fix.n_beacons < 4 or len(self._tentative_ids | set(fix.used_ids)) < 5:
                 self.last_fix = None
                 return None
             self.confirmed = True
             if self._sane(last):
                 self._confirmed_tentative = last
-        # Tracking follows fixes whose residuals were tested (four beacons or more); an exactly
-        # determined three-beacon fix is reported only when nothing was excluded to reach it.
-        if not self._sane(fix) or (fix.n_beacons < 4 and fix.rejected_ids):
-            return None
         if fix.n_beacons >= 4:
             self._previous_fix, self.last_fix = self.last_fix, fix
             self._clock_anchor = (fix.t_s, fix.clock_offset_s)
