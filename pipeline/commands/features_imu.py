@@ -2,29 +2,13 @@
 
 from __future__ import annotations
 
-import argparse
 import math
 import sys
 from pathlib import Path
 
+from pipeline.args import finite, positive
+
 GROUP = "features"
-
-
-def _finite(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
-    if not math.isfinite(value):
-        raise argparse.ArgumentTypeError(f"expected a finite number, got {text!r}")
-    return value
-
-
-def _positive(text: str) -> float:
-    value = _finite(text)
-    if value <= 0:
-        raise argparse.ArgumentTypeError(f"expected a positive number, got {text!r}")
-    return value
 
 
 def register(sub) -> None:
@@ -39,13 +23,13 @@ def register(sub) -> None:
     p.add_argument("imu", type=Path, help="IMU CSV file")
     p.add_argument("--out", type=Path, required=True,
                    help="steps CSV: t_s (heel strike), step_length_m, heading_rad, east_m, north_m")
-    p.add_argument("--start-east", type=_finite, default=0.0, help="start east, m (default 0)")
-    p.add_argument("--start-north", type=_finite, default=0.0, help="start north, m (default 0)")
-    p.add_argument("--k", type=_positive, default=None, help="Weinberg constant K (default 0.47; calibrate it)")
-    p.add_argument("--declination-deg", type=_finite, default=None,
+    p.add_argument("--start-east", type=finite, default=0.0, help="start east, m (default 0)")
+    p.add_argument("--start-north", type=finite, default=0.0, help="start north, m (default 0)")
+    p.add_argument("--k", type=positive, default=None, help="Weinberg constant K (default 0.47; calibrate it)")
+    p.add_argument("--declination-deg", type=finite, default=None,
                    help="magnetic declination, degrees east (default: [imu] declination_deg of walk.toml "
                         "beside the file, else 0)")
-    p.add_argument("--calibrate-distance-m", type=_positive, default=None,
+    p.add_argument("--calibrate-distance-m", type=positive, default=None,
                    help="the walk's known length, m: fit K to it and print it (overrides --k)")
     p.set_defaults(func=_run)
 
