@@ -100,11 +100,15 @@ class ChirpDetection:
 
 @dataclass(frozen=True)
 class SearchWindow:
-    """Where a beacon's chirp may start: sample indices [lo, hi] of the stream."""
+    """Where a beacon's chirp may start: sample indices [lo, hi] of the stream.
+
+    ``expected``: sample index of the arrival predicted from the track (None in acquisition).
+    """
 
     beacon_index: int
     tx_s: float
     lo: int
     hi: int
     associated: bool = True
+    expected: int | None = None
 

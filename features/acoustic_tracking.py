@@ -54,6 +54,7 @@ class ClockPositionTracker:
     max_fix_sigma_m = 1.0
     residual_speed_m_s = 0.5
     max_turn_speed_m_s = 1.0
+    static_agreement_m = 0.3
     max_rms_m = 0.5
 
     def __init__(self, site: Site, timing: AudioTiming, fs_hz: float, c: float, r_max: float,
@@ -68,6 +69,7 @@ class ClockPositionTracker:
         self._acquire_config = positions
         self._verify_config = dataclasses.replace(positions, motion_speed_m_s=0.0, max_excluded=1)
         self._track_config = positions
+        self._strict_config = dataclasses.replace(positions, motion_speed_m_s=0.0, max_excluded=0)
         # With the velocity known from the track, what remains of the motion is its change over
         # a frame (turns, stops): at most ``residual_speed_m_s``.
         self._compensated_config = dataclasses.replace(
@@ -76,6 +78,7 @@ class ClockPositionTracker:
         self.confirmed = False
         self._previous_fix: AcousticFix | None = None
         self._confirmed_tentative: AcousticFix | None = None
+        self._tentative_detections: list[ChirpDetection] = []
         self._tentative_ids: set = set()
         self._clock_anchor: tuple[float, float] | None = None
 
@@ -97,6 +100,7 @@ class ClockPositionTracker:
         ac, u, fs = self.site.acoustic, self.timing.start_uncertainty_s, self.fs
         out = []
         tracking = self.tracking_at(frame_start_s)
+        expected = None
         for i in self.order:
             b = self.site.beacons[i]
             tx = frame_start_s + b.slot * ac.slot_s
@@ -112,12 +116,13 @@ class ClockPositionTracker:
                 centre = tx + r / self.c + fix.clock_offset_s
                 lo_s = centre - radius_m / self.c - clock_s
                 hi_s = centre + (radius_m + self.nlos_slack_m) / self.c + clock_s
+                expected = int(round((centre - self.timing.start_s) * fs))
             else:
                 lo_s = tx - u
                 hi_s = tx + u + self.r_max / self.c
             lo = int(math.floor((lo_s - self.timing.start_s) * fs))
             hi = int(math.ceil((hi_s - self.timing.start_s) * fs))
-            out.append(SearchWindow(i, tx, lo, hi))
+            out.append(SearchWindow(i, tx, lo, hi, expected=expected))
         return out
 
     def acquire(self, candidates: dict) -> dict:
@@ -252,9 +257,13 @@ class ClockPositionTracker:
             members = order[row, k: k + int(count[f])]
             # Distinct beacons, but one physical arrival cannot serve two beacons.
             n_distinct = min(len(set(bi[members].tolist())), len(set(np.round(arrivals[members], 4).tolist())))
-            hyps.append((n_distinct, float(sorted_delta[row, k]), row, members))
-        hyps.sort(key=lambda h: (-h[0], h[1]))
-        return [(n, d, (float(pe[row]), float(pn[row])), delta[row, members]) for n, d, row, members in hyps]
+            spread = float(sorted_delta[row, k + int(count[f]) - 1] - sorted_delta[row, k])
+            hyps.append((n_distinct, float(sorted_delta[row, k]), row, members, spread))
+        # Among equal counts the tightest agreement first: a hypothesis that is only just within
+        # the tolerance is usually a chance alignment (ordering by smallest δ instead buried
+        # the true one under chance alignments whenever the clock offset was positive).
+        hyps.sort(key=lambda h: (-h[0], h[4], h[1]))
+        return [(n, d, (float(pe[row]), float(pn[row])), delta[row, members]) for n, d, row, members, _ in hyps]
 
     def skip_acquisition(self) -> bool:
         """After a failed attempt the next frame skips acquisition (halves its cost while unlocked)."""
@@ -327,6 +336,7 @@ class ClockPositionTracker:
             if fix.n_beacons < self.acquisition_min_beacons or not self._clock_continues(fix):
                 return None
             self.last_fix, self.confirmed, self._tentative_ids = fix, False, set(fix.used_ids)
+            self._tentative_detections = detections
             return None
         last = self.last_fix
         if not self._continues(fix, last, velocity):
@@ -341,7 +351,8 @@ class ClockPositionTracker:
             # Confirmation: a second sane fix on four or more beacons continuing the first, and
             # five beacons or more between the two, so that a standing receiver repeating one
             # wrong association of the same four arrivals never confirms it.
-            if fix.n_beacons < 4 or len(self._tentative_ids | set(fix.used_ids)) < 5:
+            if fix.n_beacons < 4 or (len(self._tentative_ids | set(fix.used_ids)) < 5
+                                     and not self._static_confirmation(detections, bandwidth)):
                 self.last_fix = None
                 return None
             self.confirmed = True
@@ -351,6 +362,18 @@ class ClockPositionTracker:
             self._previous_fix, self.last_fix = self.last_fix, fix
             self._clock_anchor = (fix.t_s, fix.clock_offset_s)
         return fix
+
+    def _static_confirmation(self, detections: list[ChirpDetection], bandwidth: dict) -> bool:
+        """Four beacons only, the same in both frames: both frames pass the static residual test
+        with nothing excluded (5 cm range floor, one degree of freedom each) and agree within
+        ``static_agreement_m``. A chance alignment of wrong arrivals that survived the vote's
+        1.5 m tolerance rarely fits to centimetres; a walker seeing the same four beacons does
+        not stay within the agreement and waits for a fifth beacon.
+        """
+        a = frame_fix(self._tentative_detections, self.site, self.c, bandwidth, self._strict_config)
+        b = frame_fix(detections, self.site, self.c, bandwidth, self._strict_config)
+        return (a is not None and b is not None and min(a.n_beacons, b.n_beacons) >= 4
+                and math.hypot(a.east_m - b.east_m, a.north_m - b.north_m) <= self.static_agreement_m)
 
     def take_confirmed_tentative(self) -> AcousticFix | None:
         """The acquisition fix the last :meth:`frame_done` confirmed (once), for its own frame."""
@@ -377,7 +400,8 @@ class ClockPositionTracker:
         if self._clock_anchor is None:
             return True
         t0, d0 = self._clock_anchor
-        return abs(fix.clock_offset_s - d0) <= self.max_drift_ppm * 1e-6 * abs(fix.t_s - t0) + 1e-3
+        return abs(fix.clock_offset_s - d0) <= (self.max_drift_ppm * 1e-6 * abs(fix.t_s - t0) + 1e-3
+                                                + 3.0 * math.sqrt(max(fix.covariance[2, 2], 0.0)))
 
 
 def frame_fix(detections: list[ChirpDetection], site: Site, c: float, bandwidth: dict,

@@ -302,6 +302,57 @@ def detect_frames(path: str | os.PathLike, site: Site, timing: AudioTiming,
             return None
         return int(starts[0] if w.associated else starts[np.argmax(heights)])
 
+    def assign_arrivals(windows: list[SearchWindow], sigmas: np.ndarray) -> list[tuple[SearchWindow, int]]:
+        """(window, chirp start) of the chirps located in a frame, one physical arrival per window.
+
+        Windows overlap (slots are 0.1 s apart, an NLOS arrival may come late), so one arrival
+        can fall into several. Associated windows come first: an arrival belongs to its beacon
+        before it can be claimed, for features only, by an unassociated window. Among tracked
+        windows an arrival goes to the window whose predicted arrival it matches best; a window
+        that loses it takes its next peak that is not the echo of a claimed one. Arrivals of different chirp templates
+        (frequency-divided beacons) never collide.
+        """
+        gap, echo = 0.001 * fs, _ECHO_SPAN_S * fs
+        claims: list[tuple[SearchWindow, int]] = []
+        cands = {}
+        for w in windows:
+            starts, heights = peaks(w, sigmas[template_of[w.beacon_index]])
+            if len(starts):
+                # An unassociated window reports its strongest peak only (features, not a range).
+                cands[id(w)] = [int(x) for x in starts] if w.associated else [int(starts[np.argmax(heights)])]
+
+        def cost(w, sp):
+            return abs(sp - w.expected) if w.expected is not None else 0
+
+        pending = sorted([w for w in windows if id(w) in cands], key=lambda w: not w.associated)
+        for _ in range(4):                       # a few rounds of re-assignment settle every case seen
+            taken: list[tuple[SearchWindow, int]] = []
+            losers = []
+            for w in pending:
+                t = template_of[w.beacon_index]
+                # Nor the echoes and tail of a claimed arrival (up to _ECHO_SPAN_S after it).
+                options = [sp for sp in cands[id(w)] if all(not -gap <= sp - f <= echo for w2, f in claims
+                                                               if template_of[w2.beacon_index] == t)]
+                if not options:
+                    continue
+                sp = options[0]
+                rival = next((k for k, (w2, f) in enumerate(taken)
+                              if template_of[w2.beacon_index] == t and abs(sp - f) <= gap), None)
+                if rival is None:
+                    taken.append((w, sp))
+                    continue
+                w2, _ = taken[rival]
+                if w.associated and w2.associated and cost(w, sp) < cost(w2, sp):
+                    taken[rival] = (w, sp)
+                    losers.append(w2)
+                else:
+                    losers.append(w)
+            claims.extend(taken)
+            if not losers:
+                break
+            pending = losers
+        return claims
+
     toa_len = 2 * lead + 16
     cir_taps = (lead + 8 + span) // dec
 
@@ -408,17 +459,7 @@ def detect_frames(path: str | os.PathLike, site: Site, timing: AudioTiming,
             elif not tracking:
                 windows = acquisition_windows(
                     windows, lambda w: candidates(w, sigmas[template_of[w.beacon_index]]), tracker, timing, fs, lead)
-            found = []
-            # Associated windows first: an arrival belongs to its beacon before it can be
-            # claimed, for features only, by an unassociated window that also contains it.
-            for w in sorted(windows, key=lambda w: not w.associated):
-                s_peak = locate(w, sigmas[template_of[w.beacon_index]])
-                # One physical arrival is one chirp, even where windows overlap (per chirp
-                # template: frequency-divided beacons may arrive together).
-                t = template_of[w.beacon_index]
-                if s_peak is not None and all(abs(s_peak - f) > 0.001 * fs for w2, f in found
-                                              if template_of[w2.beacon_index] == t):
-                    found.append((w, s_peak))
+            found = assign_arrivals(windows, sigmas)
             if found:
                 detections = analyse(found, sigmas, k, len(held))
         fix = tracker.frame_done(frame_start, detections, bandwidth)
