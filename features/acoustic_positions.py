@@ -235,12 +235,17 @@ def _gauss_newton(ranges: list[BeaconRange], height_m: float, c: float, iteratio
 
 def solve_position(ranges: list[BeaconRange], site: Site, speed_m_s: float,
                    config: PositionConfig = PositionConfig(), start: np.ndarray | None = None,
-                   clock_prior: tuple[float, float] | None = None) -> AcousticFix | None:
+                   clock_prior: tuple[float, float] | None = None,
+                   position_prior: tuple[float, float, float] | None = None) -> AcousticFix | None:
     """Gauss-Newton fix with NLOS exclusion; None when too few beacons or no plausible solution.
 
     ``start``: optional initial (east_m, north_m, clock_offset_s), e.g. the previous fix.
     ``clock_prior``: optional (clock_offset_s, sigma_s) from a tracked clock; with it
     three beacons leave one degree of freedom for the residual test.
+    ``position_prior``: optional (east_m, north_m, sigma_m) predicted by a track; it does
+    not enter the fix, only the choice among subsets of equal size that pass the test
+    (smallest chi² + ‖p − p̂‖²/σ², the innovation's share): under poor geometry a subset
+    keeping an NLOS-biased beacon can fit as well as the right one, but lies metres off.
     """
     ranges = list(ranges)
     h = site.device_height_m
@@ -254,7 +259,7 @@ def solve_position(ranges: list[BeaconRange], site: Site, speed_m_s: float,
     dof = len(ranges) + n_prior - 3
     rejected: list[int] = []
     if dof > 0 and chi2 > _chi2_limit(dof, config.chi2_alpha):
-        found = _exclude(ranges, h, speed_m_s, config, x, clock_prior)
+        found = _exclude(ranges, h, speed_m_s, config, x, clock_prior, position_prior)
         if found is None:
             return None
         keep, (x, cov, res, sig, _) = found
@@ -269,7 +274,8 @@ def solve_position(ranges: list[BeaconRange], site: Site, speed_m_s: float,
                        used_ids=tuple(r.beacon_id for r in ranges), rejected_ids=tuple(rejected))
 
 
-def _exclude(ranges: list[BeaconRange], h: float, c: float, config: PositionConfig, start, clock_prior=None):
+def _exclude(ranges: list[BeaconRange], h: float, c: float, config: PositionConfig, start, clock_prior=None,
+             position_prior=None):
     """Largest subset (of four or more) whose residuals pass the chi-square test; ties: smallest chi².
 
     Subsets are tried by decreasing size, at most ``config.max_excluded``
@@ -292,8 +298,14 @@ def _exclude(ranges: list[BeaconRange], h: float, c: float, config: PositionConf
             if sol is None:
                 continue
             chi2 = sol[4]
-            if chi2 <= _chi2_limit(size + n_prior - 3, config.chi2_alpha) and (best is None or chi2 < best[0]):
-                best = (chi2, keep, sol)
+            if chi2 > _chi2_limit(size + n_prior - 3, config.chi2_alpha):
+                continue
+            score = chi2
+            if position_prior is not None:
+                pe, pn, ps = position_prior
+                score += ((sol[0][0] - pe) ** 2 + (sol[0][1] - pn) ** 2) / ps ** 2
+            if best is None or score < best[0]:
+                best = (score, keep, sol)
         if best is not None:
             return best[1], best[2]
     return None

@@ -286,8 +286,11 @@ class ClockPositionTracker:
         innovation that catches a wrong subset kept by the exclusion search under poor geometry.
         """
         dt = max(0.0, fix.t_s - last.t_s)
+        # 0.3 ms of slack, not more: a looser bound let a track's clock walk off by a
+        # millisecond a frame, pulling the position metres away with it.
         clock_ok = abs(fix.clock_offset_s - last.clock_offset_s) <= (
-            3.0 * math.sqrt(max(last.covariance[2, 2], 0.0)) + self.max_drift_ppm * 1e-6 * dt + 1e-3)
+            3.0 * math.sqrt(max(last.covariance[2, 2], 0.0) + max(fix.covariance[2, 2], 0.0))
+            + self.max_drift_ppm * 1e-6 * dt + 3e-4)
         sigma = math.sqrt(max(last.covariance[0, 0] + last.covariance[1, 1]
                               + fix.covariance[0, 0] + fix.covariance[1, 1], 0.0))
         if velocity is None:
@@ -323,8 +326,15 @@ class ClockPositionTracker:
         velocity = self._velocity() if tracking else None
         config = self._acquire_config if not tracking else (
             self._track_config if velocity is None else self._compensated_config)
+        predicted = None
+        if velocity is not None:
+            # Constant-velocity prediction for the exclusion's choice of subset (see solve_position).
+            last = self.last_fix
+            dt = max(0.0, frame_start_s + 0.5 * self.site.acoustic.frame_s - last.t_s)
+            predicted = (last.east_m + velocity[0] * dt, last.north_m + velocity[1] * dt, math.sqrt(
+                last.covariance[0, 0] + last.covariance[1, 1] + (self.max_turn_speed_m_s * dt) ** 2 + 0.25))
         fix = frame_fix(detections, self.site, self.c, bandwidth, config,
-                        self.last_fix if tracking else None, prior, velocity)
+                        self.last_fix if tracking else None, prior, velocity, predicted)
         if fix is None or not self._clock_plausible(fix):
             if tracking and not self.confirmed:
                 self.last_fix = None                         # a tentative lock not confirmed is dropped
@@ -356,7 +366,11 @@ class ClockPositionTracker:
                 self.last_fix = None
                 return None
             self.confirmed = True
-            if self._sane(last):
+            # The acquisition fix itself is reported only when it lies where the confirming fix
+            # says the receiver was (walking speed, not the looser confirmation gate).
+            dt = max(0.0, fix.t_s - last.t_s)
+            if self._sane(last) and math.hypot(fix.east_m - last.east_m, fix.north_m - last.north_m) <= (
+                    1.5 * dt + 3.0 * math.sqrt(max(fix.covariance[0, 0] + fix.covariance[1, 1], 0.0)) + 0.5):
                 self._confirmed_tentative = last
         if fix.n_beacons >= 4:
             self._previous_fix, self.last_fix = self.last_fix, fix
@@ -407,7 +421,8 @@ class ClockPositionTracker:
 def frame_fix(detections: list[ChirpDetection], site: Site, c: float, bandwidth: dict,
               config: PositionConfig, start: AcousticFix | None = None,
               clock_prior: tuple[float, float] | None = None,
-              velocity_m_s: tuple[float, float] | None = None) -> AcousticFix | None:
+              velocity_m_s: tuple[float, float] | None = None,
+              position_prior: tuple[float, float, float] | None = None) -> AcousticFix | None:
     """Position fix from one frame's detections (None when fewer than three beacons).
 
     ``start``: the previous fix (initial value); ``clock_prior``: (δ, σ_δ) of a tracked clock;
@@ -432,7 +447,7 @@ def frame_fix(detections: list[ChirpDetection], site: Site, c: float, bandwidth:
         ranges = [dataclasses.replace(r, sigma_m=math.sqrt(r.sigma_m ** 2 + 0.5 * (
             config.motion_speed_m_s * (r.arrival_s - t_mean)) ** 2)) for r in ranges]
     x0 = None if start is None else np.array([start.east_m, start.north_m, start.clock_offset_s])
-    return solve_position(ranges, site, c, config, x0, clock_prior)
+    return solve_position(ranges, site, c, config, x0, clock_prior, position_prior)
 
 
 def acquisition_windows(windows: list[SearchWindow], candidates, tracker: ClockPositionTracker, timing: AudioTiming,
