@@ -346,7 +346,7 @@ class ClockPositionTracker:
             if fix.n_beacons < self.acquisition_min_beacons or not self._clock_continues(fix):
                 return None
             self.last_fix, self.confirmed, self._tentative_ids = fix, False, set(fix.used_ids)
-            self._tentative_detections = detections
+            self._tentative_detections = [d for d in detections if d.beacon_id in fix.used_ids]
             return None
         last = self.last_fix
         if not self._continues(fix, last, velocity):
@@ -362,7 +362,7 @@ class ClockPositionTracker:
             # five beacons or more between the two, so that a standing receiver repeating one
             # wrong association of the same four arrivals never confirms it.
             if fix.n_beacons < 4 or (len(self._tentative_ids | set(fix.used_ids)) < 5
-                                     and not self._static_confirmation(detections, bandwidth)):
+                                     and not self._static_confirmation(detections, fix, bandwidth)):
                 self.last_fix = None
                 return None
             self.confirmed = True
@@ -377,15 +377,16 @@ class ClockPositionTracker:
             self._clock_anchor = (fix.t_s, fix.clock_offset_s)
         return fix
 
-    def _static_confirmation(self, detections: list[ChirpDetection], bandwidth: dict) -> bool:
+    def _static_confirmation(self, detections: list[ChirpDetection], fix: AcousticFix, bandwidth: dict) -> bool:
         """Four beacons only, the same in both frames: both frames pass the static residual test
         with nothing excluded (5 cm range floor, one degree of freedom each) and agree within
-        ``static_agreement_m``. A chance alignment of wrong arrivals that survived the vote's
+        ``static_agreement_m`` (each frame's beacons as its fix kept them). A chance alignment of wrong arrivals that survived the vote's
         1.5 m tolerance rarely fits to centimetres; a walker seeing the same four beacons does
         not stay within the agreement and waits for a fifth beacon.
         """
         a = frame_fix(self._tentative_detections, self.site, self.c, bandwidth, self._strict_config)
-        b = frame_fix(detections, self.site, self.c, bandwidth, self._strict_config)
+        b = frame_fix([d for d in detections if d.beacon_id in fix.used_ids], self.site, self.c, bandwidth,
+                      self._strict_config)
         return (a is not None and b is not None and min(a.n_beacons, b.n_beacons) >= 4
                 and math.hypot(a.east_m - b.east_m, a.north_m - b.north_m) <= self.static_agreement_m)
 
