@@ -271,29 +271,59 @@ def detect_frames(path: str | os.PathLike, site: Site, timing: AudioTiming,
         q25 = np.partition(sub, sub.shape[1] // 4, axis=1)[:, sub.shape[1] // 4]
         return q25.astype(float) / _RAYLEIGH_Q25
 
-    def peaks(w: SearchWindow, sigma: float) -> tuple[np.ndarray, np.ndarray]:
-        """Chirp-start indices (ascending) and heights of envelope maxima in ``w`` above the threshold.
+    maxima: dict = {}            # template -> (j_lo, j_hi, global indices, heights) for the current frame
 
-        The threshold is γ (see the module docstring); a maximum within one chirp
-        length of a maximum 25 dB stronger is dropped, so that the range
-        sidelobes (−34.6 dB) of a strong arrival never pass for an earlier one.
+    def gamma_of(w: SearchWindow, sigma: float) -> float:
+        """Detection threshold γ of window ``w`` (see the module docstring)."""
+        n_cells = max(1.0, (w.hi - w.lo) / fs * bandwidth[site.beacons[w.beacon_index].id])
+        return max(sigma * math.sqrt(2.0 * math.log(n_cells / config.p_fa)), 1e-9)
+
+    def prepare_maxima(windows: list[SearchWindow], sigmas: np.ndarray) -> None:
+        """Envelope maxima of the whole frame, once per template, for :func:`peaks` to slice.
+
+        Windows overlap, and a local maximum is one whatever window looks at it, so the
+        maxima above the lowest threshold of the frame are found once, and the sidelobe
+        guard (a maximum within one chirp length of one 25 dB stronger is dropped, so
+        that the range sidelobes, −34.6 dB, of a strong arrival never pass for an earlier
+        one) applied once, instead of per window.
+        """
+        maxima.clear()
+        for t in {template_of[w.beacon_index] for w in windows}:
+            mine = [w for w in windows if template_of[w.beacon_index] == t]
+            j_lo = -(-(min(w.lo for w in mine) + bank.delay_samples) // dec)
+            j_hi = (max(w.hi for w in mine) + bank.delay_samples) // dec + 1
+            j_first, seg = stream.env_range(j_lo, j_hi)
+            seg = seg[t]
+            gamma = min(gamma_of(w, float(sigmas[t])) for w in mine)
+            if len(seg) < 3:
+                maxima[t] = (j_first, j_first + len(seg), np.zeros(0, int), np.zeros(0, seg.dtype))
+                continue
+            mid = seg[1:-1]
+            idx = 1 + np.flatnonzero((mid > seg[:-2]) & (mid >= seg[2:]) & (mid > gamma))
+            # The ends count when above the neighbour inside (as if padded with zeros).
+            ends = [i for i, ok in ((0, seg[0] > gamma and seg[0] >= seg[1]),
+                                    (len(seg) - 1, seg[-1] > gamma and seg[-1] > seg[-2])) if ok]
+            if ends:
+                idx = np.sort(np.concatenate([idx, np.array(ends, dtype=idx.dtype)]))
+            if len(idx) > 1:
+                h = seg[idx]
+                near = np.abs(idx[:, None] - idx[None, :]) * dec <= bank.template_len
+                idx = idx[~np.any(near & (h[None, :] > h[:, None] * _SIDELOBE_GUARD), axis=1)]
+            maxima[t] = (j_first, j_first + len(seg), j_first + idx, seg[idx])
+
+    def peaks(w: SearchWindow, sigma: float) -> tuple[np.ndarray, np.ndarray]:
+        """Chirp-start indices (ascending) and heights of envelope maxima in ``w`` above its threshold γ.
+
+        Sliced from the frame's maxima (:func:`prepare_maxima`).
         """
         t = template_of[w.beacon_index]
         j_lo = -(-(w.lo + bank.delay_samples) // dec)
         j_hi = (w.hi + bank.delay_samples) // dec + 1
-        j_first, seg = stream.env_range(j_lo, j_hi)
-        seg = seg[t]
-        if len(seg) < 3:
-            return np.zeros(0, int), np.zeros(0)
-        n_cells = max(1.0, (w.hi - w.lo) / fs * bandwidth[site.beacons[w.beacon_index].id])
-        gamma = max(sigma * math.sqrt(2.0 * math.log(n_cells / config.p_fa)), 1e-9)
-        padded = np.concatenate([[0.0], seg, [0.0]])
-        idx = np.flatnonzero((padded[1:-1] > padded[:-2]) & (padded[1:-1] >= padded[2:]) & (seg > gamma))
-        if len(idx) > 1:
-            h = seg[idx]
-            near = np.abs(idx[:, None] - idx[None, :]) * dec <= bank.template_len
-            idx = idx[~np.any(near & (h[None, :] > h[:, None] * _SIDELOBE_GUARD), axis=1)]
-        return mf.chirp_start(j_first + idx).astype(int), seg[idx]
+        _, _, jj, hh = maxima[t]
+        a, b = np.searchsorted(jj, [j_lo, j_hi])
+        jj, hh = jj[a:b], hh[a:b]
+        keep = hh > gamma_of(w, sigma)
+        return mf.chirp_start(jj[keep]).astype(int), hh[keep]
 
     def locate(w: SearchWindow, sigma: float) -> int | None:
         """Chirp start of the detection in ``w``: its earliest peak (strongest, when not associated)."""
@@ -454,6 +484,7 @@ def detect_frames(path: str | os.PathLike, site: Site, timing: AudioTiming,
         if windows:
             stream.ensure(max(w.hi for w in windows) + span + bank.kernel_len + dec)
             sigmas = noise_scales(windows)
+            prepare_maxima(windows, sigmas)
             if not tracking and tracker.skip_acquisition():
                 windows = [dataclasses.replace(w, associated=False) for w in windows]
             elif not tracking:
