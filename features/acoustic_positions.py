@@ -274,12 +274,93 @@ def solve_position(ranges: list[BeaconRange], site: Site, speed_m_s: float,
                        used_ids=tuple(r.beacon_id for r in ranges), rejected_ids=tuple(rejected))
 
 
+def _inverse3_batch(m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Inverses of symmetric 3×3 matrices (k, 3, 3) by their adjugates, and which are regular (k,).
+
+    The batched form of :func:`_inverse3` (same singularity test); singular ones get zeros.
+
+    >>> a = np.array([[[4.0, 1.0, 0.5], [1.0, 3.0, 0.2], [0.5, 0.2, 2.0]], np.zeros((3, 3))])
+    >>> inv, ok = _inverse3_batch(a)
+    >>> ok.tolist(), bool(np.allclose(inv[0] @ a[0], np.eye(3)))
+    ([True, False], True)
+    """
+    a, b, c = m[:, 0, 0], m[:, 0, 1], m[:, 0, 2]
+    d, e, f = m[:, 1, 0], m[:, 1, 1], m[:, 1, 2]
+    g, h, i = m[:, 2, 0], m[:, 2, 1], m[:, 2, 2]
+    c00, c01, c02 = e * i - f * h, c * h - b * i, b * f - c * e
+    det = a * c00 + d * c01 + g * c02
+    scale = np.abs(a) + np.abs(e) + np.abs(i)
+    ok = np.isfinite(det) & (np.abs(det) > 1e-14 * scale ** 3)
+    adj = np.stack([np.stack([c00, c01, c02], -1),
+                    np.stack([f * g - d * i, a * i - c * g, c * d - a * f], -1),
+                    np.stack([d * h - e * g, b * g - a * h, a * e - b * d], -1)], -2)
+    inv = np.where(ok[:, None, None], adj / np.where(ok, det, 1.0)[:, None, None], 0.0)
+    return inv, ok
+
+
+def _gauss_newton_subsets(ranges: list[BeaconRange], masks: np.ndarray, h: float, c: float, iterations: int,
+                          start: np.ndarray, clock_prior: tuple[float, float] | None = None):
+    """:func:`_gauss_newton` for many subsets of ``ranges`` at once (the exclusion search).
+
+    ``masks`` (k, n) bool selects each subset's ranges (a range left out gets weight 0).
+    Returns x (k, 3), covariance (k, 3, 3), residuals (k, n), chi² (k,) and which
+    subsets gave a valid solution (k,) — the same tests as :func:`_gauss_newton`.
+    """
+    s = np.array([[r.east_m, r.north_m, r.up_m] for r in ranges])
+    rho = np.array([r.pseudorange_m for r in ranges])
+    sig = np.array([r.sigma_m for r in ranges])
+    w = masks / sig[None, :] ** 2                                   # (k, n)
+    du2 = (h - s[:, 2]) ** 2
+    k = masks.shape[0]
+    x = np.repeat(np.asarray(start, dtype=float)[None, :], k, axis=0)
+    ok = np.ones(k, dtype=bool)
+    prior_w = 0.0 if clock_prior is None else 1.0 / clock_prior[1] ** 2
+
+    def normal_equations(x):
+        de, dn = x[:, :1] - s[None, :, 0], x[:, 1:2] - s[None, :, 1]
+        r = np.sqrt(de * de + dn * dn + du2[None, :])
+        je, jn = de / r, dn / r
+        res = rho[None, :] - (r + c * x[:, 2:3])
+        normal = np.empty((k, 3, 3))
+        normal[:, 0, 0] = np.einsum("kn,kn,kn->k", je, w, je)
+        normal[:, 0, 1] = normal[:, 1, 0] = np.einsum("kn,kn,kn->k", je, w, jn)
+        normal[:, 1, 1] = np.einsum("kn,kn,kn->k", jn, w, jn)
+        normal[:, 0, 2] = normal[:, 2, 0] = c * np.einsum("kn,kn->k", je, w)
+        normal[:, 1, 2] = normal[:, 2, 1] = c * np.einsum("kn,kn->k", jn, w)
+        normal[:, 2, 2] = c * c * w.sum(axis=1) + prior_w
+        wres = w * res
+        gradient = np.stack([np.einsum("kn,kn->k", je, wres), np.einsum("kn,kn->k", jn, wres),
+                             c * wres.sum(axis=1)], axis=1)
+        if clock_prior is not None:
+            gradient[:, 2] += (clock_prior[0] - x[:, 2]) * prior_w
+        return normal, gradient, res
+
+    for _ in range(iterations):
+        normal, gradient, _ = normal_equations(x)
+        inv, regular = _inverse3_batch(normal)
+        ok &= regular
+        step = np.einsum("kij,kj->ki", inv, gradient)
+        step[~ok] = 0.0
+        x = x + step
+        if np.all((step[:, 0] ** 2 + step[:, 1] ** 2 < 1e-12) & (np.abs(step[:, 2]) * c < 1e-6)):
+            break
+    normal, _, res = normal_equations(x)
+    cov, regular = _inverse3_batch(normal)
+    diag = np.diagonal(cov, axis1=1, axis2=2)
+    ok &= regular & np.all(np.isfinite(cov), axis=(1, 2)) & np.all(diag > 0, axis=1) & (diag[:, 0] + diag[:, 1] <= 1e8)
+    chi2 = np.sum(w * res ** 2, axis=1)
+    if clock_prior is not None:
+        chi2 += (clock_prior[0] - x[:, 2]) ** 2 * prior_w
+    return x, 0.5 * (cov + np.transpose(cov, (0, 2, 1))), res, chi2, ok
+
+
 def _exclude(ranges: list[BeaconRange], h: float, c: float, config: PositionConfig, start, clock_prior=None,
              position_prior=None):
     """Largest subset (of four or more) whose residuals pass the chi-square test; ties: smallest chi².
 
     Subsets are tried by decreasing size, at most ``config.max_excluded``
-    beacons left out and :data:`_MAX_SUBSETS` subsets tried in all.
+    beacons left out and :data:`_MAX_SUBSETS` subsets tried in all; all subsets
+    of one size are solved together (:func:`_gauss_newton_subsets`).
     Returns (kept indices, Gauss-Newton solution) or None. With n − k beacons
     kept, k NLOS-biased beacons can be excluded, which the classic one-at-a-time
     leave-one-out cannot do reliably once two are biased.
@@ -287,27 +368,30 @@ def _exclude(ranges: list[BeaconRange], h: float, c: float, config: PositionConf
     n = len(ranges)
     n_prior = 0 if clock_prior is None else 1
     smallest = 4 - n_prior            # one degree of freedom left for the test
+    sig = np.array([r.sigma_m for r in ranges])
     tried = 0
     for size in range(n - 1, max(smallest - 1, n - 1 - config.max_excluded), -1):
-        best = None
-        for keep in itertools.combinations(range(n), size):
-            tried += 1
-            if tried > _MAX_SUBSETS:
-                return None
-            sol = _gauss_newton([ranges[i] for i in keep], h, c, config.max_iterations, start, clock_prior)
-            if sol is None:
-                continue
-            chi2 = sol[4]
-            if chi2 > _chi2_limit(size + n_prior - 3, config.chi2_alpha):
-                continue
-            score = chi2
+        combos = list(itertools.islice(itertools.combinations(range(n), size), _MAX_SUBSETS - tried + 1))
+        truncated = tried + len(combos) > _MAX_SUBSETS
+        combos = combos[: _MAX_SUBSETS - tried]
+        tried += len(combos)
+        if combos:
+            masks = np.zeros((len(combos), n), dtype=bool)
+            for row, keep in enumerate(combos):
+                masks[row, list(keep)] = True
+            x, cov, res, chi2, ok = _gauss_newton_subsets(ranges, masks, h, c, config.max_iterations, start,
+                                                          clock_prior)
+            score = np.where(ok & (chi2 <= _chi2_limit(size + n_prior - 3, config.chi2_alpha)), chi2, np.inf)
             if position_prior is not None:
                 pe, pn, ps = position_prior
-                score += ((sol[0][0] - pe) ** 2 + (sol[0][1] - pn) ** 2) / ps ** 2
-            if best is None or score < best[0]:
-                best = (score, keep, sol)
-        if best is not None:
-            return best[1], best[2]
+                score = score + ((x[:, 0] - pe) ** 2 + (x[:, 1] - pn) ** 2) / ps ** 2
+            best = int(np.argmin(score))
+            if np.isfinite(score[best]):
+                keep = combos[best]
+                m = masks[best]
+                return keep, (x[best], cov[best], res[best][m], sig[m], float(chi2[best]))
+        if truncated:
+            return None
     return None
 
 
