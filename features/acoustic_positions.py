@@ -291,10 +291,13 @@ def _inverse3_batch(m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     det = a * c00 + d * c01 + g * c02
     scale = np.abs(a) + np.abs(e) + np.abs(i)
     ok = np.isfinite(det) & (np.abs(det) > 1e-14 * scale ** 3)
-    adj = np.stack([np.stack([c00, c01, c02], -1),
-                    np.stack([f * g - d * i, a * i - c * g, c * d - a * f], -1),
-                    np.stack([d * h - e * g, b * g - a * h, a * e - b * d], -1)], -2)
-    inv = np.where(ok[:, None, None], adj / np.where(ok, det, 1.0)[:, None, None], 0.0)
+    adj = np.empty(m.shape)
+    adj[:, 0, 0], adj[:, 0, 1], adj[:, 0, 2] = c00, c01, c02
+    adj[:, 1, 0], adj[:, 1, 1], adj[:, 1, 2] = f * g - d * i, a * i - c * g, c * d - a * f
+    adj[:, 2, 0], adj[:, 2, 1], adj[:, 2, 2] = d * h - e * g, b * g - a * h, a * e - b * d
+    adj /= np.where(ok, det, 1.0)[:, None, None]
+    adj[~ok] = 0.0
+    inv = adj
     return inv, ok
 
 
@@ -329,8 +332,10 @@ def _gauss_newton_subsets(ranges: list[BeaconRange], masks: np.ndarray, h: float
         normal[:, 1, 2] = normal[:, 2, 1] = c * np.einsum("kn,kn->k", jn, w)
         normal[:, 2, 2] = c * c * w.sum(axis=1) + prior_w
         wres = w * res
-        gradient = np.stack([np.einsum("kn,kn->k", je, wres), np.einsum("kn,kn->k", jn, wres),
-                             c * wres.sum(axis=1)], axis=1)
+        gradient = np.empty((k, 3))
+        gradient[:, 0] = np.einsum("kn,kn->k", je, wres)
+        gradient[:, 1] = np.einsum("kn,kn->k", jn, wres)
+        gradient[:, 2] = c * wres.sum(axis=1)
         if clock_prior is not None:
             gradient[:, 2] += (clock_prior[0] - x[:, 2]) * prior_w
         return normal, gradient, res

@@ -172,7 +172,9 @@ class ClockPositionTracker:
         # 1981): the one whose fix keeps the most beacons, then the smallest residual, wins.
         best, best_key, tried = {}, None, []
         for n, _, point, member_delta in hyps:
-            if n < 3 or len(tried) >= 12:
+            # Hypotheses come by decreasing vote; one two votes short of the best verified fix
+            # has never been seen to beat it (re-association adds a beacon at most), so stop.
+            if n < 3 or len(tried) >= 12 or (best_key is not None and n + 1 < best_key[0]):
                 break
             d0 = float(np.median(member_delta))
             if any(abs(point[0] - p[0]) < 2 and abs(point[1] - p[1]) < 2 and abs(d0 - q) < 2e-3 for p, q in tried):
