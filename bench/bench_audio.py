@@ -10,6 +10,11 @@ block so generation stays flat too), then times
 * the whole receiver, ``features.acoustic_features.analyse_audio``: reading,
   matched filter, detection, CIR features per window and positions per frame;
 
+and, on a simulated 120 s walk (``envfuse simulate site --seed 3`` and
+``simulate walk --seed 7``, run through the CLI: the receiver itself never
+imports the simulator), the whole receiver with acquisition and tracking of a
+moving receiver, its fix count and its error against truth.csv;
+
 and the memory of the receiver on files of 1, 5 and 10 minutes, each in its
 own process: peak resident set (``resource.getrusage(RUSAGE_SELF).ru_maxrss``,
 dominated by the interpreter and imported libraries) and the peak of memory
@@ -124,6 +129,38 @@ def matched_filter_rates(path: Path) -> dict:
     return out
 
 
+def walk_rate(tmp: Path) -> dict:
+    """Receiver speed and fix figures on a simulated walk (site seed 3, walk seed 7, 120 s)."""
+    from features.acoustic_positions import PositionConfig
+    from features.site import load_site
+    from pipeline.cli import main as cli_main
+    from pipeline.commands.features_audio import timing_from_walk
+
+    site_dir, walk = tmp / "site3", tmp / "walk7"
+    quiet = open(os.devnull, "w")
+    old = sys.stdout
+    sys.stdout = quiet
+    try:
+        cli_main(["simulate", "site", "--seed", "3", "--out", str(site_dir)])
+        cli_main(["simulate", "walk", str(site_dir), "--seed", "7", "--duration", "120", "--out", str(walk)])
+    finally:
+        sys.stdout = old
+        quiet.close()
+    site = load_site(site_dir)
+    timing = timing_from_walk(walk / "walk.toml", site, None)
+    positions = PositionConfig(max_clock_offset_s=timing.start_uncertainty_s + 0.05, motion_speed_m_s=1.4)
+    t0 = time.perf_counter()
+    res = analyse_audio(walk / "audio.wav", site, timing, DetectorConfig(), positions=positions)
+    wall = time.perf_counter() - t0
+    truth = np.genfromtxt(walk / "truth.csv", delimiter=",", names=True, dtype=None, encoding=None)
+    t = np.array([f.t_s for f in res.fixes])
+    err = np.hypot(np.array([f.east_m for f in res.fixes]) - np.interp(t, truth["t_s"], truth["east_m"]),
+                   np.array([f.north_m for f in res.fixes]) - np.interp(t, truth["t_s"], truth["north_m"]))
+    n_frames = int(round(res.duration_s / site.acoustic.frame_s))
+    return {"audio_s": res.duration_s, "wall_s": wall, "fixes": len(res.fixes), "frames": n_frames,
+            "median_m": float(np.median(err)), "p95_m": float(np.percentile(err, 95)), "max_m": float(err.max())}
+
+
 def main() -> None:
     if len(sys.argv) == 3 and sys.argv[1] == "--child":
         child(sys.argv[2])
@@ -137,6 +174,10 @@ def main() -> None:
         print("matched filter alone, 1-min file, one core (x real time):")
         for name, rate in matched_filter_rates(files[1]).items():
             print(f"  {name:48s} {rate:8.0f}x")
+        w = walk_rate(tmp)
+        print(f"\nsimulated walk (site 3, walk 7): {w['audio_s']:.0f} s audio in {w['wall_s']:.2f} s = "
+              f"{w['audio_s'] / w['wall_s']:.0f}x real time; {w['fixes']} fixes of {w['frames']} frames, "
+              f"error median {w['median_m']:.2f} m, p95 {w['p95_m']:.2f} m, max {w['max_m']:.2f} m")
         print("\nfull receiver (read, matched filter, detection, CIR features, positions), one core:")
         print(f"  {'file':>8s} {'audio s':>8s} {'wall s':>8s} {'x real time':>12s} {'windows':>8s} {'fixes':>6s} "
               f"{'peak RSS MiB':>13s} {'peak allocated MiB':>19s}")
