@@ -33,7 +33,6 @@ from pathlib import Path
 from typing import Iterator
 
 import numpy as np
-import scipy.signal
 import soundfile as sf
 
 from .constants import AUDIO_FS_HZ
@@ -175,6 +174,8 @@ def iter_audio_blocks(path: str | os.PathLike, block_s: float = 4.0,
 
 def _resampled_blocks(fh, dtype, scale, block_in, ratio: Fraction, n_frames: int) -> Iterator[AudioBlock]:
     """Blockwise ``resample_poly(x, up, down)`` with context padding; see the module docstring."""
+    import scipy.signal  # here, not at the top: importing it costs about 1.4 s, and 48 kHz files never need it
+
     up, down = ratio.numerator, ratio.denominator
     pad = int(math.ceil(_RESAMPLE_PAD / down)) * down
     prev = np.zeros(0, dtype=np.float32)

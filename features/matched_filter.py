@@ -41,7 +41,6 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.fft
-import scipy.signal
 
 from .errors import ConfigError
 
@@ -111,8 +110,45 @@ def chirp_template(spec: ChirpSpec, fs_hz: float) -> np.ndarray:
     if n < 8:
         raise ConfigError(f"chirp of {spec.duration_s} s has fewer than 8 samples at {fs_hz} Hz")
     t = np.arange(n) / fs_hz
-    s = scipy.signal.chirp(t, f0=spec.f0_hz, t1=spec.duration_s, f1=spec.f1_hz, method="linear", phi=-90.0)
-    return s * scipy.signal.windows.tukey(n, alpha=spec.taper_fraction)
+    k = (spec.f1_hz - spec.f0_hz) / spec.duration_s
+    # scipy.signal.chirp(method="linear", phi=-90): cos(2π(f0·t + k·t²/2) − π/2) = sin(...).
+    s = np.cos(2.0 * np.pi * (spec.f0_hz * t + 0.5 * k * t * t) - 0.5 * np.pi)
+    return s * _tukey(n, spec.taper_fraction)
+
+
+# Written out (as scipy.signal.windows.tukey and scipy.signal.firwin define them, checked
+# against them in tests/test_matched_filter.py) because importing scipy.signal, which pulls
+# in scipy.stats, costs about 1.4 s of start-up: more than the receiver spends on a
+# two-minute recording.
+
+
+def _tukey(n: int, alpha: float) -> np.ndarray:
+    """Symmetric Tukey window of ``n`` points, taper fraction ``alpha`` (Harris 1978, Proc. IEEE 66(1)).
+
+    >>> _tukey(5, 0.5).round(3).tolist()
+    [0.0, 1.0, 1.0, 1.0, 0.0]
+    """
+    if alpha <= 0:
+        return np.ones(n)
+    if alpha >= 1:
+        return np.hanning(n)
+    x = np.arange(n) / (n - 1)
+    w = np.ones(n)
+    lo, hi = x < alpha / 2, x > 1 - alpha / 2
+    w[lo] = 0.5 * (1 + np.cos(np.pi * (2 * x[lo] / alpha - 1)))
+    w[hi] = 0.5 * (1 + np.cos(np.pi * (2 * x[hi] / alpha - 2 / alpha + 1)))
+    return w
+
+
+def _firwin_bandpass(n_taps: int, low_hz: float, high_hz: float, fs_hz: float) -> np.ndarray:
+    """Windowed-sinc band-pass FIR (Hamming), unit gain at the band centre: scipy.signal.firwin's
+    ``firwin(n_taps, [low, high], pass_zero=False, fs=fs)`` (Oppenheim & Schafer, §7.5)."""
+    nyq = fs_hz / 2
+    lo, hi = low_hz / nyq, high_hz / nyq
+    m = np.arange(n_taps) - (n_taps - 1) / 2
+    h = hi * np.sinc(hi * m) - lo * np.sinc(lo * m)
+    h *= np.hamming(n_taps)
+    return h / np.sum(h * np.cos(np.pi * m * 0.5 * (lo + hi)))
 
 
 def bandpass_fir(fs_hz: float, low_hz: float = BANDPASS_LOW_HZ, high_hz: float = BANDPASS_HIGH_HZ,
@@ -128,7 +164,7 @@ def bandpass_fir(fs_hz: float, low_hz: float = BANDPASS_LOW_HZ, high_hz: float =
     high = min(high_hz, 0.49 * fs_hz)
     if not 0 < low_hz < high:
         raise ConfigError(f"band-pass {low_hz}..{high_hz} Hz does not fit below Nyquist at fs={fs_hz} Hz")
-    return scipy.signal.firwin(n_taps, [low_hz, high], pass_zero=False, fs=fs_hz)
+    return _firwin_bandpass(n_taps, low_hz, high, fs_hz)
 
 
 class MatchedFilterBank:
@@ -170,7 +206,7 @@ class MatchedFilterBank:
         for s in templates:
             padded = np.zeros(self.template_len)
             padded[: len(s)] = s
-            reference = s * scipy.signal.get_window(RECEIVE_WINDOW, len(s), fftbins=False)
+            reference = s * np.kaiser(len(s), RECEIVE_WINDOW[1])      # symmetric Kaiser, β = 6
             ref_padded = np.zeros(self.template_len)
             ref_padded[: len(s)] = reference
             kernel = np.convolve(bp, ref_padded[::-1])

@@ -3,6 +3,7 @@ hand-synthesised recordings (straight-line delays, 1/r amplitudes, a ground echo
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -71,8 +72,10 @@ def test_nlos_biased_beacon_is_rejected():
     fix = solve_position(ranges, site, C)
     assert fix.rejected_ids == (3,)
     assert math.hypot(fix.east_m - 8.0, fix.north_m - 11.0) < 0.03
-    # Without exclusion the 2.5 m bias drags the fix by decimetres.
-    naive = solve_position(ranges, site, C, PositionConfig(chi2_alpha=1e-300))
+    # Without exclusion the 2.5 m bias drags the fix by decimetres (σ = 10 m for every range:
+    # the same least-squares solution, a chi² far below any test limit).
+    naive = solve_position([dataclasses.replace(r, sigma_m=10.0) for r in ranges], site, C)
+    assert naive.rejected_ids == ()
     assert math.hypot(naive.east_m - 8.0, naive.north_m - 11.0) > 0.1
 
 

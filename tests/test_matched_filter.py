@@ -89,3 +89,24 @@ def test_analytic_convolve_envelope_of_a_tone():
     n = np.arange(2000)
     z = analytic_convolve(np.cos(2 * np.pi * 0.2 * n), np.array([0.5]))
     assert np.abs(z[200:1800]).mean() == pytest.approx(0.5, rel=1e-3)
+
+
+def test_hand_written_windows_and_filter_equal_scipy_signal():
+    """The receiver avoids importing scipy.signal (1.4 s of start-up): its own Tukey window,
+    chirp and band-pass FIR must equal scipy's definitions."""
+    import scipy.signal
+
+    from features.matched_filter import _firwin_bandpass, _tukey, bandpass_fir, chirp_template, ChirpSpec
+
+    for n, alpha in ((480, 0.2), (481, 0.5), (100, 0.0), (100, 1.0)):
+        np.testing.assert_allclose(_tukey(n, alpha), scipy.signal.windows.tukey(n, alpha), atol=1e-12)
+    np.testing.assert_allclose(_firwin_bandpass(127, 16_500.0, 23_500.0, 48_000.0),
+                               scipy.signal.firwin(127, [16_500.0, 23_500.0], pass_zero=False, fs=48_000.0),
+                               atol=1e-12)
+    np.testing.assert_allclose(bandpass_fir(44_100.0),
+                               scipy.signal.firwin(127, [16_500.0, 0.49 * 44_100.0], pass_zero=False, fs=44_100.0),
+                               atol=1e-12)
+    t = np.arange(480) / 48_000.0
+    ref = scipy.signal.chirp(t, f0=17_000.0, t1=0.010, f1=23_000.0, method="linear", phi=-90.0)
+    np.testing.assert_allclose(chirp_template(ChirpSpec(17_000.0, 23_000.0, 0.010, 0.2), 48_000.0),
+                               ref * scipy.signal.windows.tukey(480, 0.2), atol=1e-12)
