@@ -417,8 +417,7 @@ class ClockPositionTracker:
         if self._clock_anchor is None:
             return True
         t0, d0 = self._clock_anchor
-        return abs(fix.clock_offset_s - d0) <= (self.max_drift_ppm * 1e-6 * abs(fix.t_s - t0) + 1e-3
-                                                + 3.0 * math.sqrt(max(fix.covariance[2, 2], 0.0)))
+        return abs(fix.clock_offset_s - d0) <= self.max_drift_ppm * 1e-6 * abs(fix.t_s - t0) + 1e-3
 
 
 def frame_fix(detections: list[ChirpDetection], site: Site, c: float, bandwidth: dict,
