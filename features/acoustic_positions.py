@@ -261,6 +261,8 @@ def solve_position(ranges: list[BeaconRange], site: Site, speed_m_s: float,
     if len(ranges) < 3:
         return None
     sol = _gauss_newton(ranges, h, speed_m_s, config.max_iterations, start, clock_prior)
+    if sol is None and start is None:
+        sol = _multistart(ranges, site, speed_m_s, config, clock_prior)
     if sol is None:
         return None
     x, cov, res, sig, chi2 = sol
@@ -406,6 +408,29 @@ def _exclude(ranges: list[BeaconRange], h: float, c: float, config: PositionConf
         if truncated:
             return None
     return None
+
+
+def _multistart(ranges: list[BeaconRange], site: Site, c: float, config: PositionConfig, clock_prior=None):
+    """Gauss-Newton from the centres of the site grid's quarters; the solution of least chi².
+
+    From the beacons' centroid Gauss-Newton can diverge when few beacons are heard
+    from one side (pseudorange problems have a second, spurious solution; Abel &
+    Chaffee 1991, IEEE Trans. AES 27(6)); these starts cover the site.
+    """
+    g = site.grid
+    clock0 = float(np.median([r.pseudorange_m for r in ranges])) / c
+    best = None
+    for fe in (0.25, 0.75):
+        for fn in (0.25, 0.75):
+            x0 = np.array([g.east_min_m + fe * (g.east_max_m - g.east_min_m),
+                           g.north_min_m + fn * (g.north_max_m - g.north_min_m), 0.0])
+            geo = np.median([math.dist((x0[0], x0[1], site.device_height_m), (r.east_m, r.north_m, r.up_m))
+                             for r in ranges])
+            x0[2] = clock0 - geo / c
+            sol = _gauss_newton(ranges, site.device_height_m, c, config.max_iterations, x0, clock_prior)
+            if sol is not None and (best is None or sol[4] < best[4]):
+                best = sol
+    return best
 
 
 def _plausible(x: np.ndarray, site: Site, config: PositionConfig) -> bool:
