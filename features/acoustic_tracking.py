@@ -25,13 +25,21 @@ __all__ = ["ClockPositionTracker", "frame_fix", "acquisition_windows"]
 class ClockPositionTracker:
     """Acquisition, then tracking, of the receiver's clock offset and position.
 
-    Acquisition (no recent fix, attempted every other frame): beacon ``b``'s
-    chirp may start anywhere in ``[tx − u, tx + u + r_max/c]``. These windows
-    overlap several slots, so the arrivals in them are associated with beacons
-    by :meth:`acquire` (Hough vote, least-squares verification), and a fix
-    from acquisition is trusted only when at least five beacons pass the
-    residual test (two degrees of freedom left for it), under the static model
-    whatever the motion prior.
+    Acquisition (no lock; attempted every other frame while it fails): beacon
+    ``b``'s chirp may start anywhere in ``[tx − u, tx + u + r_max/c]``. These
+    windows overlap several slots, so the arrivals in them are associated with
+    beacons by :meth:`acquire` (Hough vote, least-squares verification). A fix
+    on four or more beacons that passes the residual test is a *tentative*
+    lock; the next frame, tracked from it, must confirm it: a sane fix on four
+    or more beacons, within walking speed and clock drift of the tentative one,
+    and either five beacons or more between the two fixes or, with the same
+    four, both frames passing the strict static test (nothing excluded, 5 cm
+    floor) within ``static_agreement_m`` — a standing receiver repeating a
+    wrong association of four arrivals never confirms it. The confirmed
+    tentative fix is then reported for its own frame
+    (:meth:`take_confirmed_tentative`). After a confirmed lock the clock offset
+    is known up to drift: a re-acquisition must agree with it within
+    ``max_drift_ppm`` over the time since, plus 1 ms.
 
     Tracking (a fix at most ``track_timeout_s`` old): the window is centred on
     the arrival predicted from the last fix, ``tx + ‖p − s_b‖/c + δ``, with a
@@ -42,7 +50,13 @@ class ClockPositionTracker:
     sample clock off by 10 ppm gains 6 ms in 10 minutes), so it is tracked
     rather than estimated once: each tracked fix takes the last offset as a
     prior widened by ``clock_drift_prior_ppm`` over the elapsed time, which
-    leaves three beacons a degree of freedom for the residual test.
+    leaves three beacons a degree of freedom for the residual test. Once two
+    fixes give a velocity, each frame's ranges are compensated for the motion
+    during the frame (:func:`frame_fix`), the exclusion search prefers the
+    subset nearest the constant-velocity prediction, and a fix farther from it
+    than ``max_turn_speed_m_s``·dt plus 3σ is refused (an innovation gate).
+    Fixes are reported only when sane: horizontal 1σ within ``max_fix_sigma_m``
+    and rms residual within ``max_rms_m``.
     """
 
     max_speed_m_s = 2.5
@@ -51,7 +65,7 @@ class ClockPositionTracker:
     track_timeout_s = 4.0
     acquisition_min_beacons = 4
     clock_drift_prior_ppm = 20.0
-    max_fix_sigma_m = 1.0
+    max_fix_sigma_m = 0.5
     residual_speed_m_s = 0.5
     max_turn_speed_m_s = 1.0
     static_agreement_m = 0.3
