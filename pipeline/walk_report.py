@@ -38,6 +38,7 @@ class WalkSources:
     truth: object | None
     gnss_features: dict | None
     quality: np.ndarray | None
+    acoustic_features: list | None = None
 
 
 def _gnss(walk, site):
@@ -53,10 +54,16 @@ def _gnss(walk, site):
     return SourceTrack("GNSS", pos.t_s, pos.east_m, pos.north_m, {"skipped": stats.summary()}), feats, pos.quality
 
 
-def _pdr(walk, start_en, k: float | None):
+def _pdr(walk, start_en, k: float | None, gnss: SourceTrack | None = None, quality=None):
+    """PDR track; with RTK-fixed GNSS, K and the mounting yaw are calibrated on it first.
+
+    Calibration uses only steps whose both ends fall between RTK-fixed epochs
+    (quality 4, centimetre level): K = Σ GNSS step distance / Σ Weinberg units,
+    yaw offset = circular mean of (GNSS step heading − PDR heading).
+    """
     from features.heading import HeadingConfig
     from features.imu import read_imu_csv
-    from features.pdr import PdrConfig, run_pdr
+    from features.pdr import PdrConfig, dead_reckon, run_pdr
     from features.steps import StepLengthModel
 
     imu = read_imu_csv(walk.path("imu"))
@@ -65,7 +72,43 @@ def _pdr(walk, start_en, k: float | None):
     if k is not None:
         cfg = PdrConfig(length=StepLengthModel(k=k), heading=cfg.heading)
     res = run_pdr(imu, start_en[0], start_en[1], cfg)
-    return SourceTrack("PDR", res.t_s, res.east_m, res.north_m, {"steps": len(res), "distance_m": res.distance_m})
+    info = {"steps": len(res), "distance_m": res.distance_m, "k": cfg.length.k, "yaw_offset_deg": 0.0}
+    east, north = res.east_m, res.north_m
+    if k is None and gnss is not None and quality is not None and len(res) > 10:
+        fixed = quality == 4
+        t_g = gnss.t_s
+        idx = np.searchsorted(t_g, res.t_s)
+        ok_t = (idx > 0) & (idx < len(t_g))
+        ii = np.clip(idx, 1, len(t_g) - 1)
+        covered = ok_t & fixed[ii] & fixed[ii - 1]
+        ge, gn = np.interp(res.t_s, t_g, gnss.east_m), np.interp(res.t_s, t_g, gnss.north_m)
+        de, dn = np.diff(ge), np.diff(gn)
+        d = np.hypot(de, dn)
+        use = covered[1:] & covered[:-1] & (d > 0.2) & (d < 1.5)
+        if use.sum() >= 20:
+            units = res.step_length_m / cfg.length.k
+            k_cal = float(d[use].sum() / units[1:][use].sum())
+            offset = float(np.angle(np.sum(d[use] * np.exp(1j * (np.arctan2(de[use], dn[use])
+                                                                  - res.heading_rad[1:][use])))))
+            east, north = dead_reckon(units * k_cal, res.heading_rad + offset, start_en[0], start_en[1])
+            info.update(k=k_cal, yaw_offset_deg=float(np.degrees(offset)), calibrated_steps=int(use.sum()),
+                        distance_m=float((units * k_cal).sum()))
+    return SourceTrack("PDR", res.t_s, east, north, info)
+
+
+def _acoustic(walk, site):
+    from features.acoustic_features import analyse_audio
+    from features.acoustic_positions import PositionConfig
+
+    from .commands.features_audio import timing_from_walk
+
+    timing = timing_from_walk(walk.directory, site, None)
+    positions = PositionConfig(max_clock_offset_s=timing.start_uncertainty_s + 0.05, motion_speed_m_s=1.4)
+    res = analyse_audio(walk.path("audio"), site, timing, positions=positions)
+    fixes = res.fixes
+    arr = np.array([[f.t_s, f.east_m, f.north_m] for f in fixes]).reshape(-1, 3)
+    return SourceTrack("acoustic", arr[:, 0], arr[:, 1], arr[:, 2],
+                       {"chirps": res.n_detections, "fixes": len(fixes)}), res.rows
 
 
 def walk_sources(walk_dir: str | os.PathLike, pdr_k: float | None = None) -> WalkSources:
@@ -76,6 +119,9 @@ def walk_sources(walk_dir: str | os.PathLike, pdr_k: float | None = None) -> Wal
     tracks, feats, quality = {}, None, None
     if walk.path("gnss") is not None:
         tracks["GNSS"], feats, quality = _gnss(walk, site)
+    acoustic_rows = None
+    if walk.path("audio") is not None and site.beacons:
+        tracks["acoustic"], acoustic_rows = _acoustic(walk, site)
     if walk.path("imu") is not None:
         if truth is not None:
             start = (float(truth.east_m[0]), float(truth.north_m[0]))
@@ -83,8 +129,9 @@ def walk_sources(walk_dir: str | os.PathLike, pdr_k: float | None = None) -> Wal
             start = (float(tracks["GNSS"].east_m[0]), float(tracks["GNSS"].north_m[0]))
         else:
             start = (0.0, 0.0)
-        tracks["PDR"] = _pdr(walk, start, pdr_k)
-    return WalkSources(site=site, tracks=tracks, truth=truth, gnss_features=feats, quality=quality)
+        tracks["PDR"] = _pdr(walk, start, pdr_k, tracks.get("GNSS"), quality)
+    return WalkSources(site=site, tracks=tracks, truth=truth, gnss_features=feats, quality=quality,
+                       acoustic_features=acoustic_rows)
 
 
 def error_table(src: WalkSources) -> dict:
@@ -134,7 +181,8 @@ def plot_walk(src: WalkSources, path: str | os.PathLike, title: str = "") -> Pat
     for name, tr in src.tracks.items():
         style = _SRC_STYLE.get(name, {})
         if name == "PDR":
-            ax.plot(tr.east_m, tr.north_m, "-", color=style["color"], lw=1, label=name)
+            lab = name + (" (K, yaw from RTK GNSS)" if "calibrated_steps" in tr.info else "")
+            ax.plot(tr.east_m, tr.north_m, "-", color=style["color"], lw=1, label=lab)
         else:
             ax.scatter(tr.east_m, tr.north_m, label=name, alpha=0.6, **style)
     ax.set_xlim(src.site.grid.east_min_m, src.site.grid.east_max_m)

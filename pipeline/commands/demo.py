@@ -70,6 +70,16 @@ def run_demo(args) -> int:
             if sel.any():
                 print(f"           {c:5s}: " + " / ".join(f"{np.nanmedian(feats[f][sel]):.2f}" for f in
                                                         ("att_mean_db", "invisible_ratio", "dop_growth")))
+    rows = src.acoustic_features
+    if rows:
+        t = np.array([r["t_s"] for r in rows])
+        cls = truth.class_at(t)
+        print("[features] acoustic medians per truth class (rms_delay_ms / rician_k_db), windows with a chirp:")
+        for k, c in enumerate(("open", "light", "heavy")):
+            sel = [r for r, ck in zip(rows, cls) if ck == k and r["acoustic_available"]]
+            if sel:
+                print(f"           {c:5s}: {np.nanmedian([r['rms_delay_ms'] for r in sel]):.2f} / "
+                      f"{np.nanmedian([r['rician_k_db'] for r in sel]):.1f}   ({len(sel)} windows)")
     print("[errors] horizontal error per source, median (p95) in m:   all | open | light | heavy")
     for name, row in error_table(src).items():
         cells = [f"{row[c][2]:.2f} ({row[c][3]:.2f})" if c in row else "-" for c in ("all", "open", "light", "heavy")]
