@@ -453,15 +453,16 @@ def frame_fix(detections: list[ChirpDetection], site: Site, c: float, bandwidth:
         return None
     t_mean = sum(d.arrival_s for d in used) / len(used)
     ve, vn = (0.0, 0.0) if velocity_m_s is None else velocity_m_s
-    ranges = [BeaconRange(d.beacon_id, by_id[d.beacon_id].east_m - ve * (d.arrival_s - t_mean),
-                          by_id[d.beacon_id].north_m - vn * (d.arrival_s - t_mean),
-                          by_id[d.beacon_id].up_m, c * (d.arrival_s - d.tx_s),
-                          toa_range_sigma_m(d.snr_db, bandwidth[d.beacon_id], c), d.arrival_s)
-              for d in used]
-    if config.motion_speed_m_s > 0:
-        # Walking during the frame: σᵢ² += ½·(v·(tᵢ − t̄))² (see PositionConfig).
-        ranges = [dataclasses.replace(r, sigma_m=math.sqrt(r.sigma_m ** 2 + 0.5 * (
-            config.motion_speed_m_s * (r.arrival_s - t_mean)) ** 2)) for r in ranges]
+    # Walking during the frame: σᵢ² += ½·(v·(tᵢ − t̄))² (see PositionConfig; v = 0 when standing).
+    v_motion = config.motion_speed_m_s if config.motion_speed_m_s > 0 else 0.0
+    ranges = []
+    for d in used:
+        b, dt = by_id[d.beacon_id], d.arrival_s - t_mean
+        sigma_m = toa_range_sigma_m(d.snr_db, bandwidth[d.beacon_id], c)
+        if v_motion:
+            sigma_m = math.sqrt(sigma_m ** 2 + 0.5 * (v_motion * dt) ** 2)
+        ranges.append(BeaconRange(d.beacon_id, b.east_m - ve * dt, b.north_m - vn * dt, b.up_m,
+                                  c * (d.arrival_s - d.tx_s), sigma_m, d.arrival_s))
     x0 = None if start is None else np.array([start.east_m, start.north_m, start.clock_offset_s])
     return solve_position(ranges, site, c, config, x0, clock_prior, position_prior)
 

@@ -38,7 +38,8 @@ import soundfile as sf
 from .constants import AUDIO_FS_HZ
 from .errors import AudioError
 
-__all__ = ["AudioWarning", "AudioInfo", "AudioBlock", "audio_info", "iter_audio_blocks", "read_audio"]
+__all__ = ["AudioWarning", "AudioInfo", "AudioBlock", "audio_info", "iter_audio_blocks", "read_audio",
+           "count_clipped"]
 
 _RESAMPLE_PAD = 64
 """Input samples of context each side of a resampled block (the default
@@ -123,6 +124,17 @@ def audio_info(path: str | os.PathLike) -> AudioInfo:
     return AudioInfo(str(path), int(info.samplerate), int(info.channels), int(info.frames), info.subtype, truncated)
 
 
+def count_clipped(x: np.ndarray) -> int:
+    """Number of samples with ``|x| >= CLIP_LEVEL`` (the common case, none, costs two reductions, not a copy).
+
+    >>> count_clipped(np.array([0.5, -1.0, 0.9995], dtype=np.float32))
+    2
+    """
+    if len(x) == 0 or max(float(x.max()), -float(x.min())) < CLIP_LEVEL:
+        return 0
+    return int(np.count_nonzero(np.abs(x) >= CLIP_LEVEL))
+
+
 def _read_dtype(subtype: str) -> tuple[str, float]:
     """numpy dtype to read as, and the scale to full scale 1.0."""
     if subtype in ("PCM_16", "PCM_U8", "PCM_S8"):
@@ -161,10 +173,8 @@ def iter_audio_blocks(path: str | os.PathLike, block_s: float = 4.0,
                     raw = fh.read(block_in, dtype=dtype, always_2d=True)
                     if len(raw) == 0:
                         break
-                    x = raw[:, 0]
-                    clipped = int(np.count_nonzero(np.abs(x.astype(np.float32) * scale) >= CLIP_LEVEL))
-                    samples = x.astype(np.float32) * np.float32(scale)
-                    yield AudioBlock(out_index, samples, clipped)
+                    samples = np.multiply(raw[:, 0], np.float32(scale), dtype=np.float32)
+                    yield AudioBlock(out_index, samples, count_clipped(samples))
                     out_index += len(samples)
                 return
             yield from _resampled_blocks(fh, dtype, scale, block_in, ratio, info.n_frames)

@@ -55,7 +55,7 @@ import numpy as np
 from .acoustic_positions import AcousticFix, PositionConfig
 from .acoustic_timing import AudioTiming, ChirpDetection, SearchWindow, frame_phase_s, speed_of_sound_m_s
 from .acoustic_tracking import ClockPositionTracker, acquisition_windows, frame_fix
-from .audio import CLIP_LEVEL, AudioBlock, audio_info, iter_audio_blocks
+from .audio import CLIP_LEVEL, AudioBlock, audio_info, count_clipped, iter_audio_blocks
 from .cir import CirFeatures, analyse_cirs
 from .constants import AUDIO_FS_HZ
 from .errors import ConfigError
@@ -127,15 +127,18 @@ class AudioStats:
         need = first_bin + 1 + n_full + (1 if len(body) % bin_len else 0)
         for lst in (self.n_samples, self.n_clipped, self.sum_sq):
             lst.extend([0] * (need - len(lst)))
+        any_clipped = count_clipped(x) > 0
         for b, seg in parts + [(first_bin + 1 + n_full, body[n_full * bin_len:])]:
             if len(seg):
                 self.n_samples[b] += len(seg)
-                self.n_clipped[b] += int(np.count_nonzero(np.abs(seg) >= CLIP_LEVEL))
+                self.n_clipped[b] += count_clipped(seg) if any_clipped else 0
                 self.sum_sq[b] += float(np.dot(seg, seg))
         if n_full:
             full = body[: n_full * bin_len].reshape(n_full, bin_len)
-            clipped = np.count_nonzero(np.abs(full) >= CLIP_LEVEL, axis=1)
-            energy = np.einsum("ij,ij->i", full, full, dtype=np.float64)
+            clipped = (np.count_nonzero(np.abs(full) >= CLIP_LEVEL, axis=1) if any_clipped
+                       else np.zeros(n_full, dtype=int))
+            # float32 sums (relative error ~1e-5 over a 0.1 s bin): the energy only flags silence.
+            energy = np.einsum("ij,ij->i", full, full)
             for k in range(n_full):
                 b = first_bin + 1 + k
                 self.n_samples[b] += bin_len
@@ -419,7 +422,7 @@ def detect_frames(path: str | os.PathLike, site: Site, timing: AudioTiming,
                 cirs[r, j_got - j_a: j_got - j_a + seg.shape[1]] = seg[t]
                 cir_lo[r] = max(0, -(-(w.lo + bank.delay_samples) // dec) - j_a, j_got - j_a)
             noise_power = 2.0 * float(sigmas[t]) ** 2   # Rayleigh envelope of scale σ: E[env²] = 2σ²
-            toa = analyse_cirs(bank.envelope(snippets, t)[:, :toa_len], 1.0 / fs, noise_power=noise_power,
+            toa = analyse_cirs(bank.envelope(snippets, t, toa_len), 1.0 / fs, noise_power=noise_power,
                                max_lead_s=config.max_lead_s, search_start=np.minimum(lo_rel, lead + 8),
                                with_features=False)
             for r, (w, _) in enumerate(group):
@@ -439,9 +442,11 @@ def detect_frames(path: str | os.PathLike, site: Site, timing: AudioTiming,
                                  noise_power=np.array([q[5] for q in rows]), max_lead_s=config.max_lead_s,
                                  pulse_width_s=float(bank.mainlobe_s[t]), search_start=np.array([q[4] for q in rows]),
                                  search_stop=(2 * lead + 9) // dec + 1)
-            for (slot, i, _, _, _, _), f in zip(rows, feats.features):
+            for (slot, i, _, _, _, _), f in zip(rows, feats.features.tolist()):
                 dets = frames[slot][2]
-                dets[i] = dataclasses.replace(dets[i], features=CirFeatures(*f.tolist()))
+                d = dets[i]
+                dets[i] = ChirpDetection(d.frame, d.beacon_id, d.tx_s, d.arrival_s, d.snr_db, CirFeatures(*f),
+                                         d.associated)
         pending_cirs.clear()
 
     def candidates(w: SearchWindow, sigma: float, max_candidates: int = 12) -> list[float]:

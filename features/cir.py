@@ -166,9 +166,11 @@ def _masked_moments(x: np.ndarray, w: np.ndarray, origin: np.ndarray):
     with np.errstate(invalid="ignore", divide="ignore"):
         mean = (w * x).sum(axis=1) / total
         c = x - mean[:, None]
-        var = (w * c * c).sum(axis=1) / total
-        m3 = (w * c ** 3).sum(axis=1) / total
-        m4 = (w * c ** 4).sum(axis=1) / total
+        c2 = c * c
+        wc2 = w * c2
+        var = wc2.sum(axis=1) / total
+        m3 = (wc2 * c).sum(axis=1) / total
+        m4 = (wc2 * c2).sum(axis=1) / total
         spread = var > 1e-30 * np.maximum(mean * mean, 1e-300)
         skew = np.where(spread, m3 / np.where(spread, var, 1.0) ** 1.5, np.nan)
         kurt = np.where(spread, m4 / np.where(spread, var, 1.0) ** 2, np.nan)
@@ -216,11 +218,11 @@ def analyse_cirs(amplitude: np.ndarray, tap_s: float, *, noise_power=None, max_l
     if noise_power is None:
         noise = np.median(power, axis=1) / np.log(2.0)
     else:
-        noise = np.broadcast_to(np.asarray(noise_power, dtype=float), (n,)).copy()
-    start = np.broadcast_to(np.asarray(search_start, dtype=int), (n,))
-    stop = np.broadcast_to(np.asarray(length if search_stop is None else search_stop, dtype=int), (n,))
-    stop = np.clip(stop, 1, length)
-    start = np.clip(start, 0, stop - 1)
+        noise = np.zeros(n) + np.asarray(noise_power, dtype=float)
+    # (np.minimum/np.maximum rather than np.clip, whose Python wrapper costs more than the work here.)
+    stop = np.minimum(np.maximum(np.zeros(n, dtype=int) + np.asarray(
+        length if search_stop is None else search_stop, dtype=int), 1), length)
+    start = np.minimum(np.maximum(np.asarray(search_start, dtype=int), 0), stop - 1)
     in_search = (idx >= start[:, None]) & (idx < stop[:, None])
     peak = np.argmax(np.where(in_search, power, -np.inf), axis=1)
     rows = np.arange(n)
@@ -239,14 +241,15 @@ def analyse_cirs(amplitude: np.ndarray, tap_s: float, *, noise_power=None, max_l
     first = np.argmax(stop_here & (idx >= edge[:, None]), axis=1)
     first = np.minimum(first, peak)
     # Log-parabolic refinement of the first path's peak.
-    im1, ip1 = np.clip(first - 1, 0, length - 1), np.clip(first + 1, 0, length - 1)
+    im1, ip1 = np.maximum(first - 1, 0), np.minimum(first + 1, length - 1)
     with np.errstate(divide="ignore", invalid="ignore"):
         y0 = np.log(np.maximum(a[rows, first], 1e-300))
         ym = np.log(np.maximum(a[rows, im1], 1e-300))
         yp = np.log(np.maximum(a[rows, ip1], 1e-300))
         denom = ym - 2.0 * y0 + yp
         interior = (first > 0) & (first < length - 1) & (denom < 0)
-        delta = np.where(interior, np.clip(0.5 * (ym - yp) / np.where(interior, denom, -1.0), -0.5, 0.5), 0.0)
+        delta = np.where(interior, np.minimum(np.maximum(0.5 * (ym - yp) / np.where(interior, denom, -1.0), -0.5),
+                                              0.5), 0.0)
     tau0 = first + delta
     amp0 = np.exp(y0 - 0.25 * (ym - yp) * delta)
 

@@ -224,17 +224,24 @@ class MatchedFilterBank:
     def n_templates(self) -> int:
         return len(self.specs)
 
-    def envelope(self, x: np.ndarray, template: int) -> np.ndarray:
+    def envelope(self, x: np.ndarray, template: int, n_out: int | None = None) -> np.ndarray:
         """Full-rate matched-filter envelope of short signals for one template.
 
         ``x`` of shape (m,) or (n, m) gives the same shape: element ``s`` is the
         envelope for a chirp starting at ``x[..., s]``; the last ``kernel_len``
-        elements see zeros beyond ``x``. The kernel spectrum is cached per FFT
+        elements see zeros beyond ``x``. ``n_out`` keeps only the first ``n_out``
+        elements (shape (..., n_out)), which allows a shorter FFT: the circular
+        convolution of size N equals the linear one at outputs ``delay_samples + s``
+        for ``s < n_out`` when N ≥ delay + n_out and N ≥ m + kernel_len − 1 − delay
+        (no wrapped-round output lands there). The kernel spectrum is cached per FFT
         size, so a batch of snippets costs one real and one complex FFT call.
         """
         x = np.asarray(x, dtype=np.float32)
         m = x.shape[-1]
-        n = m + self.kernel_len
+        if n_out is None:
+            n_out = m
+        n_out = min(int(n_out), m)
+        n = max(self.delay_samples + n_out, m + self.kernel_len - 1 - self.delay_samples, m)
         nfft = scipy.fft.next_fast_len(n)
         key = (nfft, template)
         spectrum = self._spectra.get(key)
@@ -252,7 +259,7 @@ class MatchedFilterBank:
         full = np.zeros(x.shape[:-1] + (nfft,), dtype=np.complex64)
         full[..., : xf.shape[-1]] = xf
         z = scipy.fft.ifft(full * spectrum, axis=-1)
-        return np.abs(z[..., self.delay_samples: self.delay_samples + m])
+        return np.abs(z[..., self.delay_samples: self.delay_samples + n_out])
 
 
 def analytic_convolve(x: np.ndarray, h: np.ndarray, post=None) -> np.ndarray:
