@@ -361,7 +361,16 @@ def _real_lines(limit: int = 400) -> list[str]:
     return lines[:limit]
 
 
-_LINES = _real_lines() if GPSD.is_dir() else [_s("GPGGA,120000.00,3000.0,N,12000.0,E,1,04,1.0,5.0,M,0.0,M,,")]
+def _repo_lines() -> list[str]:
+    """Fallback corpus when ../shared/data is absent: the repo's own hand-made NMEA files."""
+    lines = []
+    for path in sorted(DATA.glob("*.nmea")):
+        lines += [ln for ln in path.read_text(encoding="latin-1").splitlines() if ln.startswith("$")]
+    random.Random(0).shuffle(lines)
+    return lines
+
+
+_LINES = _real_lines() if GPSD.is_dir() else _repo_lines()
 
 
 @st.composite
@@ -414,7 +423,7 @@ def test_fuzzed_real_lines_never_raise(mutated, resign):
         stats = ReadStats()
         epochs = list(iter_epochs(lines, stats, parser=parser))
         assert all(e.t_s >= 0 for e in epochs)
-        assert stats.sentences >= 6
+        assert stats.sentences >= min(6, len(_LINES))
         results[parser] = (epochs, stats)
     # the whole-file path (vectorised splitting and checksums) sees exactly what the line path sees
     stats = ReadStats()
