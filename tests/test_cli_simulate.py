@@ -116,6 +116,12 @@ def test_features_gnss_takes_time_base_and_site_from_walk_toml(tmp_path, capsys)
     first = rows[1].split(",")
     assert abs(float(first[1]) - float(truth[1])) < 1.0 and abs(float(first[2]) - float(truth[2])) < 1.0
     assert tomllib.loads((tmp_path / "w" / "walk.toml").read_text())["gnss"]["file"] == "gnss.nmea"
+    # the audio command likewise finds walk.toml (time base, frames) and the site through it
+    code = cli(["features", "audio", str(tmp_path / "w" / "audio.wav"), "--out", str(tmp_path / "a.csv")])
+    assert code == 0, capsys.readouterr().err
+    rows = (tmp_path / "a.csv").read_text().splitlines()
+    assert rows[0].startswith("t_s,") and len(rows) >= 10
+    assert float(rows[1].split(",")[0]) == 1.0  # first 2 s window centred 1 s after the walk's start
 
 
 def test_features_gnss_writes_all_outputs_or_none(tmp_path, capsys):

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import argparse
 import io
 import math
 import sys
@@ -10,28 +9,9 @@ import warnings
 from pathlib import Path
 
 from features.errors import ConfigError
+from pipeline.args import bounded, non_negative, positive
 
 GROUP = "features"
-
-
-def _positive(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a positive number, got {text!r}") from None
-    if not (value > 0 and math.isfinite(value)):
-        raise argparse.ArgumentTypeError(f"expected a positive number, got {text!r}")
-    return value
-
-
-def _non_negative(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number >= 0, got {text!r}") from None
-    if not (value >= 0 and math.isfinite(value)):
-        raise argparse.ArgumentTypeError(f"expected a number >= 0, got {text!r}")
-    return value
 
 
 def register(sub) -> None:
@@ -44,21 +24,23 @@ def register(sub) -> None:
         epilog="Example: envfuse features audio walk7/audio.wav --site site1 --walk walk7/walk.toml "
                "--out audio_features.csv --positions audio_positions.csv")
     p.add_argument("wav", type=Path, help="audio file (WAV; mono or first channel)")
-    p.add_argument("--site", type=Path, required=True, help="site directory or site.toml (beacons, chirps, frames)")
+    p.add_argument("--site", type=Path, default=None,
+                   help="site directory or site.toml (beacons, chirps, frames); default: the site named by --walk")
     p.add_argument("--walk", type=Path, default=None,
                    help="walk.toml or cell.toml: [audio] start_s / start_uncertainty_s and start_utc place the "
                         "samples on the walk time base and the beacon frames (default: the first sample at t=0 "
-                        "on a frame boundary, see --start-uncertainty-s)")
-    p.add_argument("--start-uncertainty-s", type=_non_negative, default=None,
+                        "on a frame boundary, see --start-uncertainty-s); a walk.toml/cell.toml beside the WAV is used "
+                        "when --walk is not given")
+    p.add_argument("--start-uncertainty-s", type=non_negative, default=None,
                    help="stated uncertainty of the audio start, s (default: from --walk, else 0.05)")
     p.add_argument("--out", type=Path, required=True, help="feature CSV, one row per window")
     p.add_argument("--positions", type=Path, default=None, help="also write one position row per frame (CSV)")
-    p.add_argument("--window-s", type=_positive, default=2.0, help="window length, s (default 2)")
-    p.add_argument("--hop-s", type=_positive, default=1.0, help="window hop, s (default 1)")
-    p.add_argument("--max-range-m", type=_positive, default=None,
+    p.add_argument("--window-s", type=bounded(0.2, 3600.0, "s"), default=2.0, help="window length, s (default 2)")
+    p.add_argument("--hop-s", type=bounded(0.05, 3600.0, "s"), default=1.0, help="window hop, s (default 1)")
+    p.add_argument("--max-range-m", type=positive, default=None,
                    help="largest range at which a beacon is searched, m (default: the site's extent)")
     p.add_argument("--p-fa", type=float, default=1e-6, help="false-alarm probability per search window (1e-6)")
-    p.add_argument("--motion-speed-m-s", type=_non_negative, default=None,
+    p.add_argument("--motion-speed-m-s", type=non_negative, default=None,
                    help="walking-speed prior for positions, m/s (default: 0 for a survey cell.toml, whose capture "
                         "is static, else 1.4)")
     p.set_defaults(func=_run)
@@ -111,7 +93,16 @@ def _run(args) -> int:
     from features.fileio import atomic_write_text
     from features.site import load_site
 
-    site = load_site(args.site)
+    if args.walk is None:
+        beside = [args.wav.parent / n for n in ("walk.toml", "cell.toml") if (args.wav.parent / n).is_file()]
+        args.walk = beside[0] if beside else None
+    if args.site is None:
+        from features.walk import load_walk
+        if args.walk is None:
+            raise ConfigError("--site is needed (no walk.toml/cell.toml beside the WAV names one)")
+        site = load_walk(args.walk).load_site()
+    else:
+        site = load_site(args.site)
     if not site.beacons:
         raise ConfigError(f"{args.site}: the site lists no [[beacons]]")
     timing = timing_from_walk(args.walk, site, args.start_uncertainty_s)
