@@ -84,8 +84,8 @@ class _HopBins:
             self.snr_sum.append(0.0)
             self.beacons.append(set())
         ok = np.isfinite(values)
-        self.sums[k][ok] += values[ok]
-        self.counts[k][ok] += 1
+        self.sums[k] += np.where(ok, values, 0.0)
+        self.counts[k] += ok
         self.n_chirps[k] += 1
         self.snr_sum[k] += snr_db
         self.beacons[k].add(beacon_id)

@@ -329,23 +329,20 @@ def _gauss_newton_subsets(ranges: list[BeaconRange], masks: np.ndarray, h: float
     ok = np.ones(k, dtype=bool)
     prior_w = 0.0 if clock_prior is None else 1.0 / clock_prior[1] ** 2
 
+    jac = np.empty((k, len(ranges), 3))                            # (k, n, 3): ∂f/∂e, ∂f/∂n, ∂f/∂δ
+    jac[:, :, 2] = c
+
     def normal_equations(x):
+        # Jᵀ W J and Jᵀ W r of every subset as two batched (3, n) @ (n, ·) products.
         de, dn = x[:, :1] - s[None, :, 0], x[:, 1:2] - s[None, :, 1]
         r = np.sqrt(de * de + dn * dn + du2[None, :])
-        je, jn = de / r, dn / r
+        jac[:, :, 0] = de / r
+        jac[:, :, 1] = dn / r
         res = rho[None, :] - (r + c * x[:, 2:3])
-        normal = np.empty((k, 3, 3))
-        normal[:, 0, 0] = np.einsum("kn,kn,kn->k", je, w, je)
-        normal[:, 0, 1] = normal[:, 1, 0] = np.einsum("kn,kn,kn->k", je, w, jn)
-        normal[:, 1, 1] = np.einsum("kn,kn,kn->k", jn, w, jn)
-        normal[:, 0, 2] = normal[:, 2, 0] = c * np.einsum("kn,kn->k", je, w)
-        normal[:, 1, 2] = normal[:, 2, 1] = c * np.einsum("kn,kn->k", jn, w)
-        normal[:, 2, 2] = c * c * w.sum(axis=1) + prior_w
-        wres = w * res
-        gradient = np.empty((k, 3))
-        gradient[:, 0] = np.einsum("kn,kn->k", je, wres)
-        gradient[:, 1] = np.einsum("kn,kn->k", jn, wres)
-        gradient[:, 2] = c * wres.sum(axis=1)
+        jw = np.transpose(jac * w[:, :, None], (0, 2, 1))          # (k, 3, n)
+        normal = jw @ jac
+        normal[:, 2, 2] += prior_w
+        gradient = (jw @ res[:, :, None])[:, :, 0]
         if clock_prior is not None:
             gradient[:, 2] += (clock_prior[0] - x[:, 2]) * prior_w
         return normal, gradient, res

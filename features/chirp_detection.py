@@ -323,10 +323,10 @@ def detect_frames(path: str | os.PathLike, site: Site, timing: AudioTiming,
         j_lo = -(-(w.lo + bank.delay_samples) // dec)
         j_hi = (w.hi + bank.delay_samples) // dec + 1
         _, _, jj, hh = maxima[t]
-        a, b = np.searchsorted(jj, [j_lo, j_hi])
+        a, b = int(jj.searchsorted(j_lo)), int(jj.searchsorted(j_hi))
         jj, hh = jj[a:b], hh[a:b]
         keep = hh > gamma_of(w, sigma)
-        return mf.chirp_start(jj[keep]).astype(int), hh[keep]
+        return dec * jj[keep] - bank.delay_samples, hh[keep]     # chirp starts (StreamingMatchedFilter.chirp_start)
 
     def locate(w: SearchWindow, sigma: float) -> int | None:
         """Chirp start of the detection in ``w``: its earliest peak (strongest, when not associated)."""
