@@ -115,16 +115,20 @@ class ClockPositionTracker:
         out = []
         tracking = self.tracking_at(frame_start_s)
         expected = None
+        if tracking:
+            fix = self.last_fix
+            cov = fix.covariance.tolist()
+            sigma_h_m = math.sqrt(max(cov[0][0], cov[1][1], 0.0))        # per fix, not per beacon
+            sigma_clock_s = math.sqrt(max(cov[2][2], 0.0))
+            here = (fix.east_m, fix.north_m, self.site.device_height_m)
         for i in self.order:
             b = self.site.beacons[i]
             tx = frame_start_s + b.slot * ac.slot_s
             if tracking:
-                fix = self.last_fix
                 dt = max(0.0, tx - fix.t_s)
-                cov = fix.covariance
-                radius_m = 3.0 * math.sqrt(max(cov[0, 0], cov[1, 1], 0.0)) + self.max_speed_m_s * dt + 0.5
-                clock_s = 3.0 * math.sqrt(max(cov[2, 2], 0.0)) + self.max_drift_ppm * 1e-6 * dt + 5e-4
-                r = math.dist((fix.east_m, fix.north_m, self.site.device_height_m), (b.east_m, b.north_m, b.up_m))
+                radius_m = 3.0 * sigma_h_m + self.max_speed_m_s * dt + 0.5
+                clock_s = 3.0 * sigma_clock_s + self.max_drift_ppm * 1e-6 * dt + 5e-4
+                r = math.dist(here, (b.east_m, b.north_m, b.up_m))
                 if r - radius_m > self.r_max:
                     continue
                 centre = tx + r / self.c + fix.clock_offset_s

@@ -65,7 +65,7 @@ from .site import Beacon, Site
 __all__ = ["AudioTiming", "DetectorConfig", "ChirpDetection", "FrameResult", "AudioStats", "speed_of_sound_m_s",
            "frame_phase_s", "beacon_chirp_spec", "detect_frames", "frame_fix", "max_site_range_m"]
 
-_FEATURE_BATCH_FRAMES = 8
+_FEATURE_BATCH_FRAMES = 32
 """Frames whose CIR features are computed in one batch (results are yielded that much later)."""
 
 _NO_FEATURES = CirFeatures(*([float("nan")] * 9))

@@ -38,6 +38,7 @@ Undefined statistics (a single tap has no spread) are NaN, not zero.
 from __future__ import annotations
 
 from dataclasses import dataclass, fields
+from operator import attrgetter
 
 import numpy as np
 
@@ -72,11 +73,13 @@ class CirFeatures:
 
     def as_array(self) -> np.ndarray:
         """Shape (9,), in :data:`FEATURE_NAMES` order."""
-        return np.array([getattr(self, name) for name in FEATURE_NAMES], dtype=float)
+        return np.array(_FEATURE_GETTER(self), dtype=float)
 
 
 FEATURE_NAMES = tuple(f.name for f in fields(CirFeatures))
 """Column names of the nine CIR features, in order."""
+
+_FEATURE_GETTER = attrgetter(*FEATURE_NAMES)
 
 
 @dataclass(frozen=True)
