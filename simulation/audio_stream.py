@@ -30,6 +30,7 @@ from typing import Iterator
 
 import numpy as np
 import soundfile as sf
+from tqdm import tqdm
 
 from features.fileio import atomic_path
 from features.site import Site
@@ -109,7 +110,7 @@ def _emissions(site: Site, start_utc, t_begin_s: float, t_end_s: float) -> Itera
 
 
 def render_audio(site: Site, trajectory: Trajectory, seed: int, wav_path,
-                 cfg: AudioConfig | None = None, truth_path=None) -> AudioResult:
+                 cfg: AudioConfig | None = None, truth_path=None, progress: bool = False) -> AudioResult:
     """Simulate the recording along ``trajectory`` into the int16 WAV at ``wav_path`` (atomic).
 
     The per-emission truth goes to ``truth_path`` (``audio_truth.csv``, atomic)
@@ -117,6 +118,7 @@ def render_audio(site: Site, trajectory: Trajectory, seed: int, wav_path,
     Randomness comes only from ``stream_rng(seed, "audio", ...)``: the same
     seed gives the same bytes, whatever ``block_samples``. With a truth path,
     memory is bounded by the block size, not the recording's length.
+    ``progress`` shows a bar of audio seconds rendered on stderr (terminals only).
     """
     cfg = cfg or AudioConfig()
     fs = cfg.fs_hz
@@ -176,8 +178,13 @@ def render_audio(site: Site, trajectory: Trajectory, seed: int, wav_path,
                 counts["clipped"] += int(np.count_nonzero(np.abs(q) > 32767))
                 out.write(np.clip(q, -32768, 32767).astype(np.int16))
 
+        bar = stack.enter_context(tqdm(total=int(math.ceil(trajectory.duration_s)), unit="s", desc="audio",
+                                       disable=None if progress else True, leave=False))
         for t_e, bid, i, b, spec in emissions:
             counts["emissions"] += 1
+            done = int(min(max(t_e - true_start, 0.0), trajectory.duration_s))
+            if done > bar.n:
+                bar.update(done - bar.n)
             flush_until((t_e - true_start) * fs_true - _PRE_SAMPLES - 2)
             src = np.array([b.east_m, b.north_m, b.up_m])
             if spec not in alpha_min:
@@ -259,6 +266,7 @@ def write_audio(ctx: StreamContext) -> dict:
     """Stream writer: ``audio.wav`` and ``audio_truth.csv`` into ``ctx.out_dir``; returns the ``[audio]`` table."""
     cfg = AudioConfig.from_options(ctx.options)
     render_audio(ctx.site, ctx.trajectory, ctx.seed, ctx.out_dir / "audio.wav", cfg,
-                 truth_path=ctx.out_dir / "audio_truth.csv")
+                 truth_path=ctx.out_dir / "audio_truth.csv",
+                 progress=ctx.kind == "walk" and bool(ctx.options.get("progress", True)))
     return {"audio": {"file": "audio.wav", "fs_hz": cfg.fs_hz, "start_s": cfg.start_s,
                       "start_uncertainty_s": cfg.start_uncertainty_s}}
