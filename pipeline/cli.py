@@ -25,6 +25,7 @@ GROUPS = {
     "train": "fit environment and fusion models",
     "survey": "fingerprint survey of a substation",
     "evaluate": "evaluate fusion methods on walk logs",
+    "report": "tables and plots of what a walk recorded",
 }
 
 

@@ -51,7 +51,7 @@ def _gnss(walk, site):
     o = site.origin
     pos = fixes_to_enu(epochs, o.lat_deg, o.lon_deg, o.alt_m)
     feats = gnss_features(sky_arrays(epochs))
-    return SourceTrack("GNSS", pos.t_s, pos.east_m, pos.north_m, {"skipped": stats.summary()}), feats, pos.quality
+    return SourceTrack("GNSS", pos.t_s, pos.east_m, pos.north_m, {"nmea": stats.summary()}), feats, pos.quality
 
 
 def _pdr(walk, start_en, k: float | None, gnss: SourceTrack | None = None, quality=None):

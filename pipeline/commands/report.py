@@ -1,0 +1,48 @@
+"""``envfuse report walk``: every raw position source of a walk against its truth, as a table and a PNG."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from features.errors import ConfigError
+from pipeline.args import positive
+
+GROUP = "report"
+
+
+def register(sub) -> None:
+    p = sub.add_parser("walk", help="sources of one walk against truth: error table and PNG",
+                       description="Read a walk directory's files (NMEA, audio, IMU, truth.csv), extract GNSS "
+                                   "fixes, acoustic positions and the PDR track, print the horizontal error per "
+                                   "source and environment class, and draw the map and errors over time.",
+                       epilog="Example: envfuse report walk walk7 --out walk7.png")
+    p.add_argument("walk", type=Path, help="walk directory (walk.toml, streams, truth.csv)")
+    p.add_argument("--out", type=Path, default=None, help="PNG to write (default: WALK/sources.png)")
+    p.add_argument("--k", type=positive, default=None,
+                   help="Weinberg K for PDR (default: calibrated on RTK-fixed GNSS steps of the walk)")
+    p.set_defaults(func=_run)
+
+
+def _run(args) -> int:
+    from pipeline.walk_report import error_table, plot_walk, walk_sources
+
+    if not (args.walk / "walk.toml").is_file():
+        raise ConfigError(f"{args.walk}: no walk.toml (expected a walk directory)")
+    src = walk_sources(args.walk, pdr_k=args.k)
+    if not src.tracks:
+        raise ConfigError(f"{args.walk}: walk.toml lists no gnss, audio or imu stream")
+    table = error_table(src)
+    if table:
+        print("horizontal error, m: n / mean / median / p95 per class")
+        for name, row in table.items():
+            parts = [f"{c} {n} / {m:.2f} / {md:.2f} / {p95:.2f}" for c, (n, m, md, p95) in row.items()]
+            print(f"  {name:8s} " + "; ".join(parts))
+    else:
+        print("no truth.csv: positions only, no errors")
+    for name, tr in src.tracks.items():
+        extra = ", ".join(f"{k}={v:.3g}" if isinstance(v, float) else f"{k}={v}" for k, v in tr.info.items())
+        print(f"  {name}: {len(tr.t_s)} positions" + (f" ({extra})" if extra else ""))
+    out = args.out or args.walk / "sources.png"
+    plot_walk(src, out, title=f"{args.walk.name}: sources against truth")
+    print(f"plot -> {out}")
+    return 0
