@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
+from features.errors import ConfigError
 from features.fileio import atomic_directory, write_toml
 from features.site import load_site
 from features.walk import parse_utc
@@ -30,6 +31,7 @@ def default_start_utc(seed: int) -> datetime:
 
 
 def format_utc(t: datetime) -> str:
+    """ISO 8601 UTC with milliseconds and a ``Z``, as walk.toml and cell.toml store times."""
     return t.astimezone(timezone.utc).isoformat(timespec="milliseconds").replace("+00:00", "Z")
 
 
@@ -54,7 +56,6 @@ def simulate_walk(site_path: str | os.PathLike, out_dir: str | os.PathLike, seed
     The directory is built under a temporary name and renamed into place only
     when every stream is written. Returns the output path.
     """
-    from features.errors import ConfigError
     if not (np.isfinite(duration_s) and duration_s >= 1.0):
         raise ConfigError(f"--duration must be at least 1 s, got {duration_s}")
     if duration_s > 6 * 3600:
