@@ -166,6 +166,7 @@ def iter_audio_blocks(path: str | os.PathLike, block_s: float = 4.0,
     period = ratio.denominator
     block_in = max(period, int(round(block_s * info.fs_hz / period)) * period)
     out_index = 0
+    warned = False
     try:
         with sf.SoundFile(str(path)) as fh:
             if ratio == 1:
@@ -174,15 +175,29 @@ def iter_audio_blocks(path: str | os.PathLike, block_s: float = 4.0,
                     if len(raw) == 0:
                         break
                     samples = np.multiply(raw[:, 0], np.float32(scale), dtype=np.float32)
+                    if dtype.startswith("float"):
+                        warned = _zero_non_finite(samples, path, warned)
                     yield AudioBlock(out_index, samples, count_clipped(samples))
                     out_index += len(samples)
                 return
-            yield from _resampled_blocks(fh, dtype, scale, block_in, ratio, info.n_frames)
+            yield from _resampled_blocks(fh, dtype, scale, block_in, ratio, info.n_frames, path)
     except sf.LibsndfileError as exc:
         raise AudioError(f"{path}: read failed ({exc})") from None
 
 
-def _resampled_blocks(fh, dtype, scale, block_in, ratio: Fraction, n_frames: int) -> Iterator[AudioBlock]:
+def _zero_non_finite(samples: np.ndarray, path, warned: bool) -> bool:
+    """Set NaN/inf samples (possible in float WAVs only) to 0, warning once per file; returns ``warned``."""
+    bad = ~np.isfinite(samples)
+    if bad.any():
+        if not warned:
+            warnings.warn(f"{path}: non-finite (NaN/inf) samples read as silence", AudioWarning, stacklevel=3)
+        samples[bad] = 0.0
+        return True
+    return warned
+
+
+def _resampled_blocks(fh, dtype, scale, block_in, ratio: Fraction, n_frames: int,
+                      path="audio") -> Iterator[AudioBlock]:
     """Blockwise ``resample_poly(x, up, down)`` with context padding; see the module docstring."""
     import scipy.signal  # here, not at the top: importing it costs about 1.4 s, and 48 kHz files never need it
 
@@ -192,12 +207,15 @@ def _resampled_blocks(fh, dtype, scale, block_in, ratio: Fraction, n_frames: int
     cur = fh.read(block_in, dtype=dtype, always_2d=True)[:, 0]
     cur_clip = int(np.count_nonzero(np.abs(cur.astype(np.float32) * scale) >= CLIP_LEVEL))
     cur = cur.astype(np.float32) * np.float32(scale)
+    warned = _zero_non_finite(cur, path, False) if dtype.startswith("float") else False
     out_index = 0
     total_out = int(math.ceil(n_frames * up / down))
     while len(cur):
         nxt = fh.read(block_in, dtype=dtype, always_2d=True)[:, 0]
         nxt_clip = int(np.count_nonzero(np.abs(nxt.astype(np.float32) * scale) >= CLIP_LEVEL))
         nxt = nxt.astype(np.float32) * np.float32(scale)
+        if dtype.startswith("float"):
+            warned = _zero_non_finite(nxt, path, warned)
         left = prev[len(prev) - pad:] if len(prev) >= pad else np.concatenate(
             [np.zeros(pad - len(prev), np.float32), prev])
         right = nxt[:pad]

@@ -30,13 +30,15 @@ def _publish_mode(path: Path, directory: bool) -> None:
     os.chmod(path, (0o777 if directory else 0o666) & ~_umask())
 
 
-__all__ = ["atomic_write_text", "atomic_write_bytes", "atomic_path", "atomic_directory", "read_toml", "write_toml"]
+__all__ = ["atomic_write_text", "atomic_write_bytes", "atomic_write_many", "atomic_path", "atomic_directory", "read_toml", "write_toml"]
 
 
 @contextlib.contextmanager
 def atomic_path(path: str | os.PathLike, suffix: str = "") -> Iterator[Path]:
     """Yield a temporary path beside ``path``; on success rename it to ``path``, on error delete it."""
     path = Path(path)
+    if path.is_dir():
+        raise EnvfuseError(f"cannot write {path}: it is a directory")
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
         fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp" + suffix, dir=path.parent)
@@ -95,6 +97,15 @@ def atomic_directory(path: str | os.PathLike, overwrite: bool = False) -> Iterat
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
+
+
+def atomic_write_many(outputs: dict) -> None:
+    """Write several text files, all or none: each goes to a temporary file first, and the
+    renames happen only once every one of them is written."""
+    with contextlib.ExitStack() as stack:
+        for path, text in outputs.items():
+            tmp = stack.enter_context(atomic_path(path))
+            tmp.write_bytes(text.encode("utf-8"))
 
 
 def read_toml(path: str | os.PathLike) -> dict:

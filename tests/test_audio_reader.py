@@ -98,3 +98,21 @@ def test_no_warning_for_a_plain_48k_mono_file(tmp_path):
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         read_audio(tmp_path / "a.wav")
+
+
+def test_non_finite_float_samples_become_silence_with_one_warning(tmp_path):
+    import warnings as _w
+
+    import soundfile as _sf
+
+    from features.audio import AudioWarning, iter_audio_blocks
+    x = np.full(48_000 * 2, np.nan, np.float32)
+    x[:100] = 0.1
+    x[500] = np.inf
+    _sf.write(tmp_path / "nan.wav", x, 48_000, subtype="FLOAT")
+    with _w.catch_warnings(record=True) as caught:
+        _w.simplefilter("always")
+        blocks = list(iter_audio_blocks(tmp_path / "nan.wav", block_s=0.5))
+    got = np.concatenate([b.samples for b in blocks])
+    assert np.isfinite(got).all() and got[500] == 0.0 and got[50] == pytest.approx(0.1)
+    assert sum(issubclass(w.category, AudioWarning) and "non-finite" in str(w.message) for w in caught) == 1

@@ -70,7 +70,9 @@ def test_leading_edge_finds_weak_direct_path_before_stronger_echo():
     r = analyse_cir(a, 1.0, noise_power=1e-10, max_lead_s=50.0, pulse_width_s=8.0)
     assert r.first_arrival_tap == pytest.approx(100.0, abs=0.05)
     assert r.peak_tap == 130
-    assert r.features.rician_k_db < 0
+    # K = first-path power / power of the other taps: the two lobes have equal shapes, so
+    # K ≈ 20·log10(0.3 / 1.0) = −10.46 dB, less the first lobe's taps counted among "the others".
+    assert r.features.rician_k_db == pytest.approx(20 * math.log10(0.3), abs=0.5)
     # With a look-back shorter than the separation the echo is taken as the first arrival.
     r = analyse_cir(a, 1.0, noise_power=1e-10, max_lead_s=20.0, pulse_width_s=8.0)
     assert r.first_arrival_tap == pytest.approx(130.0, abs=0.05)

@@ -175,3 +175,43 @@ def test_real_phone_audio_with_injected_chirps_is_detected(tmp_path, site_path):
                  "--out", str(tmp_path / "f.csv")]) == 0
     rows = _rows(tmp_path / "f.csv")
     assert all(r["acoustic_available"] == "1" for r in rows)
+
+
+def _tiny_site(tmp_path):
+    from features.site import Beacon, Grid, Origin, Site, save_site
+    site = Site(name="t", origin=Origin(31.0, 118.0), grid=Grid(5.0, 0.0, 40.0, 0.0, 40.0),
+                beacons=(Beacon(1, 0.0, 0.0, 3.0, 0), Beacon(2, 30.0, 0.0, 3.0, 1)))
+    save_site(site, tmp_path / "site.toml")
+    return tmp_path / "site.toml"
+
+
+@pytest.mark.parametrize("case,needle", [
+    ("no_samples", "holds no audio samples"),
+    ("fs_8k", "cannot carry the beacon band"),
+    ("huge_uncertainty", "start_uncertainty_s must lie in [0, 2] s"),
+    ("huge_start", "more than an hour outside the walk"),
+    ("positions_unwritable", "cannot write /proc/p.csv"),
+])
+def test_unusable_audio_or_timing_refused_cleanly(tmp_path, capsys, case, needle):
+    import soundfile as sf
+    from pipeline.cli import main
+    site = _tiny_site(tmp_path)
+    wav = tmp_path / "a.wav"
+    rng = np.random.default_rng(0)
+    if case == "no_samples":
+        sf.write(wav, np.zeros(0, np.int16), 48_000, subtype="PCM_16")
+    elif case == "fs_8k":
+        sf.write(wav, (rng.standard_normal(8_000) * 1000).astype(np.int16), 8_000, subtype="PCM_16")
+    else:
+        sf.write(wav, (rng.standard_normal(48_000) * 100).astype(np.int16), 48_000, subtype="PCM_16")
+    audio = {"huge_uncertainty": "start_uncertainty_s = 1e9", "huge_start": "start_s = 1e300"}.get(case, "start_s = 0.0")
+    (tmp_path / "walk.toml").write_text(f'start_utc = "2026-06-01T00:00:00Z"\nduration_s = 1.0\n'
+                                        f'[audio]\nfile = "a.wav"\n{audio}\n')
+    argv = ["features", "audio", str(wav), "--site", str(site), "--walk", str(tmp_path / "walk.toml"),
+            "--out", str(tmp_path / "o.csv")]
+    if case == "positions_unwritable":
+        argv += ["--positions", "/proc/p.csv"]
+    code = main(argv)
+    err = capsys.readouterr().err
+    assert code == 1 and needle in err and len(err.strip().splitlines()) == 1, err
+    assert not (tmp_path / "o.csv").exists()  # all outputs or none

@@ -31,7 +31,7 @@ def register(sub) -> None:
                         "samples on the walk time base and the beacon frames (default: the first sample at t=0 "
                         "on a frame boundary, see --start-uncertainty-s); a walk.toml/cell.toml beside the WAV is used "
                         "when --walk is not given")
-    p.add_argument("--start-uncertainty-s", type=non_negative, default=None,
+    p.add_argument("--start-uncertainty-s", type=bounded(0.0, 2.0, "s"), default=None,
                    help="stated uncertainty of the audio start, s (default: from --walk, else 0.05)")
     p.add_argument("--out", type=Path, required=True, help="feature CSV, one row per window")
     p.add_argument("--positions", type=Path, default=None, help="also write one position row per frame (CSV)")
@@ -60,6 +60,25 @@ def _csv(rows: list[dict], names) -> str:
     return buf.getvalue()
 
 
+MAX_START_UNCERTAINTY_S = 2.0
+"""Largest stated audio-start uncertainty accepted, s: beyond a frame or two the TDMA schedule
+cannot place chirps in their slots, and the acquisition search grows with it."""
+
+
+def _check_audio(wav: Path, site) -> None:
+    """Refuse audio that cannot hold a beacon chirp at all: no samples, or a Nyquist below every band."""
+    from features.audio import audio_info
+    from features.errors import AudioError
+
+    info = audio_info(wav)
+    if info.n_frames == 0:
+        raise AudioError(f"{wav}: holds no audio samples")
+    lowest = min(b.f0_hz if b.f0_hz is not None else site.acoustic.f0_hz for b in site.beacons)
+    if info.fs_hz / 2 <= lowest:
+        raise AudioError(f"{wav}: sample rate {info.fs_hz} Hz (Nyquist {info.fs_hz / 2:.0f} Hz) cannot carry "
+                         f"the beacon band starting at {lowest:.0f} Hz")
+
+
 def timing_from_walk(walk_path: Path | None, site, uncertainty_override: float | None):
     """:class:`AudioTiming` from a walk.toml / cell.toml (or the documented defaults without one)."""
     from features.chirp_detection import AudioTiming, frame_phase_s
@@ -73,10 +92,20 @@ def timing_from_walk(walk_path: Path | None, site, uncertainty_override: float |
     table = walk.streams.get("audio", {})
     start_s = table.get("start_s", 0.0)
     u = table.get("start_uncertainty_s", 0.05)
+    where = Path(walk_path) if Path(walk_path).is_file() else walk.directory / (
+        "walk.toml" if (walk.directory / "walk.toml").is_file() else "cell.toml")
     for name, value in (("start_s", start_s), ("start_uncertainty_s", u)):
         if not isinstance(value, (int, float)) or isinstance(value, bool) or not math.isfinite(value):
-            raise ConfigError(f"{walk.directory}: [audio] {name} must be a finite number, got {value!r}")
+            raise ConfigError(f"{where}: [audio] {name} must be a finite number, got {value!r}")
+    limit = (walk.duration_s or 0.0) + 3600.0
+    if abs(start_s) > limit:
+        raise ConfigError(f"{where}: [audio] start_s {start_s} lies more than an hour outside the walk")
+    if not 0 <= u <= MAX_START_UNCERTAINTY_S:
+        raise ConfigError(f"{where}: [audio] start_uncertainty_s must lie in [0, {MAX_START_UNCERTAINTY_S:g}] s, "
+                          f"got {u}")
     fs = table.get("fs_hz")
+    if fs is not None and (not isinstance(fs, (int, float)) or isinstance(fs, bool) or not fs > 0):
+        raise ConfigError(f"{where}: [audio] fs_hz must be a positive number, got {fs!r}")
     if fs is not None and fs != 48_000:
         print(f"envfuse: warning: [audio] fs_hz is {fs}; the file's own header rate is used", file=sys.stderr)
     if uncertainty_override is not None:
@@ -90,7 +119,7 @@ def _run(args) -> int:
     from features.acoustic_positions import POSITION_COLUMNS, PositionConfig
     from features.audio import AudioWarning
     from features.chirp_detection import DetectorConfig
-    from features.fileio import atomic_write_text
+    from features.fileio import atomic_write_many
     from features.site import load_site
 
     if args.walk is None:
@@ -104,8 +133,9 @@ def _run(args) -> int:
     else:
         site = load_site(args.site)
     if not site.beacons:
-        raise ConfigError(f"{args.site}: the site lists no [[beacons]]")
+        raise ConfigError(f"{args.site or args.walk}: the site lists no [[beacons]]")
     timing = timing_from_walk(args.walk, site, args.start_uncertainty_s)
+    _check_audio(args.wav, site)
     if not 0 < args.p_fa < 1:
         raise ConfigError(f"--p-fa must lie in (0, 1), got {args.p_fa}")
     detector = DetectorConfig(p_fa=args.p_fa, max_range_m=args.max_range_m)
@@ -121,12 +151,14 @@ def _run(args) -> int:
     for w in caught:
         if issubclass(w.category, AudioWarning):
             print(f"envfuse: warning: {w.message}", file=sys.stderr)
-    atomic_write_text(args.out, _csv(result.rows, FEATURE_COLUMNS))
+    outputs = {args.out: _csv(result.rows, FEATURE_COLUMNS)}
+    if args.positions is not None:
+        outputs[args.positions] = _csv([f.as_row() for f in result.fixes], POSITION_COLUMNS)
+    atomic_write_many(outputs)
     msg = (f"{args.wav}: {result.duration_s:.1f} s, {result.n_detections} chirps detected, "
            f"{sum(r['acoustic_available'] for r in result.rows)}/{len(result.rows)} windows with a chirp "
            f"-> {args.out}")
     if args.positions is not None:
-        atomic_write_text(args.positions, _csv([f.as_row() for f in result.fixes], POSITION_COLUMNS))
         msg += f"; {len(result.fixes)} positions -> {args.positions}"
     print(msg)
     return 0

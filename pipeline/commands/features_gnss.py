@@ -57,17 +57,6 @@ def _csv(columns: dict, names) -> str:
     return buf.getvalue()
 
 
-def _write_all(outputs: dict) -> None:
-    """Write every output or none: all go to temporary files first, renamed only when all are written."""
-    import contextlib
-
-    from features.fileio import atomic_path
-    with contextlib.ExitStack() as stack:
-        for path, text in outputs.items():
-            tmp = stack.enter_context(atomic_path(path))
-            tmp.write_text(text)
-
-
 def _walk_beside(nmea: Path):
     """The walk.toml / cell.toml in the NMEA file's directory, if any (its start time and site)."""
     from features.walk import load_walk
@@ -87,6 +76,7 @@ def _on_time_base(epochs, start_utc: str | None):
 
 
 def _run(args) -> int:
+    from features.fileio import atomic_write_many
     from features.gnss_features import (
         COUNT_COLUMNS, FEATURE_COLUMNS, Cn0Reference, GnssFeatureConfig, fit_cn0_reference, gnss_features, sky_arrays,
     )
@@ -131,7 +121,7 @@ def _run(args) -> int:
         pos = fixes_to_enu(epochs, o.lat_deg, o.lon_deg, o.alt_m)
         outputs[args.positions] = _csv({n: getattr(pos, n) for n in pos.COLUMNS}, pos.COLUMNS)
         n_pos = len(pos)
-    _write_all(outputs)
+    atomic_write_many(outputs)
     n_with_sky = int(sky.n_epochs)
     msg = (f"{args.nmea}: {len(epochs)} epochs ({n_with_sky} with satellites, "
            f"{sum(e.fix.has_position for e in epochs)} with a fix); {stats.summary()}; "
