@@ -1,14 +1,7 @@
 """Streaming beacon-chirp detection: which beacon was heard when, and its CIR.
 
-Beacon protocol (docs/beacon_protocol.md; written by the transmit side in
-``simulation/chirp.py``): frames of ``frame_s = n_slots·slot_s`` start at
-integer multiples of ``frame_s`` of POSIX UTC time; beacon ``b`` starts its
-chirp ``slot_b·slot_s`` after each frame start. On the walk's time base
-(seconds since ``start_utc``) a chirp leaves beacon ``b`` at
-``t_tx = frame_phase + k·frame_s + slot_b·slot_s`` with
-``frame_phase = (−POSIX(start_utc)) mod frame_s``. The receiver states the walk
-time of its first audio sample (``start_s``) only to within
-``start_uncertainty_s``.
+Frame and clock timing follow the beacon protocol as summarised in
+:mod:`features.acoustic_timing` (docs/beacon_protocol.md).
 
 Association. Beacons share one chirp and are told apart by time alone, so
 the search window of each (frame, beacon) is narrowed as soon as the receiver
