@@ -165,25 +165,36 @@ def _chi2_limit(dof: int, alpha: float) -> float:
     return float(scipy.special.chdtri(dof, alpha))
 
 
-def _inverse3(m: np.ndarray) -> np.ndarray | None:
+def _inverse3(m) -> np.ndarray | None:
     """Inverse of a symmetric 3×3 matrix by its adjugate (Cramer), None when nearly singular.
-
-    Written out because numpy's general solver costs ~30 µs of call overhead on
-    a 3×3 system, and the exclusion search solves thousands of them.
 
     >>> a = np.array([[4.0, 1.0, 0.5], [1.0, 3.0, 0.2], [0.5, 0.2, 2.0]])
     >>> bool(np.allclose(_inverse3(a) @ a, np.eye(3)))
     True
     """
-    (a, b, c), (d, e, f), (g, h, i) = m.tolist()
-    c00, c01, c02 = e * i - f * h, c * h - b * i, b * f - c * e
-    det = a * c00 + d * c01 + g * c02
+    (a, b, c), (_, e, f), (_, _, i) = np.asarray(m, dtype=float).tolist()
+    inv = _inverse3_sym(a, b, c, e, f, i)
+    return None if inv is None else np.array(_sym_rows(inv))
+
+
+def _inverse3_sym(a: float, b: float, c: float, e: float, f: float, i: float) -> tuple | None:
+    """Upper triangle (00, 01, 02, 11, 12, 22) of the inverse of the symmetric matrix
+    [[a, b, c], [b, e, f], [c, f, i]] by its adjugate, or None when nearly singular.
+
+    Scalar Python: on a 3×3 system numpy's call overhead exceeds the arithmetic many
+    times over, and the receiver solves one or more per TDMA frame.
+    """
+    c00, c01, c02 = e * i - f * f, c * f - b * i, b * f - c * e
+    det = a * c00 + b * c01 + c * c02
     scale = abs(a) + abs(e) + abs(i)
     if not math.isfinite(det) or abs(det) <= 1e-14 * scale ** 3:
         return None
-    return np.array([[c00, c01, c02],
-                     [f * g - d * i, a * i - c * g, c * d - a * f],
-                     [d * h - e * g, b * g - a * h, a * e - b * d]]) / det
+    return c00 / det, c01 / det, c02 / det, (a * i - c * c) / det, (b * c - a * f) / det, (a * e - b * b) / det
+
+
+def _sym_rows(u: tuple) -> list:
+    """Rows of the symmetric 3×3 matrix whose upper triangle is ``u`` (00, 01, 02, 11, 12, 22)."""
+    return [[u[0], u[1], u[2]], [u[1], u[3], u[4]], [u[2], u[4], u[5]]]
 
 
 def _gauss_newton(ranges: list[BeaconRange], height_m: float, c: float, iterations: int,
@@ -194,51 +205,66 @@ def _gauss_newton(ranges: list[BeaconRange], height_m: float, c: float, iteratio
     of the beacons with the median clock offset. ``clock_prior`` = (δ₀, σ_δ)
     adds the pseudo-measurement δ = δ₀ ± σ_δ (a tracked clock), which enters
     the normal equations and chi² like one more range.
+
+    Scalar Python over the ranges (a frame has a few to a few tens): with three
+    unknowns the normal equations are six sums, and numpy's per-call overhead
+    would cost several times the arithmetic. :func:`_gauss_newton_subsets` is the
+    vectorised form for many subsets at once.
     """
-    s = np.array([[r.east_m, r.north_m, r.up_m] for r in ranges])
-    rho = np.array([r.pseudorange_m for r in ranges])
-    sig = np.array([r.sigma_m for r in ranges])
-    w = 1.0 / sig ** 2
-    du = height_m - s[:, 2]
+    rows = [(r.east_m, r.north_m, height_m - r.up_m, r.pseudorange_m, 1.0 / (r.sigma_m * r.sigma_m)) for r in ranges]
     if start is None:
-        e0, n0 = float(w @ s[:, 0] / w.sum()), float(w @ s[:, 1] / w.sum())
-        geo = np.sqrt((s[:, 0] - e0) ** 2 + (s[:, 1] - n0) ** 2 + du ** 2)
-        x = np.array([e0, n0, float(np.median(rho - geo)) / c])
+        w_sum = sum(q[4] for q in rows)
+        e = sum(q[4] * q[0] for q in rows) / w_sum
+        n = sum(q[4] * q[1] for q in rows) / w_sum
+        d = float(np.median([q[3] - math.sqrt((q[0] - e) ** 2 + (q[1] - n) ** 2 + q[2] ** 2) for q in rows])) / c
     else:
-        x = np.array(start, dtype=float)
-    jac = np.empty((len(ranges), 3))
-    jac[:, 2] = c
+        e, n, d = (float(v) for v in start)
+    prior_w = 0.0 if clock_prior is None else 1.0 / (clock_prior[1] * clock_prior[1])
     for it in range(iterations + 1):
-        de, dn = x[0] - s[:, 0], x[1] - s[:, 1]
-        r = np.sqrt(de * de + dn * dn + du * du)
-        # f(x) = ‖p − sᵢ‖ + c·δ;  J = [∂f/∂e, ∂f/∂n, ∂f/∂δ]
-        jac[:, 0], jac[:, 1] = de / r, dn / r
-        res = rho - (r + c * x[2])
-        normal = jac.T @ (w[:, None] * jac)
-        gradient = jac.T @ (w * res)
+        # f(x) = ‖p − sᵢ‖ + c·δ;  J = [∂f/∂e, ∂f/∂n, ∂f/∂δ];  normal = JᵀWJ, gradient = JᵀW(ρ − f)
+        a00 = a01 = a02 = a11 = a12 = a22 = g0 = g1 = g2 = 0.0
+        res = []
+        for se, sn, du, rho, w in rows:
+            de, dn = e - se, n - sn
+            r = math.sqrt(de * de + dn * dn + du * du)
+            j0, j1 = de / r, dn / r
+            v = rho - (r + c * d)
+            res.append(v)
+            wj0, wj1, wc = w * j0, w * j1, w * c
+            a00 += wj0 * j0
+            a01 += wj0 * j1
+            a02 += wj0 * c
+            a11 += wj1 * j1
+            a12 += wj1 * c
+            a22 += wc * c
+            g0 += wj0 * v
+            g1 += wj1 * v
+            g2 += wc * v
         if clock_prior is not None:
             # Prior row: δ₀ − δ with weight 1/σ_δ² (J row [0, 0, 1]).
-            normal[2, 2] += 1.0 / clock_prior[1] ** 2
-            gradient[2] += (clock_prior[0] - x[2]) / clock_prior[1] ** 2
+            a22 += prior_w
+            g2 += (clock_prior[0] - d) * prior_w
         if it == iterations:
             break
-        inv = _inverse3(normal)
+        inv = _inverse3_sym(a00, a01, a02, a11, a12, a22)
         if inv is None:
             return None
-        step = inv @ gradient
-        x = x + step
-        if step[0] * step[0] + step[1] * step[1] < 1e-12 and abs(step[2]) * c < 1e-6:
+        s0 = inv[0] * g0 + inv[1] * g1 + inv[2] * g2
+        s1 = inv[1] * g0 + inv[3] * g1 + inv[4] * g2
+        s2 = inv[2] * g0 + inv[4] * g1 + inv[5] * g2
+        e, n, d = e + s0, n + s1, d + s2
+        if s0 * s0 + s1 * s1 < 1e-12 and abs(s2) * c < 1e-6:
             iterations = it + 1
     # Covariance of the weighted LS estimate: (JᵀWJ)⁻¹ (refused when nearly singular).
-    cov = _inverse3(normal)
-    if cov is None:
+    cov = _inverse3_sym(a00, a01, a02, a11, a12, a22)
+    if cov is None or not all(math.isfinite(v) for v in cov) or min(cov[0], cov[3], cov[5]) <= 0 \
+            or cov[0] + cov[3] > 1e8:
         return None
-    if not np.all(np.isfinite(cov)) or np.any(np.diag(cov) <= 0) or cov[0, 0] + cov[1, 1] > 1e8:
-        return None
-    chi2 = float(np.sum((res / sig) ** 2))
+    sig = [1.0 / math.sqrt(q[4]) for q in rows]
+    chi2 = sum(w * v * v for (_, _, _, _, w), v in zip(rows, res))
     if clock_prior is not None:
-        chi2 += ((clock_prior[0] - x[2]) / clock_prior[1]) ** 2
-    return x, 0.5 * (cov + cov.T), res, sig, chi2
+        chi2 += (clock_prior[0] - d) ** 2 * prior_w
+    return np.array([e, n, d]), np.array(_sym_rows(cov)), np.array(res), np.array(sig), chi2
 
 
 def solve_position(ranges: list[BeaconRange], site: Site, speed_m_s: float,

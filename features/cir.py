@@ -180,6 +180,44 @@ def _masked_moments(x: np.ndarray, w: np.ndarray, origin: np.ndarray):
     return mean - origin, np.sqrt(np.maximum(var, 0.0)), kurt, skew
 
 
+def _first_arrivals(a: np.ndarray, power: np.ndarray, idx: np.ndarray, noise: np.ndarray, search_start,
+                    search_stop, lead: int):
+    """Steps 2–3 of the module docstring for the rows of ``a`` (n, L): the strongest tap in
+    the search range, the tap threshold, validity, the leading edge and τ₀ (log-parabolic).
+
+    Returns (valid, peak, p_peak, threshold, edge, tau0, amp0), each of shape (n,). Kept to
+    few numpy calls: the receiver runs it on every frame's chirps.
+    """
+    n, length = a.shape
+    rows = np.arange(n)
+    # (np.minimum/np.maximum rather than np.clip, whose Python wrapper costs more than the work here.)
+    stop = np.minimum(np.maximum(np.asarray(length if search_stop is None else search_stop, dtype=int), 1), length)
+    start = np.minimum(np.maximum(np.asarray(search_start, dtype=int), 0), stop - 1)
+    start_col = start[:, None] if start.ndim else start
+    stop_col = stop[:, None] if stop.ndim else stop
+    # Powers are >= 0, so -1 marks the taps outside the search range.
+    peak = np.argmax(np.where((idx >= start_col) & (idx < stop_col), power, -1.0), axis=1)
+    p_peak = power[rows, peak]
+    threshold = np.maximum(p_peak * 10 ** (-PEAK_DYNAMIC_RANGE_DB / 10), noise * 10 ** (NOISE_MARGIN_DB / 10))
+    valid = np.isfinite(p_peak) & (p_peak > threshold)
+    # Leading edge: the earliest tap above the threshold, at most ``lead`` taps before the peak.
+    lo = np.maximum(start, peak - lead)
+    edge = np.argmax((idx >= lo[:, None]) & (idx <= peak[:, None]) & (power >= threshold[:, None]), axis=1)
+    # First local maximum at or after the edge: the first i >= edge with a[i+1] < a[i], or the peak.
+    stop_here = idx == peak[:, None]
+    stop_here[:, :-1] |= a[:, 1:] < a[:, :-1]
+    first = np.minimum(np.argmax(stop_here & (idx >= edge[:, None]), axis=1), peak)
+    # Log-parabolic refinement of the first path's peak.
+    cols = np.minimum(np.maximum(first[:, None] + np.array([-1, 0, 1]), 0), length - 1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ym, y0, yp = np.log(np.maximum(a[rows[:, None], cols], 1e-300)).T
+        denom = ym - 2.0 * y0 + yp
+        interior = (first > 0) & (first < length - 1) & (denom < 0)
+        delta = np.where(interior, np.minimum(np.maximum(0.5 * (ym - yp) / np.where(interior, denom, -1.0), -0.5),
+                                              0.5), 0.0)
+    return valid, peak, p_peak, threshold, edge, first + delta, np.exp(y0 - 0.25 * (ym - yp) * delta)
+
+
 @dataclass(frozen=True)
 class CirBatch:
     """Results of :func:`analyse_cirs` for n CIRs; rows with ``valid`` False found no tap.
@@ -222,40 +260,9 @@ def analyse_cirs(amplitude: np.ndarray, tap_s: float, *, noise_power=None, max_l
         noise = np.median(power, axis=1) / np.log(2.0)
     else:
         noise = np.zeros(n) + np.asarray(noise_power, dtype=float)
-    # (np.minimum/np.maximum rather than np.clip, whose Python wrapper costs more than the work here.)
-    stop = np.minimum(np.maximum(np.zeros(n, dtype=int) + np.asarray(
-        length if search_stop is None else search_stop, dtype=int), 1), length)
-    start = np.minimum(np.maximum(np.asarray(search_start, dtype=int), 0), stop - 1)
-    in_search = (idx >= start[:, None]) & (idx < stop[:, None])
-    peak = np.argmax(np.where(in_search, power, -np.inf), axis=1)
-    rows = np.arange(n)
-    p_peak = power[rows, peak]
-    threshold = np.maximum(p_peak * 10 ** (-PEAK_DYNAMIC_RANGE_DB / 10), noise * 10 ** (NOISE_MARGIN_DB / 10))
-    valid = np.isfinite(p_peak) & (p_peak > threshold) & (p_peak > 0)
-
     lead = length if max_lead_s is None else int(np.ceil(max_lead_s / tap_s))
-    lo = np.maximum(start, peak - lead)
-    window = (idx >= lo[:, None]) & (idx <= peak[:, None])
-    edge = np.argmax(window & (power >= threshold[:, None]), axis=1)
-    # First local maximum at or after the leading edge: first i >= edge with a[i+1] < a[i] (or i = peak).
-    descending = np.zeros_like(window)
-    descending[:, :-1] = a[:, 1:] < a[:, :-1]
-    stop_here = ((idx >= edge[:, None]) & descending) | (idx == peak[:, None])
-    first = np.argmax(stop_here & (idx >= edge[:, None]), axis=1)
-    first = np.minimum(first, peak)
-    # Log-parabolic refinement of the first path's peak.
-    im1, ip1 = np.maximum(first - 1, 0), np.minimum(first + 1, length - 1)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        y0 = np.log(np.maximum(a[rows, first], 1e-300))
-        ym = np.log(np.maximum(a[rows, im1], 1e-300))
-        yp = np.log(np.maximum(a[rows, ip1], 1e-300))
-        denom = ym - 2.0 * y0 + yp
-        interior = (first > 0) & (first < length - 1) & (denom < 0)
-        delta = np.where(interior, np.minimum(np.maximum(0.5 * (ym - yp) / np.where(interior, denom, -1.0), -0.5),
-                                              0.5), 0.0)
-    tau0 = first + delta
-    amp0 = np.exp(y0 - 0.25 * (ym - yp) * delta)
-
+    valid, peak, p_peak, threshold, edge, tau0, amp0 = _first_arrivals(a, power, idx, noise, search_start,
+                                                                       search_stop, lead)
     sel = (power >= threshold[:, None]) & (idx >= edge[:, None]) & valid[:, None]
     if not with_features:
         return CirBatch(valid=valid, features=np.full((n, len(FEATURE_NAMES)), np.nan), first_arrival_tap=tau0,
