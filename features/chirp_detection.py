@@ -37,6 +37,7 @@ survey, 94 cells: 4.1 vs 3.6 ms with 30 ms; 1.0 vs 2.6 ms with 15 ms).
 
 from __future__ import annotations
 
+import bisect
 import dataclasses
 import math
 import os
@@ -49,7 +50,7 @@ from .acoustic_positions import AcousticFix, PositionConfig
 from .acoustic_timing import AudioTiming, ChirpDetection, SearchWindow, frame_phase_s, speed_of_sound_m_s
 from .acoustic_tracking import ClockPositionTracker, acquisition_windows, frame_fix
 from .audio import CLIP_LEVEL, AudioBlock, audio_info, count_clipped, iter_audio_blocks
-from .cir import CirFeatures, analyse_cirs
+from .cir import CirFeatures, analyse_cirs, first_arrivals
 from .constants import AUDIO_FS_HZ
 from .errors import ConfigError
 from .matched_filter import ChirpSpec, MatchedFilterBank, StreamingMatchedFilter
@@ -173,24 +174,19 @@ class FrameResult:
 
 
 class _Stream:
-    """Raw samples and decimated envelopes of the recent past, read on demand."""
+    """Decimated matched-filter envelopes of the recent past, read on demand."""
 
     def __init__(self, path, config: DetectorConfig, mf: StreamingMatchedFilter, stats: AudioStats | None):
         self.blocks = iter_audio_blocks(path, block_s=config.block_s, fs_out_hz=int(config.fs_hz))
         self.mf, self.stats, self.fs = mf, stats, float(config.fs_hz)
-        self.raw = np.zeros(0, dtype=np.float32)
-        self.raw_start = 0
+        self.read_end = 0            # input samples read so far
         self.env = np.zeros((mf.bank.n_templates, 0), dtype=np.float32)
         self.env_j0 = 0
         self.eof = False
 
-    @property
-    def raw_end(self) -> int:
-        return self.raw_start + len(self.raw)
-
     def ensure(self, upto: int) -> None:
-        """Read until raw samples reach index ``upto`` (and their envelopes exist) or the file ends."""
-        while not self.eof and self.raw_end < upto:
+        """Read until input sample ``upto`` has been read (and its envelope exists) or the file ends."""
+        while not self.eof and self.read_end < upto:
             block = next(self.blocks, None)
             if block is None:
                 self.eof = True
@@ -198,7 +194,7 @@ class _Stream:
             else:
                 if self.stats is not None:
                     self.stats.add(block, self.fs)
-                self.raw = np.concatenate([self.raw, block.samples])
+                self.read_end = block.start_index + len(block.samples)
                 _, e = self.mf.process(block.samples)
             self.env = np.concatenate([self.env, e], axis=1) if self.env.shape[1] else e
 
@@ -208,10 +204,7 @@ class _Stream:
         return self.env_j0 + a, self.env[:, a:b]
 
     def trim(self, keep_from: int) -> None:
-        cut = keep_from - self.raw_start
-        if cut > 0:
-            self.raw = self.raw[cut:]
-            self.raw_start += cut
+        """Forget the envelope of chirps starting before input sample ``keep_from``."""
         cut_env = (keep_from + self.mf.bank.delay_samples) // self.mf.decimation - self.env_j0
         if cut_env > 0:
             self.env = self.env[:, cut_env:]
@@ -267,35 +260,39 @@ def detect_frames(path: str | os.PathLike, site: Site, timing: AudioTiming,
         q25 = np.partition(sub, sub.shape[1] // 4, axis=1)[:, sub.shape[1] // 4]
         return q25.astype(float) / _RAYLEIGH_Q25
 
-    maxima: dict = {}            # template -> (j_lo, j_hi, global indices, heights) for the current frame
+    maxima: dict = {}            # template -> (decimated indices, heights), ascending lists, for the current frame
+    delay = bank.delay_samples
+    bandwidth_of = [bandwidth[b.id] for b in site.beacons]
+    log_inv_p_fa = -math.log(config.p_fa)
 
     def gamma_of(w: SearchWindow, sigma: float) -> float:
         """Detection threshold γ of window ``w`` (see the module docstring)."""
-        n_cells = max(1.0, (w.hi - w.lo) / fs * bandwidth[site.beacons[w.beacon_index].id])
-        return max(sigma * math.sqrt(2.0 * math.log(n_cells / config.p_fa)), 1e-9)
+        n_cells = max(1.0, (w.hi - w.lo) / fs * bandwidth_of[w.beacon_index])
+        return max(sigma * math.sqrt(2.0 * (math.log(n_cells) + log_inv_p_fa)), 1e-9)
 
-    def prepare_maxima(windows: list[SearchWindow], sigmas: np.ndarray) -> None:
+    def prepare_maxima(windows: list[SearchWindow], sigmas: list) -> None:
         """Envelope maxima of the whole frame, once per template, for :func:`peaks` to slice.
 
         Windows overlap, and a local maximum is one whatever window looks at it, so the
         maxima above the lowest threshold of the frame are found once, and the sidelobe
         guard (a maximum within one chirp length of one 25 dB stronger is dropped, so
         that the range sidelobes, −34.6 dB, of a strong arrival never pass for an earlier
-        one) applied once, instead of per window.
+        one) applied once, instead of per window. Kept as Python lists: each window
+        then takes its slice by bisection at no numpy call's cost.
         """
         maxima.clear()
         for t in {template_of[w.beacon_index] for w in windows}:
             mine = [w for w in windows if template_of[w.beacon_index] == t]
-            j_lo = -(-(min(w.lo for w in mine) + bank.delay_samples) // dec)
-            j_hi = (max(w.hi for w in mine) + bank.delay_samples) // dec + 1
+            j_lo = -(-(min(w.lo for w in mine) + delay) // dec)
+            j_hi = (max(w.hi for w in mine) + delay) // dec + 1
             j_first, seg = stream.env_range(j_lo, j_hi)
             seg = seg[t]
-            gamma = min(gamma_of(w, float(sigmas[t])) for w in mine)
+            gamma = min(gamma_of(w, sigmas[t]) for w in mine)
             if len(seg) < 3:
-                maxima[t] = (j_first, j_first + len(seg), np.zeros(0, int), np.zeros(0, seg.dtype))
+                maxima[t] = ([], [])
                 continue
             mid = seg[1:-1]
-            idx = 1 + np.flatnonzero((mid > seg[:-2]) & (mid >= seg[2:]) & (mid > gamma))
+            idx = 1 + np.flatnonzero((mid > gamma) & (mid > seg[:-2]) & (mid >= seg[2:]))
             # The ends count when above the neighbour inside (as if padded with zeros).
             ends = [i for i, ok in ((0, seg[0] > gamma and seg[0] >= seg[1]),
                                     (len(seg) - 1, seg[-1] > gamma and seg[-1] > seg[-2])) if ok]
@@ -305,28 +302,23 @@ def detect_frames(path: str | os.PathLike, site: Site, timing: AudioTiming,
                 h = seg[idx]
                 near = np.abs(idx[:, None] - idx[None, :]) * dec <= bank.template_len
                 idx = idx[~np.any(near & (h[None, :] > h[:, None] * _SIDELOBE_GUARD), axis=1)]
-            maxima[t] = (j_first, j_first + len(seg), j_first + idx, seg[idx])
+            maxima[t] = ((j_first + idx).tolist(), seg[idx].tolist())
 
-    def peaks(w: SearchWindow, sigma: float) -> tuple[np.ndarray, np.ndarray]:
+    def peaks(w: SearchWindow, sigma: float) -> tuple[list, list]:
         """Chirp-start indices (ascending) and heights of envelope maxima in ``w`` above its threshold γ.
 
         Sliced from the frame's maxima (:func:`prepare_maxima`).
         """
-        t = template_of[w.beacon_index]
-        j_lo = -(-(w.lo + bank.delay_samples) // dec)
-        j_hi = (w.hi + bank.delay_samples) // dec + 1
-        _, _, jj, hh = maxima[t]
-        a, b = int(jj.searchsorted(j_lo)), int(jj.searchsorted(j_hi))
-        jj, hh = jj[a:b], hh[a:b]
-        keep = hh > gamma_of(w, sigma)
-        return dec * jj[keep] - bank.delay_samples, hh[keep]     # chirp starts (StreamingMatchedFilter.chirp_start)
-
-    def locate(w: SearchWindow, sigma: float) -> int | None:
-        """Chirp start of the detection in ``w``: its earliest peak (strongest, when not associated)."""
-        starts, heights = peaks(w, sigma)
-        if len(starts) == 0:
-            return None
-        return int(starts[0] if w.associated else starts[np.argmax(heights)])
+        jj, hh = maxima[template_of[w.beacon_index]]
+        a = bisect.bisect_left(jj, -(-(w.lo + delay) // dec))
+        b = bisect.bisect_left(jj, (w.hi + delay) // dec + 1, a)
+        gamma = gamma_of(w, sigma)
+        starts, heights = [], []
+        for j, h in zip(jj[a:b], hh[a:b]):
+            if h > gamma:
+                starts.append(dec * j - delay)     # chirp starts (StreamingMatchedFilter.chirp_start)
+                heights.append(h)
+        return starts, heights
 
     def assign_arrivals(windows: list[SearchWindow], sigmas: np.ndarray) -> list[tuple[SearchWindow, int]]:
         """(window, chirp start) of the chirps located in a frame, one physical arrival per window.
@@ -343,9 +335,9 @@ def detect_frames(path: str | os.PathLike, site: Site, timing: AudioTiming,
         cands = {}
         for w in windows:
             starts, heights = peaks(w, sigmas[template_of[w.beacon_index]])
-            if len(starts):
+            if starts:
                 # An unassociated window reports its strongest peak only (features, not a range).
-                cands[id(w)] = [int(x) for x in starts] if w.associated else [int(starts[np.argmax(heights)])]
+                cands[id(w)] = starts if w.associated else [starts[heights.index(max(heights))]]
 
         def cost(w, sp):
             return abs(sp - w.expected) if w.expected is not None else 0
@@ -420,16 +412,16 @@ def detect_frames(path: str | os.PathLike, site: Site, timing: AudioTiming,
             cirs, j_got = cir_rows(t, j_a)
             w_lo = np.array([w.lo for w, _ in group])
             cir_lo = np.minimum(np.maximum(-(-(w_lo + bank.delay_samples) // dec), j_got) - j_a, first_tap)
-            noise_power = 2.0 * float(sigmas[t]) ** 2   # Rayleigh envelope of scale σ: E[env²] = 2σ²
-            toa = analyse_cirs(cirs[:, :toa_taps], dec / fs, noise_power=noise_power, max_lead_s=config.max_lead_s,
-                               search_start=cir_lo, search_stop=toa_taps, with_features=False)
-            arrival = timing.start_s + (dec * (j_a + toa.first_arrival_tap) - bank.delay_samples) / fs
-            for r, ((w, _), ok, a_s, snr, row, lo) in enumerate(zip(group, toa.valid.tolist(), arrival.tolist(),
-                                                                   toa.peak_snr_db.tolist(), cirs, cir_lo.tolist())):
-                if not ok:
+            noise_power = 2.0 * sigmas[t] ** 2   # Rayleigh envelope of scale σ: E[env²] = 2σ²
+            lead_taps = int(math.ceil(config.max_lead_s / (dec / fs)))
+            toa = first_arrivals(cirs[:, :toa_taps].tolist(), cir_lo.tolist(), toa_taps, lead_taps, noise_power)
+            for (w, _), found_r, j, row, lo in zip(group, toa, j_a.tolist(), cirs, cir_lo.tolist()):
+                if found_r is None:
                     continue
+                tau0, snr = found_r
+                arrival_s = timing.start_s + (dec * (j + tau0) - delay) / fs
                 pending_cirs.append((slot, len(out), t, row, lo, noise_power))
-                out.append(ChirpDetection(frame, site.beacons[w.beacon_index].id, w.tx_s, a_s, snr, _NO_FEATURES,
+                out.append(ChirpDetection(frame, site.beacons[w.beacon_index].id, w.tx_s, arrival_s, snr, _NO_FEATURES,
                                           w.associated))
         return out
 
@@ -457,8 +449,9 @@ def detect_frames(path: str | os.PathLike, site: Site, timing: AudioTiming,
         strongest ``max_candidates``.
         """
         starts, heights = peaks(w, sigma)
-        if len(starts) == 0:
+        if not starts:
             return []
+        starts, heights = np.array(starts), np.array(heights)
         lag = starts[None, :] - starts[:, None]          # [i, j]: j after i
         shadowed = np.any((lag > 0) & (lag <= _ECHO_SPAN_S * fs) & (heights[:, None] > heights[None, :]), axis=0)
         keep = np.flatnonzero(~shadowed)
@@ -487,7 +480,7 @@ def detect_frames(path: str | os.PathLike, site: Site, timing: AudioTiming,
         detections = []
         if windows:
             stream.ensure(max(w.hi for w in windows) + span + bank.kernel_len + dec)
-            sigmas = noise_scales(windows)
+            sigmas = noise_scales(windows).tolist()
             prepare_maxima(windows, sigmas)
             if not tracking and tracker.skip_acquisition():
                 windows = [dataclasses.replace(w, associated=False) for w in windows]

@@ -37,6 +37,7 @@ Undefined statistics (a single tap has no spread) are NaN, not zero.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, fields
 from operator import attrgetter
 
@@ -44,7 +45,7 @@ import numpy as np
 
 from .errors import DataError
 
-__all__ = ["CirFeatures", "CirAnalysis", "CirBatch", "analyse_cir", "analyse_cirs", "find_paths", "robust_noise_power",
+__all__ = ["CirFeatures", "CirAnalysis", "CirBatch", "analyse_cir", "analyse_cirs", "first_arrivals", "find_paths", "robust_noise_power",
            "FEATURE_NAMES", "K_MAX_DB", "PEAK_DYNAMIC_RANGE_DB", "NOISE_MARGIN_DB"]
 
 PEAK_DYNAMIC_RANGE_DB = 20.0
@@ -153,27 +154,22 @@ def find_paths(amplitude: np.ndarray, threshold_amplitude: float) -> tuple[np.nd
     return pos, amp
 
 
-def _weighted_moments(delay: np.ndarray, weight: np.ndarray, tau0: float) -> tuple[float, float, float, float]:
-    """Mean excess delay, rms spread, Pearson kurtosis, skewness of one power-delay profile."""
-    out = _masked_moments(delay[None, :], weight[None, :], np.array([tau0]))
-    return tuple(float(v[0]) for v in out)
-
-
-def _masked_moments(x: np.ndarray, w: np.ndarray, origin: np.ndarray):
-    """Row-wise weighted moments of ``x`` (n, L) with weights ``w`` (n, L; 0 = excluded).
+def _sparse_moments(row: np.ndarray, x: np.ndarray, w: np.ndarray, n: int, origin: np.ndarray):
+    """Weighted moments of the values ``x`` (m,) with weights ``w`` (m,) grouped by ``row`` (m,) into n rows.
 
     Returns (mean − origin, std, Pearson kurtosis, skewness), each of shape (n,);
-    kurtosis and skewness are NaN where the spread is zero.
+    kurtosis and skewness are NaN where the spread is zero, everything NaN for a row
+    without values. Sums by :func:`numpy.bincount` over the selected taps only (a
+    CIR's selected taps are a few of its hundreds).
     """
-    total = w.sum(axis=1)
+    total = np.bincount(row, weights=w, minlength=n)
     with np.errstate(invalid="ignore", divide="ignore"):
-        mean = (w * x).sum(axis=1) / total
-        c = x - mean[:, None]
-        c2 = c * c
-        wc2 = w * c2
-        var = wc2.sum(axis=1) / total
-        m3 = (wc2 * c).sum(axis=1) / total
-        m4 = (wc2 * c2).sum(axis=1) / total
+        mean = np.bincount(row, weights=w * x, minlength=n) / total
+        c = x - mean[row]
+        wc2 = w * c * c
+        var = np.bincount(row, weights=wc2, minlength=n) / total
+        m3 = np.bincount(row, weights=wc2 * c, minlength=n) / total
+        m4 = np.bincount(row, weights=wc2 * c * c, minlength=n) / total
         spread = var > 1e-30 * np.maximum(mean * mean, 1e-300)
         skew = np.where(spread, m3 / np.where(spread, var, 1.0) ** 1.5, np.nan)
         kurt = np.where(spread, m4 / np.where(spread, var, 1.0) ** 2, np.nan)
@@ -181,14 +177,15 @@ def _masked_moments(x: np.ndarray, w: np.ndarray, origin: np.ndarray):
 
 
 def _first_arrivals(a: np.ndarray, power: np.ndarray, idx: np.ndarray, noise: np.ndarray, search_start,
-                    search_stop, lead: int):
+                    search_stop, lead: int, length: int):
     """Steps 2–3 of the module docstring for the rows of ``a`` (n, L): the strongest tap in
     the search range, the tap threshold, validity, the leading edge and τ₀ (log-parabolic).
 
-    Returns (valid, peak, p_peak, threshold, edge, tau0, amp0), each of shape (n,). Kept to
-    few numpy calls: the receiver runs it on every frame's chirps.
+    ``a`` may be the first columns of CIRs ``length`` taps long, as long as it holds
+    the search range and one tap more. Returns (valid, peak, p_peak, threshold, edge,
+    tau0, amp0), each of shape (n,).
     """
-    n, length = a.shape
+    n = a.shape[0]
     rows = np.arange(n)
     # (np.minimum/np.maximum rather than np.clip, whose Python wrapper costs more than the work here.)
     stop = np.minimum(np.maximum(np.asarray(length if search_stop is None else search_stop, dtype=int), 1), length)
@@ -208,7 +205,7 @@ def _first_arrivals(a: np.ndarray, power: np.ndarray, idx: np.ndarray, noise: np
     stop_here[:, :-1] |= a[:, 1:] < a[:, :-1]
     first = np.minimum(np.argmax(stop_here & (idx >= edge[:, None]), axis=1), peak)
     # Log-parabolic refinement of the first path's peak.
-    cols = np.minimum(np.maximum(first[:, None] + np.array([-1, 0, 1]), 0), length - 1)
+    cols = np.minimum(np.maximum(first[:, None] + np.array([-1, 0, 1]), 0), a.shape[1] - 1)
     with np.errstate(divide="ignore", invalid="ignore"):
         ym, y0, yp = np.log(np.maximum(a[rows[:, None], cols], 1e-300)).T
         denom = ym - 2.0 * y0 + yp
@@ -216,6 +213,50 @@ def _first_arrivals(a: np.ndarray, power: np.ndarray, idx: np.ndarray, noise: np
         delta = np.where(interior, np.minimum(np.maximum(0.5 * (ym - yp) / np.where(interior, denom, -1.0), -0.5),
                                               0.5), 0.0)
     return valid, peak, p_peak, threshold, edge, first + delta, np.exp(y0 - 0.25 * (ym - yp) * delta)
+
+
+def first_arrivals(rows: list, search_start: list, search_stop: int, lead: int, noise_power: float) -> list:
+    """Steps 2–3 of the module docstring for a few CIRs, in scalar Python: per row,
+    ``(τ₀ in fractional taps, peak SNR in dB)``, or None when no tap clears the threshold.
+
+    ``rows``: amplitude envelopes as lists of floats (all of one length L);
+    ``search_start`` (one per row) and ``search_stop``: the strongest tap is sought in
+    ``[start, stop)``; ``lead``: how many taps before it the leading edge may lie.
+    The same arithmetic as :func:`analyse_cirs` (``with_features=False``), which a
+    test checks row for row; written out because the receiver times a handful of
+    chirps per TDMA frame, where numpy's per-call overhead costs several times the
+    arithmetic (on a 2-core test machine ~60 µs here against ~150 µs for eight CIRs).
+    """
+    out = []
+    noise_floor = noise_power * 10 ** (NOISE_MARGIN_DB / 10)
+    snr_ref = max(noise_power, 1e-300)
+    for a, start in zip(rows, search_start):
+        length = len(a)
+        stop = min(max(search_stop, 1), length)
+        start = min(max(start, 0), stop - 1)
+        seg = a[start:stop]
+        m = max(seg)
+        peak = start + seg.index(m)
+        p_peak = m * m
+        threshold = max(p_peak * 10 ** (-PEAK_DYNAMIC_RANGE_DB / 10), noise_floor)
+        if not (math.isfinite(p_peak) and p_peak > threshold):
+            out.append(None)
+            continue
+        first = peak
+        for i in range(max(start, peak - lead), peak):          # leading edge
+            if a[i] * a[i] >= threshold:
+                first = i
+                break
+        while first < peak and not a[first + 1] < a[first]:    # first local maximum at or after it
+            first += 1
+        delta = 0.0
+        if 0 < first < length - 1:
+            ym, y0, yp = (math.log(max(v, 1e-300)) for v in a[first - 1: first + 2])
+            denom = ym - 2.0 * y0 + yp
+            if denom < 0:
+                delta = min(max(0.5 * (ym - yp) / denom, -0.5), 0.5)
+        out.append((first + delta, 10.0 * math.log10(max(p_peak, 1e-300) / snr_ref)))
+    return out
 
 
 @dataclass(frozen=True)
@@ -244,8 +285,9 @@ def analyse_cirs(amplitude: np.ndarray, tap_s: float, *, noise_power=None, max_l
     """Vectorised :func:`analyse_cir` over the rows of ``amplitude`` (n, L).
 
     ``noise_power``, ``search_start`` and ``search_stop`` may be scalars or
-    arrays of shape (n,). Written with masks rather than a loop so that a
-    frame's chirps, or a whole UWB log, cost a handful of numpy calls.
+    arrays of shape (n,). Written with masks rather than a loop, and with sums
+    over the selected taps only, so that many frames' chirps, or a whole UWB log,
+    cost a handful of numpy calls.
     ``with_features=False`` stops after the first arrival (features NaN).
     """
     a = np.asarray(amplitude, dtype=float)
@@ -261,37 +303,37 @@ def analyse_cirs(amplitude: np.ndarray, tap_s: float, *, noise_power=None, max_l
     else:
         noise = np.zeros(n) + np.asarray(noise_power, dtype=float)
     lead = length if max_lead_s is None else int(np.ceil(max_lead_s / tap_s))
-    valid, peak, p_peak, threshold, edge, tau0, amp0 = _first_arrivals(a, power, idx, noise, search_start,
-                                                                       search_stop, lead)
+    # Every index the first-arrival step returns lies before the search stop (plus one tap for the parabola).
+    width = length if search_stop is None else min(length, int(np.max(search_stop)) + 1)
+    valid, peak, p_peak, threshold, edge, tau0, amp0 = _first_arrivals(
+        a[:, :width], power[:, :width], idx[:, :width], noise, search_start, search_stop, lead, length)
     sel = (power >= threshold[:, None]) & (idx >= edge[:, None]) & valid[:, None]
     if not with_features:
         return CirBatch(valid=valid, features=np.full((n, len(FEATURE_NAMES)), np.nan), first_arrival_tap=tau0,
                         first_arrival_amplitude=amp0, peak_tap=peak,
                         peak_snr_db=10.0 * np.log10(np.maximum(p_peak, 1e-300) / np.maximum(noise, 1e-300)),
                         threshold_power=threshold, noise_power=noise, tap_mask=sel)
-    weight = np.where(sel, power, 0.0)
-    delay = idx * tap_s + np.zeros((n, 1))
-    mean_excess, rms, kurt, skew = _masked_moments(delay, weight, tau0 * tap_s)
+    rows, cols = np.nonzero(sel)
+    p_sel = power[rows, cols]
+    mean_excess, rms, kurt, skew = _sparse_moments(rows, cols * tap_s, p_sel, n, tau0 * tap_s)
 
     half_width = 0.5 * (pulse_width_s if pulse_width_s is not None else tap_s)
-    in_first = sel & (np.abs(idx - tau0[:, None]) * tap_s <= half_width + 1e-9 * tap_s)
-    e_first = np.where(in_first, power, 0.0).sum(axis=1)
-    e_rest = weight.sum(axis=1) - e_first
+    in_first = np.abs(cols - tau0[rows]) * tap_s <= half_width + 1e-9 * tap_s
+    e_first = np.bincount(rows, weights=np.where(in_first, p_sel, 0.0), minlength=n)
+    e_rest = np.bincount(rows, weights=p_sel, minlength=n) - e_first
+    count = np.bincount(rows, minlength=n).astype(float)
     with np.errstate(divide="ignore", invalid="ignore"):
         k_db = np.where(e_rest > 0, 10.0 * np.log10(np.maximum(e_first, 1e-300) / np.where(e_rest > 0, e_rest, 1.0)),
                         K_MAX_DB)
         k_db = np.minimum(k_db, K_MAX_DB)
-        gain_db = np.where(sel, 10.0 * np.log10(np.maximum(power, 1e-300) / np.maximum(p_peak, 1e-300)[:, None]), 0.0)
+        gain_db = 10.0 * np.log10(np.maximum(p_sel, 1e-300) / np.maximum(p_peak, 1e-300)[rows])
         snr_db = np.where(noise > 0, 10.0 * np.log10(np.maximum(p_peak, 1e-300) / np.where(noise > 0, noise, 1.0)),
                           np.inf)
-    ones = sel.astype(float)
-    count = ones.sum(axis=1)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        g_mean = gain_db.sum(axis=1) / count
-        g_rms = np.sqrt((gain_db ** 2).sum(axis=1) / count)
+        g_mean = np.bincount(rows, weights=gain_db, minlength=n) / count
+        g_rms = np.sqrt(np.bincount(rows, weights=gain_db * gain_db, minlength=n) / count)
     # Equal weights: population skewness and Pearson kurtosis, as scipy.stats.skew /
     # kurtosis(fisher=False) with bias=True (a test checks the agreement).
-    _, _, g_kurt, g_skew = _masked_moments(gain_db, ones, np.zeros(n))
+    _, _, g_kurt, g_skew = _sparse_moments(rows, gain_db, np.ones(len(rows)), n, np.zeros(n))
     features = np.column_stack([1e3 * mean_excess, 1e3 * rms, kurt, skew, k_db, g_mean, g_rms, g_kurt, g_skew])
     features[~valid] = np.nan
     return CirBatch(valid=valid, features=features, first_arrival_tap=tau0, first_arrival_amplitude=amp0,
