@@ -116,3 +116,18 @@ def test_non_finite_float_samples_become_silence_with_one_warning(tmp_path):
     got = np.concatenate([b.samples for b in blocks])
     assert np.isfinite(got).all() and got[500] == 0.0 and got[50] == pytest.approx(0.1)
     assert sum(issubclass(w.category, AudioWarning) and "non-finite" in str(w.message) for w in caught) == 1
+
+
+@pytest.mark.parametrize("subtype, dtype, scale", [("PCM_24", "int32", 2.0 ** -31), ("PCM_16", "int16", 2.0 ** -15)])
+def test_stereo_blocks_from_the_reused_read_buffer(tmp_path, subtype, dtype, scale):
+    """Blocks are fresh arrays (a later read into the shared buffer leaves them alone), first
+    channel, scaled exactly as one mixed-type multiply would: int → float32, times 2^-31 or 2^-15."""
+    x = (np.random.default_rng(2).normal(size=(50_001, 2)) * 0.2).clip(-1, 1)
+    sf.write(tmp_path / "s.wav", x, 48_000, subtype=subtype)
+    with pytest.warns(AudioWarning, match="2 channels"):
+        blocks = list(iter_audio_blocks(tmp_path / "s.wav", block_s=0.25))
+    assert [b.start_index for b in blocks] == [i * 12_000 for i in range(5)]
+    ints = sf.read(tmp_path / "s.wav", dtype=dtype)[0][:, 0]
+    expected = np.multiply(ints, np.float32(scale), dtype=np.float32)
+    assert all(b.samples.dtype == np.float32 and b.samples.flags.c_contiguous for b in blocks)
+    np.testing.assert_array_equal(np.concatenate([b.samples for b in blocks]), expected)
