@@ -76,16 +76,22 @@ class _HopBins:
     snr_sum: list = field(default_factory=list)
     beacons: list = field(default_factory=list)
 
-    def add(self, k: int, values: np.ndarray, snr_db: float, beacon_id: int) -> None:
+    def add(self, k: int, values, snr_db: float, beacon_id: int) -> None:
+        """Fold one chirp's nine features (any sequence of floats; NaN and inf skipped) into hop ``k``.
+
+        Python lists, not arrays: nine additions cost less than one numpy call.
+        """
         while len(self.sums) <= k:
-            self.sums.append(np.zeros(len(FEATURE_NAMES)))
-            self.counts.append(np.zeros(len(FEATURE_NAMES)))
+            self.sums.append([0.0] * len(FEATURE_NAMES))
+            self.counts.append([0] * len(FEATURE_NAMES))
             self.n_chirps.append(0)
             self.snr_sum.append(0.0)
             self.beacons.append(set())
-        ok = np.isfinite(values)
-        self.sums[k] += np.where(ok, values, 0.0)
-        self.counts[k] += ok
+        sums, counts = self.sums[k], self.counts[k]
+        for i, v in enumerate(values):
+            if math.isfinite(v):
+                sums[i] += v
+                counts[i] += 1
         self.n_chirps[k] += 1
         self.snr_sum[k] += snr_db
         self.beacons[k].add(beacon_id)
@@ -124,7 +130,7 @@ def analyse_audio(path: str | os.PathLike, site: Site, timing: AudioTiming,
             n_det += 1
             k = math.floor((det.arrival_s - timing.start_s) / windows.hop_s)
             if k >= 0:
-                bins.add(k, det.features.as_array(), det.snr_db, det.beacon_id)
+                bins.add(k, det.features, det.snr_db, det.beacon_id)
         if frame.fix is not None:
             fixes.append(frame.fix)
     rows = _window_rows(bins, stats, timing, windows)

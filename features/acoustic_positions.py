@@ -38,6 +38,7 @@ import functools
 import itertools
 import math
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -98,8 +99,7 @@ class PositionConfig:
             raise ConfigError(f"max_iterations must be >= 1, got {self.max_iterations}")
 
 
-@dataclass(frozen=True)
-class BeaconRange:
+class BeaconRange(NamedTuple):
     """One pseudorange: beacon position (ENU m), ``pseudorange_m`` = c·(arrival − emission), σ in m."""
 
     beacon_id: int
@@ -211,56 +211,59 @@ def _gauss_newton(ranges: list[BeaconRange], height_m: float, c: float, iteratio
     would cost several times the arithmetic. :func:`_gauss_newton_subsets` is the
     vectorised form for many subsets at once.
     """
-    rows = [(r.east_m, r.north_m, height_m - r.up_m, r.pseudorange_m, 1.0 / (r.sigma_m * r.sigma_m)) for r in ranges]
+    rows = [(r.east_m, r.north_m, (height_m - r.up_m) ** 2, r.pseudorange_m, 1.0 / (r.sigma_m * r.sigma_m))
+            for r in ranges]
     if start is None:
         w_sum = sum(q[4] for q in rows)
         e = sum(q[4] * q[0] for q in rows) / w_sum
         n = sum(q[4] * q[1] for q in rows) / w_sum
-        d = float(np.median([q[3] - math.sqrt((q[0] - e) ** 2 + (q[1] - n) ** 2 + q[2] ** 2) for q in rows])) / c
+        d = float(np.median([q[3] - math.sqrt((q[0] - e) ** 2 + (q[1] - n) ** 2 + q[2]) for q in rows])) / c
     else:
-        e, n, d = (float(v) for v in start)
+        e, n, d = (float(v) for v in (start.tolist() if isinstance(start, np.ndarray) else start))
     prior_w = 0.0 if clock_prior is None else 1.0 / (clock_prior[1] * clock_prior[1])
+    # The clock column of J is c for every range: its sums need only Σw, Σw·j and Σw·v.
+    a22 = c * c * sum(q[4] for q in rows) + prior_w
     for it in range(iterations + 1):
         # f(x) = ‖p − sᵢ‖ + c·δ;  J = [∂f/∂e, ∂f/∂n, ∂f/∂δ];  normal = JᵀWJ, gradient = JᵀW(ρ − f)
-        a00 = a01 = a02 = a11 = a12 = a22 = g0 = g1 = g2 = 0.0
+        a00 = a01 = a11 = s0 = s1 = g0 = g1 = gv = 0.0
+        cd = c * d
         res = []
-        for se, sn, du, rho, w in rows:
+        for se, sn, du2, rho, w in rows:
             de, dn = e - se, n - sn
-            r = math.sqrt(de * de + dn * dn + du * du)
-            j0, j1 = de / r, dn / r
-            v = rho - (r + c * d)
+            r = math.sqrt(de * de + dn * dn + du2)
+            v = rho - r - cd
             res.append(v)
-            wj0, wj1, wc = w * j0, w * j1, w * c
+            j0, j1 = de / r, dn / r
+            wj0, wj1 = w * j0, w * j1
             a00 += wj0 * j0
             a01 += wj0 * j1
-            a02 += wj0 * c
             a11 += wj1 * j1
-            a12 += wj1 * c
-            a22 += wc * c
+            s0 += wj0
+            s1 += wj1
             g0 += wj0 * v
             g1 += wj1 * v
-            g2 += wc * v
+            gv += w * v
+        a02, a12, g2 = c * s0, c * s1, c * gv
         if clock_prior is not None:
             # Prior row: δ₀ − δ with weight 1/σ_δ² (J row [0, 0, 1]).
-            a22 += prior_w
             g2 += (clock_prior[0] - d) * prior_w
         if it == iterations:
             break
         inv = _inverse3_sym(a00, a01, a02, a11, a12, a22)
         if inv is None:
             return None
-        s0 = inv[0] * g0 + inv[1] * g1 + inv[2] * g2
-        s1 = inv[1] * g0 + inv[3] * g1 + inv[4] * g2
-        s2 = inv[2] * g0 + inv[4] * g1 + inv[5] * g2
-        e, n, d = e + s0, n + s1, d + s2
-        if s0 * s0 + s1 * s1 < 1e-12 and abs(s2) * c < 1e-6:
+        s_e = inv[0] * g0 + inv[1] * g1 + inv[2] * g2
+        s_n = inv[1] * g0 + inv[3] * g1 + inv[4] * g2
+        s_d = inv[2] * g0 + inv[4] * g1 + inv[5] * g2
+        e, n, d = e + s_e, n + s_n, d + s_d
+        if s_e * s_e + s_n * s_n < 1e-12 and abs(s_d) * c < 1e-6:
             iterations = it + 1
     # Covariance of the weighted LS estimate: (JᵀWJ)⁻¹ (refused when nearly singular).
     cov = _inverse3_sym(a00, a01, a02, a11, a12, a22)
     if cov is None or not all(math.isfinite(v) for v in cov) or min(cov[0], cov[3], cov[5]) <= 0 \
             or cov[0] + cov[3] > 1e8:
         return None
-    sig = [1.0 / math.sqrt(q[4]) for q in rows]
+    sig = [r.sigma_m for r in ranges]
     chi2 = sum(w * v * v for (_, _, _, _, w), v in zip(rows, res))
     if clock_prior is not None:
         chi2 += (clock_prior[0] - d) ** 2 * prior_w
@@ -303,10 +306,11 @@ def solve_position(ranges: list[BeaconRange], site: Site, speed_m_s: float,
         ranges = [ranges[i] for i in keep]
     if not _plausible(x, site, config):
         return None
-    t_true = float(np.mean([r.arrival_s for r in ranges])) - x[2]
-    return AcousticFix(t_s=t_true, east_m=float(x[0]), north_m=float(x[1]), clock_offset_s=float(x[2]),
+    east, north, clock = x.tolist()
+    t_true = sum(r.arrival_s for r in ranges) / len(ranges) - clock
+    return AcousticFix(t_s=t_true, east_m=east, north_m=north, clock_offset_s=clock,
                        n_beacons=len(ranges), covariance=cov,
-                       rms_residual_m=float(np.sqrt(np.mean(res ** 2))),
+                       rms_residual_m=math.sqrt(float(res @ res) / len(res)),
                        used_ids=tuple(r.beacon_id for r in ranges), rejected_ids=tuple(rejected))
 
 
@@ -457,7 +461,8 @@ def _multistart(ranges: list[BeaconRange], site: Site, c: float, config: Positio
 
 
 def _plausible(x: np.ndarray, site: Site, config: PositionConfig) -> bool:
+    e, n, d = x.tolist()
     g, m = site.grid, config.bounds_margin_m
-    inside = (g.east_min_m - m <= x[0] <= g.east_max_m + m) and (g.north_min_m - m <= x[1] <= g.north_max_m + m)
-    clock_ok = config.max_clock_offset_s is None or abs(x[2]) <= config.max_clock_offset_s
-    return bool(inside and clock_ok and np.all(np.isfinite(x)))
+    inside = (g.east_min_m - m <= e <= g.east_max_m + m) and (g.north_min_m - m <= n <= g.north_max_m + m)
+    clock_ok = config.max_clock_offset_s is None or abs(d) <= config.max_clock_offset_s
+    return inside and clock_ok and math.isfinite(e + n + d)

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import NamedTuple
 from datetime import datetime, timezone
 
 from .cir import CirFeatures
@@ -76,8 +77,7 @@ class AudioTiming:
 
 
 
-@dataclass(frozen=True)
-class ChirpDetection:
+class ChirpDetection(NamedTuple):
     """One beacon chirp heard by the receiver.
 
     ``frame`` counts frames on the walk time base (frame 0 starts at
@@ -98,8 +98,7 @@ class ChirpDetection:
 
 
 
-@dataclass(frozen=True)
-class SearchWindow:
+class SearchWindow(NamedTuple):
     """Where a beacon's chirp may start: sample indices [lo, hi] of the stream.
 
     ``expected``: sample index of the arrival predicted from the track (None in acquisition).

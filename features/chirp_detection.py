@@ -38,7 +38,6 @@ survey, 94 cells: 4.1 vs 3.6 ms with 30 ms; 1.0 vs 2.6 ms with 15 ms).
 from __future__ import annotations
 
 import bisect
-import dataclasses
 import math
 import os
 from dataclasses import dataclass
@@ -133,11 +132,10 @@ class AudioStats:
                        else np.zeros(n_full, dtype=int))
             # float32 sums (relative error ~1e-5 over a 0.1 s bin): the energy only flags silence.
             energy = np.einsum("ij,ij->i", full, full)
-            for k in range(n_full):
-                b = first_bin + 1 + k
-                self.n_samples[b] += bin_len
-                self.n_clipped[b] += int(clipped[k])
-                self.sum_sq[b] += float(energy[k])
+            bins = slice(first_bin + 1, first_bin + 1 + n_full)
+            self.n_samples[bins] = [v + bin_len for v in self.n_samples[bins]]
+            self.n_clipped[bins] = [v + int(k) for v, k in zip(self.n_clipped[bins], clipped.tolist())]
+            self.sum_sq[bins] = [v + e for v, e in zip(self.sum_sq[bins], energy.tolist())]
 
 
 
@@ -291,8 +289,9 @@ def detect_frames(path: str | os.PathLike, site: Site, timing: AudioTiming,
             if len(seg) < 3:
                 maxima[t] = ([], [])
                 continue
-            mid = seg[1:-1]
-            idx = 1 + np.flatnonzero((mid > gamma) & (mid > seg[:-2]) & (mid >= seg[2:]))
+            # Interior local maxima above γ, tested only where the envelope exceeds γ (few samples).
+            idx = 1 + np.flatnonzero(seg[1:-1] > gamma)
+            idx = idx[(seg[idx] > seg[idx - 1]) & (seg[idx] >= seg[idx + 1])]
             # The ends count when above the neighbour inside (as if padded with zeros).
             ends = [i for i, ok in ((0, seg[0] > gamma and seg[0] >= seg[1]),
                                     (len(seg) - 1, seg[-1] > gamma and seg[-1] > seg[-2])) if ok]
@@ -343,6 +342,10 @@ def detect_frames(path: str | os.PathLike, site: Site, timing: AudioTiming,
             return abs(sp - w.expected) if w.expected is not None else 0
 
         pending = sorted([w for w in windows if id(w) in cands], key=lambda w: not w.associated)
+        # The common case: no two windows' first peaks are one arrival; each window keeps its own.
+        firsts = sorted((template_of[w.beacon_index], cands[id(w)][0]) for w in pending)
+        if all(t1 != t2 or s2 - s1 > gap for (t1, s1), (t2, s2) in zip(firsts, firsts[1:])):
+            return [(w, cands[id(w)][0]) for w in pending]
         for _ in range(4):                       # a few rounds of re-assignment settle every case seen
             taken: list[tuple[SearchWindow, int]] = []
             losers = []
@@ -374,22 +377,22 @@ def detect_frames(path: str | os.PathLike, site: Site, timing: AudioTiming,
     cir_taps = (lead + 8 + span) // dec
     toa_taps = (2 * lead + 9) // dec + 1        # the strongest tap is sought within ±max_lead_s of the located one
     first_tap = (lead + 8) // dec               # where the located arrival lies in its CIR
+    lead_taps = int(math.ceil(config.max_lead_s / (dec / fs)))
     tap_offsets = np.arange(cir_taps)
 
     pending_cirs: list = []      # (frame list index, detection index, template, cir row, search start, noise power)
 
-    def cir_rows(t: int, j_a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Decimated envelope rows ``[j_a, j_a + cir_taps)`` of template ``t`` (zeros outside the
-        stream's history) and the first tap of each that the stream holds."""
-        rel = j_a - stream.env_j0
-        if len(rel) and rel.min() >= 0 and rel.max() + cir_taps <= stream.env.shape[1]:
-            return stream.env[t][rel[:, None] + tap_offsets], j_a
+    def cir_rows(t: int, j_a: list) -> tuple[np.ndarray, list]:
+        """Decimated envelope rows ``[j, j + cir_taps)`` of template ``t`` for each ``j`` of ``j_a``
+        (zeros outside the stream's history), and the first tap of each that the stream holds."""
+        if min(j_a) >= stream.env_j0 and max(j_a) + cir_taps <= stream.env_j0 + stream.env.shape[1]:
+            return stream.env[t][(np.array(j_a) - stream.env_j0)[:, None] + tap_offsets], j_a
         cirs = np.zeros((len(j_a), cir_taps), dtype=np.float32)
-        got = np.empty(len(j_a), dtype=int)
-        for r, j in enumerate(j_a.tolist()):
+        got = []
+        for r, j in enumerate(j_a):
             j_got, seg = stream.env_range(j, j + cir_taps)
             cirs[r, j_got - j: j_got - j + seg.shape[1]] = seg[t]
-            got[r] = j_got
+            got.append(j_got)
         return cirs, got
 
     def analyse(found: list[tuple[SearchWindow, int]], sigmas: np.ndarray, frame: int, slot: int) -> list[ChirpDetection]:
@@ -407,15 +410,12 @@ def detect_frames(path: str | os.PathLike, site: Site, timing: AudioTiming,
         out = []
         for t in sorted({template_of[w.beacon_index] for w, _ in found}):
             group = [(w, sp) for w, sp in found if template_of[w.beacon_index] == t]
-            located = np.array([sp for _, sp in group])
-            j_a = -(-(located - lead - 8 + bank.delay_samples) // dec)
+            j_a = [-(-(sp - lead - 8 + delay) // dec) for _, sp in group]
             cirs, j_got = cir_rows(t, j_a)
-            w_lo = np.array([w.lo for w, _ in group])
-            cir_lo = np.minimum(np.maximum(-(-(w_lo + bank.delay_samples) // dec), j_got) - j_a, first_tap)
+            cir_lo = [min(max(-(-(w.lo + delay) // dec), g) - j, first_tap) for (w, _), g, j in zip(group, j_got, j_a)]
             noise_power = 2.0 * sigmas[t] ** 2   # Rayleigh envelope of scale σ: E[env²] = 2σ²
-            lead_taps = int(math.ceil(config.max_lead_s / (dec / fs)))
-            toa = first_arrivals(cirs[:, :toa_taps].tolist(), cir_lo.tolist(), toa_taps, lead_taps, noise_power)
-            for (w, _), found_r, j, row, lo in zip(group, toa, j_a.tolist(), cirs, cir_lo.tolist()):
+            toa = first_arrivals(cirs[:, :toa_taps].tolist(), cir_lo, toa_taps, lead_taps, noise_power)
+            for (w, _), found_r, j, row, lo in zip(group, toa, j_a, cirs, cir_lo):
                 if found_r is None:
                     continue
                 tau0, snr = found_r
@@ -483,7 +483,7 @@ def detect_frames(path: str | os.PathLike, site: Site, timing: AudioTiming,
             sigmas = noise_scales(windows).tolist()
             prepare_maxima(windows, sigmas)
             if not tracking and tracker.skip_acquisition():
-                windows = [dataclasses.replace(w, associated=False) for w in windows]
+                windows = [w._replace(associated=False) for w in windows]
             elif not tracking:
                 windows = acquisition_windows(
                     windows, lambda w: candidates(w, sigmas[template_of[w.beacon_index]]), tracker, timing, fs, lead)
