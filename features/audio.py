@@ -135,6 +135,21 @@ def count_clipped(x: np.ndarray) -> int:
     return int(np.count_nonzero(np.abs(x) >= CLIP_LEVEL))
 
 
+_INT16_CLIP = math.ceil(CLIP_LEVEL * 32768)
+"""Least int16 magnitude ``i`` with ``i / 32768 >= CLIP_LEVEL`` (32736: 32735/32768 = 0.998993)."""
+
+
+def _count_clipped_int16(x: np.ndarray) -> int:
+    """:func:`count_clipped` of ``x / 32768``, counted on the int16 samples: half the bytes to scan.
+
+    >>> _count_clipped_int16(np.array([32735, 32736, -32768, -32735, 0], dtype=np.int16))
+    2
+    """
+    if len(x) == 0 or max(int(x.max()), -int(x.min())) < _INT16_CLIP:
+        return 0
+    return int(np.count_nonzero((x >= _INT16_CLIP) | (x <= -_INT16_CLIP)))
+
+
 def _read_dtype(subtype: str) -> tuple[str, float]:
     """numpy dtype to read as, and the scale to full scale 1.0."""
     if subtype in ("PCM_16", "PCM_U8", "PCM_S8"):
@@ -183,7 +198,8 @@ def iter_audio_blocks(path: str | os.PathLike, block_s: float = 4.0,
                         samples *= np.float32(scale)
                     if dtype.startswith("float"):
                         warned = _zero_non_finite(samples, path, warned)
-                    yield AudioBlock(out_index, samples, count_clipped(samples))
+                    clipped = _count_clipped_int16(raw[:n, 0]) if dtype == "int16" else count_clipped(samples)
+                    yield AudioBlock(out_index, samples, clipped)
                     out_index += len(samples)
                 return
             yield from _resampled_blocks(fh, dtype, scale, block_in, ratio, info.n_frames, path)

@@ -365,8 +365,16 @@ class StreamingMatchedFilter:
         # Work buffers, grown to the largest block seen (memory is bounded by the block size):
         # input = the last kernel_len − 1 samples carried over, then the block, then zeros;
         # band products, whose bins above Nyquist stay zero.
-        self._input = np.zeros(self.nfft, dtype=np.float32)
+        self._set_input(np.zeros(self.nfft, dtype=np.float32))
         self._products = np.zeros((bank.n_templates, 0, n_keep), dtype=np.complex64)
+
+    def _set_input(self, data: np.ndarray) -> None:
+        """Use ``data`` as the input buffer, with its overlapping segments as a read-only view
+        made once (``as_strided`` costs about as much per call as a small FFT)."""
+        self._input = data
+        n_seg = (len(data) - self.nfft) // self.hop + 1
+        self._segments = np.lib.stride_tricks.as_strided(
+            data, shape=(n_seg, self.nfft), strides=(self.hop * data.strides[0], data.strides[0]), writeable=False)
 
     def chirp_start(self, j):
         """Input sample index at which a chirp starts for decimated output index ``j``."""
@@ -385,20 +393,19 @@ class StreamingMatchedFilter:
         if len(data) < need:
             data = np.zeros(need, dtype=np.float32)
             data[:carry] = self._input[:carry]
-            self._input = data
+            self._set_input(data)
         data[carry: carry + n] = x
         data[carry + n: need] = 0.0
-        segments = np.lib.stride_tricks.as_strided(
-            data, shape=(n_seg, self.nfft), strides=(self.hop * data.strides[0], data.strides[0]), writeable=False)
-        spec = scipy.fft.rfft(segments, axis=1, workers=1)
+        spec = scipy.fft.rfft(self._segments[:n_seg], axis=1, workers=1)
         data[:carry] = data[n: n + carry]          # carried over to the next block
         if self._products.shape[1] < n_seg:
             self._products = np.zeros((self.bank.n_templates, n_seg, self._n_keep), dtype=np.complex64)
         products = self._products[:, :n_seg]
-        # Y_k = X · H_k for every template k and segment, then one batched inverse FFT.
+        # Y_k = X · H_k for every template k and segment, then one batched inverse FFT, in place.
         np.multiply(spec[None, :, self._k0: self._k0 + self._n_band], self._spectra[:, None, :],
                     out=products[:, :, : self._n_band])
-        z = scipy.fft.ifft(products, axis=2, workers=1, norm="forward")
+        products[:, :, self._n_band:] = 0.0
+        z = scipy.fft.ifft(products, axis=2, workers=1, norm="forward", overwrite_x=True)
         # Overlap-save: outputs before kernel_len − 1 wrap around; keep hop / D after them.
         env = np.abs(z[:, :, self._first_valid: self._first_valid + self.hop // self.decimation])
         return env.reshape(env.shape[0], -1)[:, :n_out]

@@ -131,3 +131,13 @@ def test_stereo_blocks_from_the_reused_read_buffer(tmp_path, subtype, dtype, sca
     expected = np.multiply(ints, np.float32(scale), dtype=np.float32)
     assert all(b.samples.dtype == np.float32 and b.samples.flags.c_contiguous for b in blocks)
     np.testing.assert_array_equal(np.concatenate([b.samples for b in blocks]), expected)
+
+
+def test_int16_clip_count_equals_the_float_count(tmp_path):
+    """int16 blocks count clipping on the integers; the count must equal count_clipped of the floats."""
+    from features.audio import count_clipped
+
+    x = np.r_[np.arange(32_700, 32_768), np.arange(-32_768, -32_700), np.zeros(100)].astype(np.int16)
+    sf.write(tmp_path / "c.wav", x, 48_000, subtype="PCM_16")
+    (block,) = iter_audio_blocks(tmp_path / "c.wav")
+    assert block.n_clipped == count_clipped(x / np.float32(32768)) == 2 * 32 + 1
