@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import math
 import os
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -66,35 +66,55 @@ class WindowConfig:
         return int(round(self.window_s / self.hop_s))
 
 
-@dataclass
 class _HopBins:
-    """Per-hop sums of the features of the chirps arriving in it."""
+    """Per-hop sums of the features of the chirps arriving in it.
 
-    sums: list = field(default_factory=list)
-    counts: list = field(default_factory=list)
-    n_chirps: list = field(default_factory=list)
-    snr_sum: list = field(default_factory=list)
-    beacons: list = field(default_factory=list)
+    Chirps are queued by :meth:`add` and folded in by :meth:`flush`, a few hundred
+    at a time with :func:`numpy.add.at` (NaN and inf features skipped): a handful of
+    numpy calls per batch instead of several per chirp.
+    """
+
+    _FLUSH_AT = 512
+
+    def __init__(self):
+        n = len(FEATURE_NAMES)
+        self.sums = np.zeros((0, n))
+        self.counts = np.zeros((0, n))
+        self.n_chirps = np.zeros(0, dtype=int)
+        self.snr_sum = np.zeros(0)
+        self.beacons: list[set] = []
+        self._queue: tuple[list, list, list, list] = ([], [], [], [])
 
     def add(self, k: int, values, snr_db: float, beacon_id: int) -> None:
-        """Fold one chirp's nine features (any sequence of floats; NaN and inf skipped) into hop ``k``.
+        """Queue one chirp's nine features (a sequence of floats) for hop ``k``."""
+        for lst, v in zip(self._queue, (k, values, snr_db, beacon_id)):
+            lst.append(v)
+        if len(self._queue[0]) >= self._FLUSH_AT:
+            self.flush()
 
-        Python lists, not arrays: nine additions cost less than one numpy call.
-        """
-        while len(self.sums) <= k:
-            self.sums.append([0.0] * len(FEATURE_NAMES))
-            self.counts.append([0] * len(FEATURE_NAMES))
-            self.n_chirps.append(0)
-            self.snr_sum.append(0.0)
-            self.beacons.append(set())
-        sums, counts = self.sums[k], self.counts[k]
-        for i, v in enumerate(values):
-            if math.isfinite(v):
-                sums[i] += v
-                counts[i] += 1
-        self.n_chirps[k] += 1
-        self.snr_sum[k] += snr_db
-        self.beacons[k].add(beacon_id)
+    def flush(self) -> None:
+        """Fold the queued chirps into the per-hop sums."""
+        ks, values, snrs, ids = self._queue
+        if not ks:
+            return
+        hops = np.array(ks)
+        need = int(hops.max()) + 1
+        if need > len(self.sums):
+            grow = need - len(self.sums)
+            self.sums = np.concatenate([self.sums, np.zeros((grow, self.sums.shape[1]))])
+            self.counts = np.concatenate([self.counts, np.zeros((grow, self.counts.shape[1]))])
+            self.n_chirps = np.concatenate([self.n_chirps, np.zeros(grow, dtype=int)])
+            self.snr_sum = np.concatenate([self.snr_sum, np.zeros(grow)])
+            self.beacons.extend(set() for _ in range(grow))
+        f = np.array(values, dtype=float)
+        ok = np.isfinite(f)
+        np.add.at(self.sums, hops, np.where(ok, f, 0.0))
+        np.add.at(self.counts, hops, ok)
+        np.add.at(self.n_chirps, hops, 1)
+        np.add.at(self.snr_sum, hops, np.array(snrs, dtype=float))
+        for k, b in zip(ks, ids):
+            self.beacons[k].add(b)
+        self._queue = ([], [], [], [])
 
 
 @dataclass(frozen=True)
@@ -133,6 +153,7 @@ def analyse_audio(path: str | os.PathLike, site: Site, timing: AudioTiming,
                 bins.add(k, det.features, det.snr_db, det.beacon_id)
         if frame.fix is not None:
             fixes.append(frame.fix)
+    bins.flush()
     rows = _window_rows(bins, stats, timing, windows)
     return AudioAnalysis(rows, fixes, n_det, stats.duration_s, stats.truncated, kept)
 
@@ -156,8 +177,8 @@ def _window_rows(bins: _HopBins, stats: AudioStats, timing: AudioTiming, cfg: Wi
             if k < len(bins.sums):
                 sums += bins.sums[k]
                 counts += bins.counts[k]
-                n_chirps += bins.n_chirps[k]
-                snr_sum += bins.snr_sum[k]
+                n_chirps += int(bins.n_chirps[k])
+                snr_sum += float(bins.snr_sum[k])
                 beacons |= bins.beacons[k]
         with np.errstate(invalid="ignore", divide="ignore"):
             means = np.where(counts > 0, sums / np.maximum(counts, 1), np.nan)

@@ -48,6 +48,9 @@ from .site import Site
 __all__ = ["BeaconRange", "AcousticFix", "PositionConfig", "solve_position", "toa_range_sigma_m",
            "RANGE_SIGMA_FLOOR_M", "POSITION_COLUMNS"]
 
+_STEP_TOL_M = 1e-4
+"""Gauss-Newton stops once a step moves the position and c·δ by less than this, m (0.1 mm)."""
+
 _MAX_SUBSETS = 256
 """Most beacon subsets tried when excluding NLOS-biased beacons (C(8, 4) = 70, C(10, 5) = 252)."""
 
@@ -204,7 +207,9 @@ def _gauss_newton(ranges: list[BeaconRange], height_m: float, c: float, iteratio
     Starts from ``start`` (e.g. the previous fix) or from the weighted centroid
     of the beacons with the median clock offset. ``clock_prior`` = (δ₀, σ_δ)
     adds the pseudo-measurement δ = δ₀ ± σ_δ (a tracked clock), which enters
-    the normal equations and chi² like one more range.
+    the normal equations and chi² like one more range. Iterates until a step
+    moves less than :data:`_STEP_TOL_M` (see the comment there for what is
+    returned then) or ``iterations`` steps are taken.
 
     Scalar Python over the ranges (a frame has a few to a few tens): with three
     unknowns the normal equations are six sums, and numpy's per-call overhead
@@ -223,6 +228,8 @@ def _gauss_newton(ranges: list[BeaconRange], height_m: float, c: float, iteratio
     prior_w = 0.0 if clock_prior is None else 1.0 / (clock_prior[1] * clock_prior[1])
     # The clock column of J is c for every range: its sums need only Σw, Σw·j and Σw·v.
     a22 = c * c * sum(q[4] for q in rows) + prior_w
+    cov = None
+    chi2_shift = 0.0
     for it in range(iterations + 1):
         # f(x) = ‖p − sᵢ‖ + c·δ;  J = [∂f/∂e, ∂f/∂n, ∂f/∂δ];  normal = JᵀWJ, gradient = JᵀW(ρ − f)
         a00 = a01 = a11 = s0 = s1 = g0 = g1 = gv = 0.0
@@ -256,17 +263,25 @@ def _gauss_newton(ranges: list[BeaconRange], height_m: float, c: float, iteratio
         s_n = inv[1] * g0 + inv[3] * g1 + inv[4] * g2
         s_d = inv[2] * g0 + inv[4] * g1 + inv[5] * g2
         e, n, d = e + s_e, n + s_n, d + s_d
-        if s_e * s_e + s_n * s_n < 1e-12 and abs(s_d) * c < 1e-6:
-            iterations = it + 1
-    # Covariance of the weighted LS estimate: (JᵀWJ)⁻¹ (refused when nearly singular).
-    cov = _inverse3_sym(a00, a01, a02, a11, a12, a22)
+        if s_e * s_e + s_n * s_n < _STEP_TOL_M ** 2 and abs(s_d) * c < _STEP_TOL_M:
+            # Converged. Residuals and covariance stay those of the last linearisation point (less
+            # than _STEP_TOL_M away); χ² moves along the linear model: ‖v − J·s‖²_W − ‖v‖²_W
+            # = −2·sᵀg + sᵀN·s = −sᵀg, since the step solves N·s = g.
+            cov = inv
+            chi2_shift = -(s_e * g0 + s_n * g1 + s_d * g2)
+            d_prior = d - s_d
+            break
+    if cov is None:
+        d_prior = d
+        # Covariance of the weighted LS estimate: (JᵀWJ)⁻¹ (refused when nearly singular).
+        cov = _inverse3_sym(a00, a01, a02, a11, a12, a22)
     if cov is None or not all(math.isfinite(v) for v in cov) or min(cov[0], cov[3], cov[5]) <= 0 \
             or cov[0] + cov[3] > 1e8:
         return None
     sig = [r.sigma_m for r in ranges]
-    chi2 = sum(w * v * v for (_, _, _, _, w), v in zip(rows, res))
+    chi2 = sum(w * v * v for (_, _, _, _, w), v in zip(rows, res)) + chi2_shift
     if clock_prior is not None:
-        chi2 += (clock_prior[0] - d) ** 2 * prior_w
+        chi2 += (clock_prior[0] - d_prior) ** 2 * prior_w
     return np.array([e, n, d]), np.array(_sym_rows(cov)), np.array(res), np.array(sig), chi2
 
 

@@ -76,6 +76,9 @@ class ClockPositionTracker:
         self.site, self.timing, self.fs, self.c, self.r_max = site, timing, fs_hz, c, r_max
         self.positions = positions
         self.order = sorted(range(len(site.beacons)), key=lambda i: (site.beacons[i].slot, site.beacons[i].id))
+        # (index, slot offset s, east, north, up) of each beacon in slot order, for windows().
+        self._beacon_geometry = [(i, site.beacons[i].slot * site.acoustic.slot_s, site.beacons[i].east_m,
+                                  site.beacons[i].north_m, site.beacons[i].up_m) for i in self.order]
         self.last_fix: AcousticFix | None = None
         # Verifying a hypothesis may drop one wrongly associated beacon; more is a new hypothesis.
         # Acquisition keeps the static model whatever the motion prior: its tight residual
@@ -111,36 +114,33 @@ class ClockPositionTracker:
         return self.last_fix is not None and t_s - self.last_fix.t_s <= self.track_timeout_s
 
     def windows(self, frame_start_s: float) -> list[SearchWindow]:
-        ac, u, fs = self.site.acoustic, self.timing.start_uncertainty_s, self.fs
+        """Search windows of the frame starting at ``frame_start_s``, one per beacon searched, in slot order."""
+        u, fs, start_s, c = self.timing.start_uncertainty_s, self.fs, self.timing.start_s, self.c
         out = []
-        tracking = self.tracking_at(frame_start_s)
-        expected = None
-        if tracking:
-            fix = self.last_fix
-            cov = fix.covariance.tolist()
-            sigma_h_m = math.sqrt(max(cov[0][0], cov[1][1], 0.0))        # per fix, not per beacon
-            sigma_clock_s = math.sqrt(max(cov[2][2], 0.0))
-            here = (fix.east_m, fix.north_m, self.site.device_height_m)
-        for i in self.order:
-            b = self.site.beacons[i]
-            tx = frame_start_s + b.slot * ac.slot_s
-            if tracking:
-                dt = max(0.0, tx - fix.t_s)
-                radius_m = 3.0 * sigma_h_m + self.max_speed_m_s * dt + 0.5
-                clock_s = 3.0 * sigma_clock_s + self.max_drift_ppm * 1e-6 * dt + 5e-4
-                r = math.dist(here, (b.east_m, b.north_m, b.up_m))
-                if r - radius_m > self.r_max:
-                    continue
-                centre = tx + r / self.c + fix.clock_offset_s
-                lo_s = centre - radius_m / self.c - clock_s
-                hi_s = centre + (radius_m + self.nlos_slack_m) / self.c + clock_s
-                expected = int(round((centre - self.timing.start_s) * fs))
-            else:
-                lo_s = tx - u
-                hi_s = tx + u + self.r_max / self.c
-            lo = int(math.floor((lo_s - self.timing.start_s) * fs))
-            hi = int(math.ceil((hi_s - self.timing.start_s) * fs))
-            out.append(SearchWindow(i, tx, lo, hi, expected=expected))
+        if not self.tracking_at(frame_start_s):
+            for i, slot_s, _, _, _ in self._beacon_geometry:
+                tx = frame_start_s + slot_s
+                out.append(SearchWindow(i, tx, math.floor((tx - u - start_s) * fs),
+                                        math.ceil((tx + u + self.r_max / c - start_s) * fs)))
+            return out
+        fix = self.last_fix
+        cov = fix.covariance
+        sigma_h_m = math.sqrt(max(cov[0, 0], cov[1, 1], 0.0))        # per fix, not per beacon
+        sigma_clock_s = math.sqrt(max(cov[2, 2], 0.0))
+        e, n, h = fix.east_m, fix.north_m, self.site.device_height_m
+        for i, slot_s, be, bn, bu in self._beacon_geometry:
+            tx = frame_start_s + slot_s
+            dt = max(0.0, tx - fix.t_s)
+            radius_m = 3.0 * sigma_h_m + self.max_speed_m_s * dt + 0.5
+            clock_s = 3.0 * sigma_clock_s + self.max_drift_ppm * 1e-6 * dt + 5e-4
+            r = math.sqrt((e - be) ** 2 + (n - bn) ** 2 + (h - bu) ** 2)
+            if r - radius_m > self.r_max:
+                continue
+            centre = tx + r / c + fix.clock_offset_s
+            lo_s = centre - radius_m / c - clock_s
+            hi_s = centre + (radius_m + self.nlos_slack_m) / c + clock_s
+            out.append(SearchWindow(i, tx, math.floor((lo_s - start_s) * fs), math.ceil((hi_s - start_s) * fs),
+                                    expected=round((centre - start_s) * fs)))
         return out
 
     def acquire(self, candidates: dict) -> dict:
@@ -467,7 +467,13 @@ def frame_fix(detections: list[ChirpDetection], site: Site, c: float, bandwidth:
             sigma_m = math.sqrt(sigma_m ** 2 + 0.5 * (v_motion * dt) ** 2)
         ranges.append(BeaconRange(d.beacon_id, b.east_m - ve * dt, b.north_m - vn * dt, b.up_m,
                                   c * (d.arrival_s - d.tx_s), sigma_m, d.arrival_s))
-    x0 = None if start is None else np.array([start.east_m, start.north_m, start.clock_offset_s])
+    # Start from the previous fix, moved to the track's prediction when there is one (fewer iterations).
+    if start is None:
+        x0 = None
+    elif position_prior is not None:
+        x0 = (position_prior[0], position_prior[1], start.clock_offset_s)
+    else:
+        x0 = (start.east_m, start.north_m, start.clock_offset_s)
     return solve_position(ranges, site, c, config, x0, clock_prior, position_prior)
 
 
