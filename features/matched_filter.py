@@ -31,7 +31,8 @@ transformed in one call. Hand-written (instead of :func:`scipy.signal.oaconvolve
 because it streams: the last ``kernel_len − 1`` input samples are carried over
 to the next block, so the output of a file processed in blocks equals the output
 of the whole file, and memory is bounded by the block size. It is also about
-1.7× faster than ``oaconvolve`` here (see ``bench/bench_audio.py``).
+2.5× faster than ``oaconvolve`` here (see ``bench/bench_audio.py``; its own
+costs against the two FFT calls it cannot avoid: ``bench/bench_frontend.py``).
 """
 
 from __future__ import annotations
@@ -294,8 +295,9 @@ def default_nfft(kernel_len: int, decimation: int = 4) -> int:
     Each segment of N samples yields N − kernel_len + 1 outputs, so short segments waste
     more on the overlap; long ones cost more per sample (scipy's pocketfft, float32, batched,
     on the development machine: 3.5 ns per sample at N = 4096, 4.1 at 8192, 4.3 at 16384).
-    For the 10 ms chirp (609 taps, 15 % overlap) 4096 was 10–20 % faster than 8192 over the
-    whole filter, for a 20 ms chirp (1089 taps) 8192 was faster than 4096 (``bench/bench_frontend.py``).
+    Over the whole filter, for the 10 ms chirp (609 taps, 15 % overlap) 4096 was 7–22 % faster
+    than 8192 in repeated runs (``bench/bench_frontend.py``); for a 20 ms chirp (1089 taps) 8192
+    was 6–8 % faster than 4096.
 
     >>> default_nfft(609), default_nfft(1089), default_nfft(3000)
     (4096, 8192, 32768)
@@ -351,11 +353,11 @@ class StreamingMatchedFilter:
         centre_hz = 0.5 * (BANDPASS_LOW_HZ + min(BANDPASS_HIGH_HZ, bank.fs_hz / 2))
         self._k0 = max(0, int(round((centre_hz - width_hz / 2) / df_hz)))
         spectra = scipy.fft.rfft(bank.kernels, n=self.nfft, axis=1)
-        # Bins of the kept band below Nyquist; the rest of the band (if any) is zero in every product.
+        # Bins of the kept band below Nyquist; those above it (if any) are zero in every product.
         self._n_band = min(n_keep, spectra.shape[1] - self._k0)
-        # Analytic signal doubles positive frequencies; the N-point IDFT's 1/N is applied here (the
-        # inverse transform runs unscaled, norm="forward"), and sampling every D-th output of the
-        # N-point IDFT equals the (N/D)-point IDFT of the band, scaled by 1/D · (N/D)/N·D = 1/N.
+        # Every D-th output of the N-point IDFT, z[D·m] = (1/N) Σ_band Y[k] e^{2πi·k·m/(N/D)}, is the
+        # unscaled (N/D)-point IDFT of the band (times a unit phase) over N; the analytic signal
+        # doubles positive frequencies. Hence 2/N here and an unscaled inverse (norm="forward").
         self._spectra = (2.0 / self.nfft * spectra[:, self._k0: self._k0 + self._n_band]).astype(np.complex64)
         self._n_keep = n_keep
         self._pending = np.zeros(0, dtype=np.float32)
