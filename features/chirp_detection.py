@@ -297,11 +297,14 @@ def detect_frames(path: str | os.PathLike, site: Site, timing: AudioTiming,
                                     (len(seg) - 1, seg[-1] > gamma and seg[-1] > seg[-2])) if ok]
             if ends:
                 idx = np.sort(np.concatenate([idx, np.array(ends, dtype=idx.dtype)]))
-            if len(idx) > 1:
-                h = seg[idx]
-                near = np.abs(idx[:, None] - idx[None, :]) * dec <= bank.template_len
-                idx = idx[~np.any(near & (h[None, :] > h[:, None] * _SIDELOBE_GUARD), axis=1)]
-            maxima[t] = ((j_first + idx).tolist(), seg[idx].tolist())
+            h = seg[idx]
+            # Only a maximum above γ·guard can be 25 dB stronger than another above γ.
+            strong = idx[h > gamma * _SIDELOBE_GUARD]
+            if len(strong) and len(idx) > 1:
+                near = np.abs(idx[:, None] - strong[None, :]) * dec <= bank.template_len
+                keep = ~np.any(near & (seg[strong][None, :] > h[:, None] * _SIDELOBE_GUARD), axis=1)
+                idx, h = idx[keep], h[keep]
+            maxima[t] = ((j_first + idx).tolist(), h.tolist())
 
     def peaks(w: SearchWindow, sigma: float) -> tuple[list, list]:
         """Chirp-start indices (ascending) and heights of envelope maxima in ``w`` above its threshold γ.
