@@ -87,9 +87,12 @@ class _HopBins:
 
     def add(self, k: int, values, snr_db: float, beacon_id: int) -> None:
         """Queue one chirp's nine features (a sequence of floats) for hop ``k``."""
-        for lst, v in zip(self._queue, (k, values, snr_db, beacon_id)):
-            lst.append(v)
-        if len(self._queue[0]) >= self._FLUSH_AT:
+        hops, feats, snrs, ids = self._queue
+        hops.append(k)
+        feats.append(values)
+        snrs.append(snr_db)
+        ids.append(beacon_id)
+        if len(hops) >= self._FLUSH_AT:
             self.flush()
 
     def flush(self) -> None:

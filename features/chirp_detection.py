@@ -311,6 +311,7 @@ def detect_frames(path: str | os.PathLike, site: Site, timing: AudioTiming,
     maxima: dict = {}            # template -> (decimated indices, heights), ascending lists, for the current frame
     delay = bank.delay_samples
     bandwidth_of = [bandwidth[b.id] for b in site.beacons]
+    beacon_ids = [b.id for b in site.beacons]
     log_inv_p_fa = -math.log(config.p_fa)
 
     def gamma_of(w: SearchWindow, sigma: float) -> float:
@@ -444,27 +445,28 @@ def detect_frames(path: str | os.PathLike, site: Site, timing: AudioTiming,
         frames in one batch (:func:`flush_features`), from the same rows.
         """
         out = []
-        for t in sorted({template_of[w.beacon_index] for w, _ in found}):
-            group = [(w, sp) for w, sp in found if template_of[w.beacon_index] == t]
+        for t in range(bank.n_templates):
+            group = found if bank.n_templates == 1 else [(w, sp) for w, sp in found if template_of[w.beacon_index] == t]
+            if not group:
+                continue
             j_a = [-(-(sp - lead - 8 + delay) // dec) for _, sp in group]
             cirs, j_got = cir_rows(t, j_a)
             cir_lo = [min(max(-(-(w.lo + delay) // dec), g) - j, first_tap) for (w, _), g, j in zip(group, j_got, j_a)]
             noise_power = 2.0 * sigmas[t] ** 2   # Rayleigh envelope of scale σ: E[env²] = 2σ²
-            valid, tau0, snr = first_arrivals(cirs[:, :toa_taps], cir_lo, toa_taps, lead_taps, noise_power)
-            arrival = timing.start_s + (dec * (np.array(j_a) + tau0) - delay) / fs
-            for (w, _), ok, arrival_s, snr_db, row, lo in zip(group, valid.tolist(), arrival.tolist(), snr.tolist(),
-                                                              cirs, cir_lo):
-                if not ok:
-                    continue
-                pending_cirs.append((slot, len(out), t, row, lo, noise_power))
-                out.append(ChirpDetection(frame, site.beacons[w.beacon_index].id, w.tx_s, arrival_s, snr_db,
-                                          _NO_FEATURES, w.associated))
+            valid, tau0, snr = first_arrivals(cirs[:, :toa_taps], np.array(cir_lo), toa_taps, lead_taps, noise_power)
+            for (w, _), ok, j, tau, snr_db, row, lo in zip(group, valid.tolist(), j_a, tau0.tolist(), snr.tolist(),
+                                                           cirs, cir_lo):
+                if ok:
+                    pending_cirs.append((slot, len(out), t, row, lo, noise_power))
+                    out.append(ChirpDetection(frame, beacon_ids[w.beacon_index], w.tx_s,
+                                              timing.start_s + (dec * (j + tau) - delay) / fs, snr_db, _NO_FEATURES,
+                                              w.associated))
         return out
 
     def flush_features(frames: list[list]) -> None:
         """Compute the queued CIR features in one batch per template and put them into ``frames``."""
         for t in sorted({q[2] for q in pending_cirs}):
-            rows = [q for q in pending_cirs if q[2] == t]
+            rows = pending_cirs if bank.n_templates == 1 else [q for q in pending_cirs if q[2] == t]
             feats = analyse_cirs(np.array([q[3] for q in rows]), dec / fs,
                                  noise_power=np.array([q[5] for q in rows]), max_lead_s=config.max_lead_s,
                                  pulse_width_s=float(bank.mainlobe_s[t]), search_start=np.array([q[4] for q in rows]),
@@ -472,8 +474,7 @@ def detect_frames(path: str | os.PathLike, site: Site, timing: AudioTiming,
             for (slot, i, _, _, _, _), f in zip(rows, feats.features.tolist()):
                 dets = frames[slot][2]
                 d = dets[i]
-                dets[i] = ChirpDetection(d.frame, d.beacon_id, d.tx_s, d.arrival_s, d.snr_db, CirFeatures(*f),
-                                         d.associated)
+                dets[i] = ChirpDetection(*d[:5], CirFeatures(*f), d[6])
         pending_cirs.clear()
 
     def candidates(w: SearchWindow, sigma: float, max_candidates: int = 12) -> list[float]:

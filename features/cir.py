@@ -188,8 +188,12 @@ def first_arrivals(amplitude: np.ndarray, search_start, search_stop: int, lead: 
     """
     a = np.asarray(amplitude)
     n = a.shape[0]
-    starts = np.zeros(n, dtype=np.int64) + np.asarray(search_start, dtype=np.int64)
-    noise = np.zeros(n) + np.asarray(noise_power, dtype=float)
+    starts = np.asarray(search_start, dtype=np.int64)
+    if starts.shape != (n,):
+        starts = np.broadcast_to(starts, (n,)).copy()
+    noise = np.asarray(noise_power, dtype=float)
+    if noise.shape != (n,):
+        noise = np.full(n, float(noise))
     valid, _, _, _, _, tau, _, snr, _, _ = _cir_kernel(a, starts, int(search_stop), int(lead), noise, 1.0, 0.5,
                                                          False)
     snr[~valid] = np.nan
