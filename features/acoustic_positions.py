@@ -43,7 +43,6 @@ from typing import NamedTuple
 import numpy as np
 
 from .errors import ConfigError
-from .jit import jit
 from .site import Site
 
 __all__ = ["BeaconRange", "AcousticFix", "PositionConfig", "solve_position", "toa_range_sigma_m",
@@ -169,65 +168,80 @@ def _chi2_limit(dof: int, alpha: float) -> float:
     return float(scipy.special.chdtri(dof, alpha))
 
 
+def _inverse3(m) -> np.ndarray | None:
+    """Inverse of a symmetric 3×3 matrix by its adjugate (Cramer), None when nearly singular.
+
+    >>> a = np.array([[4.0, 1.0, 0.5], [1.0, 3.0, 0.2], [0.5, 0.2, 2.0]])
+    >>> bool(np.allclose(_inverse3(a) @ a, np.eye(3)))
+    True
+    """
+    (a, b, c), (_, e, f), (_, _, i) = np.asarray(m, dtype=float).tolist()
+    inv = _inverse3_sym(a, b, c, e, f, i)
+    return None if inv is None else np.array(_sym_rows(inv))
+
+
+def _inverse3_sym(a: float, b: float, c: float, e: float, f: float, i: float) -> tuple | None:
+    """Upper triangle (00, 01, 02, 11, 12, 22) of the inverse of the symmetric matrix
+    [[a, b, c], [b, e, f], [c, f, i]] by its adjugate, or None when nearly singular.
+
+    Scalar Python: on a 3×3 system numpy's call overhead exceeds the arithmetic many
+    times over, and the receiver solves one or more per TDMA frame.
+    """
+    c00, c01, c02 = e * i - f * f, c * f - b * i, b * f - c * e
+    det = a * c00 + b * c01 + c * c02
+    scale = abs(a) + abs(e) + abs(i)
+    if not math.isfinite(det) or abs(det) <= 1e-14 * scale ** 3:
+        return None
+    return c00 / det, c01 / det, c02 / det, (a * i - c * c) / det, (b * c - a * f) / det, (a * e - b * b) / det
+
+
+def _sym_rows(u: tuple) -> list:
+    """Rows of the symmetric 3×3 matrix whose upper triangle is ``u`` (00, 01, 02, 11, 12, 22)."""
+    return [[u[0], u[1], u[2]], [u[1], u[3], u[4]], [u[2], u[4], u[5]]]
+
+
 def _gauss_newton(ranges: list[BeaconRange], height_m: float, c: float, iterations: int,
-                  start=None, clock_prior: tuple[float, float] | None = None):
+                  start: np.ndarray | None = None, clock_prior: tuple[float, float] | None = None):
     """(x = [e, n, δ], covariance (3, 3), residuals (n,), sigmas (n,), chi²) or None if singular.
 
-    Starts from ``start`` ((east, north, δ), e.g. the previous fix) or from the
-    weighted centroid of the beacons with the median clock offset.
-    ``clock_prior`` = (δ₀, σ_δ) adds the pseudo-measurement δ = δ₀ ± σ_δ (a
-    tracked clock), which enters the normal equations and chi² like one more
-    range. Iterates until a step moves less than :data:`_STEP_TOL_M` or
-    ``iterations`` steps are taken; the loop is compiled (:func:`_gauss_newton_kernel`).
+    Starts from ``start`` (e.g. the previous fix) or from the weighted centroid
+    of the beacons with the median clock offset. ``clock_prior`` = (δ₀, σ_δ)
+    adds the pseudo-measurement δ = δ₀ ± σ_δ (a tracked clock), which enters
+    the normal equations and chi² like one more range. Iterates until a step
+    moves less than :data:`_STEP_TOL_M` (see the comment there for what is
+    returned then) or ``iterations`` steps are taken.
+
+    Scalar Python over the ranges (a frame has a few to a few tens): with three
+    unknowns the normal equations are six sums, and numpy's per-call overhead
+    would cost several times the arithmetic. :func:`_gauss_newton_subsets` is the
+    vectorised form for many subsets at once.
     """
-    geometry = np.array([(r.east_m, r.north_m, (height_m - r.up_m) ** 2, r.pseudorange_m, r.sigma_m) for r in ranges])
-    x0 = np.zeros(3) if start is None else np.asarray(start, dtype=float)
-    prior = (0.0, 0.0) if clock_prior is None else (float(clock_prior[0]), 1.0 / float(clock_prior[1]) ** 2)
-    ok, x, cov, res, chi2 = _gauss_newton_kernel(geometry, x0, start is not None, int(iterations), float(c),
-                                                 prior[0], prior[1], clock_prior is not None, _STEP_TOL_M)
-    if not ok:
-        return None
-    return x, cov, res, geometry[:, 4].copy(), chi2
-
-
-@jit
-def _gauss_newton_kernel(geometry, x0, has_start, iterations, c, prior_d, prior_w, has_prior, tol):
-    """Compiled loop of :func:`_gauss_newton`; ``geometry`` rows (east, north, Δup², ρ, σ).
-
-    Returns (ok, x (3,), covariance (3, 3), residuals (n,), chi²). The normal
-    equations JᵀWJ·s = JᵀW·v (J = [∂f/∂e, ∂f/∂n, c], f(x) = ‖p − sᵢ‖ + c·δ; Björck
-    1996, §9.2) have three unknowns, solved by the adjugate (Cramer) of the
-    symmetric 3×3 matrix, refused when nearly singular.
-    """
-    n = geometry.shape[0]
-    w = 1.0 / (geometry[:, 4] * geometry[:, 4])
-    if has_start:
-        e, nn, d = x0[0], x0[1], x0[2]
+    rows = [(r.east_m, r.north_m, (height_m - r.up_m) ** 2, r.pseudorange_m, 1.0 / (r.sigma_m * r.sigma_m))
+            for r in ranges]
+    if start is None:
+        w_sum = sum(q[4] for q in rows)
+        e = sum(q[4] * q[0] for q in rows) / w_sum
+        n = sum(q[4] * q[1] for q in rows) / w_sum
+        d = float(np.median([q[3] - math.sqrt((q[0] - e) ** 2 + (q[1] - n) ** 2 + q[2]) for q in rows])) / c
     else:
-        w_sum = w.sum()
-        e = (w * geometry[:, 0]).sum() / w_sum
-        nn = (w * geometry[:, 1]).sum() / w_sum
-        geo = np.sqrt((geometry[:, 0] - e) ** 2 + (geometry[:, 1] - nn) ** 2 + geometry[:, 2])
-        d = np.median(geometry[:, 3] - geo) / c
+        e, n, d = (float(v) for v in (start.tolist() if isinstance(start, np.ndarray) else start))
+    prior_w = 0.0 if clock_prior is None else 1.0 / (clock_prior[1] * clock_prior[1])
     # The clock column of J is c for every range: its sums need only Σw, Σw·j and Σw·v.
-    a22 = c * c * w.sum() + prior_w
-    res = np.empty(n)
-    out_cov = np.zeros((3, 3))
-    a00 = a01 = a11 = a02 = a12 = g0 = g1 = g2 = 0.0
-    i00 = i01 = i02 = i11 = i12 = i22 = 0.0
-    converged = False
+    a22 = c * c * sum(q[4] for q in rows) + prior_w
+    cov = None
     chi2_shift = 0.0
-    d_prior = d
     for it in range(iterations + 1):
+        # f(x) = ‖p − sᵢ‖ + c·δ;  J = [∂f/∂e, ∂f/∂n, ∂f/∂δ];  normal = JᵀWJ, gradient = JᵀW(ρ − f)
         a00 = a01 = a11 = s0 = s1 = g0 = g1 = gv = 0.0
         cd = c * d
-        for k in range(n):
-            de, dn = e - geometry[k, 0], nn - geometry[k, 1]
-            r = np.sqrt(de * de + dn * dn + geometry[k, 2])
-            v = geometry[k, 3] - r - cd
-            res[k] = v
+        res = []
+        for se, sn, du2, rho, w in rows:
+            de, dn = e - se, n - sn
+            r = math.sqrt(de * de + dn * dn + du2)
+            v = rho - r - cd
+            res.append(v)
             j0, j1 = de / r, dn / r
-            wj0, wj1 = w[k] * j0, w[k] * j1
+            wj0, wj1 = w * j0, w * j1
             a00 += wj0 * j0
             a01 += wj0 * j1
             a11 += wj1 * j1
@@ -235,46 +249,40 @@ def _gauss_newton_kernel(geometry, x0, has_start, iterations, c, prior_d, prior_
             s1 += wj1
             g0 += wj0 * v
             g1 += wj1 * v
-            gv += w[k] * v
+            gv += w * v
         a02, a12, g2 = c * s0, c * s1, c * gv
-        if has_prior:
+        if clock_prior is not None:
             # Prior row: δ₀ − δ with weight 1/σ_δ² (J row [0, 0, 1]).
-            g2 += (prior_d - d) * prior_w
-        # Inverse of [[a00, a01, a02], [a01, a11, a12], [a02, a12, a22]] by its adjugate.
-        c00, c01, c02 = a11 * a22 - a12 * a12, a02 * a12 - a01 * a22, a01 * a12 - a02 * a11
-        det = a00 * c00 + a01 * c01 + a02 * c02
-        scale = abs(a00) + abs(a11) + abs(a22)
-        if not np.isfinite(det) or abs(det) <= 1e-14 * scale ** 3:
-            return False, np.zeros(3), out_cov, res, 0.0
-        i00, i01, i02 = c00 / det, c01 / det, c02 / det
-        i11, i12, i22 = (a00 * a22 - a02 * a02) / det, (a01 * a02 - a00 * a12) / det, (a00 * a11 - a01 * a01) / det
+            g2 += (clock_prior[0] - d) * prior_w
         if it == iterations:
             break
-        s_e = i00 * g0 + i01 * g1 + i02 * g2
-        s_n = i01 * g0 + i11 * g1 + i12 * g2
-        s_d = i02 * g0 + i12 * g1 + i22 * g2
-        d_prior = d
-        e, nn, d = e + s_e, nn + s_n, d + s_d
-        if s_e * s_e + s_n * s_n < tol * tol and abs(s_d) * c < tol:
+        inv = _inverse3_sym(a00, a01, a02, a11, a12, a22)
+        if inv is None:
+            return None
+        s_e = inv[0] * g0 + inv[1] * g1 + inv[2] * g2
+        s_n = inv[1] * g0 + inv[3] * g1 + inv[4] * g2
+        s_d = inv[2] * g0 + inv[4] * g1 + inv[5] * g2
+        e, n, d = e + s_e, n + s_n, d + s_d
+        if s_e * s_e + s_n * s_n < _STEP_TOL_M ** 2 and abs(s_d) * c < _STEP_TOL_M:
             # Converged. Residuals and covariance stay those of the last linearisation point (less
-            # than tol away); χ² moves along the linear model: ‖v − J·s‖²_W − ‖v‖²_W
+            # than _STEP_TOL_M away); χ² moves along the linear model: ‖v − J·s‖²_W − ‖v‖²_W
             # = −2·sᵀg + sᵀN·s = −sᵀg, since the step solves N·s = g.
-            converged = True
+            cov = inv
             chi2_shift = -(s_e * g0 + s_n * g1 + s_d * g2)
+            d_prior = d - s_d
             break
-    # Covariance of the weighted LS estimate: (JᵀWJ)⁻¹ (refused when implausible).
-    if not (np.isfinite(i00) and np.isfinite(i01) and np.isfinite(i02) and np.isfinite(i11)
-            and np.isfinite(i12) and np.isfinite(i22)) or min(i00, i11, i22) <= 0 or i00 + i11 > 1e8:
-        return False, np.zeros(3), out_cov, res, 0.0
-    out_cov[0, 0], out_cov[0, 1], out_cov[0, 2] = i00, i01, i02
-    out_cov[1, 0], out_cov[1, 1], out_cov[1, 2] = i01, i11, i12
-    out_cov[2, 0], out_cov[2, 1], out_cov[2, 2] = i02, i12, i22
-    chi2 = (w * res * res).sum() + chi2_shift
-    if has_prior:
-        chi2 += (prior_d - (d_prior if converged else d)) ** 2 * prior_w
-    x = np.empty(3)
-    x[0], x[1], x[2] = e, nn, d
-    return True, x, out_cov, res, chi2
+    if cov is None:
+        d_prior = d
+        # Covariance of the weighted LS estimate: (JᵀWJ)⁻¹ (refused when nearly singular).
+        cov = _inverse3_sym(a00, a01, a02, a11, a12, a22)
+    if cov is None or not all(math.isfinite(v) for v in cov) or min(cov[0], cov[3], cov[5]) <= 0 \
+            or cov[0] + cov[3] > 1e8:
+        return None
+    sig = [r.sigma_m for r in ranges]
+    chi2 = sum(w * v * v for (_, _, _, _, w), v in zip(rows, res)) + chi2_shift
+    if clock_prior is not None:
+        chi2 += (clock_prior[0] - d_prior) ** 2 * prior_w
+    return np.array([e, n, d]), np.array(_sym_rows(cov)), np.array(res), np.array(sig), chi2
 
 
 def solve_position(ranges: list[BeaconRange], site: Site, speed_m_s: float,
@@ -324,8 +332,7 @@ def solve_position(ranges: list[BeaconRange], site: Site, speed_m_s: float,
 def _inverse3_batch(m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Inverses of symmetric 3×3 matrices (k, 3, 3) by their adjugates, and which are regular (k,).
 
-    The batched form of the adjugate inverse in :func:`_gauss_newton_kernel` (same singularity
-    test); singular ones get zeros.
+    The batched form of :func:`_inverse3` (same singularity test); singular ones get zeros.
 
     >>> a = np.array([[[4.0, 1.0, 0.5], [1.0, 3.0, 0.2], [0.5, 0.2, 2.0]], np.zeros((3, 3))])
     >>> inv, ok = _inverse3_batch(a)

@@ -52,7 +52,6 @@ from .audio import CLIP_LEVEL, AudioBlock, audio_info, count_clipped, iter_audio
 from .cir import CirFeatures, analyse_cirs, first_arrivals
 from .constants import AUDIO_FS_HZ
 from .errors import ConfigError
-from .jit import jit
 from .matched_filter import ChirpSpec, MatchedFilterBank, StreamingMatchedFilter
 from .site import Beacon, Site
 
@@ -159,55 +158,6 @@ def max_site_range_m(site: Site) -> float:
             best = max(best, math.dist((b.east_m, b.north_m, b.up_m), (e, n, site.device_height_m)))
     return best
 
-
-
-@jit
-def _envelope_maxima(seg: np.ndarray, gamma: float, guard: float, lim: int) -> np.ndarray:
-    """Indices (ascending) of the local maxima of ``seg`` (n,) above ``gamma``, less those with a
-    maximum more than ``guard`` times higher within ``lim`` samples (the sidelobe guard).
-
-    Interior maxima satisfy ``seg[i] > seg[i-1]`` and ``seg[i] >= seg[i+1]``; the ends count
-    when above their one neighbour (as if padded with zeros); fewer than 3 samples give none.
-    Comparisons in float32, as numpy makes them on the float32 envelope. Compiled
-    (:mod:`features.jit`): a loop over the frame's envelope instead of a dozen numpy passes.
-    """
-    n = seg.shape[0]
-    g = np.float32(gamma)
-    found = np.empty(n, np.int64)
-    m = 0
-    if n >= 3:
-        for i in range(n):
-            v = seg[i]
-            if v > g:
-                if i == 0:
-                    ok = v >= seg[1]
-                elif i == n - 1:
-                    ok = v > seg[n - 2]
-                else:
-                    ok = v > seg[i - 1] and v >= seg[i + 1]
-                if ok:
-                    found[m] = i
-                    m += 1
-    keep = np.empty(m, np.int64)
-    k = 0
-    for a in range(m):
-        limit = seg[found[a]] * np.float32(guard)
-        drop = False
-        b = a - 1
-        while b >= 0 and found[a] - found[b] <= lim:
-            if seg[found[b]] > limit:
-                drop = True
-                break
-            b -= 1
-        b = a + 1
-        while not drop and b < m and found[b] - found[a] <= lim:
-            if seg[found[b]] > limit:
-                drop = True
-            b += 1
-        if not drop:
-            keep[k] = found[a]
-            k += 1
-    return keep[:k]
 
 
 @dataclass(frozen=True)
@@ -337,8 +287,25 @@ def detect_frames(path: str | os.PathLike, site: Site, timing: AudioTiming,
             j_first, seg = stream.env_range(j_lo, j_hi)
             seg = seg[t]
             gamma = min(gamma_of(w, sigmas[t]) for w in mine)
-            idx = _envelope_maxima(seg, gamma, _SIDELOBE_GUARD, bank.template_len // dec)
-            maxima[t] = ((j_first + idx).tolist(), seg[idx].tolist())
+            if len(seg) < 3:
+                maxima[t] = ([], [])
+                continue
+            # Interior local maxima above γ, tested only where the envelope exceeds γ (few samples).
+            idx = 1 + np.flatnonzero(seg[1:-1] > gamma)
+            idx = idx[(seg[idx] > seg[idx - 1]) & (seg[idx] >= seg[idx + 1])]
+            # The ends count when above the neighbour inside (as if padded with zeros).
+            ends = [i for i, ok in ((0, seg[0] > gamma and seg[0] >= seg[1]),
+                                    (len(seg) - 1, seg[-1] > gamma and seg[-1] > seg[-2])) if ok]
+            if ends:
+                idx = np.sort(np.concatenate([idx, np.array(ends, dtype=idx.dtype)]))
+            h = seg[idx]
+            # Only a maximum above γ·guard can be 25 dB stronger than another above γ.
+            strong = idx[h > gamma * _SIDELOBE_GUARD]
+            if len(strong) and len(idx) > 1:
+                near = np.abs(idx[:, None] - strong[None, :]) * dec <= bank.template_len
+                keep = ~np.any(near & (seg[strong][None, :] > h[:, None] * _SIDELOBE_GUARD), axis=1)
+                idx, h = idx[keep], h[keep]
+            maxima[t] = ((j_first + idx).tolist(), h.tolist())
 
     def peaks(w: SearchWindow, sigma: float) -> tuple[list, list]:
         """Chirp-start indices (ascending) and heights of envelope maxima in ``w`` above its threshold γ.
@@ -453,14 +420,13 @@ def detect_frames(path: str | os.PathLike, site: Site, timing: AudioTiming,
             cirs, j_got = cir_rows(t, j_a)
             cir_lo = [min(max(-(-(w.lo + delay) // dec), g) - j, first_tap) for (w, _), g, j in zip(group, j_got, j_a)]
             noise_power = 2.0 * sigmas[t] ** 2   # Rayleigh envelope of scale σ: E[env²] = 2σ²
-            valid, tau0, snr = first_arrivals(cirs[:, :toa_taps], np.array(cir_lo), toa_taps, lead_taps, noise_power)
-            for (w, _), ok, j, tau, snr_db, row, lo in zip(group, valid.tolist(), j_a, tau0.tolist(), snr.tolist(),
-                                                           cirs, cir_lo):
-                if ok:
+            toa = first_arrivals(cirs[:, :toa_taps].tolist(), cir_lo, toa_taps, lead_taps, noise_power)
+            for (w, _), found_r, j, row, lo in zip(group, toa, j_a, cirs, cir_lo):
+                if found_r is not None:
                     pending_cirs.append((slot, len(out), t, row, lo, noise_power))
                     out.append(ChirpDetection(frame, beacon_ids[w.beacon_index], w.tx_s,
-                                              timing.start_s + (dec * (j + tau) - delay) / fs, snr_db, _NO_FEATURES,
-                                              w.associated))
+                                              timing.start_s + (dec * (j + found_r[0]) - delay) / fs, found_r[1],
+                                              _NO_FEATURES, w.associated))
         return out
 
     def flush_features(frames: list[list]) -> None:

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import scipy.stats
 
-from features.cir import FEATURE_NAMES, K_MAX_DB, analyse_cir, analyse_cirs, find_paths
+from features.cir import FEATURE_NAMES, K_MAX_DB, analyse_cir, analyse_cirs, find_paths, first_arrivals
 from features.matched_filter import ChirpSpec, MatchedFilterBank
 from tests.acoustic_synth import FS_HZ, add_chirp
 
@@ -101,6 +101,30 @@ def test_batch_equals_single():
         np.testing.assert_allclose(batch.features[i], one.features.as_array(), equal_nan=True)
         assert batch.first_arrival_tap[i] == pytest.approx(one.first_arrival_tap)
     assert len(FEATURE_NAMES) == 9
+
+
+def test_scalar_first_arrivals_equal_the_batch_row_for_row():
+    """The receiver's per-frame scalar timing and the batched features time the same arrival:
+    Rayleigh noise with one to three paths (some below the thresholds, some weak and early),
+    random search starts, noise power given; validity, τ₀ and peak SNR agree exactly."""
+    rng = np.random.default_rng(12)
+    n, length, lead, stop = 400, 63, 30, 57
+    amp = rng.rayleigh(1.0, (n, length))
+    for row in amp:
+        for _ in range(rng.integers(1, 4)):
+            k = rng.integers(0, length)
+            row[max(k - 2, 0): k + 3] += rng.choice([0.5, 3.0, 30.0]) * np.array([0.3, 0.8, 1.0, 0.8, 0.3])[
+                max(2 - k, 0): 2 + length - k]
+    amp = amp.astype(np.float32)
+    starts = rng.integers(0, 40, n)
+    batch = analyse_cirs(amp, 1e-3, noise_power=2.0, max_lead_s=lead * 1e-3, search_start=starts,
+                         search_stop=stop, with_features=False)
+    scalar = first_arrivals(amp.tolist(), starts.tolist(), stop, lead, 2.0)
+    assert [r is not None for r in scalar] == batch.valid.tolist()
+    assert 50 < batch.valid.sum() < n                     # both outcomes occur
+    got = np.array([r for r in scalar if r is not None])
+    np.testing.assert_allclose(got[:, 0], batch.first_arrival_tap[batch.valid], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(got[:, 1], batch.peak_snr_db[batch.valid], rtol=0, atol=1e-9)
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2])
