@@ -131,3 +131,14 @@ def test_short_walk_fix_rate_and_error(short_walk):
     assert moving.sum() >= 3                       # fixes while walking, not only standing
     assert np.median(err) < 0.1 and err.max() < 0.3
     assert all(int(f["n_beacons"]) >= 4 for f in fixes)
+
+
+def test_top_stable_equals_a_stable_sort_of_all_votes():
+    """The vote's top-k selection (a partition) must rank exactly as the stable full sort it replaced."""
+    from features.acoustic_tracking import _top_stable
+
+    rng = np.random.default_rng(0)
+    for _ in range(200):
+        votes = rng.integers(0, 8, int(rng.integers(1, 3000)))     # many ties, as vote counts have
+        k = int(rng.integers(1, 500))
+        assert _top_stable(votes, k).tolist() == np.argsort(-votes, kind="stable")[:k].tolist()
