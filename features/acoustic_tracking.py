@@ -98,6 +98,7 @@ class ClockPositionTracker:
         self._tentative_detections: list[ChirpDetection] = []
         self._tentative_ids: set = set()
         self._clock_anchor: tuple[float, float] | None = None
+        self._anchor_fix: AcousticFix | None = None
 
     @property
     def grid_step_m(self) -> float:
@@ -158,18 +159,29 @@ class ClockPositionTracker:
         re-associates after a least-squares fix. Returns beacon index → arrival time.
         """
         items = [(i, tx, t) for i, (tx, times) in candidates.items() for t in times]
-        if len({i for i, _, _ in items}) < 3:
+        g = self.site.grid
+        coarse = 4.0 * self.grid_step_m
+        disk = self._search_disk(min((tx for tx, _ in candidates.values()), default=0.0))
+        if disk is not None:
+            items = self._clock_consistent(items, disk)
+        # A fix needs four beacons (see _refine): with fewer candidates no vote can succeed.
+        if len({i for i, _, _ in items}) < 4:
             return {}
         bi = np.array([i for i, _, _ in items])
         rho = self.c * np.array([t - tx for _, tx, t in items])
         bpos = np.array([[self.site.beacons[i].east_m, self.site.beacons[i].north_m, self.site.beacons[i].up_m]
                          for i in bi])
-        g = self.site.grid
-        coarse = 4.0 * self.grid_step_m
         ee, nn = np.meshgrid(np.arange(g.east_min_m, g.east_max_m + coarse, coarse),
                              np.arange(g.north_min_m, g.north_max_m + coarse, coarse))
+        ee, nn = ee.ravel(), nn.ravel()
+        if disk is not None:
+            # Every point within the disk has a grid point within coarse/√2 of it.
+            inside = np.hypot(ee - disk[0], nn - disk[1]) <= disk[2] + coarse / math.sqrt(2.0)
+            ee, nn = ee[inside], nn[inside]
+            if len(ee) == 0:
+                return {}
         arrivals = np.array([t for _, _, t in items])
-        hyps = self._vote(ee.ravel(), nn.ravel(), bi, rho, bpos, coarse * math.sqrt(2.0) / self.c + 5e-4, arrivals)
+        hyps = self._vote(ee, nn, bi, rho, bpos, coarse * math.sqrt(2.0) / self.c + 5e-4, arrivals)
         if not hyps:
             return {}
         fine = self.grid_step_m
@@ -185,6 +197,10 @@ class ClockPositionTracker:
             return {}
         pe = np.concatenate([s[0] + oe.ravel() for s in seeds])
         pn = np.concatenate([s[1] + on.ravel() for s in seeds])
+        # Neighbouring seeds' fine grids overlap: each point once (first occurrence, order kept).
+        _, first = np.unique(np.round(np.column_stack([pe, pn]) / fine).astype(np.int64), axis=0, return_index=True)
+        first.sort()
+        pe, pn = pe[first], pn[first]
         hyps = self._vote(pe, pn, bi, rho, bpos, self.tolerance_s, arrivals, n_best=400)
         # Verify the best distinct hypotheses by least squares (RANSAC-style, Fischler & Bolles
         # 1981): the one whose fix keeps the most beacons, then the smallest residual, wins.
@@ -206,6 +222,39 @@ class ClockPositionTracker:
             if best_key is None or key > best_key:
                 best, best_key = refined, key
         return best
+
+    def _search_disk(self, t_s: float) -> tuple[float, float, float] | None:
+        """(east, north, radius) the receiver can have reached by ``t_s`` since the last fix that
+        anchored the clock, at ``max_speed_m_s`` plus that fix's 3σ and 1 m; None (search the
+        whole site) before any such fix or once the disk would cover half the site's diagonal.
+        Re-acquisition after a lost lock then votes over a few grid points instead of the site.
+        """
+        fix = self._anchor_fix
+        if fix is None:
+            return None
+        sigma = math.sqrt(max(fix.covariance[0, 0] + fix.covariance[1, 1], 0.0))
+        radius = 3.0 * sigma + self.max_speed_m_s * max(0.0, t_s - fix.t_s) + 1.0
+        g = self.site.grid
+        if radius >= 0.5 * math.hypot(g.east_max_m - g.east_min_m, g.north_max_m - g.north_min_m):
+            return None
+        return fix.east_m, fix.north_m, radius
+
+    def _clock_consistent(self, items: list, disk: tuple[float, float, float]) -> list:
+        """The candidate arrivals (beacon index, tx, t) whose implied clock offset, somewhere in
+        ``disk``, lies within the drift bound of the anchored clock (:meth:`_clock_continues`):
+        from the disk's centre a beacon at range r is between r − R and r + R away."""
+        t0, d0 = self._clock_anchor
+        e, n, radius = disk
+        h = self.site.device_height_m
+        out = []
+        for i, tx, t in items:
+            b = self.site.beacons[i]
+            r = math.sqrt((e - b.east_m) ** 2 + (n - b.north_m) ** 2 + (h - b.up_m) ** 2)
+            delta = t - tx - r / self.c                        # implied offset at the disk's centre
+            bound = self.max_drift_ppm * 1e-6 * abs(tx - t0) + 1e-3 + radius / self.c
+            if abs(delta - d0) <= bound:
+                out.append((i, tx, t))
+        return out
 
     def _associate(self, point, d0, bi, rho, bpos, items) -> dict:
         """Each beacon's earliest candidate within ``tol`` of δ = d0 at ``point``; one arrival, one beacon."""
@@ -398,6 +447,7 @@ class ClockPositionTracker:
         if fix.n_beacons >= 4:
             self._previous_fix, self.last_fix = self.last_fix, fix
             self._clock_anchor = (fix.t_s, fix.clock_offset_s)
+            self._anchor_fix = fix
         return fix
 
     def _static_confirmation(self, detections: list[ChirpDetection], fix: AcousticFix, bandwidth: dict) -> bool:
