@@ -229,18 +229,22 @@ def first_arrivals(rows: list, search_start: list, search_stop: int, lead: int, 
     arithmetic (on a 2-core test machine ~60 µs here against ~150 µs for eight CIRs).
     """
     out = []
+    if not rows:
+        return out
     noise_floor = noise_power * 10 ** (NOISE_MARGIN_DB / 10)
+    dynamic_range = 10 ** (-PEAK_DYNAMIC_RANGE_DB / 10)
     snr_ref = max(noise_power, 1e-300)
+    length = len(rows[0])
+    stop = min(max(search_stop, 1), length)
+    log, isfinite = math.log, math.isfinite
     for a, start in zip(rows, search_start):
-        length = len(a)
-        stop = min(max(search_stop, 1), length)
         start = min(max(start, 0), stop - 1)
         seg = a[start:stop]
         m = max(seg)
         peak = start + seg.index(m)
         p_peak = m * m
-        threshold = max(p_peak * 10 ** (-PEAK_DYNAMIC_RANGE_DB / 10), noise_floor)
-        if not (math.isfinite(p_peak) and p_peak > threshold):
+        threshold = max(p_peak * dynamic_range, noise_floor)
+        if not (isfinite(p_peak) and p_peak > threshold):
             out.append(None)
             continue
         first = peak
@@ -252,7 +256,7 @@ def first_arrivals(rows: list, search_start: list, search_stop: int, lead: int, 
             first += 1
         delta = 0.0
         if 0 < first < length - 1:
-            ym, y0, yp = (math.log(max(v, 1e-300)) for v in a[first - 1: first + 2])
+            ym, y0, yp = log(max(a[first - 1], 1e-300)), log(max(a[first], 1e-300)), log(max(a[first + 1], 1e-300))
             denom = ym - 2.0 * y0 + yp
             if denom < 0:
                 delta = min(max(0.5 * (ym - yp) / denom, -0.5), 0.5)
