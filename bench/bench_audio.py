@@ -196,7 +196,8 @@ def main() -> None:
             files[minutes] = tmp / f"rec_{minutes}min.wav"
             write_recording(files[minutes], minutes)
         print("matched filter alone, 1-min file, one core (x real time):")
-        for name, rate in matched_filter_rates(files[1]).items():
+        mf_rates = matched_filter_rates(files[1])
+        for name, rate in mf_rates.items():
             print(f"  {name:48s} {rate:8.0f}x")
         w = walk_rate(tmp)
         print(f"\nsimulated walk (site 3, walk 7), best of 3: {w['audio_s']:.0f} s audio in {w['wall_s']:.2f} s = "
@@ -206,13 +207,23 @@ def main() -> None:
               "static receiver, 8 beacons;\neach file in a fresh process: the first run, then the best of 3:")
         print(f"  {'file':>8s} {'audio s':>8s} {'first x':>8s} {'best s':>8s} {'best x':>8s} {'windows':>8s} "
               f"{'fixes':>6s} {'peak RSS MiB':>13s} {'peak allocated MiB':>19s}")
+        best = {}
         for minutes, path in files.items():
             run = subprocess.run([sys.executable, __file__, "--child", str(path)], capture_output=True, text=True,
                                  check=True)
             r = json.loads(run.stdout.strip().splitlines()[-1])
+            best[minutes] = r['audio_s'] / r['wall_s']
             print(f"  {minutes:>5d}min {r['audio_s']:8.0f} {r['audio_s'] / r['first_wall_s']:8.0f} {r['wall_s']:8.2f} "
-                  f"{r['audio_s'] / r['wall_s']:8.0f} {r['rows']:8d} {r['fixes']:6d} {r['peak_mib']:13.1f} "
+                  f"{best[minutes]:8.0f} {r['rows']:8d} {r['fixes']:6d} {r['peak_mib']:13.1f} "
                   f"{r['traced_mib']:19.1f}")
+        # The target (issue 4) is 1,000x where scipy's correlate(method="fft") ran at ~600x and
+        # oaconvolve at ~2,400x: measured against them in the same run, it holds whatever the day.
+        correlate = mf_rates["scipy correlate fft (real output only)"]
+        oaconvolve = mf_rates["scipy oaconvolve (real output only)"]
+        print(f"\nagainst the references of the same run (5-min file): the receiver runs {best[5] / correlate:.2f}x "
+              f"as fast as scipy correlate(fft) and {best[5] / oaconvolve:.2f}x as fast as oaconvolve; the 1,000x "
+              f"target is {1000 / 600:.2f}x and {1000 / 2400:.2f}x of the rates the issue quotes for them\n"
+              f"(scaled to those: {best[5] * 600 / correlate:.0f}x and {best[5] * 2400 / oaconvolve:.0f}x)")
 
 
 if __name__ == "__main__":

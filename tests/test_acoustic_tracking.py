@@ -142,3 +142,31 @@ def test_top_stable_equals_a_stable_sort_of_all_votes():
         votes = rng.integers(0, 8, int(rng.integers(1, 3000)))     # many ties, as vote counts have
         k = int(rng.integers(1, 500))
         assert _top_stable(votes, k).tolist() == np.argsort(-votes, kind="stable")[:k].tolist()
+
+
+def _candidates(site, frame_start, east, north, clock_s):
+    """Acquisition candidates {beacon index: (tx, [arrival])} of a receiver at (east, north)."""
+    out = {}
+    for i, b in enumerate(site.beacons):
+        tx = frame_start + b.slot * site.acoustic.slot_s
+        r = math.dist((east, north, site.device_height_m), (b.east_m, b.north_m, b.up_m))
+        out[i] = (tx, [tx + r / C + clock_s])
+    return out
+
+
+def test_reacquisition_searches_only_where_the_receiver_can_have_walked():
+    """After a lock at (20, 25) lost 4 s ago, arrivals that fit (22, 27) are re-associated, while
+    arrivals that fit (55, 55), 45 m away (beyond 2.5 m/s × 4 s), are not considered at all;
+    a tracker that never had a lock finds either."""
+    site = square_site(5)
+    all_ids = {1, 2, 3, 4, 5}
+    tracker = _tracker(site)
+    fixes, _ = _run(site, tracker, [_frame(site, k, 20.0, 25.0, 0.004, all_ids) for k in range(3)])
+    assert fixes[2] is not None
+    t_later = 2 * site.acoustic.frame_s + 4.0
+    near = tracker.acquire(_candidates(site, t_later, 22.0, 27.0, 0.004))
+    assert sorted(near) == [0, 1, 2, 3, 4]
+    assert tracker._search_disk(t_later)[2] < 15.0
+    assert tracker.acquire(_candidates(site, t_later, 55.0, 55.0, 0.004)) == {}
+    fresh = _tracker(site)
+    assert sorted(fresh.acquire(_candidates(site, t_later, 55.0, 55.0, 0.004))) == [0, 1, 2, 3, 4]
