@@ -26,8 +26,10 @@ cells; requiring a false-alarm probability ``p_fa`` per window gives
 16 dB above the noise scale: about one false chirp per 300 hours of audio.
 
 A detected chirp's CIR spans ``max_lead_s`` before to ``cir_span_s`` (15 ms,
-5 m of excess path) after the located arrival; :func:`features.cir.analyse_cirs`
-finds the first arrival and the nine features. The span is short on purpose:
+5 m of excess path) after the located arrival, on the decimated envelope;
+:func:`features.cir.first_arrivals` times its first arrival in the frame (tracking
+needs it at once) and :func:`features.cir.analyse_cirs` computes the nine
+features for 32 frames at a time. The span is short on purpose:
 slots are 0.1 s apart but ranges differ by tens of metres, so a 30 ms span
 often takes in another beacon's chirp, which in open areas (many audible
 beacons) inflated the mean excess delay above that of heavy cells (simulated
