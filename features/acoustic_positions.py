@@ -37,6 +37,7 @@ from __future__ import annotations
 import functools
 import itertools
 import math
+import statistics
 from dataclasses import dataclass
 from typing import NamedTuple
 
@@ -50,6 +51,10 @@ __all__ = ["BeaconRange", "AcousticFix", "PositionConfig", "solve_position", "to
 
 _STEP_TOL_M = 1e-4
 """Gauss-Newton stops once a step moves the position and c·δ by less than this, m (0.1 mm)."""
+
+_SCALAR_SUBSETS = 16
+"""Up to this many subsets of one size are solved one by one (scalar, each stopping on its own);
+more are solved together (:func:`_gauss_newton_subsets`)."""
 
 _MAX_SUBSETS = 256
 """Most beacon subsets tried when excluding NLOS-biased beacons (C(8, 4) = 70, C(10, 5) = 252)."""
@@ -222,7 +227,7 @@ def _gauss_newton(ranges: list[BeaconRange], height_m: float, c: float, iteratio
         w_sum = sum(q[4] for q in rows)
         e = sum(q[4] * q[0] for q in rows) / w_sum
         n = sum(q[4] * q[1] for q in rows) / w_sum
-        d = float(np.median([q[3] - math.sqrt((q[0] - e) ** 2 + (q[1] - n) ** 2 + q[2]) for q in rows])) / c
+        d = statistics.median([q[3] - math.sqrt((q[0] - e) ** 2 + (q[1] - n) ** 2 + q[2]) for q in rows]) / c
     else:
         e, n, d = (float(v) for v in (start.tolist() if isinstance(start, np.ndarray) else start))
     prior_w = 0.0 if clock_prior is None else 1.0 / (clock_prior[1] * clock_prior[1])
@@ -416,8 +421,9 @@ def _exclude(ranges: list[BeaconRange], h: float, c: float, config: PositionConf
     """Largest subset (of four or more) whose residuals pass the chi-square test; ties: smallest chi².
 
     Subsets are tried by decreasing size, at most ``config.max_excluded``
-    beacons left out and :data:`_MAX_SUBSETS` subsets tried in all; all subsets
-    of one size are solved together (:func:`_gauss_newton_subsets`).
+    beacons left out and :data:`_MAX_SUBSETS` subsets tried in all; the subsets
+    of one size are solved one by one when few, else together
+    (:func:`_gauss_newton_subsets`).
     Returns (kept indices, Gauss-Newton solution) or None. With n − k beacons
     kept, k NLOS-biased beacons can be excluded, which the classic one-at-a-time
     leave-one-out cannot do reliably once two are biased.
@@ -432,7 +438,23 @@ def _exclude(ranges: list[BeaconRange], h: float, c: float, config: PositionConf
         truncated = tried + len(combos) > _MAX_SUBSETS
         combos = combos[: _MAX_SUBSETS - tried]
         tried += len(combos)
-        if combos:
+        if combos and len(combos) <= _SCALAR_SUBSETS:
+            # A few subsets: one scalar Gauss-Newton each, every one stopping when it converges.
+            best_score, best = math.inf, None
+            limit = _chi2_limit(size + n_prior - 3, config.chi2_alpha)
+            for keep in combos:
+                sol = _gauss_newton([ranges[i] for i in keep], h, c, config.max_iterations, start, clock_prior)
+                if sol is None or not sol[4] <= limit:
+                    continue
+                score = sol[4]
+                if position_prior is not None:
+                    pe, pn, ps = position_prior
+                    score += ((sol[0][0] - pe) ** 2 + (sol[0][1] - pn) ** 2) / ps ** 2
+                if score < best_score:
+                    best_score, best = score, (keep, sol)
+            if best is not None:
+                return best
+        elif combos:
             masks = np.zeros((len(combos), n), dtype=bool)
             for row, keep in enumerate(combos):
                 masks[row, list(keep)] = True
@@ -460,14 +482,14 @@ def _multistart(ranges: list[BeaconRange], site: Site, c: float, config: Positio
     Chaffee 1991, IEEE Trans. AES 27(6)); these starts cover the site.
     """
     g = site.grid
-    clock0 = float(np.median([r.pseudorange_m for r in ranges])) / c
+    clock0 = statistics.median([r.pseudorange_m for r in ranges]) / c
     best = None
     for fe in (0.25, 0.75):
         for fn in (0.25, 0.75):
             x0 = np.array([g.east_min_m + fe * (g.east_max_m - g.east_min_m),
                            g.north_min_m + fn * (g.north_max_m - g.north_min_m), 0.0])
-            geo = np.median([math.dist((x0[0], x0[1], site.device_height_m), (r.east_m, r.north_m, r.up_m))
-                             for r in ranges])
+            geo = statistics.median([math.dist((x0[0], x0[1], site.device_height_m), (r.east_m, r.north_m, r.up_m))
+                                     for r in ranges])
             x0[2] = clock0 - geo / c
             sol = _gauss_newton(ranges, site.device_height_m, c, config.max_iterations, x0, clock_prior)
             if sol is not None and (best is None or sol[4] < best[4]):

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import statistics
 
 import numpy as np
 
@@ -210,7 +211,7 @@ class ClockPositionTracker:
             # has never been seen to beat it (re-association adds a beacon at most), so stop.
             if n < 3 or len(tried) >= 12 or (best_key is not None and n + 1 < best_key[0]):
                 break
-            d0 = float(np.median(member_delta))
+            d0 = statistics.median(member_delta.tolist())
             if any(abs(point[0] - p[0]) < 2 and abs(point[1] - p[1]) < 2 and abs(d0 - q) < 2e-3 for p, q in tried):
                 continue
             tried.append((point, d0))
