@@ -173,24 +173,17 @@ def _chi2_limit(dof: int, alpha: float) -> float:
     return float(scipy.special.chdtri(dof, alpha))
 
 
-def _inverse3(m) -> np.ndarray | None:
-    """Inverse of a symmetric 3×3 matrix by its adjugate (Cramer), None when nearly singular.
-
-    >>> a = np.array([[4.0, 1.0, 0.5], [1.0, 3.0, 0.2], [0.5, 0.2, 2.0]])
-    >>> bool(np.allclose(_inverse3(a) @ a, np.eye(3)))
-    True
-    """
-    (a, b, c), (_, e, f), (_, _, i) = np.asarray(m, dtype=float).tolist()
-    inv = _inverse3_sym(a, b, c, e, f, i)
-    return None if inv is None else np.array(_sym_rows(inv))
-
-
 def _inverse3_sym(a: float, b: float, c: float, e: float, f: float, i: float) -> tuple | None:
     """Upper triangle (00, 01, 02, 11, 12, 22) of the inverse of the symmetric matrix
     [[a, b, c], [b, e, f], [c, f, i]] by its adjugate, or None when nearly singular.
 
     Scalar Python: on a 3×3 system numpy's call overhead exceeds the arithmetic many
     times over, and the receiver solves one or more per TDMA frame.
+
+    >>> u = _inverse3_sym(4.0, 1.0, 0.5, 3.0, 0.2, 2.0)
+    >>> m = np.array([[4.0, 1.0, 0.5], [1.0, 3.0, 0.2], [0.5, 0.2, 2.0]])
+    >>> bool(np.allclose(np.array(_sym_rows(u)) @ m, np.eye(3))), _inverse3_sym(1.0, 1.0, 0.0, 1.0, 0.0, 1.0)
+    (True, None)
     """
     c00, c01, c02 = e * i - f * f, c * f - b * i, b * f - c * e
     det = a * c00 + b * c01 + c * c02
@@ -213,7 +206,7 @@ def _gauss_newton(ranges: list[BeaconRange], height_m: float, c: float, iteratio
     of the beacons with the median clock offset. ``clock_prior`` = (δ₀, σ_δ)
     adds the pseudo-measurement δ = δ₀ ± σ_δ (a tracked clock), which enters
     the normal equations and chi² like one more range. Iterates until a step
-    moves less than :data:`_STEP_TOL_M` (see the comment there for what is
+    moves less than :data:`_STEP_TOL_M` (the comment at that test says what is
     returned then) or ``iterations`` steps are taken.
 
     Scalar Python over the ranges (a frame has a few to a few tens): with three
@@ -221,6 +214,8 @@ def _gauss_newton(ranges: list[BeaconRange], height_m: float, c: float, iteratio
     would cost several times the arithmetic. :func:`_gauss_newton_subsets` is the
     vectorised form for many subsets at once.
     """
+    if not all(r.sigma_m > 0 for r in ranges):
+        return None
     rows = [(r.east_m, r.north_m, (height_m - r.up_m) ** 2, r.pseudorange_m, 1.0 / (r.sigma_m * r.sigma_m))
             for r in ranges]
     if start is None:
@@ -243,6 +238,8 @@ def _gauss_newton(ranges: list[BeaconRange], height_m: float, c: float, iteratio
         for se, sn, du2, rho, w in rows:
             de, dn = e - se, n - sn
             r = math.sqrt(de * de + dn * dn + du2)
+            if r == 0.0:                     # on a beacon at the device's height: no direction, no fix
+                return None
             v = rho - r - cd
             res.append(v)
             j0, j1 = de / r, dn / r
@@ -337,7 +334,7 @@ def solve_position(ranges: list[BeaconRange], site: Site, speed_m_s: float,
 def _inverse3_batch(m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Inverses of symmetric 3×3 matrices (k, 3, 3) by their adjugates, and which are regular (k,).
 
-    The batched form of :func:`_inverse3` (same singularity test); singular ones get zeros.
+    The batched form of :func:`_inverse3_sym` (same singularity test); singular ones get zeros.
 
     >>> a = np.array([[[4.0, 1.0, 0.5], [1.0, 3.0, 0.2], [0.5, 0.2, 2.0]], np.zeros((3, 3))])
     >>> inv, ok = _inverse3_batch(a)
@@ -367,7 +364,8 @@ def _gauss_newton_subsets(ranges: list[BeaconRange], masks: np.ndarray, h: float
 
     ``masks`` (k, n) bool selects each subset's ranges (a range left out gets weight 0).
     Returns x (k, 3), covariance (k, 3, 3), residuals (k, n), chi² (k,) and which
-    subsets gave a valid solution (k,) — the same tests as :func:`_gauss_newton`.
+    subsets gave a valid solution (k,) — the same validity tests as :func:`_gauss_newton`, but
+    iterated until every subset's step is below 1 µm and evaluated at the final point.
     """
     s = np.array([[r.east_m, r.north_m, r.up_m] for r in ranges])
     rho = np.array([r.pseudorange_m for r in ranges])

@@ -162,7 +162,9 @@ class ClockPositionTracker:
         items = [(i, tx, t) for i, (tx, times) in candidates.items() for t in times]
         g = self.site.grid
         coarse = 4.0 * self.grid_step_m
-        disk = self._search_disk(min((tx for tx, _ in candidates.values()), default=0.0))
+        # The last beacon of the frame is heard up to r_max/c after its emission: the disk must hold
+        # the receiver until then.
+        disk = self._search_disk(max((tx for tx, _ in candidates.values()), default=0.0) + self.r_max / self.c)
         if disk is not None:
             items = self._clock_consistent(items, disk)
         # A fix needs four beacons (see _refine): with fewer candidates no vote can succeed.

@@ -422,7 +422,8 @@ def detect_frames(path: str | os.PathLike, site: Site, timing: AudioTiming,
             cirs, j_got = cir_rows(t, j_a)
             cir_lo = [min(max(-(-(w.lo + delay) // dec), g) - j, first_tap) for (w, _), g, j in zip(group, j_got, j_a)]
             noise_power = 2.0 * sigmas[t] ** 2   # Rayleigh envelope of scale σ: E[env²] = 2σ²
-            toa = first_arrivals(cirs[:, :toa_taps].tolist(), cir_lo, toa_taps, lead_taps, noise_power)
+            # One tap beyond the search range, for the parabola of an arrival at its last tap (as the features see it).
+            toa = first_arrivals(cirs[:, :toa_taps + 1].tolist(), cir_lo, toa_taps, lead_taps, noise_power)
             for (w, _), found_r, j, row, lo in zip(group, toa, j_a, cirs, cir_lo):
                 if found_r is not None:
                     pending_cirs.append((slot, len(out), t, row, lo, noise_power))

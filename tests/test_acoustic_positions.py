@@ -178,9 +178,10 @@ def test_walking_receiver_is_tracked():
     assert all(f.fix.clock_offset_s == pytest.approx(-0.011, abs=1e-3) for f in res.frames if f.fix is not None)
 
 
-def test_frequency_divided_beacons_share_slots():
+def _frequency_divided_run(east, north, clock, seed, echo=None, duration=4.0):
     """Six beacons in three slots, two bands (17–20 and 20–23 kHz) per slot, per-beacon chirps from
-    site.toml: each is matched against its own reference, and positions come out exact."""
+    site.toml; a static receiver, optionally an echo (delay s, relative amplitude) on every path.
+    Returns the fixes of :func:`analyse_audio`."""
     from features.acoustic_features import analyse_audio
     from tests.acoustic_synth import C_20C_M_S, FS_HZ, chirp_at
 
@@ -190,23 +191,51 @@ def test_frequency_divided_beacons_share_slots():
                            f0_hz=bands[i][0], f1_hz=bands[i][1]) for i, (e, n) in enumerate(pts))
     site = Site(name="fd", origin=Origin(31.0, 118.0), grid=Grid(5.0, -5.0, 35.0, -5.0, 35.0),
                 acoustic=AcousticConfig(n_slots=3), beacons=beacons)
-    rng = np.random.default_rng(0)
-    duration, east, north, clock = 4.0, 12.0, 17.0, 0.005
+    rng = np.random.default_rng(seed)
     x = rng.normal(0, 0.002, int(duration * FS_HZ))
+    paths = [(0.0, 1.0)] + ([echo] if echo else [])
     for b in beacons:
         d = math.dist((east, north, 1.0), (b.east_m, b.north_m, b.up_m))
         for k in range(int(duration / site.acoustic.frame_s) + 1):
-            t0 = k * site.acoustic.frame_s + b.slot * site.acoustic.slot_s + d / C_20C_M_S + clock
-            n0 = int(t0 * FS_HZ) - 1
-            n1 = min(len(x), n0 + 490)
-            if n0 < len(x):
-                x[n0:n1] += 2.0 / d * chirp_at(np.arange(n0, n1) / FS_HZ - t0, f0_hz=b.f0_hz, f1_hz=b.f1_hz)
+            for delay_s, gain in paths:
+                t0 = k * site.acoustic.frame_s + b.slot * site.acoustic.slot_s + d / C_20C_M_S + clock + delay_s
+                n0 = int(t0 * FS_HZ) - 1
+                n1 = min(len(x), n0 + 490)
+                if 0 <= n0 < len(x):
+                    x[n0:n1] += gain * 2.0 / d * chirp_at(np.arange(n0, n1) / FS_HZ - t0, f0_hz=b.f0_hz, f1_hz=b.f1_hz)
     import tempfile
     from pathlib import Path
     with tempfile.TemporaryDirectory() as tmp:
         write_wav(Path(tmp) / "fd.wav", x)
         res = analyse_audio(Path(tmp) / "fd.wav", site, AudioTiming(0.0, 0.02, 0.0), keep_frames=True)
-    fixes = [f.fix for f in res.frames if f.fix is not None]
+    return [f.fix for f in res.frames if f.fix is not None]
+
+
+def test_frequency_divided_beacons_share_slots():
+    """Each beacon is matched against its own reference, and positions come out exact."""
+    east, north = 12.0, 17.0
+    fixes = _frequency_divided_run(east, north, 0.005, seed=0)
     assert len(fixes) >= 3
     assert all(f.n_beacons == 6 for f in fixes)
     assert all(math.hypot(f.east_m - east, f.north_m - north) < 0.01 for f in fixes)
+
+
+def test_frequency_divided_acquisition_near_a_corner_with_echoes():
+    """A receiver 3.6 m from a corner beacon, clock −12 ms, a 4 ms echo on every path: the
+    acquisition vote must still lock (it did not when duplicate fine-grid points crowded the best
+    hypotheses out of the vote's top list) and every fix is exact."""
+    east, north = 3.0, 2.0
+    fixes = _frequency_divided_run(east, north, -0.012, seed=1, echo=(0.004, 0.3))
+    assert len(fixes) >= 10
+    assert all(math.hypot(f.east_m - east, f.north_m - north) < 0.02 for f in fixes)
+
+
+def test_degenerate_geometry_gives_no_exception():
+    """Beacons at the device's height and a receiver on one of them: no direction to that beacon,
+    so no Gauss-Newton step from there; the solver answers (a fix or None) without raising."""
+    site = _ring_site()
+    flat = [BeaconRange(r.beacon_id, r.east_m, r.north_m, site.device_height_m, r.pseudorange_m, 0.05, r.arrival_s)
+            for r in _ranges(site, 15.0, 0.0, 0.0)]
+    fix = solve_position(flat, site, C, start=np.array([15.0, 0.0, 0.0]))
+    assert fix is None or math.hypot(fix.east_m - 15.0, fix.north_m) < 0.3
+    assert solve_position([r._replace(sigma_m=0.0) for r in flat], site, C) is None
