@@ -153,8 +153,8 @@ def toa_range_sigma_m(snr_db: float, bandwidth_hz: float, speed_m_s: float) -> f
     """
     snr = 10.0 ** (snr_db / 10.0)
     beta = bandwidth_hz / math.sqrt(12.0)
-    sigma_s = 1.0 / (2.0 * math.pi * beta * math.sqrt(2.0 * max(snr, 1e-12)))
-    return max(RANGE_SIGMA_FLOOR_M, speed_m_s * sigma_s)
+    sigma_m = speed_m_s / (2.0 * math.pi * beta * math.sqrt(2.0 * (snr if snr > 1e-12 else 1e-12)))
+    return sigma_m if sigma_m > RANGE_SIGMA_FLOOR_M else RANGE_SIGMA_FLOOR_M
 
 
 @functools.lru_cache(maxsize=64)

@@ -132,7 +132,7 @@ class ClockPositionTracker:
         e, n, h = fix.east_m, fix.north_m, self.site.device_height_m
         for i, slot_s, be, bn, bu in self._beacon_geometry:
             tx = frame_start_s + slot_s
-            dt = max(0.0, tx - fix.t_s)
+            dt = tx - fix.t_s if tx > fix.t_s else 0.0
             radius_m = 3.0 * sigma_h_m + self.max_speed_m_s * dt + 0.5
             clock_s = 3.0 * sigma_clock_s + self.max_drift_ppm * 1e-6 * dt + 5e-4
             r = math.sqrt((e - be) ** 2 + (n - bn) ** 2 + (h - bu) ** 2)

@@ -268,8 +268,9 @@ def detect_frames(path: str | os.PathLike, site: Site, timing: AudioTiming,
 
     def gamma_of(w: SearchWindow, sigma: float) -> float:
         """Detection threshold γ of window ``w`` (see the module docstring)."""
-        n_cells = max(1.0, (w.hi - w.lo) / fs * bandwidth_of[w.beacon_index])
-        return max(sigma * math.sqrt(2.0 * (math.log(n_cells) + log_inv_p_fa)), 1e-9)
+        n_cells = (w.hi - w.lo) / fs * bandwidth_of[w.beacon_index]
+        gamma = sigma * math.sqrt(2.0 * (math.log(n_cells if n_cells > 1.0 else 1.0) + log_inv_p_fa))
+        return gamma if gamma > 1e-9 else 1e-9
 
     def prepare_maxima(windows: list[SearchWindow], sigmas: list) -> None:
         """Envelope maxima of the whole frame, once per template, for :func:`peaks` to slice.

@@ -238,17 +238,19 @@ def first_arrivals(rows: list, search_start: list, search_stop: int, lead: int, 
     stop = min(max(search_stop, 1), length)
     log, isfinite = math.log, math.isfinite
     for a, start in zip(rows, search_start):
-        start = min(max(start, 0), stop - 1)
+        start = 0 if start < 0 else (stop - 1 if start > stop - 1 else start)
         seg = a[start:stop]
         m = max(seg)
         peak = start + seg.index(m)
         p_peak = m * m
-        threshold = max(p_peak * dynamic_range, noise_floor)
+        threshold = p_peak * dynamic_range
+        if threshold < noise_floor:
+            threshold = noise_floor
         if not (isfinite(p_peak) and p_peak > threshold):
             out.append(None)
             continue
         first = peak
-        for i in range(max(start, peak - lead), peak):          # leading edge
+        for i in range(peak - lead if peak - lead > start else start, peak):          # leading edge
             if a[i] * a[i] >= threshold:
                 first = i
                 break
@@ -256,10 +258,14 @@ def first_arrivals(rows: list, search_start: list, search_stop: int, lead: int, 
             first += 1
         delta = 0.0
         if 0 < first < length - 1:
-            ym, y0, yp = log(max(a[first - 1], 1e-300)), log(max(a[first], 1e-300)), log(max(a[first + 1], 1e-300))
+            am, a0, ap = a[first - 1], a[first], a[first + 1]
+            ym = log(am if am > 1e-300 else 1e-300)
+            y0 = log(a0 if a0 > 1e-300 else 1e-300)
+            yp = log(ap if ap > 1e-300 else 1e-300)
             denom = ym - 2.0 * y0 + yp
             if denom < 0:
-                delta = min(max(0.5 * (ym - yp) / denom, -0.5), 0.5)
+                delta = 0.5 * (ym - yp) / denom
+                delta = -0.5 if delta < -0.5 else (0.5 if delta > 0.5 else delta)
         out.append((first + delta, 10.0 * math.log10(max(p_peak, 1e-300) / snr_ref)))
     return out
 
