@@ -157,7 +157,10 @@ class ClockPositionTracker:
         too, only later. The vote runs on a 4 m grid, then on a 1 m grid round
         the best coarse points. Each beacon keeps its earliest candidate within
         ``tol`` of the median δ of the winning group, and :meth:`_refine`
-        re-associates after a least-squares fix. Returns beacon index → arrival time.
+        re-associates after a least-squares fix. After a lost lock the vote covers
+        only the disk the receiver can have reached since (:meth:`_search_disk`),
+        with only the candidates that fit the anchored clock (:meth:`_clock_consistent`).
+        Returns beacon index → arrival time.
         """
         items = [(i, tx, t) for i, (tx, times) in candidates.items() for t in times]
         g = self.site.grid
