@@ -497,21 +497,6 @@ class ClockPositionTracker:
         return abs(fix.clock_offset_s - d0) <= self.max_drift_ppm * 1e-6 * abs(fix.t_s - t0) + 1e-3
 
 
-_BY_ID: dict = {}
-
-
-def _beacons_by_id(site: Site) -> dict:
-    """Beacon id → beacon of ``site`` (cached by identity: a receiver asks every frame)."""
-    key = id(site)
-    hit = _BY_ID.get(key)
-    if hit is None or hit[0] is not site:
-        hit = (site, {b.id: b for b in site.beacons})
-        if len(_BY_ID) > 16:
-            _BY_ID.clear()
-        _BY_ID[key] = hit
-    return hit[1]
-
-
 def _top_stable(values: np.ndarray, k: int) -> np.ndarray:
     """Indices of the ``k`` largest ``values``, largest first, ties in index order.
 
@@ -544,7 +529,7 @@ def frame_fix(detections: list[ChirpDetection], site: Site, c: float, bandwidth:
     p + v·(tᵢ − t̄); since ‖p + v·(tᵢ − t̄) − sᵢ‖ = ‖p − (sᵢ − v·(tᵢ − t̄))‖, each beacon is
     moved by −v·(tᵢ − t̄) and the fix p is the position at the mean arrival time t̄.
     """
-    by_id = _beacons_by_id(site)
+    by_id = site.beacon_by_id
     used = [d for d in detections if d.associated]
     if len(used) < 3:
         return None

@@ -18,6 +18,7 @@ the map-label baseline use them. A real site's ``site.toml`` omits them.
 
 from __future__ import annotations
 
+import functools
 import math
 import os
 from dataclasses import asdict, dataclass, field, fields
@@ -214,6 +215,11 @@ class Site:
         for b in self.beacons:
             if b.slot >= self.acoustic.n_slots:
                 raise ConfigError(f"beacon {b.id} slot {b.slot} >= acoustic.n_slots {self.acoustic.n_slots}")
+
+    @functools.cached_property
+    def beacon_by_id(self) -> dict:
+        """Beacon id → :class:`Beacon` (built once per site; the receiver looks beacons up every frame)."""
+        return {b.id: b for b in self.beacons}
 
     def to_dict(self) -> dict:
         """Plain-dict form for TOML (``None`` fields omitted)."""
