@@ -7,7 +7,7 @@ block so generation stays flat too), then times
 * the streaming matched filter alone (decimated batched overlap-save), against
   ``scipy.signal.correlate(method="fft")`` and ``scipy.signal.oaconvolve`` of
   the same kernel over the same samples (full rate, whole file in memory);
-* the whole receiver, ``features.acoustic_features.analyse_audio``: reading,
+* the whole receiver, ``features.acoustic.features.analyse_audio``: reading,
   matched filter, detection, CIR features per window and positions per frame;
 
 and, on a simulated 120 s walk (``envfuse simulate site --seed 3`` and
@@ -52,9 +52,9 @@ import numpy as np
 import scipy.signal
 import soundfile as sf
 
-from features.acoustic_features import analyse_audio
-from features.chirp_detection import AudioTiming, DetectorConfig
-from features.matched_filter import ChirpSpec, MatchedFilterBank, StreamingMatchedFilter, chirp_template
+from features.acoustic.features import analyse_audio
+from features.acoustic.detection import AudioTiming, DetectorConfig
+from features.acoustic.matched_filter import ChirpSpec, MatchedFilterBank, StreamingMatchedFilter, chirp_template
 from features.site import AcousticConfig, Beacon, Grid, Origin, Site
 
 FS = 48_000
@@ -171,7 +171,7 @@ def matched_filter_rates(path: Path) -> dict:
 
 def walk_rate(tmp: Path) -> dict:
     """Receiver speed and fix figures on a simulated walk (site seed 3, walk seed 7, 120 s)."""
-    from features.acoustic_positions import PositionConfig
+    from features.acoustic.positions import PositionConfig
     from features.site import load_site
     from pipeline.cli import main as cli_main
     from pipeline.commands.features_audio import timing_from_walk

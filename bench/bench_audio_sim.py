@@ -24,12 +24,12 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from features.site import Atmosphere  # noqa: E402
-from simulation.acoustic_channel import beacon_arrivals, build_scene  # noqa: E402
-from simulation.acoustics import absorption_db_per_m  # noqa: E402
-from simulation.audio_stream import AudioConfig, render_audio  # noqa: E402
-from simulation.layout import generate_site  # noqa: E402
+from simulation.acoustic.channel import beacon_arrivals, build_scene  # noqa: E402
+from simulation.acoustic.atmosphere import absorption_db_per_m  # noqa: E402
+from simulation.acoustic.stream import AudioConfig, render_audio  # noqa: E402
+from simulation.site.layout import generate_site  # noqa: E402
 from simulation.rng import stream_rng  # noqa: E402
-from simulation.route import RouteConfig, plan_route, route_trajectory, static_trajectory  # noqa: E402
+from simulation.site.route import RouteConfig, plan_route, route_trajectory, static_trajectory  # noqa: E402
 
 START = datetime(2026, 6, 1, 8, 0, 0, tzinfo=timezone.utc)
 

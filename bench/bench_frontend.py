@@ -5,7 +5,7 @@ Writes a 5-minute 48 kHz int16 recording (white noise at −50 dBFS and a 10 ms
 ``time.process_time`` (CPU time of this process, best of ``--repeat`` runs, so
 other load on the machine inflates the figures less than wall time would):
 
-* reading alone: ``features.audio.iter_audio_blocks`` in 4 s blocks;
+* reading alone: ``features.acoustic.audio.iter_audio_blocks`` in 4 s blocks;
 * the matched filter alone: ``StreamingMatchedFilter.process`` over the same
   blocks already in memory, at the default segment length and at the others
   listed, for the 10 ms chirp;
@@ -40,8 +40,8 @@ import numpy as np
 import scipy.fft
 import soundfile as sf
 
-from features.audio import iter_audio_blocks
-from features.matched_filter import ChirpSpec, MatchedFilterBank, StreamingMatchedFilter, chirp_template
+from features.acoustic.audio import iter_audio_blocks
+from features.acoustic.matched_filter import ChirpSpec, MatchedFilterBank, StreamingMatchedFilter, chirp_template
 
 FS = 48_000
 SPEC = ChirpSpec(17_000.0, 23_000.0, 0.010, 0.2)

@@ -5,8 +5,8 @@ Prints, for the same lines:
 * pynmea2's bare parse rate — ``pynmea2.parse(line, check=True)`` in a loop,
   nothing else: the ceiling the issue measures against;
 * the reader, sentences/s: the whole-file fast path
-  (:func:`features.nmea.epochs_from_bytes`: line/``$`` splitting and checksums
-  vectorised with numpy, :mod:`features.nmea_quirks` interpreters), the
+  (:func:`features.gnss.nmea.epochs_from_bytes`: line/``$`` splitting and checksums
+  vectorised with numpy, :mod:`features.gnss.quirks` interpreters), the
   streaming fast path (:func:`iter_epochs` over lines, checksum per sentence)
   and the pynmea2 path (same interpreters on pynmea2's tokens);
 * the features (:func:`sky_arrays` + :func:`gnss_features`), epochs/s;
@@ -37,8 +37,8 @@ sys.path.insert(0, str(ROOT))
 
 import pynmea2  # noqa: E402
 
-from features.gnss_features import gnss_features, sky_arrays  # noqa: E402
-from features.nmea import ReadStats, epochs_from_bytes, iter_epochs  # noqa: E402
+from features.gnss.features import gnss_features, sky_arrays  # noqa: E402
+from features.gnss.nmea import ReadStats, epochs_from_bytes, iter_epochs  # noqa: E402
 
 GPSD = ROOT.parent / "shared" / "data" / "nmea" / "gpsd"
 

@@ -22,11 +22,11 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from features.site import ENV_CLASSES  # noqa: E402
-from simulation.environment import blocked_share, classify_share  # noqa: E402
-from simulation.gnss_stream import simulate_gnss, to_nmea_epochs  # noqa: E402
-from simulation.layout import generate_site  # noqa: E402
-from simulation.nmea_writer import format_nmea  # noqa: E402
-from simulation.route import static_trajectory  # noqa: E402
+from simulation.site.environment import blocked_share, classify_share  # noqa: E402
+from simulation.gnss.stream import simulate_gnss, to_nmea_epochs  # noqa: E402
+from simulation.site.layout import generate_site  # noqa: E402
+from simulation.gnss.nmea_writer import format_nmea  # noqa: E402
+from simulation.site.route import static_trajectory  # noqa: E402
 from simulation.streams import Trajectory  # noqa: E402
 from simulation.survey import survey_cells  # noqa: E402
 

@@ -3,8 +3,8 @@
 Speed: a simulated 30-min waist walk (100 Hz, accelerometer + gyro +
 magnetometer) written as ``imu.csv``, then
 
-* ``read``: :func:`features.imu.read_imu_csv` (parse + repair + resample),
-* ``pdr``: :func:`features.pdr.run_pdr` (step detection, step length,
+* ``read``: :func:`features.imu.reader.read_imu_csv` (parse + repair + resample),
+* ``pdr``: :func:`features.imu.pdr.run_pdr` (step detection, step length,
   heading filter, track) on the repaired samples,
 * ``whole``: both, the path ``envfuse features imu`` runs,
 
@@ -48,15 +48,15 @@ import numpy as np  # noqa: E402
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from features.heading import HeadingConfig, estimate_heading, imufusion_heading, wrap_pi  # noqa: E402
-from features.imu import read_imu_csv, repair_imu  # noqa: E402
-from features.pdr import PdrConfig, run_pdr  # noqa: E402
-from features.steps import StepLengthModel, calibrate_weinberg_k, detect_steps, fit_improved_model  # noqa: E402
-from simulation.imu_stream import imu_csv_text, simulate_imu  # noqa: E402
-from simulation.layout import generate_site  # noqa: E402
-from simulation.magnetic import earth_field_ned_ut, field_elements  # noqa: E402
+from features.imu.heading import HeadingConfig, estimate_heading, imufusion_heading, wrap_pi  # noqa: E402
+from features.imu.reader import read_imu_csv, repair_imu  # noqa: E402
+from features.imu.pdr import PdrConfig, run_pdr  # noqa: E402
+from features.imu.steps import StepLengthModel, calibrate_weinberg_k, detect_steps, fit_improved_model  # noqa: E402
+from simulation.imu.stream import imu_csv_text, simulate_imu  # noqa: E402
+from simulation.site.layout import generate_site  # noqa: E402
+from simulation.imu.magnetic import earth_field_ned_ut, field_elements  # noqa: E402
 from simulation.rng import stream_rng  # noqa: E402
-from simulation.route import plan_route, route_trajectory  # noqa: E402
+from simulation.site.route import plan_route, route_trajectory  # noqa: E402
 from simulation.streams import StreamContext  # noqa: E402
 
 OXFORD = ROOT.parent / "shared" / "data" / "imu" / "oxford_step_counter"
@@ -133,7 +133,7 @@ def oxford() -> None:
 
 def _file_walk(site, seed, duration_s, root: Path):
     """Simulate a walk, write imu.csv / truth_steps.csv, read them back as a user would."""
-    from simulation.imu_stream import write_imu
+    from simulation.imu.stream import write_imu
 
     out = root / f"w{seed}_{int(duration_s)}"
     out.mkdir(parents=True, exist_ok=True)
@@ -149,7 +149,7 @@ def _file_walk(site, seed, duration_s, root: Path):
 
 
 def simulated(quick: bool) -> None:
-    from simulation.magnetic import disturbance_ned_ut, site_steel_dipoles
+    from simulation.imu.magnetic import disturbance_ned_ut, site_steel_dipoles
 
     site = generate_site(3)
     tmp = tempfile.TemporaryDirectory()

@@ -17,7 +17,7 @@ from typing import Iterator
 
 import tomli_w
 
-from .errors import ConfigError, EnvfuseError
+from features.errors import ConfigError, EnvfuseError
 
 def _umask() -> int:
     mask = os.umask(0)

@@ -24,8 +24,8 @@ import os
 from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
 
-from .errors import ConfigError
-from .fileio import read_toml, write_toml
+from features.errors import ConfigError
+from features.fileio import read_toml, write_toml
 
 __all__ = [
     "Origin", "Atmosphere", "Grid", "AcousticConfig", "Beacon", "Box", "EmiZone", "Site",

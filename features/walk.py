@@ -15,9 +15,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import ConfigError, DataError
-from .fileio import read_toml
-from .site import ENV_CLASSES, Site, load_site
+from features.errors import ConfigError, DataError
+from features.fileio import read_toml
+from features.site import ENV_CLASSES, Site, load_site
 
 __all__ = ["WalkInfo", "load_walk", "Truth", "read_truth", "parse_utc"]
 

@@ -34,7 +34,7 @@ def save_figure(fig, path: str | os.PathLike, dpi: int = 130) -> Path:
 
 def plot_site(site: Site, path: str | os.PathLike, resolution_m: float = 0.5, title: str | None = None) -> Path:
     """Layout, beacons (with TDMA slot) and the ground-truth environment class map."""
-    from simulation.environment import class_map, classify_share  # pipeline may import simulation
+    from simulation.site.environment import class_map, classify_share  # pipeline may import simulation
     east, north, share = class_map(site, resolution_m=resolution_m, n_az=120)
     cls = np.where(np.isfinite(share), classify_share(np.nan_to_num(share)), -1).astype(float)
     cls[cls < 0] = np.nan

@@ -42,9 +42,9 @@ class WalkSources:
 
 
 def _gnss(walk, site):
-    from features.gnss_features import gnss_features, sky_arrays
-    from features.gnss_positions import fixes_to_enu
-    from features.nmea import epochs_on_time_base, read_nmea
+    from features.gnss.features import gnss_features, sky_arrays
+    from features.gnss.positions import fixes_to_enu
+    from features.gnss.nmea import epochs_on_time_base, read_nmea
 
     epochs, stats = read_nmea(walk.path("gnss"))
     epochs = epochs_on_time_base(epochs, walk.start_utc)
@@ -61,10 +61,10 @@ def _pdr(walk, start_en, k: float | None, gnss: SourceTrack | None = None, quali
     (quality 4, centimetre level): K = Σ GNSS step distance / Σ Weinberg units,
     yaw offset = circular mean of (GNSS step heading − PDR heading).
     """
-    from features.heading import HeadingConfig
-    from features.imu import read_imu_csv
-    from features.pdr import PdrConfig, dead_reckon, run_pdr
-    from features.steps import StepLengthModel
+    from features.imu.heading import HeadingConfig
+    from features.imu.reader import read_imu_csv
+    from features.imu.pdr import PdrConfig, dead_reckon, run_pdr
+    from features.imu.steps import StepLengthModel
 
     imu = read_imu_csv(walk.path("imu"))
     decl = float(walk.streams["imu"].get("declination_deg", 0.0))
@@ -97,10 +97,10 @@ def _pdr(walk, start_en, k: float | None, gnss: SourceTrack | None = None, quali
 
 
 def _acoustic(walk, site):
-    from features.acoustic_features import analyse_audio
-    from features.acoustic_positions import PositionConfig
+    from features.acoustic.features import analyse_audio
+    from features.acoustic.positions import PositionConfig
 
-    from .commands.features_audio import timing_from_walk
+    from pipeline.commands.features_audio import timing_from_walk
 
     timing = timing_from_walk(walk.directory, site, None)
     positions = PositionConfig(max_clock_offset_s=timing.start_uncertainty_s + 0.05, motion_speed_m_s=1.4)
@@ -167,7 +167,7 @@ def plot_walk(src: WalkSources, path: str | os.PathLike, title: str = "") -> Pat
     import matplotlib.pyplot as plt
     from matplotlib.patches import Rectangle
 
-    from .plots import CLASS_COLOURS, save_figure
+    from pipeline.plots import CLASS_COLOURS, save_figure
 
     fig, (ax, ax2) = plt.subplots(1, 2, figsize=(15, 6), gridspec_kw={"width_ratios": [1.1, 1]})
     for b in src.site.layout:

@@ -85,9 +85,9 @@ class StreamContext:
 
 
 STREAM_WRITERS: tuple[str, ...] = (
-    "simulation.gnss_stream:write_gnss",
-    "simulation.imu_stream:write_imu",
-    "simulation.audio_stream:write_audio",
+    "simulation.gnss.stream:write_gnss",
+    "simulation.imu.stream:write_imu",
+    "simulation.acoustic.stream:write_audio",
 )
 """Writers run in order for every walk and survey cell, as ``"module:function"``."""
 

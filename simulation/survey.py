@@ -19,12 +19,12 @@ from features.errors import ConfigError
 from features.fileio import atomic_directory, write_toml
 from features.site import ENV_CLASSES, load_site
 
-from .environment import blocked_share, classify_share
-from .geometry import boxes_array, inside_boxes
-from .rng import stream_seed
-from .route import static_trajectory
-from .streams import STREAM_WRITERS, StreamContext, run_stream_writers
-from .walk import default_start_utc, format_utc
+from simulation.site.environment import blocked_share, classify_share
+from simulation.site.geometry import boxes_array, inside_boxes
+from simulation.rng import stream_seed
+from simulation.site.route import static_trajectory
+from simulation.streams import STREAM_WRITERS, StreamContext, run_stream_writers
+from simulation.walk import default_start_utc, format_utc
 
 __all__ = ["survey_cells", "simulate_survey"]
 

@@ -13,10 +13,10 @@ from features.fileio import atomic_directory, write_toml
 from features.site import load_site
 from features.walk import parse_utc
 
-from .environment import environment_class
-from .rng import stream_rng
-from .route import RouteConfig, plan_route, route_trajectory
-from .streams import STREAM_WRITERS, StreamContext, run_stream_writers
+from simulation.site.environment import environment_class
+from simulation.rng import stream_rng
+from simulation.site.route import RouteConfig, plan_route, route_trajectory
+from simulation.streams import STREAM_WRITERS, StreamContext, run_stream_writers
 
 __all__ = ["DEFAULT_EPOCH_UTC", "default_start_utc", "parse_utc", "format_utc", "write_truth_csv", "simulate_walk"]
 

@@ -22,7 +22,7 @@ def shared_data(*parts: str) -> Path:
 def site_dir(tmp_path_factory) -> Path:
     """A generated site (seed 3) written as site.toml."""
     from features.site import save_site
-    from simulation.layout import generate_site
+    from simulation.site.layout import generate_site
 
     d = tmp_path_factory.mktemp("site3")
     save_site(generate_site(3), d / "site.toml")
@@ -52,4 +52,4 @@ def gnss_survey_dir(site_dir, tmp_path_factory) -> Path:
     from simulation.survey import simulate_survey
 
     return simulate_survey(site_dir, tmp_path_factory.mktemp("gsurveys") / "g3", seed=5, cell_size_m=10.0,
-                           capture_s=10.0, progress=False, writers=("simulation.gnss_stream:write_gnss",))
+                           capture_s=10.0, progress=False, writers=("simulation.gnss.stream:write_gnss",))

@@ -1,10 +1,10 @@
-"""Per-hop accumulation of chirp features (features.acoustic_features._HopBins)."""
+"""Per-hop accumulation of chirp features (features.acoustic.features._HopBins)."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from features.acoustic_features import _HopBins
+from features.acoustic.features import _HopBins
 
 
 def _fill(bins: _HopBins, rng: np.random.Generator, n: int) -> list:

@@ -8,8 +8,8 @@ import math
 import numpy as np
 import pytest
 
-from features.acoustic_positions import RANGE_SIGMA_FLOOR_M, BeaconRange, PositionConfig, solve_position, toa_range_sigma_m
-from features.chirp_detection import AudioTiming, DetectorConfig, detect_frames, speed_of_sound_m_s
+from features.acoustic.positions import RANGE_SIGMA_FLOOR_M, BeaconRange, PositionConfig, solve_position, toa_range_sigma_m
+from features.acoustic.detection import AudioTiming, DetectorConfig, detect_frames, speed_of_sound_m_s
 from features.site import AcousticConfig, Beacon, Grid, Origin, Site
 from tests.acoustic_synth import static_capture, write_wav
 
@@ -154,8 +154,8 @@ def test_walking_receiver_is_tracked():
     """A receiver walking 1.2 m/s across the ring (8 beacons, 8–25 m): after acquisition every
     frame gives a fix, within decimetres of the true position at the fix time, and the clock
     offset is tracked. The positions CLI default for walks (1.4 m/s motion prior) is used."""
-    from features.acoustic_features import analyse_audio
-    from features.acoustic_positions import PositionConfig
+    from features.acoustic.features import analyse_audio
+    from features.acoustic.positions import PositionConfig
     from tests.acoustic_synth import moving_capture
 
     site = _ring_site()
@@ -182,7 +182,7 @@ def _frequency_divided_run(east, north, clock, seed, echo=None, duration=4.0):
     """Six beacons in three slots, two bands (17–20 and 20–23 kHz) per slot, per-beacon chirps from
     site.toml; a static receiver, optionally an echo (delay s, relative amplitude) on every path.
     Returns the fixes of :func:`analyse_audio`."""
-    from features.acoustic_features import analyse_audio
+    from features.acoustic.features import analyse_audio
     from tests.acoustic_synth import C_20C_M_S, FS_HZ, chirp_at
 
     pts = [(0, 0), (30, 0), (30, 30), (0, 30), (15, 0), (15, 30)]

@@ -10,12 +10,12 @@ import pytest
 
 from features.errors import ConfigError
 from features.site import AcousticConfig, Atmosphere, Beacon, Box, Origin, Site
-from simulation.acoustic_channel import (ChannelConfig, beacon_arrivals, build_scene, channel_paths, clutter_index,
+from simulation.acoustic.channel import (ChannelConfig, beacon_arrivals, build_scene, channel_paths, clutter_index,
                                          tail_model)
-from simulation.acoustics import (absorption_db_per_m, fresnel_number, maekawa_loss_db, reflection_coefficient,
+from simulation.acoustic.atmosphere import (absorption_db_per_m, fresnel_number, maekawa_loss_db, reflection_coefficient,
                                   speed_of_sound_m_s, spreading_gain)
-from simulation.audio_stream import detection_range_m
-from simulation.chirp import (ChirpSpec, beacon_chirp, chirp_waveform, emission_times_s, frame_phase_s,
+from simulation.acoustic.stream import detection_range_m
+from simulation.acoustic.chirp import (ChirpSpec, beacon_chirp, chirp_waveform, emission_times_s, frame_phase_s,
                               reference_chirp, slot_reuse_conflicts)
 
 ORIGIN = Origin(31.0, 118.0)
@@ -147,7 +147,7 @@ def test_blocked_direct_path_diffracts_round_a_vertical_edge():
 
 
 def test_nlos_first_arrival_and_reflection_geometry_on_generated_site():
-    layout = pytest.importorskip("simulation.layout")
+    layout = pytest.importorskip("simulation.site.layout")
     site = layout.generate_site(3)
     arr = beacon_arrivals(site, (60.0, 30.0, 1.0))
     c = speed_of_sound_m_s(site.atmosphere.temperature_c)
@@ -231,13 +231,13 @@ def test_detection_range_and_slot_reuse_of_generated_sites():
     slots are hardly reused (frame ≈ n_beacons × slot_s). With the noisy phone
     floor measured on real audio (50 dB SPL) the range is ≈ 47 m.
     """
-    from simulation.audio_stream import AudioConfig
+    from simulation.acoustic.stream import AudioConfig
     spec = ChirpSpec(17_000.0, 23_000.0, 0.010, 0.2)
     r_default = detection_range_m(100.0, AudioConfig().inband_noise_db_spl, spec, Atmosphere())
     r_noisy = detection_range_m(100.0, AudioConfig(device_noise_dbfs=-63.0).inband_noise_db_spl, spec, Atmosphere())
     assert r_default == pytest.approx(70.5, abs=1.0)
     assert r_noisy == pytest.approx(47.3, abs=1.0)
-    layout = pytest.importorskip("simulation.layout")
+    layout = pytest.importorskip("simulation.site.layout")
     cfg = layout.LayoutConfig()
     assert cfg.reuse_distance_m >= 2.0 * r_default
     for seed in (1, 2, 3):
@@ -249,8 +249,8 @@ def test_detection_range_and_slot_reuse_of_generated_sites():
 
 def test_paths_are_reciprocal_on_a_generated_site():
     """Acoustic reciprocity: swapping source and receiver leaves every path length and gain unchanged."""
-    layout = pytest.importorskip("simulation.layout")
-    from simulation.geometry import boxes_array, inside_boxes
+    layout = pytest.importorskip("simulation.site.layout")
+    from simulation.site.geometry import boxes_array, inside_boxes
     site = layout.generate_site(5)
     scene = build_scene(site)
     rng = np.random.default_rng(7)
@@ -285,9 +285,9 @@ def test_documented_reference_chirp_runs_and_matches():
 
 def test_receiver_template_equals_transmitted_chirp():
     """Interface check with the receiver half: its template is the waveform the simulator transmits."""
-    mf = pytest.importorskip("features.matched_filter")
+    mf = pytest.importorskip("features.acoustic.matched_filter")
     if not hasattr(mf, "chirp_template"):
-        pytest.skip("features.matched_filter has no chirp_template")
+        pytest.skip("features.acoustic.matched_filter has no chirp_template")
     for f0, f1, dur, taper in ((17_000.0, 23_000.0, 0.010, 0.2), (18_000.0, 21_000.0, 0.02, 0.5)):
         theirs = mf.chirp_template(mf.ChirpSpec(f0, f1, dur, taper), 48_000)
         ours = chirp_waveform(ChirpSpec(f0, f1, dur, taper), 48_000.0)

@@ -9,10 +9,10 @@ import math
 import numpy as np
 import pytest
 
-from features.acoustic_positions import PositionConfig
-from features.acoustic_timing import AudioTiming, ChirpDetection, speed_of_sound_m_s
-from features.acoustic_tracking import ClockPositionTracker
-from features.cir import CirFeatures
+from features.acoustic.positions import PositionConfig
+from features.acoustic.timing import AudioTiming, ChirpDetection, speed_of_sound_m_s
+from features.acoustic.tracking import ClockPositionTracker
+from features.acoustic.cir import CirFeatures
 from pipeline.cli import main
 from tests.acoustic_synth import square_site
 
@@ -135,7 +135,7 @@ def test_short_walk_fix_rate_and_error(short_walk):
 
 def test_top_stable_equals_a_stable_sort_of_all_votes():
     """The vote's top-k selection (a partition) must rank exactly as the stable full sort it replaced."""
-    from features.acoustic_tracking import _top_stable
+    from features.acoustic.tracking import _top_stable
 
     rng = np.random.default_rng(0)
     for _ in range(200):

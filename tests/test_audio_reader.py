@@ -9,7 +9,7 @@ import pytest
 import scipy.signal
 import soundfile as sf
 
-from features.audio import AudioWarning, audio_info, iter_audio_blocks, read_audio
+from features.acoustic.audio import AudioWarning, audio_info, iter_audio_blocks, read_audio
 from features.errors import AudioError
 
 
@@ -105,7 +105,7 @@ def test_non_finite_float_samples_become_silence_with_one_warning(tmp_path):
 
     import soundfile as _sf
 
-    from features.audio import AudioWarning, iter_audio_blocks
+    from features.acoustic.audio import AudioWarning, iter_audio_blocks
     x = np.full(48_000 * 2, np.nan, np.float32)
     x[:100] = 0.1
     x[500] = np.inf
@@ -135,7 +135,7 @@ def test_stereo_blocks_from_the_reused_read_buffer(tmp_path, subtype, dtype, sca
 
 def test_int16_clip_count_equals_the_float_count(tmp_path):
     """int16 blocks count clipping on the integers; the count must equal count_clipped of the floats."""
-    from features.audio import count_clipped
+    from features.acoustic.audio import count_clipped
 
     x = np.r_[np.arange(32_700, 32_768), np.arange(-32_768, -32_700), np.zeros(100)].astype(np.int16)
     sf.write(tmp_path / "c.wav", x, 48_000, subtype="PCM_16")

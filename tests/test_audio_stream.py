@@ -17,9 +17,9 @@ from scipy.signal import fftconvolve, hilbert, welch
 
 from features.errors import ConfigError
 from features.site import AcousticConfig, Atmosphere, Beacon, Box, Origin, Site, save_site
-from simulation.acoustics import absorption_db_per_m
-from simulation.audio_stream import AudioConfig, render_audio, write_audio
-from simulation.chirp import beacon_chirp, reference_chirp
+from simulation.acoustic.atmosphere import absorption_db_per_m
+from simulation.acoustic.stream import AudioConfig, render_audio, write_audio
+from simulation.acoustic.chirp import beacon_chirp, reference_chirp
 from simulation.streams import StreamContext, Trajectory
 
 FS = 48_000
@@ -209,12 +209,12 @@ def test_writer_contract(tmp_path):
 
 def test_simulated_walk_carries_audio(tmp_path):
     """The lead's walk generator with this writer: walk.toml [audio] and a WAV of the walk's length."""
-    layout = pytest.importorskip("simulation.layout")
+    layout = pytest.importorskip("simulation.site.layout")
     walk = pytest.importorskip("simulation.walk")
     site = layout.generate_site(2)
     save_site(site, tmp_path / "site.toml")
     out = walk.simulate_walk(tmp_path / "site.toml", tmp_path / "w", seed=4, duration_s=6.0,
-                             writers=("simulation.audio_stream:write_audio",))
+                             writers=("simulation.acoustic.stream:write_audio",))
     meta = tomllib.loads((out / "walk.toml").read_text())
     assert meta["audio"]["file"] == "audio.wav" and meta["audio"]["fs_hz"] == 48000
     info = sf.info(out / "audio.wav")
@@ -254,7 +254,7 @@ def test_per_beacon_band_and_schedule_in_the_recording(tmp_path):
 def test_wall_reflection_in_the_wav_at_image_source_delay_and_level(tmp_path):
     """A concrete wall: the matched filter shows the image-source echo at (L_refl − d)/c after the
     direct peak, at the level R·(d/L_refl) × the band-weighted absorption difference."""
-    from simulation.acoustic_channel import ChannelConfig
+    from simulation.acoustic.channel import ChannelConfig
     wall = Box("firewall", "concrete", False, 10.0, 10.4, -20.0, 20.0, 9.0)
     site = _site([wall], beacons=(Beacon(1, 0.0, 0.0, 3.0, 0),))
     cfg = replace(QUIET, channel=ChannelConfig(clutter_radius_m=0.1))      # faint, short tail only
@@ -284,8 +284,8 @@ def test_wall_reflection_in_the_wav_at_image_source_delay_and_level(tmp_path):
 def test_diffracted_arrival_in_the_wav_with_maekawa_loss(tmp_path):
     """Behind a wall: the only arrival is the over-the-top path, at its detour delay, weaker than the
     free field by Maekawa's frequency-dependent loss 10·log10(3 + 20N(f)) averaged by the matched filter."""
-    from simulation.acoustic_channel import ChannelConfig
-    from simulation.acoustics import maekawa_loss_db
+    from simulation.acoustic.channel import ChannelConfig
+    from simulation.acoustic.atmosphere import maekawa_loss_db
     wall = Box("firewall", "concrete", False, 10.0, 10.4, -30.0, 30.0, 3.4)
     site = _site([wall], beacons=(Beacon(1, 0.0, 0.0, 3.0, 0),))
     rx = (20.0, 0.0, 1.0)

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 import scipy.stats
 
-from features.cir import FEATURE_NAMES, K_MAX_DB, analyse_cir, analyse_cirs, find_paths, first_arrivals
-from features.matched_filter import ChirpSpec, MatchedFilterBank
+from features.acoustic.cir import FEATURE_NAMES, K_MAX_DB, analyse_cir, analyse_cirs, find_paths, first_arrivals
+from features.acoustic.matched_filter import ChirpSpec, MatchedFilterBank
 from tests.acoustic_synth import FS_HZ, add_chirp
 
 

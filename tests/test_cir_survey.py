@@ -15,8 +15,8 @@ import math
 import numpy as np
 import pytest
 
-from features.acoustic_features import analyse_audio
-from features.chirp_detection import speed_of_sound_m_s
+from features.acoustic.features import analyse_audio
+from features.acoustic.detection import speed_of_sound_m_s
 from features.site import load_site
 from features.walk import load_walk
 from pipeline.cli import main

@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 import soundfile as sf
 
-from features.acoustic_features import FEATURE_COLUMNS
-from features.acoustic_positions import POSITION_COLUMNS
+from features.acoustic.features import FEATURE_COLUMNS
+from features.acoustic.positions import POSITION_COLUMNS
 from features.fileio import write_toml
 from features.site import save_site
 from pipeline.cli import main

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from simulation.geometry import (footprint_entry, horizon_elevation, inside_boxes, ray_blockers,
+from simulation.site.geometry import (footprint_entry, horizon_elevation, inside_boxes, ray_blockers,
                                  segment_hits_boxes, sky_blocked_fraction)
 
 WALL = np.array([[0.0, 20.0, 0.0, 10.0, 8.0]])  # 20 x 10 m footprint, 8 m tall

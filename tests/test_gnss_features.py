@@ -11,11 +11,11 @@ import numpy as np
 import pytest
 
 from features.errors import ConfigError, DataError
-from features.gnss_features import (
+from features.gnss.features import (
     COUNT_COLUMNS, FEATURE_COLUMNS, Cn0Reference, GnssFeatureConfig, SkyArrays, epoch_dop_growth,
     fit_cn0_reference, fluctuation_extrema, gnss_features, sky_arrays,
 )
-from features.nmea import read_nmea
+from features.gnss.nmea import read_nmea
 
 DATA = Path(__file__).resolve().parent / "data"
 GPSD = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "nmea" / "gpsd"
@@ -190,7 +190,7 @@ def simulated_survey(tmp_path_factory):
     # = envfuse simulate survey SITE --cell-size 10 --capture-s 4 --seed 2, GNSS stream only (audio is not needed
     # here and costs 10x more); each stream draws from its own seeded generator, so gnss.nmea is the same
     simulate_survey(root / "site", root / "survey", seed=2, cell_size_m=10.0, capture_s=4.0,
-                    writers=("simulation.gnss_stream:write_gnss",), progress=False)
+                    writers=("simulation.gnss.stream:write_gnss",), progress=False)
     return root / "survey"
 
 

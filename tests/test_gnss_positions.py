@@ -10,8 +10,8 @@ import pymap3d
 import pytest
 
 from features.errors import DataError
-from features.gnss_positions import ASSUMED_HDOP, UERE_BY_QUALITY_M, fixes_to_enu, sigma_axis_m
-from features.nmea import Epoch, Fix, read_nmea
+from features.gnss.positions import ASSUMED_HDOP, UERE_BY_QUALITY_M, fixes_to_enu, sigma_axis_m
+from features.gnss.nmea import Epoch, Fix, read_nmea
 
 DATA = Path(__file__).resolve().parent / "data"
 

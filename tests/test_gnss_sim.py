@@ -9,12 +9,12 @@ from scipy.special import j0
 
 from features.errors import ConfigError
 from features.site import Box, EmiZone, Origin, Site
-from simulation import gnss_signal
-from simulation.geometry import boxes_array
-from simulation.gnss_fix import FixConfig, code_sigma_m, solve_fixes
-from simulation.gnss_signal import SignalConfig, blockage, knife_edge_loss_db, open_sky_cn0_dbhz, rician_power, track
-from simulation.gnss_stream import simulate_gnss, write_gnss
-from simulation.route import static_trajectory
+from simulation.gnss import signal as gnss_signal
+from simulation.site.geometry import boxes_array
+from simulation.gnss.fix import FixConfig, code_sigma_m, solve_fixes
+from simulation.gnss.signal import SignalConfig, blockage, knife_edge_loss_db, open_sky_cn0_dbhz, rician_power, track
+from simulation.gnss.stream import simulate_gnss, write_gnss
+from simulation.site.route import static_trajectory
 from simulation.streams import StreamContext, Trajectory
 
 START = datetime(2026, 5, 1, 3, 0, tzinfo=timezone.utc)

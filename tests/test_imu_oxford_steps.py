@@ -12,8 +12,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from features.imu import repair_imu
-from features.steps import detect_steps
+from features.imu.reader import repair_imu
+from features.imu.steps import detect_steps
 from tests.conftest import shared_data
 
 # position: (our count, true count, published algorithm's count)

@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from features.errors import ImuError
-from features.imu import RepairConfig, read_imu_csv, repair_imu
-from features.pdr import run_pdr
+from features.imu.reader import RepairConfig, read_imu_csv, repair_imu
+from features.imu.pdr import run_pdr
 from pipeline.cli import main
 
 DATA = Path(__file__).resolve().parent / "data"

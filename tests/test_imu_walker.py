@@ -7,14 +7,14 @@ import math
 import numpy as np
 import pytest
 
-from features.heading import down_in_body, yaw_rate
+from features.imu.heading import down_in_body, yaw_rate
 from features.site import Box, Origin, Site
 from dataclasses import replace
 
-from features.heading import magnetic_heading, wrap_pi
-from simulation.imu_walker import (MIN_EXCURSION_STEP_M, SensorErrors, person_gait, place_steps, synthesise_imu,
+from features.imu.heading import magnetic_heading, wrap_pi
+from simulation.imu.walker import (MIN_EXCURSION_STEP_M, SensorErrors, person_gait, place_steps, synthesise_imu,
                                    trajectory_from_waypoints)
-from simulation.magnetic import (SteelDipoles, disturbance_ned_ut, earth_field_ned_ut, field_elements,
+from simulation.imu.magnetic import (SteelDipoles, disturbance_ned_ut, earth_field_ned_ut, field_elements,
                                  steel_dipoles)
 from simulation.rng import stream_rng
 

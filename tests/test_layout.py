@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from features.site import save_site
-from simulation.layout import LayoutConfig, assign_slots, class_shares, generate_site
-from simulation.geometry import boxes_array, inside_boxes
+from simulation.site.layout import LayoutConfig, assign_slots, class_shares, generate_site
+from simulation.site.geometry import boxes_array, inside_boxes
 
 SEEDS = (1, 2, 4)
 

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import scipy.signal
 
-from features.matched_filter import (ChirpSpec, MatchedFilterBank, StreamingMatchedFilter, analytic_convolve,
+from features.acoustic.matched_filter import (ChirpSpec, MatchedFilterBank, StreamingMatchedFilter, analytic_convolve,
                                      bandpass_fir, chirp_template)
 from tests.acoustic_synth import FS_HZ, add_chirp, chirp_at
 
@@ -96,7 +96,7 @@ def test_hand_written_windows_and_filter_equal_scipy_signal():
     chirp and band-pass FIR must equal scipy's definitions."""
     import scipy.signal
 
-    from features.matched_filter import _firwin_bandpass, _tukey, bandpass_fir, chirp_template, ChirpSpec
+    from features.acoustic.matched_filter import _firwin_bandpass, _tukey, bandpass_fir, chirp_template, ChirpSpec
 
     for n, alpha in ((480, 0.2), (481, 0.5), (100, 0.0), (100, 1.0)):
         np.testing.assert_allclose(_tukey(n, alpha), scipy.signal.windows.tukey(n, alpha), atol=1e-12)

@@ -18,8 +18,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from features.errors import NmeaError
-from features.nmea import ReadStats, epochs_from_bytes, iter_epochs, parse_sentence, read_nmea
-from features.nmea_quirks import gsa_fields, gsv_fields, parse_time_of_day, satellite_id
+from features.gnss.nmea import ReadStats, epochs_from_bytes, iter_epochs, parse_sentence, read_nmea
+from features.gnss.quirks import gsa_fields, gsv_fields, parse_time_of_day, satellite_id
 
 DATA = Path(__file__).resolve().parent / "data"
 SHARED = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "nmea"

@@ -6,11 +6,11 @@ import numpy as np
 import pynmea2
 import pytest
 
-from features.nmea import read_nmea
+from features.gnss.nmea import read_nmea
 from features.site import Box, Origin, Site
-from simulation.gnss_stream import simulate_gnss, to_nmea_epochs
-from simulation.nmea_writer import NmeaEpochs, format_nmea, nmea_checksum
-from simulation.route import static_trajectory
+from simulation.gnss.stream import simulate_gnss, to_nmea_epochs
+from simulation.gnss.nmea_writer import NmeaEpochs, format_nmea, nmea_checksum
+from simulation.site.route import static_trajectory
 
 START = datetime(2026, 5, 1, 23, 59, 58, tzinfo=timezone.utc)  # crosses midnight: the date must roll over
 

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from features.constants import GEO_RADIUS_M, SIDEREAL_DAY_S, WGS84_A_M
-from simulation.orbits import (
+from simulation.gnss.orbits import (
     BDS_GEO_LON_DEG, all_satellites, azel, beidou_constellation, ecef_positions, eci_positions, gmst_rad,
     gps_constellation, to_unix_s,
 )

@@ -11,18 +11,18 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from features.heading import (HeadingConfig, complementary_heading, down_in_body, magnetic_heading, wrap_pi,
+from features.imu.heading import (HeadingConfig, complementary_heading, down_in_body, magnetic_heading, wrap_pi,
                               yaw_rate)
-from features.imu import read_imu_csv
-from features.pdr import PdrConfig, run_pdr
+from features.imu.reader import read_imu_csv
+from features.imu.pdr import PdrConfig, run_pdr
 from features.site import load_site
 from features.errors import DataError
-from features.steps import StepLengthModel, calibrate_weinberg_k, fit_improved_model
-from simulation.imu_stream import simulate_imu, write_imu
-from simulation.imu_walker import person_gait
-from simulation.magnetic import disturbance_ned_ut, earth_field_ned_ut, field_elements, site_steel_dipoles
+from features.imu.steps import StepLengthModel, calibrate_weinberg_k, fit_improved_model
+from simulation.imu.stream import simulate_imu, write_imu
+from simulation.imu.walker import person_gait
+from simulation.imu.magnetic import disturbance_ned_ut, earth_field_ned_ut, field_elements, site_steel_dipoles
 from simulation.rng import stream_rng
-from simulation.route import plan_route, route_trajectory
+from simulation.site.route import plan_route, route_trajectory
 from simulation.streams import StreamContext
 
 PERSON = 5

@@ -6,10 +6,10 @@ import numpy as np
 import pytest
 
 from features.site import load_site
-from simulation.environment import environment_class
-from simulation.geometry import boxes_array, inside_boxes
+from simulation.site.environment import environment_class
+from simulation.site.geometry import boxes_array, inside_boxes
 from simulation.rng import stream_rng
-from simulation.route import RouteConfig, plan_route, route_trajectory
+from simulation.site.route import RouteConfig, plan_route, route_trajectory
 
 T0 = datetime(2026, 6, 1, tzinfo=timezone.utc)
 

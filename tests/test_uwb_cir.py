@@ -4,7 +4,7 @@ Data: Kolakowski & Modelski, "Detection of direct path component absence in
 NLOS UWB channel", MIKON 2018, doi:10.23919/MIKON.2018.8405190; dataset
 Zenodo 10.5281/zenodo.4742391 (CC BY 4.0), in ../shared/data/cir_uwb: DecaWave
 EVK1000 accumulators (1016 taps, 1.0016 ns) labelled LOS / NLOS / NDP NLOS per
-file. The same :func:`features.cir.analyse_cirs` that serves the 48 kHz
+file. The same :func:`features.acoustic.cir.analyse_cirs` that serves the 48 kHz
 acoustic CIRs runs here with only the tap spacing changed.
 
 Figures pinned below (first 15 packets of each of the 22 files, 328 CIRs):
@@ -30,8 +30,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from features.cir import FEATURE_NAMES, analyse_cirs
-from features.uwb_cir import DW1000_PULSE_WIDTH_S, DW1000_TAP_S, read_decawave_log
+from features.acoustic.cir import FEATURE_NAMES, analyse_cirs
+from features.acoustic.uwb import DW1000_PULSE_WIDTH_S, DW1000_TAP_S, read_decawave_log
 
 DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "cir_uwb"
 CLASSES = ("LOS", "NLOS", "NDP NLOS")

@@ -25,7 +25,7 @@ def run_demo(args) -> int:
     from features.site import save_site
     from features.walk import load_walk, read_truth
     from pipeline.plots import plot_site
-    from simulation.layout import class_shares, generate_site
+    from simulation.site.layout import class_shares, generate_site
     from simulation.walk import simulate_walk
 
     out = Path(args.out)

@@ -67,7 +67,7 @@ cannot place chirps in their slots, and the acquisition search grows with it."""
 
 def _check_audio(wav: Path, site) -> None:
     """Refuse audio that cannot hold a beacon chirp at all: no samples, or a Nyquist below every band."""
-    from features.audio import audio_info
+    from features.acoustic.audio import audio_info
     from features.errors import AudioError
 
     info = audio_info(wav)
@@ -81,7 +81,7 @@ def _check_audio(wav: Path, site) -> None:
 
 def timing_from_walk(walk_path: Path | None, site, uncertainty_override: float | None):
     """:class:`AudioTiming` from a walk.toml / cell.toml (or the documented defaults without one)."""
-    from features.chirp_detection import AudioTiming, frame_phase_s
+    from features.acoustic.detection import AudioTiming, frame_phase_s
 
     if walk_path is None:
         u = 0.05 if uncertainty_override is None else uncertainty_override
@@ -115,10 +115,10 @@ def timing_from_walk(walk_path: Path | None, site, uncertainty_override: float |
 
 
 def _run(args) -> int:
-    from features.acoustic_features import FEATURE_COLUMNS, WindowConfig, analyse_audio
-    from features.acoustic_positions import POSITION_COLUMNS, PositionConfig
-    from features.audio import AudioWarning
-    from features.chirp_detection import DetectorConfig
+    from features.acoustic.features import FEATURE_COLUMNS, WindowConfig, analyse_audio
+    from features.acoustic.positions import POSITION_COLUMNS, PositionConfig
+    from features.acoustic.audio import AudioWarning
+    from features.acoustic.detection import DetectorConfig
     from features.fileio import atomic_write_many
     from features.site import load_site
 

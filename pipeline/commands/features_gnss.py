@@ -70,17 +70,17 @@ def _on_time_base(epochs, start_utc: str | None):
     """Epochs with t_s re-based to ``start_utc`` (ISO 8601); unchanged when None."""
     if start_utc is None:
         return epochs
-    from features.nmea import epochs_on_time_base
+    from features.gnss.nmea import epochs_on_time_base
     from features.walk import parse_utc
     return epochs_on_time_base(epochs, parse_utc(start_utc, "--start-utc"))
 
 
 def _run(args) -> int:
     from features.fileio import atomic_write_many
-    from features.gnss_features import (
+    from features.gnss.features import (
         COUNT_COLUMNS, FEATURE_COLUMNS, Cn0Reference, GnssFeatureConfig, fit_cn0_reference, gnss_features, sky_arrays,
     )
-    from features.nmea import read_nmea
+    from features.gnss.nmea import read_nmea
 
     config = GnssFeatureConfig(window_s=args.window_s, hop_s=args.hop_s, elevation_mask_deg=args.elevation_mask_deg,
                                fluct_threshold_dbhz=args.fluct_threshold_dbhz)
@@ -116,7 +116,7 @@ def _run(args) -> int:
         outputs[args.fit_cn0_reference] = json.dumps(fitted.to_dict(), indent=2) + "\n"
     n_pos = None
     if args.positions is not None:
-        from features.gnss_positions import fixes_to_enu
+        from features.gnss.positions import fixes_to_enu
         o = site.origin
         pos = fixes_to_enu(epochs, o.lat_deg, o.lon_deg, o.alt_m)
         outputs[args.positions] = _csv({n: getattr(pos, n) for n in pos.COLUMNS}, pos.COLUMNS)

@@ -49,10 +49,10 @@ def _declination_deg(imu_path: Path, given: float | None) -> float:
 
 
 def _run(args) -> int:
-    from features.heading import HeadingConfig
-    from features.imu import read_imu_csv
-    from features.pdr import PdrConfig, run_pdr, write_steps_csv
-    from features.steps import StepLengthModel, calibrate_weinberg_k
+    from features.imu.heading import HeadingConfig
+    from features.imu.reader import read_imu_csv
+    from features.imu.pdr import PdrConfig, run_pdr, write_steps_csv
+    from features.imu.steps import StepLengthModel, calibrate_weinberg_k
 
     imu = read_imu_csv(args.imu)
     if imu.report.n_defects:

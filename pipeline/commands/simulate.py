@@ -51,7 +51,7 @@ def register(sub) -> None:
 def _site(args) -> int:
     from features.fileio import atomic_directory
     from features.site import save_site
-    from simulation.layout import LayoutConfig, class_shares, generate_site
+    from simulation.site.layout import LayoutConfig, class_shares, generate_site
 
     site = generate_site(args.seed, LayoutConfig(emi_zones=not args.no_emi))
     with atomic_directory(args.out, overwrite=args.force) as tmp:

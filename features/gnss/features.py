@@ -1,0 +1,395 @@
+"""The five GNSS environment features of DESIGN.md §5, vectorised over epochs.
+
+Per analysis window (default 2 s, hop 1 s), over satellites at or above the
+elevation mask (default 10°):
+
+1. ``att_mean_db`` μ — mean attenuation of tracked satellites,
+   attenuation = max(0, C_ref(el) − C/N0) (Xue, Han & Wang 2023, §2.1);
+2. ``att_std_db`` σ — its (population) standard deviation;
+3. ``fluct_per_s`` β — local extrema of each tracked satellite's C/N0 series
+   whose swing from the previous extremum is ≥ 2 dB-Hz, per second, averaged
+   over the satellites tracked in the window. DESIGN.md says 1 dB-Hz, but NMEA
+   reports C/N0 in whole dB-Hz, so a 1 dB-Hz swing is a single quantisation
+   step: it counts the estimator flicker of strong line-of-sight signals and
+   the feature then orders the classes backwards (open > heavy on simulated
+   surveys). 2 dB-Hz, the smallest swing above one step, restores
+   heavy > light > open; ``fluct_threshold_dbhz`` sets it;
+4. ``invisible_ratio`` ζ — in-view-but-untracked (satellite, epoch) pairs over
+   all in-view pairs;
+5. ``dop_growth`` λ — HDOP of the tracked satellites over HDOP of all in-view
+   satellites, minus 1, averaged over the window's epochs; 10 when fewer than
+   4 are tracked (or their geometry is singular).
+
+HDOP from azimuth/elevation only, with one common receiver clock: rows
+``[cos el sin az, cos el cos az, sin el, 1]`` of the geometry matrix G,
+Q = (GᵀG)⁻¹, HDOP = sqrt(Q_EE + Q_NN) — the textbook definition (Kaplan &
+Hegarty, *Understanding GPS*, 2nd ed. 2006, ch. 7, dilution of precision).
+
+The open-sky reference C_ref(el) = a + b·sin(el) defaults to ≈ 38 dB-Hz at 5°
+and 50 dB-Hz at zenith (DESIGN.md §6). The linear form in sin(el) is an
+engineering choice, not a published model: it follows the monotone rise of
+C/N0 with elevation seen in real data (smartLoc bins 29.9 / 35.8 / 38.8 /
+46.6 dB-Hz for 0-15 / 15-30 / 30-60 / 60-90°, DESIGN.md §6) with two
+parameters that :func:`fit_cn0_reference` can fit to open-sky epochs (an
+upper quantile per elevation bin, then a count-weighted least-squares line in
+sin(el)); a median fit on simulated open cells recovers the simulator's
+open-sky line within 1.5 dB (tests).
+
+A satellite listed on several signals (NMEA 4.10+) counts once, with the
+highest C/N0 of its signals: "tracked" means tracked on any signal.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass
+from typing import Sequence
+
+import numpy as np
+
+from features.constants import ELEVATION_MASK_DEG
+from features.errors import ConfigError, DataError
+
+__all__ = [
+    "FEATURE_COLUMNS", "COUNT_COLUMNS", "GnssFeatureConfig", "Cn0Reference", "SkyArrays",
+    "sky_arrays", "gnss_features", "fit_cn0_reference", "epoch_dop_growth", "fluctuation_extrema",
+]
+
+FEATURE_COLUMNS = ("att_mean_db", "att_std_db", "fluct_per_s", "invisible_ratio", "dop_growth")
+"""The five GNSS feature names, in DESIGN.md §5 order."""
+
+COUNT_COLUMNS = ("n_epochs", "n_in_view", "n_tracked", "n_pairs_in_view", "n_pairs_tracked")
+"""Counts behind each window: epochs with a reported sky; distinct satellites above the mask in
+view and tracked; (satellite, epoch) pairs in view and tracked."""
+
+
+MAX_WINDOWS = 20_000_000
+"""Largest number of windows computed in one call (≈ 230 days at the default 1 s hop)."""
+
+
+@dataclass(frozen=True)
+class GnssFeatureConfig:
+    """Window and feature parameters (DESIGN.md §5 defaults)."""
+
+    window_s: float = 2.0
+    hop_s: float = 1.0
+    elevation_mask_deg: float = ELEVATION_MASK_DEG
+    fluct_threshold_dbhz: float = 2.0  # not DESIGN's 1.0: see the module docstring (integer C/N0)
+    dop_growth_cap: float = 10.0
+
+    def __post_init__(self):
+        for name in ("window_s", "hop_s", "fluct_threshold_dbhz", "dop_growth_cap"):
+            value = getattr(self, name)
+            if not isinstance(value, (int, float)) or not math.isfinite(value) or value <= 0:
+                raise ConfigError(f"GnssFeatureConfig.{name} must be a positive number, got {value!r}")
+        if not 0.0 <= self.elevation_mask_deg < 90.0:
+            raise ConfigError("GnssFeatureConfig.elevation_mask_deg must lie in [0, 90), "
+                              f"got {self.elevation_mask_deg}")
+
+
+@dataclass(frozen=True)
+class Cn0Reference:
+    """Open-sky C/N0 model C_ref(el) = intercept_dbhz + slope_dbhz · sin(el).
+
+    >>> ref = Cn0Reference()
+    >>> round(float(ref.cref_dbhz(5.0)), 2), round(float(ref.cref_dbhz(90.0)), 2)
+    (38.0, 50.0)
+    >>> Cn0Reference.from_dict(ref.to_dict()) == ref
+    True
+    """
+
+    intercept_dbhz: float = 38.0 - 12.0 * math.sin(math.radians(5.0)) / (1.0 - math.sin(math.radians(5.0)))
+    slope_dbhz: float = 12.0 / (1.0 - math.sin(math.radians(5.0)))
+    source: str = "default: 38 dB-Hz at 5 deg, 50 dB-Hz at zenith (DESIGN.md 6)"
+
+    def __post_init__(self):
+        for name in ("intercept_dbhz", "slope_dbhz"):
+            value = getattr(self, name)
+            if not isinstance(value, (int, float)) or not math.isfinite(value):
+                raise ConfigError(f"Cn0Reference.{name} must be a finite number, got {value!r}")
+        if not 0.0 < self.intercept_dbhz + max(self.slope_dbhz, 0.0) < 80.0:
+            raise ConfigError(f"Cn0Reference gives an implausible zenith C/N0 "
+                              f"{self.intercept_dbhz + self.slope_dbhz:.1f} dB-Hz")
+
+    def cref_dbhz(self, el_deg):
+        """C_ref at elevation(s) ``el_deg`` (array-like, degrees) in dB-Hz."""
+        return self.intercept_dbhz + self.slope_dbhz * np.sin(np.radians(np.asarray(el_deg, dtype=float)))
+
+    def to_dict(self) -> dict:
+        """JSON-serialisable parameters (model bundles store these)."""
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, data: dict) -> "Cn0Reference":
+        try:
+            return cls(float(data["intercept_dbhz"]), float(data["slope_dbhz"]), str(data.get("source", "")))
+        except (KeyError, TypeError, ValueError) as exc:
+            raise ConfigError(f"C/N0 reference needs numeric intercept_dbhz and slope_dbhz: {exc}") from None
+
+
+@dataclass(frozen=True)
+class SkyArrays:
+    """Epochs with a reported sky, as arrays over (epoch, satellite).
+
+    t_s : (n,) seconds; sat_keys : m tuples (system, prn);
+    el_deg, az_deg, cn0_dbhz : (n, m), NaN when not listed / not tracked;
+    in_view, used : (n, m) bool; hdop : (n,) receiver HDOP (NaN when absent).
+    """
+
+    t_s: np.ndarray
+    sat_keys: tuple
+    el_deg: np.ndarray
+    az_deg: np.ndarray
+    cn0_dbhz: np.ndarray
+    in_view: np.ndarray
+    used: np.ndarray
+    hdop: np.ndarray
+
+    @property
+    def n_epochs(self) -> int:
+        return int(self.t_s.shape[0])
+
+
+def sky_arrays(epochs: Sequence) -> SkyArrays:
+    """Stack the epochs that reported a sky into :class:`SkyArrays` (one column per satellite)."""
+    sky = [e for e in epochs if e.sky_reported]
+    flat = [(i, s) for i, e in enumerate(sky) for s in e.satellites]
+    index: dict = {}
+    cols = [index.setdefault((s[0], s[1]), len(index)) for _, s in flat]
+    n, m = len(sky), len(index)
+    el = np.full((n, m), np.nan)
+    az = np.full((n, m), np.nan)
+    cn0 = np.full((n, m), np.nan)
+    in_view = np.zeros((n, m), dtype=bool)
+    used = np.zeros((n, m), dtype=bool)
+    if flat:
+        r = np.fromiter((i for i, _ in flat), dtype=np.intp, count=len(flat))
+        c = np.asarray(cols, dtype=np.intp)
+        # Satellite fields: (system, prn, signal, el_deg, az_deg, cn0_dbhz, used); None → NaN
+        el_v = np.array([s[3] for _, s in flat], dtype=float)
+        az_v = np.array([s[4] for _, s in flat], dtype=float)
+        cn0_v = np.array([s[5] for _, s in flat], dtype=float)
+        used_v = np.array([s[6] for _, s in flat], dtype=bool)
+        # Several signals of one satellite: C/N0 = max over signals (fmax ignores NaN),
+        # el/az from any listing that has them.
+        np.fmax.at(cn0, (r, c), cn0_v)
+        has_el = ~np.isnan(el_v)
+        el[r[has_el], c[has_el]] = el_v[has_el]
+        has_az = ~np.isnan(az_v)
+        az[r[has_az], c[has_az]] = az_v[has_az]
+        in_view[r, c] = True
+        np.logical_or.at(used, (r, c), used_v)
+    hdop = np.array([np.nan if e.fix.hdop is None else e.fix.hdop for e in sky], dtype=float)
+    t_s = np.array([e.t_s for e in sky], dtype=float)
+    return SkyArrays(t_s, tuple(index), el, az, cn0, in_view, used, hdop)
+
+
+def _hdop(el_rad: np.ndarray, az_rad: np.ndarray, weight: np.ndarray) -> np.ndarray:
+    """HDOP per epoch from the satellites where ``weight`` is True; NaN if < 4 or singular. Shapes (n, m) → (n,)."""
+    ce = np.cos(el_rad)
+    g = np.stack([ce * np.sin(az_rad), ce * np.cos(az_rad), np.sin(el_rad), np.ones_like(el_rad)], axis=-1)
+    g = np.where(weight[..., None], np.nan_to_num(g), 0.0)
+    # A = GᵀG per epoch, shape (n, 4, 4)
+    a = np.einsum("nmi,nmj->nij", g, g)
+    count = weight.sum(axis=1)
+    out = np.full(a.shape[0], np.nan)
+    ok = count >= 4
+    if ok.any():
+        sub = a[ok]
+        # singular geometry (e.g. all satellites on one cone): |det(GᵀG)| negligible against its scale
+        # count⁴ (entries are O(count)); LU determinant, cheaper than an SVD condition number
+        det = np.linalg.det(sub)
+        good = np.isfinite(det) & (np.abs(det) > 1e-10 * count[ok].astype(float) ** 4)
+        q = np.full_like(sub, np.nan)
+        if good.any():
+            q[good] = np.linalg.inv(sub[good])
+        h = np.sqrt(q[:, 0, 0] + q[:, 1, 1])
+        out[ok] = h
+    return out
+
+
+def epoch_dop_growth(el_deg: np.ndarray, az_deg: np.ndarray, in_view: np.ndarray, tracked: np.ndarray,
+                     cap: float = 10.0) -> np.ndarray:
+    """λ per epoch: HDOP(tracked) / HDOP(in view) − 1, in [0, cap]; cap when < 4 tracked; NaN when none in view.
+
+    All inputs of shape (n, m); ``tracked`` ⊆ ``in_view``.
+
+    >>> el = np.array([[80.0, 30, 30, 30, 30]]); az = np.array([[0.0, 0, 90, 180, 270]])
+    >>> view = np.ones((1, 5), bool)
+    >>> [round(float(epoch_dop_growth(el, az, view, view & keep)[0]), 4)
+    ...  for keep in (az >= 0, az != 90, az < 180)]  # all; without the east one (σ_E² doubles); only 3
+    [0.0, 0.4142, 10.0]
+    """
+    el_rad, az_rad = np.radians(el_deg), np.radians(az_deg)
+    h_view = _hdop(el_rad, az_rad, in_view)
+    h_trk = _hdop(el_rad, az_rad, tracked)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        growth = h_trk / h_view - 1.0
+    n_trk = tracked.sum(axis=1)
+    n_view = in_view.sum(axis=1)
+    growth = np.where((n_trk < 4) | ~np.isfinite(growth), cap, growth)
+    growth = np.clip(growth, 0.0, cap)
+    return np.where(n_view > 0, growth, np.nan)
+
+
+def _ffill_rows(x: np.ndarray, valid: np.ndarray) -> np.ndarray:
+    """Forward-fill x (n, m) along axis 0 from the rows where ``valid``; NaN before the first valid row."""
+    n = x.shape[0]
+    idx = np.where(valid, np.arange(n)[:, None], -1)
+    np.maximum.accumulate(idx, axis=0, out=idx)
+    out = np.take_along_axis(x, np.maximum(idx, 0), axis=0)
+    return np.where(idx >= 0, out, np.nan)
+
+
+def fluctuation_extrema(cn0_dbhz: np.ndarray, tracked: np.ndarray, threshold_dbhz: float = 1.0) -> np.ndarray:
+    """Mark C/N0 local extrema whose swing from the previous extremum is ≥ ``threshold_dbhz``.
+
+    Per column (satellite) of ``cn0_dbhz`` (n, m), over the epochs where
+    ``tracked`` (gaps bridged by the last value): an extremum is a tracked
+    epoch where the direction of change reverses (plateaus count once, at
+    their end); its swing is the difference to the previous extremum (or to
+    the first tracked value). Returns a bool array (n, m).
+
+    >>> x = np.array([40, 42, 40, 40, 43, 43.5, 43], float)[:, None]
+    >>> fluctuation_extrema(x, np.ones_like(x, bool))[:, 0].astype(int).tolist()
+    [0, 1, 0, 1, 0, 1, 0]
+    >>> fluctuation_extrema(x, np.ones_like(x, bool), 2.5)[:, 0].astype(int).tolist()
+    [0, 0, 0, 0, 0, 1, 0]
+    """
+    n, m = cn0_dbhz.shape
+    if n < 3:
+        return np.zeros((n, m), dtype=bool)
+    y = _ffill_rows(cn0_dbhz, tracked)
+    d = np.nan_to_num(np.diff(y, axis=0))  # (n-1, m); d[i] = y[i+1] − y[i]
+    sgn = np.sign(d)
+    # last non-zero direction before point i (from d[0..i-1])
+    last = _ffill_rows(sgn, sgn != 0)  # last[i] = last non-zero sign among d[0..i]
+    before = np.vstack([np.full((1, m), np.nan), last[:-1]])  # for point i: direction into it
+    is_ext = np.zeros((n, m), dtype=bool)
+    is_ext[:-1] = (sgn != 0) & np.isfinite(before) & (before != sgn) & tracked[:-1]
+    is_ext[0] = False
+    # swing from the previous (unfiltered) extremum, or from the first tracked value
+    first = _ffill_rows(y, np.isfinite(y))
+    first_val = np.take_along_axis(first, np.argmax(np.isfinite(y), axis=0)[None, :], axis=0)
+    ext_val = np.where(is_ext, y, np.nan)
+    prev = _ffill_rows(ext_val, is_ext)
+    prev = np.vstack([np.full((1, m), np.nan), prev[:-1]])
+    prev = np.where(np.isfinite(prev), prev, first_val)
+    with np.errstate(invalid="ignore"):
+        return is_ext & (np.abs(y - prev) >= threshold_dbhz)
+
+
+def _window_sums(cum: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """Sums over epochs [lo, hi) from a cumulative array with a leading zero row."""
+    return cum[hi] - cum[lo]
+
+
+def gnss_features(sky: SkyArrays, config: GnssFeatureConfig | None = None,
+                  reference: Cn0Reference | None = None) -> dict[str, np.ndarray]:
+    """The five features and their counts per window.
+
+    Returns a dict of arrays of shape (n_windows,): ``t_s`` (window centre),
+    ``FEATURE_COLUMNS`` and ``COUNT_COLUMNS``. Windows start at the first
+    epoch and step by ``hop_s``; windows holding no epoch are omitted. A
+    feature is NaN when its inputs are absent (no tracked satellite above the
+    mask for μ, σ, β; none in view for ζ, λ).
+    """
+    config = config or GnssFeatureConfig()
+    reference = reference or Cn0Reference()
+    names = ("t_s",) + FEATURE_COLUMNS + COUNT_COLUMNS
+    if sky.n_epochs == 0:
+        return {k: np.zeros(0) for k in names}
+    t = sky.t_s
+    if not np.all(np.isfinite(t)) or np.any(np.diff(t) <= 0):
+        raise DataError("GNSS epochs must have finite, strictly increasing t_s")
+    with np.errstate(invalid="ignore"):
+        view = sky.in_view & (sky.el_deg >= config.elevation_mask_deg)
+    tracked = view & np.isfinite(sky.cn0_dbhz)
+    att = np.where(tracked, np.maximum(0.0, reference.cref_dbhz(sky.el_deg) - sky.cn0_dbhz), 0.0)
+    ext = fluctuation_extrema(np.where(tracked, sky.cn0_dbhz, np.nan), tracked, config.fluct_threshold_dbhz)
+    lam = epoch_dop_growth(sky.el_deg, sky.az_deg, view, tracked, config.dop_growth_cap)
+
+    def cum(a):
+        a = np.asarray(a, dtype=float)
+        return np.concatenate([np.zeros((1,) + a.shape[1:]), np.cumsum(a, axis=0)])
+
+    c_att, c_att2 = cum(att.sum(axis=1)), cum((att ** 2).sum(axis=1))
+    c_trk, c_view = cum(tracked.sum(axis=1)), cum(view.sum(axis=1))
+    c_ext = cum(ext.sum(axis=1))
+    c_lam, c_lam_n = cum(np.nan_to_num(lam)), cum(np.isfinite(lam))
+    c_trk_sat, c_view_sat = cum(tracked), cum(view)
+
+    span = t[-1] - t[0]
+    n_win = 1 if span < config.window_s else int(math.floor((span - config.window_s) / config.hop_s + 1e-9)) + 2
+    if n_win > MAX_WINDOWS:
+        raise DataError(f"{n_win} windows ({span:.0f} s of epochs at hop {config.hop_s:g} s) exceed the "
+                        f"{MAX_WINDOWS} a feature table may hold; use a larger hop_s")
+    starts = t[0] + config.hop_s * np.arange(n_win)
+    lo = np.searchsorted(t, starts - 1e-9, side="left")
+    hi = np.searchsorted(t, starts + config.window_s - 1e-9, side="left")
+    keep = hi > lo
+    lo, hi, starts = lo[keep], hi[keep], starts[keep]
+
+    n_pairs_trk = _window_sums(c_trk, lo, hi)
+    n_pairs_view = _window_sums(c_view, lo, hi)
+    n_sat_trk = (_window_sums(c_trk_sat, lo, hi) > 0).sum(axis=1)
+    n_sat_view = (_window_sums(c_view_sat, lo, hi) > 0).sum(axis=1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        mu = _window_sums(c_att, lo, hi) / n_pairs_trk
+        var = _window_sums(c_att2, lo, hi) / n_pairs_trk - mu ** 2
+        sigma = np.sqrt(np.maximum(var, 0.0))
+        beta = _window_sums(c_ext, lo, hi) / n_sat_trk / config.window_s
+        zeta = 1.0 - n_pairs_trk / n_pairs_view
+        lam_w = np.clip(_window_sums(c_lam, lo, hi) / _window_sums(c_lam_n, lo, hi), 0.0, config.dop_growth_cap)
+    no_trk = n_pairs_trk == 0
+    for arr in (mu, sigma, beta):
+        arr[no_trk] = np.nan
+    zeta[n_pairs_view == 0] = np.nan
+    return {
+        "t_s": starts + 0.5 * config.window_s,
+        "att_mean_db": mu, "att_std_db": sigma, "fluct_per_s": beta, "invisible_ratio": zeta,
+        "dop_growth": lam_w,
+        "n_epochs": (hi - lo).astype(int), "n_in_view": n_sat_view.astype(int), "n_tracked": n_sat_trk.astype(int),
+        "n_pairs_in_view": n_pairs_view.astype(int), "n_pairs_tracked": n_pairs_trk.astype(int),
+    }
+
+
+def fit_cn0_reference(el_deg, cn0_dbhz, *, quantile: float = 0.8, bin_width_deg: float = 10.0,
+                      min_per_bin: int = 20, elevation_mask_deg: float = 5.0) -> Cn0Reference:
+    """Fit C_ref(el) = a + b·sin(el) to open-sky C/N0 samples.
+
+    Per elevation bin (``bin_width_deg`` from the mask to 90°) with at least
+    ``min_per_bin`` tracked samples, the ``quantile`` of C/N0 (an upper
+    quantile: the unobstructed line-of-sight level, robust to the multipath
+    fades that open sky has too) at the bin's mean sin(el); then a
+    count-weighted least-squares line through the bin points. Raises
+    DataError when fewer than two bins qualify.
+
+    el_deg, cn0_dbhz : array-like of the same shape (NaN C/N0 = untracked, ignored).
+    """
+    el = np.asarray(el_deg, dtype=float).ravel()
+    cn0 = np.asarray(cn0_dbhz, dtype=float).ravel()
+    if el.shape != cn0.shape:
+        raise DataError(f"el_deg and cn0_dbhz differ in size: {el.size} vs {cn0.size}")
+    if not 0.0 < quantile < 1.0:
+        raise ConfigError(f"quantile must lie in (0, 1), got {quantile}")
+    ok = np.isfinite(el) & np.isfinite(cn0) & (el >= elevation_mask_deg) & (el <= 90.0)
+    el, cn0 = el[ok], cn0[ok]
+    edges = np.arange(elevation_mask_deg, 90.0 + bin_width_deg, bin_width_deg)
+    which = np.clip(np.digitize(el, edges) - 1, 0, len(edges) - 2)
+    xs, ys, ws = [], [], []
+    for b in range(len(edges) - 1):
+        sel = which == b
+        if sel.sum() >= min_per_bin:
+            xs.append(np.sin(np.radians(el[sel])).mean())
+            ys.append(np.quantile(cn0[sel], quantile))
+            ws.append(sel.sum())
+    if len(xs) < 2:
+        raise DataError(f"fitting C_ref needs >= 2 elevation bins with >= {min_per_bin} tracked samples "
+                        f"above {elevation_mask_deg} deg; got {len(xs)} from {el.size} samples")
+    x, y, w = np.asarray(xs), np.asarray(ys), np.asarray(ws, dtype=float)
+    # weighted least squares: minimise Σ w (y − a − b x)²
+    design = np.stack([np.ones_like(x), x], axis=1) * np.sqrt(w)[:, None]
+    (a, b), *_ = np.linalg.lstsq(design, y * np.sqrt(w), rcond=None)
+    return Cn0Reference(float(a), float(b), f"fit: q{quantile:g} per {bin_width_deg:g} deg bin, "
+                                            f"{el.size} samples, {len(xs)} bins")

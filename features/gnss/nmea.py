@@ -1,0 +1,440 @@
+"""Read NMEA 0183 (2.3 to 4.11) into epochs, one per fix time.
+
+An epoch gathers every sentence between two changes of the fix time: GGA,
+RMC, GNS, GLL, ZDA, GST and GBS carry the time and open a new epoch when it
+differs from the current one; GSA and GSV carry none and belong to the epoch
+open when they arrive. No sentence order is assumed otherwise. Multi-part GSV
+is assembled per talker and signal id (one satellite may be listed once per
+signal); the satellites "used" are those of the epoch's GSA sentences.
+
+Bad input is skipped and counted in :class:`ReadStats`, never fatal: bad or
+missing checksums, truncated sentences, binary garbage (a line is split at
+every ``$``, so sentences glued together by a lost newline are recovered),
+fields that do not parse, and time jumps backwards. A backwards jump that
+persists (``resync_after`` consecutive timed sentences, e.g. a receiver that
+reset its clock) is accepted as a new time base spliced one epoch interval
+after the last epoch, so ``t_s`` never decreases. A file with no usable epoch
+raises :class:`~features.errors.NmeaError`.
+
+Parsing: :mod:`features.gnss.tokens` turns bytes into checked sentences (a
+vectorised whole-file path by default, pynmea2 on request, both equal on every
+real log; types not used, e.g. VTG and vendor messages, are counted, not
+validated); :mod:`features.gnss.quirks` interprets their fields.
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Iterable, Iterator, Literal, NamedTuple
+
+from features.errors import ConfigError, NmeaError
+from features.gnss.tokens import (  # noqa: F401 - ReadStats and parse_sentence are re-exported
+    TIMED_TYPES, USED_TYPES, ReadStats, fields_from_buffer, fields_from_lines, parse_sentence, pynmea2_fields,
+)
+from features.gnss.quirks import (
+    FIX_QUALITY_FROM_MODE, gsa_fields, gsv_fields, parse_ddmmyy, parse_latlon, parse_time_of_day,
+)
+
+__all__ = ["Satellite", "Fix", "Epoch", "ReadStats", "read_nmea", "iter_epochs", "epochs_from_bytes",
+           "epochs_on_time_base",
+           "parse_sentence"]
+
+_TIMED = TIMED_TYPES
+_USED_TYPES = USED_TYPES
+_FIX_TYPES = frozenset(("GGA", "RMC", "GNS", "ZDA"))  # timed sentences that carry more than the time
+_EPOCH_GAP_DEFAULT_S = 1.0
+_tuple_new = tuple.__new__  # builds a NamedTuple without its Python-level __new__ (hot loop)
+
+
+class Satellite(NamedTuple):
+    """One satellite (one signal of it) in view at an epoch; ``cn0_dbhz`` None when not tracked."""
+
+    system: str
+    prn: int
+    signal: int | None
+    el_deg: float | None
+    az_deg: float | None
+    cn0_dbhz: float | None
+    used: bool
+
+
+@dataclass(frozen=True)
+class Fix:
+    """The receiver's position solution at an epoch.
+
+    ``quality`` uses the GGA code (0 none, 1 autonomous, 2 DGNSS, 3 PPS, 4 RTK
+    fixed, 5 RTK float, 6 dead reckoning, 7 manual, 8 simulator); ``alt_m`` is
+    above mean sea level and ``geoid_sep_m`` the geoid height, so the
+    ellipsoidal height is their sum. ``mode`` is GSA's 1/2/3 (no fix, 2-D, 3-D).
+    """
+
+    lat_deg: float | None
+    lon_deg: float | None
+    alt_m: float | None
+    geoid_sep_m: float | None
+    quality: int
+    n_used: int | None
+    hdop: float | None
+    pdop: float | None
+    vdop: float | None
+    mode: int | None
+
+    @property
+    def has_position(self) -> bool:
+        return self.quality > 0 and self.lat_deg is not None and self.lon_deg is not None
+
+
+@dataclass(frozen=True)
+class Epoch:
+    """All that a receiver reported for one fix time.
+
+    ``t_s`` counts seconds from the first epoch of the file (monotonic);
+    ``time_utc`` is the receiver's UTC time (None while no date was ever
+    given); ``sky_reported`` is False for epochs without any GSV (receivers
+    that report the sky every few fixes), whose ``satellites`` are then empty
+    but not "none in view".
+    """
+
+    t_s: float
+    time_utc: dt.datetime | None
+    time_of_day_s: float
+    fix: Fix
+    satellites: tuple[Satellite, ...]
+    sky_reported: bool
+
+    @property
+    def n_in_view(self) -> int:
+        return len({(s.system, s.prn) for s in self.satellites})
+
+    @property
+    def n_tracked(self) -> int:
+        return len({(s.system, s.prn) for s in self.satellites if s.cn0_dbhz is not None})
+
+    def to_json_dict(self) -> dict:
+        """The epoch as plain JSON types (the ``--epochs`` JSON-lines format)."""
+        f = self.fix
+        return {
+            "t_s": round(self.t_s, 3),
+            "time": self.time_utc.isoformat().replace("+00:00", "Z") if self.time_utc else None,
+            "time_of_day_s": self.time_of_day_s,
+            "fix": {"lat_deg": f.lat_deg, "lon_deg": f.lon_deg, "alt_m": f.alt_m, "geoid_sep_m": f.geoid_sep_m,
+                    "quality": f.quality, "n_used": f.n_used, "hdop": f.hdop, "pdop": f.pdop, "vdop": f.vdop,
+                    "mode": f.mode},
+            "sky_reported": self.sky_reported,
+            "satellites": [{"system": s.system, "prn": s.prn, "signal": s.signal, "el_deg": s.el_deg,
+                            "az_deg": s.az_deg, "cn0_dbhz": s.cn0_dbhz, "used": s.used} for s in self.satellites],
+        }
+
+
+class _Clock:
+    """Orders fix times: time of day plus midnight rollovers (a decrease of more than 12 h).
+
+    Dates (RMC, ZDA) only label epochs: cold-starting receivers report
+    arbitrary dates (the gpsd coldboot log goes 2019 → 2006 → 2010 → 1999)
+    while their time of day runs on smoothly.
+    """
+
+    def __init__(self):
+        self.offset_s = 0.0
+        self.backwards_run = 0
+        self.reset_base()
+
+    def reset_base(self):
+        self.day = 0
+        self.last_tod: float | None = None
+        self.known: tuple[dt.date, int] | None = None  # (date, day index) last reported
+
+    def candidate(self, tod: float) -> tuple[float, int]:
+        day = self.day
+        if self.last_tod is not None and tod < self.last_tod - 43_200.0:
+            day += 1
+        return day * 86_400.0 + tod + self.offset_s, day
+
+    def accept(self, tod: float, day: int, date: dt.date | None):
+        self.day, self.last_tod = day, tod
+        if date is not None:
+            self.known = (date, day)
+
+    def date_of(self, day: int) -> dt.date | None:
+        if self.known is None:
+            return None
+        return self.known[0] + dt.timedelta(days=day - self.known[1])
+
+
+class _EpochBuilder:
+    __slots__ = ("rel_s", "tod", "day", "date", "gga", "gns", "rmc", "gsa", "sats", "sky")
+
+    def __init__(self, rel_s: float, tod: float, day: int, date: dt.date | None):
+        self.rel_s, self.tod, self.day, self.date = rel_s, tod, day, date
+        self.gga = self.gns = self.rmc = None
+        self.gsa: list = []
+        self.sats: dict = {}
+        self.sky = False
+
+
+def _fix_of(b: _EpochBuilder, used_count: int) -> Fix:
+    pdop = hdop = vdop = mode = None
+    for g in b.gsa:
+        pdop = g.pdop if g.pdop is not None else pdop
+        hdop = g.hdop if g.hdop is not None else hdop
+        vdop = g.vdop if g.vdop is not None else vdop
+        mode = g.mode if g.mode is not None else mode
+    if b.gga is not None:
+        lat, lon, alt, sep, quality, n_used, gga_hdop = b.gga
+        return Fix(lat, lon, alt, sep, quality, n_used, gga_hdop if gga_hdop is not None else hdop, pdop, vdop, mode)
+    if b.gns is not None:
+        lat, lon, alt, sep, quality, n_used, gns_hdop = b.gns
+        return Fix(lat, lon, alt, sep, quality, n_used, gns_hdop if gns_hdop is not None else hdop, pdop, vdop, mode)
+    if b.rmc is not None:
+        lat, lon, quality = b.rmc
+        return Fix(lat, lon, None, None, quality, used_count or None, hdop, pdop, vdop, mode)
+    return Fix(None, None, None, None, 0, used_count or None, hdop, pdop, vdop, mode)
+
+
+def _opt_int(text: str) -> int | None:
+    return int(text) if text else None
+
+
+def _opt_num(text: str) -> float | None:
+    return float(text) if text else None
+
+
+def _check_options(parser: str, resync_after: int) -> None:
+    if parser not in ("fast", "pynmea2"):
+        raise ConfigError(f"NMEA parser must be 'fast' or 'pynmea2', got {parser!r}")
+    if not isinstance(resync_after, int) or resync_after < 1:
+        raise ConfigError(f"resync_after must be a positive integer, got {resync_after!r}")
+
+
+def iter_epochs(lines: Iterable[bytes | str], stats: ReadStats | None = None, *,
+                parser: Literal["fast", "pynmea2"] = "fast", require_checksum: bool = True,
+                resync_after: int = 5) -> Iterator[Epoch]:
+    """Stream epochs from lines of NMEA text (bytes decoded as Latin-1, so garbage never raises).
+
+    A timed sentence earlier than the open epoch is skipped (``time_jumps``),
+    with the GSA/GSV that follow it, until time moves on; after
+    ``resync_after`` consecutive such sentences the new time base is accepted.
+
+    ``stats`` (a :class:`ReadStats`) is filled in as the lines are consumed.
+    """
+    stats = ReadStats() if stats is None else stats
+    _check_options(parser, resync_after)
+    tokenise = parse_sentence if parser == "fast" else pynmea2_fields
+    return _assemble(fields_from_lines(lines, stats, tokenise, require_checksum), stats, resync_after)
+
+
+def _assemble(sentences: Iterable[list[str]], stats: ReadStats, resync_after: int) -> Iterator[Epoch]:
+    """Epochs from checked, comma-split sentences (address first)."""
+    clock = _Clock()
+    current: _EpochBuilder | None = None
+    first_rel: float | None = None
+    last_t_s = None
+    last_interval = _EPOCH_GAP_DEFAULT_S
+    gsv_parts: dict = {}
+    orphaned = False
+    current_time_text = None
+
+    def finish(b: _EpochBuilder) -> Epoch:
+        used = set()
+        for g in b.gsa:
+            used.update(g.used)
+        # GSA names satellites, not signals: a signal listed without C/N0 is not tracked and
+        # cannot contribute to the fix, so only tracked signals of a GSA satellite are "used"
+        # (gpsd's rule too; it matters for 4.10+ receivers that list L2/L5 untracked).
+        sats = tuple([_tuple_new(Satellite, (system, prn, sig, el, az, cn0, cn0 is not None and (system, prn) in used))
+                      for (system, prn, sig), (_, _, el, az, cn0) in b.sats.items()])
+        when = None
+        if b.date is not None:
+            when = (dt.datetime(b.date.year, b.date.month, b.date.day, tzinfo=dt.timezone.utc)
+                    + dt.timedelta(seconds=b.tod))
+        return Epoch(b.rel_s - first_rel, when, b.tod, _fix_of(b, len(used)), sats, b.sky)
+
+    for fields in sentences:
+        address = fields[0]
+        kind = address[2:] if len(address) == 5 else address[-3:]
+        if kind not in _USED_TYPES or address[0] == "P" and address[:2] != "PQ":
+            stats.other_types[address[:8]] += 1
+            continue
+        talker = address[:2]
+        data = fields[1:]
+        try:
+            if kind in _TIMED:
+                time_text = data[4] if kind == "GLL" else data[0]
+                if time_text == current_time_text and kind not in _FIX_TYPES:
+                    stats.used_sentences += 1  # same fix time, nothing else used from it (hot path)
+                    orphaned = False
+                    clock.backwards_run = 0
+                    continue
+                tod = parse_time_of_day(time_text)
+                if tod is None:
+                    stats.no_time += 1
+                    continue
+                date = None
+                if kind == "RMC" and len(data) > 8:
+                    date = parse_ddmmyy(data[8])
+                elif kind == "ZDA" and len(data) >= 4 and data[1] and data[2] and data[3]:
+                    date = dt.date(int(data[3]), int(data[2]), int(data[1]))
+                payload = _timed_payload(kind, data)
+            else:
+                payload = gsv_fields(talker, data) if kind == "GSV" else gsa_fields(talker, data)
+        except (ValueError, IndexError, OverflowError):
+            stats.malformed += 1
+            continue
+        if kind in _TIMED:
+            rel, day = clock.candidate(tod)
+            if current is not None and rel < current.rel_s:
+                clock.backwards_run += 1
+                if clock.backwards_run < resync_after:
+                    stats.time_jumps += 1
+                    orphaned = True  # this cycle's GSA/GSV must not land in the earlier epoch
+                    continue
+                # The new time base persisted: splice it one epoch interval after the last epoch.
+                current_time_text = None
+                stats.time_resets += 1
+                clock.reset_base()
+                clock.offset_s = 0.0
+                raw_rel, day = clock.candidate(tod)
+                clock.offset_s = current.rel_s + last_interval - raw_rel
+                rel, day = clock.candidate(tod)
+            clock.backwards_run = 0
+            orphaned = False
+            clock.accept(tod, day, date)
+            if current is None or rel != current.rel_s:
+                if current is not None:
+                    epoch = finish(current)
+                    if last_t_s is not None and epoch.t_s > last_t_s:
+                        last_interval = epoch.t_s - last_t_s
+                    last_t_s = epoch.t_s
+                    yield epoch
+                current = _EpochBuilder(rel, tod, day, clock.date_of(day))
+                current_time_text = time_text
+                if first_rel is None:
+                    first_rel = rel
+                gsv_parts.clear()
+            elif date is not None:
+                current.date = date
+            stats.used_sentences += 1
+            if kind == "GGA":
+                current.gga = payload
+            elif kind == "GNS":
+                current.gns = payload
+            elif kind == "RMC":
+                current.rmc = payload
+            continue
+        if current is None:
+            continue  # sky data before any time: no epoch to attach it to
+        if orphaned:
+            stats.time_jumps += 1
+            continue
+        stats.used_sentences += 1
+        if kind == "GSA":
+            current.gsa.append(payload)
+            continue
+        current.sky = True
+        key = (talker, payload.signal)
+        expected = gsv_parts.get(key, 1)
+        if payload.msg_num != expected:
+            stats.gsv_incomplete += 1
+        gsv_parts[key] = payload.msg_num % payload.n_msgs + 1
+        sats, signal = current.sats, payload.signal
+        for sat in payload.satellites:
+            sats[(sat[0], sat[1], signal)] = sat
+    if current is not None:
+        yield finish(current)
+
+
+def _timed_payload(kind: str, data: list[str]):
+    """Fix content of a timed sentence.
+
+    GGA/GNS → (lat, lon, alt, sep, quality, n_used, hdop); RMC → (lat, lon, quality); others None.
+    """
+    if kind == "GGA":
+        lat = parse_latlon(data[1], data[2], True)
+        lon = parse_latlon(data[3], data[4], False)
+        quality = int(data[5]) if data[5] else 0
+        if not 0 <= quality <= 9:
+            raise ValueError(f"GGA quality {quality}")
+        hdop = _opt_num(data[7])
+        return (lat, lon, _opt_num(data[8]), _opt_num(data[10]) if len(data) > 10 else None,
+                quality, _opt_int(data[6]), hdop if hdop is None or 0 < hdop < 99 else None)
+    if kind == "GNS":
+        lat = parse_latlon(data[1], data[2], True)
+        lon = parse_latlon(data[3], data[4], False)
+        modes = data[5]
+        quality = max((FIX_QUALITY_FROM_MODE.get(c, 0) for c in modes if c in "ADPRF"), default=0)
+        if quality == 0 and any(c == "E" for c in modes):
+            quality = 6
+        hdop = _opt_num(data[7])
+        return (lat, lon, _opt_num(data[8]), _opt_num(data[9]) if len(data) > 9 else None,
+                quality, _opt_int(data[6]), hdop if hdop is None or 0 < hdop < 99 else None)
+    if kind == "RMC":
+        lat = parse_latlon(data[2], data[3], True)
+        lon = parse_latlon(data[4], data[5], False)
+        quality = 0
+        if data[1] == "A":
+            mode = data[11] if len(data) > 11 else ""
+            quality = FIX_QUALITY_FROM_MODE.get(mode[:1], 1) if mode else 1
+        return (lat, lon, quality)
+    return None
+
+
+def epochs_from_bytes(buf: bytes, stats: ReadStats | None = None, *, require_checksum: bool = True,
+                      resync_after: int = 5) -> list[Epoch]:
+    """All epochs of a whole NMEA file's bytes (the vectorised fast path); never raises on content.
+
+    Gives exactly what :func:`iter_epochs` gives on the same bytes split into lines.
+    """
+    stats = ReadStats() if stats is None else stats
+    return list(_assemble(fields_from_buffer(bytes(buf), stats, require_checksum), stats, resync_after))
+
+
+def read_nmea(path: str | os.PathLike, *, parser: Literal["fast", "pynmea2"] = "fast",
+              require_checksum: bool = True, resync_after: int = 5) -> tuple[list[Epoch], ReadStats]:
+    """Read a whole NMEA file into epochs and the statistics of what was skipped.
+
+    Raises NmeaError when the file holds no usable epoch (one with a fix or a
+    reported sky), DataError subclasses only; never a parsing exception.
+    """
+    path = Path(path)
+    _check_options(parser, resync_after)
+    stats = ReadStats()
+    try:
+        if parser == "fast":
+            epochs = epochs_from_bytes(path.read_bytes(), stats, require_checksum=require_checksum,
+                                       resync_after=resync_after)
+        else:
+            with path.open("rb") as fh:
+                epochs = list(iter_epochs(fh, stats, parser=parser, require_checksum=require_checksum,
+                                          resync_after=resync_after))
+    except FileNotFoundError:
+        raise NmeaError(f"NMEA file {path} does not exist") from None
+    except IsADirectoryError:
+        raise NmeaError(f"NMEA path {path} is a directory, not a file") from None
+    if not any(e.sky_reported or e.fix.has_position for e in epochs):
+        raise NmeaError(f"{path}: no usable epoch (no fix and no satellites in view) in "
+                        f"{stats.lines} lines; {stats.summary()}")
+    return epochs, stats
+
+
+def epochs_on_time_base(epochs: list[Epoch], start_utc) -> list[Epoch]:
+    """Shift the epochs' ``t_s`` so that 0 is ``start_utc`` (a walk's time base).
+
+    ``start_utc`` is a timezone-aware datetime (naive is taken as UTC). The
+    shift comes from the first epoch that carries a date (RMC/ZDA); a file
+    without any date raises :class:`NmeaError`.
+    """
+    import dataclasses
+    import datetime as dt
+
+    if start_utc.tzinfo is None:
+        start_utc = start_utc.replace(tzinfo=dt.timezone.utc)
+    dated = next((e for e in epochs if e.time_utc is not None), None)
+    if dated is None:
+        raise NmeaError("the NMEA file carries no date (no RMC/ZDA), so it cannot be put on the walk's time base")
+    shift = (dated.time_utc - start_utc).total_seconds() - dated.t_s
+    if shift == 0.0:
+        return list(epochs)
+    return [dataclasses.replace(e, t_s=e.t_s + shift) for e in epochs]

@@ -1,0 +1,402 @@
+"""IMU CSV reader and repair: one uniform time base, every defect counted.
+
+Format (DESIGN.md §4): header line, columns ``t_s, ax, ay, az`` (m/s², body
+frame, gravity included) required; ``gx, gy, gz`` (rad/s) and ``mx, my, mz``
+(µT) optional, each triple all-or-none. Extra columns are ignored.
+
+Repair (never an exception for a few bad samples; counts in
+:class:`ImuRepairReport`):
+
+- rows whose time is not a finite number are dropped, and so is an isolated
+  time outlier: a row whose t_s departs from both file-order neighbours by
+  more than ``max_gap_s`` while those neighbours agree with each other (a
+  corrupted timestamp, e.g. 1e9 s inside a 100 Hz record), counted in
+  ``n_bad_time``;
+- the median sample interval must give a rate in [``min_rate_hz``,
+  ``max_rate_hz``] (10-2000 Hz): t_s in milliseconds (100 Hz → 0.1 Hz) is
+  rejected with one clear message rather than guessed at;
+- a remaining gap longer than ``max_fill_gap_s`` (default 600 s) is rejected
+  with one message naming it (split the file there), and so is a record
+  whose gaps would make the uniform grid more than 10× the sample count
+  (plus one ``max_fill_gap_s``): the grid is never allocated per a corrupt
+  time span;
+- unsorted rows are sorted (stable); duplicated timestamps keep the first row;
+- NaN / non-numeric channel values are interpolated from their neighbours;
+- clipped samples — at or beyond the stated full scale, or in runs of ≥ 3
+  equal samples at the channel's extreme — and absurd magnetometer values
+  (beyond ``mag_full_scale_ut``) are treated like NaN: counted, replaced by
+  interpolation from their unclipped neighbours *before* any filtering (a
+  ±16 g spike would otherwise dominate the low-passed norm and the step
+  amplitude) and flagged in ``saturated``; runs of clipped samples longer
+  than ``max_clip_fill_s`` (40 ms) are also flagged not ``valid`` (no step
+  is placed on an invented peak), while shorter ones, bridged from
+  neighbours a few ms away, stay valid;
+- the record is resampled onto a uniform grid at the nominal rate (the median
+  sample interval unless given) by linear interpolation; gaps longer than
+  ``max_gap_s`` are counted and flagged in ``valid`` (False inside them).
+
+A file without the required columns raises one :class:`ImuError` naming them.
+"""
+
+from __future__ import annotations
+
+import io
+import math
+import os
+import warnings
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from features.errors import ImuError
+
+__all__ = ["ImuData", "ImuRepairReport", "RepairConfig", "read_imu_csv", "repair_imu", "REQUIRED_COLUMNS"]
+
+REQUIRED_COLUMNS = ("t_s", "ax", "ay", "az")
+GYRO_COLUMNS = ("gx", "gy", "gz")
+MAG_COLUMNS = ("mx", "my", "mz")
+HEADER_SHOWN_CHARS = 120
+"""At most this much of a bad header goes into the error message (repr: control bytes escaped)."""
+
+
+@dataclass(frozen=True)
+class RepairConfig:
+    """Repair parameters.
+
+    ``rate_hz`` None → nominal rate from the median sample interval.
+    Full-scale values default to ±16 g, ±2000 °/s and ±4900 µT (common MEMS
+    ranges, e.g. Bosch BMI160, AKM AK09916).
+    """
+
+    rate_hz: float | None = None
+    max_gap_s: float = 0.5
+    max_fill_gap_s: float = 600.0
+    max_clip_fill_s: float = 0.04
+    min_rate_hz: float = 10.0
+    max_rate_hz: float = 2000.0
+    acc_full_scale_m_s2: float = 16.0 * 9.80665
+    gyro_full_scale_rad_s: float = math.radians(2000.0)
+    mag_full_scale_ut: float = 4900.0
+    clip_run_samples: int = 3
+
+    def __post_init__(self):
+        if self.rate_hz is not None and not (math.isfinite(self.rate_hz) and 1.0 <= self.rate_hz <= 10_000.0):
+            raise ImuError(f"rate_hz must lie in [1, 10000], got {self.rate_hz}")
+        if not (self.max_gap_s > 0 and math.isfinite(self.max_gap_s)):
+            raise ImuError(f"max_gap_s must be positive, got {self.max_gap_s}")
+        if not (math.isfinite(self.max_fill_gap_s) and self.max_fill_gap_s >= self.max_gap_s):
+            raise ImuError(f"max_fill_gap_s must be finite and >= max_gap_s, got {self.max_fill_gap_s}")
+        if not (math.isfinite(self.max_clip_fill_s) and self.max_clip_fill_s >= 0):
+            raise ImuError(f"max_clip_fill_s must be finite and >= 0, got {self.max_clip_fill_s}")
+        if not (0 < self.min_rate_hz < self.max_rate_hz and math.isfinite(self.max_rate_hz)):
+            raise ImuError(f"need 0 < min_rate_hz < max_rate_hz, got {self.min_rate_hz}, {self.max_rate_hz}")
+        if self.clip_run_samples < 2:
+            raise ImuError(f"clip_run_samples must be >= 2, got {self.clip_run_samples}")
+
+
+@dataclass
+class ImuRepairReport:
+    """Counts of what the repair found and did."""
+
+    n_rows: int = 0
+    n_bad_time: int = 0
+    n_bad_lines: int = 0
+    n_unsorted: int = 0
+    n_duplicate_t: int = 0
+    n_nan_acc: int = 0
+    n_nan_gyro: int = 0
+    n_nan_mag: int = 0
+    n_saturated_acc: int = 0
+    n_saturated_gyro: int = 0
+    n_saturated_mag: int = 0
+    n_gaps: int = 0
+    gap_total_s: float = 0.0
+    n_output: int = 0
+
+    @property
+    def n_defects(self) -> int:
+        """Number of defects found (bad times/lines, disorder, duplicates, NaN, saturation, gaps)."""
+        return sum(v for k, v in vars(self).items() if k.startswith("n_") and k not in ("n_rows", "n_output"))
+
+    def summary(self) -> str:
+        """One line listing the non-zero counts.
+
+        >>> ImuRepairReport(n_rows=10, n_gaps=1, gap_total_s=0.75).summary()
+        'n_rows=10, n_gaps=1, gap_total_s=0.75'
+        """
+        parts = [f"{k}={v:.3g}" if isinstance(v, float) else f"{k}={v}" for k, v in vars(self).items() if v]
+        return ", ".join(parts) if parts else "clean"
+
+
+@dataclass(frozen=True)
+class ImuData:
+    """IMU samples on a uniform time base.
+
+    Attributes
+    ----------
+    t_s : ndarray of shape (n,)
+        Sample times, s, uniform at ``rate_hz`` from the first valid sample.
+    acc_m_s2 : ndarray of shape (n, 3)
+        Specific force, body frame, m/s².
+    gyro_rad_s, mag_ut : ndarray of shape (n, 3) or None
+        Angular rate (rad/s) and magnetic field (µT), None when absent.
+    valid : ndarray of bool, shape (n,)
+        False inside gaps longer than ``max_gap_s`` and in runs of clipped
+        samples longer than ``max_clip_fill_s`` (interpolated, not measured).
+    saturated : ndarray of bool, shape (n,)
+        True where any accelerometer, gyro or magnetometer axis was clipped
+        (the value there is interpolated).
+    rate_hz : float
+    report : ImuRepairReport
+    """
+
+    t_s: np.ndarray
+    acc_m_s2: np.ndarray
+    gyro_rad_s: np.ndarray | None
+    mag_ut: np.ndarray | None
+    valid: np.ndarray
+    saturated: np.ndarray
+    rate_hz: float
+    report: ImuRepairReport = field(default_factory=ImuRepairReport)
+
+    def __len__(self) -> int:
+        return len(self.t_s)
+
+
+def _fill_nan(x: np.ndarray) -> int:
+    """Interpolate NaNs of every column in place (edges take the nearest value); return the count."""
+    bad = ~np.isfinite(x)
+    n_bad = int(bad.any(axis=1).sum())
+    if n_bad == 0:
+        return 0
+    idx = np.arange(len(x))
+    for j in range(x.shape[1]):
+        ok = ~bad[:, j]
+        x[:, j] = np.interp(idx, idx[ok], x[ok, j]) if ok.any() else 0.0
+    return n_bad
+
+
+def _time_outliers(t: np.ndarray, max_gap_s: float) -> np.ndarray:
+    """Isolated corrupt timestamps in file order, bool (n,).
+
+    Row i is an outlier when |t_i − t_{i−1}| and |t_{i+1} − t_i| both exceed
+    ``max_gap_s`` while |t_{i+1} − t_{i−1}| does not (first/last row: its one
+    neighbour pair, judged against the next interval).
+
+    >>> _time_outliers(np.array([0.0, 0.01, 1e9, 0.03, 0.04]), 0.5).nonzero()[0].tolist()
+    [2]
+    >>> _time_outliers(np.array([0.0, 0.01, 5.0, 5.01, 5.02]), 0.5).any()   # a real gap is kept
+    np.False_
+    """
+    n = len(t)
+    out = np.zeros(n, bool)
+    if n < 3:
+        return out
+    with np.errstate(over="ignore", invalid="ignore"):
+        d = np.abs(np.diff(t))
+        skip = np.abs(t[2:] - t[:-2])
+    out[1:-1] = (d[:-1] > max_gap_s) & (d[1:] > max_gap_s) & (skip <= max_gap_s)
+    out[0] = d[0] > max_gap_s and d[1] <= max_gap_s and n > 3
+    out[-1] = d[-1] > max_gap_s and d[-2] <= max_gap_s and n > 3
+    return out
+
+
+def _long_runs(mask: np.ndarray, max_samples: float) -> np.ndarray:
+    """The True runs of ``mask`` longer than ``max_samples`` samples, bool (n,).
+
+    >>> _long_runs(np.array([1, 0, 1, 1, 1, 0], bool), 2).astype(int).tolist()
+    [0, 0, 1, 1, 1, 0]
+    """
+    out = np.zeros(len(mask), bool)
+    d = np.diff(np.r_[0, mask.astype(np.int8), 0])
+    for s, e in zip(np.nonzero(d == 1)[0], np.nonzero(d == -1)[0]):
+        if e - s > max_samples:
+            out[s:e] = True
+    return out
+
+
+def _saturation(x: np.ndarray, full_scale: float, run: int) -> np.ndarray:
+    """Clipped samples per axis, bool (n, 3): |x| ≥ full scale, or runs of ≥ ``run`` equal values at the
+    column's (finite) extreme. NaN entries are not flagged (they are counted as NaN)."""
+    with np.errstate(invalid="ignore"):
+        flag = np.abs(x) >= full_scale
+    for j in range(x.shape[1]):
+        col = x[:, j]
+        fin = np.isfinite(col) & ~flag[:, j]
+        if not fin.any():
+            continue
+        for extreme in (col[fin].max(), col[fin].min()):
+            at = col == extreme
+            if at.sum() >= run:
+                d = np.diff(np.r_[0, at.astype(np.int8), 0])
+                for s, e in zip(np.nonzero(d == 1)[0], np.nonzero(d == -1)[0]):
+                    if e - s >= run:
+                        flag[s:e, j] = True
+    return flag
+
+
+def repair_imu(t_s, acc_m_s2, gyro_rad_s=None, mag_ut=None, config: RepairConfig = RepairConfig(),
+               report: ImuRepairReport | None = None) -> ImuData:
+    """Repair raw samples (see module docstring) and resample them to a uniform grid.
+
+    Parameters
+    ----------
+    t_s : array of shape (n,)
+    acc_m_s2 : array of shape (n, 3)
+    gyro_rad_s, mag_ut : array of shape (n, 3) or None
+
+    >>> d = repair_imu([0.0, 0.02, 0.01, 0.01, 0.03], [[0, 0, -9.8]] * 5, config=RepairConfig(rate_hz=100))
+    >>> d.report.n_unsorted, d.report.n_duplicate_t, len(d)
+    (1, 1, 4)
+    """
+    report = report or ImuRepairReport()
+    t = np.asarray(t_s, dtype=float).ravel()
+    chans = {"acc": np.array(acc_m_s2, dtype=float, ndmin=2)}
+    if gyro_rad_s is not None:
+        chans["gyro"] = np.array(gyro_rad_s, dtype=float, ndmin=2)
+    if mag_ut is not None:
+        chans["mag"] = np.array(mag_ut, dtype=float, ndmin=2)
+    for name, x in chans.items():
+        if x.shape != (len(t), 3):
+            raise ImuError(f"{name} must have shape ({len(t)}, 3), got {x.shape}")
+    report.n_rows = report.n_rows or len(t)
+    ok = np.isfinite(t)
+    ok[ok] &= ~_time_outliers(t[ok], config.max_gap_s)
+    report.n_bad_time += int((~ok).sum())
+    t = t[ok]
+    chans = {k: v[ok] for k, v in chans.items()}
+    if len(t) < 2:
+        raise ImuError(f"fewer than 2 samples with a valid time ({len(t)})")
+    if np.any(np.diff(t) < 0):
+        order = np.argsort(t, kind="stable")
+        report.n_unsorted += int((np.diff(t) < 0).sum())
+        t = t[order]
+        chans = {k: v[order] for k, v in chans.items()}
+    keep = np.r_[True, np.diff(t) > 0]
+    report.n_duplicate_t += int((~keep).sum())
+    t = t[keep]
+    chans = {k: v[keep] for k, v in chans.items()}
+    if len(t) < 2:
+        raise ImuError("fewer than 2 distinct sample times")
+    # clipped samples become NaN first, so they are interpolated like missing ones (never filtered as data)
+    full_scale = {"acc": config.acc_full_scale_m_s2, "gyro": config.gyro_full_scale_rad_s,
+                  "mag": config.mag_full_scale_ut}
+    sat = np.zeros(len(t), bool)
+    for name, x in chans.items():
+        clipped = _saturation(x, full_scale[name], config.clip_run_samples)
+        rows = clipped.any(axis=1)
+        setattr(report, f"n_saturated_{name}", getattr(report, f"n_saturated_{name}") + int(rows.sum()))
+        sat |= rows
+        n_nan = int((~np.isfinite(x) & ~clipped).any(axis=1).sum())
+        x[clipped] = np.nan
+        _fill_nan(x)
+        setattr(report, f"n_nan_{name}", getattr(report, f"n_nan_{name}") + n_nan)
+
+    dt_raw = np.diff(t)
+    median_dt = float(np.median(dt_raw))
+    if not config.min_rate_hz <= 1.0 / median_dt <= config.max_rate_hz:
+        raise ImuError(f"median sample interval {median_dt:.6g} s ({1.0 / median_dt:.4g} Hz) is outside "
+                       f"{config.min_rate_hz:g}-{config.max_rate_hz:g} Hz; t_s must be in seconds "
+                       f"(milliseconds? divide by 1000)")
+    worst = int(np.argmax(dt_raw))
+    if dt_raw[worst] > config.max_fill_gap_s:
+        raise ImuError(f"t_s jumps by {dt_raw[worst]:.6g} s (from {t[worst]:.6g} to {t[worst + 1]:.6g} s), "
+                       f"more than {config.max_fill_gap_s:g} s: split the record there")
+    rate = config.rate_hz or 1.0 / median_dt
+    dt = 1.0 / rate
+    long_clip = _long_runs(sat, config.max_clip_fill_s * rate)
+    gaps = dt_raw > max(config.max_gap_s, 2.5 * dt)
+    report.n_gaps += int(gaps.sum())
+    report.gap_total_s += float(dt_raw[gaps].sum())
+    n_out = int(math.floor((t[-1] - t[0]) * rate + 1e-6)) + 1
+    n_bound = 10 * len(t) + int(rate * config.max_fill_gap_s)
+    if n_out > n_bound:
+        raise ImuError(f"gaps fill {float(dt_raw[gaps].sum()):.6g} s of a {t[-1] - t[0]:.6g} s record with "
+                       f"{len(t)} samples: resampling would need {n_out} samples (> {n_bound}); split the record")
+    tu = t[0] + np.arange(n_out) * dt
+    if n_out == len(t) and np.max(np.abs(t - tu)) <= 1e-3 * dt:
+        # already uniform (the common case): keep the samples, no interpolation
+        report.n_output = n_out
+        return ImuData(t_s=tu, acc_m_s2=chans["acc"], gyro_rad_s=chans.get("gyro"), mag_ut=chans.get("mag"),
+                       valid=~long_clip, saturated=sat, rate_hz=float(rate), report=report)
+    out = {k: np.stack([np.interp(tu, t, v[:, j]) for j in range(3)], axis=1) for k, v in chans.items()}
+    seg = np.searchsorted(t, tu, side="right") - 1
+    seg = np.clip(seg, 0, len(dt_raw) - 1)
+    tol = 1e-3 * dt
+    valid = ~(gaps[seg] & (tu > t[seg] + tol) & (tu < t[seg + 1] - tol))
+    nearest = np.where(tu - t[seg] <= t[np.minimum(seg + 1, len(t) - 1)] - tu, seg, np.minimum(seg + 1, len(t) - 1))
+    sat_u = sat[nearest]
+    report.n_output = n_out
+    return ImuData(t_s=tu, acc_m_s2=out["acc"], gyro_rad_s=out.get("gyro"), mag_ut=out.get("mag"),
+                   valid=valid & ~long_clip[nearest], saturated=sat_u, rate_hz=float(rate), report=report)
+
+
+def _parse_table(text: str, path: str) -> tuple[list[str], np.ndarray, int]:
+    """Header names and the numeric table; a table with bad lines is parsed line by line (bad ones counted)."""
+    text = text.lstrip()
+    if not text:
+        raise ImuError(f"{path}: empty file; need columns {', '.join(REQUIRED_COLUMNS)}")
+    cut = text.find("\n")
+    head, body = (text, "") if cut < 0 else (text[:cut], text[cut + 1:])
+    header = [h.strip().lower() for h in head.split(",")]
+    ncol = len(header)
+    try:  # fast path: numpy's C parser (blank lines and '#' comments skipped)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            data = np.loadtxt(io.StringIO(body), delimiter=",", ndmin=2, comments="#")
+        if data.size == 0:
+            return header, np.zeros((0, ncol)), 0
+        if data.shape[1] == ncol:
+            return header, data, 0
+    except ValueError:
+        pass
+    rows, n_bad = [], 0
+    for ln in body.splitlines():
+        if not ln.strip() or ln.lstrip().startswith("#"):
+            continue
+        parts = ln.split(",")
+        if len(parts) != ncol:
+            n_bad += 1
+            continue
+        row = []
+        for p in parts:
+            try:
+                row.append(float(p))
+            except ValueError:
+                row.append(math.nan)
+        rows.append(row)
+    return header, np.asarray(rows, dtype=float).reshape(-1, ncol), n_bad
+
+
+def read_imu_csv(path: str | os.PathLike, config: RepairConfig = RepairConfig()) -> ImuData:
+    """Read ``imu.csv`` (columns per module docstring), repair it, return :class:`ImuData`."""
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8-sig", errors="replace")
+    except FileNotFoundError:
+        raise ImuError(f"{path}: file not found") from None
+    except IsADirectoryError:
+        raise ImuError(f"{path}: is a directory, expected an IMU CSV file") from None
+    header, data, n_bad = _parse_table(text, str(path))
+    missing = [c for c in REQUIRED_COLUMNS if c not in header]
+    if missing:
+        have = ", ".join(header)
+        have = repr(have[:HEADER_SHOWN_CHARS]) + ("…" if len(have) > HEADER_SHOWN_CHARS else "") if have else "none"
+        raise ImuError(f"{path}: missing required column(s) {', '.join(missing)} "
+                       f"(have: {have}; need {', '.join(REQUIRED_COLUMNS)})")
+    col = {name: i for i, name in enumerate(header)}
+
+    def triple(names):
+        present = [n in col for n in names]
+        if all(present):
+            return data[:, [col[n] for n in names]]
+        if any(present):
+            raise ImuError(f"{path}: columns {', '.join(names)} must all be present or all absent")
+        return None
+
+    report = ImuRepairReport(n_rows=len(data), n_bad_lines=n_bad)
+    if len(data) < 2:
+        raise ImuError(f"{path}: fewer than 2 data rows")
+    return repair_imu(data[:, col["t_s"]], data[:, [col["ax"], col["ay"], col["az"]]],
+                      triple(GYRO_COLUMNS), triple(MAG_COLUMNS), config=config, report=report)

@@ -1,0 +1,472 @@
+"""Geometric acoustic channel from a beacon to a receiver among the yard's boxes.
+
+For one source (beacon) and one receiver position the channel is a small set
+of discrete paths plus a diffuse tail:
+
+* **direct** path, spherical spreading 1/d, when the segment clears every solid
+  box; porous boxes (lattice gantries) crossed cost ``porous_loss_db`` each;
+* **diffraction** instead of a blocked direct path: the shortest path round the
+  obstruction, either over the tops in the vertical plane through source and
+  receiver (taut string = upper convex hull of the box-top edges) or round the
+  vertical edges in plan (shortest path in the visibility graph of the box
+  corners, lengthened for the height change), whichever is shorter. Its
+  frequency-dependent loss re. free field at the direct distance is Maekawa's
+  ΔL(N), N = 2δ/λ, δ = path − direct (``simulation.acoustic.atmosphere``); for several
+  edges the total detour is used (a single-screen approximation);
+* **ground** reflection by the image source mirrored in z = 0, coefficient of
+  the yard's crushed rock;
+* first-order **specular reflections** off the vertical faces of solid boxes
+  by image sources (Allen & Berkley 1979, JASA 65(4)), kept when the specular
+  point lies on the face and both legs are unobstructed (visibility test with
+  ``simulation.site.geometry.segment_hits_boxes``), coefficient of the box's
+  material. Box tops are not used: beacons (2.5–3 m) and receivers (≈ 1 m)
+  stand below every solid top, so no specular point can lie on one;
+* a **diffuse tail** standing for scattering off fins, insulators, lattice and
+  higher-order reflections, described by :class:`TailModel` from the local
+  clutter (share of directions with a solid face within 15 m).
+
+Air absorption (ISO 9613-1) and Maekawa's loss depend on frequency and are
+applied when the channel is rendered (``simulation.acoustic.stream``); here every
+path carries its length, a frequency-independent pressure gain re. 1 m and its
+diffraction detour. The channel is static over one chirp (the receiver moves
+≈ 1.5 cm in 10 ms).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from features.errors import ConfigError
+from features.site import Site
+
+from simulation.acoustic.atmosphere import GROUND_MATERIAL, reflection_coefficient, speed_of_sound_m_s
+from simulation.site.geometry import boxes_array, footprint_entry, segment_hits_boxes
+
+__all__ = ["PATH_KINDS", "PathSet", "ChannelConfig", "Scene", "build_scene", "channel_paths", "clutter_index",
+           "TailModel", "tail_model", "beacon_arrivals"]
+
+PATH_KINDS = ("direct", "ground", "reflection", "diffraction")
+"""Path kind names, indexed by :attr:`PathSet.kind`."""
+
+_NUDGE_M = 1e-6
+
+
+@dataclass(frozen=True)
+class ChannelConfig:
+    """Parameters of the geometric channel.
+
+    porous_loss_db : loss of a path crossing one porous (lattice) box, dB. Steel
+        members shadow ≈ 15–30 % of a gantry's face; at λ ≈ 17 mm they act as
+        geometric obstacles, so ≈ 1–2 dB is lost in transmission.
+    max_excess_m : reflections longer than the direct distance by more than this
+        are dropped (≥ 120 ms late, and 1/r weaker): they belong to the tail.
+    clutter_radius_m : radius within which solid faces count as clutter.
+    ground_material : key of ``simulation.acoustic.atmosphere.ABSORPTION_COEFFICIENTS``.
+    tail_offset_db : added to the diffuse tail's level of :func:`tail_model`
+        (0 = the model; −100 ≈ no tail, for tests of the discrete paths).
+    """
+
+    porous_loss_db: float = 1.5
+    max_excess_m: float = 40.0
+    clutter_radius_m: float = 15.0
+    ground_material: str = GROUND_MATERIAL
+    tail_offset_db: float = 0.0
+
+    def __post_init__(self):
+        if not 0.0 <= self.porous_loss_db < 40.0:
+            raise ConfigError(f"porous_loss_db must lie in [0, 40), got {self.porous_loss_db}")
+        if not self.max_excess_m > 0:
+            raise ConfigError(f"max_excess_m must be positive, got {self.max_excess_m}")
+        if not self.clutter_radius_m > 0:
+            raise ConfigError(f"clutter_radius_m must be positive, got {self.clutter_radius_m}")
+        if not -200.0 <= self.tail_offset_db <= 20.0:
+            raise ConfigError(f"tail_offset_db must lie in [-200, 20], got {self.tail_offset_db}")
+
+
+@dataclass(frozen=True)
+class PathSet:
+    """Discrete paths of one beacon→receiver channel, sorted by length (= delay).
+
+    Attributes
+    ----------
+    kind : int ndarray (p,)        index into :data:`PATH_KINDS`
+    length_m : ndarray (p,)        path length (delay = length / c)
+    gain : ndarray (p,)            frequency-independent pressure gain re. 1 m from the source:
+                                   spreading × reflection coefficient × porous losses
+    detour_m : ndarray (p,)        diffraction detour δ (0 for undiffracted paths)
+    box : int ndarray (p,)         reflecting / diffracting box (index into ``site.layout``), −1 if none
+    direct_m : float               straight-line source–receiver distance
+    los : bool                     the straight line clears every solid box
+    """
+
+    kind: np.ndarray
+    length_m: np.ndarray
+    gain: np.ndarray
+    detour_m: np.ndarray
+    box: np.ndarray
+    direct_m: float
+    los: bool
+
+    def __len__(self) -> int:
+        return len(self.length_m)
+
+    def delays_s(self, speed_m_s: float) -> np.ndarray:
+        """Propagation delays, s, shape (p,)."""
+        return self.length_m / speed_m_s
+
+    def kind_names(self) -> list[str]:
+        return [PATH_KINDS[k] for k in self.kind]
+
+
+@dataclass(frozen=True)
+class Scene:
+    """The site's boxes arranged for fast channel evaluation (built by :func:`build_scene`).
+
+    solid : (m, 5) boxes (east_min, east_max, north_min, north_max, height); solid_index : (m,) their
+    index in ``site.layout``; porous : (q, 5); faces : (4m, 7) vertical faces as
+    (axis 0=east/1=north, plane coordinate, outward sign, lo, hi, height, |R|); face_box : (4m,)
+    index into ``solid``; ground_r : |R| of the ground.
+    """
+
+    solid: np.ndarray
+    solid_index: np.ndarray
+    porous: np.ndarray
+    faces: np.ndarray
+    face_box: np.ndarray
+    ground_r: float
+    config: ChannelConfig
+
+
+def build_scene(site: Site, config: ChannelConfig | None = None) -> Scene:
+    """Arrange ``site.layout`` for :func:`channel_paths`."""
+    config = config or ChannelConfig()
+    solid_idx = [i for i, b in enumerate(site.layout) if not b.porous]
+    solid = boxes_array([site.layout[i] for i in solid_idx])
+    porous = boxes_array([b for b in site.layout if b.porous])
+    faces, face_box = [], []
+    for j, i in enumerate(solid_idx):
+        e0, e1, n0, n1, h = solid[j]
+        r = reflection_coefficient(site.layout[i].material)
+        faces += [(0, e0, -1, n0, n1, h, r), (0, e1, 1, n0, n1, h, r),
+                  (1, n0, -1, e0, e1, h, r), (1, n1, 1, e0, e1, h, r)]
+        face_box += [j] * 4
+    return Scene(solid=solid, solid_index=np.asarray(solid_idx, int), porous=porous,
+                 faces=np.asarray(faces, float).reshape(-1, 7), face_box=np.asarray(face_box, int),
+                 ground_r=reflection_coefficient(config.ground_material), config=config)
+
+
+def _segment_hits(a: np.ndarray, b: np.ndarray, boxes: np.ndarray) -> np.ndarray:
+    """``simulation.site.geometry.segment_hits_boxes`` restricted to boxes overlapping the segments' bounding box.
+
+    Same result, shape (n, m); only the candidate columns are tested (most of
+    a yard's boxes lie far from any one beacon–receiver pair).
+    """
+    a = np.asarray(a, float)
+    b = np.asarray(b, float)
+    out = np.zeros((a.shape[0], boxes.shape[0]), bool)
+    if a.shape[0] == 0 or boxes.shape[0] == 0:
+        return out
+    lo = np.minimum(a.min(axis=0), b.min(axis=0))
+    hi = np.maximum(a.max(axis=0), b.max(axis=0))
+    near = ((boxes[:, 0] <= hi[0]) & (boxes[:, 1] >= lo[0]) & (boxes[:, 2] <= hi[1]) & (boxes[:, 3] >= lo[1])
+            & (boxes[:, 4] >= lo[2]))
+    if near.any():
+        out[:, near] = segment_hits_boxes(a, b, boxes[near])
+    return out
+
+
+def _porous_gain(scene: Scene, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Pressure factor 10^(−n·loss/20) for segments a→b (n, 3) crossing n porous boxes; shape (n,)."""
+    if scene.porous.shape[0] == 0 or scene.config.porous_loss_db == 0:
+        return np.ones(a.shape[0])
+    n_cross = _segment_hits(a, b, scene.porous).sum(axis=1)
+    return 10.0 ** (-n_cross * scene.config.porous_loss_db / 20.0)
+
+
+def _blocked(scene: Scene, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Whether segments a→b (n, 3) pass through a solid box; shape (n,)."""
+    if scene.solid.shape[0] == 0:
+        return np.zeros(a.shape[0], bool)
+    return _segment_hits(a, b, scene.solid).any(axis=1)
+
+
+def _upper_hull_length(points_uz: np.ndarray) -> float:
+    """Length of the upper convex hull of points (k, 2) sorted by u (Andrew's monotone chain, 1979)."""
+    hull: list[np.ndarray] = []
+    for p in points_uz:
+        while len(hull) >= 2:
+            o, a = hull[-2], hull[-1]
+            cross = (a[0] - o[0]) * (p[1] - o[1]) - (a[1] - o[1]) * (p[0] - o[0])
+            if cross >= 0:       # a lies on or below o→p: not on the upper hull
+                hull.pop()
+            else:
+                break
+        hull.append(p)
+    h = np.asarray(hull)
+    return float(np.hypot(np.diff(h[:, 0]), np.diff(h[:, 1])).sum())
+
+
+def _over_top_length(scene: Scene, src: np.ndarray, rx: np.ndarray) -> float:
+    """Taut-string length over the box tops in the vertical plane through src and rx (inf if none)."""
+    d_h = math.hypot(rx[0] - src[0], rx[1] - src[1])
+    if d_h < 1e-6 or scene.solid.shape[0] == 0:
+        return math.inf
+    az = math.atan2(rx[0] - src[0], rx[1] - src[1])
+    t_in, t_out = footprint_entry(src[None, :2], np.array([az]), scene.solid)
+    t_in, t_out = t_in[0, 0], t_out[0, 0]
+    crossed = np.isfinite(t_in) & (t_in < d_h)
+    if not crossed.any():
+        return math.inf
+    h = scene.solid[crossed, 4]
+    u = np.concatenate([t_in[crossed], np.minimum(t_out[crossed], d_h)])
+    pts = np.column_stack([np.concatenate([[0.0], u, [d_h]]), np.concatenate([[src[2]], h, h, [rx[2]]])])
+    pts = pts[np.lexsort((pts[:, 1], pts[:, 0]))]
+    # the end points must stay the ends of the chain even when a box touches them
+    pts = np.vstack([[0.0, src[2]], pts[(pts[:, 0] > 0) & (pts[:, 0] < d_h)], [d_h, rx[2]]])
+    return _upper_hull_length(pts)
+
+
+def _plan_hits(p: np.ndarray, q: np.ndarray, boxes: np.ndarray) -> np.ndarray:
+    """Whether plan segments p→q (n, 2) cross box footprints (treated as infinitely tall); (n,)."""
+    tall = boxes.copy()
+    tall[:, 4] = 1e9
+    a = np.column_stack([p, np.ones(len(p))])
+    b = np.column_stack([q, np.ones(len(q))])
+    return _segment_hits(a, b, tall).any(axis=1)
+
+
+def _dijkstra_dense(w: np.ndarray, source: int) -> tuple[np.ndarray, np.ndarray]:
+    """Shortest distances and predecessors from ``source`` over a dense (k, k) weight matrix (inf = no edge).
+
+    Dijkstra (1959) with an O(k²) array scan: the graphs here have a handful of
+    corner nodes, for which scipy.sparse.csgraph's validation costs more than the search.
+    """
+    k = w.shape[0]
+    dist = np.full(k, np.inf)
+    pred = np.full(k, -1)
+    done = np.zeros(k, bool)
+    dist[source] = 0.0
+    for _ in range(k):
+        u = int(np.argmin(np.where(done, np.inf, dist)))
+        if not np.isfinite(dist[u]):
+            break
+        done[u] = True
+        alt = dist[u] + w[u]
+        better = (alt < dist) & ~done
+        dist[better] = alt[better]
+        pred[better] = u
+    return dist, pred
+
+
+def _lateral_length(scene: Scene, src: np.ndarray, rx: np.ndarray, blockers: np.ndarray) -> float:
+    """Shortest path round the vertical edges (plan visibility graph of box corners), 3-D length.
+
+    The plan route is found by Dijkstra over the corners of the obstructing
+    boxes; boxes the resulting 3-D route still hits join the obstacle set and
+    the search repeats (at most four rounds). Its 3-D length is
+    sqrt(L_plan² + Δz²): the route rises linearly from source to receiver.
+    """
+    obstacles = set(int(j) for j in blockers)
+    dz = rx[2] - src[2]
+    for _round in range(4):
+        ob = scene.solid[sorted(obstacles)]
+        e0, e1, n0, n1 = (ob[:, k] for k in range(4))
+        eps = 1e-3
+        corners = np.concatenate([np.column_stack([e0 - eps, n0 - eps]), np.column_stack([e0 - eps, n1 + eps]),
+                                  np.column_stack([e1 + eps, n0 - eps]), np.column_stack([e1 + eps, n1 + eps])])
+        nodes = np.vstack([src[:2], rx[:2], corners])
+        k = len(nodes)
+        ii, jj = np.triu_indices(k, 1)
+        free = ~_plan_hits(nodes[ii], nodes[jj], ob)
+        w = np.full((k, k), np.inf)
+        lengths = np.hypot(*(nodes[jj] - nodes[ii]).T)
+        w[ii[free], jj[free]] = lengths[free]
+        w[jj[free], ii[free]] = lengths[free]
+        dist, pred = _dijkstra_dense(w, 0)
+        if not np.isfinite(dist[1]):
+            return math.inf
+        route = [1]
+        while route[-1] != 0:
+            route.append(int(pred[route[-1]]))
+        route = route[::-1]
+        plan = nodes[route]
+        seg = np.hypot(*np.diff(plan, axis=0).T)
+        cum = np.concatenate([[0.0], np.cumsum(seg)])
+        total = cum[-1]
+        z = src[2] + dz * cum / max(total, 1e-9)
+        pts = np.column_stack([plan, z])
+        hits = _segment_hits(pts[:-1], pts[1:], scene.solid).any(axis=0)
+        new = set(np.flatnonzero(hits).tolist()) - obstacles
+        if not new:
+            return math.hypot(total, dz)
+        obstacles |= new
+    return math.inf
+
+
+def _reflections(scene: Scene, src: np.ndarray, rx: np.ndarray, direct_m: float):
+    """First-order image-source reflections off vertical faces; returns (length, gain, box) arrays."""
+    f = scene.faces
+    if f.shape[0] == 0:
+        return np.zeros(0), np.zeros(0), np.zeros(0, int)
+    axis = f[:, 0].astype(int)
+    plane, sign = f[:, 1], f[:, 2]
+    s_a, r_a = src[axis], rx[axis]
+    ok = (sign * (s_a - plane) > 0) & (sign * (r_a - plane) > 0)
+    image = np.broadcast_to(src, (len(f), 3)).copy()
+    rows = np.arange(len(f))
+    image[rows, axis] = 2.0 * plane - s_a
+    length = np.linalg.norm(rx[None, :] - image, axis=1)
+    ok &= length - direct_m <= scene.config.max_excess_m
+    if not ok.any():
+        return np.zeros(0), np.zeros(0), np.zeros(0, int)
+    idx = np.flatnonzero(ok)
+    im, ax = image[idx], axis[idx]
+    u = (plane[idx] - im[np.arange(len(idx)), ax]) / (r_a[idx] - im[np.arange(len(idx)), ax])
+    p = im + u[:, None] * (rx[None, :] - im)
+    other = p[np.arange(len(idx)), 1 - ax]
+    on_face = (other >= f[idx, 3]) & (other <= f[idx, 4]) & (p[:, 2] >= 0.0) & (p[:, 2] <= f[idx, 5])
+    idx, p, ax = idx[on_face], p[on_face], ax[on_face]
+    if len(idx) == 0:
+        return np.zeros(0), np.zeros(0), np.zeros(0, int)
+    p[np.arange(len(idx)), ax] += sign[idx] * _NUDGE_M       # step off the face onto the outer side
+    # both legs in one call: rows [src→p_i ..., p_i→rx ...]
+    n = len(idx)
+    a = np.vstack([np.broadcast_to(src, p.shape), p])
+    b = np.vstack([p, np.broadcast_to(rx, p.shape)])
+    blocked = _blocked(scene, a, b)
+    visible = ~(blocked[:n] | blocked[n:])
+    if not visible.any():
+        return np.zeros(0), np.zeros(0), np.zeros(0, int)
+    idx = idx[visible]
+    legs = np.concatenate([visible, visible])
+    porous = _porous_gain(scene, a[legs], b[legs])
+    gain = f[idx, 6] / length[idx] * porous[:len(idx)] * porous[len(idx):]
+    return length[idx], gain, scene.solid_index[scene.face_box[idx]]
+
+
+def channel_paths(scene: Scene, src_xyz, rx_xyz) -> PathSet:
+    """Discrete paths from a source to a receiver (ENU metres, up = height above ground).
+
+    Parameters
+    ----------
+    scene : from :func:`build_scene`
+    src_xyz, rx_xyz : sequences of 3 floats (east, north, up)
+
+    Returns
+    -------
+    PathSet sorted by length.
+    """
+    src = np.asarray(src_xyz, float)
+    rx = np.asarray(rx_xyz, float)
+    d = float(np.linalg.norm(rx - src))
+    kinds, lengths, gains, detours, boxes = [], [], [], [], []
+    # direct path and both legs of the ground reflection (image source at z = −z_src) in one test
+    img = src * np.array([1.0, 1.0, -1.0])
+    lg = float(np.linalg.norm(rx - img))
+    u = src[2] / (src[2] + rx[2]) if src[2] > 0 and rx[2] > 0 else 0.0
+    gp = (src + u * (rx - src)) * np.array([1.0, 1.0, 0.0]) + np.array([0.0, 0.0, _NUDGE_M])
+    a, b = np.vstack([src, src, gp]), np.vstack([rx, gp, rx])
+    hits = _segment_hits(a, b, scene.solid) if scene.solid.shape[0] else np.zeros((3, 0), bool)
+    porous3 = _porous_gain(scene, a, b)
+    hit = hits[0]
+    los = not hit.any()
+    porous = float(porous3[0])
+    if los:
+        kinds.append(0), lengths.append(d), gains.append(porous / max(d, 1e-3)), detours.append(0.0), boxes.append(-1)
+    else:
+        path = min(_over_top_length(scene, src, rx), _lateral_length(scene, src, rx, np.flatnonzero(hit)))
+        if math.isfinite(path):
+            first = int(scene.solid_index[np.flatnonzero(hit)[0]])
+            kinds.append(3), lengths.append(path), gains.append(porous / max(d, 1e-3))
+            detours.append(max(path - d, 0.0)), boxes.append(first)
+    if u > 0 and not (hits[1].any() or hits[2].any()):
+        g = scene.ground_r / lg * porous3[1] * porous3[2]
+        kinds.append(1), lengths.append(lg), gains.append(g), detours.append(0.0), boxes.append(-1)
+    rl, rg, rb = _reflections(scene, src, rx, d)
+    kinds += [2] * len(rl)
+    lengths += rl.tolist()
+    gains += rg.tolist()
+    detours += [0.0] * len(rl)
+    boxes += rb.tolist()
+    order = np.argsort(np.asarray(lengths), kind="stable")
+    return PathSet(kind=np.asarray(kinds, int)[order], length_m=np.asarray(lengths, float)[order],
+                   gain=np.asarray(gains, float)[order], detour_m=np.asarray(detours, float)[order],
+                   box=np.asarray(boxes, int)[order], direct_m=d, los=los)
+
+
+def clutter_index(scene: Scene, rx_en, n_azimuths: int = 72) -> float:
+    """Share of horizontal directions in which a solid face lies within ``clutter_radius_m``, in [0, 1].
+
+    An enclosure measure: 0 in the open, ≈ 0.5 in an aisle between two rows of
+    equipment, → 1 in a court closed on all sides.
+    """
+    p = np.asarray(rx_en, float)[:2]
+    bx = scene.solid
+    if bx.shape[0] == 0:
+        return 0.0
+    gap_e = np.maximum(np.maximum(bx[:, 0] - p[0], p[0] - bx[:, 1]), 0.0)
+    gap_n = np.maximum(np.maximum(bx[:, 2] - p[1], p[1] - bx[:, 3]), 0.0)
+    near = bx[np.hypot(gap_e, gap_n) <= scene.config.clutter_radius_m]
+    if near.shape[0] == 0:
+        return 0.0
+    az = (np.arange(n_azimuths) + 0.5) * (2.0 * np.pi / n_azimuths)
+    t_in, _ = footprint_entry(p[None], az, near)
+    return float((t_in[0].min(axis=1) <= scene.config.clutter_radius_m).mean())
+
+
+@dataclass(frozen=True)
+class TailModel:
+    """Diffuse tail of one channel (an assumed model; docs/beacon_protocol.md §Channel).
+
+    Poisson arrivals at ``density_per_ms`` with zero-mean Gaussian pressure
+    amplitudes under an exponential envelope exp(−t/``decay_ms``) starting
+    ``onset_ms`` after the geometric direct delay; total energy
+    ``level_db`` re. the free-field direct energy at the source–receiver distance.
+    """
+
+    onset_ms: float
+    decay_ms: float
+    density_per_ms: float
+    level_db: float
+
+
+def tail_model(clutter: float) -> TailModel:
+    """Tail parameters from the clutter index c ∈ [0, 1] (linear in c).
+
+    decay 3 → 23 ms, density 0.5 → 10 arrivals/ms and level −20 → −6 dB as c
+    goes 0 → 1: an open area keeps a faint, short, sparse tail (ground
+    roughness, distant structures), a court of steel tanks and walls a dense,
+    long, strong one, which lowers the Rician K and raises τ_rms there.
+
+    >>> tail_model(0.0)
+    TailModel(onset_ms=0.5, decay_ms=3.0, density_per_ms=0.5, level_db=-20.0)
+    """
+    c = min(max(float(clutter), 0.0), 1.0)
+    return TailModel(onset_ms=0.5, decay_ms=3.0 + 20.0 * c, density_per_ms=0.5 + 9.5 * c, level_db=-20.0 + 14.0 * c)
+
+
+def beacon_arrivals(site: Site, rx_xyz, scene: Scene | None = None) -> dict[int, tuple[float, str, PathSet]]:
+    """True first arrival of every beacon at a receiver position: {beacon id: (delay_s, kind, paths)}.
+
+    ``delay_s`` is the first discrete path's propagation delay at the site's
+    air temperature (``inf`` and kind ``"none"`` when no path exists).
+
+    >>> from features.site import Site, Origin, Beacon
+    >>> site = Site(name="t", origin=Origin(31.0, 118.0), beacons=(Beacon(1, 0.0, 0.0, 3.0, 0),))
+    >>> delay, kind, paths = beacon_arrivals(site, (20.0, 0.0, 1.0))[1]
+    >>> round(delay * 1e3, 3), kind, paths.kind_names()
+    (58.563, 'direct', ['direct', 'ground'])
+    """
+    scene = scene or build_scene(site)
+    c = speed_of_sound_m_s(site.atmosphere.temperature_c)
+    out = {}
+    for b in site.beacons:
+        paths = channel_paths(scene, (b.east_m, b.north_m, b.up_m), rx_xyz)
+        if len(paths) == 0:
+            out[b.id] = (math.inf, "none", paths)
+        else:
+            out[b.id] = (float(paths.length_m[0] / c), PATH_KINDS[int(paths.kind[0])], paths)
+    return out

@@ -1,0 +1,272 @@
+"""``audio.wav``: every beacon's chirps through the time-varying channel, plus noise, as a 48 kHz int16 WAV.
+
+Per chirp emission (a beacon's slot in a TDMA frame, :mod:`simulation.acoustic.chirp`)
+the channel is evaluated once, static over the 10 ms chirp (the walker moves
+≈ 1.5 cm), at the receiver's position at the moment the first path arrives
+(found by fixed-point iteration t_a = t_e + L(x(t_a))/c), and rendered by
+:class:`simulation.acoustic.synthesis.ChirpRenderer`; ambient noise, hum and corona
+clicks come from :class:`simulation.acoustic.synthesis.AmbientNoise`. Emissions whose
+free-field level could not rise out of the noise are skipped. Samples are
+summed in a rolling buffer and written block by block, so memory stays
+bounded for any length of walk.
+
+The receiver: its recording starts at ``start_s + U(−u, u)`` on the walk's time
+base (stated ``start_s``, stated uncertainty ``u``), its sample clock runs
+``drift_ppm`` fast or slow, the microphone maps ``full_scale_db_spl`` to a
+full-scale sine, and samples are rounded to int16 (clipped only beyond full
+scale). The true per-emission arrivals are written to ``audio_truth.csv`` for
+evaluation; a receiver never reads it.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import csv
+import heapq
+import io
+import math
+from dataclasses import dataclass
+from typing import Iterator
+
+import numpy as np
+import soundfile as sf
+from tqdm import tqdm
+
+from features.fileio import atomic_path
+from features.site import Site
+
+from simulation.acoustic.channel import PATH_KINDS, PathSet, build_scene, channel_paths, clutter_index
+from simulation.acoustic.atmosphere import absorption_db_per_m, fresnel_number, maekawa_loss_db
+from simulation.acoustic.synthesis import CHUNK_SAMPLES, AmbientNoise, AudioConfig, ChirpRenderer, detection_range_m
+from simulation.acoustic.chirp import ChirpSpec, beacon_chirp, emission_times_s
+from simulation.rng import stream_rng
+from simulation.streams import StreamContext, Trajectory
+
+__all__ = ["AudioConfig", "AudioResult", "render_audio", "write_audio", "detection_range_m"]
+
+_PRE_SAMPLES = 64          # flush margin: a segment starts this many samples before its first arrival
+
+
+@dataclass(frozen=True)
+class AudioResult:
+    """What :func:`render_audio` did: true clock, counts and per-emission truth rows."""
+
+    true_start_s: float
+    drift_ppm: float
+    n_samples: int
+    n_emissions: int
+    n_rendered: int
+    n_clipped: int
+    truth_csv: str | None
+
+
+class _Accumulator:
+    """A rolling float buffer of device samples; finished blocks leave through :meth:`pop_block`."""
+
+    def __init__(self, block: int, n_total: int):
+        self.block = block
+        self.n_total = n_total
+        self.base = 0
+        self.buf = np.zeros(4 * block)
+
+    def add(self, start: int, seg: np.ndarray) -> None:
+        lo, hi = max(start, self.base), min(start + len(seg), self.n_total)
+        if hi <= lo:
+            return
+        need = hi - self.base
+        if need > len(self.buf):
+            self.buf = np.concatenate([self.buf, np.zeros(need - len(self.buf) + self.block)])
+        self.buf[lo - self.base:hi - self.base] += seg[lo - start:hi - start]
+
+    def pop_block(self) -> np.ndarray:
+        n = min(self.block, self.n_total - self.base)
+        out = self.buf[:n].copy()
+        self.buf = np.concatenate([self.buf[n:], np.zeros(n)])
+        self.base += n
+        return out
+
+
+def _position_at(traj: Trajectory, t_s: float) -> np.ndarray:
+    return np.array([np.interp(t_s, traj.t_s, traj.east_m), np.interp(t_s, traj.t_s, traj.north_m),
+                     np.interp(t_s, traj.t_s, traj.up_m)])
+
+
+def _velocity_table(traj: Trajectory) -> tuple[np.ndarray, np.ndarray]:
+    """Horizontal velocity (v_east, v_north), m/s, shape (n,) each, from speed and heading (from north, clockwise)."""
+    return traj.speed_m_s * np.sin(traj.heading_rad), traj.speed_m_s * np.cos(traj.heading_rad)
+
+
+def _emissions(site: Site, start_utc, t_begin_s: float, t_end_s: float) -> Iterator[tuple]:
+    """Every (t_emit_s, beacon_id, index, beacon, spec) in [t_begin_s, t_end_s), in emission order.
+
+    A lazy k-way merge of the beacons' schedules: memory per beacon, not per emission.
+    """
+    def one(b):
+        spec = beacon_chirp(site, b)
+        for i, t_e in enumerate(emission_times_s(site, b, start_utc, t_begin_s, t_end_s)):
+            yield float(t_e), b.id, i, b, spec
+
+    return heapq.merge(*(one(b) for b in site.beacons), key=lambda e: (e[0], e[1]))
+
+
+def render_audio(site: Site, trajectory: Trajectory, seed: int, wav_path,
+                 cfg: AudioConfig | None = None, truth_path=None, progress: bool = False) -> AudioResult:
+    """Simulate the recording along ``trajectory`` into the int16 WAV at ``wav_path`` (atomic).
+
+    The per-emission truth goes to ``truth_path`` (``audio_truth.csv``, atomic)
+    as it is produced, or, without a path, into ``AudioResult.truth_csv``.
+    Randomness comes only from ``stream_rng(seed, "audio", ...)``: the same
+    seed gives the same bytes, whatever ``block_samples``. With a truth path,
+    memory is bounded by the block size, not the recording's length.
+    ``progress`` shows a bar of audio seconds rendered on stderr (terminals only).
+    """
+    cfg = cfg or AudioConfig()
+    fs = cfg.fs_hz
+    clock_rng = stream_rng(seed, "audio", "clock")
+    true_start = cfg.start_s + float(clock_rng.uniform(-1.0, 1.0)) * cfg.start_uncertainty_s
+    drift_ppm = float(clock_rng.uniform(-1.0, 1.0)) * cfg.clock_drift_ppm
+    fs_true = fs * (1.0 + drift_ppm * 1e-6)        # device samples per second of true time
+    n_total = int(math.floor(trajectory.duration_s * fs))
+    t_end = true_start + n_total / fs_true
+    scene = build_scene(site, cfg.channel)
+    renderer = ChirpRenderer(site, cfg)
+    ambient = AmbientNoise(site, trajectory, seed, cfg, true_start, fs_true)
+    c = renderer.c
+    sl_db = site.acoustic.source_level_db
+    noise_floor_db = cfg.inband_noise_db_spl
+    level_scale = 10.0 ** ((sl_db - cfg.full_scale_db_spl) / 20.0)
+    v_east, v_north = _velocity_table(trajectory)
+    emissions = _emissions(site, trajectory.start_utc, true_start - 0.5, t_end)
+    alpha_min: dict[ChirpSpec, float] = {}
+    clutter_cache: dict[tuple[int, int], float] = {}
+    path_cache: dict[tuple, PathSet] = {}         # a static receiver sees the same geometry every frame
+    acc = _Accumulator(cfg.block_samples, n_total)
+    counts = {"emissions": 0, "rendered": 0, "clipped": 0}
+    next_chunk = 0
+    carry = np.zeros(0)
+
+    def paths_at(bid: int, src: np.ndarray, rx: np.ndarray) -> PathSet:
+        key = (bid, *np.round(rx, 4).tolist())
+        if key not in path_cache:
+            if len(path_cache) > 512:
+                path_cache.clear()
+            path_cache[key] = channel_paths(scene, src, rx)
+        return path_cache[key]
+
+    with contextlib.ExitStack() as stack:
+        tmp = stack.enter_context(atomic_path(wav_path, suffix=".wav"))
+        out = stack.enter_context(sf.SoundFile(tmp, "w", samplerate=fs, channels=1, subtype="PCM_16", format="WAV"))
+        if truth_path is None:
+            truth_file = io.StringIO()
+        else:
+            truth_file = stack.enter_context(open(stack.enter_context(atomic_path(truth_path)), "w", newline=""))
+        truth = _TruthWriter(truth_file)
+
+        def flush_until(sample: float) -> None:
+            nonlocal next_chunk, carry
+            while acc.base < n_total and acc.base + min(acc.block, n_total - acc.base) <= sample:
+                n = min(acc.block, n_total - acc.base)
+                pieces = []
+                while next_chunk * CHUNK_SAMPLES < acc.base + n:        # ambient of the chunks of this block
+                    m = min(CHUNK_SAMPLES, n_total - next_chunk * CHUNK_SAMPLES)
+                    amb = ambient.chunk(next_chunk, m)
+                    amb[:len(carry)] += carry                     # click tails from the previous chunk
+                    pieces.append(amb[:m])
+                    carry = amb[m:]
+                    next_chunk += 1
+                q = np.rint((acc.pop_block() + np.concatenate(pieces)) * 32767.0)
+                counts["clipped"] += int(np.count_nonzero(np.abs(q) > 32767))
+                out.write(np.clip(q, -32768, 32767).astype(np.int16))
+
+        bar = stack.enter_context(tqdm(total=int(math.ceil(trajectory.duration_s)), unit="s", desc="audio",
+                                       disable=None if progress else True, leave=False))
+        for t_e, bid, i, b, spec in emissions:
+            counts["emissions"] += 1
+            done = int(min(max(t_e - true_start, 0.0), trajectory.duration_s))
+            if done > bar.n:
+                bar.update(done - bar.n)
+            flush_until((t_e - true_start) * fs_true - _PRE_SAMPLES - 2)
+            src = np.array([b.east_m, b.north_m, b.up_m])
+            if spec not in alpha_min:
+                alpha_min[spec] = float(absorption_db_per_m(spec.f0_hz, site.atmosphere))
+            # receiver position when the first path arrives: t_a = t_e + L(x(t_a))/c, straight line first
+            t_a = t_e
+            for _ in range(2):
+                t_a = t_e + float(np.linalg.norm(src - _position_at(trajectory, t_a))) / c
+            rx = _position_at(trajectory, t_a)
+            d = float(np.linalg.norm(src - rx))
+            if sl_db - 20.0 * math.log10(max(d, 1e-3)) - alpha_min[spec] * d < noise_floor_db - cfg.skip_margin_db:
+                continue          # even in free field it could not rise out of the noise
+            paths = paths_at(bid, src, rx)
+            speed = float(np.interp(t_a, trajectory.t_s, trajectory.speed_m_s))
+            if len(paths) and speed * (paths.length_m[0] - d) / c > 0.005:
+                # a detour delays the arrival long enough for the walker to move: look again there
+                rx = _position_at(trajectory, t_e + paths.length_m[0] / c)
+                paths = paths_at(bid, src, rx)
+            if len(paths) == 0:
+                continue
+            t_a = t_e + paths.length_m[0] / c
+            best_db = sl_db + 20.0 * math.log10(max(paths.gain.max(), 1e-12)) - alpha_min[spec] * paths.length_m[0]
+            first_sample = (t_a - true_start) * fs_true
+            if best_db < noise_floor_db - cfg.skip_margin_db or not -fs <= first_sample < n_total:
+                continue
+            eta = 1.0
+            if cfg.doppler:       # moving observer: η = 1 + v·u/c, u the unit vector to the beacon
+                u = (src - rx) / max(np.linalg.norm(src - rx), 1e-6)
+                v = np.array([np.interp(t_a, trajectory.t_s, v_east), np.interp(t_a, trajectory.t_s, v_north), 0.0])
+                eta = 1.0 + float(v @ u) / c
+            cell = (int(math.floor(rx[0])), int(math.floor(rx[1])))      # clutter on a 1 m grid
+            if cell not in clutter_cache:
+                clutter_cache[cell] = clutter_index(scene, np.array([cell[0] + 0.5, cell[1] + 0.5]))
+            # the tail realisation belongs to the place (1 cm grid): a static receiver hears the same tail every
+            # frame, a walker (≥ 1 m between a beacon's chirps, ≫ λ/2 ≈ 8 mm) an independent one
+            rng = stream_rng(seed, "audio", "tail", bid, *(int(round(x_m * 100.0)) + 10**8 for x_m in rx))
+            start, seg = renderer.render(paths, spec, eta, first_sample, clutter_cache[cell], rng, level_scale)
+            acc.add(start, seg)
+            counts["rendered"] += 1
+            if first_sample >= 0:
+                truth.row(bid, b.slot, t_e, t_a, first_sample, PATH_KINDS[paths.kind[0]], paths.length_m[0],
+                          paths.direct_m, int(paths.los), rx, _first_path_db_spl(paths, spec, sl_db, renderer), eta)
+        flush_until(float(n_total))
+        text = truth_file.getvalue() if truth_path is None else None
+    return AudioResult(true_start_s=true_start, drift_ppm=drift_ppm, n_samples=n_total,
+                       n_emissions=counts["emissions"],
+                       n_rendered=counts["rendered"], n_clipped=counts["clipped"], truth_csv=text)
+
+
+def _first_path_db_spl(paths: PathSet, spec: ChirpSpec, source_level_db: float,
+                       renderer: ChirpRenderer) -> float:
+    """Level of the first path at the band centre: SL + 20·log10(g) − α(f_c)·L − ΔL_Maekawa(f_c), dB SPL."""
+    f_c = 0.5 * (spec.f0_hz + spec.f1_hz)
+    level = (source_level_db + 20.0 * math.log10(max(float(paths.gain[0]), 1e-12))
+             - float(absorption_db_per_m(f_c, renderer.atmosphere)) * float(paths.length_m[0]))
+    if paths.kind[0] == 3:
+        level -= float(maekawa_loss_db(fresnel_number(paths.detour_m[0], f_c, renderer.c)))
+    return level
+
+
+class _TruthWriter:
+    """``audio_truth.csv``: one row per recorded emission (true first arrival, for evaluation only)."""
+
+    HEADER = ("beacon_id", "slot", "emit_t_s", "arrival_t_s", "arrival_sample", "first_path", "first_path_m",
+              "direct_m", "los", "rx_east_m", "rx_north_m", "rx_up_m", "first_path_db_spl", "doppler")
+
+    def __init__(self, stream):
+        self._w = csv.writer(stream, lineterminator="\n")
+        self._w.writerow(self.HEADER)
+
+    def row(self, beacon_id, slot, emit_t_s, arrival_t_s, arrival_sample, first_path, first_path_m, direct_m, los,
+            rx, level_db_spl, doppler) -> None:
+        self._w.writerow([beacon_id, slot, f"{emit_t_s:.9f}", f"{arrival_t_s:.9f}", f"{arrival_sample:.3f}",
+                          first_path, f"{first_path_m:.4f}", f"{direct_m:.4f}", los, f"{rx[0]:.3f}", f"{rx[1]:.3f}",
+                          f"{rx[2]:.3f}", f"{level_db_spl:.1f}", f"{doppler:.6f}"])
+
+
+def write_audio(ctx: StreamContext) -> dict:
+    """Stream writer: ``audio.wav`` and ``audio_truth.csv`` into ``ctx.out_dir``; returns the ``[audio]`` table."""
+    cfg = AudioConfig.from_options(ctx.options)
+    render_audio(ctx.site, ctx.trajectory, ctx.seed, ctx.out_dir / "audio.wav", cfg,
+                 truth_path=ctx.out_dir / "audio_truth.csv",
+                 progress=ctx.kind == "walk" and bool(ctx.options.get("progress", True)))
+    return {"audio": {"file": "audio.wav", "fs_hz": cfg.fs_hz, "start_s": cfg.start_s,
+                      "start_uncertainty_s": cfg.start_uncertainty_s}}

@@ -1,0 +1,309 @@
+"""Sample synthesis for ``audio.wav``: the recorder's parameters, one chirp through its channel, ambient noise.
+
+One emission (:class:`ChirpRenderer`). Each discrete path of
+:func:`simulation.acoustic.channel.channel_paths` is a delayed, filtered copy of
+the chirp, built in the frequency domain over the chirp's band::
+
+    Y(f) = S_η(f) · [ Σ_p g_p · 10^(−(α(f)·L_p + ΔL_p(f))/20) · e^(−j2πf·τ_p) + T(f) ]
+
+with S_η the chirp as heard with the Doppler factor η = 1 + v_r/c of the
+receiver's closing speed on the beacon (one factor for all paths of the
+emission), α(f) the ISO 9613-1 absorption (dB/m), ΔL_p Maekawa's loss of a
+diffracted path, τ_p the fractional-sample delay (a phase ramp), and T(f) the
+diffuse tail (:func:`simulation.acoustic.channel.tail_model`: Poisson arrivals
+of Gaussian amplitude on integer samples, absorbed over the direct distance).
+
+Ambient sound (:class:`AmbientNoise`), drawn per fixed chunk of samples:
+
+* in-band noise, white Gaussian: the acoustic ambient (``noise_db_spl``) and
+  the recorder's own floor (``device_noise_dbfs``, a MEMS datasheet figure,
+  bounded above by real phone audio); see :class:`AudioConfig`;
+* transformer hum (100 Hz and harmonics for a 50 Hz grid, magnetostriction)
+  falling 1/r from the nearest tank — far out of band, it only tests the
+  receiver's band-pass;
+* corona clicks near HV equipment: a Poisson process whose rate decays with the
+  distance to the nearest transformer, gantry or apparatus; each click an
+  exponentially decaying broadband burst.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, fields
+
+import numpy as np
+import scipy.fft as sfft
+
+from features.errors import ConfigError
+from features.site import Site
+
+from simulation.acoustic.channel import ChannelConfig, PathSet, tail_model
+from simulation.acoustic.atmosphere import absorption_db_per_m, fresnel_number, maekawa_loss_db, speed_of_sound_m_s
+from simulation.acoustic.chirp import ChirpSpec, chirp_waveform
+from simulation.site.geometry import boxes_array
+from simulation.rng import stream_rng
+from simulation.streams import Trajectory
+
+__all__ = ["AudioConfig", "ChirpRenderer", "AmbientNoise", "detection_range_m", "CHUNK_SAMPLES"]
+
+_HV_KINDS = ("transformer", "gantry", "equipment")
+CHUNK_SAMPLES = 16384
+"""Ambient noise is drawn per chunk of this many samples (block sizes must be multiples of it)."""
+_PRE_SAMPLES = 64          # segment margin before the first arrival (zero-phase filters smear both ways)
+_POST_SAMPLES = 64
+
+
+@dataclass(frozen=True)
+class AudioConfig:
+    """Receiver, noise and rendering parameters of the audio stream.
+
+    noise_db_spl : acoustic ambient noise within ``noise_band_hz``, dB SPL.
+        35 dB: outdoors at 17–23 kHz wind in equipment, gravel steps and corona
+        hiss give broadband noise (transformer hum, 60–75 dB(A), lies below
+        2 kHz). An assumed level, not a measurement.
+    device_noise_dbfs : the recorder's own noise (microphone, preamp, ADC)
+        within ``noise_band_hz``, dB re. full scale squared (mean square of
+        samples scaled to ±1). −85 dB from a datasheet: a MEMS microphone of
+        65 dB(A) SNR at −26 dBFS/94 dB SPL (InvenSense ICS-43434) has a
+        −91 dBFS(A) floor over 20 kHz, ≈ −96 dBFS within the 6 kHz band,
+        −86 dB after 10 dB of gain (28 dB SPL equivalent, below the ambient).
+        Upper bound from real audio: the five Galaxy S3 recordings in
+        ../shared/data/audio_ultrasense show −63 dB (median Welch PSD over
+        17–19.5 and 20.5–22 kHz × 6 kHz; −62.3 … −63.3 dB), but they were made
+        while the phone's own speaker played a 20 kHz tone at −20 … −24 dB re.
+        full scale², 40 dB above that floor, so the emitting chain's noise is
+        in it. Set −63 to stress the receiver: detection range falls from
+        ≈ 70 m to ≈ 47 m (:func:`detection_range_m`).
+    full_scale_db_spl : SPL of a full-scale sine (RMS): 110 dB, i.e. a 120 dB
+        SPL AOP microphone with 10 dB of recording gain.
+    start_s, start_uncertainty_s : the stated audio start on the walk's time
+        base and its uncertainty; the true start is uniform within ± it.
+    clock_drift_ppm : the sample clock's error is uniform within ± this.
+    hum_db_spl_1m : transformer hum at 1 m from the tank (100 Hz line), dB SPL.
+    corona_rate_hz : corona clicks per second next to HV equipment; the rate
+        falls as exp(−d/``corona_scale_m``).
+    corona_peak_db_spl : range of a click's peak level at 1 m, dB SPL.
+    doppler : render the chirp with the receiver's Doppler factor.
+    max_excess_delay_s : paths later than this after the first one are dropped.
+    skip_margin_db : emissions whose best free-field level stays this far below
+        the in-band noise are not rendered (post-matched-filter SNR < −7 dB).
+    block_samples : samples written per block.
+    channel : geometric channel parameters.
+    """
+
+    fs_hz: int = 48_000
+    noise_db_spl: float = 35.0
+    device_noise_dbfs: float = -85.0
+    noise_band_hz: tuple[float, float] = (17_000.0, 23_000.0)
+    full_scale_db_spl: float = 110.0
+    start_s: float = 0.0
+    start_uncertainty_s: float = 0.02
+    clock_drift_ppm: float = 10.0
+    hum_db_spl_1m: float = 75.0
+    mains_hz: float = 50.0
+    corona_rate_hz: float = 1.0
+    corona_scale_m: float = 10.0
+    corona_peak_db_spl: tuple[float, float] = (60.0, 80.0)
+    doppler: bool = True
+    max_excess_delay_s: float = 0.12
+    skip_margin_db: float = 25.0
+    block_samples: int = 1 << 16
+    channel: ChannelConfig = field(default_factory=ChannelConfig)
+
+    def __post_init__(self):
+        for f in fields(self):
+            v = getattr(self, f.name)
+            if isinstance(v, float) and not math.isfinite(v) and f.name != "hum_db_spl_1m":
+                raise ConfigError(f"audio {f.name} must be finite, got {v}")
+        if not isinstance(self.fs_hz, int) or self.fs_hz < 8_000:
+            raise ConfigError(f"audio fs_hz must be an integer >= 8000, got {self.fs_hz!r}")
+        lo, hi = self.noise_band_hz
+        if not 0 <= lo < hi <= self.fs_hz / 2:
+            raise ConfigError(f"audio noise_band_hz must lie within (0, fs/2), got {self.noise_band_hz}")
+        if self.start_uncertainty_s < 0 or self.clock_drift_ppm < 0 or self.corona_rate_hz < 0:
+            raise ConfigError("audio start_uncertainty_s, clock_drift_ppm and corona_rate_hz must be >= 0")
+        if abs(self.clock_drift_ppm) > 1000:
+            raise ConfigError(f"audio clock_drift_ppm must be below 1000, got {self.clock_drift_ppm}")
+        blk = self.block_samples
+        if not isinstance(blk, int) or blk < CHUNK_SAMPLES or blk % CHUNK_SAMPLES:
+            raise ConfigError(f"audio block_samples must be a positive multiple of {CHUNK_SAMPLES}, "
+                              f"got {self.block_samples!r}")
+        if not self.max_excess_delay_s > 0:
+            raise ConfigError(f"audio max_excess_delay_s must be positive, got {self.max_excess_delay_s}")
+
+    @property
+    def inband_noise_db_spl(self) -> float:
+        """Total in-band noise (ambient + device), dB SPL (a full-scale sine, mean square ½, is full_scale_db_spl)."""
+        device_db_spl = self.full_scale_db_spl + self.device_noise_dbfs + 10.0 * math.log10(2.0)
+        return 10.0 * math.log10(10.0 ** (self.noise_db_spl / 10.0) + 10.0 ** (device_db_spl / 10.0))
+
+    @classmethod
+    def from_options(cls, options: dict | None) -> "AudioConfig":
+        """Build from ``ctx.options["audio"]`` (a table of field values), naming any unknown key."""
+        table = dict((options or {}).get("audio", {}) or {})
+        known = {f.name for f in fields(cls)}
+        unknown = set(table) - known
+        if unknown:
+            raise ConfigError(f"options [audio]: unknown key(s) {sorted(unknown)}")
+        for key in ("noise_band_hz", "corona_peak_db_spl"):
+            if key in table:
+                table[key] = tuple(table[key])
+        if "channel" in table and isinstance(table["channel"], dict):
+            table["channel"] = ChannelConfig(**table["channel"])
+        return cls(**table)
+
+
+def detection_range_m(source_level_db: float, noise_db_spl: float, spec: ChirpSpec, atmosphere,
+                      snr_db: float = 12.0) -> float:
+    """Free-field range at which a chirp's matched-filter SNR falls to ``snr_db``.
+
+    Link budget: SNR(r) = SL − 20·log10(r) − α(f_c)·r − N + 10·log10(T·B), with
+    the pulse-compression gain T·B of a linear chirp (Skolnik, *Radar
+    Handbook*, 3rd ed., §8.2) and α at the band centre (ISO 9613-1). Solved by
+    bisection on [1, 2000] m.
+    """
+    alpha = float(absorption_db_per_m(0.5 * (spec.f0_hz + spec.f1_hz), atmosphere))
+    gain = 10.0 * math.log10(spec.time_bandwidth)
+
+    def snr(r):
+        return source_level_db - 20.0 * math.log10(r) - alpha * r - noise_db_spl + gain
+
+    if snr(1.0) < snr_db:
+        return 1.0
+    lo, hi = 1.0, 2000.0
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if snr(mid) > snr_db else (lo, mid)
+    return 0.5 * (lo + hi)
+
+
+class ChirpRenderer:
+    """Per-emission frequency-domain rendering of a chirp through a :class:`PathSet` (see module docstring)."""
+
+    def __init__(self, site: Site, cfg: AudioConfig):
+        self.cfg = cfg
+        self.fs = float(cfg.fs_hz)
+        self.c = speed_of_sound_m_s(site.atmosphere.temperature_c)
+        self.atmosphere = site.atmosphere
+        self._alpha_cache: dict[int, np.ndarray] = {}
+
+    def _band(self, n_fft: int, spec: ChirpSpec, eta: float) -> tuple[int, int]:
+        df = self.fs / n_fft
+        k0 = max(0, int(math.floor((spec.f0_hz * eta - 2000.0) / df)))
+        k1 = min(n_fft // 2, int(math.ceil((spec.f1_hz * eta + 2000.0) / df)))
+        return k0, k1 + 1
+
+    def _alpha(self, n_fft: int, k0: int, k1: int) -> np.ndarray:
+        """ISO 9613-1 α (dB/m) on bins k0..k1 of an n_fft grid; cached per n_fft (a handful of fast lengths)."""
+        if n_fft not in self._alpha_cache:
+            self._alpha_cache[n_fft] = absorption_db_per_m(np.arange(n_fft // 2 + 1) * self.fs / n_fft, self.atmosphere)
+        return self._alpha_cache[n_fft][k0:k1]
+
+    def render(self, paths: PathSet, spec: ChirpSpec, eta: float, first_sample: float, clutter: float,
+               rng: np.random.Generator, level_scale: float) -> tuple[int, np.ndarray]:
+        """Return (start sample, segment) of one emission as recorded (digital full-scale units)."""
+        fs, c = self.fs, self.c
+        chirp = chirp_waveform(spec, fs, eta)
+        start = int(math.floor(first_sample)) - _PRE_SAMPLES
+        rel = first_sample - start + (paths.length_m - paths.length_m[0]) / c * fs   # (p,) samples
+        keep = rel - rel[0] <= self.cfg.max_excess_delay_s * fs
+        tail = tail_model(clutter)
+        tail_len = int(5.0 * tail.decay_ms * 1e-3 * fs)
+        tail0 = rel[0] + tail.onset_ms * 1e-3 * fs
+        n_used = int(max(rel[keep].max(), tail0 + tail_len)) + len(chirp) + _POST_SAMPLES
+        n_fft = sfft.next_fast_len(n_used, real=True)
+        k0, k1 = self._band(n_fft, spec, eta)
+        k = np.arange(k0, k1)
+        f = k * fs / n_fft
+        alpha = self._alpha(n_fft, k0, k1)
+        # H(f) = Σ_p g_p · 10^(−(α(f)·L_p + ΔL_p(f))/20) · exp(−j2π k τ_p / n_fft)
+        g, length, detour, kind = paths.gain[keep], paths.length_m[keep], paths.detour_m[keep], paths.kind[keep]
+        loss_db = alpha[None, :] * length[:, None]
+        diff = kind == 3
+        if diff.any():
+            loss_db[diff] += maekawa_loss_db(fresnel_number(detour[diff, None], f[None, :], c))
+        phase = np.exp(-2j * np.pi * np.outer(rel[keep], k) / n_fft)
+        h = (g[:, None] * 10.0 ** (-loss_db / 20.0) * phase).sum(axis=0)
+        # diffuse tail: Poisson arrivals, Gaussian amplitudes, envelope exp(−t/decay); E[Σa²] = level·(1/d²)
+        n_taps = rng.poisson(tail.density_per_ms * 5.0 * tail.decay_ms)
+        if n_taps:
+            t_ms = rng.uniform(0.0, 5.0 * tail.decay_ms, n_taps)
+            level_db = tail.level_db + self.cfg.channel.tail_offset_db
+            e_target = 10.0 ** (level_db / 10.0) / max(paths.direct_m, 1e-3) ** 2
+            scale = math.sqrt(e_target / (tail.density_per_ms * tail.decay_ms / 2.0))
+            amp = rng.standard_normal(n_taps) * np.exp(-t_ms / tail.decay_ms) * scale
+            taps = np.zeros(n_fft)
+            np.add.at(taps, np.minimum((tail0 + t_ms * 1e-3 * fs).astype(int), n_fft - 1), amp)
+            h += sfft.rfft(taps)[k0:k1] * 10.0 ** (-alpha * paths.direct_m / 20.0)
+        spectrum = np.zeros(n_fft // 2 + 1, complex)
+        spectrum[k0:k1] = sfft.rfft(chirp, n_fft)[k0:k1] * h
+        return start, sfft.irfft(spectrum, n_fft) * level_scale
+
+
+def _distance_to_boxes(p_en: np.ndarray, boxes: np.ndarray) -> np.ndarray:
+    """Horizontal distance from points (n, 2) to the nearest box footprint (0 inside); (n,), inf if none."""
+    if boxes.shape[0] == 0:
+        return np.full(len(p_en), np.inf)
+    de = np.maximum(np.maximum(boxes[:, 0] - p_en[:, :1], p_en[:, :1] - boxes[:, 1]), 0.0)
+    dn = np.maximum(np.maximum(boxes[:, 2] - p_en[:, 1:2], p_en[:, 1:2] - boxes[:, 3]), 0.0)
+    return np.hypot(de, dn).min(axis=1)
+
+
+def _db_to_digital_rms(level_db_spl: float, cfg: AudioConfig) -> float:
+    """RMS of a signal at ``level_db_spl`` in full-scale units (a full-scale sine has RMS 1/√2)."""
+    return 10.0 ** ((level_db_spl - cfg.full_scale_db_spl) / 20.0) / math.sqrt(2.0)
+
+
+class AmbientNoise:
+    """Noise, hum and corona clicks of one recording, drawn per fixed chunk of samples.
+
+    Chunk ``k`` (``CHUNK_SAMPLES`` samples) takes its draws from
+    ``stream_rng(seed, "audio", "noise", k)``, so the recording does not depend
+    on the block size used to write it.
+    """
+
+    def __init__(self, site: Site, trajectory: Trajectory, seed: int, cfg: AudioConfig, true_start: float,
+                 fs_true: float):
+        self.traj, self.seed, self.cfg = trajectory, seed, cfg
+        self.true_start, self.fs_true = true_start, fs_true
+        fs = cfg.fs_hz
+        band = cfg.noise_band_hz[1] - cfg.noise_band_hz[0]
+        # white noise over 0..fs/2 whose share within the band has the stated level
+        self.noise_rms = _db_to_digital_rms(cfg.inband_noise_db_spl, cfg) * math.sqrt((fs / 2.0) / band)
+        self.hv = boxes_array([b for b in site.layout if b.kind in _HV_KINDS])
+        self.tanks = boxes_array([b for b in site.layout if b.kind == "transformer"])
+        self.hum_phase = stream_rng(seed, "audio", "hum").uniform(0.0, 2.0 * np.pi, 4)
+
+    def chunk(self, k: int, n: int) -> np.ndarray:
+        """Ambient samples of chunk ``k`` (device samples k·CHUNK_SAMPLES …), length ``n`` plus click overhang."""
+        cfg, fs = self.cfg, self.cfg.fs_hz
+        rng = stream_rng(self.seed, "audio", "noise", k)
+        click_len = int(0.002 * fs)
+        out = np.zeros(n + click_len)
+        out[:n] = rng.standard_normal(n) * self.noise_rms
+        b0 = k * CHUNK_SAMPLES
+        grid = self.true_start + (b0 + np.array([0.0, n / 2.0, float(n)])) / self.fs_true
+        pos = np.column_stack([np.interp(grid, self.traj.t_s, self.traj.east_m),
+                               np.interp(grid, self.traj.t_s, self.traj.north_m)])
+        if self.tanks.shape[0] and cfg.hum_db_spl_1m > -np.inf:
+            t_true = self.true_start + (b0 + np.arange(n)) / self.fs_true
+            d = np.maximum(_distance_to_boxes(pos, self.tanks), 1.0)
+            amp = np.interp(t_true, grid, _db_to_digital_rms(cfg.hum_db_spl_1m, cfg) * math.sqrt(2.0) / d)
+            # 2·mains and harmonics (magnetostriction), −3 dB each: Im(z^h·e^{jφ_h}), z = e^{j2π·2f_m·t}
+            z = np.exp(2j * np.pi * 2.0 * cfg.mains_hz * t_true)
+            zh = np.ones(n, complex)
+            hum = np.zeros(n)
+            for h in range(4):
+                zh *= z
+                hum += 10.0 ** (-3.0 * h / 20.0) * (zh * np.exp(1j * self.hum_phase[h])).imag
+            out[:n] += amp * hum
+        if self.hv.shape[0] and cfg.corona_rate_hz > 0:
+            d_mid = float(_distance_to_boxes(pos[1:2], self.hv)[0])
+            rate = cfg.corona_rate_hz * math.exp(-d_mid / cfg.corona_scale_m)
+            tt = np.arange(click_len) / fs
+            for s0 in np.sort(rng.integers(0, n, rng.poisson(rate * n / fs))):
+                peak_db = rng.uniform(*cfg.corona_peak_db_spl) - 20.0 * math.log10(max(d_mid, 1.0))
+                click = rng.standard_normal(click_len) * np.exp(-tt / 1.5e-4)
+                click *= 10.0 ** ((peak_db - cfg.full_scale_db_spl) / 20.0) * math.sqrt(2.0) / np.abs(click).max()
+                out[s0:s0 + click_len] += click
+        return out

@@ -1,0 +1,410 @@
+"""Pseudorange and carrier errors, weighted least squares with RAIM, and the receiver's fix quality.
+
+Errors per epoch and satellite (shape (n_epochs, k), metres):
+
+* **Code noise**: SIGMA-ε model, σ² = a² + b²·10^(−C/N0/10) (Hartinger &
+  Brunner 1999, "Variances of GPS phase observations: the SIGMA-ε model",
+  GPS Solutions 2(4)), first-order Gauss–Markov in time with the ≈ 1 s
+  correlation of carrier smoothing.
+* **Atmosphere, orbit and clock residuals**: slowly varying Gauss–Markov
+  processes (τ ≈ 30 min) per satellite, the ionospheric part scaled by the
+  Klobuchar obliquity factor F = 1 + 16·(0.53 − E)³ (IS-GPS-200 §20.3.3.5.2.5,
+  E in semicircles), the tropospheric part by 1/sin(el). Differential
+  corrections from a nearby base remove all but a small fraction (DGNSS) or
+  all of it (RTK double differences).
+* **Multipath**: Gauss–Markov, σ growing at low elevation and near clutter;
+  the correlation time shortens as the walker moves (the multipath geometry
+  changes over about a metre).
+* **NLOS bias**: positive, the reflected path's extra length, ≈ 2·d·cos(el)
+  off a structure d metres away plus an exponential part (from
+  :mod:`simulation.gnss.signal`).
+* **Carrier phase** (for RTK): SIGMA-ε carrier noise (C = 0.00224 m²Hz for L1,
+  Hartinger & Brunner 1999), millimetre-to-centimetre carrier multipath, and
+  for NLOS satellites the fractional-cycle part of the extra path.
+
+The receiver weights satellites by reported C/N0 only (it cannot know which
+are NLOS), with the SIGMA-ε variance plus a floor for the unmodelled errors of
+its mode. Weighted least squares is linearised about the true position with
+one clock column per system: the pseudorange errors are metres while ranges are
+2·10⁷ m, so the linearisation error is |δx|²/ρ < 10⁻³ m — far below every
+modelled error — and iterating Gauss–Newton on ECEF would return the same
+solution. A RAIM-style test compares the weighted sum of squared residuals
+with the χ² quantile for the degrees of freedom and, when it fails, excludes
+the satellite with the largest standardised residual (Brown 1992, "A baseline
+GPS RAIM scheme", Navigation 39(3)), up to ``raim_max_exclusions`` times.
+
+Fix quality (GGA field 6): this module does not search integer ambiguities; it
+models the RTK engine's behaviour. RTK fixed (4) needs many satellites in
+continuous lock, PDOP ≤ ≈ 3 and few biased (NLOS) phases — biased phases make
+the ambiguity ratio test fail — held for a time-to-fix of a few seconds; its
+error is the carrier-phase WLS error (cm). RTK float (5) needs ≥ 5 satellites in
+lock; each satellite's float ambiguity converges from its code error as its
+lock ages (share 1 → ``float_floor`` with ``float_conv_tau_s``), and cycle slips
+— frequent on weak and reflected carriers — restart it. DGNSS (2) otherwise; autonomous (1) when
+corrections are off; no fix (0) when the geometry cannot be solved (fewer than
+4 satellites, or fewer than 3 + the number of systems).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.signal import lfilter
+from scipy.stats import chi2
+
+from features.errors import ConfigError
+
+__all__ = ["FixConfig", "FixResult", "code_sigma_m", "carrier_sigma_m", "klobuchar_obliquity",
+           "gauss_markov", "pseudorange_errors", "slip_probability", "solve_fixes", "QUALITY_NONE", "QUALITY_AUTONOMOUS",
+           "QUALITY_DGNSS", "QUALITY_RTK_FIXED", "QUALITY_RTK_FLOAT"]
+
+QUALITY_NONE, QUALITY_AUTONOMOUS, QUALITY_DGNSS, QUALITY_RTK_FIXED, QUALITY_RTK_FLOAT = 0, 1, 2, 4, 5
+
+
+@dataclass(frozen=True)
+class FixConfig:
+    """Error and receiver parameters (metres, seconds, degrees as named)."""
+
+    code_a_m: float = 0.2
+    code_b_m_sqrt_hz: float = 47.4
+    code_tau_s: float = 1.0
+    carrier_c_m2_hz: float = 0.00224
+    carrier_mp_sigma_m: float = 0.004
+    carrier_mp_tau_s: float = 30.0
+    mp_sigma_m: float = 0.3
+    mp_low_el_m: float = 1.2
+    mp_el_scale_deg: float = 15.0
+    mp_clutter_gain: float = 1.5
+    mp_tau_s: float = 10.0
+    mp_corr_dist_m: float = 1.0
+    nlos_mp_sigma_m: float = 1.5
+    orbit_clock_sigma_m: float = 0.8
+    iono_zenith_sigma_m: float = 2.0
+    tropo_zenith_sigma_m: float = 0.2
+    atm_tau_s: float = 1800.0
+    dgnss_residual_fraction: float = 0.05
+    fix_mask_deg: float = 10.0
+    raim_pfa: float = 1e-3
+    raim_max_exclusions: int = 2
+    rx_floor_autonomous_m: float = 3.0
+    rx_floor_differential_m: float = 0.6
+    rtk_min_sats: int = 8
+    rtk_max_pdop: float = 3.0
+    rtk_max_nlos_fraction: float = 0.15
+    ttf_min_s: float = 2.0
+    ttf_max_s: float = 6.0
+    float_min_sats: int = 5
+    phase_lock_s: float = 3.0
+    float_conv_tau_s: float = 30.0
+    float_floor: float = 0.1
+    warm_start_lock_s: float = 60.0
+    slip_nlos_prob: float = 0.2
+    slip_weak_prob: float = 0.5
+    slip_weak_scale_db: float = 3.0
+    rtk_atm_fraction: float = 0.003
+
+    def __post_init__(self):
+        for name, value in vars(self).items():
+            if not np.isfinite(value) or value < 0:
+                raise ConfigError(f"FixConfig.{name} must be finite and non-negative, got {value!r}")
+        if self.ttf_max_s < self.ttf_min_s:
+            raise ConfigError(f"FixConfig.ttf_max_s ({self.ttf_max_s}) < ttf_min_s ({self.ttf_min_s})")
+        if not 0.0 < self.raim_pfa < 1.0:
+            raise ConfigError(f"FixConfig.raim_pfa must lie in (0, 1), got {self.raim_pfa}")
+        if self.rtk_min_sats < 4 or self.float_min_sats < 4:
+            raise ConfigError("FixConfig.rtk_min_sats and float_min_sats must be >= 4")
+
+
+def code_sigma_m(cn0_dbhz, a_m: float = 0.2, b_m_sqrt_hz: float = 47.4) -> np.ndarray:
+    """Code (pseudorange) noise σ, m: SIGMA-ε σ² = a² + b²·10^(−C/N0/10) (Hartinger & Brunner 1999).
+
+    >>> [round(float(code_sigma_m(c)), 2) for c in (45.0, 30.0)]
+    [0.33, 1.51]
+    """
+    c = np.asarray(cn0_dbhz, float)
+    return np.sqrt(a_m ** 2 + b_m_sqrt_hz ** 2 * 10.0 ** (-c / 10.0))
+
+
+def carrier_sigma_m(cn0_dbhz, c_m2_hz: float = 0.00224) -> np.ndarray:
+    """Carrier-phase noise σ, m: SIGMA-ε σ² = C·10^(−C/N0/10), C = 0.00224 m²Hz for L1 (Hartinger & Brunner 1999)."""
+    return np.sqrt(c_m2_hz * 10.0 ** (-np.asarray(cn0_dbhz, float) / 10.0))
+
+
+def klobuchar_obliquity(el_rad) -> np.ndarray:
+    """Ionospheric obliquity factor F = 1 + 16·(0.53 − E)³, E in semicircles (IS-GPS-200 §20.3.3.5.2.5).
+
+    >>> round(float(klobuchar_obliquity(np.pi / 2)), 3), round(float(klobuchar_obliquity(np.radians(10.0))), 2)
+    (1.0, 2.71)
+    """
+    e = np.clip(np.asarray(el_rad, float), 0.0, np.pi / 2) / np.pi
+    return 1.0 + 16.0 * (0.53 - e) ** 3
+
+
+def gauss_markov(rng: np.random.Generator, phi: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
+    """Unit-variance first-order Gauss–Markov processes, shape (n, k), started in steady state.
+
+    x_i = φ_i·x_{i−1} + sqrt(1 − φ_i²)·w_i, w ~ N(0, 1); ``phi`` has shape (n,)
+    (φ_i = exp(−Δt/τ_i)) or is a scalar.
+    """
+    n, k = shape
+    w = rng.standard_normal((n, k))
+    phi = np.broadcast_to(np.asarray(phi, float), (n,))
+    if n > 1 and np.all(phi[1:] == phi[1]):
+        # Constant φ: the same recursion as a first-order IIR filter, run in C.
+        p = float(phi[1])
+        x = np.empty((n, k))
+        x[0] = w[0]
+        if n > 1:
+            x[1:], _ = lfilter([np.sqrt(1.0 - p * p)], [1.0, -p], w[1:], axis=0, zi=(p * w[0])[None])
+        return x
+    out = np.empty((n, k))
+    x = w[0]
+    out[0] = x
+    q = np.sqrt(1.0 - phi ** 2)
+    for i in range(1, n):
+        x = phi[i] * x + q[i] * w[i]
+        out[i] = x
+    return out
+
+
+def pseudorange_errors(rng: np.random.Generator, el_rad: np.ndarray, cn0_dbhz: np.ndarray, nlos: np.ndarray,
+                       nlos_extra_m: np.ndarray, clutter: np.ndarray, speed_m_s: np.ndarray, dt_s: float,
+                       wavelength_m: float, cfg: FixConfig = FixConfig()) -> dict[str, np.ndarray]:
+    """Error components, each of shape (n, k), metres.
+
+    Returns a dict with ``noise`` (code noise), ``multipath``, ``nlos_bias``,
+    ``atmosphere`` (orbit, clock, ionosphere and troposphere residuals before
+    any differential correction) and ``carrier`` (carrier-phase error for RTK).
+
+    Parameters
+    ----------
+    el_rad, cn0_dbhz : (n, k) elevation and the C/N0 seen by the tracking loops
+    nlos, nlos_extra_m : (n, k) NLOS flags and extra path
+    clutter : (n,) nearness of structures in [0, 1]; speed_m_s : (n,)
+    """
+    n, k = el_rad.shape
+    el = np.clip(el_rad, np.radians(1.0), np.pi / 2)
+    cn0 = np.nan_to_num(cn0_dbhz, nan=20.0)
+    v = np.asarray(speed_m_s, float)
+    noise = code_sigma_m(cn0, cfg.code_a_m, cfg.code_b_m_sqrt_hz) * gauss_markov(
+        rng, np.exp(-dt_s / cfg.code_tau_s), (n, k))
+    sigma_mp = ((cfg.mp_sigma_m + cfg.mp_low_el_m * np.exp(-np.degrees(el) / cfg.mp_el_scale_deg))
+                * (1.0 + cfg.mp_clutter_gain * clutter[:, None]))
+    sigma_mp = np.where(nlos, np.hypot(sigma_mp, cfg.nlos_mp_sigma_m), sigma_mp)
+    phi_mp = np.exp(-dt_s * (1.0 / cfg.mp_tau_s + v / cfg.mp_corr_dist_m))
+    multipath = sigma_mp * gauss_markov(rng, phi_mp, (n, k))
+    sigma_atm = np.sqrt(cfg.orbit_clock_sigma_m ** 2 + (cfg.iono_zenith_sigma_m * klobuchar_obliquity(el)) ** 2
+                        + (cfg.tropo_zenith_sigma_m / np.sin(el)) ** 2)
+    atmosphere = sigma_atm * gauss_markov(rng, np.exp(-dt_s / cfg.atm_tau_s), (n, k))
+    phi_cmp = np.exp(-dt_s * (1.0 / cfg.carrier_mp_tau_s + v / wavelength_m))
+    sigma_cmp = cfg.carrier_mp_sigma_m * (1.0 + 2.0 * clutter[:, None]) * (1.0 + np.exp(-np.degrees(el) / 15.0))
+    carrier = (carrier_sigma_m(cn0, cfg.carrier_c_m2_hz) * rng.standard_normal((n, k))
+               + sigma_cmp * gauss_markov(rng, phi_cmp, (n, k)))
+    # A reflected carrier is offset by the extra path modulo one cycle.
+    frac = np.mod(nlos_extra_m, wavelength_m) - 0.5 * wavelength_m
+    carrier = np.where(nlos, carrier + frac, carrier)
+    return {"noise": noise, "multipath": multipath, "nlos_bias": np.where(nlos, nlos_extra_m, 0.0),
+            "atmosphere": atmosphere, "carrier": carrier}
+
+
+@dataclass(frozen=True, eq=False)
+class FixResult:
+    """Receiver solution per epoch.
+
+    error_enu_m : (n, 3) fix minus truth, m (NaN without a fix)
+    quality : (n,) int, GGA fix quality 0/1/2/4/5
+    used : (n, k) bool, satellites in the solution (after RAIM)
+    hdop, vdop, pdop : (n,) from the used satellites (NaN without a fix)
+    """
+
+    error_enu_m: np.ndarray
+    quality: np.ndarray
+    used: np.ndarray
+    hdop: np.ndarray
+    vdop: np.ndarray
+    pdop: np.ndarray
+
+    @property
+    def n_used(self) -> np.ndarray:
+        return self.used.sum(axis=1)
+
+
+def _design(az_rad: np.ndarray, el_rad: np.ndarray, sys_idx: np.ndarray) -> np.ndarray:
+    """Design matrix rows [−u_E, −u_N, −u_U, 1_GPS, 1_BDS], shape (n, k, 5); u points to the satellite."""
+    ce = np.cos(el_rad)
+    n, k = el_rad.shape
+    g = np.zeros((n, k, 5))
+    g[..., 0] = -ce * np.sin(az_rad)
+    g[..., 1] = -ce * np.cos(az_rad)
+    g[..., 2] = -np.sin(el_rad)
+    g[..., 3] = (sys_idx == 0)[None, :]
+    g[..., 4] = (sys_idx == 1)[None, :]
+    return g
+
+
+def _solvable(used: np.ndarray, sys_idx: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Drop satellites alone in their system (they only fix their own clock) and test the rank.
+
+    Returns (used, ok) with ok (n,) = at least 3 + n_systems satellites remain.
+    """
+    used = used.copy()
+    n_sys = np.zeros(used.shape[0], int)
+    for s in (0, 1):
+        cols = sys_idx == s
+        cnt = used[:, cols].sum(axis=1)
+        lone = cnt == 1
+        used[np.ix_(lone, cols)] = False
+        n_sys += cnt >= 2
+    ok = used.sum(axis=1) >= np.maximum(4, 3 + n_sys)
+    return used, ok
+
+
+def _wls(g: np.ndarray, w: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Batched WLS θ = (GᵀWG)⁻¹GᵀWy; returns (θ (n, 5), (GᵀWG)⁻¹ (n, 5, 5)).
+
+    A clock column with no used satellite is pinned (its diagonal set to 1),
+    which is the same as removing that unknown.
+    """
+    gw = g * w[..., None]
+    nmat = np.matmul(gw.transpose(0, 2, 1), g)
+    for c in (3, 4):
+        empty = nmat[:, c, c] <= 0.0
+        nmat[empty, c, c] = 1.0
+    nmat = nmat + 1e-12 * np.eye(5)[None]
+    ninv = np.linalg.inv(nmat)
+    theta = np.matmul(ninv, np.matmul(gw.transpose(0, 2, 1), y[..., None]))[..., 0]
+    return theta, ninv
+
+
+def _dops(g: np.ndarray, used: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    _, q = _wls(g, used.astype(float), np.zeros(used.shape))
+    hdop = np.sqrt(q[:, 0, 0] + q[:, 1, 1])
+    vdop = np.sqrt(np.abs(q[:, 2, 2]))
+    pdop = np.sqrt(q[:, 0, 0] + q[:, 1, 1] + q[:, 2, 2])
+    return hdop, vdop, pdop
+
+
+def _lock_age_s(tracked: np.ndarray, slip: np.ndarray, dt_s: float, warm_s: float) -> np.ndarray:
+    """Seconds of continuous carrier-phase lock up to each epoch, (n, k).
+
+    Lock restarts at 0 after a loss of track or a cycle slip (``slip``, bool
+    (n, k)); satellites tracked at epoch 0 without a slip start at ``warm_s``.
+    """
+    n, k = tracked.shape
+    age = np.empty((n, k))
+    a = np.where(tracked[0] & ~slip[0], warm_s, 0.0)
+    age[0] = a
+    for i in range(1, n):
+        a = np.where(tracked[i] & ~slip[i], a + dt_s, 0.0)
+        age[i] = a
+    return age
+
+
+def slip_probability(cn0_dbhz: np.ndarray, nlos: np.ndarray, cfg: FixConfig = FixConfig()) -> np.ndarray:
+    """Per-epoch probability of a cycle slip, (n, k).
+
+    Weak signals slip more, p = p_w·exp(−(C/N0 − 25)/s), and reflected (NLOS)
+    carriers, whose phase follows the moving reflection geometry, slip often
+    (a behavioural model; cf. Groves 2013, *Principles of GNSS, Inertial, and
+    Multisensor Integrated Navigation Systems*, 2nd ed., §9.2.4 and §10.4).
+
+    >>> [round(float(x), 3) for x in slip_probability(np.array([25.0, 40.0]), np.array([False, True]))]
+    [0.5, 0.203]
+    """
+    c = np.nan_to_num(np.asarray(cn0_dbhz, float), nan=0.0)
+    p = cfg.slip_weak_prob * np.exp(-np.maximum(c - 25.0, 0.0) / cfg.slip_weak_scale_db)
+    return np.clip(p + np.where(nlos, cfg.slip_nlos_prob, 0.0), 0.0, 1.0)
+
+
+def solve_fixes(rng: np.random.Generator, az_rad: np.ndarray, el_rad: np.ndarray, sys_idx: np.ndarray,
+                tracked: np.ndarray, cn0_reported_dbhz: np.ndarray, errors: dict[str, np.ndarray],
+                nlos: np.ndarray, dt_s: float, corrections: bool = True,
+                cfg: FixConfig = FixConfig()) -> FixResult:
+    """Weighted least squares with RAIM and the fix-quality state machine (module docstring).
+
+    Parameters
+    ----------
+    az_rad, el_rad : (n, k); sys_idx : (k,) 0 = GPS, 1 = BeiDou
+    tracked, cn0_reported_dbhz : (n, k) receiver tracking state and reported C/N0
+    errors : from :func:`pseudorange_errors`
+    nlos : (n, k) truth NLOS flags — used only for the ambiguity-validation proxy of RTK fixed
+    corrections : differential corrections (DGNSS/RTK) available
+    """
+    n, k = el_rad.shape
+    g = _design(az_rad, el_rad, sys_idx)
+    cand = tracked & (el_rad >= np.radians(cfg.fix_mask_deg))
+    used, ok = _solvable(cand, sys_idx)
+    atm_scale = cfg.dgnss_residual_fraction if corrections else 1.0
+    code_err = errors["noise"] + errors["multipath"] + errors["nlos_bias"] + atm_scale * errors["atmosphere"]
+    floor = cfg.rx_floor_differential_m if corrections else cfg.rx_floor_autonomous_m
+    sig2 = floor ** 2 + code_sigma_m(np.nan_to_num(cn0_reported_dbhz, nan=0.0),
+                                     cfg.code_a_m, cfg.code_b_m_sqrt_hz) ** 2
+    w_all = 1.0 / sig2
+    for n_excluded in range(cfg.raim_max_exclusions + 1):
+        w = np.where(used & ok[:, None], w_all, 0.0)
+        theta, ninv = _wls(g, w, code_err)
+        resid = code_err - np.matmul(g, theta[..., None])[..., 0]
+        n_sys = (used[:, sys_idx == 0].any(axis=1).astype(int) + used[:, sys_idx == 1].any(axis=1))
+        dof = used.sum(axis=1) - 3 - n_sys
+        test = (w * resid ** 2).sum(axis=1)
+        thresh = chi2.ppf(1.0 - cfg.raim_pfa, np.maximum(dof, 1))
+        fail = ok & (dof >= 2) & (test > thresh)
+        if not fail.any() or n_excluded == cfg.raim_max_exclusions:
+            break
+        # Standardised residual w·r²/(1 − h), h = w·gᵀ(GᵀWG)⁻¹g (hat-matrix diagonal).
+        h = w * (np.matmul(g, ninv) * g).sum(axis=-1)
+        std = np.where(used, w * resid ** 2 / np.maximum(1.0 - h, 1e-6), -1.0)
+        worst = std.argmax(axis=1)
+        rows = np.flatnonzero(fail)
+        used[rows, worst[rows]] = False
+        used, ok = _solvable(used, sys_idx)
+    used &= ok[:, None]
+    w = np.where(used, w_all, 0.0)
+    theta_code, _ = _wls(g, w, code_err)
+    # Double-differenced carrier: the base a few km away leaves ≈ 1 ppm of the atmosphere (rtk_atm_fraction).
+    carrier_dd = errors["carrier"] + cfg.rtk_atm_fraction * errors["atmosphere"]
+    theta_car, _ = _wls(g, w, carrier_dd)
+    hdop, vdop, pdop = _dops(g, used)
+
+    quality = np.zeros(n, int)
+    err = np.full((n, 3), np.nan)
+    if not corrections:
+        quality[ok] = QUALITY_AUTONOMOUS
+        err[ok] = theta_code[ok, :3]
+    else:
+        slip = rng.random((n, k)) < slip_probability(cn0_reported_dbhz, nlos, cfg)
+        lock = _lock_age_s(tracked, slip, dt_s, cfg.warm_start_lock_s)
+        locked = used & (lock >= cfg.phase_lock_s)
+        n_lock = locked.sum(axis=1)
+        n_used = used.sum(axis=1)
+        nlos_frac = (used & nlos).sum(axis=1) / np.maximum(n_used, 1)
+        fixed_ok = ok & (n_lock >= cfg.rtk_min_sats) & (pdop <= cfg.rtk_max_pdop) & (nlos_frac <= cfg.rtk_max_nlos_fraction)
+        float_ok = ok & (n_lock >= cfg.float_min_sats)
+        ttf_draws = rng.uniform(cfg.ttf_min_s, cfg.ttf_max_s, n)
+        fixed = np.zeros(n, bool)
+        # Warm start: the receiver was running in the same surroundings before the first epoch.
+        held, need = 0.0, 0.0
+        for i in range(n):
+            if fixed_ok[i]:
+                if held == 0.0 and i > 0:
+                    need = ttf_draws[i]  # a new time-to-fix after every loss of the fixed conditions
+                held += dt_s
+                fixed[i] = held >= need
+            else:
+                held = 0.0
+        quality[ok] = QUALITY_DGNSS
+        quality[float_ok] = QUALITY_RTK_FLOAT
+        quality[fixed] = QUALITY_RTK_FIXED
+        err[ok] = theta_code[ok, :3]
+        # Float: each satellite's ambiguity converges from its code error as its lock ages, so a
+        # satellite that keeps slipping (NLOS) carries most of its code error into the solution.
+        share = cfg.float_floor + (1.0 - cfg.float_floor) * np.exp(-lock / cfg.float_conv_tau_s)
+        theta_float, _ = _wls(g, w, carrier_dd + share * code_err)
+        fl = quality == QUALITY_RTK_FLOAT
+        err[fl] = theta_float[fl, :3]
+        err[fixed] = theta_car[fixed, :3]
+    hdop = np.where(ok, hdop, np.nan)
+    vdop = np.where(ok, vdop, np.nan)
+    pdop = np.where(ok, pdop, np.nan)
+    return FixResult(err, quality, used, hdop, vdop, pdop)

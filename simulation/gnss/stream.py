@@ -1,0 +1,239 @@
+"""The GNSS stream of a walk or survey cell: simulate the receiver and write ``gnss.nmea``.
+
+:func:`simulate_gnss` is the pure simulation (arrays per epoch and satellite,
+for tests and benchmarks); :func:`write_gnss` is the stream writer listed in
+:data:`simulation.streams.STREAM_WRITERS`. Every random draw comes from
+``stream_rng(seed, "gnss", <part>)``, one named stream per model part, so a
+change in one part never shifts the draws of another.
+
+Options read from ``StreamContext.options``: ``gnss_corrections`` (bool,
+default True: DGNSS/RTK corrections available), ``gnss_rate_hz`` (default 5).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from datetime import timezone
+
+import numpy as np
+
+from features.errors import ConfigError
+from features.fileio import atomic_write_text
+from features.geodesy import enu_to_geodetic
+from simulation.gnss import fix as gnss_fix
+from simulation.gnss import signal as gnss_signal
+from simulation.site.geometry import boxes_array
+from simulation.gnss.nmea_writer import NMEA_SYSTEM_BDS, NMEA_SYSTEM_GPS, NmeaEpochs, format_nmea
+from simulation.gnss.orbits import SYSTEM_GPS, all_satellites, azel
+from simulation.rng import stream_rng
+from simulation.streams import StreamContext, Trajectory
+
+__all__ = ["GnssSimulation", "simulate_gnss", "to_nmea_epochs", "write_gnss", "GNSS_FILE", "DEFAULT_RATE_HZ"]
+
+GNSS_FILE = "gnss.nmea"
+DEFAULT_RATE_HZ = 5.0
+
+
+@dataclass(frozen=True, eq=False)
+class GnssSimulation:
+    """Per-epoch simulator output (n epochs, k satellites); simulator internals for tests.
+
+    t_s : (n,) seconds since the trajectory start; unix_s : (n,) UTC POSIX seconds
+    truth_enu_m, fix_enu_m : (n, 3) true and reported positions (fix NaN when quality 0)
+    quality, n_used : (n,) int; hdop, vdop, pdop : (n,)
+    system : (k,) "GPS"/"BDS"; prn : (k,)
+    az_rad, el_rad : (n, k); in_view, tracked, used : (n, k) bool
+    los, nlos : (n, k) bool, in view and received directly or diffracted (los) or by reflection (nlos)
+    blocked : (n, k) bool, in view with a solid box in the geometric direct path (diffracted or NLOS)
+    cn0_open_dbhz : (n, k) open-sky C/N0 (with the satellite's offset)
+    attenuation_db : (n, k) blockage + EMI loss (no fading), dB
+    cn0_true_dbhz : (n, k) epoch-mean C/N0 with fading; cn0_reported_dbhz : (n, k) integer, NaN untracked
+    """
+
+    t_s: np.ndarray
+    unix_s: np.ndarray
+    truth_enu_m: np.ndarray
+    fix_enu_m: np.ndarray
+    quality: np.ndarray
+    n_used: np.ndarray
+    hdop: np.ndarray
+    vdop: np.ndarray
+    pdop: np.ndarray
+    system: np.ndarray
+    prn: np.ndarray
+    az_rad: np.ndarray
+    el_rad: np.ndarray
+    in_view: np.ndarray
+    tracked: np.ndarray
+    used: np.ndarray
+    los: np.ndarray
+    nlos: np.ndarray
+    blocked: np.ndarray
+    cn0_open_dbhz: np.ndarray
+    attenuation_db: np.ndarray
+    cn0_true_dbhz: np.ndarray
+    cn0_reported_dbhz: np.ndarray
+
+    @property
+    def horizontal_error_m(self) -> np.ndarray:
+        """(n,) horizontal fix error, m (NaN without a fix)."""
+        d = self.fix_enu_m[:, :2] - self.truth_enu_m[:, :2]
+        return np.hypot(d[:, 0], d[:, 1])
+
+
+def _epoch_times(traj: Trajectory, rate_hz: float) -> np.ndarray:
+    dt = 1.0 / rate_hz
+    n = int(np.floor(traj.duration_s * rate_hz + 1e-9)) + 1
+    return traj.t_s[0] + dt * np.arange(n)
+
+
+def _key_epochs(t_s: np.ndarray, p_en: np.ndarray, up_m: np.ndarray, move_m: float = 0.05,
+                max_dt_s: float = 1.0) -> np.ndarray:
+    """Epochs at which the ray–box tests are redone: the receiver moved ≥ ``move_m`` or ``max_dt_s`` passed.
+
+    In between, the satellites move by < 0.01° (MEO angular rate ≈ 0.008°/s),
+    so a standing receiver reuses the last test; a walker (≈ 0.3 m per epoch)
+    gets a fresh test every epoch. Returns sorted indices starting at 0.
+    """
+    keys = [0]
+    last = 0
+    pe, pn, pu, tt = p_en[:, 0].tolist(), p_en[:, 1].tolist(), up_m.tolist(), t_s.tolist()
+    for i in range(1, len(tt)):
+        if (tt[i] - tt[last] >= max_dt_s - 1e-9
+                or (pe[i] - pe[last]) ** 2 + (pn[i] - pn[last]) ** 2 + (pu[i] - pu[last]) ** 2 >= move_m ** 2):
+            keys.append(i)
+            last = i
+    return np.asarray(keys, int)
+
+
+def simulate_gnss(site, traj: Trajectory, seed: int, corrections: bool = True, rate_hz: float = DEFAULT_RATE_HZ,
+                  signal_cfg: gnss_signal.SignalConfig = gnss_signal.SignalConfig(),
+                  fix_cfg: gnss_fix.FixConfig = gnss_fix.FixConfig()) -> GnssSimulation:
+    """Simulate the receiver along ``traj`` at ``site`` (see the module docstrings of the parts).
+
+    Parameters
+    ----------
+    site : features.site.Site (origin, layout boxes, EMI zones)
+    traj : Trajectory; its ``up_m`` is the device height above ground
+    seed : the walk's or cell's seed; corrections : DGNSS/RTK corrections available
+    """
+    if not rate_hz > 0:
+        raise ConfigError(f"gnss rate_hz must be positive, got {rate_hz}")
+    if len(traj.t_s) < 1:
+        raise ConfigError("trajectory is empty")
+    dt = 1.0 / rate_hz
+    t = _epoch_times(traj, rate_hz)
+    n = len(t)
+    start = traj.start_utc if traj.start_utc.tzinfo else traj.start_utc.replace(tzinfo=timezone.utc)
+    unix = start.timestamp() + (t - traj.t_s[0])
+    east, north, up = traj.interp(t)
+    speed = np.interp(t, traj.t_s, traj.speed_m_s)
+    p_en = np.stack([east, north], axis=1)
+
+    cfg = signal_cfg
+    sats = all_satellites()
+    k_all = len(sats)
+    az, el = azel(unix, site.origin, sats)
+    boxes = boxes_array(site.layout)
+    porous = np.array([b.porous for b in site.layout], bool)
+    m = boxes.shape[0]
+    # Per-satellite draws for the whole constellation, so a satellite's draws do not depend on which others rise.
+    offset = cfg.sat_offset_sigma_db * stream_rng(seed, "gnss", "sat_offset").standard_normal(k_all)
+    refl = stream_rng(seed, "gnss", "nlos_loss").uniform(cfg.nlos_loss_min_db, cfg.nlos_loss_max_db, (k_all, m))
+    por = stream_rng(seed, "gnss", "porous_loss").uniform(cfg.porous_loss_min_db, cfg.porous_loss_max_db, (k_all, m))
+    excess = stream_rng(seed, "gnss", "nlos_excess").exponential(cfg.nlos_excess_mean_m, (k_all, m))
+    # Work only on satellites above the in-view mask at some epoch: the others never appear in any output.
+    rises = np.flatnonzero((el > np.radians(cfg.in_view_mask_deg)).any(axis=0))
+    sats = sats.select(rises)
+    az, el = az[:, rises], el[:, rises]
+    offset, refl, por, excess = offset[rises], refl[rises], por[rises], excess[rises]
+    k = len(sats)
+
+    key = _key_epochs(t, p_en, up)
+    blk = gnss_signal.blockage(p_en[key], up[key], az[key], el[key], boxes, porous, refl, por, excess, cfg)
+    fill = np.searchsorted(key, np.arange(n), side="right") - 1
+    blk = gnss_signal.Blockage(*(getattr(blk, f)[fill] for f in (
+        "loss_db", "nlos", "solid_blocked", "nlos_extra_m", "diffraction_db")))
+    emi = gnss_signal.emi_loss_db(p_en, site.emi_zones)
+    clutter = gnss_signal.clutter_index(p_en, boxes, porous, cfg.clutter_scale_m)
+    cn0_open = gnss_signal.open_sky_cn0_dbhz(el, sats.a_m[None, :], cfg) + offset[None, :]
+    attenuation = blk.loss_db + emi[:, None]
+    cn0_mean = cn0_open - attenuation
+
+    # Fading: K from clutter for direct/diffracted paths, Rayleigh for reflections; the receiver averages
+    # power over each epoch, sampled fast enough for the walker's Doppler spread.
+    k_db = cfg.k_open_db - cfg.k_clutter_drop_db * clutter
+    k_lin = np.where(blk.nlos, 0.0, 10.0 ** (k_db[:, None] / 10.0) * np.ones((1, k)))
+    f_max = float(np.max(speed, initial=0.0)) / cfg.wavelength_m + cfg.doppler_floor_hz
+    n_sub = int(min(8, max(1, np.ceil(2.0 * f_max * dt))))
+    sub = t[:, None] - dt + dt * (np.arange(n_sub) + 0.5)[None, :] / n_sub  # (n, n_sub) inside each epoch
+    walked = np.concatenate([[0.0], np.cumsum(0.5 * (traj.speed_m_s[1:] + traj.speed_m_s[:-1]) * np.diff(traj.t_s))])
+    path = np.interp(sub, traj.t_s, walked) + cfg.wavelength_m * cfg.doppler_floor_hz * sub
+    power = gnss_signal.rician_power(stream_rng(seed, "gnss", "fading"), path.ravel(),
+                                     np.repeat(k_lin, n_sub, axis=0), cfg.wavelength_m, cfg.n_sinusoids)
+    power = power.reshape(n, n_sub, k).mean(axis=1)
+    cn0_true = cn0_mean + 10.0 * np.log10(np.maximum(power, 1e-12))
+
+    in_view = el > np.radians(cfg.in_view_mask_deg)
+    est = gnss_signal.estimate_cn0(stream_rng(seed, "gnss", "estimator"), cn0_true, dt, cfg)
+    tracked = gnss_signal.track(est, in_view, dt, cfg)
+    reported = np.where(tracked, np.clip(np.rint(est), 0, 99), np.nan)
+
+    sys_idx = np.where(sats.system == SYSTEM_GPS, 0, 1)
+    errors = gnss_fix.pseudorange_errors(stream_rng(seed, "gnss", "errors"), el, np.where(tracked, est, np.nan),
+                                         blk.nlos, blk.nlos_extra_m, clutter, speed, dt, cfg.wavelength_m, fix_cfg)
+    fix = gnss_fix.solve_fixes(stream_rng(seed, "gnss", "rtk"), az, el, sys_idx, tracked, reported, errors,
+                               blk.nlos, dt, corrections, fix_cfg)
+    truth = np.stack([east, north, up], axis=1)
+    return GnssSimulation(
+        t_s=t, unix_s=unix, truth_enu_m=truth, fix_enu_m=truth + fix.error_enu_m, quality=fix.quality,
+        n_used=fix.n_used, hdop=fix.hdop, vdop=fix.vdop, pdop=fix.pdop, system=sats.system, prn=sats.prn,
+        az_rad=az, el_rad=el, in_view=in_view, tracked=tracked, used=fix.used, los=in_view & ~blk.nlos,
+        nlos=in_view & blk.nlos, blocked=in_view & blk.solid_blocked, cn0_open_dbhz=cn0_open, attenuation_db=attenuation, cn0_true_dbhz=cn0_true,
+        cn0_reported_dbhz=reported)
+
+
+def to_nmea_epochs(sim: GnssSimulation, site, seed: int, traj: Trajectory) -> NmeaEpochs:
+    """Receiver-reported quantities for the NMEA writer (geodetic fix, velocity with Doppler-level noise).
+
+    The site origin's ``alt_m`` is taken as the ground's height and written as
+    GGA altitude with a geoid separation of 0.0 (no geoid model is simulated),
+    so altitude + separation is the ellipsoidal height pymap3d used.
+    """
+    o = site.origin
+    lat, lon, alt = enu_to_geodetic(sim.fix_enu_m[:, 0], sim.fix_enu_m[:, 1], sim.fix_enu_m[:, 2],
+                                    o.lat_deg, o.lon_deg, o.alt_m)
+    # Up in the trajectory is the device height above ground at the origin; the origin's altitude is the ground.
+    rng = stream_rng(seed, "gnss", "velocity")
+    n = len(sim.t_s)
+    speed_true = np.interp(sim.t_s, traj.t_s, traj.speed_m_s)
+    idx = np.clip(np.searchsorted(traj.t_s, sim.t_s), 0, len(traj.t_s) - 1)
+    heading = np.degrees(np.mod(traj.heading_rad[idx], 2.0 * np.pi))
+    # Doppler velocity noise of a few cm/s (σ = 0.03 m/s per axis), a typical receiver figure.
+    ve = speed_true * np.sin(np.radians(heading)) + 0.03 * rng.standard_normal(n)
+    vn = speed_true * np.cos(np.radians(heading)) + 0.03 * rng.standard_normal(n)
+    spd = np.hypot(ve, vn)
+    course = np.where(spd > 0.1, np.mod(np.degrees(np.arctan2(ve, vn)), 360.0), np.nan)
+    system = np.where(sim.system == SYSTEM_GPS, NMEA_SYSTEM_GPS, NMEA_SYSTEM_BDS)
+    return NmeaEpochs(
+        unix_s=sim.unix_s, lat_deg=np.asarray(lat, float), lon_deg=np.asarray(lon, float), alt_m=np.asarray(alt, float),
+        quality=sim.quality, hdop=sim.hdop, vdop=sim.vdop, pdop=sim.pdop, speed_m_s=spd, course_deg=course,
+        sat_system=system, sat_prn=sim.prn, el_deg=np.degrees(sim.el_rad), az_deg=np.degrees(sim.az_rad),
+        in_view=sim.in_view, used=sim.used, snr_dbhz=sim.cn0_reported_dbhz)
+
+
+def write_gnss(ctx: StreamContext) -> dict:
+    """Stream writer: simulate the receiver along ``ctx.trajectory`` and write ``gnss.nmea``.
+
+    Returns the ``[gnss]`` table for walk.toml / cell.toml.
+    """
+    corrections = ctx.options.get("gnss_corrections", True)
+    if not isinstance(corrections, bool):
+        raise ConfigError(f"option gnss_corrections must be true or false, got {corrections!r}")
+    rate_hz = ctx.options.get("gnss_rate_hz", DEFAULT_RATE_HZ)
+    if isinstance(rate_hz, bool) or not isinstance(rate_hz, (int, float)) or not 0 < rate_hz <= 20:
+        raise ConfigError(f"option gnss_rate_hz must lie in (0, 20], got {rate_hz!r}")
+    sim = simulate_gnss(ctx.site, ctx.trajectory, ctx.seed, corrections=corrections, rate_hz=float(rate_hz))
+    text = format_nmea(to_nmea_epochs(sim, ctx.site, ctx.seed, ctx.trajectory))
+    atomic_write_text(ctx.out_dir / GNSS_FILE, text)
+    return {"gnss": {"file": GNSS_FILE, "rate_hz": float(rate_hz)}}
