@@ -23,6 +23,7 @@ demo: $(STAMP)
 	$(BIN)/python -m pipeline demo --out $(DEMO_DIR)
 
 test: $(STAMP)
+	$(BIN)/lint-imports
 	$(BIN)/python -m pytest -n 2 -q
 
 bench: $(STAMP)

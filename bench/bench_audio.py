@@ -174,7 +174,8 @@ def walk_rate(tmp: Path) -> dict:
     from features.acoustic.positions import PositionConfig
     from features.site import load_site
     from pipeline.cli import main as cli_main
-    from pipeline.commands.features_audio import timing_from_walk
+    from features.acoustic.timing import timing_from_walk
+    from features.walk import load_walk
 
     site_dir, walk = tmp / "site3", tmp / "walk7"
     quiet = open(os.devnull, "w")
@@ -187,7 +188,7 @@ def walk_rate(tmp: Path) -> dict:
         sys.stdout = old
         quiet.close()
     site = load_site(site_dir)
-    timing = timing_from_walk(walk / "walk.toml", site, None)
+    timing = timing_from_walk(load_walk(walk), site)
     positions = PositionConfig(max_clock_offset_s=timing.start_uncertainty_s + 0.05, motion_speed_m_s=1.4)
     walls = []
     for _ in range(3):

@@ -15,7 +15,8 @@ from pathlib import Path
 import numpy as np
 
 from features.site import ENV_CLASSES
-from features.walk import load_walk, read_truth
+from features.imu.pdr import dead_reckon
+from pipeline.walk_data import PdrStream, read_walk
 
 __all__ = ["SourceTrack", "WalkSources", "walk_sources", "error_table", "plot_walk"]
 
@@ -41,40 +42,17 @@ class WalkSources:
     acoustic_features: list | None = None
 
 
-def _gnss(walk, site):
-    from features.gnss.features import gnss_features, sky_arrays
-    from features.gnss.positions import fixes_to_enu
-    from features.gnss.nmea import epochs_on_time_base, read_nmea
-
-    epochs, stats = read_nmea(walk.path("gnss"))
-    epochs = epochs_on_time_base(epochs, walk.start_utc)
-    o = site.origin
-    pos = fixes_to_enu(epochs, o.lat_deg, o.lon_deg, o.alt_m)
-    feats = gnss_features(sky_arrays(epochs))
-    return SourceTrack("GNSS", pos.t_s, pos.east_m, pos.north_m, {"nmea": stats.summary()}), feats, pos.quality
-
-
-def _pdr(walk, start_en, k: float | None, gnss: SourceTrack | None = None, quality=None):
-    """PDR track; with RTK-fixed GNSS, K and the mounting yaw are calibrated on it first.
+def _pdr_track(pdr: PdrStream, gnss: SourceTrack | None = None, quality=None, calibrate: bool = True) -> SourceTrack:
+    """PDR track; with RTK-fixed GNSS and no K given, K and the mounting yaw are calibrated on it first.
 
     Calibration uses only steps whose both ends fall between RTK-fixed epochs
     (quality 4, centimetre level): K = Σ GNSS step distance / Σ Weinberg units,
     yaw offset = circular mean of (GNSS step heading − PDR heading).
     """
-    from features.imu.heading import HeadingConfig
-    from features.imu.reader import read_imu_csv
-    from features.imu.pdr import PdrConfig, dead_reckon, run_pdr
-    from features.imu.steps import StepLengthModel
-
-    imu = read_imu_csv(walk.path("imu"))
-    decl = float(walk.streams["imu"].get("declination_deg", 0.0))
-    cfg = PdrConfig(heading=HeadingConfig(declination_rad=np.radians(decl)))
-    if k is not None:
-        cfg = PdrConfig(length=StepLengthModel(k=k), heading=cfg.heading)
-    res = run_pdr(imu, start_en[0], start_en[1], cfg)
+    res, cfg, start_en = pdr.result, pdr.config, pdr.start_en_m
     info = {"steps": len(res), "distance_m": res.distance_m, "k": cfg.length.k, "yaw_offset_deg": 0.0}
     east, north = res.east_m, res.north_m
-    if k is None and gnss is not None and quality is not None and len(res) > 10:
+    if calibrate and gnss is not None and quality is not None and len(res) > 10:
         fixed = quality == 4
         t_g = gnss.t_s
         idx = np.searchsorted(t_g, res.t_s)
@@ -96,41 +74,22 @@ def _pdr(walk, start_en, k: float | None, gnss: SourceTrack | None = None, quali
     return SourceTrack("PDR", res.t_s, east, north, info)
 
 
-def _acoustic(walk, site):
-    from features.acoustic.features import analyse_audio
-    from features.acoustic.positions import PositionConfig
-
-    from pipeline.commands.features_audio import timing_from_walk
-
-    timing = timing_from_walk(walk.directory, site, None)
-    positions = PositionConfig(max_clock_offset_s=timing.start_uncertainty_s + 0.05, motion_speed_m_s=1.4)
-    res = analyse_audio(walk.path("audio"), site, timing, positions=positions)
-    fixes = res.fixes
-    arr = np.array([[f.t_s, f.east_m, f.north_m] for f in fixes]).reshape(-1, 3)
-    return SourceTrack("acoustic", arr[:, 0], arr[:, 1], arr[:, 2],
-                       {"chirps": res.n_detections, "fixes": len(fixes)}), res.rows
-
-
 def walk_sources(walk_dir: str | os.PathLike, pdr_k: float | None = None) -> WalkSources:
-    """Extract every available position source of a walk directory."""
-    walk = load_walk(walk_dir)
-    site = walk.load_site()
-    truth = read_truth(walk.directory) if (walk.directory / "truth.csv").is_file() else None
-    tracks, feats, quality = {}, None, None
-    if walk.path("gnss") is not None:
-        tracks["GNSS"], feats, quality = _gnss(walk, site)
-    acoustic_rows = None
-    if walk.path("audio") is not None and site.beacons:
-        tracks["acoustic"], acoustic_rows = _acoustic(walk, site)
-    if walk.path("imu") is not None:
-        if truth is not None:
-            start = (float(truth.east_m[0]), float(truth.north_m[0]))
-        elif "GNSS" in tracks and len(tracks["GNSS"].t_s):
-            start = (float(tracks["GNSS"].east_m[0]), float(tracks["GNSS"].north_m[0]))
-        else:
-            start = (0.0, 0.0)
-        tracks["PDR"] = _pdr(walk, start, pdr_k, tracks.get("GNSS"), quality)
-    return WalkSources(site=site, tracks=tracks, truth=truth, gnss_features=feats, quality=quality,
+    """Every available position source of a walk directory, read once by :func:`pipeline.walk_data.read_walk`."""
+    data = read_walk(walk_dir, pdr_k=pdr_k)
+    tracks, feats, quality, acoustic_rows = {}, None, None, None
+    if data.gnss is not None:
+        pos = data.gnss.positions
+        tracks["GNSS"] = SourceTrack("GNSS", pos.t_s, pos.east_m, pos.north_m, {"nmea": data.gnss.nmea_summary})
+        feats, quality = data.gnss.features, pos.quality
+    if data.acoustic is not None:
+        ac = data.acoustic
+        tracks["acoustic"] = SourceTrack("acoustic", ac.t_s, ac.east_m, ac.north_m,
+                                         {"chirps": ac.analysis.n_detections, "fixes": len(ac.t_s)})
+        acoustic_rows = ac.feature_rows
+    if data.pdr is not None:
+        tracks["PDR"] = _pdr_track(data.pdr, tracks.get("GNSS"), quality, calibrate=pdr_k is None)
+    return WalkSources(site=data.site, tracks=tracks, truth=data.truth, gnss_features=feats, quality=quality,
                        acoustic_features=acoustic_rows)
 
 

@@ -20,7 +20,7 @@ from features.acoustic.detection import speed_of_sound_m_s
 from features.site import load_site
 from features.walk import load_walk
 from pipeline.cli import main
-from pipeline.commands.features_audio import timing_from_walk
+from features.acoustic.timing import timing_from_walk
 
 
 @pytest.fixture(scope="module")
@@ -42,7 +42,7 @@ def analysed(survey):
     site = load_site(survey / "site.toml")
     out = []
     for cell in _cells(survey):
-        timing = timing_from_walk(cell / "cell.toml", site, None)
+        timing = timing_from_walk(load_walk(cell / "cell.toml"), site)
         res = analyse_audio(cell / "audio.wav", site, timing, keep_frames=True)
         truth = {(int(r["beacon_id"]), round(float(r["emit_t_s"]), 6)): r
                  for r in csv.DictReader(open(cell / "audio_truth.csv"))}

@@ -217,6 +217,19 @@ def detect_frames(path: str | os.PathLike, site: Site, timing: AudioTiming,
                   positions: PositionConfig | None = None) -> Iterator[FrameResult]:
     """Stream ``path`` frame by frame: the chirps detected in each TDMA frame and its fix.
 
+    Per frame, in order (each step a method of :class:`_FrameDetector`):
+
+    1. *track* — the search windows of the frame's (frame, beacon) pairs from the
+       tracker (:class:`~features.acoustic.tracking.ClockPositionTracker`);
+    2. *detect* — noise scale per template, envelope maxima above the
+       Neyman–Pearson threshold (:meth:`_FrameDetector.detect`);
+    3. *acquire* — without a lock, candidate arrivals are voted into a position
+       and clock hypothesis (:func:`~features.acoustic.tracking.acquisition_windows`);
+    4. *assign* — one physical arrival per window (:meth:`_FrameDetector.assign_arrivals`);
+    5. *time* — first arrival of each chirp on its CIR (:meth:`_FrameDetector.time_arrivals`);
+    6. *solve* — the tracker's fix from the timed arrivals;
+    7. *features* — the nine CIR features, in batches of frames (:meth:`_FrameDetector.flush_features`).
+
     Memory is bounded by one audio block plus about two frames of history,
     whatever the file length. ``stats`` (optional) receives per-bin sample
     counts, clipping and energy for window flags. ``positions`` defaults to a
@@ -232,24 +245,105 @@ def detect_frames(path: str | os.PathLike, site: Site, timing: AudioTiming,
         stats.duration_s = n_total / fs
     if positions is None:
         positions = PositionConfig(max_clock_offset_s=timing.start_uncertainty_s + 0.05)
-    c = speed_of_sound_m_s(site.atmosphere.temperature_c)
-    r_max = config.max_range_m if config.max_range_m is not None else max_site_range_m(site)
+    det = _FrameDetector(path, site, timing, config, stats, positions, n_total)
+    yield from det.frames()
 
-    specs = [beacon_chirp_spec(site, b) for b in site.beacons]
-    unique = sorted(set(specs), key=lambda s: (s.f0_hz, s.f1_hz, s.duration_s))
-    template_of = [unique.index(s) for s in specs]
-    bandwidth = {b.id: s.bandwidth_hz for b, s in zip(site.beacons, specs)}
-    bank = MatchedFilterBank(unique, fs)
-    mf = StreamingMatchedFilter(bank)
-    dec = mf.decimation
-    lead = int(math.ceil(config.max_lead_s * fs))
-    span = int(math.ceil(config.cir_span_s * fs))
-    history = int(math.ceil(site.acoustic.frame_s * fs))
-    stream = _Stream(path, config, mf, stats)
-    tracker = ClockPositionTracker(site, timing, fs, c, r_max, positions)
 
-    def noise_scales(windows: list[SearchWindow]) -> np.ndarray:
+class _FrameDetector:
+    """State of one recording's detection: matched filter, envelope history, tracker, pending CIRs."""
+
+    def __init__(self, path, site: Site, timing: AudioTiming, config: DetectorConfig,
+                 stats: AudioStats | None, positions: PositionConfig, n_total: int):
+        fs = float(config.fs_hz)
+        self.site, self.timing, self.config, self.fs, self.n_total = site, timing, config, fs, n_total
+        self.c = speed_of_sound_m_s(site.atmosphere.temperature_c)
+        self.r_max = config.max_range_m if config.max_range_m is not None else max_site_range_m(site)
+        specs = [beacon_chirp_spec(site, b) for b in site.beacons]
+        unique = sorted(set(specs), key=lambda s: (s.f0_hz, s.f1_hz, s.duration_s))
+        self.template_of = [unique.index(s) for s in specs]
+        self.bandwidth = {b.id: s.bandwidth_hz for b, s in zip(site.beacons, specs)}
+        self.bank = bank = MatchedFilterBank(unique, fs)
+        mf = StreamingMatchedFilter(bank)
+        self.dec = dec = mf.decimation
+        self.lead = lead = int(math.ceil(config.max_lead_s * fs))
+        self.span = span = int(math.ceil(config.cir_span_s * fs))
+        self.history = int(math.ceil(site.acoustic.frame_s * fs))
+        self.stream = _Stream(path, config, mf, stats)
+        self.tracker = ClockPositionTracker(site, timing, fs, self.c, self.r_max, positions)
+        self.maxima: dict = {}       # template -> (decimated indices, heights), ascending lists, for the current frame
+        self.delay = bank.delay_samples
+        self.bandwidth_of = [self.bandwidth[b.id] for b in site.beacons]
+        self.beacon_ids = [b.id for b in site.beacons]
+        self.log_inv_p_fa = -math.log(config.p_fa)
+        self.cir_taps = (lead + 8 + span) // dec
+        self.toa_taps = (2 * lead + 9) // dec + 1   # the strongest tap is sought within ±max_lead_s of the located one
+        self.first_tap = (lead + 8) // dec          # where the located arrival lies in its CIR
+        self.lead_taps = int(math.ceil(config.max_lead_s / (dec / fs)))
+        self.tap_offsets = np.arange(self.cir_taps)
+        self.pending_cirs: list = []  # (frame list index, detection index, template, cir row, search start, noise power)
+        self.held: list = []          # frames waiting for their CIR features: [k, start, detections, fix, tracking]
+
+    # -- the frame loop ------------------------------------------------------------------------
+
+    def frames(self) -> Iterator[FrameResult]:
+        """Every TDMA frame that can hold a chirp of the recording, in order."""
+        site, timing, tracker, stream, fs = self.site, self.timing, self.tracker, self.stream, self.fs
+        frame_s = site.acoustic.frame_s
+        u = timing.start_uncertainty_s
+        end_s = timing.start_s + self.n_total / fs
+        k = math.floor((timing.start_s - u - min(self.r_max / self.c, frame_s) - timing.frame_phase_s) / frame_s)
+        while True:
+            frame_start = timing.frame_phase_s + k * frame_s
+            if frame_start - u > end_s:
+                yield from self.release()
+                return
+            detections, tracking = self.detect_frame(k, frame_start)
+            fix = tracker.frame_done(frame_start, detections, self.bandwidth)
+            earlier = tracker.take_confirmed_tentative()
+            held = self.held
+            if earlier is not None and held and held[-1][3] is None:
+                held[-1][3] = earlier          # the acquisition fix this frame confirmed
+            held.append([k, frame_start, detections, fix, tracking])
+            if len(held) >= _FEATURE_BATCH_FRAMES:
+                yield from self.release()
+            next_lo = int(math.floor((frame_start + frame_s - u - 0.05 - timing.start_s) * fs))
+            stream.trim(next_lo - self.history - self.lead - 64)
+            k += 1
+
+    def detect_frame(self, k: int, frame_start: float) -> tuple[list[ChirpDetection], bool]:
+        """Track, detect, acquire, assign and time the chirps of frame ``k``; and whether it was tracked."""
+        tracker = self.tracker
+        windows = [w for w in tracker.windows(frame_start) if w.hi >= 0 and w.lo < self.n_total]
+        tracking = tracker.tracking_at(frame_start)
+        if not windows:
+            return [], tracking
+        self.stream.ensure(max(w.hi for w in windows) + self.span + self.bank.kernel_len + self.dec)
+        sigmas = self.noise_scales(windows).tolist()
+        self.prepare_maxima(windows, sigmas)
+        if not tracking and tracker.skip_acquisition():
+            windows = [w._replace(associated=False) for w in windows]
+        elif not tracking:
+            windows = self.acquire(windows, sigmas)
+        found = self.assign_arrivals(windows, sigmas)
+        return (self.time_arrivals(found, sigmas, k, len(self.held)) if found else []), tracking
+
+    def acquire(self, windows: list[SearchWindow], sigmas: list) -> list[SearchWindow]:
+        """Without a lock: windows narrowed by a vote over candidate arrivals (see the tracker)."""
+        template_of = self.template_of
+        return acquisition_windows(windows, lambda w: self.candidates(w, sigmas[template_of[w.beacon_index]]),
+                                   self.tracker, self.timing, self.fs, self.lead)
+
+    def release(self) -> Iterator[FrameResult]:
+        """Compute the held frames' features and yield them."""
+        self.flush_features(self.held)
+        for k_, start_, dets_, fix_, tracking_ in self.held:
+            yield FrameResult(k_, start_, tuple(sorted(dets_, key=lambda d: d.tx_s)), fix_, tracking_)
+        self.held.clear()
+
+    # -- detect ---------------------------------------------------------------------------------
+    def noise_scales(self, windows: list[SearchWindow]) -> np.ndarray:
         """Rayleigh scale σ per template from the envelope of the frame before and under ``windows``."""
+        bank, dec, history, stream = self.bank, self.dec, self.history, self.stream
         j_hi = (max(w.hi for w in windows) + bank.delay_samples) // dec + 1
         j_lo = min((min(w.lo for w in windows) + bank.delay_samples) // dec, j_hi - history // dec)
         _, seg = stream.env_range(j_lo, j_hi)
@@ -260,19 +354,13 @@ def detect_frames(path: str | os.PathLike, site: Site, timing: AudioTiming,
         q25 = np.partition(sub, sub.shape[1] // 4, axis=1)[:, sub.shape[1] // 4]
         return q25.astype(float) / _RAYLEIGH_Q25
 
-    maxima: dict = {}            # template -> (decimated indices, heights), ascending lists, for the current frame
-    delay = bank.delay_samples
-    bandwidth_of = [bandwidth[b.id] for b in site.beacons]
-    beacon_ids = [b.id for b in site.beacons]
-    log_inv_p_fa = -math.log(config.p_fa)
-
-    def gamma_of(w: SearchWindow, sigma: float) -> float:
+    def gamma_of(self, w: SearchWindow, sigma: float) -> float:
         """Detection threshold γ of window ``w`` (see the module docstring)."""
-        n_cells = (w.hi - w.lo) / fs * bandwidth_of[w.beacon_index]
-        gamma = sigma * math.sqrt(2.0 * (math.log(n_cells if n_cells > 1.0 else 1.0) + log_inv_p_fa))
+        n_cells = (w.hi - w.lo) / self.fs * self.bandwidth_of[w.beacon_index]
+        gamma = sigma * math.sqrt(2.0 * (math.log(n_cells if n_cells > 1.0 else 1.0) + self.log_inv_p_fa))
         return gamma if gamma > 1e-9 else 1e-9
 
-    def prepare_maxima(windows: list[SearchWindow], sigmas: list) -> None:
+    def prepare_maxima(self, windows: list[SearchWindow], sigmas: list) -> None:
         """Envelope maxima of the whole frame, once per template, for :func:`peaks` to slice.
 
         Windows overlap, and a local maximum is one whatever window looks at it, so the
@@ -282,12 +370,14 @@ def detect_frames(path: str | os.PathLike, site: Site, timing: AudioTiming,
         one) applied once, instead of per window. Kept as Python lists: each window
         then takes its slice by bisection at no numpy call's cost.
         """
+        maxima, template_of, delay, dec, bank, gamma_of = (self.maxima, self.template_of, self.delay, self.dec,
+                                                            self.bank, self.gamma_of)
         maxima.clear()
         for t in {template_of[w.beacon_index] for w in windows}:
             mine = [w for w in windows if template_of[w.beacon_index] == t]
             j_lo = -(-(min(w.lo for w in mine) + delay) // dec)
             j_hi = (max(w.hi for w in mine) + delay) // dec + 1
-            j_first, seg = stream.env_range(j_lo, j_hi)
+            j_first, seg = self.stream.env_range(j_lo, j_hi)
             seg = seg[t]
             gamma = min(gamma_of(w, sigmas[t]) for w in mine)
             if len(seg) < 3:
@@ -310,15 +400,16 @@ def detect_frames(path: str | os.PathLike, site: Site, timing: AudioTiming,
                 idx, h = idx[keep], h[keep]
             maxima[t] = ((j_first + idx).tolist(), h.tolist())
 
-    def peaks(w: SearchWindow, sigma: float) -> tuple[list, list]:
+    def peaks(self, w: SearchWindow, sigma: float) -> tuple[list, list]:
         """Chirp-start indices (ascending) and heights of envelope maxima in ``w`` above its threshold γ.
 
         Sliced from the frame's maxima (:func:`prepare_maxima`).
         """
-        jj, hh = maxima[template_of[w.beacon_index]]
+        delay, dec = self.delay, self.dec
+        jj, hh = self.maxima[self.template_of[w.beacon_index]]
         a = bisect.bisect_left(jj, -(-(w.lo + delay) // dec))
         b = bisect.bisect_left(jj, (w.hi + delay) // dec + 1, a)
-        gamma = gamma_of(w, sigma)
+        gamma = self.gamma_of(w, sigma)
         starts, heights = [], []
         for j, h in zip(jj[a:b], hh[a:b]):
             if h > gamma:
@@ -326,7 +417,7 @@ def detect_frames(path: str | os.PathLike, site: Site, timing: AudioTiming,
                 heights.append(h)
         return starts, heights
 
-    def assign_arrivals(windows: list[SearchWindow], sigmas: np.ndarray) -> list[tuple[SearchWindow, int]]:
+    def assign_arrivals(self, windows: list[SearchWindow], sigmas: list) -> list[tuple[SearchWindow, int]]:
         """(window, chirp start) of the chirps located in a frame, one physical arrival per window.
 
         Windows overlap (slots are 0.1 s apart, an NLOS arrival may come late), so one arrival
@@ -336,6 +427,7 @@ def detect_frames(path: str | os.PathLike, site: Site, timing: AudioTiming,
         that loses it takes its next peak that is not the echo of a claimed one. Arrivals of different chirp templates
         (frequency-divided beacons) never collide.
         """
+        fs, template_of, peaks = self.fs, self.template_of, self.peaks
         gap, echo = 0.001 * fs, _ECHO_SPAN_S * fs
         claims: list[tuple[SearchWindow, int]] = []
         cands = {}
@@ -381,19 +473,12 @@ def detect_frames(path: str | os.PathLike, site: Site, timing: AudioTiming,
             pending = losers
         return claims
 
-    cir_taps = (lead + 8 + span) // dec
-    toa_taps = (2 * lead + 9) // dec + 1        # the strongest tap is sought within ±max_lead_s of the located one
-    first_tap = (lead + 8) // dec               # where the located arrival lies in its CIR
-    lead_taps = int(math.ceil(config.max_lead_s / (dec / fs)))
-    tap_offsets = np.arange(cir_taps)
-
-    pending_cirs: list = []      # (frame list index, detection index, template, cir row, search start, noise power)
-
-    def cir_rows(t: int, j_a: list) -> tuple[np.ndarray, list]:
+    def cir_rows(self, t: int, j_a: list) -> tuple[np.ndarray, list]:
         """Decimated envelope rows ``[j, j + cir_taps)`` of template ``t`` for each ``j`` of ``j_a``
         (zeros outside the stream's history), and the first tap of each that the stream holds."""
+        stream, cir_taps = self.stream, self.cir_taps
         if min(j_a) >= stream.env_j0 and max(j_a) + cir_taps <= stream.env_j0 + stream.env.shape[1]:
-            return stream.env[t][(np.array(j_a) - stream.env_j0)[:, None] + tap_offsets], j_a
+            return stream.env[t][(np.array(j_a) - stream.env_j0)[:, None] + self.tap_offsets], j_a
         cirs = np.zeros((len(j_a), cir_taps), dtype=np.float32)
         got = []
         for r, j in enumerate(j_a):
@@ -402,7 +487,8 @@ def detect_frames(path: str | os.PathLike, site: Site, timing: AudioTiming,
             got.append(j_got)
         return cirs, got
 
-    def analyse(found: list[tuple[SearchWindow, int]], sigmas: np.ndarray, frame: int, slot: int) -> list[ChirpDetection]:
+    def time_arrivals(self, found: list[tuple[SearchWindow, int]], sigmas: list, frame: int,
+                      slot: int) -> list[ChirpDetection]:
         """Arrival times of all chirps located in a frame, batched per template; CIRs queued for features.
 
         Each chirp's CIR is the decimated envelope from ``max_lead_s`` before the
@@ -412,42 +498,45 @@ def detect_frames(path: str | os.PathLike, site: Site, timing: AudioTiming,
         ``decimation`` samples, and on simulated walks this timing agrees with a
         full-rate envelope to a median 0.03 samples, p95 0.3), because tracking
         needs it for the next frame; the nine features come later, for many
-        frames in one batch (:func:`flush_features`), from the same rows.
+        frames in one batch (:meth:`flush_features`), from the same rows.
         """
+        bank, dec, delay, lead, fs = self.bank, self.dec, self.delay, self.lead, self.fs
+        template_of, first_tap, toa_taps, beacon_ids = self.template_of, self.first_tap, self.toa_taps, self.beacon_ids
         out = []
         for t in range(bank.n_templates):
             group = found if bank.n_templates == 1 else [(w, sp) for w, sp in found if template_of[w.beacon_index] == t]
             if not group:
                 continue
             j_a = [-(-(sp - lead - 8 + delay) // dec) for _, sp in group]
-            cirs, j_got = cir_rows(t, j_a)
+            cirs, j_got = self.cir_rows(t, j_a)
             cir_lo = [min(max(-(-(w.lo + delay) // dec), g) - j, first_tap) for (w, _), g, j in zip(group, j_got, j_a)]
             noise_power = 2.0 * sigmas[t] ** 2   # Rayleigh envelope of scale σ: E[env²] = 2σ²
             # One tap beyond the search range, for the parabola of an arrival at its last tap (as the features see it).
-            toa = first_arrivals(cirs[:, :toa_taps + 1].tolist(), cir_lo, toa_taps, lead_taps, noise_power)
+            toa = first_arrivals(cirs[:, :toa_taps + 1].tolist(), cir_lo, toa_taps, self.lead_taps, noise_power)
             for (w, _), found_r, j, row, lo in zip(group, toa, j_a, cirs, cir_lo):
                 if found_r is not None:
-                    pending_cirs.append((slot, len(out), t, row, lo, noise_power))
+                    self.pending_cirs.append((slot, len(out), t, row, lo, noise_power))
                     out.append(ChirpDetection(frame, beacon_ids[w.beacon_index], w.tx_s,
-                                              timing.start_s + (dec * (j + found_r[0]) - delay) / fs, found_r[1],
+                                              self.timing.start_s + (dec * (j + found_r[0]) - delay) / fs, found_r[1],
                                               _NO_FEATURES, w.associated))
         return out
 
-    def flush_features(frames: list[list]) -> None:
+    def flush_features(self, frames: list[list]) -> None:
         """Compute the queued CIR features in one batch per template and put them into ``frames``."""
+        pending_cirs, bank, dec, fs, config = self.pending_cirs, self.bank, self.dec, self.fs, self.config
         for t in sorted({q[2] for q in pending_cirs}):
             rows = pending_cirs if bank.n_templates == 1 else [q for q in pending_cirs if q[2] == t]
             feats = analyse_cirs(np.array([q[3] for q in rows]), dec / fs,
                                  noise_power=np.array([q[5] for q in rows]), max_lead_s=config.max_lead_s,
                                  pulse_width_s=float(bank.mainlobe_s[t]), search_start=np.array([q[4] for q in rows]),
-                                 search_stop=toa_taps)
+                                 search_stop=self.toa_taps)
             for (slot, i, _, _, _, _), f in zip(rows, feats.features.tolist()):
                 dets = frames[slot][2]
                 d = dets[i]
                 dets[i] = ChirpDetection(*d[:5], CirFeatures(*f), d[6])
         pending_cirs.clear()
 
-    def candidates(w: SearchWindow, sigma: float, max_candidates: int = 12) -> list[float]:
+    def candidates(self, w: SearchWindow, sigma: float, max_candidates: int = 12) -> list[float]:
         """Stated arrival times of candidate first arrivals in ``w`` (acquisition).
 
         Maxima within ``_ECHO_SPAN_S`` after a stronger one are taken for its echoes
@@ -455,7 +544,8 @@ def detect_frames(path: str | os.PathLike, site: Site, timing: AudioTiming,
         time, are not crowded out by the echoes of near ones; of the rest, the
         strongest ``max_candidates``.
         """
-        starts, heights = peaks(w, sigma)
+        fs = self.fs
+        starts, heights = self.peaks(w, sigma)
         if not starts:
             return []
         starts, heights = np.array(starts), np.array(heights)
@@ -463,48 +553,4 @@ def detect_frames(path: str | os.PathLike, site: Site, timing: AudioTiming,
         shadowed = np.any((lag > 0) & (lag <= _ECHO_SPAN_S * fs) & (heights[:, None] > heights[None, :]), axis=0)
         keep = np.flatnonzero(~shadowed)
         keep = keep[np.argsort(heights[keep])[::-1][:max_candidates]]
-        return [timing.start_s + float(x) / fs for x in starts[keep]]
-
-    held: list = []              # frames waiting for their CIR features: [k, start, detections, fix, tracking]
-
-    def release():
-        flush_features(held)
-        for k_, start_, dets_, fix_, tracking_ in held:
-            yield FrameResult(k_, start_, tuple(sorted(dets_, key=lambda d: d.tx_s)), fix_, tracking_)
-        held.clear()
-
-    frame_s = site.acoustic.frame_s
-    u = timing.start_uncertainty_s
-    end_s = timing.start_s + n_total / fs
-    k = math.floor((timing.start_s - u - min(r_max / c, frame_s) - timing.frame_phase_s) / frame_s)
-    while True:
-        frame_start = timing.frame_phase_s + k * frame_s
-        if frame_start - u > end_s:
-            yield from release()
-            return
-        windows = [w for w in tracker.windows(frame_start) if w.hi >= 0 and w.lo < n_total]
-        tracking = tracker.tracking_at(frame_start)
-        detections = []
-        if windows:
-            stream.ensure(max(w.hi for w in windows) + span + bank.kernel_len + dec)
-            sigmas = noise_scales(windows).tolist()
-            prepare_maxima(windows, sigmas)
-            if not tracking and tracker.skip_acquisition():
-                windows = [w._replace(associated=False) for w in windows]
-            elif not tracking:
-                windows = acquisition_windows(
-                    windows, lambda w: candidates(w, sigmas[template_of[w.beacon_index]]), tracker, timing, fs, lead)
-            found = assign_arrivals(windows, sigmas)
-            if found:
-                detections = analyse(found, sigmas, k, len(held))
-        fix = tracker.frame_done(frame_start, detections, bandwidth)
-        earlier = tracker.take_confirmed_tentative()
-        if earlier is not None and held and held[-1][3] is None:
-            held[-1][3] = earlier          # the acquisition fix this frame confirmed
-        held.append([k, frame_start, detections, fix, tracking])
-        if len(held) >= _FEATURE_BATCH_FRAMES:
-            yield from release()
-        next_lo = int(math.floor((frame_start + frame_s - u - 0.05 - timing.start_s) * fs))
-        stream.trim(next_lo - history - lead - 64)
-        k += 1
-
+        return [self.timing.start_s + float(x) / fs for x in starts[keep]]

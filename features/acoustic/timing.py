@@ -14,15 +14,22 @@ time of its first audio sample (``start_s``) only to within
 from __future__ import annotations
 
 import math
+import os
+import warnings
 from dataclasses import dataclass
 from typing import NamedTuple
 from datetime import datetime, timezone
+from pathlib import Path
 
+from features.acoustic.audio import AudioWarning
 from features.acoustic.cir import CirFeatures
 from features.constants import SPEED_OF_SOUND_0C_M_S
 from features.errors import ConfigError
+from features.site import Site
+from features.walk import WalkInfo
 
-__all__ = ["speed_of_sound_m_s", "frame_phase_s", "AudioTiming", "ChirpDetection", "SearchWindow"]
+__all__ = ["speed_of_sound_m_s", "frame_phase_s", "AudioTiming", "ChirpDetection", "SearchWindow", "timing_from_walk",
+           "MAX_START_UNCERTAINTY_S"]
 
 _EPOCH = datetime(1970, 1, 1, tzinfo=timezone.utc)
 
@@ -111,3 +118,45 @@ class SearchWindow(NamedTuple):
     associated: bool = True
     expected: int | None = None
 
+
+MAX_START_UNCERTAINTY_S = 2.0
+"""Largest stated audio-start uncertainty accepted, s: beyond a frame or two the TDMA schedule
+cannot place chirps in their slots, and the acquisition search grows with it."""
+
+
+def timing_from_walk(walk: WalkInfo | None, site: Site, uncertainty_override: float | None = None,
+                     where: str | os.PathLike | None = None) -> AudioTiming:
+    """The audio time base of a walk or survey cell: its ``[audio]`` table's ``start_s`` and
+    ``start_uncertainty_s``, and the frame phase of its ``start_utc`` (see the module docstring).
+
+    Without a walk (a bare WAV), the documented defaults: the first sample at t = 0 on a frame
+    boundary, uncertainty 0.05 s. ``uncertainty_override`` replaces the stated uncertainty;
+    ``where`` names the metadata file in messages (default: the walk's walk.toml / cell.toml).
+    Warns (:class:`~features.acoustic.audio.AudioWarning`) when ``[audio] fs_hz`` is not 48 kHz.
+    """
+    if walk is None:
+        u = 0.05 if uncertainty_override is None else uncertainty_override
+        return AudioTiming(start_s=0.0, start_uncertainty_s=u, frame_phase_s=0.0)
+    table = walk.streams.get("audio", {})
+    start_s = table.get("start_s", 0.0)
+    u = table.get("start_uncertainty_s", 0.05)
+    if where is None or not Path(where).is_file():
+        where = walk.directory / ("walk.toml" if (walk.directory / "walk.toml").is_file() else "cell.toml")
+    for name, value in (("start_s", start_s), ("start_uncertainty_s", u)):
+        if not isinstance(value, (int, float)) or isinstance(value, bool) or not math.isfinite(value):
+            raise ConfigError(f"{where}: [audio] {name} must be a finite number, got {value!r}")
+    limit = (walk.duration_s or 0.0) + 3600.0
+    if abs(start_s) > limit:
+        raise ConfigError(f"{where}: [audio] start_s {start_s} lies more than an hour outside the walk")
+    if not 0 <= u <= MAX_START_UNCERTAINTY_S:
+        raise ConfigError(f"{where}: [audio] start_uncertainty_s must lie in [0, {MAX_START_UNCERTAINTY_S:g}] s, "
+                          f"got {u}")
+    fs = table.get("fs_hz")
+    if fs is not None and (not isinstance(fs, (int, float)) or isinstance(fs, bool) or not fs > 0):
+        raise ConfigError(f"{where}: [audio] fs_hz must be a positive number, got {fs!r}")
+    if fs is not None and fs != 48_000:
+        warnings.warn(f"[audio] fs_hz is {fs}; the file's own header rate is used", AudioWarning, stacklevel=2)
+    if uncertainty_override is not None:
+        u = uncertainty_override
+    return AudioTiming(start_s=float(start_s), start_uncertainty_s=float(u),
+                       frame_phase_s=frame_phase_s(walk.start_utc, site.acoustic.frame_s))

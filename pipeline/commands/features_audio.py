@@ -60,11 +60,6 @@ def _csv(rows: list[dict], names) -> str:
     return buf.getvalue()
 
 
-MAX_START_UNCERTAINTY_S = 2.0
-"""Largest stated audio-start uncertainty accepted, s: beyond a frame or two the TDMA schedule
-cannot place chirps in their slots, and the acquisition search grows with it."""
-
-
 def _check_audio(wav: Path, site) -> None:
     """Refuse audio that cannot hold a beacon chirp at all: no samples, or a Nyquist below every band."""
     from features.acoustic.audio import audio_info
@@ -79,39 +74,12 @@ def _check_audio(wav: Path, site) -> None:
                          f"the beacon band starting at {lowest:.0f} Hz")
 
 
-def timing_from_walk(walk_path: Path | None, site, uncertainty_override: float | None):
-    """:class:`AudioTiming` from a walk.toml / cell.toml (or the documented defaults without one)."""
-    from features.acoustic.detection import AudioTiming, frame_phase_s
+def _print_warnings(caught) -> None:
+    from features.acoustic.audio import AudioWarning
 
-    if walk_path is None:
-        u = 0.05 if uncertainty_override is None else uncertainty_override
-        return AudioTiming(start_s=0.0, start_uncertainty_s=u, frame_phase_s=0.0)
-    from features.walk import load_walk
-
-    walk = load_walk(walk_path)
-    table = walk.streams.get("audio", {})
-    start_s = table.get("start_s", 0.0)
-    u = table.get("start_uncertainty_s", 0.05)
-    where = Path(walk_path) if Path(walk_path).is_file() else walk.directory / (
-        "walk.toml" if (walk.directory / "walk.toml").is_file() else "cell.toml")
-    for name, value in (("start_s", start_s), ("start_uncertainty_s", u)):
-        if not isinstance(value, (int, float)) or isinstance(value, bool) or not math.isfinite(value):
-            raise ConfigError(f"{where}: [audio] {name} must be a finite number, got {value!r}")
-    limit = (walk.duration_s or 0.0) + 3600.0
-    if abs(start_s) > limit:
-        raise ConfigError(f"{where}: [audio] start_s {start_s} lies more than an hour outside the walk")
-    if not 0 <= u <= MAX_START_UNCERTAINTY_S:
-        raise ConfigError(f"{where}: [audio] start_uncertainty_s must lie in [0, {MAX_START_UNCERTAINTY_S:g}] s, "
-                          f"got {u}")
-    fs = table.get("fs_hz")
-    if fs is not None and (not isinstance(fs, (int, float)) or isinstance(fs, bool) or not fs > 0):
-        raise ConfigError(f"{where}: [audio] fs_hz must be a positive number, got {fs!r}")
-    if fs is not None and fs != 48_000:
-        print(f"envfuse: warning: [audio] fs_hz is {fs}; the file's own header rate is used", file=sys.stderr)
-    if uncertainty_override is not None:
-        u = uncertainty_override
-    return AudioTiming(start_s=float(start_s), start_uncertainty_s=float(u),
-                       frame_phase_s=frame_phase_s(walk.start_utc, site.acoustic.frame_s))
+    for w in caught:
+        if issubclass(w.category, AudioWarning):
+            print(f"envfuse: warning: {w.message}", file=sys.stderr)
 
 
 def _run(args) -> int:
@@ -120,13 +88,14 @@ def _run(args) -> int:
     from features.acoustic.audio import AudioWarning
     from features.acoustic.detection import DetectorConfig
     from features.fileio import atomic_write_many
+    from features.acoustic.timing import timing_from_walk
     from features.site import load_site
+    from features.walk import load_walk
 
     if args.walk is None:
         beside = [args.wav.parent / n for n in ("walk.toml", "cell.toml") if (args.wav.parent / n).is_file()]
         args.walk = beside[0] if beside else None
     if args.site is None:
-        from features.walk import load_walk
         if args.walk is None:
             raise ConfigError("--site is needed (no walk.toml/cell.toml beside the WAV names one)")
         site = load_walk(args.walk).load_site()
@@ -134,8 +103,12 @@ def _run(args) -> int:
         site = load_site(args.site)
     if not site.beacons:
         raise ConfigError(f"{args.site or args.walk}: the site lists no [[beacons]]")
-    timing = timing_from_walk(args.walk, site, args.start_uncertainty_s)
     _check_audio(args.wav, site)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", AudioWarning)
+        timing = timing_from_walk(None if args.walk is None else load_walk(args.walk), site,
+                                  args.start_uncertainty_s, where=args.walk)
+    _print_warnings(caught)
     if not 0 < args.p_fa < 1:
         raise ConfigError(f"--p-fa must lie in (0, 1), got {args.p_fa}")
     detector = DetectorConfig(p_fa=args.p_fa, max_range_m=args.max_range_m)
@@ -148,9 +121,7 @@ def _run(args) -> int:
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", AudioWarning)
         result = analyse_audio(args.wav, site, timing, detector, windows, positions)
-    for w in caught:
-        if issubclass(w.category, AudioWarning):
-            print(f"envfuse: warning: {w.message}", file=sys.stderr)
+    _print_warnings(caught)
     outputs = {args.out: _csv(result.rows, FEATURE_COLUMNS)}
     if args.positions is not None:
         outputs[args.positions] = _csv([f.as_row() for f in result.fixes], POSITION_COLUMNS)

@@ -1,0 +1,166 @@
+"""The spine: read a walk directory once, every source on the walk's time base.
+
+:func:`read_walk` is what ``envfuse report walk``, the demo and the coming
+``run`` and ``evaluate`` commands stand on. It reads only the walk's files (as
+for a real device's log) and returns, per source:
+
+- GNSS: the NMEA fixes in the site's ENU frame with their per-axis σ, fix
+  quality and HDOP, and the five GNSS feature windows;
+- acoustic: the beacon fixes with their (east, north, clock) covariance and the
+  nine CIR feature windows, on the audio time base stated in ``walk.toml``
+  (:func:`features.acoustic.timing.timing_from_walk`);
+- PDR: the detected steps (time, length, heading) and the dead-reckoned track;
+- truth, when ``truth.csv`` is present (evaluation only: nothing above reads it
+  except the PDR start, see :func:`read_walk`).
+
+A stream the walk does not have is ``None``.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from features.acoustic.features import AudioAnalysis, analyse_audio
+from features.acoustic.positions import PositionConfig
+from features.acoustic.timing import AudioTiming, timing_from_walk
+from features.gnss.features import gnss_features, sky_arrays
+from features.gnss.nmea import epochs_on_time_base, read_nmea
+from features.gnss.positions import GnssPositions, fixes_to_enu
+from features.imu.heading import HeadingConfig
+from features.imu.pdr import PdrConfig, PdrResult, run_pdr
+from features.imu.reader import read_imu_csv
+from features.imu.steps import StepLengthModel
+from features.site import Site
+from features.walk import Truth, WalkInfo, load_walk, read_truth
+
+__all__ = ["GnssStream", "AcousticStream", "PdrStream", "WalkData", "read_walk", "WALK_SPEED_PRIOR_M_S", "walk_has"]
+
+WALK_SPEED_PRIOR_M_S = 1.4
+"""Walking-speed prior of the acoustic solver on a walk, m/s (a survey cell is static: 0)."""
+
+
+@dataclass(frozen=True)
+class GnssStream:
+    """GNSS of a walk: ``positions`` (fixes with σ, quality, HDOP; arrays of shape (n_fixes,)),
+    ``features`` (the five feature windows, dict of arrays of shape (n_windows,)), and the
+    NMEA reader's summary."""
+
+    positions: GnssPositions
+    features: dict
+    nmea_summary: dict
+
+
+@dataclass(frozen=True)
+class AcousticStream:
+    """Acoustic positions of a walk.
+
+    ``t_s``, ``east_m``, ``north_m`` : ndarray of shape (n_fixes,);
+    ``covariance_en_m2`` : ndarray of shape (n_fixes, 2, 2), the fixes' horizontal covariance;
+    ``analysis`` : the receiver's full output (feature rows, fixes with clock offsets, counts);
+    ``timing`` : the audio time base used.
+    """
+
+    t_s: np.ndarray
+    east_m: np.ndarray
+    north_m: np.ndarray
+    covariance_en_m2: np.ndarray
+    analysis: AudioAnalysis
+    timing: AudioTiming
+
+    @property
+    def feature_rows(self) -> list:
+        """The nine CIR features per window (dicts keyed by FEATURE_COLUMNS)."""
+        return self.analysis.rows
+
+
+@dataclass(frozen=True)
+class PdrStream:
+    """PDR of a walk: ``result`` holds the steps (``t_s``, ``step_length_m``, ``heading_rad``) and
+    the track dead-reckoned from ``start_en_m``; ``config`` the settings used."""
+
+    result: PdrResult
+    config: PdrConfig
+    start_en_m: tuple[float, float]
+
+
+@dataclass(frozen=True)
+class WalkData:
+    """Every source of one walk; a stream the walk lacks is ``None``."""
+
+    walk: WalkInfo
+    site: Site
+    gnss: GnssStream | None
+    acoustic: AcousticStream | None
+    pdr: PdrStream | None
+    truth: Truth | None
+
+
+def read_walk(walk_dir: str | os.PathLike, *, site: Site | None = None, pdr_k: float | None = None,
+              audio_positions: PositionConfig | None = None) -> WalkData:
+    """Read a walk directory once: GNSS, acoustic and PDR streams and the truth when present.
+
+    ``site`` overrides the site named in ``walk.toml``; ``pdr_k`` the step-length
+    constant (Weinberg K; default the model's); ``audio_positions`` the acoustic
+    solver's settings (default: clock bound = stated start uncertainty + 50 ms,
+    walking-speed prior :data:`WALK_SPEED_PRIOR_M_S`).
+
+    The PDR track starts at the first truth position when ``truth.csv`` exists,
+    else at the first GNSS fix, else at the origin.
+    """
+    walk = load_walk(walk_dir)
+    site = walk.load_site() if site is None else site
+    truth = read_truth(walk.directory) if (walk.directory / "truth.csv").is_file() else None
+    gnss = _read_gnss(walk, site) if walk.path("gnss") is not None else None
+    acoustic = None
+    if walk.path("audio") is not None and site.beacons:
+        acoustic = _read_acoustic(walk, site, audio_positions)
+    pdr = None
+    if walk.path("imu") is not None:
+        if truth is not None:
+            start = (float(truth.east_m[0]), float(truth.north_m[0]))
+        elif gnss is not None and len(gnss.positions):
+            start = (float(gnss.positions.east_m[0]), float(gnss.positions.north_m[0]))
+        else:
+            start = (0.0, 0.0)
+        pdr = _read_pdr(walk, start, pdr_k)
+    return WalkData(walk=walk, site=site, gnss=gnss, acoustic=acoustic, pdr=pdr, truth=truth)
+
+
+def _read_gnss(walk: WalkInfo, site: Site) -> GnssStream:
+    epochs, stats = read_nmea(walk.path("gnss"))
+    epochs = epochs_on_time_base(epochs, walk.start_utc)
+    o = site.origin
+    positions = fixes_to_enu(epochs, o.lat_deg, o.lon_deg, o.alt_m)
+    return GnssStream(positions=positions, features=gnss_features(sky_arrays(epochs)), nmea_summary=stats.summary())
+
+
+def _read_acoustic(walk: WalkInfo, site: Site, positions: PositionConfig | None) -> AcousticStream:
+    timing = timing_from_walk(walk, site)
+    if positions is None:
+        positions = PositionConfig(max_clock_offset_s=timing.start_uncertainty_s + 0.05,
+                                   motion_speed_m_s=WALK_SPEED_PRIOR_M_S)
+    res = analyse_audio(walk.path("audio"), site, timing, positions=positions)
+    arr = np.array([[f.t_s, f.east_m, f.north_m] for f in res.fixes]).reshape(-1, 3)
+    cov = np.array([f.covariance[:2, :2] for f in res.fixes]).reshape(-1, 2, 2)
+    return AcousticStream(t_s=arr[:, 0], east_m=arr[:, 1], north_m=arr[:, 2], covariance_en_m2=cov,
+                          analysis=res, timing=timing)
+
+
+def _read_pdr(walk: WalkInfo, start_en: tuple[float, float], k: float | None) -> PdrStream:
+    imu = read_imu_csv(walk.path("imu"))
+    decl = float(walk.streams["imu"].get("declination_deg", 0.0))
+    heading = HeadingConfig(declination_rad=np.radians(decl))
+    cfg = PdrConfig(heading=heading) if k is None else PdrConfig(length=StepLengthModel(k=k), heading=heading)
+    return PdrStream(result=run_pdr(imu, start_en[0], start_en[1], cfg), config=cfg, start_en_m=start_en)
+
+
+def walk_has(walk_dir: str | os.PathLike) -> dict:
+    """Which streams a walk directory holds, without reading them: {'gnss': bool, 'audio': ..., 'imu': ...,
+    'truth': ...}."""
+    walk = load_walk(walk_dir)
+    return {s: walk.path(s) is not None for s in ("gnss", "audio", "imu")} | {
+        "truth": (Path(walk.directory) / "truth.csv").is_file()}
