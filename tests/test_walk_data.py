@@ -1,0 +1,46 @@
+"""The spine (pipeline.walk_data.read_walk): one read of a walk, every source on its time base."""
+
+import shutil
+
+import numpy as np
+import pytest
+
+from features.acoustic.timing import timing_from_walk
+from features.walk import load_walk
+from pipeline.walk_data import read_walk, walk_has
+
+
+@pytest.fixture(scope="module")
+def data(walk_dir):
+    return read_walk(walk_dir)
+
+
+def test_every_stream_is_read_with_its_uncertainty(data):
+    g, a, p = data.gnss, data.acoustic, data.pdr
+    n = len(g.positions)
+    assert n > 200                                             # 60 s at 5 Hz, most epochs with a fix
+    assert g.positions.sigma_en_m.shape == (n,) and np.all(g.positions.sigma_en_m > 0)
+    assert set(g.features) >= {"t_s", "att_mean_db", "att_std_db", "fluct_per_s", "invisible_ratio", "dop_growth"}
+    m = len(a.t_s)
+    assert m >= 5 and a.covariance_en_m2.shape == (m, 2, 2)
+    cov = a.covariance_en_m2
+    assert np.allclose(cov, np.transpose(cov, (0, 2, 1)))       # symmetric
+    assert np.all(np.linalg.eigvalsh(cov) > 0)                 # positive definite
+    assert len(a.feature_rows) > 50                            # one row per 1 s hop
+    assert len(p.result) > 50 and np.all(np.diff(p.result.t_s) > 0)
+
+
+def test_sources_share_the_walk_time_base(data):
+    t_end = data.truth.t_s[-1]
+    for t in (data.gnss.positions.t_s, data.acoustic.t_s, data.pdr.result.t_s):
+        assert -0.5 <= t[0] and t[-1] <= t_end + 1.0
+    assert data.acoustic.timing == timing_from_walk(load_walk(data.walk.directory), data.site)
+
+
+def test_a_missing_stream_is_none(walk_dir, tmp_path):
+    d = tmp_path / "w"
+    shutil.copytree(walk_dir, d)
+    (d / "audio.wav").unlink()
+    assert walk_has(d) == {"gnss": True, "audio": False, "imu": True, "truth": True}
+    partial = read_walk(d)
+    assert partial.acoustic is None and partial.gnss is not None and partial.pdr is not None
