@@ -1,0 +1,332 @@
+"""Online environment classifier: a window's 14 features → class probabilities, occlusion, OOD flag.
+
+t-SNE cannot place new points, so the classes the embedding + density-peak
+clustering found (or map labels, in the supervised mode) are learnt by a
+classifier in the standardised 14-D feature space, which then classifies
+every new window.
+
+Model. Multinomial logistic regression (softmax of a linear score; Bishop,
+*Pattern Recognition and Machine Learning*, 2006, §4.3.4) on standardised
+features, optionally with their pairwise products (``degree=2``: a quadratic
+decision boundary, as quadratic discriminant analysis has, with the
+regularisation of a linear model). Chosen over forests because prediction is
+one small matrix product (millions of windows per second) and the learnt
+state is a few arrays that are saved without pickle.
+
+Missing modality. A window without GNSS (no satellites in view) or without a
+beacon chirp has those five or nine features missing (NaN). Imputation would
+invent the very statistics that tell the classes apart, so one sub-model is
+fitted per available set — both, GNSS only, acoustic only — on the training
+windows that have it, and each window is answered by the sub-model of what
+it has. A window with neither gets the training class frequencies and the
+OOD flag.
+
+Out of distribution (OOD). The distance of a window to its k-th nearest
+training window of the same sub-model (standardised space, KD-tree) is
+compared with the same distance over the training windows themselves
+(leave-one-out); beyond the ``ood_quantile`` of those, the window is flagged
+rather than forced into a class (a k-NN density test; Breunig et al. 2000 use
+the same k-distance for local outlier factors).
+
+Continuous occlusion. Where training windows carry the blocked-sky share, a
+ridge regression on the same inputs estimates it (clipped to [0, 1]); the
+fusion filter can use it as a soft input beside the class.
+
+Cells. :func:`combine_windows` gives a cell the class of its windows'
+combined probabilities (the product of window likelihoods, i.e. the sum of
+log-probabilities, renormalised).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial import cKDTree
+from sklearn.linear_model import LogisticRegression, Ridge
+
+from features.schema import ENV_CLASSES, FEATURES, modality_columns
+
+__all__ = ["EnvironmentClassifier", "combine_windows", "availability", "SUBMODELS"]
+
+SUBMODELS = ("both", "gnss", "acoustic")
+"""Sub-model names, by the modalities a window has."""
+
+_COLUMNS = {"both": tuple(range(len(FEATURES))), "gnss": modality_columns("gnss"),
+            "acoustic": modality_columns("acoustic")}
+
+
+def _expand(z: np.ndarray, degree: int) -> np.ndarray:
+    """Standardised inputs, and with ``degree=2`` their pairwise products (i ≤ j) appended."""
+    if degree == 1:
+        return z
+    i, j = np.triu_indices(z.shape[1])
+    return np.hstack([z, z[:, i] * z[:, j]])
+
+
+def availability(X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(gnss_available, acoustic_available) per row: every feature of the modality finite."""
+    X = np.asarray(X, float)
+    return (np.isfinite(X[:, list(_COLUMNS["gnss"])]).all(axis=1),
+            np.isfinite(X[:, list(_COLUMNS["acoustic"])]).all(axis=1))
+
+
+class EnvironmentClassifier:
+    """Classify feature windows into environment classes, with sub-models per available modality.
+
+    Parameters
+    ----------
+    C : float
+        Inverse L2 regularisation strength of the logistic regressions (scikit-learn's ``C``).
+    degree : {1, 2}
+        1: linear in the standardised features; 2: with pairwise products too.
+    ood_k : int
+        Neighbour rank of the OOD distance.
+    ood_quantile : float
+        Quantile of the training windows' own k-distances beyond which a window is OOD.
+    min_samples : int
+        A sub-model is fitted only with at least this many training windows (and two classes).
+    class_names : tuple of str
+        Names of the class codes 0..n-1 (default open, light, heavy).
+
+    Attributes
+    ----------
+    classes_ : ndarray of shape (n_classes,)
+        Class codes seen in training.
+    prior_ : ndarray of shape (n_classes,)
+        Training class frequencies.
+    submodels_ : dict
+        Per sub-model name: ``mean``, ``scale``, ``coef``, ``intercept``, ``train_z`` (standardised
+        training points, for the OOD test), ``ood_threshold``, and ``share_coef``/``share_intercept``
+        when shares were given.
+    """
+
+    def __init__(self, *, C: float = 1.0, degree: int = 2, ood_k: int = 10, ood_quantile: float = 0.995,
+                 min_samples: int = 30, class_names: tuple = ENV_CLASSES):
+        self.C = C
+        self.degree = degree
+        self.ood_k = ood_k
+        self.ood_quantile = ood_quantile
+        self.min_samples = min_samples
+        self.class_names = class_names
+
+    # -- fitting ---------------------------------------------------------------------------------
+
+    def _validate(self) -> None:
+        if not (isinstance(self.C, (int, float)) and self.C > 0):
+            raise ValueError(f"C must be a positive number, got {self.C!r}")
+        if self.degree not in (1, 2):
+            raise ValueError(f"degree must be 1 or 2, got {self.degree!r}")
+        if not (isinstance(self.ood_k, int) and self.ood_k >= 1):
+            raise ValueError(f"ood_k must be a positive integer, got {self.ood_k!r}")
+        if not 0.5 <= self.ood_quantile < 1:
+            raise ValueError(f"ood_quantile must lie in [0.5, 1), got {self.ood_quantile!r}")
+        if not (isinstance(self.min_samples, int) and self.min_samples >= 2):
+            raise ValueError(f"min_samples must be an integer >= 2, got {self.min_samples!r}")
+
+    def fit(self, X, y, share=None) -> "EnvironmentClassifier":
+        """Fit every sub-model the data allow.
+
+        Parameters
+        ----------
+        X : array-like of shape (n_windows, 14)
+            Features in :data:`features.schema.FEATURES` order; NaN where a modality is missing.
+        y : array-like of shape (n_windows,)
+            Class codes (ints into ``class_names``) or class names.
+        share : array-like of shape (n_windows,), optional
+            Blocked-sky share per window in [0, 1], for the continuous estimate.
+        """
+        self._validate()
+        X = np.asarray(X, float)
+        if X.ndim != 2 or X.shape[1] != len(FEATURES):
+            raise ValueError(f"X must have shape (n_windows, {len(FEATURES)}), got {X.shape}")
+        y = self._codes(y)
+        if len(y) != len(X):
+            raise ValueError(f"X has {len(X)} rows but y has {len(y)}")
+        if share is not None:
+            share = np.asarray(share, float)
+            if share.shape != (len(X),):
+                raise ValueError(f"share must have shape ({len(X)},), got {share.shape}")
+        self.n_classes_ = len(self.class_names)
+        self.classes_ = np.unique(y)
+        self.prior_ = np.bincount(y, minlength=self.n_classes_) / len(y)
+        g, a = availability(X)
+        masks = {"both": g & a, "gnss": g, "acoustic": a}
+        self.submodels_ = {}
+        for name in SUBMODELS:
+            rows = masks[name]
+            if rows.sum() >= self.min_samples and len(np.unique(y[rows])) >= 2:
+                self.submodels_[name] = self._fit_one(X[rows][:, list(_COLUMNS[name])], y[rows],
+                                                      None if share is None else share[rows])
+        if not self.submodels_:
+            raise ValueError(f"no sub-model could be fitted: need at least {self.min_samples} windows with "
+                             "finite GNSS or acoustic features and two classes among them")
+        return self
+
+    def _codes(self, y) -> np.ndarray:
+        y = np.asarray(y)
+        if y.dtype.kind in "USO":
+            try:
+                return np.array([self.class_names.index(str(v)) for v in y], int)
+            except ValueError:
+                bad = sorted({str(v) for v in y} - set(self.class_names))
+                raise ValueError(f"unknown class names {bad}; expected {self.class_names}") from None
+        y = y.astype(int)
+        if y.size and (y.min() < 0 or y.max() >= len(self.class_names)):
+            raise ValueError(f"class codes must lie in [0, {len(self.class_names) - 1}]")
+        return y
+
+    def _fit_one(self, X: np.ndarray, y: np.ndarray, share) -> dict:
+        mean = X.mean(axis=0)
+        scale = X.std(axis=0)
+        constant = scale < 1e-12
+        scale = np.where(constant, 1.0, scale)       # a constant feature carries no information: z = 0
+        z = (X - mean) / scale
+        lr = LogisticRegression(C=self.C, max_iter=2000)
+        lr.fit(_expand(z, self.degree), y)
+        coef = np.zeros((self.n_classes_, lr.coef_.shape[1]))
+        intercept = np.full(self.n_classes_, -1e3)   # classes never seen: probability ~0
+        if len(lr.classes_) == 2:                    # scikit-learn's binary form: one score for classes_[1]
+            coef[lr.classes_[1]] = lr.coef_[0]
+            intercept[lr.classes_[1]] = lr.intercept_[0]
+            intercept[lr.classes_[0]] = 0.0
+        else:
+            coef[lr.classes_] = lr.coef_
+            intercept[lr.classes_] = lr.intercept_
+        k = min(self.ood_k, len(z) - 1)
+        d, _ = cKDTree(z).query(z, k=k + 1)           # the first neighbour is the point itself
+        out = {"mean": mean, "scale": scale, "coef": coef, "intercept": intercept, "train_z": z,
+               "ood_threshold": np.array(float(np.quantile(d[:, k], self.ood_quantile)))}
+        if share is not None and np.isfinite(share).all():
+            r = Ridge(alpha=1.0).fit(_expand(z, self.degree), share)
+            out["share_coef"], out["share_intercept"] = r.coef_, np.array(float(r.intercept_))
+        return out
+
+    # -- prediction ------------------------------------------------------------------------------
+
+    def _route(self, X: np.ndarray) -> np.ndarray:
+        """Sub-model index (into SUBMODELS) per row, −1 when no fitted sub-model can answer."""
+        g, a = availability(X)
+        route = np.full(len(X), -1)
+        for i, (name, ok) in enumerate(zip(SUBMODELS, (g & a, g & ~a, a & ~g))):
+            if name in self.submodels_:
+                route[ok] = i
+        # A window with both modalities but no "both" model: the better-populated single one.
+        if "both" not in self.submodels_:
+            for name in ("gnss", "acoustic"):
+                if name in self.submodels_:
+                    route[(g & a) & (route < 0)] = SUBMODELS.index(name)
+        return route
+
+    def _z(self, name: str, X: np.ndarray) -> np.ndarray:
+        m = self.submodels_[name]
+        return (X[:, list(_COLUMNS[name])] - m["mean"]) / m["scale"]
+
+    def predict_proba(self, X) -> np.ndarray:
+        """Class probabilities, shape (n_windows, n_classes); the prior where no sub-model answers."""
+        X = np.atleast_2d(np.asarray(X, float))
+        route = self._route(X)
+        out = np.tile(self.prior_, (len(X), 1))
+        for i, name in enumerate(SUBMODELS):
+            rows = route == i
+            if rows.any():
+                m = self.submodels_[name]
+                s = _expand(self._z(name, X[rows]), self.degree) @ m["coef"].T + m["intercept"]
+                s -= s.max(axis=1, keepdims=True)
+                p = np.exp(s)
+                out[rows] = p / p.sum(axis=1, keepdims=True)
+        return out
+
+    def predict(self, X) -> np.ndarray:
+        """Most probable class code per window, shape (n_windows,)."""
+        return np.argmax(self.predict_proba(X), axis=1)
+
+    def is_ood(self, X) -> np.ndarray:
+        """True where a window lies beyond the training windows' k-distance quantile (or has no features)."""
+        X = np.atleast_2d(np.asarray(X, float))
+        route = self._route(X)
+        flag = route < 0
+        for i, name in enumerate(SUBMODELS):
+            rows = route == i
+            if rows.any():
+                m = self.submodels_[name]
+                tree = self._trees().get(name)
+                k = min(self.ood_k, len(m["train_z"]) - 1)
+                d, _ = tree.query(self._z(name, X[rows]), k=k)
+                d = d if d.ndim == 1 else d[:, -1]
+                flag[rows] = d > float(m["ood_threshold"])
+        return flag
+
+    def _trees(self) -> dict:
+        trees = getattr(self, "_trees_cache", None)
+        if trees is None:
+            trees = {name: cKDTree(m["train_z"]) for name, m in self.submodels_.items()}
+            self._trees_cache = trees
+        return trees
+
+    def occlusion(self, X) -> np.ndarray:
+        """Estimated blocked-sky share in [0, 1] per window; NaN where no share model answers."""
+        X = np.atleast_2d(np.asarray(X, float))
+        route = self._route(X)
+        out = np.full(len(X), np.nan)
+        for i, name in enumerate(SUBMODELS):
+            rows = route == i
+            m = self.submodels_.get(name)
+            if rows.any() and m is not None and "share_coef" in m:
+                est = _expand(self._z(name, X[rows]), self.degree) @ m["share_coef"] + float(m["share_intercept"])
+                out[rows] = np.clip(est, 0.0, 1.0)
+        return out
+
+    # -- state for bundles (no pickle) -----------------------------------------------------------
+
+    def get_state(self) -> tuple[dict, dict]:
+        """(parameters as JSON-able dict, arrays as a flat dict of ndarrays) for a model bundle."""
+        params = {"C": self.C, "degree": self.degree, "ood_k": self.ood_k, "ood_quantile": self.ood_quantile,
+                  "min_samples": self.min_samples, "class_names": list(self.class_names),
+                  "submodels": sorted(self.submodels_), "features": list(FEATURES)}
+        arrays = {"prior": self.prior_, "classes": self.classes_}
+        for name, m in self.submodels_.items():
+            for key, value in m.items():
+                arrays[f"{name}.{key}"] = np.asarray(value)
+        return params, arrays
+
+    @classmethod
+    def from_state(cls, params: dict, arrays: dict) -> "EnvironmentClassifier":
+        """Rebuild a fitted classifier from :meth:`get_state`'s output; raises ValueError if inconsistent."""
+        if list(params.get("features", [])) != list(FEATURES):
+            raise ValueError("the model's feature order differs from this version's "
+                             f"({params.get('features')} vs {list(FEATURES)})")
+        self = cls(C=params["C"], degree=params["degree"], ood_k=params["ood_k"],
+                   ood_quantile=params["ood_quantile"], min_samples=params["min_samples"],
+                   class_names=tuple(params["class_names"]))
+        self._validate()
+        self.n_classes_ = len(self.class_names)
+        self.prior_ = np.asarray(arrays["prior"], float)
+        self.classes_ = np.asarray(arrays["classes"], int)
+        self.submodels_ = {}
+        for name in params["submodels"]:
+            if name not in SUBMODELS:
+                raise ValueError(f"unknown sub-model {name!r}")
+            m = {key.split(".", 1)[1]: np.asarray(v) for key, v in arrays.items() if key.startswith(name + ".")}
+            n_in = len(_COLUMNS[name])
+            n_exp = _expand(np.zeros((1, n_in)), self.degree).shape[1]
+            if m.get("coef", np.zeros(0)).shape != (self.n_classes_, n_exp) or m["mean"].shape != (n_in,):
+                raise ValueError(f"sub-model {name!r}: arrays do not match its shape")
+            self.submodels_[name] = m
+        return self
+
+
+def combine_windows(proba: np.ndarray, eps: float = 1e-6) -> np.ndarray:
+    """A cell's class probabilities from its windows': normalised product of the window probabilities.
+
+    Parameters
+    ----------
+    proba : ndarray of shape (n_windows, n_classes)
+
+    >>> combine_windows(np.array([[0.6, 0.3, 0.1], [0.5, 0.4, 0.1]])).round(3).tolist()
+    [0.698, 0.279, 0.023]
+    """
+    proba = np.asarray(proba, float)
+    if proba.ndim != 2 or len(proba) == 0:
+        raise ValueError("proba must have shape (n_windows, n_classes) with at least one window")
+    s = np.log(np.clip(proba, eps, 1.0)).sum(axis=0)
+    p = np.exp(s - s.max())
+    return p / p.sum()
