@@ -1,0 +1,40 @@
+"""The benchmark split: disjoint seeded sites, resumable build, traceable split.toml."""
+
+import pytest
+
+from features.errors import ConfigError
+from features.walk import load_walk
+from training.benchmark import SPLITS, BenchmarkSplit, build_split, split_layout
+
+TINY = BenchmarkSplit("tiny", train_sites=(101,), test_sites=(201,), walks_per_site=1, walk_s=12.0,
+                      cell_size_m=40.0, capture_s=1.0)
+
+
+def test_documented_splits_are_disjoint_and_valid():
+    for s in SPLITS.values():
+        assert not set(s.train_sites) & set(s.test_sites)
+    assert len(SPLITS["standard"].test_sites) >= 5
+    with pytest.raises(ConfigError, match="both training and test"):
+        BenchmarkSplit("bad", train_sites=(1, 2), test_sites=(2,))
+    with pytest.raises(ConfigError, match="walks_per_site"):
+        BenchmarkSplit("bad", train_sites=(1,), test_sites=(2,), walks_per_site=0)
+
+
+def test_build_is_resumable_and_traceable(tmp_path):
+    said = []
+    layout = build_split(TINY, tmp_path / "b", progress=said.append)
+    assert said == ["site 101", "survey 101", "walk 101/w0", "site 201", "survey 201", "walk 201/w0"]
+    assert layout.train_walks == [tmp_path / "b" / "walks" / "101" / "w0"]
+    w = load_walk(layout.test_walks[0])
+    assert w.duration_s == pytest.approx(12.0)
+    assert len(list((layout.survey_dir(201) / "cells").iterdir())) >= 3
+    again = []
+    build_split(TINY, tmp_path / "b", progress=again.append)
+    assert again == []                                   # everything already there: nothing rebuilt
+    assert split_layout(tmp_path / "b").split == TINY
+    other = BenchmarkSplit("tiny", train_sites=(102,), test_sites=(201,), walks_per_site=1, walk_s=12.0,
+                           cell_size_m=40.0, capture_s=1.0)
+    with pytest.raises(ConfigError, match="another split"):
+        build_split(other, tmp_path / "b")
+    with pytest.raises(ConfigError, match="unknown split"):
+        build_split("nope", tmp_path / "c")

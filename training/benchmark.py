@@ -1,0 +1,167 @@
+"""The benchmark split: seeded simulated substations for training and others, held out, for testing.
+
+Every figure envfuse reports about its models comes from a split defined here:
+training sites (their surveys build the fingerprint library, their walks fit
+the fusion model) and test sites with other seeds — so other layouts, other
+beacon plans, other start times and so other constellations, other walkers —
+that nothing is fitted or tuned on. A split is data, not code paths: its
+seeds and sizes are listed in :data:`SPLITS` and written to ``split.toml``
+beside what it builds, so a run can always be traced to its inputs.
+
+This is the only module of ``training`` that imports ``simulation`` (the
+import-linter contract in ``pyproject.toml`` says so): everything else reads
+the files the split wrote, exactly as it would read a real survey and real
+walk logs.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Callable
+
+from features.errors import ConfigError
+from features.fileio import read_toml, write_toml
+
+__all__ = ["BenchmarkSplit", "SPLITS", "SplitLayout", "build_split", "split_layout"]
+
+
+@dataclass(frozen=True)
+class BenchmarkSplit:
+    """Seeds and sizes of one split.
+
+    ``train_sites`` / ``test_sites`` are site seeds (disjoint); each site gets a
+    survey (``cell_size_m`` cells, ``capture_s`` each) and ``walks_per_site``
+    walks of ``walk_s`` seconds. Walk seeds are ``1000·site + k`` and walkers
+    (person seeds) ``site·10 + k``, so no walker of a test site walked a
+    training site.
+    """
+
+    name: str
+    train_sites: tuple[int, ...]
+    test_sites: tuple[int, ...]
+    walks_per_site: int = 2
+    walk_s: float = 300.0
+    cell_size_m: float = 10.0
+    capture_s: float = 10.0
+
+    def __post_init__(self):
+        if not self.train_sites or not self.test_sites:
+            raise ConfigError(f"split {self.name!r}: needs at least one training and one test site")
+        if set(self.train_sites) & set(self.test_sites):
+            raise ConfigError(f"split {self.name!r}: sites {sorted(set(self.train_sites) & set(self.test_sites))} "
+                              "are both training and test sites")
+        if self.walks_per_site < 1:
+            raise ConfigError(f"split {self.name!r}: walks_per_site must be >= 1, got {self.walks_per_site}")
+        for key in ("walk_s", "cell_size_m", "capture_s"):
+            if not getattr(self, key) > 0:
+                raise ConfigError(f"split {self.name!r}: {key} must be positive, got {getattr(self, key)}")
+
+    def walk_seed(self, site: int, k: int) -> int:
+        return 1000 * site + k
+
+    def person(self, site: int, k: int) -> int:
+        return 10 * site + k
+
+
+SPLITS = {
+    "demo": BenchmarkSplit("demo", train_sites=(101, 102), test_sites=(201,), walks_per_site=2, walk_s=90.0,
+                           cell_size_m=12.0, capture_s=4.0),
+    "standard": BenchmarkSplit("standard", train_sites=(101, 102, 103, 104, 105, 106),
+                               test_sites=(201, 202, 203, 204, 205), walks_per_site=3, walk_s=300.0,
+                               cell_size_m=10.0, capture_s=10.0),
+}
+"""The documented splits: ``demo`` (a few minutes on 2 cores, for ``make demo``) and ``standard`` (the
+figures in issue notes: six training sites, five held-out test sites)."""
+
+
+@dataclass(frozen=True)
+class SplitLayout:
+    """Where a built split's files are: ``root/split.toml``, ``root/sites/<seed>/site.toml``,
+    ``root/surveys/<seed>/``, ``root/walks/<seed>/w<k>/``."""
+
+    root: Path
+    split: BenchmarkSplit
+
+    def site_dir(self, site: int) -> Path:
+        return self.root / "sites" / str(site)
+
+    def survey_dir(self, site: int) -> Path:
+        return self.root / "surveys" / str(site)
+
+    def walk_dir(self, site: int, k: int) -> Path:
+        return self.root / "walks" / str(site) / f"w{k}"
+
+    def walks(self, sites) -> list[Path]:
+        return [self.walk_dir(s, k) for s in sites for k in range(self.split.walks_per_site)]
+
+    @property
+    def train_walks(self) -> list[Path]:
+        return self.walks(self.split.train_sites)
+
+    @property
+    def test_walks(self) -> list[Path]:
+        return self.walks(self.split.test_sites)
+
+
+def split_layout(root: str | os.PathLike) -> SplitLayout:
+    """The layout of a split built in ``root`` (reads its ``split.toml``)."""
+    root = Path(root)
+    data = read_toml(root / "split.toml")
+    try:
+        split = BenchmarkSplit(name=str(data["name"]), train_sites=tuple(int(s) for s in data["train_sites"]),
+                               test_sites=tuple(int(s) for s in data["test_sites"]),
+                               walks_per_site=int(data["walks_per_site"]), walk_s=float(data["walk_s"]),
+                               cell_size_m=float(data["cell_size_m"]), capture_s=float(data["capture_s"]))
+    except (KeyError, TypeError, ValueError) as exc:
+        raise ConfigError(f"{root / 'split.toml'}: malformed ({exc})") from None
+    return SplitLayout(root, split)
+
+
+def build_split(split: BenchmarkSplit | str, root: str | os.PathLike,
+                progress: Callable[[str], None] | None = None) -> SplitLayout:
+    """Simulate every site, survey and walk of ``split`` into ``root``; what already exists is kept.
+
+    Each site, survey and walk is written atomically by the simulator, so an
+    interrupted build resumes where it stopped: a directory that exists is
+    complete. ``progress`` receives one line per item built.
+    """
+    from features.site import save_site
+    from simulation.site.layout import generate_site
+    from simulation.survey import simulate_survey
+    from simulation.walk import simulate_walk
+
+    if isinstance(split, str):
+        if split not in SPLITS:
+            raise ConfigError(f"unknown split {split!r}; choose one of {sorted(SPLITS)}")
+        split = SPLITS[split]
+    root = Path(root)
+    root.mkdir(parents=True, exist_ok=True)
+    doc = {k: (list(v) if isinstance(v, tuple) else v) for k, v in asdict(split).items()}
+    if (root / "split.toml").is_file():
+        if read_toml(root / "split.toml") != doc:
+            raise ConfigError(f"{root} holds another split (its split.toml differs); choose an empty directory")
+    else:
+        write_toml(root / "split.toml", doc)
+    layout = SplitLayout(root, split)
+    say = progress or (lambda line: None)
+    for site in split.train_sites + split.test_sites:
+        sdir = layout.site_dir(site)
+        if not (sdir / "site.toml").is_file():
+            sdir.mkdir(parents=True, exist_ok=True)
+            save_site(generate_site(site), sdir / "site.toml")
+            say(f"site {site}")
+        if not layout.survey_dir(site).is_dir():
+            layout.survey_dir(site).parent.mkdir(parents=True, exist_ok=True)
+            simulate_survey(sdir, layout.survey_dir(site), seed=site, cell_size_m=split.cell_size_m,
+                            capture_s=split.capture_s, progress=False)
+            say(f"survey {site}")
+        for k in range(split.walks_per_site):
+            wdir = layout.walk_dir(site, k)
+            if not wdir.is_dir():
+                wdir.parent.mkdir(parents=True, exist_ok=True)
+                simulate_walk(sdir, wdir, seed=split.walk_seed(site, k), duration_s=split.walk_s,
+                              person=split.person(site, k))
+                say(f"walk {site}/w{k}")
+    return layout
