@@ -46,14 +46,17 @@ def chi2_bounds(dof: int, n_runs: int = 1, prob: float = 0.95) -> tuple[float, f
     return float(chi2.ppf(a, df) / n_runs), float(chi2.ppf(1.0 - a, df) / n_runs)
 
 
-def in_bounds_share(values: np.ndarray, dof: int, prob: float = 0.95) -> float:
+def in_bounds_share(values: np.ndarray, dof: int, prob: float = 0.95, pooled: bool = False) -> float:
     """Share of epochs whose NEES lies in the two-sided χ² region.
 
-    values : (m,) one run, or (n_runs, m) Monte Carlo runs (averaged over runs per epoch first).
+    values : (m,) one run, or (n_runs, m) Monte Carlo runs, averaged over runs per epoch first
+    (Bar-Shalom's test, bounds of χ²_{N·n_x}/N); ``pooled=True`` instead tests every (run, epoch)
+    against the single-run bounds — the same expected share, 0.95, but N Bernoulli trials per
+    epoch instead of one, so far less spread when the epochs of a run are correlated.
     """
     v = np.asarray(values, float)
-    n_runs = 1 if v.ndim == 1 else v.shape[0]
-    eps = v if v.ndim == 1 else v.mean(axis=0)
+    n_runs = 1 if v.ndim == 1 or pooled else v.shape[0]
+    eps = v.ravel() if pooled else (v if v.ndim == 1 else v.mean(axis=0))
     lo, hi = chi2_bounds(dof, n_runs, prob)
     ok = np.isfinite(eps)
     return float(np.mean((eps[ok] >= lo) & (eps[ok] <= hi)))

@@ -359,7 +359,10 @@ class EventEKF:
             P[idx, idx] += q[k]
             c = kind[k]
             if c == STEP:
-                x, P = _step_predict(x, P, length[k], heading[k], cfg, Fr[k])
+                Fs = np.eye(n)
+                x, P = _step_predict(x, P, length[k], heading[k], cfg, Fs)
+                # F = F_step Φ   (bias decay first, then the step)
+                Fr[k] = Fs @ Fr[k]
             xpr[k] = x
             Ppr[k] = P
             if c != STEP and avail[k]:

@@ -119,10 +119,11 @@ class IMMFilter:
                     Pj[:, 4:6] *= phi[k]
                 Pj[idx, idx] += q[k]
                 Fj = np.eye(n)
-                if cfg.gnss_bias:
-                    Fj[4, 4] = Fj[5, 5] = phi[k]
                 if c == STEP:
                     xj, Pj = _step_predict(xj, Pj, stream.step_length_m[k], stream.heading_rad[k], cfg, Fj)
+                if cfg.gnss_bias:
+                    # F = F_step Φ   (bias decay first, then the step)
+                    Fj[:, 4:6] *= phi[k]
                 xs[j], Ps[j] = xj, Pj
                 Fk += cbar[j] * Fj
             rec["F"][k] = Fk
