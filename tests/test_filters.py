@@ -403,3 +403,26 @@ def test_same_seed_same_run_and_seed_reaches_the_draws(mixed):
         r2 = dict(all_methods(b.stream))[name]
         np.testing.assert_array_equal(r1.x, r2.x)
         np.testing.assert_array_equal(r1.P, r2.P)
+
+
+def test_scalar_loop_matches_matrix_form(mixed):
+    ev = mixed[0]
+    pc = PerClassNoise(3, 1.5, 0.3).fit()
+    cases = [(EkfConfig(), FixedNoise(1.5, 0.3), {}),
+             (EkfConfig(outlier="huber"), QualityNoise(), {}),
+             (EkfConfig(outlier="none"), pc, {"class_at": lambda e, n: 0 if e > 0 else 2}),
+             (EkfConfig(gate_prob=0.9), pc, {"classes": ClassTrack(np.array([0.0]), np.array([[0.2, 0.3, 0.5]]))})]
+    for cfg, noise, kw in cases:
+        a = EventEKF(cfg, noise, fast=True).run(ev, **kw)
+        b = EventEKF(cfg, noise, fast=False).run(ev, **kw)
+        assert a.info["fast"] and not b.info["fast"]
+        np.testing.assert_array_equal(a.accepted, b.accepted)
+        for f in ("x", "P", "x_prior", "P_prior", "F", "nu", "S", "K", "R", "nis", "weight"):
+            np.testing.assert_allclose(getattr(a, f), getattr(b, f), rtol=1e-9, atol=1e-10, err_msg=f)
+
+
+def test_gate_quantile_closed_form_matches_scipy():
+    from scipy.stats import chi2
+
+    for p in (0.9, 0.99, 0.999):
+        assert abs(EkfConfig(gate_prob=p).gate_nis - chi2.ppf(p, 2)) < 1e-9

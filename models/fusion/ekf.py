@@ -49,7 +49,6 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.stats import chi2
 
 from models.fusion.events import GNSS, STEP, EventStream
 
@@ -101,8 +100,9 @@ class EkfConfig:
 
     @property
     def gate_nis(self) -> float:
-        """χ²₂ quantile of ``gate_prob``: the NIS above which a fix is rejected."""
-        return float(chi2.ppf(self.gate_prob, 2))
+        """χ²₂ quantile of ``gate_prob``, the NIS above which a fix is rejected: −2 ln(1 − p)
+        (the χ² distribution with 2 degrees of freedom is exponential with mean 2)."""
+        return -2.0 * math.log1p(-self.gate_prob)
 
 
 @dataclass
@@ -304,6 +304,9 @@ def _h_matrices(cfg: EkfConfig) -> dict:
 class EventEKF:
     """The event-driven EKF with one noise policy (:mod:`models.fusion.noise`).
 
+    ``fast``: run the 4-state model with a feedback-free policy through the scalar loop of
+    :mod:`models.fusion.fast` (same results to rounding; ``False`` forces the matrix form).
+
     >>> import numpy as np
     >>> from models.fusion.events import GnssEvents, StepEvents, merge_events
     >>> from models.fusion.noise import FixedNoise
@@ -314,10 +317,11 @@ class EventEKF:
     (7, True)
     """
 
-    def __init__(self, config: EkfConfig | None = None, noise=None, method: str = "kf"):
+    def __init__(self, config: EkfConfig | None = None, noise=None, method: str = "kf", fast: bool = True):
         self.config = config
         self.noise = noise
         self.method = method
+        self.fast = fast
 
     def run(self, stream: EventStream, x0_en=None, classes=None, class_at=None, x0=None, P0=None) -> FilterRun:
         """Filter the whole stream once.
@@ -334,8 +338,16 @@ class EventEKF:
         x, P = _initial(stream, cfg, x0_en, x0, P0)
         x0, P0 = x.copy(), P.copy()
         m, n = len(stream), cfg.n_state
-        rec = _records(m, n)
         q, phi = _time_noise(stream, cfg)
+        info = {"n_guarded": 0, "fast": False}
+        if self.fast and n == 4 and getattr(runner, "fast", False):
+            from models.fusion.fast import run_fast4
+
+            rec = run_fast4(stream, cfg, runner, x, P, q)
+            info["fast"] = True
+            return FilterRun(self.method, stream.t_s, stream.kind, x0, P0, available=stream.available, info=info,
+                             **rec)
+        rec = _records(m, n)
         if cfg.gnss_bias:
             rec["F"][:, 4, 4] = rec["F"][:, 5, 5] = phi
         H = _h_matrices(cfg)
@@ -376,7 +388,7 @@ class EventEKF:
                     rec["K"][k] = K
             xr[k] = x
             Pr[k] = P
-        info = {"n_guarded": getattr(runner, "n_guarded", 0)}
+        info["n_guarded"] = getattr(runner, "n_guarded", 0)
         if hasattr(runner, "history"):
             info["r_history"] = np.array(runner.history).reshape(-1, 4)   # event, kind, R_ee, R_nn
         return FilterRun(self.method, stream.t_s, stream.kind, x0, P0, available=stream.available, info=info, **rec)

@@ -91,6 +91,7 @@ class _Static:
     """Per-run R that was computed for the whole stream beforehand."""
 
     n_iter = 1
+    fast = True          # no feedback: the scalar 4-state loop of models.fusion.fast may run it
 
     def __init__(self, r_m2: np.ndarray):
         self.R = r_m2
@@ -221,6 +222,7 @@ class _MapLookup:
     """Per-run R from the class at the last estimate (``kf_map``)."""
 
     n_iter = 1
+    fast = True
 
     def __init__(self, kind, r_gnss, r_acoustic, class_at, combine):
         self.kind, self.rg, self.ra, self.class_at, self.combine = kind, r_gnss, r_acoustic, class_at, combine
