@@ -1,0 +1,173 @@
+"""Interacting multiple model filter, one mode per environment class (method ``imm``).
+
+Blom & Bar-Shalom (1988), IEEE TAC 33(8); Bar-Shalom, Li & Kirubarajan
+(2001) §11.6.6. All modes share the event-driven model of
+:mod:`models.fusion.ekf`; they differ in the measurement noise R_j of each
+source, the per-class R a :class:`~models.fusion.noise.PerClassNoise` learnt.
+Each event is one IMM cycle:
+
+1. mixing with the transition matrix of the elapsed time,
+   π_ii = e^(−λΔt), π_ij = (1 − e^(−λΔt))/(M − 1) (a continuous-time chain of
+   switch rate λ, so irregular event rates need no resampling);
+2. mode-matched predict (step or stationary) and update (Joseph form, the
+   same gate or Huber weights as the EKF, per mode);
+3. mode probabilities from the Gaussian innovation likelihoods, in logs;
+4. optional classifier evidence: when the class track moves to a new window,
+   μ_j ∝ μ_j · p_j^w (``evidence_weight`` w; 0 ignores the classifier);
+5. the moment-matched combination, recorded like an EKF run (the combined
+   prior, posterior and the probability-weighted Jacobian), so
+   :func:`~models.fusion.smoother.rts_smooth` smooths it too.
+
+Hand-written rather than ``filterpy.kalman.IMMEstimator``: that class mixes
+filterpy filters whose ``predict()`` takes a fixed F and Q and whose
+``update(z)`` a fixed R, whereas here each event brings its own step
+Jacobian, H, R per mode and elapsed time; the mixing and combination
+equations are the same as filterpy's (its ``_compute_mixing_probabilities``
+and ``_compute_state_estimate``).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from models.fusion.ekf import (EkfConfig, FilterError, FilterRun, _h_matrices, _initial, _records, _step_predict,
+                               _time_noise, _update)
+from models.fusion.events import ACOUSTIC, GNSS, STEP, ClassTrack, EventStream
+
+__all__ = ["IMMFilter"]
+
+
+class _Fixed:
+    """The per-mode 'runner' the shared update wants: a fixed R, no adaptation."""
+
+    n_iter = 1
+
+    def feedback(self, k, nu, hph, accepted):
+        pass
+
+
+def _combine(mu, xs, Ps):
+    # x = Σ μ_j x_j ;  P = Σ μ_j (P_j + (x_j − x)(x_j − x)')
+    x = np.tensordot(mu, xs, axes=1)
+    d = xs - x
+    P = np.tensordot(mu, Ps, axes=1) + np.einsum("j,ji,jk->ik", mu, d, d)
+    return x, 0.5 * (P + P.T)
+
+
+class IMMFilter:
+    """IMM over environment classes.
+
+    ``noise``: a :class:`~models.fusion.noise.PerClassNoise` (fitted; its classes are the modes);
+    ``switch_rate_hz`` λ; ``evidence_weight`` w; ``mu0`` (M,) initial mode probabilities (uniform).
+    """
+
+    def __init__(self, noise, config: EkfConfig | None = None, switch_rate_hz: float = 0.05,
+                 evidence_weight: float = 1.0, mu0=None, method: str = "imm"):
+        self.noise = noise
+        self.config = config
+        self.switch_rate_hz = switch_rate_hz
+        self.evidence_weight = evidence_weight
+        self.mu0 = mu0
+        self.method = method
+
+    def run(self, stream: EventStream, x0_en=None, classes: ClassTrack | None = None, x0=None, P0=None) -> FilterRun:
+        """Filter the stream; the result's ``mode_proba`` (m, M) holds the posterior mode probabilities."""
+        cfg = self.config or EkfConfig()
+        if not hasattr(self.noise, "R_gnss_"):
+            self.noise.fit()
+        table = {GNSS: self.noise.R_gnss_, ACOUSTIC: self.noise.R_acoustic_}
+        M = table[GNSS].shape[0]
+        if not (math.isfinite(self.switch_rate_hz) and self.switch_rate_hz >= 0):
+            raise FilterError(f"switch_rate_hz must be finite and >= 0, got {self.switch_rate_hz}")
+        if classes is not None and classes.n_classes != M:
+            raise FilterError(f"classes has {classes.n_classes} classes, the IMM {M} modes")
+        mu = np.full(M, 1.0 / M) if self.mu0 is None else np.asarray(self.mu0, float) / np.sum(self.mu0)
+        x, P = _initial(stream, cfg, x0_en, x0, P0)
+        x0c, P0c = x.copy(), P.copy()
+        m, n = len(stream), cfg.n_state
+        xs = np.repeat(x[None], M, axis=0)
+        Ps = np.repeat(P[None], M, axis=0)
+        rec = _records(m, n)
+        mode_p = np.empty((m, M))
+        q, phi = _time_noise(stream, cfg)
+        H = _h_matrices(cfg)
+        gate = cfg.gate_nis
+        fixed = _Fixed()
+        rows = classes.row_at(stream.t_s) if classes is not None else None
+        w_ev = float(self.evidence_weight)
+        idx = np.arange(n)
+        off = ~np.eye(M, dtype=bool)
+        for k in range(m):
+            # 1. mixing: π(Δt);  c̄_j = Σ_i π_ij μ_i;  μ_{i|j} = π_ij μ_i / c̄_j
+            stay = math.exp(-self.switch_rate_hz * stream.dt_s[k])
+            pi = np.where(off, (1.0 - stay) / max(M - 1, 1), stay)
+            cbar = mu @ pi
+            mix = pi * mu[:, None] / cbar[None, :]
+            xm = mix.T @ xs
+            d = xs[:, None, :] - xm[None, :, :]
+            Pm = np.einsum("ij,ikl->jkl", mix, Ps) + np.einsum("ij,ijk,ijl->jkl", mix, d, d)
+            # 2. mode-matched predict
+            c = stream.kind[k]
+            Fk = np.zeros((n, n))
+            for j in range(M):
+                xj, Pj = xm[j].copy(), Pm[j].copy()
+                if cfg.gnss_bias:
+                    xj[4:6] *= phi[k]
+                    Pj[4:6, :] *= phi[k]
+                    Pj[:, 4:6] *= phi[k]
+                Pj[idx, idx] += q[k]
+                Fj = np.eye(n)
+                if c == STEP:
+                    xj, Pj = _step_predict(xj, Pj, stream.step_length_m[k], stream.heading_rad[k], cfg, Fj)
+                if cfg.gnss_bias:
+                    # F = F_step Φ   (bias decay first, then the step)
+                    Fj[:, 4:6] *= phi[k]
+                xs[j], Ps[j] = xj, Pj
+                Fk += cbar[j] * Fj
+            rec["F"][k] = Fk
+            rec["x_prior"][k], rec["P_prior"][k] = _combine(cbar, xs, Ps)
+            mu = cbar
+            if c != STEP and stream.available[k]:
+                Hk = H[GNSS] if c == GNSS else H["other"]
+                z = stream.z_m[k]
+                loglik = np.empty(M)
+                Ks = np.zeros((M, n, 2))
+                ws = np.empty(M)
+                oks = np.zeros(M, bool)
+                for j in range(M):
+                    Rj = table[c][j]
+                    xj, Pj, nu, S, K, _, nis, w, ok = _update(xs[j], Ps[j], z, Rj, Hk, cfg, fixed, k, gate)
+                    # ln Λ_j = −½ (ν'S⁻¹ν + ln det 2πS), with the unweighted S
+                    S0 = Hk @ Ps[j] @ Hk.T + Rj
+                    loglik[j] = -0.5 * (float(nu @ np.linalg.solve(S0, nu)) + math.log((2 * math.pi) ** 2
+                                                                                       * np.linalg.det(S0)))
+                    xs[j], Ps[j], ws[j], oks[j] = xj, Pj, w, ok
+                    if ok:
+                        Ks[j] = K
+                # 3. μ_j ∝ Λ_j c̄_j
+                lp = loglik + np.log(np.maximum(cbar, 1e-300))
+                lp -= lp.max()
+                mu = np.exp(lp)
+                mu /= mu.sum()
+                xp = rec["x_prior"][k]
+                Rbar = np.tensordot(cbar, table[c], axes=1)
+                Sc = Hk @ rec["P_prior"][k] @ Hk.T + Rbar
+                nu_c = z - Hk @ xp
+                rec["nu"][k], rec["S"][k], rec["R"][k] = nu_c, Sc, Rbar
+                rec["nis"][k] = float(nu_c @ np.linalg.solve(Sc, nu_c))
+                rec["K"][k] = np.tensordot(mu, Ks, axes=1)
+                rec["weight"][k] = float(mu @ ws)
+                rec["updated"][k] = True
+                rec["accepted"][k] = bool(oks.any())
+            # 4. classifier evidence once per new window: μ_j ∝ μ_j p_j^w
+            if rows is not None and w_ev > 0 and (k == 0 or rows[k] != rows[k - 1]):
+                p = np.maximum(classes.proba[rows[k]], 1e-12)
+                mu = mu * p ** w_ev
+                mu /= mu.sum()
+            # 5. combination
+            rec["x"][k], rec["P"][k] = _combine(mu, xs, Ps)
+            mode_p[k] = mu
+        return FilterRun(self.method, stream.t_s, stream.kind, x0c, P0c, available=stream.available,
+                         mode_proba=mode_p, **rec)

@@ -1,0 +1,428 @@
+"""Event-driven fusion filters (models.fusion): invariants, references and synthetic truths.
+
+Every stream comes from tests/fusion_synth.py with an explicit seed; the truth
+follows the filter's own process model, so consistency tests are meaningful.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from models.fusion import (ACOUSTIC, GNSS, STEP, AcousticEvents, ClassTrack, EkfConfig, EventEKF, EventError,
+                           FilterError, FixedNoise, GnssEvents, IMMFilter, NoiseError, PerClassNoise, QualityNoise,
+                           SageHusaNoise, StandIntervals, StepEvents, VBAdaptiveNoise, chi2_bounds, in_bounds_share,
+                           merge_events, nees, nis_summary, rts_smooth)
+from models.fusion.ekf import _step_predict
+from tests.fusion_synth import synth_walk
+
+
+def rms(a, b):
+    return float(np.sqrt(np.mean(np.sum((a[:, :2] - b[:, :2]) ** 2, axis=1))))
+
+
+def min_eig(P):
+    return float(np.min(np.linalg.eigvalsh(0.5 * (P + np.swapaxes(P, -1, -2)))))
+
+
+@pytest.fixture(scope="module")
+def walk():
+    """300 s, GNSS 1 Hz σ 2 m, a 0.15 rad heading offset and an 8 % step-scale error."""
+    return synth_walk(10, duration_s=300, heading_offset_rad=0.15, scale_error=0.08, gnss_sigma_m=2.0, gnss_hz=1.0)
+
+
+@pytest.fixture(scope="module")
+def mixed():
+    """120 s with GNSS 5 Hz, acoustic 1.25 Hz and two standing intervals (steps removed inside them)."""
+    s = synth_walk(4, duration_s=120, acoustic_hz=1.25)
+    st = StandIntervals(np.array([30.0, 80.0]), np.array([40.0, 90.0]))
+    keep = ~(((s.steps.t_s >= 30) & (s.steps.t_s < 40)) | ((s.steps.t_s >= 80) & (s.steps.t_s < 90)))
+    steps = StepEvents(s.steps.t_s[keep], s.steps.step_length_m[keep], s.steps.heading_rad[keep])
+    return merge_events(steps, s.gnss, s.acoustic, st, t0_s=0.0), s
+
+
+def all_methods(stream):
+    """(name, run) of every method on one stream (class evidence: the open class, or east > 0)."""
+    classes = ClassTrack.from_labels(np.array([0.0, 60.0]), np.array([0, 1]), 3)
+    pc = PerClassNoise(3, 1.5, 0.3).fit()
+    out = [("kf", EventEKF(noise=FixedNoise(1.5, 0.3)).run(stream)),
+           ("kf_quality", EventEKF(noise=QualityNoise()).run(stream)),
+           ("kf_map", EventEKF(noise=pc).run(stream, class_at=lambda e, n: 0 if e > 0 else 2)),
+           ("adaptive_nobp", EventEKF(noise=pc).run(stream, classes=classes)),
+           ("aekf", EventEKF(noise=VBAdaptiveNoise(1.5, 0.3)).run(stream)),
+           ("sage_husa", EventEKF(noise=SageHusaNoise(1.5, 0.3)).run(stream)),
+           ("huber", EventEKF(EkfConfig(outlier="huber"), FixedNoise(1.5, 0.3)).run(stream)),
+           ("bias", EventEKF(EkfConfig(gnss_bias=True), FixedNoise(1.5, 0.3)).run(stream)),
+           ("imm", IMMFilter(pc).run(stream, classes=classes))]
+    return out
+
+
+@pytest.fixture(scope="module")
+def runs(mixed):
+    return all_methods(mixed[0])
+
+
+# --- invariants -------------------------------------------------------------------------------------------
+
+
+def test_covariance_symmetric_positive_definite_for_every_method(runs):
+    for name, run in runs:
+        for P in (run.P, run.P_prior):
+            assert np.max(np.abs(P - np.swapaxes(P, 1, 2))) < 1e-9, name
+            assert min_eig(P) > 0, name
+        assert np.all(np.isfinite(run.x)), name
+
+
+def test_update_shrinks_and_predict_grows_covariance(runs):
+    for name, run in runs:
+        if name == "imm":          # mixture spread may grow P on an update; tested by RTS instead
+            continue
+        up = run.accepted
+        assert up.sum() > 100, name
+        assert min_eig(run.P_prior[up] - run.P[up]) > -1e-9, name
+        # P⁻_k − F_k P_{k−1} F_k' = Q_k ⪰ 0, and for fixes (F = I without a bias) P⁻_k ⪰ P_{k−1}
+        FPF = run.F[1:] @ run.P[:-1] @ np.swapaxes(run.F[1:], 1, 2)
+        assert min_eig(run.P_prior[1:] - FPF) > -1e-9, name
+        fix = run.kind[1:] != STEP
+        if name != "bias":
+            assert min_eig(run.P_prior[1:][fix] - run.P[:-1][fix]) > -1e-12, name
+
+
+def test_records_for_the_corrector(runs):
+    name, run = runs[0]
+    up = run.accepted
+    assert np.all(np.isfinite(run.K[up])) and np.all(np.isfinite(run.nu[up])) and np.all(np.isfinite(run.S[up]))
+    # posterior − prior = K ν on every accepted update
+    np.testing.assert_allclose(run.dx[up], np.einsum("mij,mj->mi", run.K[up], run.nu[up]), atol=1e-9)
+    np.testing.assert_allclose(run.nis[up], np.einsum("mi,mij,mj->m", run.nu[up], np.linalg.inv(run.S[up]),
+                                                      run.nu[up]), rtol=1e-9)
+    assert np.all(np.isnan(run.nis[run.kind == STEP]))
+    assert set(nis_summary(run)) == {GNSS, ACOUSTIC}
+
+
+def test_update_matches_filterpy_joseph_form():
+    from filterpy.kalman import KalmanFilter
+
+    rng = np.random.default_rng(5)
+    A = rng.normal(size=(4, 4))
+    P = A @ A.T + np.eye(4)
+    x = rng.normal(size=4)
+    R = np.array([[2.0, 0.3], [0.3, 1.0]])
+    z = np.array([1.0, -2.0])
+    ev = merge_events(gnss=GnssEvents(np.array([0.0]), z[:1], z[1:], R[None]))
+    run = EventEKF(EkfConfig(outlier="none"), FixedNoise().fit(), "kf")
+    noise = FixedNoise()
+    noise.R_gnss_, noise.R_acoustic_ = R, R
+    run = EventEKF(EkfConfig(outlier="none"), noise).run(ev, x0=x, P0=P)
+    kf = KalmanFilter(dim_x=4, dim_z=2)
+    kf.x, kf.P, kf.R = x.copy(), P.copy(), R.copy()
+    kf.H = np.hstack([np.eye(2), np.zeros((2, 2))])
+    kf.update(z)
+    np.testing.assert_allclose(run.x[0], kf.x.ravel(), atol=1e-12)
+    np.testing.assert_allclose(run.P[0], kf.P, atol=1e-12)
+
+
+def test_step_jacobian_matches_finite_differences():
+    cfg = EkfConfig()
+    x = np.array([3.0, -1.0, 0.2, 0.05])
+    F = np.eye(4)
+    _step_predict(x, np.eye(4), 0.72, 1.1, cfg, F)
+    h = 1e-6
+    for j in (2, 3):
+        d = np.zeros(4)
+        d[j] = h
+        xp, _ = _step_predict(x + d, np.eye(4), 0.72, 1.1, cfg, np.eye(4))
+        xm, _ = _step_predict(x - d, np.eye(4), 0.72, 1.1, cfg, np.eye(4))
+        np.testing.assert_allclose((xp - xm)[:2] / (2 * h), F[:2, j], rtol=1e-6)
+
+
+# --- accuracy ---------------------------------------------------------------------------------------------
+
+
+def test_fusing_gnss_and_pdr_beats_either_alone(walk):
+    run = EventEKF(noise=FixedNoise(2.0, 0.3)).run(walk.stream, x0_en=walk.x0[:2])
+    g = walk.stream.kind == GNSS
+    e_gnss = rms(walk.stream.z_m[g], walk.truth[g])
+    e_pdr = rms(walk.pdr_en, walk.truth)
+    e_fused = rms(run.x, walk.truth)
+    # measured (seed 10): GNSS 2.82 m, PDR 5.67 m, fused 0.69 m
+    assert 2.4 < e_gnss < 3.2
+    assert 3.0 < e_pdr < 10.0
+    assert 0.1 < e_fused / e_gnss < 0.4
+    assert 0.03 < e_fused / e_pdr < 0.25
+
+
+def test_estimates_heading_offset_and_step_scale(walk):
+    run = EventEKF(noise=FixedNoise(2.0, 0.3)).run(walk.stream, x0_en=walk.x0[:2])
+    d_psi = run.x[-1, 2] - walk.truth[-1, 2]
+    d_s = run.x[-1, 3] - walk.truth[-1, 3]
+    # within 0.03 rad (1.7°) and 0.015 of the truth, and within 3σ of the filter's own covariance
+    assert abs(d_psi) < 0.03 and abs(d_psi) < 3 * math.sqrt(run.P[-1, 2, 2])
+    assert abs(d_s) < 0.015 and abs(d_s) < 3 * math.sqrt(run.P[-1, 3, 3])
+    # and the prior was wrong by the full amount: 0.15 rad and 8 %
+    assert abs(run.x0[2] - walk.truth[0, 2]) > 0.1
+
+
+def test_rts_reduces_error_and_covariance(walk, runs):
+    run = EventEKF(noise=FixedNoise(2.0, 0.3)).run(walk.stream, x0_en=walk.x0[:2])
+    sm = rts_smooth(run)
+    e_f, e_s = rms(run.x, walk.truth), rms(sm.x, walk.truth)
+    # measured: 0.69 m → 0.39 m
+    assert 0.3 < e_s / e_f < 0.8
+    assert sm.method == "kf+rts"
+    assert min_eig(run.P - sm.P) > -1e-9
+    np.testing.assert_allclose(sm.x[-1], run.x[-1])
+    for name, r in runs:                  # every method's run smooths, covariance never above the filter's
+        s = rts_smooth(r)
+        assert np.all(np.isfinite(s.x)), name
+        assert min_eig(s.P) > 0, name
+        assert min_eig(r.P - s.P) > -1e-8, name
+
+
+# --- outliers ---------------------------------------------------------------------------------------------
+
+
+def _static_with_outlier(offset_m=20.0):
+    t = np.arange(0.0, 31.0)
+    rng = np.random.default_rng(7)
+    e, n = rng.normal(0, 1.0, t.size), rng.normal(0, 1.0, t.size)
+    e[-1] += offset_m
+    return merge_events(gnss=GnssEvents.from_sigma(t, e, n, np.ones(t.size)), t0_s=0.0)
+
+
+@pytest.mark.parametrize("outlier", ["gate", "huber", "none"])
+def test_outlier_20m(outlier):
+    ev = _static_with_outlier()
+    run = EventEKF(EkfConfig(outlier=outlier), FixedNoise(1.0, 0.3)).run(ev, x0_en=(0.0, 0.0))
+    shift = float(np.hypot(*run.dx[-1, :2]))
+    assert run.nis[-1] > 100                    # (20 m)² over S ≈ 1.03 m²
+    if outlier == "gate":
+        assert not run.accepted[-1] and shift == 0.0 and run.weight[-1] == 0.0
+        assert run.accepted[:-1].all()
+    elif outlier == "huber":
+        ref = EventEKF(EkfConfig(outlier="none"), FixedNoise(1.0, 0.3)).run(ev, x0_en=(0.0, 0.0))
+        full = float(np.hypot(*ref.dx[-1, :2]))
+        assert run.accepted[-1] and 0.05 < run.weight[-1] < 0.3
+        assert 0.0 < shift < 0.35 * full        # bounded influence: moved, but far less
+    else:
+        assert shift > 0.5
+
+
+def test_unavailable_fix_never_updates():
+    t = np.arange(0.0, 5.0)
+    g = GnssEvents.from_sigma(t, np.zeros(5), np.zeros(5), np.ones(5), available=np.array([1, 1, 0, 1, 1], bool))
+    run = EventEKF(noise=FixedNoise(1.0)).run(merge_events(gnss=g))
+    assert run.updated.tolist() == [True, True, False, True, True]
+    assert not run.available[2]
+
+
+# --- consistency ------------------------------------------------------------------------------------------
+
+
+def test_nees_in_bounds_share_monte_carlo():
+    values = []
+    for seed in range(8):
+        s = synth_walk(100 + seed, duration_s=150, acoustic_hz=1.25)
+        run = EventEKF(noise=FixedNoise(1.5, 0.3)).run(s.stream, x0=s.x0, P0=s.P0)
+        values.append(nees(run.x, run.P, s.truth))
+    m = min(map(len, values))
+    v = np.array([a[:m] for a in values])
+    # measured 0.948 pooled; 0.944 averaged over the 8 runs (Bar-Shalom's form, wider spread)
+    assert abs(in_bounds_share(v, 2, pooled=True) - 0.95) < 0.03
+    assert abs(in_bounds_share(v, 2) - 0.95) < 0.05
+    assert 1.8 < v.mean() < 2.2
+
+
+def test_gnss_bias_state_keeps_consistency_under_correlated_errors():
+    s = synth_walk(2, duration_s=300, bias_sigma_m=1.5, bias_tau_s=30.0, acoustic_hz=0.5, gnss_sigma_m=0.5)
+    plain = EventEKF(noise=FixedNoise(math.sqrt(0.25 + 2.25), 0.3)).run(s.stream, x0_en=s.x0[:2])
+    biased = EventEKF(EkfConfig(gnss_bias=True), FixedNoise(0.5, 0.3)).run(s.stream, x0_en=s.x0[:2])
+    # measured: 1.87 m, 9 % in bounds without the state; 0.21 m, 97 % with it
+    assert rms(biased.x, s.truth) < 0.5 * rms(plain.x, s.truth)
+    assert in_bounds_share(nees(biased.x, biased.P, s.truth), 2) > 0.85
+    assert in_bounds_share(nees(plain.x, plain.P, s.truth), 2) < 0.6
+
+
+def test_chi2_bounds_reference_values():
+    # Bar-Shalom, Li & Kirubarajan 2001, §5.4.2: N = 50 runs, n_x = 2 → [1.5, 2.6]
+    # (χ²₁₀₀ quantiles 74.22 and 129.56, over 50)
+    lo, hi = chi2_bounds(2, 50)
+    assert abs(lo - 74.22 / 50) < 1e-3 and abs(hi - 129.56 / 50) < 1e-3
+
+
+# --- adaptive noise ---------------------------------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def inflated():
+    """GNSS noise ten times the variance the receiver reports (σ 1.5 m reported, 4.74 m true)."""
+    return synth_walk(3, duration_s=400, gnss_sigma_m=1.5 * math.sqrt(10), gnss_reported_sigma_m=1.5,
+                      acoustic_hz=1.25)
+
+
+def _learnt_gnss_r(run):
+    g = run.updated & (run.kind == GNSS)
+    r = run.R[g][g.sum() // 2:]
+    return r[:, 0, 0].mean(), r[:, 1, 1].mean()
+
+
+def test_vb_akf_learns_tenfold_r(inflated):
+    run = EventEKF(EkfConfig(outlier="none"), VBAdaptiveNoise(1.5, 0.3)).run(inflated.stream, x0=inflated.x0,
+                                                                             P0=inflated.P0)
+    g = inflated.stream.kind == GNSS
+    sample = np.var(inflated.stream.z_m[g] - inflated.truth[g, :2], axis=0)
+    for learnt, true in zip(_learnt_gnss_r(run), sample):
+        assert 0.85 < learnt / true < 1.15                       # measured ≈ 1.00
+    fixed = EventEKF(EkfConfig(outlier="none"), FixedNoise(1.5, 0.3)).run(inflated.stream, x0=inflated.x0,
+                                                                          P0=inflated.P0)
+    assert nis_summary(run)[GNSS]["mean"] < 0.5 * nis_summary(fixed)[GNSS]["mean"]
+
+
+def test_sage_husa_learns_tenfold_r_and_stays_positive(inflated):
+    run = EventEKF(EkfConfig(outlier="none"), SageHusaNoise(1.5, 0.3)).run(inflated.stream, x0=inflated.x0,
+                                                                          P0=inflated.P0)
+    for learnt in _learnt_gnss_r(run):
+        assert 0.7 < learnt / 22.5 < 1.3
+    g = run.updated
+    assert min_eig(run.R[g]) > 0
+
+
+def test_imm_mode_probabilities_follow_regime_switch():
+    s = synth_walk(2, duration_s=300, gnss_sigma_m=lambda t: np.where(t < 150, 0.5, 5.0), gnss_hz=2.0)
+    pc = PerClassNoise(2)
+    pc.R_gnss_ = np.array([np.eye(2) * 0.25, np.eye(2) * 25.0])
+    pc.R_acoustic_ = np.array([np.eye(2) * 0.1] * 2)
+    run = IMMFilter(pc).run(s.stream, x0=s.x0, P0=s.P0)
+    t, mu = s.stream.t_s, run.mode_proba
+    assert np.allclose(mu.sum(axis=1), 1.0)
+    assert mu[(t > 20) & (t < 150), 0].mean() > 0.95            # measured 0.99
+    assert mu[t > 170, 1].mean() > 0.95                         # measured 0.98
+    switched = t[(t > 150) & (mu[:, 1] > 0.9)]
+    assert switched.size and switched[0] < 165
+    # classifier evidence for the true regime holds the right mode at least as firmly
+    ct = ClassTrack.from_labels(np.arange(0.0, 300.0, 5.0), (np.arange(0.0, 300.0, 5.0) >= 150).astype(int), 2)
+    ev = IMMFilter(pc, evidence_weight=0.5).run(s.stream, x0=s.x0, P0=s.P0, classes=ct)
+    assert ev.mode_proba[(t > 20) & (t < 150), 0].mean() >= mu[(t > 20) & (t < 150), 0].mean() - 1e-9
+
+
+# --- noise policies: fits and lookups -------------------------------------------------------------------
+
+
+def test_fixed_noise_fit_recovers_covariance():
+    rng = np.random.default_rng(11)
+    C = np.array([[4.0, 1.0], [1.0, 2.0]])
+    e = rng.multivariate_normal([0, 0], C, 20_000)
+    f = FixedNoise().fit(gnss_errors_m=e, acoustic_errors_m=0.1 * e)
+    np.testing.assert_allclose(f.R_gnss_, C, rtol=0.05, atol=0.05)
+    # from innovations: E[νν'] − E[HPH'] gives R back
+    hph = np.broadcast_to(np.eye(2) * 3.0, (20_000, 2, 2))
+    nu = e + rng.normal(0, math.sqrt(3.0), e.shape)
+    g = FixedNoise().fit(gnss_errors_m=nu, gnss_hph_m2=hph)
+    np.testing.assert_allclose(g.R_gnss_, C, rtol=0.08, atol=0.1)
+
+
+def test_quality_noise_fit_recovers_uere_and_scales():
+    rng = np.random.default_rng(12)
+    n = 5_000
+    q = rng.choice([1, 2, 4], n)
+    hdop = rng.uniform(0.8, 3.0, n)
+    uere = {1: 3.0, 2: 0.8, 4: 0.05}
+    sig = np.array([uere[c] for c in q]) * hdop / math.sqrt(2)
+    e = rng.normal(0, 1, (n, 2)) * sig[:, None]
+    gst = np.column_stack([sig, sig]) / 1.5              # GST σ reported 1.5× too small
+    ac_cov = np.broadcast_to(np.eye(2) * 0.04, (n, 2, 2))
+    ac_err = rng.normal(0, 0.4, (n, 2))                    # 2× the reported σ 0.2
+    f = QualityNoise().fit(q, hdop, e, gst_sigma_m=gst, acoustic_cov_m2=ac_cov, acoustic_errors_m=ac_err)
+    for c, u in uere.items():
+        assert abs(f.uere_m_[c] / u - 1) < 0.05
+    assert abs(f.gst_scale_ - 1.5) < 0.05 and abs(f.acoustic_scale_ - 2.0) < 0.08
+    r = f.gnss_r(np.array([1, 2]), np.array([2.0, np.nan]), np.array([[np.nan, np.nan], [0.3, 0.4]]),
+                 np.zeros((2, 2, 2)))
+    np.testing.assert_allclose(r[0], np.eye(2) * (f.uere_m_[1] * 2.0) ** 2 / 2)     # UERE·HDOP/√2
+    np.testing.assert_allclose(np.diag(r[1]), (f.gst_scale_ * np.array([0.3, 0.4])) ** 2)  # GST wins
+
+
+def test_per_class_noise_map_and_probabilities():
+    rng = np.random.default_rng(13)
+    cls = rng.integers(0, 3, 6_000)
+    sig = np.array([0.5, 2.0, 6.0])[cls]
+    pc = PerClassNoise(3).fit(cls, rng.normal(0, 1, (6_000, 2)) * sig[:, None])
+    np.testing.assert_allclose(np.diag(pc.R_gnss_[2]), [36.0, 36.0], rtol=0.08)
+    s = synth_walk(1, duration_s=30)
+    ev = s.stream
+    mapped = EventEKF(noise=pc).run(ev, class_at=lambda e, n: 1)
+    g = mapped.updated
+    np.testing.assert_allclose(mapped.R[g], np.broadcast_to(pc.R_gnss_[1], mapped.R[g].shape))
+    p = np.array([[0.2, 0.3, 0.5]])
+    prob = EventEKF(noise=pc).run(ev, classes=ClassTrack(np.array([0.0]), p))
+    np.testing.assert_allclose(prob.R[prob.updated][0], np.tensordot(p[0], pc.R_gnss_, axes=1))
+    with pytest.raises(NoiseError):
+        EventEKF(noise=pc).run(ev)
+
+
+# --- events, config and determinism ---------------------------------------------------------------------
+
+
+def test_stand_intervals_use_the_standing_random_walk():
+    st = StandIntervals(np.array([10.0]), np.array([20.0]))
+    t = np.array([0.0, 10.0, 20.0, 30.0])
+    np.testing.assert_allclose(st.standing_time(t), [0, 0, 10, 10])
+    g = GnssEvents.from_sigma(np.array([0.0, 10.0, 20.0, 30.0]), np.zeros(4), np.zeros(4), np.full(4, 1e3))
+    cfg = EkfConfig(q_walk_m2_s=1e-2, q_stand_m2_s=1e-5)
+    run = EventEKF(cfg, FixedNoise(1e3)).run(merge_events(gnss=g, stands=st))
+    grow = run.P_prior[1:, 0, 0] - run.P[:-1, 0, 0]
+    np.testing.assert_allclose(grow, [0.1, 1e-4, 0.1], rtol=1e-6)
+
+
+def test_merge_orders_by_time_then_kind_and_validates():
+    steps = StepEvents(np.array([1.0, 0.5]), np.array([0.7, 0.7]), np.array([0.0, np.nan]))
+    assert len(steps) == 1                              # the step without heading is dropped
+    g = GnssEvents.from_sigma(np.array([1.0, 0.2]), np.zeros(2), np.zeros(2), np.ones(2))
+    a = AcousticEvents.from_sigma(np.array([1.0]), np.zeros(1), np.zeros(1), np.ones(1))
+    ev = merge_events(steps, g, a)
+    assert ev.kind.tolist() == [GNSS, STEP, GNSS, ACOUSTIC] and ev.index.tolist() == [1, 0, 0, 0]
+    assert np.all(ev.dt_s >= 0)
+    with pytest.raises(EventError):
+        GnssEvents(np.zeros(2), np.zeros(2), np.zeros(2), np.zeros((2, 3, 3)))
+    with pytest.raises(EventError):
+        merge_events()
+    with pytest.raises(FilterError):
+        EkfConfig(outlier="bogus")
+    with pytest.raises(FilterError):
+        EkfConfig(sigma0_pos_m=-1.0)
+
+
+def test_same_seed_same_run_and_seed_reaches_the_draws(mixed):
+    a, b, c = synth_walk(21, duration_s=40), synth_walk(21, duration_s=40), synth_walk(22, duration_s=40)
+    np.testing.assert_array_equal(a.stream.z_m, b.stream.z_m)
+    assert not np.array_equal(a.truth, c.truth)
+    for name in ("kf", "aekf", "imm"):
+        r1 = dict(all_methods(a.stream))[name]
+        r2 = dict(all_methods(b.stream))[name]
+        np.testing.assert_array_equal(r1.x, r2.x)
+        np.testing.assert_array_equal(r1.P, r2.P)
+
+
+def test_scalar_loop_matches_matrix_form(mixed):
+    ev = mixed[0]
+    pc = PerClassNoise(3, 1.5, 0.3).fit()
+    cases = [(EkfConfig(), FixedNoise(1.5, 0.3), {}),
+             (EkfConfig(outlier="huber"), QualityNoise(), {}),
+             (EkfConfig(outlier="none"), pc, {"class_at": lambda e, n: 0 if e > 0 else 2}),
+             (EkfConfig(gate_prob=0.9), pc, {"classes": ClassTrack(np.array([0.0]), np.array([[0.2, 0.3, 0.5]]))})]
+    for cfg, noise, kw in cases:
+        a = EventEKF(cfg, noise, fast=True).run(ev, **kw)
+        b = EventEKF(cfg, noise, fast=False).run(ev, **kw)
+        assert a.info["fast"] and not b.info["fast"]
+        np.testing.assert_array_equal(a.accepted, b.accepted)
+        for f in ("x", "P", "x_prior", "P_prior", "F", "nu", "S", "K", "R", "nis", "weight"):
+            np.testing.assert_allclose(getattr(a, f), getattr(b, f), rtol=1e-9, atol=1e-10, err_msg=f)
+
+
+def test_gate_quantile_closed_form_matches_scipy():
+    from scipy.stats import chi2
+
+    for p in (0.9, 0.99, 0.999):
+        assert abs(EkfConfig(gate_prob=p).gate_nis - chi2.ppf(p, 2)) < 1e-9
