@@ -1,0 +1,95 @@
+"""The fusion model: what ``envfuse train fusion`` learns and ``run`` / ``evaluate`` apply.
+
+A :class:`FusionModel` holds, for one substation family:
+
+- the online environment classifier (:class:`models.environment.EnvironmentClassifier`),
+- the measurement-noise policies fitted on training walks: ``kf`` (one R per
+  source), ``kf_quality`` (UERE per GGA quality, GST and acoustic scales),
+  ``kf_map`` (R per class, classes from the site map at the truth position),
+  ``adaptive`` (R per class, classes from the online classifier — what it will
+  see when running), the adaptive filters' starting R,
+- the filter's process-noise settings (:class:`models.fusion.ekf.EkfConfig`),
+- the BP corrector (:class:`models.bp.BPCorrector`), or None,
+- metadata: the training walks and their hashes, the site names, versions.
+
+Saved as one bundle (:mod:`models.bundle`, kind ``"fusion"``): JSON parameters
+and safetensors arrays, never pickle.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+
+from models.bp import BPCorrector
+from models.bundle import BundleError, load_bundle, save_bundle
+from models.environment import EnvironmentClassifier
+from models.fusion.ekf import EkfConfig
+from models.fusion.noise import FixedNoise, PerClassNoise, QualityNoise
+
+__all__ = ["FusionModel", "save_fusion_model", "load_fusion_model"]
+
+
+@dataclass
+class FusionModel:
+    """Everything the fusion methods need at run time (see the module docstring)."""
+
+    classifier: EnvironmentClassifier
+    fixed: FixedNoise
+    quality: QualityNoise
+    per_class_map: PerClassNoise
+    per_class: PerClassNoise
+    ekf: EkfConfig = field(default_factory=EkfConfig)
+    bp: BPCorrector | None = None
+    meta: dict = field(default_factory=dict)
+
+
+def _noise_arrays(model: FusionModel) -> dict:
+    a = {"fixed.R_gnss": model.fixed.R_gnss_, "fixed.R_acoustic": model.fixed.R_acoustic_,
+         "map.R_gnss": model.per_class_map.R_gnss_, "map.R_acoustic": model.per_class_map.R_acoustic_,
+         "cls.R_gnss": model.per_class.R_gnss_, "cls.R_acoustic": model.per_class.R_acoustic_}
+    return {k: np.asarray(v, float) for k, v in a.items()}
+
+
+def save_fusion_model(model: FusionModel, path, overwrite: bool = False):
+    """Write ``model`` as a ``fusion`` bundle at ``path``."""
+    cls_params, cls_arrays = model.classifier.get_state()
+    params = {"classifier": cls_params, "ekf": asdict(model.ekf),
+              "quality": {"uere_m": {str(k): v for k, v in model.quality.uere_m_.items()},
+                          "gst_scale": model.quality.gst_scale_, "acoustic_scale": model.quality.acoustic_scale_},
+              "per_class": {"combine": model.per_class.combine}, "per_class_map": {"combine": model.per_class_map.combine},
+              "bp": None}
+    arrays = {"classifier": cls_arrays, "noise": _noise_arrays(model)}
+    if model.bp is not None:
+        bp_params, bp_arrays = model.bp.get_state()
+        params["bp"] = bp_params
+        arrays["bp"] = bp_arrays
+    return save_bundle(path, "fusion", params, arrays, meta=model.meta, overwrite=overwrite)
+
+
+def load_fusion_model(path) -> FusionModel:
+    """Read a ``fusion`` bundle; a damaged or inconsistent one raises :class:`~models.bundle.BundleError`."""
+    b = load_bundle(path, "fusion")
+    try:
+        p, a = b.params, b.arrays
+        clf = EnvironmentClassifier.from_state(p["classifier"], a["classifier"])
+        n = a["noise"]
+        fixed = FixedNoise()
+        fixed.R_gnss_, fixed.R_acoustic_ = n["fixed.R_gnss"], n["fixed.R_acoustic"]
+        q = QualityNoise()
+        q.uere_m_ = {int(k): float(v) for k, v in p["quality"]["uere_m"].items()}
+        q.gst_scale_, q.acoustic_scale_ = float(p["quality"]["gst_scale"]), float(p["quality"]["acoustic_scale"])
+        per_map = PerClassNoise(n_classes=clf.n_classes_, combine=p["per_class_map"]["combine"])
+        per_map.R_gnss_, per_map.R_acoustic_ = n["map.R_gnss"], n["map.R_acoustic"]
+        per = PerClassNoise(n_classes=clf.n_classes_, combine=p["per_class"]["combine"])
+        per.R_gnss_, per.R_acoustic_ = n["cls.R_gnss"], n["cls.R_acoustic"]
+        for name, r in n.items():
+            if not (np.all(np.isfinite(r)) and r.shape[-2:] == (2, 2)):
+                raise ValueError(f"noise array {name} is not a finite set of 2×2 matrices")
+        bp = BPCorrector.from_state(p["bp"], a["bp"]) if p.get("bp") else None
+        ekf = EkfConfig(**p["ekf"])
+    except (KeyError, TypeError, ValueError) as exc:
+        raise BundleError(f"{path}: the fusion model is inconsistent ({exc})") from None
+    return FusionModel(classifier=clf, fixed=fixed, quality=q, per_class_map=per_map, per_class=per, ekf=ekf, bp=bp,
+                       meta=b.meta)

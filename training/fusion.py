@@ -1,0 +1,98 @@
+"""Fitting the fusion model from training walks with ground truth (``envfuse train fusion``).
+
+From each training walk (read exactly as at run time, :func:`pipeline`-free: the
+walk is read by the caller and handed in as :class:`WalkTraining` rows):
+
+1. the fixes' errors against truth (fix − truth at the fix time), per source;
+2. R per source (``kf``): the second moment of those errors;
+3. the UERE per GGA quality, the GST and acoustic scales (``kf_quality``);
+4. R per class and source twice: with the class of the map at the true
+   position (``kf_map``), and with the class the online classifier predicts
+   at the fix time (``adaptive``), because that is what it will see running;
+5. the BP network, on the ``adaptive_nobp`` filter runs of the training walks
+   (inputs: the run's own records; target: truth − filter position), with
+   early stopping on a validation split of whole walks.
+
+Nothing here sees a test site: the benchmark split keeps them apart.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+
+from models.bp import BPConfig, BPCorrector
+from models.environment import EnvironmentClassifier
+from models.fusion import FixedNoise, PerClassNoise, QualityNoise
+from models.fusion.ekf import EkfConfig
+from models.fusion_model import FusionModel
+
+__all__ = ["WalkTraining", "fit_noise", "fit_fusion_model"]
+
+
+@dataclass(frozen=True)
+class WalkTraining:
+    """One training walk's fixes against truth.
+
+    GNSS: ``g_err`` (n, 2) fix − truth, ``g_quality`` (n,), ``g_hdop`` (n,), ``g_map_class`` (n,) truth class,
+    ``g_pred_class`` (n,) classifier's class; acoustic likewise ``a_err`` (k, 2), ``a_cov`` (k, 2, 2),
+    ``a_map_class``, ``a_pred_class``.
+    """
+
+    name: str
+    g_err: np.ndarray
+    g_quality: np.ndarray
+    g_hdop: np.ndarray
+    g_map_class: np.ndarray
+    g_pred_class: np.ndarray
+    a_err: np.ndarray
+    a_cov: np.ndarray
+    a_map_class: np.ndarray
+    a_pred_class: np.ndarray
+
+
+def _cat(rows, name, shape_tail):
+    parts = [getattr(r, name) for r in rows if len(getattr(r, name))]
+    return np.concatenate(parts) if parts else np.zeros((0,) + shape_tail)
+
+
+def fit_noise(rows: list[WalkTraining], n_classes: int = 3) -> tuple[FixedNoise, QualityNoise, PerClassNoise,
+                                                                       PerClassNoise]:
+    """(fixed, quality, per-class by map, per-class by classifier) noise policies from training walks."""
+    g_err, a_err = _cat(rows, "g_err", (2,)), _cat(rows, "a_err", (2,))
+    if len(g_err) + len(a_err) == 0:
+        raise ValueError("the training walks hold no GNSS or acoustic fix with truth")
+    g = g_err if len(g_err) else None
+    a = a_err if len(a_err) else None
+    fixed = FixedNoise().fit(gnss_errors_m=g, acoustic_errors_m=a)
+    quality = QualityNoise().fit(quality=_cat(rows, "g_quality", ()), hdop=_cat(rows, "g_hdop", ()),
+                                 gnss_errors_m=g, acoustic_cov_m2=_cat(rows, "a_cov", (2, 2)) if a is not None else None,
+                                 acoustic_errors_m=a)
+    per_map = PerClassNoise(n_classes=n_classes).fit(
+        gnss_class=_cat(rows, "g_map_class", ()) if g is not None else None, gnss_errors_m=g,
+        acoustic_class=_cat(rows, "a_map_class", ()) if a is not None else None, acoustic_errors_m=a)
+    per_cls = PerClassNoise(n_classes=n_classes).fit(
+        gnss_class=_cat(rows, "g_pred_class", ()) if g is not None else None, gnss_errors_m=g,
+        acoustic_class=_cat(rows, "a_pred_class", ()) if a is not None else None, acoustic_errors_m=a)
+    return fixed, quality, per_map, per_cls
+
+
+def fit_fusion_model(rows: list[WalkTraining], classifier: EnvironmentClassifier,
+                     bp_data: Callable[[FusionModel], tuple[list, list]] | None = None,
+                     bp_config: BPConfig = BPConfig(), ekf: EkfConfig = EkfConfig(), meta: dict | None = None,
+                     progress: Callable[[int, int], None] | None = None) -> FusionModel:
+    """Fit the noise policies, then (when ``bp_data`` is given) the BP network.
+
+    ``bp_data(model)`` runs ``adaptive_nobp`` of the noise-only model on every training walk and returns
+    (inputs per walk, targets per walk) — the caller reads the walks, this module stays free of file I/O.
+    """
+    fixed, quality, per_map, per_cls = fit_noise(rows, classifier.n_classes_)
+    model = FusionModel(classifier=classifier, fixed=fixed, quality=quality, per_class_map=per_map, per_class=per_cls,
+                        ekf=ekf, bp=None, meta=dict(meta or {}))
+    if bp_data is not None:
+        X, Y = bp_data(model)
+        model.bp = BPCorrector(bp_config).fit(X, Y, progress=progress)
+    model.meta.setdefault("training_walks", [r.name for r in rows])
+    return model
