@@ -1,0 +1,603 @@
+"""The fingerprint library: one SQLite file of sites, receivers, cells, samples and clustering runs.
+
+Schema and feature order: :mod:`fingerprints.schema`. Guarantees:
+
+* **WAL mode, foreign keys on, synchronous=FULL**: a committed cell survives a
+  killed process (and a power cut); readers never block the writer.
+* **Schema version checked on open**: a file that is not an SQLite database,
+  an SQLite file of another application, or a library of another schema
+  version is refused with :class:`LibraryError` — never modified.
+* **One transaction per cell** in :meth:`FingerprintLibrary.ingest_cell`:
+  a cell and all its samples are committed together or not at all; ingesting
+  the same capture (same ``capture_sha256``) again adds nothing.
+
+>>> import tempfile, os
+>>> path = os.path.join(tempfile.mkdtemp(), "fp.sqlite")
+>>> with FingerprintLibrary.open(path) as lib:
+...     _ = lib.add_site("demo", lat_deg=30.0, lon_deg=114.0, alt_m=20.0, site_toml_sha256="0" * 64)
+...     lib.ingest_cell("demo", CellCapture("E000N000", 5.0, 5.0, "2026-06-01T08:00:00Z", gnss_sha256="1" * 64),
+...                     {"t_s": [1.0, 2.0], "att_mean_db": [3.5, 4.0], "gnss_available": [1, 1]}).status
+'added'
+>>> with FingerprintLibrary.open(path, create=False) as lib:
+...     s = lib.samples()
+...     s["cell_id"].tolist(), s["att_mean_db"].tolist(), bool(np.isnan(s["rms_delay_ms"]).all())
+(['E000N000', 'E000N000'], [3.5, 4.0], True)
+"""
+
+from __future__ import annotations
+
+import contextlib
+import csv
+import hashlib
+import json
+import math
+import os
+import sqlite3
+from dataclasses import dataclass, field
+from datetime import datetime, timedelta, timezone
+from pathlib import Path
+from typing import Iterator, Mapping, Sequence
+
+import numpy as np
+
+from features.errors import EnvfuseError
+from features.fileio import atomic_path
+from features.gnss.features import Cn0Reference
+from features.site import ENV_CLASSES
+
+from fingerprints.schema import (
+    ACOUSTIC_COUNTS, APPLICATION_ID, DDL, FEATURES, GNSS_COUNTS, SAMPLE_COLUMNS, SCHEMA_VERSION,
+)
+
+__all__ = ["LibraryError", "CellCapture", "IngestResult", "ReceiverRecord", "FingerprintLibrary",
+           "feature_matrix", "capture_sha256", "EXPORT_COLUMNS"]
+
+_SQLITE_MAGIC = b"SQLite format 3\x00"
+
+EXPORT_COLUMNS = (("site", "receiver", "cell_id", "east_m", "north_m", "map_label", "map_share", "sample_id")
+                  + SAMPLE_COLUMNS)
+"""Columns of :meth:`FingerprintLibrary.export_csv`, in order (one row per sample)."""
+
+
+class LibraryError(EnvfuseError):
+    """A fingerprint library cannot be opened or an operation on it is refused."""
+
+
+def _now_utc() -> str:
+    return datetime.now(timezone.utc).isoformat(timespec="seconds").replace("+00:00", "Z")
+
+
+def capture_sha256(gnss_sha256: str | None, audio_sha256: str | None) -> str:
+    """Identity of a capture: SHA-256 over its streams' SHA-256s (an absent stream hashes as ``-``)."""
+    text = f"gnss:{gnss_sha256 or '-'}\naudio:{audio_sha256 or '-'}\n"
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+@dataclass(frozen=True)
+class CellCapture:
+    """One survey cell's metadata, as :meth:`FingerprintLibrary.ingest_cell` stores it.
+
+    ``start_utc`` ISO 8601; ``missing_streams`` names of the absent or unusable
+    streams (``"gnss"``, ``"audio"``), ``stream_notes`` why; ``*_sha256`` of the
+    stream files (None when missing).
+    """
+
+    cell_id: str
+    east_m: float
+    north_m: float
+    start_utc: str
+    duration_s: float | None = None
+    map_label: str | None = None
+    map_share: float | None = None
+    missing_streams: tuple[str, ...] = ()
+    stream_notes: str = ""
+    gnss_sha256: str | None = None
+    audio_sha256: str | None = None
+    feature_params: dict = field(default_factory=dict)
+
+    def __post_init__(self):
+        if not isinstance(self.cell_id, str) or not self.cell_id:
+            raise LibraryError(f"cell id must be a non-empty string, got {self.cell_id!r}")
+        for name in ("east_m", "north_m"):
+            value = getattr(self, name)
+            if not isinstance(value, (int, float)) or isinstance(value, bool) or not math.isfinite(value):
+                raise LibraryError(f"cell {self.cell_id}: {name} must be a finite number, got {value!r}")
+        if self.map_label is not None and self.map_label not in ENV_CLASSES:
+            raise LibraryError(f"cell {self.cell_id}: map_label must be one of {ENV_CLASSES}, got {self.map_label!r}")
+        if self.map_share is not None and not (isinstance(self.map_share, (int, float))
+                                               and 0.0 <= self.map_share <= 1.0):
+            raise LibraryError(f"cell {self.cell_id}: map_share must lie in [0, 1], got {self.map_share!r}")
+        bad = set(self.missing_streams) - {"gnss", "audio"}
+        if bad:
+            raise LibraryError(f"cell {self.cell_id}: unknown stream names in missing_streams: {sorted(bad)}")
+        _utc(self.start_utc, f"cell {self.cell_id} start_utc")
+
+    @property
+    def capture_sha256(self) -> str:
+        return capture_sha256(self.gnss_sha256, self.audio_sha256)
+
+
+@dataclass(frozen=True)
+class IngestResult:
+    """What :meth:`FingerprintLibrary.ingest_cell` did: ``status`` is ``added``, ``unchanged`` or ``replaced``."""
+
+    cell_id: str
+    status: str
+    n_samples: int
+
+
+@dataclass(frozen=True)
+class ReceiverRecord:
+    """A stored receiver: its open-sky C/N0 model and the record of how it was obtained."""
+
+    name: str
+    description: str
+    reference: Cn0Reference
+    reference_info: dict
+    calibrated: bool
+
+
+def _utc(text: str, where: str) -> datetime:
+    try:
+        t = datetime.fromisoformat(str(text).replace("Z", "+00:00"))
+    except ValueError:
+        raise LibraryError(f"{where} {text!r} is not ISO 8601") from None
+    return t if t.tzinfo else t.replace(tzinfo=timezone.utc)
+
+
+def _num(v) -> float | None:
+    """A float for SQLite: NaN and ±inf become NULL (a missing feature)."""
+    if v is None:
+        return None
+    f = float(v)
+    return f if math.isfinite(f) else None
+
+
+def feature_matrix(samples: np.ndarray) -> np.ndarray:
+    """The 14 features of :meth:`FingerprintLibrary.samples` as a float array (n_samples, 14), NaN = missing."""
+    if len(samples) == 0:
+        return np.zeros((0, len(FEATURES)))
+    return np.column_stack([np.asarray(samples[name], dtype=float) for name in FEATURES])
+
+
+class FingerprintLibrary:
+    """A fingerprint library file. Open with :meth:`open` (a context manager); never construct directly."""
+
+    def __init__(self, conn: sqlite3.Connection, path: Path):
+        self._conn = conn
+        self.path = path
+
+    # ---------------------------------------------------------------- opening
+    @classmethod
+    def open(cls, path: str | os.PathLike, *, create: bool = True) -> "FingerprintLibrary":
+        """Open (or, with ``create``, make) the library at ``path``; use as ``with FingerprintLibrary.open(p) as lib``.
+
+        Raises :class:`LibraryError` for a directory, a missing file when not
+        ``create``, a file that is not an envfuse library, or a schema version
+        other than :data:`~fingerprints.schema.SCHEMA_VERSION`.
+        """
+        path = Path(path)
+        if path.is_dir():
+            raise LibraryError(f"{path}: is a directory, expected a fingerprint library file")
+        exists = path.exists() and path.stat().st_size > 0
+        if not exists and not create:
+            raise LibraryError(f"{path}: no fingerprint library there (build one with 'envfuse survey build')")
+        if exists:
+            try:
+                with open(path, "rb") as fh:
+                    head = fh.read(len(_SQLITE_MAGIC))
+            except OSError as exc:
+                raise LibraryError(f"{path}: cannot read ({exc.strerror or exc})") from None
+            if head != _SQLITE_MAGIC:
+                raise LibraryError(f"{path}: is not a fingerprint library (not an SQLite database)")
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            conn = sqlite3.connect(path, isolation_level=None, timeout=30.0)
+        except (OSError, sqlite3.Error) as exc:
+            raise LibraryError(f"{path}: cannot open ({exc})") from None
+        try:
+            cls._prepare(conn, path)
+        except BaseException:
+            conn.close()
+            raise
+        return cls(conn, path)
+
+    @staticmethod
+    def _prepare(conn: sqlite3.Connection, path: Path) -> None:
+        try:
+            app_id = conn.execute("PRAGMA application_id").fetchone()[0]
+            version = conn.execute("PRAGMA user_version").fetchone()[0]
+            n_objects = conn.execute("SELECT count(*) FROM sqlite_master").fetchone()[0]
+        except sqlite3.DatabaseError as exc:
+            raise LibraryError(f"{path}: is not a readable fingerprint library ({exc})") from None
+        fresh = app_id == 0 and version == 0 and n_objects == 0
+        if not fresh:
+            if app_id != APPLICATION_ID:
+                raise LibraryError(f"{path}: is an SQLite database but not an envfuse fingerprint library "
+                                   f"(application_id {app_id:#x}, expected {APPLICATION_ID:#x})")
+            if version > SCHEMA_VERSION:
+                raise LibraryError(f"{path}: written by a newer envfuse (library schema version {version}; this "
+                                   f"version reads {SCHEMA_VERSION}); upgrade envfuse to use it")
+            if version != SCHEMA_VERSION:
+                raise LibraryError(f"{path}: unknown library schema version {version} (this envfuse reads "
+                                   f"version {SCHEMA_VERSION})")
+        try:
+            mode = conn.execute("PRAGMA journal_mode=WAL").fetchone()[0]
+            if str(mode).lower() != "wal":
+                raise LibraryError(f"{path}: cannot switch the library to WAL mode (got {mode!r}); "
+                                   "is it on a network file system?")
+            conn.execute("PRAGMA synchronous=FULL")
+            conn.execute("PRAGMA foreign_keys=ON")
+            if fresh:
+                conn.executescript("BEGIN IMMEDIATE;\n" + DDL + f"\nPRAGMA application_id={APPLICATION_ID};\n"
+                                   f"PRAGMA user_version={SCHEMA_VERSION};\nCOMMIT;")
+        except sqlite3.Error as exc:
+            raise LibraryError(f"{path}: cannot prepare the library ({exc})") from None
+
+    def close(self) -> None:
+        """Close the connection (committed data is already on disk)."""
+        self._conn.close()
+
+    def __enter__(self) -> "FingerprintLibrary":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    @contextlib.contextmanager
+    def _transaction(self) -> Iterator[sqlite3.Connection]:
+        """BEGIN IMMEDIATE … COMMIT, rolled back on any error; SQLite errors become :class:`LibraryError`."""
+        try:
+            self._conn.execute("BEGIN IMMEDIATE")
+        except sqlite3.Error as exc:
+            raise LibraryError(f"{self.path}: cannot start a transaction ({exc})") from None
+        try:
+            yield self._conn
+        except BaseException as exc:
+            self._conn.execute("ROLLBACK")
+            if isinstance(exc, sqlite3.Error):
+                raise LibraryError(f"{self.path}: {exc}") from None
+            raise
+        else:
+            try:
+                self._conn.execute("COMMIT")
+            except sqlite3.Error as exc:
+                self._conn.execute("ROLLBACK")
+                raise LibraryError(f"{self.path}: commit failed ({exc})") from None
+
+    # ---------------------------------------------------------------- sites, receivers
+    @property
+    def schema_version(self) -> int:
+        return int(self._conn.execute("PRAGMA user_version").fetchone()[0])
+
+    def sites(self) -> list[str]:
+        """Names of the sites in the library, sorted."""
+        return [r[0] for r in self._conn.execute("SELECT name FROM sites ORDER BY name")]
+
+    def _site_id(self, site: str) -> int:
+        row = self._conn.execute("SELECT site_id FROM sites WHERE name = ?", (site,)).fetchone()
+        if row is None:
+            known = ", ".join(self.sites()) or "none"
+            raise LibraryError(f"{self.path}: no site named {site!r} (sites: {known})")
+        return int(row[0])
+
+    def add_site(self, name: str, *, lat_deg: float, lon_deg: float, alt_m: float, site_toml_sha256: str) -> int:
+        """Add a site (or find it: same name and same ``site.toml`` hash); returns its ``site_id``.
+
+        The same name with another ``site.toml`` hash is refused: its cells'
+        positions would refer to another layout or origin.
+        """
+        with self._transaction() as conn:
+            row = conn.execute("SELECT site_id, site_toml_sha256 FROM sites WHERE name = ?", (name,)).fetchone()
+            if row is not None:
+                if row[1] != site_toml_sha256:
+                    raise LibraryError(f"{self.path}: site {name!r} is already in the library from another "
+                                       f"site.toml (sha256 {row[1][:12]}..., now {site_toml_sha256[:12]}...)")
+                return int(row[0])
+            cur = conn.execute("INSERT INTO sites (name, lat_deg, lon_deg, alt_m, site_toml_sha256, created_utc) "
+                               "VALUES (?, ?, ?, ?, ?, ?)",
+                               (name, float(lat_deg), float(lon_deg), float(alt_m), site_toml_sha256, _now_utc()))
+            return int(cur.lastrowid)
+
+    def add_receiver(self, site: str, name: str, cn0_reference: Mapping, *, calibrated: bool,
+                     description: str = "") -> int:
+        """Add a receiver of ``site`` with its C/N0 reference (or find the identical one); returns its id.
+
+        ``cn0_reference``: a JSON-serialisable mapping holding at least
+        ``intercept_dbhz`` and ``slope_dbhz`` (:class:`Cn0Reference` fields) and,
+        from a calibration, the per-bin values and the rule. A receiver already
+        stored with a different reference is refused (its samples were computed
+        with the stored one).
+        """
+        Cn0Reference.from_dict(dict(cn0_reference))  # validates the line parameters
+        try:
+            text = json.dumps(dict(cn0_reference), sort_keys=True, allow_nan=False)
+        except (TypeError, ValueError) as exc:
+            raise LibraryError(f"receiver {name!r}: C/N0 reference is not plain JSON ({exc})") from None
+        with self._transaction() as conn:
+            site_id = self._site_id(site)
+            row = conn.execute("SELECT receiver_id, cn0_reference_json FROM receivers WHERE site_id = ? AND name = ?",
+                               (site_id, name)).fetchone()
+            if row is not None:
+                if row[1] != text:
+                    raise LibraryError(f"{self.path}: receiver {name!r} of site {site!r} is already stored with "
+                                       "another C/N0 reference; use a new receiver name or a new library")
+                return int(row[0])
+            cur = conn.execute("INSERT INTO receivers (site_id, name, description, cn0_reference_json, "
+                               "cn0_calibrated, created_utc) VALUES (?, ?, ?, ?, ?, ?)",
+                               (site_id, name, description, text, int(bool(calibrated)), _now_utc()))
+            return int(cur.lastrowid)
+
+    def receiver(self, site: str, name: str) -> ReceiverRecord | None:
+        """The stored receiver ``name`` of ``site``, or None."""
+        row = self._conn.execute(
+            "SELECT r.name, r.description, r.cn0_reference_json, r.cn0_calibrated FROM receivers r "
+            "JOIN sites s USING (site_id) WHERE s.name = ? AND r.name = ?", (site, name)).fetchone()
+        if row is None:
+            return None
+        info = json.loads(row[2])
+        return ReceiverRecord(row[0], row[1], Cn0Reference.from_dict(info), info, bool(row[3]))
+
+    # ---------------------------------------------------------------- cells and samples
+    def has_capture(self, site: str, cell_id: str, capture_sha256: str) -> bool:
+        """True when ``cell_id`` of ``site`` is stored from exactly this capture (resume test, no features needed)."""
+        row = self._conn.execute("SELECT c.capture_sha256 FROM cells c JOIN sites s USING (site_id) "
+                                 "WHERE s.name = ? AND c.cell_id = ?", (site, cell_id)).fetchone()
+        return row is not None and row[0] == capture_sha256
+
+    def ingest_cell(self, site: str, cell: CellCapture, rows: Mapping[str, Sequence], *,
+                    receiver: str | None = None, replace: bool = False) -> IngestResult:
+        """Store one cell and its samples in one transaction.
+
+        ``rows`` maps column names of :data:`~fingerprints.schema.SAMPLE_COLUMNS`
+        to sequences of one length (one entry per window); ``t_s`` is required;
+        an absent feature column, or NaN/inf in it, is stored as NULL; absent
+        flags and counts are 0, ``t_utc`` and the hashes are filled in from
+        ``cell``. The same capture again is ``unchanged`` (nothing written);
+        another capture of a stored cell is refused unless ``replace``.
+        """
+        table = self._sample_rows(cell, rows)
+        with self._transaction() as conn:
+            site_id = self._site_id(site)
+            receiver_id = None
+            if receiver is not None:
+                r = conn.execute("SELECT receiver_id FROM receivers WHERE site_id = ? AND name = ?",
+                                 (site_id, receiver)).fetchone()
+                if r is None:
+                    raise LibraryError(f"{self.path}: site {site!r} has no receiver {receiver!r}; add it first")
+                receiver_id = int(r[0])
+            old = conn.execute("SELECT cell_pk, capture_sha256 FROM cells WHERE site_id = ? AND cell_id = ?",
+                               (site_id, cell.cell_id)).fetchone()
+            status = "added"
+            if old is not None:
+                if old[1] == cell.capture_sha256:
+                    n_old = conn.execute("SELECT count(*) FROM samples WHERE cell_pk = ?", (old[0],)).fetchone()[0]
+                    return IngestResult(cell.cell_id, "unchanged", int(n_old))
+                if not replace:
+                    raise LibraryError(f"{self.path}: cell {cell.cell_id} of site {site!r} is already stored from "
+                                       "another capture; pass --replace to swap it")
+                used = conn.execute("SELECT count(*) FROM run_samples rs JOIN samples s USING (sample_id) "
+                                    "WHERE s.cell_pk = ?", (old[0],)).fetchone()[0]
+                if used:
+                    raise LibraryError(f"{self.path}: cell {cell.cell_id} cannot be replaced: {used} of its samples "
+                                       "belong to clustering runs")
+                conn.execute("DELETE FROM cells WHERE cell_pk = ?", (old[0],))
+                status = "replaced"
+            cur = conn.execute(
+                "INSERT INTO cells (site_id, receiver_id, cell_id, east_m, north_m, start_utc, duration_s, map_label, "
+                "map_share, missing_streams, stream_notes, gnss_sha256, audio_sha256, capture_sha256, "
+                "feature_params_json, n_samples, ingested_utc) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
+                (site_id, receiver_id, cell.cell_id, float(cell.east_m), float(cell.north_m), cell.start_utc,
+                 _num(cell.duration_s), cell.map_label, _num(cell.map_share), "+".join(cell.missing_streams),
+                 cell.stream_notes, cell.gnss_sha256, cell.audio_sha256, cell.capture_sha256,
+                 json.dumps(cell.feature_params, sort_keys=True), len(table), _now_utc()))
+            self._insert_samples(conn, int(cur.lastrowid), table)
+        return IngestResult(cell.cell_id, status, len(table))
+
+    @staticmethod
+    def _sample_rows(cell: CellCapture, rows: Mapping[str, Sequence]) -> list[tuple]:
+        unknown = set(rows) - set(SAMPLE_COLUMNS)
+        if unknown:
+            raise LibraryError(f"cell {cell.cell_id}: unknown sample columns {sorted(unknown)}")
+        if "t_s" not in rows:
+            raise LibraryError(f"cell {cell.cell_id}: sample rows need t_s")
+        t = np.asarray(rows["t_s"], dtype=float)
+        n = t.shape[0]
+        cols = {k: list(v) for k, v in rows.items()}
+        for k, v in cols.items():
+            if len(v) != n:
+                raise LibraryError(f"cell {cell.cell_id}: column {k} has {len(v)} values, t_s has {n}")
+        if not np.all(np.isfinite(t)) or len(np.unique(t)) != n:
+            raise LibraryError(f"cell {cell.cell_id}: t_s must be finite and distinct")
+        start = _utc(cell.start_utc, f"cell {cell.cell_id} start_utc")
+        out = []
+        for i in range(n):
+            def get(k, default=None):
+                return cols[k][i] if k in cols else default
+            rec = [float(t[i]),
+                   (start + timedelta(seconds=float(t[i]))).isoformat(timespec="milliseconds").replace("+00:00", "Z")]
+            rec += [_num(get(k)) for k in FEATURES]
+            for k in ("gnss_available", "acoustic_available"):
+                v = int(get(k, 0))
+                if v not in (0, 1):
+                    raise LibraryError(f"cell {cell.cell_id}: {k} must be 0 or 1, got {v}")
+                rec.append(v)
+            for k in GNSS_COUNTS + ACOUSTIC_COUNTS:
+                v = int(get(k, 0))
+                if v < 0:
+                    raise LibraryError(f"cell {cell.cell_id}: {k} must be >= 0, got {v}")
+                rec.append(v)
+            rec += [_num(get("snr_db_mean")), str(get("acoustic_flags", "") or ""),
+                    get("gnss_sha256", cell.gnss_sha256), get("audio_sha256", cell.audio_sha256)]
+            out.append(tuple(rec))
+        return out
+
+    def _insert_samples(self, conn: sqlite3.Connection, cell_pk: int, table: list[tuple]) -> None:
+        names = ("cell_pk",) + SAMPLE_COLUMNS
+        sql = f"INSERT INTO samples ({', '.join(names)}) VALUES ({', '.join('?' * len(names))})"
+        conn.executemany(sql, [(cell_pk,) + r for r in table])
+
+    def _where_site(self, site: str | None, alias: str = "s") -> tuple[str, tuple]:
+        if site is None:
+            return "", ()
+        self._site_id(site)
+        return f" WHERE {alias}.name = ?", (site,)
+
+    def cells(self, site: str | None = None) -> np.ndarray:
+        """Stored cells as a structured array, ordered by site and cell id.
+
+        Fields: ``site, receiver, cell_id`` (str), ``east_m, north_m, duration_s,
+        map_share`` (float, NaN = NULL), ``start_utc, map_label, missing_streams``
+        (str, '' = NULL), ``n_samples`` (int).
+        """
+        where, args = self._where_site(site)
+        rows = self._conn.execute(
+            "SELECT s.name, coalesce(r.name, ''), c.cell_id, c.east_m, c.north_m, c.start_utc, c.duration_s, "
+            "coalesce(c.map_label, ''), c.map_share, c.missing_streams, c.n_samples FROM cells c "
+            "JOIN sites s USING (site_id) LEFT JOIN receivers r ON r.receiver_id = c.receiver_id"
+            + where + " ORDER BY s.name, c.cell_id", args).fetchall()
+        names = ("site", "receiver", "cell_id", "east_m", "north_m", "start_utc", "duration_s", "map_label",
+                 "map_share", "missing_streams", "n_samples")
+        kinds = "UUUffUfUfUi"
+        return _structured(rows, names, kinds)
+
+    def samples(self, site: str | None = None) -> np.ndarray:
+        """Stored samples as a structured array (n_samples,), ordered by site, cell id and t_s.
+
+        Fields: ``sample_id`` (int), ``site, cell_id`` (str), ``t_s`` (float),
+        the 14 :data:`~fingerprints.schema.FEATURES` (float, NaN = missing),
+        ``gnss_available, acoustic_available`` (bool), the counts (int) and
+        ``snr_db_mean`` (float). :func:`feature_matrix` gives the (n, 14) array.
+        """
+        where, args = self._where_site(site)
+        counts = GNSS_COUNTS + ACOUSTIC_COUNTS
+        cols = ", ".join(f"x.{k}" for k in ("t_s",) + FEATURES + ("gnss_available", "acoustic_available") + counts
+                         + ("snr_db_mean",))
+        rows = self._conn.execute(
+            f"SELECT x.sample_id, s.name, c.cell_id, {cols} FROM samples x JOIN cells c USING (cell_pk) "
+            "JOIN sites s USING (site_id)" + where + " ORDER BY s.name, c.cell_id, x.t_s", args).fetchall()
+        names = ("sample_id", "site", "cell_id", "t_s") + FEATURES + ("gnss_available", "acoustic_available") \
+            + counts + ("snr_db_mean",)
+        kinds = "iUUf" + "f" * len(FEATURES) + "bb" + "i" * len(counts) + "f"
+        return _structured(rows, names, kinds)
+
+    # ---------------------------------------------------------------- clustering runs
+    def save_clustering_run(self, sample_ids, labels, rho, delta, *, parameters: Mapping, model_version: str,
+                            embedding=None, is_center=None, is_halo=None, site: str | None = None,
+                            cluster_names: Mapping | None = None, note: str = "") -> int:
+        """Store a clustering of samples in one transaction; returns its ``run_id``.
+
+        sample_ids, labels (int, −1 = none), rho, delta : shape (n,);
+        embedding : (n, 2) or None; is_center, is_halo : bool (n,) or None;
+        parameters : JSON-serialisable; cluster_names : {cluster: name}.
+        """
+        ids = np.asarray(sample_ids, dtype=np.int64)
+        n = ids.shape[0]
+        lab = np.asarray(labels)
+        arrays = {"labels": lab, "rho": np.asarray(rho, dtype=float), "delta": np.asarray(delta, dtype=float)}
+        emb = None if embedding is None else np.asarray(embedding, dtype=float)
+        if emb is not None and emb.shape != (n, 2):
+            raise LibraryError(f"embedding must have shape ({n}, 2), got {emb.shape}")
+        for name, flag in (("is_center", is_center), ("is_halo", is_halo)):
+            arrays[name] = np.zeros(n, dtype=bool) if flag is None else np.asarray(flag, dtype=bool)
+        for name, a in arrays.items():
+            if a.shape != (n,):
+                raise LibraryError(f"{name} must have shape ({n},), got {a.shape}")
+        if not np.issubdtype(lab.dtype, np.integer):
+            raise LibraryError(f"labels must be integers, got dtype {lab.dtype}")
+        if not (np.all(~np.isnan(arrays["rho"])) and np.all(~np.isnan(arrays["delta"]))):
+            raise LibraryError("rho and delta must not hold NaN")
+        if len(np.unique(ids)) != n:
+            raise LibraryError("sample_ids must be distinct")
+        try:
+            params = json.dumps(dict(parameters), sort_keys=True, allow_nan=False)
+            names = None if cluster_names is None else json.dumps({str(k): str(v) for k, v in cluster_names.items()})
+        except (TypeError, ValueError) as exc:
+            raise LibraryError(f"clustering parameters are not plain JSON ({exc})") from None
+        n_clusters = int(len(np.unique(lab[lab >= 0])))
+        with self._transaction() as conn:
+            site_id = None if site is None else self._site_id(site)
+            cur = conn.execute("INSERT INTO clustering_runs (site_id, created_utc, model_version, parameters_json, "
+                               "n_clusters, cluster_names_json, note) VALUES (?, ?, ?, ?, ?, ?, ?)",
+                               (site_id, _now_utc(), str(model_version), params, n_clusters, names, note))
+            run_id = int(cur.lastrowid)
+            xs = [None] * n if emb is None else [_num(v) for v in emb[:, 0]]
+            ys = [None] * n if emb is None else [_num(v) for v in emb[:, 1]]
+            try:
+                conn.executemany(
+                    "INSERT INTO run_samples (run_id, sample_id, x, y, rho, delta, cluster, is_center, is_halo) "
+                    "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)",
+                    zip([run_id] * n, ids.tolist(), xs, ys, arrays["rho"].tolist(), arrays["delta"].tolist(),
+                        lab.astype(int).tolist(), arrays["is_center"].astype(int).tolist(),
+                        arrays["is_halo"].astype(int).tolist()))
+            except sqlite3.IntegrityError as exc:
+                raise LibraryError(f"clustering run refers to samples not in the library ({exc})") from None
+        return run_id
+
+    def clustering_run(self, run_id: int) -> tuple[dict, np.ndarray]:
+        """A stored run: its metadata and a structured array (sample_id, x, y, rho, delta, cluster, is_center, is_halo)."""
+        meta = self._conn.execute("SELECT created_utc, model_version, parameters_json, n_clusters, "
+                                  "cluster_names_json, note FROM clustering_runs WHERE run_id = ?",
+                                  (int(run_id),)).fetchone()
+        if meta is None:
+            raise LibraryError(f"{self.path}: no clustering run {run_id}")
+        info = {"run_id": int(run_id), "created_utc": meta[0], "model_version": meta[1],
+                "parameters": json.loads(meta[2]), "n_clusters": meta[3],
+                "cluster_names": None if meta[4] is None else json.loads(meta[4]), "note": meta[5]}
+        rows = self._conn.execute("SELECT sample_id, x, y, rho, delta, cluster, is_center, is_halo FROM run_samples "
+                                  "WHERE run_id = ? ORDER BY sample_id", (int(run_id),)).fetchall()
+        return info, _structured(rows, ("sample_id", "x", "y", "rho", "delta", "cluster", "is_center", "is_halo"),
+                                 "iffffibb")
+
+    # ---------------------------------------------------------------- export
+    def export_csv(self, out, site: str | None = None) -> int:
+        """Write every sample (of ``site``) as CSV with :data:`EXPORT_COLUMNS`; returns the number of rows.
+
+        ``out``: a path, written atomically (temporary file + rename: a failed
+        export leaves any previous file untouched), or an open text stream.
+        Floats are written in shortest round-trip form; NULL as an empty field.
+        """
+        where, args = self._where_site(site)
+        sql = ("SELECT s.name, coalesce(r.name, ''), c.cell_id, c.east_m, c.north_m, c.map_label, c.map_share, "
+               "x.sample_id, " + ", ".join(f"x.{k}" for k in SAMPLE_COLUMNS) +
+               " FROM samples x JOIN cells c USING (cell_pk) JOIN sites s USING (site_id) "
+               "LEFT JOIN receivers r ON r.receiver_id = c.receiver_id" + where +
+               " ORDER BY s.name, c.cell_id, x.t_s")
+
+        def write(fh) -> int:
+            w = csv.writer(fh, lineterminator="\n")
+            w.writerow(EXPORT_COLUMNS)
+            n = 0
+            for row in self._conn.execute(sql, args):
+                w.writerow(["" if v is None else repr(v) if isinstance(v, float) else v for v in row])
+                n += 1
+            return n
+
+        if hasattr(out, "write"):
+            return write(out)
+        with atomic_path(out) as tmp:
+            with open(tmp, "w", newline="", encoding="utf-8") as fh:
+                return write(fh)
+
+
+def _structured(rows: list[tuple], names: Sequence[str], kinds: str) -> np.ndarray:
+    """A structured array from SQL rows; kinds per field: i int64, f float64 (NULL → NaN), b bool, U str (NULL → '')."""
+    cols = list(zip(*rows)) if rows else [()] * len(names)
+    fields, data = [], []
+    for name, kind, col in zip(names, kinds, cols):
+        if kind == "f":
+            a = np.array([np.nan if v is None else v for v in col], dtype=float)
+        elif kind == "i":
+            a = np.array(col, dtype=np.int64)
+        elif kind == "b":
+            a = np.array(col, dtype=bool)
+        else:
+            a = np.array(["" if v is None else str(v) for v in col], dtype=str)
+            if a.dtype.itemsize == 0:
+                a = a.astype("U1")
+        fields.append((name, a.dtype))
+        data.append(a)
+    out = np.empty(len(rows), dtype=fields)
+    for (name, _), a in zip(fields, data):
+        out[name] = a
+    return out
