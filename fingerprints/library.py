@@ -28,23 +28,23 @@ from __future__ import annotations
 
 import contextlib
 import csv
-import hashlib
 import json
-import math
 import os
 import sqlite3
-from dataclasses import dataclass, field
-from datetime import datetime, timedelta, timezone
+from datetime import timedelta
 from pathlib import Path
 from typing import Iterator, Mapping, Sequence
 
 import numpy as np
 
-from features.errors import EnvfuseError
 from features.fileio import atomic_path
 from features.gnss.features import Cn0Reference
-from features.site import ENV_CLASSES
 
+from fingerprints.records import (
+    CellCapture, IngestResult, LibraryError, ReceiverRecord, _now_utc, _num, _structured, _utc, capture_sha256,
+    feature_matrix,
+)
+from fingerprints.runs import ClusteringRunsMixin
 from fingerprints.schema import (
     ACOUSTIC_COUNTS, APPLICATION_ID, DDL, FEATURES, GNSS_COUNTS, SAMPLE_COLUMNS, SCHEMA_VERSION,
 )
@@ -52,115 +52,14 @@ from fingerprints.schema import (
 __all__ = ["LibraryError", "CellCapture", "IngestResult", "ReceiverRecord", "FingerprintLibrary",
            "feature_matrix", "capture_sha256", "EXPORT_COLUMNS"]
 
-_SQLITE_MAGIC = b"SQLite format 3\x00"
-
 EXPORT_COLUMNS = (("site", "receiver", "cell_id", "east_m", "north_m", "map_label", "map_share", "sample_id")
                   + SAMPLE_COLUMNS)
 """Columns of :meth:`FingerprintLibrary.export_csv`, in order (one row per sample)."""
 
-
-class LibraryError(EnvfuseError):
-    """A fingerprint library cannot be opened or an operation on it is refused."""
+_SQLITE_MAGIC = b"SQLite format 3\x00"
 
 
-def _now_utc() -> str:
-    return datetime.now(timezone.utc).isoformat(timespec="seconds").replace("+00:00", "Z")
-
-
-def capture_sha256(gnss_sha256: str | None, audio_sha256: str | None) -> str:
-    """Identity of a capture: SHA-256 over its streams' SHA-256s (an absent stream hashes as ``-``)."""
-    text = f"gnss:{gnss_sha256 or '-'}\naudio:{audio_sha256 or '-'}\n"
-    return hashlib.sha256(text.encode()).hexdigest()
-
-
-@dataclass(frozen=True)
-class CellCapture:
-    """One survey cell's metadata, as :meth:`FingerprintLibrary.ingest_cell` stores it.
-
-    ``start_utc`` ISO 8601; ``missing_streams`` names of the absent or unusable
-    streams (``"gnss"``, ``"audio"``), ``stream_notes`` why; ``*_sha256`` of the
-    stream files (None when missing).
-    """
-
-    cell_id: str
-    east_m: float
-    north_m: float
-    start_utc: str
-    duration_s: float | None = None
-    map_label: str | None = None
-    map_share: float | None = None
-    missing_streams: tuple[str, ...] = ()
-    stream_notes: str = ""
-    gnss_sha256: str | None = None
-    audio_sha256: str | None = None
-    feature_params: dict = field(default_factory=dict)
-
-    def __post_init__(self):
-        if not isinstance(self.cell_id, str) or not self.cell_id:
-            raise LibraryError(f"cell id must be a non-empty string, got {self.cell_id!r}")
-        for name in ("east_m", "north_m"):
-            value = getattr(self, name)
-            if not isinstance(value, (int, float)) or isinstance(value, bool) or not math.isfinite(value):
-                raise LibraryError(f"cell {self.cell_id}: {name} must be a finite number, got {value!r}")
-        if self.map_label is not None and self.map_label not in ENV_CLASSES:
-            raise LibraryError(f"cell {self.cell_id}: map_label must be one of {ENV_CLASSES}, got {self.map_label!r}")
-        if self.map_share is not None and not (isinstance(self.map_share, (int, float))
-                                               and 0.0 <= self.map_share <= 1.0):
-            raise LibraryError(f"cell {self.cell_id}: map_share must lie in [0, 1], got {self.map_share!r}")
-        bad = set(self.missing_streams) - {"gnss", "audio"}
-        if bad:
-            raise LibraryError(f"cell {self.cell_id}: unknown stream names in missing_streams: {sorted(bad)}")
-        _utc(self.start_utc, f"cell {self.cell_id} start_utc")
-
-    @property
-    def capture_sha256(self) -> str:
-        return capture_sha256(self.gnss_sha256, self.audio_sha256)
-
-
-@dataclass(frozen=True)
-class IngestResult:
-    """What :meth:`FingerprintLibrary.ingest_cell` did: ``status`` is ``added``, ``unchanged`` or ``replaced``."""
-
-    cell_id: str
-    status: str
-    n_samples: int
-
-
-@dataclass(frozen=True)
-class ReceiverRecord:
-    """A stored receiver: its open-sky C/N0 model and the record of how it was obtained."""
-
-    name: str
-    description: str
-    reference: Cn0Reference
-    reference_info: dict
-    calibrated: bool
-
-
-def _utc(text: str, where: str) -> datetime:
-    try:
-        t = datetime.fromisoformat(str(text).replace("Z", "+00:00"))
-    except ValueError:
-        raise LibraryError(f"{where} {text!r} is not ISO 8601") from None
-    return t if t.tzinfo else t.replace(tzinfo=timezone.utc)
-
-
-def _num(v) -> float | None:
-    """A float for SQLite: NaN and ±inf become NULL (a missing feature)."""
-    if v is None:
-        return None
-    f = float(v)
-    return f if math.isfinite(f) else None
-
-
-def feature_matrix(samples: np.ndarray) -> np.ndarray:
-    """The 14 features of :meth:`FingerprintLibrary.samples` as a float array (n_samples, 14), NaN = missing."""
-    if len(samples) == 0:
-        return np.zeros((0, len(FEATURES)))
-    return np.column_stack([np.asarray(samples[name], dtype=float) for name in FEATURES])
-
-
-class FingerprintLibrary:
+class FingerprintLibrary(ClusteringRunsMixin):
     """A fingerprint library file. Open with :meth:`open` (a context manager); never construct directly."""
 
     def __init__(self, conn: sqlite3.Connection, path: Path):
@@ -481,74 +380,6 @@ class FingerprintLibrary:
         kinds = "iUUf" + "f" * len(FEATURES) + "bb" + "i" * len(counts) + "f"
         return _structured(rows, names, kinds)
 
-    # ---------------------------------------------------------------- clustering runs
-    def save_clustering_run(self, sample_ids, labels, rho, delta, *, parameters: Mapping, model_version: str,
-                            embedding=None, is_center=None, is_halo=None, site: str | None = None,
-                            cluster_names: Mapping | None = None, note: str = "") -> int:
-        """Store a clustering of samples in one transaction; returns its ``run_id``.
-
-        sample_ids, labels (int, −1 = none), rho, delta : shape (n,);
-        embedding : (n, 2) or None; is_center, is_halo : bool (n,) or None;
-        parameters : JSON-serialisable; cluster_names : {cluster: name}.
-        """
-        ids = np.asarray(sample_ids, dtype=np.int64)
-        n = ids.shape[0]
-        lab = np.asarray(labels)
-        arrays = {"labels": lab, "rho": np.asarray(rho, dtype=float), "delta": np.asarray(delta, dtype=float)}
-        emb = None if embedding is None else np.asarray(embedding, dtype=float)
-        if emb is not None and emb.shape != (n, 2):
-            raise LibraryError(f"embedding must have shape ({n}, 2), got {emb.shape}")
-        for name, flag in (("is_center", is_center), ("is_halo", is_halo)):
-            arrays[name] = np.zeros(n, dtype=bool) if flag is None else np.asarray(flag, dtype=bool)
-        for name, a in arrays.items():
-            if a.shape != (n,):
-                raise LibraryError(f"{name} must have shape ({n},), got {a.shape}")
-        if not np.issubdtype(lab.dtype, np.integer):
-            raise LibraryError(f"labels must be integers, got dtype {lab.dtype}")
-        if not (np.all(~np.isnan(arrays["rho"])) and np.all(~np.isnan(arrays["delta"]))):
-            raise LibraryError("rho and delta must not hold NaN")
-        if len(np.unique(ids)) != n:
-            raise LibraryError("sample_ids must be distinct")
-        try:
-            params = json.dumps(dict(parameters), sort_keys=True, allow_nan=False)
-            names = None if cluster_names is None else json.dumps({str(k): str(v) for k, v in cluster_names.items()})
-        except (TypeError, ValueError) as exc:
-            raise LibraryError(f"clustering parameters are not plain JSON ({exc})") from None
-        n_clusters = int(len(np.unique(lab[lab >= 0])))
-        with self._transaction() as conn:
-            site_id = None if site is None else self._site_id(site)
-            cur = conn.execute("INSERT INTO clustering_runs (site_id, created_utc, model_version, parameters_json, "
-                               "n_clusters, cluster_names_json, note) VALUES (?, ?, ?, ?, ?, ?, ?)",
-                               (site_id, _now_utc(), str(model_version), params, n_clusters, names, note))
-            run_id = int(cur.lastrowid)
-            xs = [None] * n if emb is None else [_num(v) for v in emb[:, 0]]
-            ys = [None] * n if emb is None else [_num(v) for v in emb[:, 1]]
-            try:
-                conn.executemany(
-                    "INSERT INTO run_samples (run_id, sample_id, x, y, rho, delta, cluster, is_center, is_halo) "
-                    "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)",
-                    zip([run_id] * n, ids.tolist(), xs, ys, arrays["rho"].tolist(), arrays["delta"].tolist(),
-                        lab.astype(int).tolist(), arrays["is_center"].astype(int).tolist(),
-                        arrays["is_halo"].astype(int).tolist()))
-            except sqlite3.IntegrityError as exc:
-                raise LibraryError(f"clustering run refers to samples not in the library ({exc})") from None
-        return run_id
-
-    def clustering_run(self, run_id: int) -> tuple[dict, np.ndarray]:
-        """A stored run: its metadata and a structured array (sample_id, x, y, rho, delta, cluster, is_center, is_halo)."""
-        meta = self._conn.execute("SELECT created_utc, model_version, parameters_json, n_clusters, "
-                                  "cluster_names_json, note FROM clustering_runs WHERE run_id = ?",
-                                  (int(run_id),)).fetchone()
-        if meta is None:
-            raise LibraryError(f"{self.path}: no clustering run {run_id}")
-        info = {"run_id": int(run_id), "created_utc": meta[0], "model_version": meta[1],
-                "parameters": json.loads(meta[2]), "n_clusters": meta[3],
-                "cluster_names": None if meta[4] is None else json.loads(meta[4]), "note": meta[5]}
-        rows = self._conn.execute("SELECT sample_id, x, y, rho, delta, cluster, is_center, is_halo FROM run_samples "
-                                  "WHERE run_id = ? ORDER BY sample_id", (int(run_id),)).fetchall()
-        return info, _structured(rows, ("sample_id", "x", "y", "rho", "delta", "cluster", "is_center", "is_halo"),
-                                 "iffffibb")
-
     # ---------------------------------------------------------------- export
     def export_csv(self, out, site: str | None = None) -> int:
         """Write every sample (of ``site``) as CSV with :data:`EXPORT_COLUMNS`; returns the number of rows.
@@ -578,26 +409,3 @@ class FingerprintLibrary:
         with atomic_path(out) as tmp:
             with open(tmp, "w", newline="", encoding="utf-8") as fh:
                 return write(fh)
-
-
-def _structured(rows: list[tuple], names: Sequence[str], kinds: str) -> np.ndarray:
-    """A structured array from SQL rows; kinds per field: i int64, f float64 (NULL → NaN), b bool, U str (NULL → '')."""
-    cols = list(zip(*rows)) if rows else [()] * len(names)
-    fields, data = [], []
-    for name, kind, col in zip(names, kinds, cols):
-        if kind == "f":
-            a = np.array([np.nan if v is None else v for v in col], dtype=float)
-        elif kind == "i":
-            a = np.array(col, dtype=np.int64)
-        elif kind == "b":
-            a = np.array(col, dtype=bool)
-        else:
-            a = np.array(["" if v is None else str(v) for v in col], dtype=str)
-            if a.dtype.itemsize == 0:
-                a = a.astype("U1")
-        fields.append((name, a.dtype))
-        data.append(a)
-    out = np.empty(len(rows), dtype=fields)
-    for (name, _), a in zip(fields, data):
-        out[name] = a
-    return out
