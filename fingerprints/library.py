@@ -238,11 +238,15 @@ class FingerprintLibrary(ClusteringRunsMixin):
         return ReceiverRecord(row[0], row[1], Cn0Reference.from_dict(info), info, bool(row[3]))
 
     # ---------------------------------------------------------------- cells and samples
-    def has_capture(self, site: str, cell_id: str, capture_sha256: str) -> bool:
-        """True when ``cell_id`` of ``site`` is stored from exactly this capture (resume test, no features needed)."""
-        row = self._conn.execute("SELECT c.capture_sha256 FROM cells c JOIN sites s USING (site_id) "
-                                 "WHERE s.name = ? AND c.cell_id = ?", (site, cell_id)).fetchone()
-        return row is not None and row[0] == capture_sha256
+    def has_capture(self, site: str, cell_id: str, capture_sha256: str, feature_params: Mapping | None = None) -> bool:
+        """True when ``cell_id`` of ``site`` is stored from exactly this capture (and, if given, these
+        feature parameters): the resume test, made before any feature is computed."""
+        row = self._conn.execute("SELECT c.capture_sha256, c.feature_params_json FROM cells c "
+                                 "JOIN sites s USING (site_id) WHERE s.name = ? AND c.cell_id = ?",
+                                 (site, cell_id)).fetchone()
+        if row is None or row[0] != capture_sha256:
+            return False
+        return feature_params is None or row[1] == json.dumps(dict(feature_params), sort_keys=True)
 
     def ingest_cell(self, site: str, cell: CellCapture, rows: Mapping[str, Sequence], *,
                     receiver: str | None = None, replace: bool = False) -> IngestResult:
@@ -265,16 +269,18 @@ class FingerprintLibrary(ClusteringRunsMixin):
                 if r is None:
                     raise LibraryError(f"{self.path}: site {site!r} has no receiver {receiver!r}; add it first")
                 receiver_id = int(r[0])
-            old = conn.execute("SELECT cell_pk, capture_sha256 FROM cells WHERE site_id = ? AND cell_id = ?",
-                               (site_id, cell.cell_id)).fetchone()
+            old = conn.execute("SELECT cell_pk, capture_sha256, feature_params_json FROM cells "
+                               "WHERE site_id = ? AND cell_id = ?", (site_id, cell.cell_id)).fetchone()
             status = "added"
+            params = json.dumps(cell.feature_params, sort_keys=True)
             if old is not None:
-                if old[1] == cell.capture_sha256:
+                if old[1] == cell.capture_sha256 and old[2] == params:
                     n_old = conn.execute("SELECT count(*) FROM samples WHERE cell_pk = ?", (old[0],)).fetchone()[0]
                     return IngestResult(cell.cell_id, "unchanged", int(n_old))
                 if not replace:
+                    what = "another capture" if old[1] != cell.capture_sha256 else "other feature parameters"
                     raise LibraryError(f"{self.path}: cell {cell.cell_id} of site {site!r} is already stored from "
-                                       "another capture; pass --replace to swap it")
+                                       f"{what}; pass --replace to swap it")
                 used = conn.execute("SELECT count(*) FROM run_samples rs JOIN samples s USING (sample_id) "
                                     "WHERE s.cell_pk = ?", (old[0],)).fetchone()[0]
                 if used:
@@ -289,7 +295,7 @@ class FingerprintLibrary(ClusteringRunsMixin):
                 (site_id, receiver_id, cell.cell_id, float(cell.east_m), float(cell.north_m), cell.start_utc,
                  _num(cell.duration_s), cell.map_label, _num(cell.map_share), "+".join(cell.missing_streams),
                  cell.stream_notes, cell.gnss_sha256, cell.audio_sha256, cell.capture_sha256,
-                 json.dumps(cell.feature_params, sort_keys=True), len(table), _now_utc()))
+                 params, len(table), _now_utc()))
             self._insert_samples(conn, int(cur.lastrowid), table)
         return IngestResult(cell.cell_id, status, len(table))
 

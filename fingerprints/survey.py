@@ -374,13 +374,16 @@ def build_library(survey_dir: str | os.PathLike, library: str | os.PathLike, con
     """Compute the 14 features of every cell of ``survey_dir`` and store them in the library file ``library``.
 
     ``receiver``: name of the GNSS receiver for cells whose ``cell.toml`` names
-    none. ``replace``: swap cells stored from another capture (default: refuse).
+    none. ``replace``: swap cells stored from another capture or computed with
+    other feature parameters (default: refuse).
     Raises :class:`~features.errors.ConfigError` for a malformed survey and
     :class:`~fingerprints.library.LibraryError` for a library it cannot use;
     cells committed before an error (or a kill) stay, and a rerun resumes.
     """
     survey_dir = Path(survey_dir)
     site_file = survey_dir / "site.toml"
+    if not site_file.is_file():
+        raise ConfigError(f"{survey_dir}: not a survey directory (no site.toml)")
     site = load_site(site_file)
     site_sha = _sha256(site_file)
     plans = [_plan_cell(d, receiver) for d in survey_cell_dirs(survey_dir)]
@@ -409,7 +412,8 @@ def build_library(survey_dir: str | os.PathLike, library: str | os.PathLike, con
         try:
             for plan in plans:
                 cap = plan.capture
-                if not replace and lib.has_capture(site.name, cap.cell_id, cap.capture_sha256):
+                params = _feature_params(config, plan.receiver, refs[plan.receiver])
+                if lib.has_capture(site.name, cap.cell_id, cap.capture_sha256, params):
                     counts["unchanged"] += 1
                     if cap.missing_streams:
                         missing[cap.cell_id] = cap.missing_streams
@@ -426,6 +430,13 @@ def build_library(survey_dir: str | os.PathLike, library: str | os.PathLike, con
         n_samples = int(sum(int(c["n_samples"]) for c in cells if c["cell_id"] in set(ids)))
     return BuildReport(site.name, len(plans), counts["added"], counts["unchanged"], counts["replaced"], n_samples,
                        missing, calibrated)
+
+
+def _feature_params(config: SurveyConfig, receiver: str, reference: Cn0Reference) -> dict:
+    """What a cell's features were computed with (stored per cell; a change makes the cell stale)."""
+    return {"window_s": config.window_s, "hop_s": config.hop_s, "elevation_mask_deg": config.elevation_mask_deg,
+            "fluct_threshold_dbhz": config.fluct_threshold_dbhz, "p_fa": config.p_fa, "receiver": receiver,
+            "cn0_reference": reference.to_dict()}
 
 
 def _ingest(lib: FingerprintLibrary, site, plan: _CellPlan, reference: Cn0Reference, config: SurveyConfig,
@@ -447,9 +458,7 @@ def _ingest(lib: FingerprintLibrary, site, plan: _CellPlan, reference: Cn0Refere
             unusable.append("audio")
             notes.append(f"audio: {plan.paths['audio'].name} unusable: {exc}")
     missing = tuple(s for s in _DEFAULT_FILES if s in cap.missing_streams or s in unusable)
-    params = {"window_s": config.window_s, "hop_s": config.hop_s, "elevation_mask_deg": config.elevation_mask_deg,
-              "fluct_threshold_dbhz": config.fluct_threshold_dbhz, "p_fa": config.p_fa, "receiver": plan.receiver,
-              "cn0_reference": reference.to_dict()}
+    params = _feature_params(config, plan.receiver, reference)
     cap = CellCapture(cap.cell_id, cap.east_m, cap.north_m, cap.start_utc, cap.duration_s, cap.map_label,
                       cap.map_share, missing, "; ".join(notes), cap.gnss_sha256, cap.audio_sha256, params)
     if missing:

@@ -150,6 +150,16 @@ def test_same_capture_twice_adds_nothing_other_capture_refused_or_replaced(lib):
     assert not lib.has_capture("s1", "E000N000", _cell().capture_sha256)
 
 
+def test_same_capture_other_feature_parameters_is_stale(lib):
+    lib.ingest_cell("s1", _cell(feature_params={"window_s": 2.0}), _rows(3))
+    assert lib.has_capture("s1", "E000N000", _cell().capture_sha256, {"window_s": 2.0})
+    assert not lib.has_capture("s1", "E000N000", _cell().capture_sha256, {"window_s": 4.0})
+    with pytest.raises(LibraryError, match="other feature parameters; pass --replace"):
+        lib.ingest_cell("s1", _cell(feature_params={"window_s": 4.0}), _rows(2))
+    res = lib.ingest_cell("s1", _cell(feature_params={"window_s": 4.0}), _rows(2), replace=True)
+    assert (res.status, res.n_samples, len(lib.samples())) == ("replaced", 2, 2)
+
+
 def test_failed_ingest_leaves_nothing(lib):
     rows = _rows()
     rows["gnss_available"] = [1, 2, 1]
@@ -245,3 +255,19 @@ def test_plain_sqlite_users_can_query(lib):
                       "JOIN cells c USING (cell_pk) GROUP BY c.cell_pk").fetchall()
     raw.close()
     assert got == [("E000N000", "light", 3, 1.0)]
+
+
+def test_fingerprints_imports_only_features():
+    """Layering (DESIGN.md §2): fingerprints imports features and third-party libraries, nothing else of ours."""
+    import ast
+    from pathlib import Path
+
+    ours = {"simulation", "models", "training", "pipeline", "fingerprints", "features"}
+    pkg = Path(__file__).resolve().parents[1] / "fingerprints"
+    seen = set()
+    for path in pkg.glob("*.py"):
+        for node in ast.walk(ast.parse(path.read_text())):
+            names = [a.name for a in node.names] if isinstance(node, ast.Import) else \
+                [node.module] if isinstance(node, ast.ImportFrom) and node.module and node.level == 0 else []
+            seen |= {n.split(".")[0] for n in names if n.split(".")[0] in ours}
+    assert seen == {"features", "fingerprints"}

@@ -33,7 +33,8 @@ def register(sub) -> None:
     p.add_argument("--hop-s", type=bounded(0.05, 3600.0, "s"), default=1.0, help="window hop, s (default 1)")
     p.add_argument("--cn0-quantile", type=bounded(0.5, 0.99), default=0.9,
                    help="C/N0 quantile per elevation bin for the receiver's open-sky reference (default 0.9)")
-    p.add_argument("--replace", action="store_true", help="replace cells stored from another capture")
+    p.add_argument("--replace", action="store_true",
+                   help="replace cells stored from another capture or with other feature parameters (default: refuse)")
     p.add_argument("--quiet", action="store_true", help="no progress lines")
     p.set_defaults(func=_build)
 
