@@ -412,6 +412,8 @@ class FingerprintLibrary(ClusteringRunsMixin):
 
         if hasattr(out, "write"):
             return write(out)
+        if Path(out).resolve() in {Path(str(self.path) + x).resolve() for x in ("", "-wal", "-shm")}:
+            raise LibraryError(f"{out}: is the library itself; choose another output file")
         with atomic_path(out) as tmp:
             with open(tmp, "w", newline="", encoding="utf-8") as fh:
                 return write(fh)

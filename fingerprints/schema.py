@@ -31,10 +31,16 @@ Tables
 ``samples``
     one row per analysis window of a cell: ``t_s`` (window centre, seconds
     since the cell's ``start_utc``), ``t_utc``, the 14 features in
-    :data:`FEATURES` order (NULL when unavailable), ``gnss_available`` /
-    ``acoustic_available`` (0/1), the counts behind them (:data:`GNSS_COUNTS`,
-    ``n_chirps, n_beacons``, ``snr_db_mean``, ``acoustic_flags``) and the
-    SHA-256 of the source files the row came from.
+    :data:`FEATURES` order (NULL when unavailable), the availability flags
+    (0/1) — ``gnss_available``: satellites in view above the mask in the
+    window (ζ and λ defined; μ, σ, β also need a tracked satellite and may
+    still be NULL), ``acoustic_available``: at least one beacon chirp
+    detected — the counts behind them (:data:`GNSS_COUNTS`, ``n_chirps,
+    n_beacons``), ``snr_db_mean``, ``acoustic_flags`` (``+``-joined:
+    ``no_chirp``, ``clipped``, ``silent``, ``partial``, ``truncated``,
+    ``no_audio`` when the cell has no usable audio, ``no_window`` when no
+    acoustic window matched the GNSS one) and the SHA-256 of the source files
+    the row came from.
 ``clustering_runs`` / ``run_samples``
     a clustering of (some) samples: ``parameters_json``, ``created_utc``,
     ``model_version``, ``n_clusters``, ``cluster_names_json``; per sample the

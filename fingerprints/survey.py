@@ -34,6 +34,12 @@ attenuation features. With fewer than two qualifying bins (or an implausible
 fit) the built-in default is used, stored with ``cn0_calibrated = 0`` and a
 :class:`SurveyWarning`. A receiver already in the library keeps its stored
 reference, so a resumed build computes every cell with the same one.
+Measured on a simulated survey (site seed 3, 94 cells of 10 m, 10 s): the
+all-cells 90th-percentile line lies within 0.6 dB of the same rule applied to
+the open cells alone (the occlusion mix barely moves it) and 3.6–4.1 dB above
+the simulator's median open-sky line (the built-in default), so open-sky
+attenuation reads about 4 dB rather than 0 — a constant offset shared by every
+receiver calibrated this way, which is what makes libraries comparable.
 
 Resuming. A cell already stored from the same capture (same file hashes) is
 skipped before any feature is computed; a run killed midway therefore resumes
@@ -332,7 +338,7 @@ def _merge(gnss: dict | None, audio: list[dict] | None, config: SurveyConfig, du
         cols["n_chirps"].append(int(row["n_chirps"]) if row else 0)
         cols["n_beacons"].append(int(row["n_beacons"]) if row else 0)
         cols["snr_db_mean"].append(row["snr_db_mean"] if row else math.nan)
-        cols["acoustic_flags"].append(row["flags"] if row else "no_audio")
+        cols["acoustic_flags"].append(row["flags"] if row else "no_audio" if audio is None else "no_window")
     return cols
 
 

@@ -246,6 +246,9 @@ def test_export_csv_round_trip_and_atomic(lib, tmp_path):
     assert out.read_bytes() == before and sorted(p.name for p in tmp_path.iterdir() if "samples" in p.name) == [
         "samples.csv"]
     assert lib.export_csv(tmp_path / "s1.csv", site="s1") == 5
+    with pytest.raises(LibraryError, match="is the library itself"):
+        lib.export_csv(lib.path)
+    assert lib.path.read_bytes()[:16] == b"SQLite format 3\x00"
 
 
 def test_plain_sqlite_users_can_query(lib):

@@ -193,6 +193,8 @@ def test_missing_and_unusable_streams_recorded(survey, tmp_path):
     with FingerprintLibrary.open(tmp_path / "fp.sqlite", create=False) as lib:
         c = {r["cell_id"]: r for r in lib.cells()}
         notes = dict(lib._conn.execute("SELECT cell_id, stream_notes FROM cells"))
+        flags = lib._conn.execute("SELECT DISTINCT s.acoustic_flags FROM samples s JOIN cells c USING (cell_pk) "
+                                  "WHERE c.cell_id IN (?, ?)", (no_audio, bad_audio)).fetchall()
         smp = lib.samples()
     assert c[no_audio]["missing_streams"] == "audio" and "audio.wav not found" in notes[no_audio]
     assert c[no_gnss]["missing_streams"] == "gnss" and "no [gnss] table" in notes[no_gnss]
@@ -206,6 +208,7 @@ def test_missing_and_unusable_streams_recorded(survey, tmp_path):
         flag = "acoustic_available" if lost.start == 5 else "gnss_available"
         assert not smp[flag][m].any(), cell
     assert c[no_gnss]["n_samples"] == WINDOWS_PER_CELL
+    assert flags == [("no_audio",)]
 
 
 _KILLED_BUILD = textwrap.dedent("""
