@@ -256,8 +256,9 @@ class FingerprintLibrary(ClusteringRunsMixin):
         to sequences of one length (one entry per window); ``t_s`` is required;
         an absent feature column, or NaN/inf in it, is stored as NULL; absent
         flags and counts are 0, ``t_utc`` and the hashes are filled in from
-        ``cell``. The same capture again is ``unchanged`` (nothing written);
-        another capture of a stored cell is refused unless ``replace``.
+        ``cell``. The same capture with the same ``feature_params`` again is
+        ``unchanged`` (nothing written); another capture, or other parameters,
+        of a stored cell is refused unless ``replace``.
         """
         table = self._sample_rows(cell, rows)
         with self._transaction() as conn:

@@ -399,7 +399,6 @@ def build_library(survey_dir: str | os.PathLike, library: str | os.PathLike, con
         raise ConfigError(f"{survey_dir}: cell ids occur twice: {', '.join(dup)}")
     out = _Progress(len(plans), progress)
     counts = {"added": 0, "unchanged": 0, "replaced": 0}
-    missing: dict = {}
     with FingerprintLibrary.open(library) as lib:
         lib.add_site(site.name, lat_deg=site.origin.lat_deg, lon_deg=site.origin.lon_deg, alt_m=site.origin.alt_m,
                      site_toml_sha256=site_sha)
@@ -421,19 +420,17 @@ def build_library(survey_dir: str | os.PathLike, library: str | os.PathLike, con
                 params = _feature_params(config, plan.receiver, refs[plan.receiver])
                 if lib.has_capture(site.name, cap.cell_id, cap.capture_sha256, params):
                     counts["unchanged"] += 1
-                    if cap.missing_streams:
-                        missing[cap.cell_id] = cap.missing_streams
                     out.step(f"{cap.cell_id} already stored")
                     continue
-                result, cap = _ingest(lib, site, plan, refs[plan.receiver], config, replace)
+                result = _ingest(lib, site, plan, refs[plan.receiver], config, replace)
                 counts[result.status] += 1
-                if cap.missing_streams:
-                    missing[cap.cell_id] = cap.missing_streams
                 out.step(f"{cap.cell_id} {result.status}, {result.n_samples} windows")
         finally:
             out.close()
-        cells = lib.cells(site.name)
-        n_samples = int(sum(int(c["n_samples"]) for c in cells if c["cell_id"] in set(ids)))
+        cells = [c for c in lib.cells(site.name) if c["cell_id"] in set(ids)]
+    n_samples = int(sum(int(c["n_samples"]) for c in cells))
+    # as stored, so a resumed build reports the streams found unusable in an earlier run too
+    missing = {str(c["cell_id"]): tuple(str(c["missing_streams"]).split("+")) for c in cells if c["missing_streams"]}
     return BuildReport(site.name, len(plans), counts["added"], counts["unchanged"], counts["replaced"], n_samples,
                        missing, calibrated)
 
@@ -471,4 +468,4 @@ def _ingest(lib: FingerprintLibrary, site, plan: _CellPlan, reference: Cn0Refere
         warnings.warn(f"cell {cap.cell_id}: stream{'s' if len(missing) > 1 else ''} {' and '.join(missing)} "
                       f"missing ({cap.stream_notes}); recorded as missing", SurveyWarning, stacklevel=3)
     rows = _merge(gnss, audio, config, cap.duration_s)
-    return lib.ingest_cell(site.name, cap, rows, receiver=plan.receiver, replace=replace), cap
+    return lib.ingest_cell(site.name, cap, rows, receiver=plan.receiver, replace=replace)

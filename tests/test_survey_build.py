@@ -208,6 +208,8 @@ def test_missing_and_unusable_streams_recorded(survey, tmp_path):
         flag = "acoustic_available" if lost.start == 5 else "gnss_available"
         assert not smp[flag][m].any(), cell
     assert c[no_gnss]["n_samples"] == WINDOWS_PER_CELL
+    again = build_library(s, tmp_path / "fp.sqlite", progress=False)  # resumed: the stored record is reported
+    assert (again.added, again.unchanged, again.missing) == (0, N_CELLS, report.missing)
     assert flags == [("no_audio",)]
 
 
