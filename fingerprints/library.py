@@ -128,10 +128,23 @@ class FingerprintLibrary(ClusteringRunsMixin):
             conn.execute("PRAGMA synchronous=FULL")
             conn.execute("PRAGMA foreign_keys=ON")
             if fresh:
-                conn.executescript("BEGIN IMMEDIATE;\n" + DDL + f"\nPRAGMA application_id={APPLICATION_ID};\n"
-                                   f"PRAGMA user_version={SCHEMA_VERSION};\nCOMMIT;")
+                conn.execute("BEGIN IMMEDIATE")
+                try:
+                    # another process may have created the library while this one waited for the lock
+                    if conn.execute("SELECT count(*) FROM sqlite_master").fetchone()[0] == 0:
+                        for statement in DDL.split(";"):
+                            if statement.strip():
+                                conn.execute(statement)
+                        conn.execute(f"PRAGMA application_id={APPLICATION_ID}")
+                        conn.execute(f"PRAGMA user_version={SCHEMA_VERSION}")
+                    conn.execute("COMMIT")
+                except BaseException:
+                    conn.execute("ROLLBACK")
+                    raise
         except sqlite3.Error as exc:
             raise LibraryError(f"{path}: cannot prepare the library ({exc})") from None
+        if fresh and conn.execute("PRAGMA user_version").fetchone()[0] != SCHEMA_VERSION:
+            FingerprintLibrary._prepare(conn, path)  # created by another process meanwhile: check it as found
 
     def close(self) -> None:
         """Close the connection (committed data is already on disk)."""

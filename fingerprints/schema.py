@@ -47,6 +47,10 @@ Tables
     embedding ``x, y``, ``rho``, ``delta``, ``cluster`` (−1 = none),
     ``is_center`` and ``is_halo``.
 
+``cell_samples`` (a view)
+    every sample with its site name, cell id, position and map label: the
+    one table most ad-hoc queries want.
+
 Every child row references its parent (``FOREIGN KEY ... ON DELETE CASCADE``);
 foreign keys are switched on for every connection.
 """
@@ -175,5 +179,8 @@ CREATE TABLE run_samples (
     PRIMARY KEY (run_id, sample_id)
 ) WITHOUT ROWID;
 CREATE INDEX run_samples_sample ON run_samples(sample_id);
+CREATE VIEW cell_samples AS
+    SELECT st.name AS site, c.cell_id, c.east_m, c.north_m, c.map_label, c.map_share, c.missing_streams, x.*
+    FROM samples x JOIN cells c USING (cell_pk) JOIN sites st USING (site_id);
 """
 """The schema of :data:`SCHEMA_VERSION`, run once when a new library is created."""

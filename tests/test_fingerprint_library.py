@@ -256,8 +256,11 @@ def test_plain_sqlite_users_can_query(lib):
     raw = sqlite3.connect(lib.path)
     got = raw.execute("SELECT c.cell_id, c.map_label, count(*), avg(s.att_mean_db) FROM samples s "
                       "JOIN cells c USING (cell_pk) GROUP BY c.cell_pk").fetchall()
+    view = raw.execute("SELECT site, cell_id, map_label, t_s, att_mean_db FROM cell_samples ORDER BY t_s").fetchall()
     raw.close()
     assert got == [("E000N000", "light", 3, 1.0)]
+    assert view == [("s1", "E000N000", "light", 1.0, 0.0), ("s1", "E000N000", "light", 2.0, 1.0),
+                    ("s1", "E000N000", "light", 3.0, 2.0)]
 
 
 def test_fingerprints_imports_only_features():
