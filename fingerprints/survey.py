@@ -121,7 +121,9 @@ class BuildReport:
         text = (f"site {self.site}: {self.n_cells} cells ({self.added} added, {self.replaced} replaced, "
                 f"{self.unchanged} already stored), {self.n_samples} samples; receivers: {rx or 'none'}")
         if self.missing:
-            text += "; missing streams: " + ", ".join(f"{c} {'+'.join(s)}" for c, s in self.missing.items())
+            items = [f"{c} {'+'.join(s)}" for c, s in self.missing.items()]
+            more = f" and {len(items) - 10} more cells" if len(items) > 10 else ""
+            text += f"; missing streams in {len(items)} cells: " + ", ".join(items[:10]) + more
         return text
 
 
