@@ -57,9 +57,10 @@ foreign keys are switched on for every connection.
 
 from __future__ import annotations
 
-from features.acoustic.cir import FEATURE_NAMES as _CIR_FEATURES
 from features.gnss.features import COUNT_COLUMNS as _GNSS_COUNTS
-from features.gnss.features import FEATURE_COLUMNS as _GNSS_FEATURES
+from features.schema import ACOUSTIC_FEATURES as _CIR_FEATURES
+from features.schema import FEATURES as _ALL_FEATURES
+from features.schema import GNSS_FEATURES as _GNSS_FEATURES
 
 __all__ = ["SCHEMA_VERSION", "APPLICATION_ID", "GNSS_FEATURES", "ACOUSTIC_FEATURES", "FEATURES", "GNSS_COUNTS",
            "ACOUSTIC_COUNTS", "SAMPLE_COLUMNS", "DDL"]
@@ -71,12 +72,12 @@ APPLICATION_ID = 0x45465031
 """``PRAGMA application_id`` marking an envfuse fingerprint library (ASCII ``EFP1``)."""
 
 GNSS_FEATURES: tuple[str, ...] = tuple(_GNSS_FEATURES)
-"""The five GNSS features, DESIGN.md §5 order (from :mod:`features.gnss.features`)."""
+"""The five GNSS features, DESIGN.md §5 order (from :mod:`features.schema`)."""
 
 ACOUSTIC_FEATURES: tuple[str, ...] = tuple(_CIR_FEATURES)
-"""The nine acoustic CIR features, DESIGN.md §5 order (from :mod:`features.acoustic.cir`)."""
+"""The nine acoustic CIR features, DESIGN.md §5 order (from :mod:`features.schema`)."""
 
-FEATURES: tuple[str, ...] = GNSS_FEATURES + ACOUSTIC_FEATURES
+FEATURES: tuple[str, ...] = tuple(_ALL_FEATURES)
 """The 14 features in the library's fixed order: the columns of ``samples`` and of every feature matrix.
 
 >>> len(FEATURES), FEATURES[0], FEATURES[5], FEATURES[-1]

@@ -59,6 +59,7 @@ from pathlib import Path
 import numpy as np
 
 from features.acoustic.features import WindowConfig, analyse_audio
+from features.acoustic.timing import timing_from_walk
 from features.constants import ELEVATION_MASK_DEG
 from features.errors import ConfigError, DataError
 from features.gnss.features import Cn0Reference, GnssFeatureConfig, fit_cn0_reference, gnss_features, sky_arrays
@@ -266,22 +267,6 @@ def _calibrate(plans: list[_CellPlan], receiver: str, config: SurveyConfig):
     return ref, record, ok
 
 
-def _audio_timing(walk: WalkInfo, site, where: Path):
-    """Audio start on the cell's time base, as ``envfuse features audio`` takes it from cell.toml."""
-    from features.acoustic.detection import AudioTiming, frame_phase_s
-
-    table = walk.streams.get("audio", {})
-    start_s = table.get("start_s", 0.0)
-    u = table.get("start_uncertainty_s", 0.05)
-    for name, value in (("start_s", start_s), ("start_uncertainty_s", u)):
-        if not isinstance(value, (int, float)) or isinstance(value, bool) or not math.isfinite(value):
-            raise ConfigError(f"{where}: [audio] {name} must be a finite number, got {value!r}")
-    if not 0 <= u <= 2.0:
-        raise ConfigError(f"{where}: [audio] start_uncertainty_s must lie in [0, 2] s, got {u}")
-    return AudioTiming(start_s=float(start_s), start_uncertainty_s=float(u),
-                       frame_phase_s=frame_phase_s(walk.start_utc, site.acoustic.frame_s))
-
-
 def _gnss_table(plan: _CellPlan, reference: Cn0Reference, config: SurveyConfig):
     epochs, _ = read_nmea(plan.paths["gnss"])
     sky = sky_arrays(epochs_on_time_base(epochs, plan.walk.start_utc))
@@ -298,7 +283,7 @@ def _audio_rows(plan: _CellPlan, site, config: SurveyConfig) -> list[dict]:
 
     if audio_info(plan.paths["audio"]).n_frames == 0:
         raise DataError("holds no audio samples")
-    timing = _audio_timing(plan.walk, site, plan.walk.directory / "cell.toml")
+    timing = timing_from_walk(plan.walk, site, where=plan.walk.directory / "cell.toml")
     # a survey capture is static: no walking-speed prior (as the CLI does for a cell.toml)
     positions = PositionConfig(max_clock_offset_s=timing.start_uncertainty_s + 0.05, motion_speed_m_s=0.0)
     result = analyse_audio(plan.paths["audio"], site, timing, DetectorConfig(p_fa=config.p_fa),
