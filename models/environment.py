@@ -310,6 +310,9 @@ class EnvironmentClassifier:
             n_exp = _expand(np.zeros((1, n_in)), self.degree).shape[1]
             if m.get("coef", np.zeros(0)).shape != (self.n_classes_, n_exp) or m["mean"].shape != (n_in,):
                 raise ValueError(f"sub-model {name!r}: arrays do not match its shape")
+            for key in ("ood_threshold", "share_intercept"):
+                if key in m:
+                    m[key] = np.asarray(m[key], float).reshape(-1)[0]     # scalars may come back as shape (1,)
             self.submodels_[name] = m
         return self
 

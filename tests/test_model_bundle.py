@@ -85,3 +85,4 @@ def test_environment_classifier_through_a_bundle(tmp_path):
     b = load_bundle(tmp_path / "env", "environment")
     again = EnvironmentClassifier.from_state(b.params, b.arrays["classifier"])
     assert np.array_equal(again.predict_proba(X), clf.predict_proba(X))
+    assert np.array_equal(again.is_ood(X + 3.0), clf.is_ood(X + 3.0)) and clf.is_ood(X + 30.0).all()

@@ -1,0 +1,88 @@
+"""``envfuse train env`` and ``envfuse train fusion``: fit the environment and the fusion model."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+from features.errors import ConfigError
+from pipeline.args import seed
+
+GROUP = "train"
+
+
+def register(sub) -> None:
+    p = sub.add_parser(
+        "env", help="environment model from a fingerprint library",
+        description="Fit the online environment classifier from a fingerprint library: 'supervised' learns the "
+                    "cells' map labels of the given sites; 'survey' clusters the library without labels "
+                    "(t-SNE + density-peak clustering, clusters named by severity) and learns the clusters; "
+                    "'transfer' does the same on training sites for use on a new one.",
+        epilog="Example: envfuse train env --library fp.sqlite --site sim-0101 --site sim-0102 --out env_model")
+    p.add_argument("--library", type=Path, required=True, help="fingerprint library (SQLite, from survey build)")
+    p.add_argument("--site", action="append", default=None, help="site to fit on (repeat; default: every site)")
+    p.add_argument("--mode", choices=("supervised", "survey", "transfer"), default="supervised",
+                   help="where the classes come from (default supervised)")
+    p.add_argument("--seed", type=seed, default=0, help="seed of the embedding and clustering (default 0)")
+    p.add_argument("--out", type=Path, required=True, help="model directory to write")
+    p.add_argument("--overwrite", action="store_true", help="replace an existing model directory")
+    p.set_defaults(func=_run_env)
+
+    p = sub.add_parser(
+        "fusion", help="fusion model (noise per class, BP network) from walks with truth",
+        description="Fit the fusion model on training walks with truth.csv: measurement noise per source, per "
+                    "GGA quality and per environment class (by the site map and by the environment model), "
+                    "and the BP correction network (early stopping on a validation split of walks).",
+        epilog="Example: envfuse train fusion --walks split/walks/101/w0 split/walks/101/w1 "
+               "--env-model env_model --out fusion_model")
+    p.add_argument("--walks", type=Path, nargs="+", required=True, help="training walk directories (with truth.csv)")
+    p.add_argument("--env-model", type=Path, required=True, help="environment model directory (train env)")
+    p.add_argument("--out", type=Path, required=True, help="model directory to write")
+    p.add_argument("--no-bp", action="store_true", help="fit the noise only, no BP network")
+    p.add_argument("--hidden", type=int, default=8, help="BP hidden units (default 8, as the source method)")
+    p.add_argument("--seed", type=seed, default=0, help="seed of the BP network's training (default 0)")
+    p.add_argument("--overwrite", action="store_true", help="replace an existing model directory")
+    p.set_defaults(func=_run_fusion)
+
+
+def _refuse_existing(out: Path, overwrite: bool) -> None:
+    if out.exists() and not overwrite:
+        raise ConfigError(f"--out {out} exists; pass --overwrite to replace it")
+
+
+def _run_env(args) -> int:
+    from training.env import fit_env_model, save_env_model, training_set
+
+    _refuse_existing(args.out, args.overwrite)
+    if not args.library.is_file():
+        raise ConfigError(f"--library {args.library}: no such file")
+    data = training_set(args.library, args.site)
+    clf, info = fit_env_model(data, args.mode, random_state=args.seed)
+    save_env_model(clf, args.out, info, library=args.library, overwrite=args.overwrite)
+    counts = "/".join(str(c) for c in info["class_counts"])
+    print(f"environment model ({args.mode}): {info['n_windows']} windows of {info['n_cells']} cells on "
+          f"{', '.join(info['sites'])}; windows per class open/light/heavy = {counts}; sub-models "
+          f"{', '.join(sorted(clf.submodels_))} -> {args.out}")
+    return 0
+
+
+def _run_fusion(args) -> int:
+    from models.bp import BPConfig
+    from models.fusion_model import save_fusion_model
+    from pipeline.fusion_train import train_fusion
+    from training.env import load_env_model
+
+    _refuse_existing(args.out, args.overwrite)
+    if args.hidden < 1:
+        raise ConfigError(f"--hidden must be at least 1, got {args.hidden}")
+    for w in args.walks:
+        if not (w / "walk.toml").is_file():
+            raise ConfigError(f"--walks {w}: no walk.toml (expected a walk directory)")
+    clf, env_meta = load_env_model(args.env_model)
+    model = train_fusion(args.walks, clf, bp=not args.no_bp, bp_config=BPConfig(hidden=args.hidden, seed=args.seed),
+                         meta={"env_model": str(args.env_model), "env_meta": env_meta},
+                         progress=lambda line: print(line, file=sys.stderr))
+    save_fusion_model(model, args.out, overwrite=args.overwrite)
+    print(f"fusion model: {len(args.walks)} training walks on {', '.join(model.meta['sites'])}; "
+          f"BP {'on' if model.bp is not None else 'off'} -> {args.out}")
+    return 0

@@ -1,0 +1,152 @@
+"""Fitting the environment model from a fingerprint library (``envfuse train env``).
+
+Modes (DESIGN.md §1, issue 13):
+
+``supervised``
+    the classifier learns the map labels of the training sites' cells — what
+    a utility with surveyed, mapped substations would do;
+``survey``
+    the site's own library is clustered without labels (standardise → t-SNE →
+    density-peak clustering, clusters named by severity) and the classifier
+    learns those clusters — the paper's way of meeting a new substation;
+``transfer``
+    the same clustering on the training sites' libraries, the classifier then
+    applied to a new site.
+
+Every mode ends in an :class:`models.environment.EnvironmentClassifier`
+saved as an ``environment`` bundle with its mode, feature order, class names,
+the library's hash and the sites and sample counts it was fitted on.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from features.errors import ConfigError, DataError
+from features.schema import ENV_CLASSES, FEATURES
+from fingerprints.library import FingerprintLibrary
+from fingerprints.records import feature_matrix
+from models.bundle import load_bundle, save_bundle
+from models.environment import EnvironmentClassifier
+
+__all__ = ["MODES", "TrainingSet", "training_set", "fit_env_model", "save_env_model", "load_env_model"]
+
+MODES = ("supervised", "survey", "transfer")
+
+
+@dataclass(frozen=True)
+class TrainingSet:
+    """Windows of a library: ``X`` (n, 14), ``site`` / ``cell`` (n,) str, ``label`` (n,) class code from the
+    cell's map label (−1 without one), ``share`` (n,) map share (NaN without one), ``t_s`` (n,)."""
+
+    X: np.ndarray
+    site: np.ndarray
+    cell: np.ndarray
+    label: np.ndarray
+    share: np.ndarray
+    t_s: np.ndarray
+
+    def __len__(self) -> int:
+        return int(self.X.shape[0])
+
+    def subset(self, keep: np.ndarray) -> "TrainingSet":
+        return TrainingSet(self.X[keep], self.site[keep], self.cell[keep], self.label[keep], self.share[keep],
+                           self.t_s[keep])
+
+
+def training_set(library: str | os.PathLike, sites=None) -> TrainingSet:
+    """Every window of ``library`` (of ``sites`` when given), with its cell's map label and share."""
+    with FingerprintLibrary.open(library, create=False) as lib:
+        known = lib.sites()
+        chosen = list(known) if not sites else list(sites)
+        missing = sorted(set(chosen) - set(known))
+        if missing:
+            raise ConfigError(f"{library}: no site {missing} (the library holds {known})")
+        parts_s, parts_c = [], []
+        for site in chosen:
+            parts_s.append(lib.samples(site))
+            parts_c.append(lib.cells(site))
+    samples = np.concatenate(parts_s) if parts_s else np.zeros(0)
+    cells = np.concatenate(parts_c) if parts_c else np.zeros(0)
+    if len(samples) == 0:
+        raise DataError(f"{library}: no samples for sites {chosen}")
+    key = {(str(c["site"]), str(c["cell_id"])): c for c in cells}
+    label = np.full(len(samples), -1)
+    share = np.full(len(samples), np.nan)
+    for i, s in enumerate(samples):
+        c = key[(str(s["site"]), str(s["cell_id"]))]
+        if c["map_label"] in ENV_CLASSES:
+            label[i] = ENV_CLASSES.index(str(c["map_label"]))
+        share[i] = float(c["map_share"])
+    return TrainingSet(feature_matrix(samples), np.asarray(samples["site"], str), np.asarray(samples["cell_id"], str),
+                       label, share, np.asarray(samples["t_s"], float))
+
+
+def fit_env_model(data: TrainingSet, mode: str = "supervised", *, random_state: int = 0,
+                  classifier: EnvironmentClassifier | None = None) -> tuple[EnvironmentClassifier, dict]:
+    """Fit the classifier of ``mode`` on ``data``; returns it and a summary of what it was fitted on."""
+    if mode not in MODES:
+        raise ConfigError(f"mode must be one of {MODES}, got {mode!r}")
+    usable = np.isfinite(data.X).any(axis=1)
+    if usable.sum() < 30:
+        raise DataError(f"only {int(usable.sum())} windows have any feature; the environment model needs at least 30")
+    data = data.subset(usable)
+    const = [FEATURES[j] for j in range(len(FEATURES))
+             if np.isfinite(data.X[:, j]).any() and np.nanstd(data.X[:, j]) < 1e-12]
+    clf = classifier or EnvironmentClassifier()
+    if mode == "supervised":
+        ok = data.label >= 0
+        if ok.sum() < 30:
+            raise DataError("supervised mode needs map labels: fewer than 30 windows lie in labelled cells")
+        labels, X = data.label[ok], data.X[ok]
+        share = data.share[ok] if np.isfinite(data.share[ok]).all() else None
+        info = {"labels": "map"}
+    else:
+        from training.clustering import cluster_windows
+
+        result = cluster_windows(data.X, random_state=random_state)
+        labels, X = result.labels, data.X
+        share = data.share if np.isfinite(data.share).all() else None
+        info = {"labels": "clusters", "n_clusters": int(result.n_clusters), "embedding": result.method}
+    clf.fit(X, labels, share=share)
+    info.update({"mode": mode, "n_windows": int(len(X)), "sites": sorted(set(data.site.tolist())),
+                 "n_cells": int(len(set(zip(data.site.tolist(), data.cell.tolist())))),
+                 "class_counts": np.bincount(labels, minlength=len(ENV_CLASSES)).tolist(),
+                 "constant_features": const, "random_state": int(random_state)})
+    return clf, info
+
+
+def _sha256(path: Path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for chunk in iter(lambda: fh.read(1 << 20), b""):
+            h.update(chunk)
+    return h.hexdigest()
+
+
+def save_env_model(clf: EnvironmentClassifier, path, info: dict, library: str | os.PathLike | None = None,
+                   overwrite: bool = False) -> Path:
+    """Save the classifier as an ``environment`` bundle with what it was fitted on."""
+    params, arrays = clf.get_state()
+    meta = dict(info)
+    meta["cn0_reference"] = "per receiver, calibrated from the survey's own data (stored in the library)"
+    if library is not None:
+        meta["library"] = str(library)
+        meta["library_sha256"] = _sha256(Path(library))
+    return save_bundle(path, "environment", params, {"classifier": arrays}, meta=meta, overwrite=overwrite)
+
+
+def load_env_model(path) -> tuple[EnvironmentClassifier, dict]:
+    """The classifier of an ``environment`` bundle and its metadata."""
+    from models.bundle import BundleError
+
+    b = load_bundle(path, "environment")
+    try:
+        return EnvironmentClassifier.from_state(b.params, b.arrays["classifier"]), b.meta
+    except (KeyError, ValueError) as exc:
+        raise BundleError(f"{path}: the environment model is inconsistent ({exc})") from None
