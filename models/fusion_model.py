@@ -6,8 +6,9 @@ A :class:`FusionModel` holds, for one substation family:
 - the measurement-noise policies fitted on training walks: ``kf`` (one R per
   source), ``kf_quality`` (UERE per GGA quality, GST and acoustic scales),
   ``kf_map`` (R per class, classes from the site map at the truth position),
-  ``adaptive`` (R per class, classes from the online classifier — what it will
-  see when running), the adaptive filters' starting R,
+  ``imm`` (R per class, classes from the online classifier — what it will
+  see when running), ``adaptive`` (UERE per class and GGA quality, acoustic
+  scale per class: :mod:`models.adaptive_noise`),
 - the filter's process-noise settings (:class:`models.fusion.ekf.EkfConfig`),
 - the BP corrector (:class:`models.bp.BPCorrector`), or None,
 - metadata: the training walks and their hashes, the site names, versions.
@@ -22,6 +23,7 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
+from models.adaptive_noise import ClassQualityNoise
 from models.bp import BPCorrector
 from models.bundle import BundleError, load_bundle, save_bundle
 from models.environment import EnvironmentClassifier
@@ -40,6 +42,7 @@ class FusionModel:
     quality: QualityNoise
     per_class_map: PerClassNoise
     per_class: PerClassNoise
+    class_quality: ClassQualityNoise | None = None
     ekf: EkfConfig = field(default_factory=EkfConfig)
     bp: BPCorrector | None = None
     meta: dict = field(default_factory=dict)
@@ -59,7 +62,7 @@ def save_fusion_model(model: FusionModel, path, overwrite: bool = False):
               "quality": {"uere_m": {str(k): v for k, v in model.quality.uere_m_.items()},
                           "gst_scale": model.quality.gst_scale_, "acoustic_scale": model.quality.acoustic_scale_},
               "per_class": {"combine": model.per_class.combine}, "per_class_map": {"combine": model.per_class_map.combine},
-              "bp": None}
+              "bp": None, "class_quality": model.class_quality.get_state() if model.class_quality else None}
     arrays = {"classifier": cls_arrays, "noise": _noise_arrays(model)}
     if model.bp is not None:
         bp_params, bp_arrays = model.bp.get_state()
@@ -88,8 +91,9 @@ def load_fusion_model(path) -> FusionModel:
             if not (np.all(np.isfinite(r)) and r.shape[-2:] == (2, 2)):
                 raise ValueError(f"noise array {name} is not a finite set of 2×2 matrices")
         bp = BPCorrector.from_state(p["bp"], a["bp"]) if p.get("bp") else None
+        cq = ClassQualityNoise.from_state(p["class_quality"]) if p.get("class_quality") else None
         ekf = EkfConfig(**p["ekf"])
     except (KeyError, TypeError, ValueError) as exc:
         raise BundleError(f"{path}: the fusion model is inconsistent ({exc})") from None
-    return FusionModel(classifier=clf, fixed=fixed, quality=q, per_class_map=per_map, per_class=per, ekf=ekf, bp=bp,
-                       meta=b.meta)
+    return FusionModel(classifier=clf, fixed=fixed, quality=q, per_class_map=per_map, per_class=per,
+                       class_quality=cq, ekf=ekf, bp=bp, meta=b.meta)

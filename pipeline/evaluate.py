@@ -38,8 +38,8 @@ def evaluate_walk(walk, model_dir: str, methods: tuple, force: bool = False) -> 
                           "pass --force to evaluate anyway")
     inputs = walk_inputs(data, model)
     tracks, skipped = run_methods(model, inputs, methods)
-    name = Path(walk).name if Path(walk).name not in ("", ".") else str(walk)
-    name = f"{Path(walk).parent.name}/{name}"
+    resolved = Path(walk).resolve()
+    name = f"{resolved.parent.name}/{resolved.name}"
     rows = score(tracks, data, name)
     series = {}
     if data.truth is not None:

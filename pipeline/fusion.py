@@ -20,7 +20,7 @@ uses a class from the future.
 ``kf_map``          R per class, class looked up in the site's map at the last estimate (method 1)
 ``aekf``            variational-Bayes adaptive R, no classifier (Särkkä & Nummenmaa 2009)
 ``imm``             one mode per class, the classifier's probabilities as mode evidence
-``adaptive_nobp``   R per class from the online classifier
+``adaptive_nobp``   R per class and GGA quality, the class from the online classifier
 ``adaptive``        adaptive_nobp + the guarded BP correction added to the output
 ``<filter>+rts``    the RTS-smoothed track of each filter method
 ==================  ==========================================================
@@ -46,7 +46,7 @@ from models.fusion_model import FusionModel
 from pipeline.walk_data import WalkData
 
 __all__ = ["METHODS", "FILTER_METHODS", "WalkInputs", "Track", "walk_inputs", "window_features", "run_methods",
-           "score", "METRIC_COLUMNS", "STAND_GAP_S"]
+           "score", "METRIC_COLUMNS", "STAND_GAP_S", "split_steps", "adaptive_noise", "bp_features"]
 
 METHODS = ("gnss", "acoustic", "pdr", "kf", "kf_quality", "kf_map", "aekf", "imm", "adaptive_nobp", "adaptive")
 """Every method, in report order (``+rts`` variants follow their filter)."""
@@ -118,6 +118,45 @@ def window_features(data: WalkData) -> tuple[np.ndarray, np.ndarray]:
     return np.array(keys) + WINDOW_S / 2.0, np.vstack([rows[k] for k in keys])
 
 
+TYPICAL_STEP_S = 0.55
+"""Duration given to a step that follows a stop (no previous step within :data:`STAND_GAP_S`), s."""
+
+
+def split_steps(t_s: np.ndarray, length_m: np.ndarray, heading_rad: np.ndarray,
+                fix_t_s: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Each step spread over the time it took, cut at the fixes that fall inside it.
+
+    A step is detected at its heel strike, but the walker covered it during the
+    preceding step period, while GNSS (5 Hz) kept measuring. Predicting the
+    whole step at the heel strike would hold the state still between steps and
+    then jump a full step past fixes that already saw the motion. So step k
+    (from the previous heel strike, or :data:`TYPICAL_STEP_S` before it after a
+    stop, to ``t_k``) becomes sub-steps ending at each fix time inside it and at
+    ``t_k``, of lengths proportional to their durations, same heading. The cost
+    is a fixed lag of one step (≤ ~0.6 s): a fix is fused once the step it falls
+    in has ended.
+
+    Returns (t_s, step_length_m, heading_rad) of the sub-steps, in time order.
+    """
+    t_s, length_m, heading_rad = (np.asarray(a, float) for a in (t_s, length_m, heading_rad))
+    if t_s.size == 0:
+        return t_s, length_m, heading_rad
+    fix = np.sort(np.asarray(fix_t_s, float))
+    prev = np.concatenate([[-np.inf], t_s[:-1]])
+    start = np.where(t_s - prev > STAND_GAP_S, t_s - TYPICAL_STEP_S, prev)
+    lo = np.searchsorted(fix, start, side="right")
+    hi = np.searchsorted(fix, t_s, side="left")
+    out_t, out_l, out_h = [], [], []
+    for k in range(t_s.size):
+        cuts = fix[lo[k]:hi[k]]
+        bounds = np.concatenate([[start[k]], cuts, [t_s[k]]])
+        frac = np.diff(bounds) / (t_s[k] - start[k])
+        out_t.append(bounds[1:])
+        out_l.append(length_m[k] * frac)
+        out_h.append(np.full(frac.size, heading_rad[k]))
+    return np.concatenate(out_t), np.concatenate(out_l), np.concatenate(out_h)
+
+
 def _stands(step_t: np.ndarray) -> StandIntervals:
     if step_t.size < 2:
         return StandIntervals(np.zeros(0), np.zeros(0))
@@ -128,10 +167,13 @@ def _stands(step_t: np.ndarray) -> StandIntervals:
 def walk_inputs(data: WalkData, model: FusionModel) -> WalkInputs:
     """Events and class evidence of one walk (see the module docstring)."""
     steps = gnss = acoustic = stands = None
+    fix_t = np.concatenate([data.gnss.positions.t_s if data.gnss is not None else np.zeros(0),
+                            data.acoustic.t_s if data.acoustic is not None else np.zeros(0)])
     if data.pdr is not None and len(data.pdr.result):
         r = data.pdr.result
-        steps = StepEvents(r.t_s, r.step_length_m, r.heading_rad)
-        stands = _stands(steps.t_s)
+        ok = np.isfinite(r.heading_rad) & np.isfinite(r.step_length_m)
+        stands = _stands(r.t_s[ok])
+        steps = StepEvents(*split_steps(r.t_s[ok], r.step_length_m[ok], r.heading_rad[ok], fix_t))
     if data.gnss is not None and len(data.gnss.positions):
         p = data.gnss.positions
         gnss = GnssEvents.from_sigma(p.t_s, p.east_m, p.north_m, p.sigma_en_m, quality=p.quality,
@@ -174,6 +216,11 @@ def _map_lookup(data: WalkData):
         return int(cls[i, j])
 
     return at
+
+
+def adaptive_noise(model: FusionModel):
+    """The adaptive methods' noise policy: R per class and GGA quality when the model has it, else per class."""
+    return model.class_quality if model.class_quality is not None else model.per_class
 
 
 def _filter_track(run, method: str, inputs: WalkInputs) -> Track:
@@ -239,7 +286,7 @@ def run_methods(model: FusionModel, inputs: WalkInputs, methods=METHODS, smooth:
         elif m == "imm":
             runs[m] = IMMFilter(model.per_class, cfg).run(ev, classes=inputs.classes)
         elif m in ("adaptive_nobp", "adaptive") and "adaptive_nobp" not in runs:
-            runs["adaptive_nobp"] = EventEKF(cfg, model.per_class, "adaptive_nobp").run(ev, classes=inputs.classes)
+            runs["adaptive_nobp"] = EventEKF(cfg, adaptive_noise(model), "adaptive_nobp").run(ev, classes=inputs.classes)
     for m, run in runs.items():
         if m in want:
             tracks[m] = _filter_track(run, m, inputs)

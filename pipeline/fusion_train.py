@@ -20,7 +20,7 @@ from models.environment import EnvironmentClassifier
 from models.fusion import EventEKF
 from models.fusion.ekf import EkfConfig
 from models.fusion_model import FusionModel
-from pipeline.fusion import WalkInputs, bp_features, walk_inputs
+from pipeline.fusion import WalkInputs, adaptive_noise, bp_features, walk_inputs
 from pipeline.walk_data import WalkData, read_walk
 from training.fusion import WalkTraining, fit_fusion_model
 
@@ -73,7 +73,7 @@ def train_fusion(walk_dirs: list, classifier: EnvironmentClassifier, *, bp: bool
     def bp_data(model: FusionModel):
         X, Y = [], []
         for _, data, inputs in walks:
-            run = EventEKF(model.ekf, model.per_class, "adaptive_nobp").run(inputs.events, classes=inputs.classes)
+            run = EventEKF(model.ekf, adaptive_noise(model), "adaptive_nobp").run(inputs.events, classes=inputs.classes)
             te, tn = data.truth.at(run.t_s)
             inside = (run.t_s >= data.truth.t_s[0]) & (run.t_s <= data.truth.t_s[-1])
             y = np.stack([te - run.x[:, 0], tn - run.x[:, 1]], axis=1)

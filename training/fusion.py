@@ -8,7 +8,9 @@ walk is read by the caller and handed in as :class:`WalkTraining` rows):
 3. the UERE per GGA quality, the GST and acoustic scales (``kf_quality``);
 4. R per class and source twice: with the class of the map at the true
    position (``kf_map``), and with the class the online classifier predicts
-   at the fix time (``adaptive``), because that is what it will see running;
+   at the fix time (``imm``), because that is what it will see running; and
+   the UERE per (predicted class, GGA quality) with the acoustic scale per
+   predicted class (``adaptive``, :mod:`models.adaptive_noise`);
 5. the BP network, on the ``adaptive_nobp`` filter runs of the training walks
    (inputs: the run's own records; target: truth − filter position), with
    early stopping on a validation split of whole walks.
@@ -23,13 +25,14 @@ from typing import Callable
 
 import numpy as np
 
+from models.adaptive_noise import ClassQualityNoise
 from models.bp import BPConfig, BPCorrector
 from models.environment import EnvironmentClassifier
 from models.fusion import FixedNoise, PerClassNoise, QualityNoise
 from models.fusion.ekf import EkfConfig
 from models.fusion_model import FusionModel
 
-__all__ = ["WalkTraining", "fit_noise", "fit_fusion_model"]
+__all__ = ["WalkTraining", "fit_noise", "fit_class_quality", "fit_fusion_model"]
 
 
 @dataclass(frozen=True)
@@ -79,6 +82,16 @@ def fit_noise(rows: list[WalkTraining], n_classes: int = 3) -> tuple[FixedNoise,
     return fixed, quality, per_map, per_cls
 
 
+def fit_class_quality(rows: list[WalkTraining], quality: QualityNoise, n_classes: int = 3) -> ClassQualityNoise:
+    """UERE per (predicted class, GGA quality) and acoustic scale per predicted class (the adaptive method)."""
+    has_a = sum(len(r.a_err) for r in rows) > 0
+    return ClassQualityNoise(n_classes=n_classes).fit(
+        _cat(rows, "g_pred_class", ()), _cat(rows, "g_quality", ()), _cat(rows, "g_hdop", ()),
+        _cat(rows, "g_err", (2,)), _cat(rows, "a_pred_class", ()) if has_a else None,
+        _cat(rows, "a_cov", (2, 2)) if has_a else None, _cat(rows, "a_err", (2,)) if has_a else None,
+        prior=quality)
+
+
 def fit_fusion_model(rows: list[WalkTraining], classifier: EnvironmentClassifier,
                      bp_data: Callable[[FusionModel], tuple[list, list]] | None = None,
                      bp_config: BPConfig = BPConfig(), ekf: EkfConfig = EkfConfig(), meta: dict | None = None,
@@ -90,7 +103,8 @@ def fit_fusion_model(rows: list[WalkTraining], classifier: EnvironmentClassifier
     """
     fixed, quality, per_map, per_cls = fit_noise(rows, classifier.n_classes_)
     model = FusionModel(classifier=classifier, fixed=fixed, quality=quality, per_class_map=per_map, per_class=per_cls,
-                        ekf=ekf, bp=None, meta=dict(meta or {}))
+                        class_quality=fit_class_quality(rows, quality, classifier.n_classes_), ekf=ekf, bp=None,
+                        meta=dict(meta or {}))
     if bp_data is not None:
         X, Y = bp_data(model)
         model.bp = BPCorrector(bp_config).fit(X, Y, progress=progress)
