@@ -65,7 +65,7 @@ def test_survey_cells(site_dir, tmp_path, capsys):
     (["simulate", "walk", "{site}", "--seed", "1", "--duration", "0", "--out", "{out}"], "expected a value in [1, 21600] s"),
     (["simulate", "walk", "{site}", "--seed", "1", "--start", "9999-12-31T23:59:59Z", "--out", "{out}"], "outside 1980-2099"),
     (["demo", "--seed", "-1", "--out", "{out}"], "non-negative integer"),
-    (["demo", "--duration", "-5", "--out", "{out}"], "expected a value in [10, 3600] s"),
+    (["demo", "--workers", "0", "--out", "{out}"], "--workers must be at least 1"),
     (["simulate", "survey", "{site}", "--out", "{out}", "--cell-size", "0.1"], "--cell-size must lie in"),
     (["simulate", "teleport"], "invalid choice"),
 ])
