@@ -49,11 +49,35 @@ class _Fixed:
 
 
 def _combine(mu, xs, Ps):
-    # x = Σ μ_j x_j ;  P = Σ μ_j (P_j + (x_j − x)(x_j − x)')
-    x = np.tensordot(mu, xs, axes=1)
+    """Moment matching of modes with weights mu (M,), means xs (M, n), covariances Ps (M, n, n)."""
+    M, n = xs.shape
+    # x = Σ μ_j x_j
+    x = mu @ xs
     d = xs - x
-    P = np.tensordot(mu, Ps, axes=1) + np.einsum("j,ji,jk->ik", mu, d, d)
+    # P = Σ μ_j (P_j + (x_j − x)(x_j − x)')
+    P = (mu @ (Ps + d[:, :, None] * d[:, None, :]).reshape(M, n * n)).reshape(n, n)
     return x, 0.5 * (P + P.T)
+
+
+def _mix(mix, xs, Ps):
+    """Mixed initial conditions per mode j: weights mix (M_i, M_j), returns (M, n) and (M, n, n)."""
+    M, n = xs.shape
+    # x0_j = Σ_i μ_{i|j} x_i
+    xm = mix.T @ xs
+    # P0_j = Σ_i μ_{i|j} (P_i + (x_i − x0_j)(x_i − x0_j)'), as Σ_i μ_{i|j} (P_i + e_i e_i') − f_j f_j'
+    # with e, f measured from a reference mode (no cancellation: modes stay close)
+    e = xs - xs[0]
+    f = xm - xs[0]
+    Pm = (mix.T @ (Ps + e[:, :, None] * e[:, None, :]).reshape(M, n * n)).reshape(M, n, n)
+    Pm -= f[:, :, None] * f[:, None, :]
+    return xm, 0.5 * (Pm + np.swapaxes(Pm, 1, 2))
+
+
+def _loglik(nu, S) -> float:
+    """ln N(ν; 0, S) for a 2-vector: −½ (ν'S⁻¹ν + ln det S) − ln 2π."""
+    det = S[0, 0] * S[1, 1] - S[0, 1] * S[1, 0]
+    q = (S[1, 1] * nu[0] * nu[0] - (S[0, 1] + S[1, 0]) * nu[0] * nu[1] + S[0, 0] * nu[1] * nu[1]) / det
+    return -0.5 * (q + math.log(det)) - math.log(2.0 * math.pi)
 
 
 class IMMFilter:
@@ -105,9 +129,7 @@ class IMMFilter:
             pi = np.where(off, (1.0 - stay) / max(M - 1, 1), stay)
             cbar = mu @ pi
             mix = pi * mu[:, None] / cbar[None, :]
-            xm = mix.T @ xs
-            d = xs[:, None, :] - xm[None, :, :]
-            Pm = np.einsum("ij,ikl->jkl", mix, Ps) + np.einsum("ij,ijk,ijl->jkl", mix, d, d)
+            xm, Pm = _mix(mix, xs, Ps)
             # 2. mode-matched predict
             c = stream.kind[k]
             Fk = np.zeros((n, n))
@@ -133,16 +155,15 @@ class IMMFilter:
                 Hk = H[GNSS] if c == GNSS else H["other"]
                 z = stream.z_m[k]
                 loglik = np.empty(M)
+                S0s = [Hk @ Ps[j] @ Hk.T for j in range(M)]
                 Ks = np.zeros((M, n, 2))
                 ws = np.empty(M)
                 oks = np.zeros(M, bool)
                 for j in range(M):
                     Rj = table[c][j]
                     xj, Pj, nu, S, K, _, nis, w, ok = _update(xs[j], Ps[j], z, Rj, Hk, cfg, fixed, k, gate)
-                    # ln Λ_j = −½ (ν'S⁻¹ν + ln det 2πS), with the unweighted S
-                    S0 = Hk @ Ps[j] @ Hk.T + Rj
-                    loglik[j] = -0.5 * (float(nu @ np.linalg.solve(S0, nu)) + math.log((2 * math.pi) ** 2
-                                                                                       * np.linalg.det(S0)))
+                    # ln Λ_j = −½ (ν'S⁻¹ν + ln det 2πS), with the unweighted S = H P⁻ H' + R_j
+                    loglik[j] = _loglik(nu, S0s[j] + Rj)
                     xs[j], Ps[j], ws[j], oks[j] = xj, Pj, w, ok
                     if ok:
                         Ks[j] = K
@@ -152,12 +173,13 @@ class IMMFilter:
                 mu = np.exp(lp)
                 mu /= mu.sum()
                 xp = rec["x_prior"][k]
-                Rbar = np.tensordot(cbar, table[c], axes=1)
+                Rbar = (cbar @ table[c].reshape(M, 4)).reshape(2, 2)
                 Sc = Hk @ rec["P_prior"][k] @ Hk.T + Rbar
                 nu_c = z - Hk @ xp
                 rec["nu"][k], rec["S"][k], rec["R"][k] = nu_c, Sc, Rbar
-                rec["nis"][k] = float(nu_c @ np.linalg.solve(Sc, nu_c))
-                rec["K"][k] = np.tensordot(mu, Ks, axes=1)
+                rec["nis"][k] = -2.0 * (_loglik(nu_c, Sc) + 0.5 * math.log(Sc[0, 0] * Sc[1, 1] - Sc[0, 1] ** 2)
+                                        + math.log(2.0 * math.pi))
+                rec["K"][k] = (mu @ Ks.reshape(M, -1)).reshape(n, 2)
                 rec["weight"][k] = float(mu @ ws)
                 rec["updated"][k] = True
                 rec["accepted"][k] = bool(oks.any())
