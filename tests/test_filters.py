@@ -398,9 +398,11 @@ def test_same_seed_same_run_and_seed_reaches_the_draws(mixed):
     a, b, c = synth_walk(21, duration_s=40), synth_walk(21, duration_s=40), synth_walk(22, duration_s=40)
     np.testing.assert_array_equal(a.stream.z_m, b.stream.z_m)
     assert not np.array_equal(a.truth, c.truth)
-    for name in ("kf", "aekf", "imm"):
-        r1 = dict(all_methods(a.stream))[name]
-        r2 = dict(all_methods(b.stream))[name]
+    pc = PerClassNoise(3, 1.5, 0.3).fit()
+    for make in (lambda ev: EventEKF(noise=FixedNoise(1.5, 0.3)).run(ev),
+                 lambda ev: EventEKF(noise=VBAdaptiveNoise(1.5, 0.3)).run(ev),
+                 lambda ev: IMMFilter(pc).run(ev)):
+        r1, r2 = make(a.stream), make(b.stream)
         np.testing.assert_array_equal(r1.x, r2.x)
         np.testing.assert_array_equal(r1.P, r2.P)
 
@@ -426,3 +428,24 @@ def test_gate_quantile_closed_form_matches_scipy():
 
     for p in (0.9, 0.99, 0.999):
         assert abs(EkfConfig(gate_prob=p).gate_nis - chi2.ppf(p, 2)) < 1e-9
+
+
+def test_irregular_fix_times_fuse_consistently():
+    # exponential gaps between fixes (no two sources share a clock): no resampling, still consistent
+    values = []
+    for seed in range(6):
+        s = synth_walk(300 + seed, duration_s=150, acoustic_hz=1.25, gnss_hz=2.0, irregular=True)
+        assert np.ptp(np.diff(s.gnss.t_s)) > 1.0
+        run = EventEKF(noise=FixedNoise(1.5, 0.3)).run(s.stream, x0=s.x0, P0=s.P0)
+        values.append(nees(run.x, run.P, s.truth))
+    share = in_bounds_share(np.concatenate(values), 2)
+    assert abs(share - 0.95) < 0.04
+
+
+def test_errors_are_envfuse_errors():
+    from features.errors import EnvfuseError
+
+    assert issubclass(EventError, EnvfuseError) and issubclass(FilterError, EnvfuseError)
+    assert issubclass(NoiseError, EnvfuseError) and issubclass(NoiseError, ValueError)
+    with pytest.raises(FilterError):
+        EventEKF().run(merge_events(StepEvents(np.array([1.0]), np.array([0.7]), np.array([0.0]))))

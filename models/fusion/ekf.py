@@ -50,12 +50,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from features.errors import EnvfuseError
 from models.fusion.events import GNSS, STEP, EventStream
 
 __all__ = ["EkfConfig", "FilterRun", "EventEKF", "run_ekf", "FilterError"]
 
 
-class FilterError(ValueError):
+class FilterError(EnvfuseError, ValueError):
     """A filter parameter is out of range, or a run cannot start."""
 
 

@@ -25,6 +25,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from features.errors import DataError
+
 __all__ = ["STEP", "GNSS", "ACOUSTIC", "KIND_NAMES", "StepEvents", "GnssEvents", "AcousticEvents",
            "StandIntervals", "ClassTrack", "EventStream", "merge_events", "EventError"]
 
@@ -35,7 +37,7 @@ KIND_NAMES = ("step", "gnss", "acoustic")
 """Names of the kind codes, by code."""
 
 
-class EventError(ValueError):
+class EventError(DataError):
     """An event array has the wrong shape, is not finite where it must be, or is out of time order."""
 
 

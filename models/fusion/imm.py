@@ -73,10 +73,15 @@ def _mix(mix, xs, Ps):
     return xm, 0.5 * (Pm + np.swapaxes(Pm, 1, 2))
 
 
+def _nis(nu, S) -> tuple[float, float]:
+    """(ν'S⁻¹ν, det S) of a 2-vector innovation and its 2×2 covariance."""
+    det = S[0, 0] * S[1, 1] - S[0, 1] * S[1, 0]
+    return (S[1, 1] * nu[0] * nu[0] - (S[0, 1] + S[1, 0]) * nu[0] * nu[1] + S[0, 0] * nu[1] * nu[1]) / det, det
+
+
 def _loglik(nu, S) -> float:
     """ln N(ν; 0, S) for a 2-vector: −½ (ν'S⁻¹ν + ln det S) − ln 2π."""
-    det = S[0, 0] * S[1, 1] - S[0, 1] * S[1, 0]
-    q = (S[1, 1] * nu[0] * nu[0] - (S[0, 1] + S[1, 0]) * nu[0] * nu[1] + S[0, 0] * nu[1] * nu[1]) / det
+    q, det = _nis(nu, S)
     return -0.5 * (q + math.log(det)) - math.log(2.0 * math.pi)
 
 
@@ -177,8 +182,7 @@ class IMMFilter:
                 Sc = Hk @ rec["P_prior"][k] @ Hk.T + Rbar
                 nu_c = z - Hk @ xp
                 rec["nu"][k], rec["S"][k], rec["R"][k] = nu_c, Sc, Rbar
-                rec["nis"][k] = -2.0 * (_loglik(nu_c, Sc) + 0.5 * math.log(Sc[0, 0] * Sc[1, 1] - Sc[0, 1] ** 2)
-                                        + math.log(2.0 * math.pi))
+                rec["nis"][k] = _nis(nu_c, Sc)[0]
                 rec["K"][k] = (mu @ Ks.reshape(M, -1)).reshape(n, 2)
                 rec["weight"][k] = float(mu @ ws)
                 rec["updated"][k] = True

@@ -40,6 +40,7 @@ from typing import Callable
 
 import numpy as np
 
+from features.errors import EnvfuseError
 from features.gnss.positions import ASSUMED_HDOP, UERE_BY_QUALITY_M
 from models.fusion.events import ACOUSTIC, GNSS, ClassTrack, EventStream
 
@@ -50,7 +51,7 @@ _EIG_FLOOR_M2 = 1e-6
 """Smallest eigenvalue any fitted or adapted R is allowed, m² (1 mm σ)."""
 
 
-class NoiseError(ValueError):
+class NoiseError(EnvfuseError, ValueError):
     """A noise policy parameter or its training samples are unusable."""
 
 
