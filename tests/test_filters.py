@@ -246,7 +246,7 @@ def test_gnss_bias_state_keeps_consistency_under_correlated_errors():
 
 
 def test_chi2_bounds_reference_values():
-    # Bar-Shalom, Li & Kirubarajan 2001, §5.4.2: N = 50 runs, n_x = 2 → [1.5, 2.6]
+    # N = 50 runs, n_x = 2 → [1.5, 2.6], the worked example of Bar-Shalom, Li & Kirubarajan 2001, §5.4
     # (χ²₁₀₀ quantiles 74.22 and 129.56, over 50)
     lo, hi = chi2_bounds(2, 50)
     assert abs(lo - 74.22 / 50) < 1e-3 and abs(hi - 129.56 / 50) < 1e-3
@@ -462,6 +462,6 @@ def test_gate_locks_out_under_a_wrong_r_and_huber_does_not(inflated):
     ac = gate.updated & (gate.kind == ACOUSTIC)
     early = s.stream.t_s < 60
     assert 0.01 < np.mean(~gate.accepted[ac]) < 0.1                  # measured 0.032
-    # measured: gate 0.82 m overall (2.06 m in the first minute), Huber 0.27 m
+    # measured: gate 0.82 m overall (2.06 m in the first minute), Huber 0.23 m
     assert 0.15 < rms(huber.x, s.truth) / rms(gate.x, s.truth) < 0.6
     assert rms(gate.x[early], s.truth[early]) > 1.0

@@ -8,7 +8,7 @@ State (n = 4, or 6 with ``gnss_bias``)::
 gyro drift), s the step-scale error (true length (1 + s)·L), b a GNSS bias
 for correlated multi-second errors (NLOS, multipath), first-order
 Gauss–Markov with time constant τ: b_k = φ·b_{k−1} + w, φ = e^(−Δt/τ),
-Var w = σ_b²(1 − φ²) (Gelb 1974, §3.8). The bias is observable only because
+Var w = σ_b²(1 − φ²) (Gelb 1974, *Applied Optimal Estimation*, ch. 3). The bias is observable only because
 acoustic fixes and PDR do not share it; with GNSS alone it trades with the
 position, which the prior σ_b bounds.
 
@@ -25,10 +25,10 @@ Prediction per event (Δt since the previous one, of which Δt_stand standing):
 Updates by position fixes, H = [I₂ 0 (I₂ for GNSS with a bias state)]. The
 covariance update is the Joseph form, P = (I − KH)P(I − KH)' + KRK', which
 stays symmetric PD for any gain (Bucy & Joseph 1968; Bar-Shalom, Li &
-Kirubarajan 2001, eq. 5.2.3-18). Outliers (``outlier``):
+Kirubarajan 2001, ch. 5). Outliers (``outlier``):
 
 * ``"gate"``: reject a fix whose NIS = ν'S⁻¹ν exceeds the χ²₂ quantile of
-  ``gate_prob`` (Bar-Shalom, Li & Kirubarajan 2001, §2.4.3 and §5.4);
+  ``gate_prob`` (the validation gate of Bar-Shalom, Li & Kirubarajan 2001, ch. 5);
 * ``"huber"``: Huber (1964) weights on the Mahalanobis norm of the
   innovation, w = min(1, k/√NIS), applied as R/w — a bounded influence
   instead of a hard cut (the robust KF of Masreliez & Martin 1977 in its
@@ -38,9 +38,11 @@ Kirubarajan 2001, eq. 5.2.3-18). Outliers (``outlier``):
 Written by hand rather than on ``filterpy.kalman.ExtendedKalmanFilter``: the
 predict is a control-driven step whose Jacobian and Q change per event, H
 and R change per event, every update must be recorded (K, ν, S, NIS,
-posterior − prior, acceptance), and filterpy's per-call allocation costs
-~5× more per event. The update agrees with ``filterpy.kalman.KalmanFilter``
-to rounding (tests/test_filters.py).
+posterior − prior, acceptance), and filterpy's ``KalmanFilter`` takes
+~36 µs per predict + update on the project machine, about five times the
+scalar loop of :mod:`models.fusion.fast`. The update agrees with
+``filterpy.kalman.KalmanFilter.update`` (also Joseph form) to rounding
+(tests/test_filters.py).
 """
 
 from __future__ import annotations

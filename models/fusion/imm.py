@@ -1,7 +1,7 @@
 """Interacting multiple model filter, one mode per environment class (method ``imm``).
 
 Blom & Bar-Shalom (1988), IEEE TAC 33(8); Bar-Shalom, Li & Kirubarajan
-(2001) §11.6.6. All modes share the event-driven model of
+(2001), ch. 11. All modes share the event-driven model of
 :mod:`models.fusion.ekf`; they differ in the measurement noise R_j of each
 source, the per-class R a :class:`~models.fusion.noise.PerClassNoise` learnt.
 Each event is one IMM cycle:

@@ -1,8 +1,8 @@
 """Rauch–Tung–Striebel smoothing of an event-driven filter run.
 
 Rauch, Tung & Striebel (1965), AIAA J. 3(8); in the extended form for a
-linearised step model (Särkkä 2013, *Bayesian Filtering and Smoothing*,
-§9.1, Algorithm 9.3), backwards over the events, k = m − 2 … 0::
+linearised step model (the extended RTS smoother, Särkkä 2013, *Bayesian
+Filtering and Smoothing*, ch. 9), backwards over the events, k = m − 2 … 0::
 
     # C_k = P_k F'_{k+1} (P⁻_{k+1})⁻¹
     # x^s_k = x_k + C_k (x^s_{k+1} − x⁻_{k+1})
