@@ -465,3 +465,17 @@ def test_gate_locks_out_under_a_wrong_r_and_huber_does_not(inflated):
     # measured: gate 0.82 m overall (2.06 m in the first minute), Huber 0.23 m
     assert 0.15 < rms(huber.x, s.truth) / rms(gate.x, s.truth) < 0.6
     assert rms(gate.x[early], s.truth[early]) > 1.0
+
+
+@pytest.mark.parametrize("outlier", ["gate", "huber"])
+def test_imm_batched_matches_mode_by_mode(mixed, outlier):
+    ev = mixed[0]
+    pc = PerClassNoise(3, 1.5, 0.3).fit()
+    pc.R_gnss_ = np.array([np.eye(2) * 0.5, np.eye(2) * 2.25, np.eye(2) * 30.0])
+    classes = ClassTrack.from_labels(np.array([0.0, 60.0]), np.array([0, 1]), 3)
+    for cfg in (EkfConfig(outlier=outlier), EkfConfig(outlier=outlier, gnss_bias=True)):
+        a = IMMFilter(pc, cfg).run(ev, classes=classes)
+        b = IMMFilter(pc, cfg, batched=False).run(ev, classes=classes)
+        for f in ("x", "P", "x_prior", "P_prior", "F", "K", "nis", "weight", "mode_proba"):
+            np.testing.assert_allclose(getattr(a, f), getattr(b, f), rtol=1e-8, atol=1e-10, err_msg=f)
+        np.testing.assert_array_equal(a.accepted, b.accepted)

@@ -85,21 +85,96 @@ def _loglik(nu, S) -> float:
     return -0.5 * (q + math.log(det)) - math.log(2.0 * math.pi)
 
 
+def _batch_step(xs, Ps, L, psi, cfg):
+    """Step predict of all modes at once: xs (M, n), Ps (M, n, n) → (xs, Ps, F (M, n, n))."""
+    M, n = xs.shape
+    g = 1.0 + xs[:, 3]
+    th = psi + xs[:, 2]
+    sn, cs = np.sin(th), np.cos(th)
+    gl = g * L
+    xs = xs.copy()
+    # e += (1+s)·L·sin(ψ+δψ),  n += (1+s)·L·cos(ψ+δψ)
+    xs[:, 0] += gl * sn
+    xs[:, 1] += gl * cs
+    F = np.broadcast_to(np.eye(n), (M, n, n)).copy()
+    F[:, 0, 2], F[:, 0, 3], F[:, 1, 2], F[:, 1, 3] = gl * cs, L * sn, -gl * sn, L * cs
+    # P⁻ = F P F'
+    Ps = F @ Ps @ np.swapaxes(F, 1, 2)
+    # + G diag(σ_L², σ_ψ²) G'
+    vl = (g * cfg.sigma_step_length_m) ** 2
+    vp = (gl * cfg.sigma_heading_rad) ** 2
+    Ps[:, 0, 0] += vl * sn * sn + vp * cs * cs
+    Ps[:, 1, 1] += vl * cs * cs + vp * sn * sn
+    c = (vl - vp) * sn * cs
+    Ps[:, 0, 1] += c
+    Ps[:, 1, 0] += c
+    return xs, Ps, F
+
+
+def _inv2(S):
+    """Inverse and determinant of a stack of 2×2 matrices (M, 2, 2)."""
+    det = S[:, 0, 0] * S[:, 1, 1] - S[:, 0, 1] * S[:, 1, 0]
+    Si = np.empty_like(S)
+    Si[:, 0, 0], Si[:, 1, 1] = S[:, 1, 1] / det, S[:, 0, 0] / det
+    Si[:, 0, 1], Si[:, 1, 0] = -S[:, 0, 1] / det, -S[:, 1, 0] / det
+    return Si, det
+
+
+def _batch_update(xs, Ps, z, R, H, cfg, gate):
+    """Mode-matched updates of all modes by one fix; R (M, 2, 2). Returns (xs, Ps, K, w, ok, ln Λ)."""
+    M, n = xs.shape
+    # ν = z − H x⁻
+    nu = z - xs @ H.T
+    PHt = Ps @ H.T
+    HPH = H @ PHt
+    # S = H P⁻ H' + R
+    S = HPH + R
+    Si, det = _inv2(S)
+    # NIS = ν' S⁻¹ ν
+    nis = (nu[:, None, :] @ Si @ nu[:, :, None])[:, 0, 0]
+    # ln Λ_j = −½ (ν'S⁻¹ν + ln det S) − ln 2π, with the unweighted S
+    loglik = -0.5 * (nis + np.log(det)) - math.log(2.0 * math.pi)
+    w = np.ones(M)
+    ok = np.ones(M, bool)
+    if cfg.outlier == "gate":
+        ok = nis <= gate
+    elif cfg.outlier == "huber":
+        # w = min(1, k / √NIS),  R ← R / w
+        w = np.minimum(1.0, cfg.huber_k / np.sqrt(np.maximum(nis, 1e-300)))
+        R = R / w[:, None, None]
+        Si, _ = _inv2(HPH + R)
+    # K = P⁻ H' S⁻¹
+    K = PHt @ Si
+    # x = x⁻ + K ν
+    xn = xs + (K @ nu[:, :, None])[:, :, 0]
+    # P = (I − KH) P⁻ (I − KH)' + K R K'   (Joseph form)
+    A = np.eye(n) - K @ H
+    Pn = A @ Ps @ np.swapaxes(A, 1, 2) + K @ R @ np.swapaxes(K, 1, 2)
+    Pn = 0.5 * (Pn + np.swapaxes(Pn, 1, 2))
+    if not ok.all():
+        xn[~ok], Pn[~ok], K[~ok] = xs[~ok], Ps[~ok], 0.0
+        w = np.where(ok, w, 0.0)
+    return xn, Pn, K, w, ok, loglik
+
+
 class IMMFilter:
     """IMM over environment classes.
 
     ``noise``: a :class:`~models.fusion.noise.PerClassNoise` (fitted; its classes are the modes);
-    ``switch_rate_hz`` λ; ``evidence_weight`` w; ``mu0`` (M,) initial mode probabilities (uniform).
+    ``switch_rate_hz`` λ; ``evidence_weight`` w; ``mu0`` (M,) initial mode probabilities (uniform);
+    ``batched``: all modes in one stack of matrices per operation (default), or mode by mode through
+    the EKF's own update (the reference the tests compare against).
     """
 
     def __init__(self, noise, config: EkfConfig | None = None, switch_rate_hz: float = 0.05,
-                 evidence_weight: float = 1.0, mu0=None, method: str = "imm"):
+                 evidence_weight: float = 1.0, mu0=None, method: str = "imm", batched: bool = True):
         self.noise = noise
         self.config = config
         self.switch_rate_hz = switch_rate_hz
         self.evidence_weight = evidence_weight
         self.mu0 = mu0
         self.method = method
+        self.batched = batched
 
     def run(self, stream: EventStream, x0_en=None, classes: ClassTrack | None = None, x0=None, P0=None) -> FilterRun:
         """Filter the stream; the result's ``mode_proba`` (m, M) holds the posterior mode probabilities."""
@@ -128,58 +203,59 @@ class IMMFilter:
         w_ev = float(self.evidence_weight)
         idx = np.arange(n)
         off = ~np.eye(M, dtype=bool)
+        eye = np.eye(n)
+        kinds, dts, avail = stream.kind.tolist(), stream.dt_s.tolist(), stream.available.tolist()
         for k in range(m):
-            # 1. mixing: π(Δt);  c̄_j = Σ_i π_ij μ_i;  μ_{i|j} = π_ij μ_i / c̄_j
-            stay = math.exp(-self.switch_rate_hz * stream.dt_s[k])
-            pi = np.where(off, (1.0 - stay) / max(M - 1, 1), stay)
-            cbar = mu @ pi
-            mix = pi * mu[:, None] / cbar[None, :]
-            xm, Pm = _mix(mix, xs, Ps)
+            # 1. mixing: π(Δt);  c̄_j = Σ_i π_ij μ_i;  μ_{i|j} = π_ij μ_i / c̄_j   (identity when Δt = 0)
+            stay = math.exp(-self.switch_rate_hz * dts[k])
+            if stay < 1.0:
+                pi = np.where(off, (1.0 - stay) / max(M - 1, 1), stay)
+                cbar = mu @ pi
+                mix = pi * mu[:, None] / cbar[None, :]
+                xs, Ps = _mix(mix, xs, Ps)
+            else:
+                cbar = mu
             # 2. mode-matched predict
-            c = stream.kind[k]
-            Fk = np.zeros((n, n))
-            for j in range(M):
-                xj, Pj = xm[j].copy(), Pm[j].copy()
-                if cfg.gnss_bias:
-                    xj[4:6] *= phi[k]
-                    Pj[4:6, :] *= phi[k]
-                    Pj[:, 4:6] *= phi[k]
-                Pj[idx, idx] += q[k]
-                Fj = np.eye(n)
-                if c == STEP:
-                    xj, Pj = _step_predict(xj, Pj, stream.step_length_m[k], stream.heading_rad[k], cfg, Fj)
-                if cfg.gnss_bias:
-                    # F = F_step Φ   (bias decay first, then the step)
-                    Fj[:, 4:6] *= phi[k]
-                xs[j], Ps[j] = xj, Pj
-                Fk += cbar[j] * Fj
+            c = kinds[k]
+            xs, Ps = xs.copy(), Ps.copy()
+            if cfg.gnss_bias:
+                # b = φ b;  P = Φ P Φ'
+                xs[:, 4:6] *= phi[k]
+                Ps[:, 4:6, :] *= phi[k]
+                Ps[:, :, 4:6] *= phi[k]
+            Ps[:, idx, idx] += q[k]
+            if c == STEP:
+                if self.batched:
+                    xs, Ps, Fb = _batch_step(xs, Ps, stream.step_length_m[k], stream.heading_rad[k], cfg)
+                else:
+                    Fb = np.empty((M, n, n))
+                    for j in range(M):
+                        Fb[j] = eye
+                        xs[j], Ps[j] = _step_predict(xs[j], Ps[j], stream.step_length_m[k], stream.heading_rad[k],
+                                                     cfg, Fb[j])
+                Fk = (cbar @ Fb.reshape(M, -1)).reshape(n, n)
+            else:
+                Fk = eye.copy()
+            if cfg.gnss_bias:
+                # F = F_step Φ   (bias decay first, then the step)
+                Fk[:, 4:6] *= phi[k]
             rec["F"][k] = Fk
-            rec["x_prior"][k], rec["P_prior"][k] = _combine(cbar, xs, Ps)
+            rec["x_prior"][k], rec["P_prior"][k] = xp, Pp = _combine(cbar, xs, Ps)
             mu = cbar
-            if c != STEP and stream.available[k]:
+            if c != STEP and avail[k]:
                 Hk = H[GNSS] if c == GNSS else H["other"]
                 z = stream.z_m[k]
-                loglik = np.empty(M)
-                S0s = [Hk @ Ps[j] @ Hk.T for j in range(M)]
-                Ks = np.zeros((M, n, 2))
-                ws = np.empty(M)
-                oks = np.zeros(M, bool)
-                for j in range(M):
-                    Rj = table[c][j]
-                    xj, Pj, nu, S, K, _, nis, w, ok = _update(xs[j], Ps[j], z, Rj, Hk, cfg, fixed, k, gate)
-                    # ln Λ_j = −½ (ν'S⁻¹ν + ln det 2πS), with the unweighted S = H P⁻ H' + R_j
-                    loglik[j] = _loglik(nu, S0s[j] + Rj)
-                    xs[j], Ps[j], ws[j], oks[j] = xj, Pj, w, ok
-                    if ok:
-                        Ks[j] = K
+                if self.batched:
+                    xs, Ps, Ks, ws, oks, loglik = _batch_update(xs, Ps, z, table[c], Hk, cfg, gate)
+                else:
+                    xs, Ps, Ks, ws, oks, loglik = self._mode_updates(xs, Ps, z, table[c], Hk, cfg, fixed, k, gate)
                 # 3. μ_j ∝ Λ_j c̄_j
                 lp = loglik + np.log(np.maximum(cbar, 1e-300))
                 lp -= lp.max()
                 mu = np.exp(lp)
                 mu /= mu.sum()
-                xp = rec["x_prior"][k]
                 Rbar = (cbar @ table[c].reshape(M, 4)).reshape(2, 2)
-                Sc = Hk @ rec["P_prior"][k] @ Hk.T + Rbar
+                Sc = Hk @ Pp @ Hk.T + Rbar
                 nu_c = z - Hk @ xp
                 rec["nu"][k], rec["S"][k], rec["R"][k] = nu_c, Sc, Rbar
                 rec["nis"][k] = _nis(nu_c, Sc)[0]
@@ -197,3 +273,17 @@ class IMMFilter:
             mode_p[k] = mu
         return FilterRun(self.method, stream.t_s, stream.kind, x0c, P0c, available=stream.available,
                          mode_proba=mode_p, **rec)
+
+    @staticmethod
+    def _mode_updates(xs, Ps, z, R, H, cfg, fixed, k, gate):
+        """Reference path: each mode through the EKF's own :func:`~models.fusion.ekf._update`."""
+        M, n = xs.shape
+        xs, Ps = xs.copy(), Ps.copy()
+        loglik, ws, oks, Ks = np.empty(M), np.empty(M), np.zeros(M, bool), np.zeros((M, n, 2))
+        for j in range(M):
+            # ln Λ_j with the unweighted S = H P⁻ H' + R_j
+            loglik[j] = _loglik(z - H @ xs[j], H @ Ps[j] @ H.T + R[j])
+            xs[j], Ps[j], _, _, K, _, _, ws[j], oks[j] = _update(xs[j], Ps[j], z, R[j], H, cfg, fixed, k, gate)
+            if oks[j]:
+                Ks[j] = K
+        return xs, Ps, Ks, ws, oks, loglik
