@@ -479,3 +479,30 @@ def test_imm_batched_matches_mode_by_mode(mixed, outlier):
         for f in ("x", "P", "x_prior", "P_prior", "F", "K", "nis", "weight", "mode_proba"):
             np.testing.assert_allclose(getattr(a, f), getattr(b, f), rtol=1e-8, atol=1e-10, err_msg=f)
         np.testing.assert_array_equal(a.accepted, b.accepted)
+
+
+def test_closed_loop_correction_hook(walk):
+    ev = walk.stream
+    seen = []
+
+    def corrector(k, x_prior, x, P, nu, S, K):
+        seen.append(k)
+        np.testing.assert_allclose(x - x_prior, K @ nu, atol=1e-9)
+        return np.array([0.01, -0.02]) if k % 2 else None
+
+    open_loop = EventEKF(noise=FixedNoise(2.0, 0.3)).run(ev, x0_en=walk.x0[:2])
+    closed = EventEKF(noise=FixedNoise(2.0, 0.3)).run(ev, x0_en=walk.x0[:2], correct=corrector)
+    assert seen == np.flatnonzero(closed.accepted).tolist()
+    odd = closed.accepted & (np.arange(len(ev)) % 2 == 1)
+    np.testing.assert_allclose(closed.correction[odd], np.broadcast_to([0.01, -0.02], (odd.sum(), 2)))
+    assert not closed.correction[~odd].any()
+    # the correction is fed back: the next prior starts from the corrected posterior (a fix follows: F = I)
+    k = int(next(i for i in np.flatnonzero(odd) if ev.kind[i + 1] != STEP))
+    np.testing.assert_array_equal(closed.x_prior[k + 1], closed.x[k])
+    np.testing.assert_allclose(closed.x[k, :2] - (closed.x_prior[k] + closed.K[k] @ closed.nu[k])[:2], [0.01, -0.02],
+                               atol=1e-12)
+    assert not np.allclose(closed.x, open_loop.x)
+    zero = EventEKF(noise=FixedNoise(2.0, 0.3)).run(ev, x0_en=walk.x0[:2], correct=lambda *a: None)
+    np.testing.assert_allclose(zero.x, open_loop.x, atol=1e-9)
+    with pytest.raises(FilterError):
+        EventEKF(noise=FixedNoise(2.0, 0.3)).run(ev, x0_en=walk.x0[:2], correct=lambda *a: np.array([np.nan, 0.0]))

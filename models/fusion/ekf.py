@@ -117,6 +117,7 @@ class FilterRun:
     per update (NaN elsewhere): ``nu`` (m, 2) innovation, ``S`` (m, 2, 2), ``K`` (m, n, 2) gain,
     ``R`` (m, 2, 2) noise used, ``nis`` (m,), ``weight`` (m,) Huber weight (1 full, 0 rejected);
     ``updated`` (m,) bool: an available fix was processed; ``accepted`` (m,) bool: it changed the state;
+    ``correction`` (m, 2): a closed-loop corrector's east/north shift added to ``x`` (zeros without one);
     ``mode_proba`` (m, n_modes) for multiple-model runs, else None.
     """
 
@@ -138,6 +139,7 @@ class FilterRun:
     weight: np.ndarray
     updated: np.ndarray
     accepted: np.ndarray
+    correction: np.ndarray
     available: np.ndarray
     mode_proba: np.ndarray | None = None
     info: dict = field(default_factory=dict)
@@ -169,7 +171,7 @@ def _records(m: int, n: int) -> dict:
     return dict(x_prior=np.empty((m, n)), P_prior=np.empty((m, n, n)), F=eye, x=np.empty((m, n)),
                 P=np.empty((m, n, n)), nu=np.full((m, 2), nan), S=np.full((m, 2, 2), nan),
                 K=np.full((m, n, 2), nan), R=np.full((m, 2, 2), nan), nis=np.full(m, nan), weight=np.full(m, nan),
-                updated=np.zeros(m, bool), accepted=np.zeros(m, bool))
+                updated=np.zeros(m, bool), accepted=np.zeros(m, bool), correction=np.zeros((m, 2)))
 
 
 def _initial(stream: EventStream, cfg: EkfConfig, x0_en, x0=None, P0=None):
@@ -326,12 +328,19 @@ class EventEKF:
         self.method = method
         self.fast = fast
 
-    def run(self, stream: EventStream, x0_en=None, classes=None, class_at=None, x0=None, P0=None) -> FilterRun:
+    def run(self, stream: EventStream, x0_en=None, classes=None, class_at=None, x0=None, P0=None,
+            correct=None) -> FilterRun:
         """Filter the whole stream once.
 
         ``x0_en``: (2,) initial east/north (default: the first available fix); ``x0``/``P0``: full prior;
         ``classes``: :class:`~models.fusion.events.ClassTrack` and ``class_at``: callable (east_m, north_m) →
         class index or probabilities, for per-class noise.
+
+        ``correct``: closed-loop corrector (``adaptive_closed``), called after every accepted update as
+        ``correct(k, x_prior, x, P, nu, S, K)`` (shapes (n,), (n,), (n, n), (2,), (2, 2), (n, 2)); a
+        returned (2,) east/north correction is added to the posterior, which the next prediction then
+        starts from, and is recorded in ``run.correction`` (m, 2) (``None`` or zeros: no change). The
+        covariance is left as the filter computed it. Runs the matrix form.
         """
         from models.fusion.noise import FixedNoise
 
@@ -343,7 +352,7 @@ class EventEKF:
         m, n = len(stream), cfg.n_state
         q, phi = _time_noise(stream, cfg)
         info = {"n_guarded": 0, "fast": False}
-        if self.fast and n == 4 and getattr(runner, "fast", False):
+        if self.fast and n == 4 and getattr(runner, "fast", False) and correct is None:
             from models.fusion.fast import run_fast4
 
             rec = run_fast4(stream, cfg, runner, x, P, q)
@@ -389,6 +398,15 @@ class EventEKF:
                 rec["accepted"][k] = ok
                 if ok:
                     rec["K"][k] = K
+                    if correct is not None:
+                        dc = correct(k, xpr[k], x, P, nu, S, K)
+                        if dc is not None:
+                            dc = np.asarray(dc, float)
+                            if dc.shape != (2,) or not np.all(np.isfinite(dc)):
+                                raise FilterError(f"correct must return a finite (2,) correction, got {dc!r}")
+                            x = x.copy()
+                            x[:2] += dc
+                            rec["correction"][k] = dc
             xr[k] = x
             Pr[k] = P
         info["n_guarded"] = getattr(runner, "n_guarded", 0)
