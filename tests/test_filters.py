@@ -474,11 +474,13 @@ def test_imm_batched_matches_mode_by_mode(mixed, outlier):
     pc.R_gnss_ = np.array([np.eye(2) * 0.5, np.eye(2) * 2.25, np.eye(2) * 30.0])
     classes = ClassTrack.from_labels(np.array([0.0, 60.0]), np.array([0, 1]), 3)
     for cfg in (EkfConfig(outlier=outlier), EkfConfig(outlier=outlier, gnss_bias=True)):
-        a = IMMFilter(pc, cfg).run(ev, classes=classes)
-        b = IMMFilter(pc, cfg, batched=False).run(ev, classes=classes)
-        for f in ("x", "P", "x_prior", "P_prior", "F", "K", "nis", "weight", "mode_proba"):
-            np.testing.assert_allclose(getattr(a, f), getattr(b, f), rtol=1e-8, atol=1e-10, err_msg=f)
-        np.testing.assert_array_equal(a.accepted, b.accepted)
+        ref = IMMFilter(pc, cfg, batched=False, fast=False).run(ev, classes=classes)
+        for other in (IMMFilter(pc, cfg, fast=False), IMMFilter(pc, cfg, fast=True)):   # batched; scalar (4 states)
+            a = other.run(ev, classes=classes)
+            for f in ("x", "P", "x_prior", "P_prior", "F", "nu", "S", "R", "K", "nis", "weight", "mode_proba"):
+                np.testing.assert_allclose(getattr(a, f), getattr(ref, f), rtol=1e-8, atol=1e-10, err_msg=f)
+            np.testing.assert_array_equal(a.accepted, ref.accepted)
+            np.testing.assert_array_equal(a.updated, ref.updated)
 
 
 def test_closed_loop_correction_hook(walk):

@@ -162,12 +162,14 @@ class IMMFilter:
 
     ``noise``: a :class:`~models.fusion.noise.PerClassNoise` (fitted; its classes are the modes);
     ``switch_rate_hz`` λ; ``evidence_weight`` w; ``mu0`` (M,) initial mode probabilities (uniform);
-    ``batched``: all modes in one stack of matrices per operation (default), or mode by mode through
-    the EKF's own update (the reference the tests compare against).
+    ``fast``: the 4-state model runs in the scalar loop of :mod:`models.fusion.fast_imm` (default);
+    otherwise, or with the bias states, ``batched``: all modes in one stack of matrices per operation,
+    or mode by mode through the EKF's own update (the reference the tests compare against).
     """
 
     def __init__(self, noise, config: EkfConfig | None = None, switch_rate_hz: float = 0.05,
-                 evidence_weight: float = 1.0, mu0=None, method: str = "imm", batched: bool = True):
+                 evidence_weight: float = 1.0, mu0=None, method: str = "imm", batched: bool = True,
+                 fast: bool = True):
         self.noise = noise
         self.config = config
         self.switch_rate_hz = switch_rate_hz
@@ -175,6 +177,7 @@ class IMMFilter:
         self.mu0 = mu0
         self.method = method
         self.batched = batched
+        self.fast = fast
 
     def run(self, stream: EventStream, x0_en=None, classes: ClassTrack | None = None, x0=None, P0=None) -> FilterRun:
         """Filter the stream; the result's ``mode_proba`` (m, M) holds the posterior mode probabilities."""
@@ -204,6 +207,13 @@ class IMMFilter:
         idx = np.arange(n)
         off = ~np.eye(M, dtype=bool)
         eye = np.eye(n)
+        if self.fast and n == 4:
+            from models.fusion.fast_imm import run_imm4
+
+            rec, mode_p = run_imm4(stream, cfg, table, mu, x, P, q, self.switch_rate_hz, rows,
+                                   None if classes is None else classes.proba, w_ev)
+            return FilterRun(self.method, stream.t_s, stream.kind, x0c, P0c, available=stream.available,
+                             mode_proba=mode_p, info={"fast": True}, **rec)
         kinds, dts, avail = stream.kind.tolist(), stream.dt_s.tolist(), stream.available.tolist()
         for k in range(m):
             # 1. mixing: π(Δt);  c̄_j = Σ_i π_ij μ_i;  μ_{i|j} = π_ij μ_i / c̄_j   (identity when Δt = 0)
