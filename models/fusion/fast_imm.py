@@ -25,13 +25,38 @@ _PAIRS = ((0, 0), (0, 1), (0, 2), (0, 3), (1, 1), (1, 2), (1, 3), (2, 2), (2, 3)
 _LN_2PI = math.log(2.0 * math.pi)
 
 
+def _lincomb(weights, rows):
+    """Σ_i w_i row_i of equal-length float sequences (one comprehension per row, no generators)."""
+    acc = [weights[0] * v for v in rows[0]]
+    for w, r in zip(weights[1:], rows[1:]):
+        acc = [a + w * v for a, v in zip(acc, r)]
+    return acc
+
+
+def _spread(modes):
+    """(reference mean, rows (x_i, P_i + e_i e_i') with e_i = x_i − reference): the terms every moment
+    matching of these modes needs (the reference, mode 0, keeps the products small: modes stay close)."""
+    r0, r1, r2, r3 = ref = modes[0][:4]
+    rows = []
+    for x0, x1, x2, x3, p00, p01, p02, p03, p11, p12, p13, p22, p23, p33 in modes:
+        e0, e1, e2, e3 = x0 - r0, x1 - r1, x2 - r2, x3 - r3
+        rows.append((x0, x1, x2, x3, p00 + e0 * e0, p01 + e0 * e1, p02 + e0 * e2, p03 + e0 * e3, p11 + e1 * e1,
+                     p12 + e1 * e2, p13 + e1 * e3, p22 + e2 * e2, p23 + e2 * e3, p33 + e3 * e3))
+    return ref, rows
+
+
+def _matched(weights, ref, rows):
+    """Moment matching: x = Σ w_i x_i, P = Σ w_i (P_i + e_i e_i') − f f' with f = x − reference."""
+    x0, x1, x2, x3, p00, p01, p02, p03, p11, p12, p13, p22, p23, p33 = _lincomb(weights, rows)
+    f0, f1, f2, f3 = x0 - ref[0], x1 - ref[1], x2 - ref[2], x3 - ref[3]
+    return (x0, x1, x2, x3, p00 - f0 * f0, p01 - f0 * f1, p02 - f0 * f2, p03 - f0 * f3, p11 - f1 * f1,
+            p12 - f1 * f2, p13 - f1 * f3, p22 - f2 * f2, p23 - f2 * f3, p33 - f3 * f3)
+
+
 def _moments(weights, modes):
     """Σ w_j (x_j, P_j + (x_j − x)(x_j − x)') of 14-tuples: the moment-matched 14-tuple."""
-    x = [sum(w * md[t] for w, md in zip(weights, modes)) for t in range(4)]
-    out = list(x)
-    for u, (a, b) in enumerate(_PAIRS):
-        out.append(sum(w * (md[4 + u] + (md[a] - x[a]) * (md[b] - x[b])) for w, md in zip(weights, modes)))
-    return out
+    ref, rows = _spread(modes)
+    return _matched(weights, ref, rows)
 
 
 def _step(md, L, psi, sl2, sp2):
@@ -138,17 +163,9 @@ def run_imm4(stream, cfg, tables, mu0, x0, P0, q, switch_rate_hz, rows, proba, w
         if stay < 1.0:
             leave = (1.0 - stay) * off_share
             cbar = [mu[j] * stay + (1.0 - mu[j]) * leave for j in range(M)]
-            ref = modes[0]
-            e = [[md[t] - ref[t] for t in range(4)] for md in modes]
-            Q = [[md[4 + u] + ei[a] * ei[b] for u, (a, b) in enumerate(_PAIRS)] for md, ei in zip(modes, e)]
-            mixed = []
-            for j in range(M):
-                wj = [(stay if i == j else leave) * mu[i] / cbar[j] for i in range(M)]
-                xj = [sum(wj[i] * modes[i][t] for i in range(M)) for t in range(4)]
-                fj = [xj[t] - ref[t] for t in range(4)]
-                pj = [sum(wj[i] * Q[i][u] for i in range(M)) - fj[a] * fj[b] for u, (a, b) in enumerate(_PAIRS)]
-                mixed.append(tuple(xj) + tuple(pj))
-            modes = mixed
+            ref, rows = _spread(modes)
+            modes = [_matched([(stay if i == j else leave) * mu[i] / cbar[j] for i in range(M)], ref, rows)
+                     for j in range(M)]
         else:
             cbar = mu
         # 2. mode-matched predict: P += Q_Δt, then the step
@@ -157,7 +174,7 @@ def run_imm4(stream, cfg, tables, mu0, x0, P0, q, switch_rate_hz, rows, proba, w
         if c == STEP:
             stepped = [_step(md, L, psi, sl2, sp2) for md in modes]
             modes = [s_[0] for s_ in stepped]
-            fab.extend([sum(cbar[j] * stepped[j][1][t] for j in range(M)) for t in range(4)])
+            fab.extend(_lincomb(cbar, [s_[1] for s_ in stepped]))
         prior = _moments(cbar, modes)
         pri.extend(prior)
         mu = cbar
@@ -172,12 +189,12 @@ def run_imm4(stream, cfg, tables, mu0, x0, P0, q, switch_rate_hz, rows, proba, w
             ex = [math.exp(v - top) for v in lp]
             tot = sum(ex)
             mu = [v / tot for v in ex]
-            rb = [sum(cbar[j] * rs[j][t] for j in range(M)) for t in range(3)]
+            rb = _lincomb(cbar, rs)
             v0, v1 = z0 - prior[0], z1 - prior[1]
             s00, s01, s11 = prior[4] + rb[0], prior[5] + rb[1], prior[8] + rb[2]
             nis = (s11 * v0 * v0 - 2.0 * s01 * v0 * v1 + s00 * v1 * v1) / (s00 * s11 - s01 * s01)
-            gains = [sum(mu[j] * res[j][4][t] for j in range(M)) for t in range(8)]
-            ups.extend((k, v0, v1, s00, s01, s11, rb[0], rb[1], rb[2], nis, sum(mu[j] * res[j][2] for j in range(M)),
+            gains = _lincomb(mu, [r_[4] for r_ in res])
+            ups.extend((k, v0, v1, s00, s01, s11, rb[0], rb[1], rb[2], nis, _lincomb(mu, [(r_[2],) for r_ in res])[0],
                         1.0 if any(r_[3] for r_ in res) else 0.0))
             ups.extend(gains)
         # 4. classifier evidence once per new window: μ_j ∝ μ_j p_j^w
