@@ -41,7 +41,7 @@ from models.fusion import (ClassTrack, EkfConfig, EventEKF, FixedNoise, IMMFilte
                            SageHusaNoise, VBAdaptiveNoise, rts_smooth)
 from tests.fusion_synth import synth_walk
 
-REPEATS = 5
+REPEATS = 9
 
 
 def python_loop_us() -> float:

@@ -513,3 +513,17 @@ def test_closed_loop_correction_hook(walk):
     np.testing.assert_allclose(zero.x, open_loop.x, atol=1e-9)
     with pytest.raises(FilterError):
         EventEKF(noise=FixedNoise(2.0, 0.3)).run(ev, x0_en=walk.x0[:2], correct=lambda *a: np.array([np.nan, 0.0]))
+
+
+def test_rts_matches_filterpy_on_a_linear_stream():
+    from filterpy.kalman import KalmanFilter
+
+    s = synth_walk(8, duration_s=60, acoustic_hz=1.25)
+    ev = merge_events(gnss=s.gnss, acoustic=s.acoustic, t0_s=0.0)          # no steps: F = I, linear
+    run = EventEKF(noise=FixedNoise(1.5, 0.3)).run(ev, x0=s.x0, P0=s.P0)
+    sm = rts_smooth(run)
+    Q = run.P_prior[1:] - run.F[1:] @ run.P[:-1] @ np.swapaxes(run.F[1:], 1, 2)
+    Qs = np.concatenate([np.zeros((1, 4, 4)), Q])
+    xs, Ps, _, _ = KalmanFilter(dim_x=4, dim_z=2).rts_smoother(run.x.copy(), run.P.copy(), Fs=run.F, Qs=Qs)
+    np.testing.assert_allclose(sm.x, xs, atol=1e-8)
+    np.testing.assert_allclose(sm.P, Ps, atol=1e-8)
