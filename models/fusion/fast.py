@@ -66,10 +66,11 @@ def run_fast4(stream, cfg, runner, x0: np.ndarray, P0: np.ndarray, q: np.ndarray
     x0_, x1, x2, x3 = (float(v) for v in x0)
     p00, p01, p02, p03, p11, p12, p13, p22, p23, p33 = (float(v) for v in P0[_IU])
     # flat float buffers (array.extend of a tuple is the cheapest append CPython has; numpy views them at
-    # the end): prior and posterior (x, P upper triangle) per event, step Jacobian entries per step, and per
-    # processed fix (k, ν, S, R, NIS, w, accepted, K)
-    pri, post, fab, ups = (array.array("d") for _ in range(4))
-    pri_a, post_a, fab_a, ups_a = pri.extend, post.extend, fab.extend, ups.extend
+    # the end): posterior (x, P upper triangle) per event, step Jacobian entries per step, and per
+    # processed fix (k, ν, S, R, NIS, w, accepted, K). Priors are not stored: a step's prior is its
+    # posterior, a fix's is the previous posterior plus diag(Q_Δt) — rebuilt exactly in _assemble.
+    post, fab, ups = (array.array("d") for _ in range(3))
+    post_a, fab_a, ups_a = post.extend, fab.extend, ups.extend
     no_gain = (0.0,) * 8
     for k, (c, av, z, L, psi, qp, qh, qs, r) in enumerate(per_event):
         # P += Q_Δt   (stationary model)
@@ -106,14 +107,10 @@ def run_fast4(stream, cfg, runner, x0: np.ndarray, P0: np.ndarray, q: np.ndarray
             p11 += vl * cs * cs + vp * sn * sn
             p01 += (vl - vp) * sn * cs
             fab_a((fa, fb, fc, fd))
-            state = (x0_, x1, x2, x3, p00, p01, p02, p03, p11, p12, p13, p22, p23, p33)
-            pri_a(state)
-            post_a(state)
+            post_a((x0_, x1, x2, x3, p00, p01, p02, p03, p11, p12, p13, p22, p23, p33))
             continue
-        state = (x0_, x1, x2, x3, p00, p01, p02, p03, p11, p12, p13, p22, p23, p33)
-        pri_a(state)
         if not av:
-            post_a(state)
+            post_a((x0_, x1, x2, x3, p00, p01, p02, p03, p11, p12, p13, p22, p23, p33))
             continue
         if r is None:
             rm = runner.r(k, (x0_, x1))
@@ -131,7 +128,7 @@ def run_fast4(stream, cfg, runner, x0: np.ndarray, P0: np.ndarray, q: np.ndarray
         if mode == 0 and nis > gate:
             ups_a((k, v0, v1, s00, s01, s11, r00, r01, r11, nis, 0.0, 0.0))
             ups_a(no_gain)
-            post_a(state)
+            post_a((x0_, x1, x2, x3, p00, p01, p02, p03, p11, p12, p13, p22, p23, p33))
             continue
         if mode == 1:
             d = sqrt(nis)
@@ -186,24 +183,27 @@ def run_fast4(stream, cfg, runner, x0: np.ndarray, P0: np.ndarray, q: np.ndarray
         p33 = m33 + d30 * k30 + d31 * k31
         ups_a((k, v0, v1, s00, s01, s11, r00, r01, r11, nis, w, 1.0, k00, k01, k10, k11, k20, k21, k30, k31))
         post_a((x0_, x1, x2, x3, p00, p01, p02, p03, p11, p12, p13, p22, p23, p33))
-    return _assemble(stream, pri, post, fab, ups)
+    return _assemble(stream, post, fab, ups, x0, P0, q)
 
 
 def _view(buf: array.array, width: int) -> np.ndarray:
     return np.frombuffer(buf, dtype=float).reshape(-1, width).copy()
 
 
-def _assemble(stream, pri, post, fab, ups) -> dict:
+def _assemble(stream, post, fab, ups, x0, P0, q) -> dict:
     from models.fusion.ekf import _records
 
     m = len(stream)
     rec = _records(m, 4)
-    a = _view(pri, 14)
-    rec["x_prior"], rec["P_prior"] = a[:, :4].copy(), _to_full(a[:, 4:])
     a = _view(post, 14)
+    step = stream.kind == STEP
+    # priors: a step's is its posterior; a fix's the previous posterior (x0, P0 first) plus diag(Q_Δt)
+    prev = np.concatenate([np.concatenate([x0, P0[_IU]])[None], a[:-1]])
+    prev[:, [4, 8, 11, 13]] += q[:, [0, 1, 2, 3]]
+    b = np.where(step[:, None], a, prev)
+    rec["x_prior"], rec["P_prior"] = b[:, :4].copy(), _to_full(b[:, 4:])
     rec["x"], rec["P"] = a[:, :4].copy(), _to_full(a[:, 4:])
     f = _view(fab, 4)
-    step = stream.kind == STEP
     F = rec["F"]
     F[step, 0, 2], F[step, 0, 3], F[step, 1, 2], F[step, 1, 3] = f[:, 0], f[:, 1], f[:, 2], f[:, 3]
     if len(ups):
