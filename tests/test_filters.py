@@ -527,3 +527,20 @@ def test_rts_matches_filterpy_on_a_linear_stream():
     xs, Ps, _, _ = KalmanFilter(dim_x=4, dim_z=2).rts_smoother(run.x.copy(), run.P.copy(), Fs=run.F, Qs=Qs)
     np.testing.assert_allclose(sm.x, xs, atol=1e-8)
     np.testing.assert_allclose(sm.P, Ps, atol=1e-8)
+
+
+def test_events_from_reader_outputs():
+    from features.gnss.positions import GnssPositions
+
+    n = 3
+    gp = GnssPositions(t_s=np.arange(n, dtype=float), east_m=np.ones(n), north_m=np.zeros(n), up_m=np.zeros(n),
+                       sigma_en_m=np.array([1.0, 2.0, 3.0]), sigma_up_m=np.ones(n), quality=np.array([1, 2, 4]),
+                       n_used=np.full(n, 8), hdop=np.array([1.2, 2.0, 0.9]),
+                       hdop_assumed=np.array([False, True, False]))
+    g = GnssEvents.from_positions(gp)
+    np.testing.assert_allclose(g.cov_m2[:, 0, 0], [1.0, 4.0, 9.0])
+    assert np.isnan(g.hdop[1]) and g.hdop[0] == 1.2 and g.quality.tolist() == [1, 2, 4]
+    a = AcousticEvents.from_columns([0.5], [1.0], [2.0], [0.04], [0.01], [0.09])
+    ev = merge_events(gnss=g, acoustic=a)
+    assert ev.kind.tolist() == [GNSS, ACOUSTIC, GNSS, GNSS]
+    np.testing.assert_allclose(ev.cov_m2[1], [[0.04, 0.01], [0.01, 0.09]])
