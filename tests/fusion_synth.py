@@ -43,9 +43,11 @@ def synth_walk(seed: int, duration_s: float = 120.0, cfg: EkfConfig = EkfConfig(
                length_m: float = 0.7, heading_offset_rad: float | None = None, scale_error: float | None = None,
                gnss_hz: float | None = 5.0, gnss_sigma_m=1.5, gnss_reported_sigma_m=None,
                acoustic_hz: float | None = None, acoustic_sigma_m=0.3, turn_every_s: float = 20.0,
-               bias_sigma_m: float = 0.0, bias_tau_s: float = 30.0, start_en=(0.0, 0.0)) -> Synth:
+               bias_sigma_m: float = 0.0, bias_tau_s: float = 30.0, start_en=(0.0, 0.0),
+               irregular: bool = False) -> Synth:
     """One walk. Unset ``heading_offset_rad``/``scale_error`` are drawn from the filter's prior
-    (so NEES tests see the prior the filter assumes); the start position likewise."""
+    (so NEES tests see the prior the filter assumes); the start position likewise.
+    ``irregular``: fix times with exponential gaps of the same mean rate instead of a fixed period."""
     rng = np.random.default_rng(seed)
     n_state = cfg.n_state
     x0 = np.zeros(n_state)
@@ -69,8 +71,16 @@ def synth_walk(seed: int, duration_s: float = 120.0, cfg: EkfConfig = EkfConfig(
     psi_m = np.cumsum(turn)[legs.astype(int)] + 0.05 * np.sin(t_step / 7.0)
     len_m = length_m + rng.normal(0.0, 0.03, n_steps)
     steps = StepEvents(t_step, len_m, psi_m)
-    gnss_t = np.arange(0.0, t_step[-1], 1.0 / gnss_hz) + 0.013 if gnss_hz else np.zeros(0)
-    ac_t = np.arange(0.0, t_step[-1], 1.0 / acoustic_hz) + 0.031 if acoustic_hz else np.zeros(0)
+    def fix_times(hz, phase_s):
+        if not hz:
+            return np.zeros(0)
+        if irregular:
+            t = np.cumsum(rng.exponential(1.0 / hz, int(2 * t_step[-1] * hz) + 10))
+            return t[t < t_step[-1]]
+        return np.arange(0.0, t_step[-1], 1.0 / hz) + phase_s
+
+    gnss_t = fix_times(gnss_hz, 0.013)
+    ac_t = fix_times(acoustic_hz, 0.031)
     g_sig = _sigma_fn(gnss_sigma_m)(gnss_t)
     g_rep = g_sig if gnss_reported_sigma_m is None else _sigma_fn(gnss_reported_sigma_m)(gnss_t)
     a_sig = _sigma_fn(acoustic_sigma_m)(ac_t)

@@ -1,7 +1,7 @@
 """Filter consistency: NEES against truth, NIS of the innovations, chi-square bounds.
 
 Bar-Shalom, Li & Kirubarajan (2001), *Estimation with Applications to
-Tracking and Navigation*, §5.4.2: for a consistent filter the normalised
+Tracking and Navigation*, §5.4: for a consistent filter the normalised
 estimation error squared ε_k = (x_k − x̂_k)' P_k⁻¹ (x_k − x̂_k) is χ² with
 n_x degrees of freedom; averaged over N Monte Carlo runs, N·ε̄_k is χ² with
 N·n_x, so the two-sided 95 % region of ε̄_k is

@@ -25,6 +25,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from features.errors import DataError
+
 __all__ = ["STEP", "GNSS", "ACOUSTIC", "KIND_NAMES", "StepEvents", "GnssEvents", "AcousticEvents",
            "StandIntervals", "ClassTrack", "EventStream", "merge_events", "EventError"]
 
@@ -35,7 +37,7 @@ KIND_NAMES = ("step", "gnss", "acoustic")
 """Names of the kind codes, by code."""
 
 
-class EventError(ValueError):
+class EventError(DataError):
     """An event array has the wrong shape, is not finite where it must be, or is out of time order."""
 
 
@@ -123,8 +125,8 @@ class GnssEvents:
             raise EventError(f"gnss.gst_sigma_m must have shape ({n}, 2), got {gst.shape}")
         avail = np.ones(n, bool) if self.available is None else _col("gnss.available", self.available, n, bool)
         avail = avail & np.isfinite(east) & np.isfinite(north) & np.all(np.isfinite(cov), axis=(1, 2))
-        for k, v in (("east_m", east), ("north_m", north), ("cov_m2", cov), ("quality", quality), ("hdop", hdop),
-                     ("gst_sigma_m", gst), ("available", avail)):
+        for k, v in (("t_s", t), ("east_m", east), ("north_m", north), ("cov_m2", cov), ("quality", quality),
+                     ("hdop", hdop), ("gst_sigma_m", gst), ("available", avail)):
             object.__setattr__(self, k, v)
 
     @classmethod
@@ -134,6 +136,15 @@ class GnssEvents:
         cov = np.zeros((s.shape[0], 2, 2))
         cov[:, 0, 0] = cov[:, 1, 1] = s * s
         return cls(t_s, east_m, north_m, cov, **kw)
+
+    @classmethod
+    def from_positions(cls, positions, gst_sigma_m=None, available=None) -> "GnssEvents":
+        """From the reader's :class:`features.gnss.positions.GnssPositions` (its ``sigma_en_m`` as the
+        reported covariance; HDOP the reader only assumed becomes NaN, so a quality policy applies its own
+        assumption)."""
+        hdop = np.where(np.asarray(positions.hdop_assumed, bool), np.nan, np.asarray(positions.hdop, float))
+        return cls.from_sigma(positions.t_s, positions.east_m, positions.north_m, positions.sigma_en_m,
+                              quality=positions.quality, hdop=hdop, gst_sigma_m=gst_sigma_m, available=available)
 
     def __len__(self) -> int:
         return int(self.t_s.shape[0])
@@ -159,7 +170,7 @@ class AcousticEvents:
         cov = _cov("acoustic.cov_m2", self.cov_m2, n)
         avail = np.ones(n, bool) if self.available is None else _col("acoustic.available", self.available, n, bool)
         avail = avail & np.isfinite(east) & np.isfinite(north) & np.all(np.isfinite(cov), axis=(1, 2))
-        for k, v in (("east_m", east), ("north_m", north), ("cov_m2", cov), ("available", avail)):
+        for k, v in (("t_s", t), ("east_m", east), ("north_m", north), ("cov_m2", cov), ("available", avail)):
             object.__setattr__(self, k, v)
 
     @classmethod
@@ -168,6 +179,18 @@ class AcousticEvents:
         s = np.asarray(sigma_m, float)
         cov = np.zeros((s.shape[0], 2, 2))
         cov[:, 0, 0] = cov[:, 1, 1] = s * s
+        return cls(t_s, east_m, north_m, cov, **kw)
+
+    @classmethod
+    def from_columns(cls, t_s, east_m, north_m, var_east_m2, cov_en_m2, var_north_m2, **kw) -> "AcousticEvents":
+        """From the columns of an acoustic positions CSV (:data:`features.acoustic.positions.POSITION_COLUMNS`).
+
+        >>> a = AcousticEvents.from_columns([1.0], [2.0], [3.0], [0.04], [0.01], [0.09])
+        >>> a.cov_m2[0].tolist()
+        [[0.04, 0.01], [0.01, 0.09]]
+        """
+        ve, c, vn = (np.asarray(v, float) for v in (var_east_m2, cov_en_m2, var_north_m2))
+        cov = np.stack([np.stack([ve, c], axis=-1), np.stack([c, vn], axis=-1)], axis=-2)
         return cls(t_s, east_m, north_m, cov, **kw)
 
     def __len__(self) -> int:

@@ -1,7 +1,7 @@
 """Interacting multiple model filter, one mode per environment class (method ``imm``).
 
 Blom & Bar-Shalom (1988), IEEE TAC 33(8); Bar-Shalom, Li & Kirubarajan
-(2001) §11.6.6. All modes share the event-driven model of
+(2001), ch. 11. All modes share the event-driven model of
 :mod:`models.fusion.ekf`; they differ in the measurement noise R_j of each
 source, the per-class R a :class:`~models.fusion.noise.PerClassNoise` learnt.
 Each event is one IMM cycle:
@@ -49,28 +49,135 @@ class _Fixed:
 
 
 def _combine(mu, xs, Ps):
-    # x = Σ μ_j x_j ;  P = Σ μ_j (P_j + (x_j − x)(x_j − x)')
-    x = np.tensordot(mu, xs, axes=1)
+    """Moment matching of modes with weights mu (M,), means xs (M, n), covariances Ps (M, n, n)."""
+    M, n = xs.shape
+    # x = Σ μ_j x_j
+    x = mu @ xs
     d = xs - x
-    P = np.tensordot(mu, Ps, axes=1) + np.einsum("j,ji,jk->ik", mu, d, d)
+    # P = Σ μ_j (P_j + (x_j − x)(x_j − x)')
+    P = (mu @ (Ps + d[:, :, None] * d[:, None, :]).reshape(M, n * n)).reshape(n, n)
     return x, 0.5 * (P + P.T)
+
+
+def _mix(mix, xs, Ps):
+    """Mixed initial conditions per mode j: weights mix (M_i, M_j), returns (M, n) and (M, n, n)."""
+    M, n = xs.shape
+    # x0_j = Σ_i μ_{i|j} x_i
+    xm = mix.T @ xs
+    # P0_j = Σ_i μ_{i|j} (P_i + (x_i − x0_j)(x_i − x0_j)'), as Σ_i μ_{i|j} (P_i + e_i e_i') − f_j f_j'
+    # with e, f measured from a reference mode (no cancellation: modes stay close)
+    e = xs - xs[0]
+    f = xm - xs[0]
+    Pm = (mix.T @ (Ps + e[:, :, None] * e[:, None, :]).reshape(M, n * n)).reshape(M, n, n)
+    Pm -= f[:, :, None] * f[:, None, :]
+    return xm, 0.5 * (Pm + np.swapaxes(Pm, 1, 2))
+
+
+def _nis(nu, S) -> tuple[float, float]:
+    """(ν'S⁻¹ν, det S) of a 2-vector innovation and its 2×2 covariance."""
+    det = S[0, 0] * S[1, 1] - S[0, 1] * S[1, 0]
+    return (S[1, 1] * nu[0] * nu[0] - (S[0, 1] + S[1, 0]) * nu[0] * nu[1] + S[0, 0] * nu[1] * nu[1]) / det, det
+
+
+def _loglik(nu, S) -> float:
+    """ln N(ν; 0, S) for a 2-vector: −½ (ν'S⁻¹ν + ln det S) − ln 2π."""
+    q, det = _nis(nu, S)
+    return -0.5 * (q + math.log(det)) - math.log(2.0 * math.pi)
+
+
+def _batch_step(xs, Ps, L, psi, cfg):
+    """Step predict of all modes at once: xs (M, n), Ps (M, n, n) → (xs, Ps, F (M, n, n))."""
+    M, n = xs.shape
+    g = 1.0 + xs[:, 3]
+    th = psi + xs[:, 2]
+    sn, cs = np.sin(th), np.cos(th)
+    gl = g * L
+    xs = xs.copy()
+    # e += (1+s)·L·sin(ψ+δψ),  n += (1+s)·L·cos(ψ+δψ)
+    xs[:, 0] += gl * sn
+    xs[:, 1] += gl * cs
+    F = np.broadcast_to(np.eye(n), (M, n, n)).copy()
+    F[:, 0, 2], F[:, 0, 3], F[:, 1, 2], F[:, 1, 3] = gl * cs, L * sn, -gl * sn, L * cs
+    # P⁻ = F P F'
+    Ps = F @ Ps @ np.swapaxes(F, 1, 2)
+    # + G diag(σ_L², σ_ψ²) G'
+    vl = (g * cfg.sigma_step_length_m) ** 2
+    vp = (gl * cfg.sigma_heading_rad) ** 2
+    Ps[:, 0, 0] += vl * sn * sn + vp * cs * cs
+    Ps[:, 1, 1] += vl * cs * cs + vp * sn * sn
+    c = (vl - vp) * sn * cs
+    Ps[:, 0, 1] += c
+    Ps[:, 1, 0] += c
+    return xs, Ps, F
+
+
+def _inv2(S):
+    """Inverse and determinant of a stack of 2×2 matrices (M, 2, 2)."""
+    det = S[:, 0, 0] * S[:, 1, 1] - S[:, 0, 1] * S[:, 1, 0]
+    Si = np.empty_like(S)
+    Si[:, 0, 0], Si[:, 1, 1] = S[:, 1, 1] / det, S[:, 0, 0] / det
+    Si[:, 0, 1], Si[:, 1, 0] = -S[:, 0, 1] / det, -S[:, 1, 0] / det
+    return Si, det
+
+
+def _batch_update(xs, Ps, z, R, H, cfg, gate):
+    """Mode-matched updates of all modes by one fix; R (M, 2, 2). Returns (xs, Ps, K, w, ok, ln Λ)."""
+    M, n = xs.shape
+    # ν = z − H x⁻
+    nu = z - xs @ H.T
+    PHt = Ps @ H.T
+    HPH = H @ PHt
+    # S = H P⁻ H' + R
+    S = HPH + R
+    Si, det = _inv2(S)
+    # NIS = ν' S⁻¹ ν
+    nis = (nu[:, None, :] @ Si @ nu[:, :, None])[:, 0, 0]
+    # ln Λ_j = −½ (ν'S⁻¹ν + ln det S) − ln 2π, with the unweighted S
+    loglik = -0.5 * (nis + np.log(det)) - math.log(2.0 * math.pi)
+    w = np.ones(M)
+    ok = np.ones(M, bool)
+    if cfg.outlier == "gate":
+        ok = nis <= gate
+    elif cfg.outlier == "huber":
+        # w = min(1, k / √NIS),  R ← R / w
+        w = np.minimum(1.0, cfg.huber_k / np.sqrt(np.maximum(nis, 1e-300)))
+        R = R / w[:, None, None]
+        Si, _ = _inv2(HPH + R)
+    # K = P⁻ H' S⁻¹
+    K = PHt @ Si
+    # x = x⁻ + K ν
+    xn = xs + (K @ nu[:, :, None])[:, :, 0]
+    # P = (I − KH) P⁻ (I − KH)' + K R K'   (Joseph form)
+    A = np.eye(n) - K @ H
+    Pn = A @ Ps @ np.swapaxes(A, 1, 2) + K @ R @ np.swapaxes(K, 1, 2)
+    Pn = 0.5 * (Pn + np.swapaxes(Pn, 1, 2))
+    if not ok.all():
+        xn[~ok], Pn[~ok], K[~ok] = xs[~ok], Ps[~ok], 0.0
+        w = np.where(ok, w, 0.0)
+    return xn, Pn, K, w, ok, loglik
 
 
 class IMMFilter:
     """IMM over environment classes.
 
     ``noise``: a :class:`~models.fusion.noise.PerClassNoise` (fitted; its classes are the modes);
-    ``switch_rate_hz`` λ; ``evidence_weight`` w; ``mu0`` (M,) initial mode probabilities (uniform).
+    ``switch_rate_hz`` λ; ``evidence_weight`` w; ``mu0`` (M,) initial mode probabilities (uniform);
+    ``fast``: the 4-state model runs in the scalar loop of :mod:`models.fusion.fast_imm` (default);
+    otherwise, or with the bias states, ``batched``: all modes in one stack of matrices per operation,
+    or mode by mode through the EKF's own update (the reference the tests compare against).
     """
 
     def __init__(self, noise, config: EkfConfig | None = None, switch_rate_hz: float = 0.05,
-                 evidence_weight: float = 1.0, mu0=None, method: str = "imm"):
+                 evidence_weight: float = 1.0, mu0=None, method: str = "imm", batched: bool = True,
+                 fast: bool = True):
         self.noise = noise
         self.config = config
         self.switch_rate_hz = switch_rate_hz
         self.evidence_weight = evidence_weight
         self.mu0 = mu0
         self.method = method
+        self.batched = batched
+        self.fast = fast
 
     def run(self, stream: EventStream, x0_en=None, classes: ClassTrack | None = None, x0=None, P0=None) -> FilterRun:
         """Filter the stream; the result's ``mode_proba`` (m, M) holds the posterior mode probabilities."""
@@ -99,65 +206,70 @@ class IMMFilter:
         w_ev = float(self.evidence_weight)
         idx = np.arange(n)
         off = ~np.eye(M, dtype=bool)
+        eye = np.eye(n)
+        if self.fast and n == 4:
+            from models.fusion.fast_imm import run_imm4
+
+            rec, mode_p = run_imm4(stream, cfg, table, mu, x, P, q, self.switch_rate_hz, rows,
+                                   None if classes is None else classes.proba, w_ev)
+            return FilterRun(self.method, stream.t_s, stream.kind, x0c, P0c, available=stream.available,
+                             mode_proba=mode_p, info={"fast": True}, **rec)
+        kinds, dts, avail = stream.kind.tolist(), stream.dt_s.tolist(), stream.available.tolist()
         for k in range(m):
-            # 1. mixing: π(Δt);  c̄_j = Σ_i π_ij μ_i;  μ_{i|j} = π_ij μ_i / c̄_j
-            stay = math.exp(-self.switch_rate_hz * stream.dt_s[k])
-            pi = np.where(off, (1.0 - stay) / max(M - 1, 1), stay)
-            cbar = mu @ pi
-            mix = pi * mu[:, None] / cbar[None, :]
-            xm = mix.T @ xs
-            d = xs[:, None, :] - xm[None, :, :]
-            Pm = np.einsum("ij,ikl->jkl", mix, Ps) + np.einsum("ij,ijk,ijl->jkl", mix, d, d)
+            # 1. mixing: π(Δt);  c̄_j = Σ_i π_ij μ_i;  μ_{i|j} = π_ij μ_i / c̄_j   (identity when Δt = 0)
+            stay = math.exp(-self.switch_rate_hz * dts[k])
+            if stay < 1.0:
+                pi = np.where(off, (1.0 - stay) / max(M - 1, 1), stay)
+                cbar = mu @ pi
+                mix = pi * mu[:, None] / cbar[None, :]
+                xs, Ps = _mix(mix, xs, Ps)
+            else:
+                cbar = mu
             # 2. mode-matched predict
-            c = stream.kind[k]
-            Fk = np.zeros((n, n))
-            for j in range(M):
-                xj, Pj = xm[j].copy(), Pm[j].copy()
-                if cfg.gnss_bias:
-                    xj[4:6] *= phi[k]
-                    Pj[4:6, :] *= phi[k]
-                    Pj[:, 4:6] *= phi[k]
-                Pj[idx, idx] += q[k]
-                Fj = np.eye(n)
-                if c == STEP:
-                    xj, Pj = _step_predict(xj, Pj, stream.step_length_m[k], stream.heading_rad[k], cfg, Fj)
-                if cfg.gnss_bias:
-                    # F = F_step Φ   (bias decay first, then the step)
-                    Fj[:, 4:6] *= phi[k]
-                xs[j], Ps[j] = xj, Pj
-                Fk += cbar[j] * Fj
+            c = kinds[k]
+            xs, Ps = xs.copy(), Ps.copy()
+            if cfg.gnss_bias:
+                # b = φ b;  P = Φ P Φ'
+                xs[:, 4:6] *= phi[k]
+                Ps[:, 4:6, :] *= phi[k]
+                Ps[:, :, 4:6] *= phi[k]
+            Ps[:, idx, idx] += q[k]
+            if c == STEP:
+                if self.batched:
+                    xs, Ps, Fb = _batch_step(xs, Ps, stream.step_length_m[k], stream.heading_rad[k], cfg)
+                else:
+                    Fb = np.empty((M, n, n))
+                    for j in range(M):
+                        Fb[j] = eye
+                        xs[j], Ps[j] = _step_predict(xs[j], Ps[j], stream.step_length_m[k], stream.heading_rad[k],
+                                                     cfg, Fb[j])
+                Fk = (cbar @ Fb.reshape(M, -1)).reshape(n, n)
+            else:
+                Fk = eye.copy()
+            if cfg.gnss_bias:
+                # F = F_step Φ   (bias decay first, then the step)
+                Fk[:, 4:6] *= phi[k]
             rec["F"][k] = Fk
-            rec["x_prior"][k], rec["P_prior"][k] = _combine(cbar, xs, Ps)
+            rec["x_prior"][k], rec["P_prior"][k] = xp, Pp = _combine(cbar, xs, Ps)
             mu = cbar
-            if c != STEP and stream.available[k]:
+            if c != STEP and avail[k]:
                 Hk = H[GNSS] if c == GNSS else H["other"]
                 z = stream.z_m[k]
-                loglik = np.empty(M)
-                Ks = np.zeros((M, n, 2))
-                ws = np.empty(M)
-                oks = np.zeros(M, bool)
-                for j in range(M):
-                    Rj = table[c][j]
-                    xj, Pj, nu, S, K, _, nis, w, ok = _update(xs[j], Ps[j], z, Rj, Hk, cfg, fixed, k, gate)
-                    # ln Λ_j = −½ (ν'S⁻¹ν + ln det 2πS), with the unweighted S
-                    S0 = Hk @ Ps[j] @ Hk.T + Rj
-                    loglik[j] = -0.5 * (float(nu @ np.linalg.solve(S0, nu)) + math.log((2 * math.pi) ** 2
-                                                                                       * np.linalg.det(S0)))
-                    xs[j], Ps[j], ws[j], oks[j] = xj, Pj, w, ok
-                    if ok:
-                        Ks[j] = K
+                if self.batched:
+                    xs, Ps, Ks, ws, oks, loglik = _batch_update(xs, Ps, z, table[c], Hk, cfg, gate)
+                else:
+                    xs, Ps, Ks, ws, oks, loglik = self._mode_updates(xs, Ps, z, table[c], Hk, cfg, fixed, k, gate)
                 # 3. μ_j ∝ Λ_j c̄_j
                 lp = loglik + np.log(np.maximum(cbar, 1e-300))
                 lp -= lp.max()
                 mu = np.exp(lp)
                 mu /= mu.sum()
-                xp = rec["x_prior"][k]
-                Rbar = np.tensordot(cbar, table[c], axes=1)
-                Sc = Hk @ rec["P_prior"][k] @ Hk.T + Rbar
+                Rbar = (cbar @ table[c].reshape(M, 4)).reshape(2, 2)
+                Sc = Hk @ Pp @ Hk.T + Rbar
                 nu_c = z - Hk @ xp
                 rec["nu"][k], rec["S"][k], rec["R"][k] = nu_c, Sc, Rbar
-                rec["nis"][k] = float(nu_c @ np.linalg.solve(Sc, nu_c))
-                rec["K"][k] = np.tensordot(mu, Ks, axes=1)
+                rec["nis"][k] = _nis(nu_c, Sc)[0]
+                rec["K"][k] = (mu @ Ks.reshape(M, -1)).reshape(n, 2)
                 rec["weight"][k] = float(mu @ ws)
                 rec["updated"][k] = True
                 rec["accepted"][k] = bool(oks.any())
@@ -171,3 +283,17 @@ class IMMFilter:
             mode_p[k] = mu
         return FilterRun(self.method, stream.t_s, stream.kind, x0c, P0c, available=stream.available,
                          mode_proba=mode_p, **rec)
+
+    @staticmethod
+    def _mode_updates(xs, Ps, z, R, H, cfg, fixed, k, gate):
+        """Reference path: each mode through the EKF's own :func:`~models.fusion.ekf._update`."""
+        M, n = xs.shape
+        xs, Ps = xs.copy(), Ps.copy()
+        loglik, ws, oks, Ks = np.empty(M), np.empty(M), np.zeros(M, bool), np.zeros((M, n, 2))
+        for j in range(M):
+            # ln Λ_j with the unweighted S = H P⁻ H' + R_j
+            loglik[j] = _loglik(z - H @ xs[j], H @ Ps[j] @ H.T + R[j])
+            xs[j], Ps[j], _, _, K, _, _, ws[j], oks[j] = _update(xs[j], Ps[j], z, R[j], H, cfg, fixed, k, gate)
+            if oks[j]:
+                Ks[j] = K
+        return xs, Ps, Ks, ws, oks, loglik

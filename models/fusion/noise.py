@@ -27,7 +27,7 @@ Policies and the method names of issue 14 they serve:
     the last estimate or from per-event class probabilities (expected R).
 ``VBAdaptiveNoise`` (``aekf``)
     variational-Bayes adaptive KF, diagonal R with inverse-gamma posteriors
-    (Särkkä & Nummenmaa 2009, IEEE TAC 54(3), Algorithm 1).
+    (Särkkä & Nummenmaa 2009, IEEE TAC 54(3), 596–600).
 ``SageHusaNoise`` (``aekf``, variant)
     Sage & Husa (1969) covariance matching with fading memory, guarded
     against a non-positive R.
@@ -40,6 +40,7 @@ from typing import Callable
 
 import numpy as np
 
+from features.errors import EnvfuseError
 from features.gnss.positions import ASSUMED_HDOP, UERE_BY_QUALITY_M
 from models.fusion.events import ACOUSTIC, GNSS, ClassTrack, EventStream
 
@@ -50,7 +51,7 @@ _EIG_FLOOR_M2 = 1e-6
 """Smallest eigenvalue any fitted or adapted R is allowed, m² (1 mm σ)."""
 
 
-class NoiseError(ValueError):
+class NoiseError(EnvfuseError, ValueError):
     """A noise policy parameter or its training samples are unusable."""
 
 
@@ -308,7 +309,7 @@ class _VB:
 
     def r(self, k, x):
         s = self.kind[k]
-        # α⁻ = ρ·α,  β⁻ = ρ·β   (heuristic dynamics, eq. 13 of Särkkä & Nummenmaa 2009)
+        # α⁻ = ρ·α,  β⁻ = ρ·β   (the heuristic forgetting dynamics of Särkkä & Nummenmaa 2009)
         self._a_pred = self.rho * self.alpha[s]
         self._b_pred = self.rho * self.beta[s]
         # α = α⁻ + 1/2   (one measurement per axis)

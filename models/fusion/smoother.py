@@ -1,8 +1,8 @@
 """Rauch–Tung–Striebel smoothing of an event-driven filter run.
 
 Rauch, Tung & Striebel (1965), AIAA J. 3(8); in the extended form for a
-linearised step model (Särkkä 2013, *Bayesian Filtering and Smoothing*,
-§9.1, Algorithm 9.3), backwards over the events, k = m − 2 … 0::
+linearised step model (the extended RTS smoother, Särkkä 2013, *Bayesian
+Filtering and Smoothing*, ch. 9), backwards over the events, k = m − 2 … 0::
 
     # C_k = P_k F'_{k+1} (P⁻_{k+1})⁻¹
     # x^s_k = x_k + C_k (x^s_{k+1} − x⁻_{k+1})
@@ -56,13 +56,20 @@ def rts_smooth(run) -> SmoothedTrack:
     xs = np.empty_like(x)
     Ps = np.empty_like(P)
     xs[-1], Ps[-1] = x[-1], P[-1]
+    if m < 2:
+        return SmoothedTrack(f"{run.method}+rts", run.t_s, run.kind, xs, Ps)
+    # C_k = P_k F'_{k+1} (P⁻_{k+1})⁻¹ for all k at once (the gains do not depend on the smoothed values):
+    # solved as (P⁻_{k+1})⁻¹ F_{k+1} P_k, transposed, since P⁻ and P are symmetric
+    C = np.swapaxes(np.linalg.solve(Pp[1:], F[1:] @ P[:-1]), 1, 2)
+    xs_next = xs[-1]
+    Ps_next = Ps[-1]
     for k in range(m - 2, -1, -1):
-        Pk = P[k]
-        # C = P_k F' (P⁻_{k+1})⁻¹, solved as (P⁻_{k+1})⁻¹ F P_k since P⁻ is symmetric
-        C = np.linalg.solve(Pp[k + 1], F[k + 1] @ Pk).T
+        Ck = C[k]
         # x^s = x + C (x^s_{k+1} − x⁻_{k+1})
-        xs[k] = x[k] + C @ (xs[k + 1] - xp[k + 1])
+        xk = x[k] + Ck @ (xs_next - xp[k + 1])
         # P^s = P + C (P^s_{k+1} − P⁻_{k+1}) C'
-        Pk = Pk + C @ (Ps[k + 1] - Pp[k + 1]) @ C.T
-        Ps[k] = 0.5 * (Pk + Pk.T)
+        Pk = P[k] + Ck @ (Ps_next - Pp[k + 1]) @ Ck.T
+        Pk = 0.5 * (Pk + Pk.T)
+        xs[k], Ps[k] = xk, Pk
+        xs_next, Ps_next = xk, Pk
     return SmoothedTrack(f"{run.method}+rts", run.t_s, run.kind, xs, Ps)
