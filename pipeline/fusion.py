@@ -22,6 +22,7 @@ uses a class from the future.
 ``imm``             one mode per class, the classifier's probabilities as mode evidence
 ``adaptive_nobp``   R per class and GGA quality, the class from the online classifier
 ``adaptive``        adaptive_nobp + the guarded BP correction added to the output
+``adaptive_closed`` the same correction fed back into the filter state after each update
 ``<filter>+rts``    the RTS-smoothed track of each filter method
 ==================  ==========================================================
 
@@ -48,7 +49,8 @@ from pipeline.walk_data import WalkData
 __all__ = ["METHODS", "FILTER_METHODS", "WalkInputs", "Track", "walk_inputs", "window_features", "run_methods",
            "score", "METRIC_COLUMNS", "STAND_GAP_S", "split_steps", "adaptive_noise", "bp_features"]
 
-METHODS = ("gnss", "acoustic", "pdr", "kf", "kf_quality", "kf_map", "aekf", "imm", "adaptive_nobp", "adaptive")
+METHODS = ("gnss", "acoustic", "pdr", "kf", "kf_quality", "kf_map", "aekf", "imm", "adaptive_nobp", "adaptive",
+           "adaptive_closed")
 """Every method, in report order (``+rts`` variants follow their filter)."""
 
 FILTER_METHODS = ("kf", "kf_quality", "kf_map", "aekf", "imm", "adaptive_nobp")
@@ -299,6 +301,11 @@ def run_methods(model: FusionModel, inputs: WalkInputs, methods=METHODS, smooth:
             skipped["adaptive"] = "the model has no BP network (trained with --no-bp)"
         else:
             tracks["adaptive"] = _with_bp(model, inputs, runs["adaptive_nobp"])
+    if "adaptive_closed" in want:
+        if model.bp is None:
+            skipped["adaptive_closed"] = "the model has no BP network (trained with --no-bp)"
+        else:
+            tracks["adaptive_closed"] = _closed_loop(model, inputs)
     return tracks, skipped
 
 
@@ -318,6 +325,66 @@ def _with_bp(model: FusionModel, inputs: WalkInputs, run) -> Track:
     return Track("adaptive", run.t_s, east, north, cov,
                  {"nis": run.nis, "class_proba": inputs.classes.at(run.t_s), "bp_delta_m": corr.delta_m,
                   "bp_disabled_share": corr.disabled_share, "run": run})
+
+
+def _closed_loop(model: FusionModel, inputs: WalkInputs) -> Track:
+    """adaptive_closed: after every accepted update the guarded BP correction is added to the state.
+
+    Guards as in :class:`models.bp.BPCorrector`: no correction out of distribution or below its own σ;
+    and while the mean NIS of the last ``guard_window`` updates lies above the 99 % point of its χ²
+    law (2·window degrees of freedom, over window) the correction is off — the filter fed with it has
+    stopped agreeing with its measurements.
+    """
+    from scipy.stats import chi2
+
+    from models.bp import GNSS_KIND, ACOUSTIC_KIND
+
+    ev, bp = inputs.events, model.bp
+    window = bp.config.guard_window
+    limit = float(chi2.ppf(0.99, 2 * window) / window)
+    proba = inputs.classes.at(ev.t_s)
+    # Whether a fix of each source was available in the 2 s up to each event (causal).
+    recent = {}
+    for code in (GNSS_KIND, ACOUSTIC_KIND):
+        tk = ev.t_s[ev.available & (ev.kind == code)]
+        idx = np.searchsorted(tk, ev.t_s, side="right") - 1
+        prev = np.where(idx >= 0, tk[np.maximum(idx, 0)] if tk.size else 0.0, -np.inf)
+        recent[code] = (ev.t_s - prev) <= 2.0
+    nis_hist: list = []
+    state = {"off": 0, "withheld": 0, "calls": 0}
+
+    def correct(k, x_prior, x, P, nu, S, K):
+        state["calls"] += 1
+        nis = float(nu @ np.linalg.solve(S, nu))
+        nis_hist.append(nis)
+        if len(nis_hist) > window:
+            nis_hist.pop(0)
+        row = np.zeros((1, len(bp.x_mean_)))
+        row[0, :3] = proba[k]
+        row[0, 3:7] = K[:2, :].reshape(-1)
+        row[0, 7:9] = nu
+        row[0, 9:11] = (x - x_prior)[:2]
+        row[0, 11] = np.log1p(nis)
+        row[0, 12] = ev.kind[k] == GNSS_KIND
+        row[0, 13] = ev.kind[k] == ACOUSTIC_KIND
+        row[0, 14] = 1.0
+        row[0, 16] = recent[GNSS_KIND][k]
+        row[0, 17] = recent[ACOUSTIC_KIND][k]
+        if len(nis_hist) >= window and np.mean(nis_hist) > limit:
+            state["off"] += 1
+            return None
+        mu, var = bp.predict(row)
+        if bp.is_ood(row)[0] or float(np.sum(mu ** 2)) < float(np.sum(var)):
+            state["withheld"] += 1
+            return None
+        return mu[0]
+
+    run = EventEKF(model.ekf, adaptive_noise(model), "adaptive_closed").run(ev, classes=inputs.classes,
+                                                                            correct=correct)
+    calls = max(state["calls"], 1)
+    return Track("adaptive_closed", run.t_s, run.x[:, 0].copy(), run.x[:, 1].copy(), run.P[:, :2, :2].copy(),
+                 {"nis": run.nis, "class_proba": proba, "bp_delta_m": run.correction,
+                  "bp_disabled_share": (state["off"] + state["withheld"]) / calls, "run": run})
 
 
 def score(tracks: dict, data: WalkData, walk_name: str = "") -> list[dict]:
