@@ -1,0 +1,138 @@
+"""Speed of the whole pipeline and of batch evaluation (issue 14): prints figures, asserts nothing.
+
+1. **Raw files to fused track, one core**: a 10-minute simulated walk read
+   (NMEA, audio, IMU), classified window by window and fused by ``adaptive``
+   (environment classifier, per-class filter, BP network): × real time, and
+   that rate divided by scipy's ``oaconvolve`` matched filter over the same
+   audio timed in the same run (this VM's speed drifts 1.5–2× between days; the
+   ratio is the figure to compare). Target: ≥ 500× real time.
+2. **Fusion step alone**: events per second of each method on that walk's
+   event stream (reading excluded). Target: ≥ 50,000 steps/s for ``adaptive``.
+3. **evaluate over 8 walks** with 1 and 2 local workers: wall time, parallel
+   efficiency T1 / (2·T2) (target ≥ 0.8) and the peak resident memory of a
+   worker process.
+
+Usage: ``python bench/bench_pipeline.py [--quick]`` (``--quick``: 2-minute walks, 4 walks).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import resource
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+import scipy.signal
+import soundfile as sf
+
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+
+def oaconvolve_rate(wav: Path) -> float:
+    """× real time of scipy's oaconvolve with the receiver's 10 ms chirp kernel over the whole file."""
+    from features.acoustic.matched_filter import ChirpSpec, MatchedFilterBank
+
+    x, fs = sf.read(str(wav), dtype="float32")
+    h = MatchedFilterBank([ChirpSpec(17_000.0, 23_000.0, 0.010, 0.2)], fs).kernels[0].astype(np.float32)
+    t0 = time.perf_counter()
+    scipy.signal.oaconvolve(x, h)
+    return len(x) / fs / (time.perf_counter() - t0)
+
+
+def build(tmp: Path, walk_s: float, n_walks: int):
+    from features.site import save_site
+    from models.bp import BPConfig
+    from models.fusion_model import save_fusion_model
+    from pipeline.fusion import window_features
+    from pipeline.fusion_train import train_fusion
+    from pipeline.walk_data import read_walk
+    from models.environment import EnvironmentClassifier
+    from simulation.site.layout import generate_site
+    from simulation.walk import simulate_walk
+
+    site = tmp / "site"
+    site.mkdir()
+    save_site(generate_site(5), site / "site.toml")
+    walks = [simulate_walk(site, tmp / f"w{k}", seed=40 + k, duration_s=walk_s) for k in range(n_walks)]
+    train = walks[:2]
+    X, y = [], []
+    for w in train:
+        d = read_walk(w)
+        t, Xw = window_features(d)
+        X.append(Xw)
+        y.append(d.truth.class_at(t - 1.0))
+    clf = EnvironmentClassifier(min_samples=10).fit(np.vstack(X), np.concatenate(y))
+    model = train_fusion(train, clf, bp_config=BPConfig(n_members=5))
+    save_fusion_model(model, tmp / "model")
+    return walks, tmp / "model"
+
+
+def pipeline_rate(walk: Path, model_dir: Path) -> tuple[float, float, dict]:
+    from models.fusion_model import load_fusion_model
+    from pipeline.fusion import METHODS, run_methods, walk_inputs
+    from pipeline.walk_data import read_walk
+
+    model = load_fusion_model(model_dir)
+    best = np.inf
+    for _ in range(3):
+        t0 = time.perf_counter()
+        data = read_walk(walk)
+        inputs = walk_inputs(data, model)
+        tracks, _ = run_methods(model, inputs, ("adaptive",), smooth=False)
+        best = min(best, time.perf_counter() - t0)
+    duration = float(data.walk.duration_s)
+    rates = {}
+    n_events = len(inputs.events)
+    for m in METHODS[3:]:
+        wall = np.inf
+        for _ in range(3):
+            t0 = time.perf_counter()
+            run_methods(model, inputs, (m,), smooth=False)
+            wall = min(wall, time.perf_counter() - t0)
+        rates[m] = n_events / wall
+    return duration / best, n_events, rates
+
+
+def evaluate_scaling(walks, model_dir: Path, tmp: Path) -> dict:
+    from pipeline.evaluate import evaluate
+
+    out = {}
+    for workers in (1, 2):
+        t0 = time.perf_counter()
+        evaluate(walks, model_dir, tmp / f"rep{workers}", workers=workers, progress=False, plots=False)
+        out[workers] = time.perf_counter() - t0
+    return out
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true", help="2-minute walks, 4 walks")
+    args = ap.parse_args()
+    walk_s, n_walks = (120.0, 4) if args.quick else (600.0, 8)
+    with tempfile.TemporaryDirectory() as d:
+        tmp = Path(d)
+        t0 = time.perf_counter()
+        walks, model_dir = build(tmp, walk_s, n_walks)
+        print(f"built {n_walks} walks of {walk_s:.0f} s and a model in {time.perf_counter() - t0:.0f} s")
+        rate, n_events, step_rates = pipeline_rate(walks[-1], model_dir)
+        yard = oaconvolve_rate(walks[-1] / "audio.wav")
+        print(f"raw files -> adaptive track, one core: {rate:,.0f}x real time "
+              f"(oaconvolve matched filter {yard:,.0f}x in the same run; ratio {rate / yard:.3f}; target 500x)")
+        print(f"fusion alone, {n_events:,} events of a {walk_s:.0f} s walk (events per second, best of 3):")
+        for m, r in step_rates.items():
+            print(f"  {m:16s} {r:12,.0f}")
+        times = evaluate_scaling(walks, model_dir, tmp)
+        eff = times[1] / (2 * times[2])
+        rss_mib = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024
+        print(f"evaluate {n_walks} walks: 1 worker {times[1]:.1f} s, 2 workers {times[2]:.1f} s, parallel efficiency "
+              f"{eff:.2f} (target 0.8); peak RSS of a worker process {rss_mib:.0f} MiB")
+
+
+if __name__ == "__main__":
+    main()
