@@ -52,3 +52,16 @@ def test_tour_commands_run(tmp_path, monkeypatch, capsys):
         lines = (tour / name).read_text().splitlines()
         assert lines[0].startswith(header) and len(lines) > 5, name
     assert len((tour / "survey" / "cells").iterdir().__next__().name) > 0
+
+
+def test_fusion_commands_run(tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    for line in _block_after("## Environment model and fusion"):
+        argv = shlex.split(line)
+        assert argv[0] == "envfuse"
+        code = main(argv[1:])
+        err = capsys.readouterr().err
+        assert code == 0, f"{line}\n{err}"
+    fuse = tmp_path / "fuse"
+    assert (fuse / "track.geojson").stat().st_size > 1000
+    assert (fuse / "report" / "metrics.csv").read_text().startswith("walk,method,env_class,n,mean_m")
