@@ -100,29 +100,44 @@ def _knn(tree: cKDTree, X: np.ndarray, rows: np.ndarray, k: int, n_jobs: int):
     return idx, _dist(X, rows[:, None], idx)
 
 
-def _cutoff_dc(tree, X, k, n_jobs) -> float:
-    """d_c = mean distance to the k-th nearest other point over :func:`_rule_queries` points."""
-    q = _rule_queries(len(X))
+def _cutoff_dc(tree, X, inv, k, n_jobs) -> float:
+    """d_c = mean distance to the k-th nearest other point over the :func:`_rule_queries` points
+    (caller's indices, mapped through ``inv`` into the tree's order)."""
+    q = inv[_rule_queries(len(X))]
     kth = np.concatenate([_knn(tree, X, q[s:s + _CHUNK], k + 1, n_jobs)[1].max(axis=1)
                           for s in range(0, len(q), _CHUNK)])
     return float(np.mean(kth))
+
+
+def _knn_all(tree, X, k, n_jobs):
+    """(indices, recomputed distances) of the k nearest points (self included) of every point."""
+    n = len(X)
+    idx = np.empty((n, k), dtype=np.int64)
+    d = np.empty((n, k))
+    for s in range(0, n, _CHUNK):
+        rows = np.arange(s, min(n, s + _CHUNK))
+        idx[rows], d[rows] = _knn(tree, X, rows, k, n_jobs)
+    return idx, d
 
 
 def _density(tree, X, dc, kernel, m, n_jobs) -> np.ndarray:
     """ρ by Eq. (1) (cutoff: others strictly within d_c) or the truncated gaussian sum."""
     n = len(X)
     if kernel == "cutoff":
-        # the tree counts d <= r, self included; counts just inside and just outside d_c agree
-        # except where a pair sits on d_c (a given d_c on gridded data): those are recounted
-        # with the exact distances and the strict inequality of Eq. (1)
-        lo = tree.query_ball_point(X, dc * (1 - _REL), return_length=True, workers=n_jobs)
-        hi = tree.query_ball_point(X, dc * (1 + _REL), return_length=True, workers=n_jobs)
-        amb = np.flatnonzero(lo != hi)
-        if amb.size:
-            near = tree.query_ball_point(X[amb], dc * (1 + _REL), workers=n_jobs)
+        # the tree counts d <= r, self included. A dual-tree count of the pairs in a thin shell
+        # round d_c tells whether any pair sits on d_c (a given d_c on gridded data, or a float
+        # coincidence among 10^8 pairs); only then are the points concerned recounted with the
+        # exact distances and the strict inequality of Eq. (1)
+        lo_r, hi_r = dc * (1 - _REL), dc * (1 + _REL)
+        shell = tree.count_neighbors(tree, np.array([lo_r, hi_r]))
+        hi = tree.query_ball_point(X, hi_r, return_length=True, workers=n_jobs)
+        if shell[0] != shell[1]:
+            lo = tree.query_ball_point(X, lo_r, return_length=True, workers=n_jobs)
+            amb = np.flatnonzero(lo != hi)
+            near = tree.query_ball_point(X[amb], hi_r, workers=n_jobs)
             for t, lst in zip(amb, near):
-                lo[t] = int(np.count_nonzero(_dist(X, t, np.asarray(lst)) < dc))
-        return lo.astype(float) - 1.0
+                hi[t] = int(np.count_nonzero(_dist(X, t, np.asarray(lst)) < dc))
+        return hi.astype(float) - 1.0
     rho = np.empty(n)
     for s in range(0, n, _CHUNK):
         rows = np.arange(s, min(n, s + _CHUNK))
@@ -142,27 +157,31 @@ def _pick(d: np.ndarray, r: np.ndarray, ok: np.ndarray):
     return dm, col
 
 
-def _nearest_higher(tree, X, rank, order, n_jobs):
+def _nearest_higher(tree, X, rank, order, knn, n_jobs):
     """δ_i and the upslope neighbour of every point but the densest, Eq. (2).
 
-    Growing k-NN queries (16, 64, 256 neighbours) settle every point whose nearest listed
-    higher-ranked point is strictly closer than the farthest listed one; the rest (local
-    density maxima) are searched exactly over the rank prefix ``order[:rank_i]``, split into
-    aligned power-of-two blocks (the logarithmic method of Bentley & Saxe, J. Algorithms 1:301,
-    1980), each block a cached KD-tree or, when short, brute force.
+    Growing k-NN lists (the shared 16-NN list, then 64 and 256 neighbours) settle every point
+    whose nearest listed higher-ranked point is strictly closer than the farthest listed one;
+    the rest (local density maxima) are searched exactly over the rank prefix
+    ``order[:rank_i]``, split into aligned power-of-two blocks (the logarithmic method of
+    Bentley & Saxe, J. Algorithms 1:301, 1980), each block a cached KD-tree or, when short,
+    brute force.
     """
     n = len(X)
     delta = np.full(n, np.inf)
     nh = np.full(n, -1, dtype=np.int64)
-    pending = order[1:]
-    for k in _KNN_STEPS:
+    pending = np.sort(order[1:])                       # tree (spatial) order: cache-friendly
+    for step, k in enumerate(_KNN_STEPS):
         if not pending.size:
             break
         kk = min(n, k + 1)
         left = []
         for s in range(0, len(pending), _CHUNK):
             rows = pending[s:s + _CHUNK]
-            idx, d = _knn(tree, X, rows, kk, n_jobs)
+            if step == 0 and knn is not None and knn[0].shape[1] == kk:
+                idx, d = knn[0][rows], knn[1][rows]
+            else:
+                idx, d = _knn(tree, X, rows, kk, n_jobs)
             r = rank[idx]
             dm, col = _pick(d, r, r < rank[rows][:, None])
             bound = np.inf if kk >= n else d.max(axis=1) * (1 - _REL)
@@ -265,26 +284,22 @@ def _assign(nh: np.ndarray, centers: np.ndarray) -> np.ndarray:
     return lab[parent]
 
 
-def _border(tree, X, labels, dc, n_jobs, n_clusters) -> np.ndarray:
+def _border(X, labels, dc, knn, n_clusters) -> np.ndarray:
     """Points with a point of another cluster strictly within d_c (the paper's border region).
 
-    A 16-NN list settles most points (a cross-cluster neighbour inside d_c, or a list reaching
-    beyond d_c); the rest query one KD-tree per other cluster whose box, grown by d_c, holds them.
+    The shared 16-NN list settles most points (a cross-cluster neighbour inside d_c, or a list
+    reaching beyond d_c); the rest query a KD-tree of each other cluster whose box, grown by
+    d_c, holds them.
     """
     n = len(X)
     border = np.zeros(n, bool)
     if n_clusters < 2:
         return border
-    undecided = []
-    kk = min(n, 17)
-    for s in range(0, n, _CHUNK):
-        rows = np.arange(s, min(n, s + _CHUNK))
-        idx, d = _knn(tree, X, rows, kk, n_jobs)
-        cross = (labels[idx] != labels[rows][:, None]) & (d < dc)
-        border[rows] = cross.any(axis=1)
-        reach = np.inf if kk >= n else d.max(axis=1) * (1 - _REL)
-        undecided.append(rows[~border[rows] & ~(reach > dc * (1 + _REL))])
-    und = np.concatenate(undecided)
+    idx, d = knn
+    cross = (labels[idx] != labels[:, None]) & (d < dc)
+    border[:] = cross.any(axis=1)
+    reach = np.inf if idx.shape[1] >= n else d.max(axis=1) * (1 - _REL)
+    und = np.flatnonzero(~border & ~(reach > dc * (1 + _REL)))
     for c in range(n_clusters):
         members = np.flatnonzero(labels == c)
         lo, hi = X[members].min(axis=0) - dc, X[members].max(axis=0) + dc
@@ -292,10 +307,11 @@ def _border(tree, X, labels, dc, n_jobs, n_clusters) -> np.ndarray:
         if not q.size:
             continue
         sub = cKDTree(X[members])
-        near = sub.query_ball_point(X[q], dc * (1 + _REL))
-        for t, lst in enumerate(near):
-            if lst and np.any(_dist(X, q[t], members[np.asarray(lst)]) < dc):
-                border[q[t]] = True
+        dq, _ = sub.query(X[q], k=1, distance_upper_bound=dc * (1 + _REL))
+        q = q[np.isfinite(dq)]
+        for t, lst in zip(q, sub.query_ball_point(X[q], dc * (1 + _REL))):
+            if np.any(_dist(X, t, members[np.asarray(lst)]) < dc):
+                border[t] = True
     return border
 
 
@@ -375,23 +391,33 @@ class DensityPeakClustering(ClusterMixin, BaseEstimator):
         if self.n_clusters is not None and self.n_clusters > n:
             raise ValueError(f"n_clusters={self.n_clusters} exceeds the number of samples {n}")
         jobs = 1 if self.n_jobs is None else int(self.n_jobs)
-        tree = cKDTree(X)
+        # work in the KD-tree's leaf order: neighbour queries in spatial order run about twice
+        # as fast (cache locality); ties are still broken by the caller's index, ``key``
+        perm = cKDTree(X).indices.astype(np.int64)
+        inv = np.empty(n, dtype=np.int64)
+        inv[perm] = np.arange(n)
+        Xp = X[perm]
+        tree = cKDTree(Xp)
         k = _rule_neighbors(n, self.percent, self.max_neighbors)
-        dc = float(self.dc) if self.dc is not None else _cutoff_dc(tree, X, k, jobs)
+        dc = float(self.dc) if self.dc is not None else _cutoff_dc(tree, Xp, inv, k, jobs)
         if not dc > 0:
             raise ValueError(f"d_c from percent={self.percent} is {dc}: more than k={k} duplicate points; "
                              "pass dc explicitly")
         m = min(n - 1, self.n_neighbors if self.n_neighbors is not None
                 else 3 * (k if self.dc is None else self.max_neighbors))
-        rho = _density(tree, X, dc, self.kernel, m, jobs)
-        # decreasing density, ties to the lower index
-        order = np.lexsort((np.arange(n), -rho))
-        rank = np.empty(n, dtype=np.int64)
-        rank[order] = np.arange(n)
-        delta, nh = _nearest_higher(tree, X, rank, order, jobs)
+        rho_p = _density(tree, Xp, dc, self.kernel, m, jobs)
+        # decreasing density, ties to the lower (caller's) index
+        order_p = np.lexsort((perm, -rho_p))
+        rank_p = np.empty(n, dtype=np.int64)
+        rank_p[order_p] = np.arange(n)
+        knn = _knn_all(tree, Xp, min(n, _KNN_STEPS[0] + 1), jobs)
+        delta_p, nh_p = _nearest_higher(tree, Xp, rank_p, order_p, knn, jobs)
+        rho, delta = rho_p[inv], delta_p[inv]
+        order = perm[order_p]
+        nh = np.where(nh_p[inv] >= 0, perm[nh_p[inv]], -1)
         centers = select_centers(rho, delta, order, self.n_clusters, self.max_clusters)
         labels = _assign(nh, centers)
-        border = _border(tree, X, labels, dc, jobs, len(centers))
+        border = _border(Xp, labels[perm], dc, knn, len(centers))[inv]
         self.dc_ = dc
         self.rho_, self.delta_, self.nearest_higher_ = rho, delta, nh
         self.gamma_ = rho * delta
