@@ -62,10 +62,10 @@ _CHUNK = 32_768
 _BRUTE = 1024
 """Rank blocks at most this long are searched by brute force in the exact δ phase."""
 
-_KNN_STEPS = (16, 64, 256)
+_KNN_STEPS = (16, 64, 256, 1024)
 """Neighbour counts of the growing k-NN phase of the δ search."""
 
-_REL = 1e-9
+_REL = 1e-12
 """Relative margin between the tree's distances and the recomputed ones."""
 
 
@@ -90,7 +90,8 @@ def _rule_neighbors(n: int, percent: float, max_neighbors: int) -> int:
 
 def _rule_queries(n: int) -> np.ndarray:
     """Indices of the points whose k-th neighbour distance sets d_c (an even stride)."""
-    return np.arange(0, n, -(-n // _DC_QUERIES))
+    q = np.arange(0, n, -(-n // _DC_QUERIES))
+    return q[:len(q) - len(q) % 2] if len(q) > 1 else q
 
 
 def _knn(tree: cKDTree, X: np.ndarray, rows: np.ndarray, k: int, n_jobs: int):
@@ -101,12 +102,12 @@ def _knn(tree: cKDTree, X: np.ndarray, rows: np.ndarray, k: int, n_jobs: int):
 
 
 def _cutoff_dc(tree, X, inv, k, n_jobs) -> float:
-    """d_c = mean distance to the k-th nearest other point over the :func:`_rule_queries` points
+    """d_c = median distance to the k-th nearest other point over the :func:`_rule_queries` points
     (caller's indices, mapped through ``inv`` into the tree's order)."""
     q = inv[_rule_queries(len(X))]
     kth = np.concatenate([_knn(tree, X, q[s:s + _CHUNK], k + 1, n_jobs)[1].max(axis=1)
                           for s in range(0, len(q), _CHUNK)])
-    return float(np.mean(kth))
+    return float(np.median(kth))
 
 
 def _knn_all(tree, X, k, n_jobs):

@@ -39,7 +39,7 @@ def dense_dpc(X, *, kernel="cutoff", dc=None, percent=2.0, max_neighbors=100, n_
     dc_given = dc is not None
     if not dc_given:
         q = _rule_queries(n)
-        dc = float(np.mean(np.partition(D[q], k, axis=1)[:, k]))     # k-th other (self is the 0th)
+        dc = float(np.median(np.partition(D[q], k, axis=1)[:, k]))     # k-th other (self is the 0th)
     if kernel == "cutoff":
         rho = (D < dc).sum(axis=1).astype(float) - 1.0
     else:
