@@ -110,8 +110,9 @@ def fit_env_model(data: TrainingSet, mode: str = "supervised", *, random_state: 
         from training.clustering import cluster_windows
 
         result = cluster_windows(data.X, random_state=random_state)
-        labels, X = result.labels, data.X
-        share = data.share if np.isfinite(data.share).all() else None
+        ok = result.labels >= 0
+        labels, X = result.labels[ok], data.X[ok]
+        share = data.share[ok] if np.isfinite(data.share[ok]).all() else None
         info = {"labels": "clusters", "n_clusters": int(result.n_clusters), "embedding": result.method}
     clf.fit(X, labels, share=share)
     info.update({"mode": mode, "n_windows": int(len(X)), "sites": sorted(set(data.site.tolist())),

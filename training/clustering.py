@@ -1,0 +1,83 @@
+"""Unsupervised environment classes of library windows: the paper's route, and K-means beside it.
+
+``method="dpc"`` (default): standardise → t-SNE to 2-D → density-peak
+clustering → clusters named open / light / heavy by severity
+(:class:`models.embedding.EnvironmentEmbedding`). ``method="kmeans"``: k = 3
+K-means on the standardised 14-D windows (scikit-learn, ``n_init=10``), named
+by the same severity rule — the baseline a data scientist would try first.
+
+Only windows with every feature (both modalities) are clustered: t-SNE and
+K-means need complete rows, and imputing a modality would invent the
+statistics the classes are told apart by. The others get label −1 (the
+online classifier still answers for them, from its single-modality
+sub-models trained on the clustered windows' features).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from features.errors import DataError
+from features.schema import ENV_CLASSES, FEATURES
+
+__all__ = ["ClusterResult", "cluster_windows"]
+
+
+@dataclass(frozen=True)
+class ClusterResult:
+    """``labels`` (n,) class codes (−1: not clustered), ``n_clusters`` found before naming, ``method``,
+    ``embedding`` (n, 2) for DPC (NaN rows where not clustered) or None, ``rho``/``delta``/``centers`` of
+    the DPC decision graph (over the clustered rows) or None."""
+
+    labels: np.ndarray
+    n_clusters: int
+    method: str
+    embedding: np.ndarray | None = None
+    rho: np.ndarray | None = None
+    delta: np.ndarray | None = None
+    centers: np.ndarray | None = None
+    clustered: np.ndarray | None = None
+
+
+def cluster_windows(X: np.ndarray, *, method: str = "dpc", random_state: int = 0,
+                    n_clusters: int | None = None) -> ClusterResult:
+    """Cluster the complete windows of ``X`` (n, 14) and name the clusters by severity."""
+    from models.embedding import EnvironmentEmbedding, name_clusters, severity_scores
+
+    X = np.asarray(X, float)
+    if X.ndim != 2 or X.shape[1] != len(FEATURES):
+        raise DataError(f"windows must have shape (n, {len(FEATURES)}), got {X.shape}")
+    complete = np.isfinite(X).all(axis=1)
+    if complete.sum() < 40:
+        raise DataError(f"only {int(complete.sum())} windows have both GNSS and acoustic features; clustering "
+                        "needs at least 40")
+    Xc = X[complete]
+    labels = np.full(len(X), -1)
+    if method == "dpc":
+        emb = EnvironmentEmbedding(random_state=random_state, n_clusters=n_clusters).fit(Xc)
+        labels[complete] = [ENV_CLASSES.index(c) for c in emb.classes_]
+        embedding = np.full((len(X), 2), np.nan)
+        embedding[complete] = emb.embedding_
+        return ClusterResult(labels, int(emb.n_clusters_), f"t-SNE + DPC ({_backend()})", embedding,
+                             emb.dpc_.rho_, emb.dpc_.delta_, np.asarray(emb.dpc_.centers_), complete)
+    if method == "kmeans":
+        from sklearn.cluster import KMeans
+        from sklearn.preprocessing import StandardScaler
+
+        Z = StandardScaler().fit_transform(Xc)
+        km = KMeans(n_clusters=n_clusters or 3, n_init=10, random_state=random_state).fit(Z)
+        names = name_clusters(severity_scores(Xc, km.labels_, FEATURES))
+        labels[complete] = [ENV_CLASSES.index(names[k]) for k in km.labels_]
+        return ClusterResult(labels, int(km.n_clusters), "K-means (k = 3)", clustered=complete)
+    raise DataError(f"clustering method must be 'dpc' or 'kmeans', got {method!r}")
+
+
+def _backend() -> str:
+    try:
+        import openTSNE  # noqa: F401
+
+        return "openTSNE"
+    except ImportError:
+        return "scikit-learn"
