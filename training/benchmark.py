@@ -71,9 +71,12 @@ SPLITS = {
     "standard": BenchmarkSplit("standard", train_sites=(101, 102, 103, 104, 105, 106),
                                test_sites=(201, 202, 203, 204, 205), walks_per_site=3, walk_s=300.0,
                                cell_size_m=10.0, capture_s=10.0),
+    "quick": BenchmarkSplit("quick", train_sites=(101, 102, 103), test_sites=(201, 202, 203), walks_per_site=2,
+                            walk_s=180.0, cell_size_m=10.0, capture_s=6.0),
 }
-"""The documented splits: ``demo`` (a few minutes on 2 cores, for ``make demo``) and ``standard`` (the
-figures in issue notes: six training sites, five held-out test sites)."""
+"""The documented splits: ``demo`` (a few minutes on 2 cores, for ``make demo``), ``quick`` (three and
+three sites, about half an hour) and ``standard`` (the figures in issue notes: six training sites, five
+held-out test sites)."""
 
 
 @dataclass(frozen=True)
@@ -120,12 +123,13 @@ def split_layout(root: str | os.PathLike) -> SplitLayout:
 
 
 def build_split(split: BenchmarkSplit | str, root: str | os.PathLike,
-                progress: Callable[[str], None] | None = None) -> SplitLayout:
+                progress: Callable[[str], None] | None = None, walks: bool = True) -> SplitLayout:
     """Simulate every site, survey and walk of ``split`` into ``root``; what already exists is kept.
 
     Each site, survey and walk is written atomically by the simulator, so an
     interrupted build resumes where it stopped: a directory that exists is
-    complete. ``progress`` receives one line per item built.
+    complete. ``progress`` receives one line per item built; ``walks=False`` builds sites and surveys only
+    (an environment-model study needs no walks).
     """
     from features.site import save_site
     from simulation.site.layout import generate_site
@@ -157,7 +161,7 @@ def build_split(split: BenchmarkSplit | str, root: str | os.PathLike,
             simulate_survey(sdir, layout.survey_dir(site), seed=site, cell_size_m=split.cell_size_m,
                             capture_s=split.capture_s, progress=False)
             say(f"survey {site}")
-        for k in range(split.walks_per_site):
+        for k in range(split.walks_per_site if walks else 0):
             wdir = layout.walk_dir(site, k)
             if not wdir.is_dir():
                 wdir.parent.mkdir(parents=True, exist_ok=True)
