@@ -88,8 +88,13 @@ def training_set(library: str | os.PathLike, sites=None) -> TrainingSet:
 
 
 def fit_env_model(data: TrainingSet, mode: str = "supervised", *, random_state: int = 0,
-                  classifier: EnvironmentClassifier | None = None) -> tuple[EnvironmentClassifier, dict]:
-    """Fit the classifier of ``mode`` on ``data``; returns it and a summary of what it was fitted on."""
+                  classifier: EnvironmentClassifier | None = None,
+                  diagnostics: dict | None = None) -> tuple[EnvironmentClassifier, dict]:
+    """Fit the classifier of ``mode`` on ``data``; returns it and a summary of what it was fitted on.
+
+    ``diagnostics`` (a dict, optional) receives ``data`` (the windows used) and, in the clustering
+    modes, ``clusters`` (:class:`training.clustering.ClusterResult`) — for the plots.
+    """
     if mode not in MODES:
         raise ConfigError(f"mode must be one of {MODES}, got {mode!r}")
     usable = np.isfinite(data.X).any(axis=1)
@@ -110,11 +115,15 @@ def fit_env_model(data: TrainingSet, mode: str = "supervised", *, random_state: 
         from training.clustering import cluster_windows
 
         result = cluster_windows(data.X, random_state=random_state)
+        if diagnostics is not None:
+            diagnostics["clusters"] = result
         ok = result.labels >= 0
         labels, X = result.labels[ok], data.X[ok]
-        share = data.share[ok] if np.isfinite(data.share[ok]).all() else None
+        share = None            # map shares are for evaluation only in the unsupervised modes
         info = {"labels": "clusters", "n_clusters": int(result.n_clusters), "embedding": result.method}
     clf.fit(X, labels, share=share)
+    if diagnostics is not None:
+        diagnostics["data"] = data
     info.update({"mode": mode, "n_windows": int(len(X)), "sites": sorted(set(data.site.tolist())),
                  "n_cells": int(len(set(zip(data.site.tolist(), data.cell.tolist())))),
                  "class_counts": np.bincount(labels, minlength=len(ENV_CLASSES)).tolist(),

@@ -25,6 +25,8 @@ def register(sub) -> None:
                    help="where the classes come from (default supervised)")
     p.add_argument("--seed", type=seed, default=0, help="seed of the embedding and clustering (default 0)")
     p.add_argument("--out", type=Path, required=True, help="model directory to write")
+    p.add_argument("--plots", type=Path, default=None,
+                   help="directory for PNGs: decision graph and t-SNE map (clustering modes), confusion matrix")
     p.add_argument("--overwrite", action="store_true", help="replace an existing model directory")
     p.set_defaults(func=_run_env)
 
@@ -57,13 +59,32 @@ def _run_env(args) -> int:
     if not args.library.is_file():
         raise ConfigError(f"--library {args.library}: no such file")
     data = training_set(args.library, args.site)
-    clf, info = fit_env_model(data, args.mode, random_state=args.seed)
+    diag: dict = {}
+    clf, info = fit_env_model(data, args.mode, random_state=args.seed, diagnostics=diag)
     save_env_model(clf, args.out, info, library=args.library, overwrite=args.overwrite)
+    if args.plots is not None:
+        for png in _env_plots(clf, diag, args.plots):
+            print(f"plot -> {png}")
     counts = "/".join(str(c) for c in info["class_counts"])
     print(f"environment model ({args.mode}): {info['n_windows']} windows of {info['n_cells']} cells on "
           f"{', '.join(info['sites'])}; windows per class open/light/heavy = {counts}; sub-models "
           f"{', '.join(sorted(clf.submodels_))} -> {args.out}")
     return 0
+
+
+def _env_plots(clf, diag: dict, out: Path) -> list:
+    from pipeline.env_plots import confusion, plot_confusion, plot_decision_graph, plot_embedding
+
+    data = diag["data"]
+    pngs = []
+    cl = diag.get("clusters")
+    if cl is not None and cl.embedding is not None:
+        pngs.append(plot_decision_graph(cl.rho, cl.delta, cl.centers, out / "decision_graph.png"))
+        pngs.append(plot_embedding(cl.embedding, cl.labels, data.label, out / "tsne_map.png"))
+    if (data.label >= 0).any():
+        m = confusion(data.label, clf.predict(data.X))
+        pngs.append(plot_confusion(m, out / "confusion.png", "training windows: map label vs classifier"))
+    return pngs
 
 
 def _run_fusion(args) -> int:

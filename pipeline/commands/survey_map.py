@@ -1,0 +1,104 @@
+"""``envfuse survey map``: classify every cell of a surveyed substation and draw its environment map."""
+
+from __future__ import annotations
+
+import io
+from pathlib import Path
+
+from features.errors import ConfigError
+
+GROUP = "survey"
+
+CELL_COLUMNS = ("cell_id", "east_m", "north_m", "predicted", "probability", "occlusion_estimate", "ood", "map_label",
+                "map_share")
+
+
+def register(sub) -> None:
+    p = sub.add_parser(
+        "map", help="environment map of a surveyed site from its fingerprint library and a model",
+        description="Classify every window of the survey's cells (stored by 'survey build') with an environment "
+                    "model, give each cell the class of its windows' combined probabilities, and draw the cells "
+                    "over the site outline; where cells carry map labels, print the per-class accuracy and the "
+                    "confusion matrix.",
+        epilog="Example: envfuse survey map survey1 --library fp.sqlite --model env_model --out map.png "
+               "--csv cells.csv")
+    p.add_argument("survey", type=Path, metavar="SURVEY_DIR", help="survey directory (its site.toml names the site)")
+    p.add_argument("--library", type=Path, required=True, help="fingerprint library holding the survey")
+    p.add_argument("--model", type=Path, required=True, help="environment model directory (train env)")
+    p.add_argument("--out", type=Path, required=True, help="PNG to write")
+    p.add_argument("--csv", type=Path, default=None, help="also write one row per cell")
+    p.set_defaults(func=_run)
+
+
+def _run(args) -> int:
+    import numpy as np
+
+    from features.fileio import atomic_write_text
+    from features.site import ENV_CLASSES, load_site
+    from fingerprints.library import FingerprintLibrary
+    from models.environment import combine_windows
+    from pipeline.env_plots import confusion, plot_survey_map
+    from training.env import load_env_model, training_set
+
+    if not (args.survey / "site.toml").is_file():
+        raise ConfigError(f"{args.survey}: not a survey directory (no site.toml)")
+    if not args.library.is_file():
+        raise ConfigError(f"--library {args.library}: no such file")
+    site = load_site(args.survey / "site.toml")
+    clf, meta = load_env_model(args.model)
+    data = training_set(args.library, [site.name])
+    proba = clf.predict_proba(data.X)
+    ood = clf.is_ood(data.X)
+    occ = clf.occlusion(data.X)
+    cells = []
+    keys = data.cell.tolist()
+    order = {}
+    for i, k in enumerate(keys):
+        order.setdefault(k, []).append(i)
+    for cell_id, idx in order.items():
+        idx = np.array(idx)
+        p = combine_windows(proba[idx])
+        k = int(np.argmax(p))
+        cells.append({"cell_id": cell_id, "predicted": ENV_CLASSES[k], "probability": float(p[k]),
+                      "occlusion_estimate": float(np.nanmean(occ[idx])) if np.isfinite(occ[idx]).any() else
+                      float("nan"), "ood": bool(ood[idx].mean() > 0.5),
+                      "map_label": ENV_CLASSES[data.label[idx[0]]] if data.label[idx[0]] >= 0 else "",
+                      "map_share": float(data.share[idx[0]])})
+    with FingerprintLibrary.open(args.library, create=False) as lib:
+        pos = {str(c["cell_id"]): (float(c["east_m"]), float(c["north_m"])) for c in lib.cells(site.name)}
+    for c in cells:
+        c["east_m"], c["north_m"] = pos[c["cell_id"]]
+    if not cells:
+        raise ConfigError(f"{args.library}: no windows of site {site.name!r} (run 'envfuse survey build' first)")
+    plot_survey_map(site, cells, _cell_pitch(cells), args.out)
+    if args.csv is not None:
+        buf = io.StringIO()
+        buf.write(",".join(CELL_COLUMNS) + "\n")
+        for c in cells:
+            buf.write(",".join("" if isinstance(c[k], float) and np.isnan(c[k]) else
+                               (f"{c[k]:.6g}" if isinstance(c[k], float) else str(c[k]).lower()
+                                if isinstance(c[k], bool) else str(c[k])) for k in CELL_COLUMNS) + "\n")
+        atomic_write_text(args.csv, buf.getvalue())
+    counts = {k: sum(c["predicted"] == k for c in cells) for k in ENV_CLASSES}
+    print(f"{site.name}: {len(cells)} cells, predicted open/light/heavy = "
+          f"{counts['open']}/{counts['light']}/{counts['heavy']}, {sum(c['ood'] for c in cells)} OOD "
+          f"(model: {meta.get('mode', '?')}) -> {args.out}")
+    labelled = [c for c in cells if c["map_label"]]
+    if labelled:
+        t = np.array([ENV_CLASSES.index(c["map_label"]) for c in labelled])
+        pr = np.array([ENV_CLASSES.index(c["predicted"]) for c in labelled])
+        m = confusion(t, pr)
+        rec = [f"{k} {100 * m[i, i] / m[i].sum():.1f} % ({m[i].sum()})" for i, k in enumerate(ENV_CLASSES) if m[i].sum()]
+        print("per-class accuracy against map labels (cells): " + ", ".join(rec))
+        print("confusion (rows map label, columns predicted open/light/heavy):")
+        for i, k in enumerate(ENV_CLASSES):
+            print(f"  {k:5s} " + " ".join(f"{v:4d}" for v in m[i]))
+    return 0
+
+
+def _cell_pitch(cells) -> float:
+    import numpy as np
+
+    e = np.unique(np.round([c["east_m"] for c in cells], 3))
+    d = np.diff(e)
+    return float(np.median(d)) if d.size else 10.0
