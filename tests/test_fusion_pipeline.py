@@ -100,3 +100,18 @@ def test_cli_refuses_bad_models_and_walks(walk_dir, tmp_path, capsys):
     assert main(["evaluate", str(tmp_path), "--model", str(tmp_path / "bad"), "--report", str(tmp_path / "r")]) == 1
     assert "no walk.toml" in capsys.readouterr().err
     assert not (tmp_path / "t.csv").exists()
+
+
+def test_evaluate_on_dask_equals_serial(trained, walk_dir, tmp_path):
+    """Each walk is a pure task of its files and the bundle: two local workers give the serial metrics."""
+    from pipeline.evaluate import evaluate
+
+    _, model = trained
+    save_fusion_model(model, tmp_path / "fm")
+    walks = [walk_dir, walk_dir]
+    a = evaluate(walks, tmp_path / "fm", tmp_path / "r1", methods=("kf", "adaptive"), workers=1, progress=False,
+                 plots=False)
+    b = evaluate(walks, tmp_path / "fm", tmp_path / "r2", methods=("kf", "adaptive"), workers=2, progress=False,
+                 plots=False)
+    assert (tmp_path / "r1" / "metrics.csv").read_text() == (tmp_path / "r2" / "metrics.csv").read_text()
+    assert [r["rows"] for r in a["results"]] == [r["rows"] for r in b["results"]]
