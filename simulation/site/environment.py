@@ -1,12 +1,27 @@
 """Ground-truth environment class of a position: the share of sky hidden by solid structures.
 
 DESIGN.md §6: open < 10 %, light 10–40 %, heavy > 40 % of the sky above the
-elevation mask, solid-angle weighted. Porous structures (lattice gantries) do
-not count: they attenuate satellites but do not hide the sky. Survey cells take
-the class at their capture point.
+elevation mask. Porous structures (lattice gantries) do not count: they
+attenuate satellites but do not hide the sky. Survey cells take the class at
+their capture point.
+
+Two ways of weighting the sky (``sky=``):
+
+- ``"uniform"`` (the default, as the project was specified): solid-angle
+  weighted, every direction above the mask alike;
+- ``"satellites"``: weighted by where this site's GPS and BeiDou satellites
+  actually pass over a day (:class:`SatelliteSky`) — the share of satellite
+  time blocked. At 30° N, say, no GPS satellite ever passes near the north
+  celestial pole and the BeiDou GEO belt hangs in the south, so a fire wall
+  north of a walker hides much uniform sky and few satellites: the uniform
+  label calls heavy what the receiver sees as light (issue 13 item 0).
 """
 
 from __future__ import annotations
+
+import functools
+from dataclasses import dataclass
+from datetime import datetime, timedelta, timezone
 
 import numpy as np
 
@@ -15,8 +30,56 @@ from features.site import ENV_CLASSES, Site
 
 from simulation.site.geometry import boxes_array, sky_blocked_fraction
 
-__all__ = ["OPEN_MAX", "LIGHT_MAX", "solid_boxes", "blocked_share", "classify_share", "environment_class",
-           "class_map"]
+__all__ = ["OPEN_MAX", "LIGHT_MAX", "SKY_WEIGHTINGS", "SatelliteSky", "satellite_sky", "solid_boxes",
+           "blocked_share", "classify_share", "environment_class", "class_map"]
+
+SKY_WEIGHTINGS = ("uniform", "satellites")
+"""Ways of weighting the sky in :func:`blocked_share` (see the module docstring)."""
+
+SKY_DAY_UTC = datetime(2026, 6, 1, tzinfo=timezone.utc)
+"""The day whose satellite passes weight the ``"satellites"`` sky (GPS ground tracks repeat every sidereal
+day, BeiDou MEO every 7 days, so one day is representative to within a few percent)."""
+
+SKY_STEP_S = 120.0
+"""Sampling of the satellites' sky tracks over that day, s."""
+
+
+@dataclass(frozen=True)
+class SatelliteSky:
+    """The satellites' sky tracks over a day, binned by azimuth.
+
+    ``el_sorted[b]`` holds the elevations (rad, ascending) of every (satellite, epoch) sample above
+    the mask in azimuth bin ``b`` of ``n_az``; ``n_samples`` their total. The blocked share of a
+    skyline ``hor`` (rad, per bin) is the share of samples below it:
+    Σ_b #{e ∈ el_sorted[b] : e < hor_b} / n_samples.
+    """
+
+    el_sorted: tuple
+    n_samples: int
+
+    def blocked(self, hor_rad: np.ndarray) -> np.ndarray:
+        """Shares (n,) of skylines ``hor_rad`` of shape (n, n_az)."""
+        hor = np.atleast_2d(hor_rad)
+        out = np.zeros(hor.shape[0])
+        for b, e in enumerate(self.el_sorted):
+            if len(e):
+                out += np.searchsorted(e, hor[:, b], side="left")
+        return out / max(self.n_samples, 1)
+
+
+@functools.lru_cache(maxsize=16)
+def satellite_sky(lat_deg: float, lon_deg: float, mask_deg: float = ELEVATION_MASK_DEG, n_az: int = 360,
+                  day_utc: datetime = SKY_DAY_UTC, step_s: float = SKY_STEP_S) -> SatelliteSky:
+    """The GPS + BeiDou sky of a site over one day (:func:`simulation.gnss.orbits.azel`), binned for
+    :func:`blocked_share`."""
+    from simulation.gnss.orbits import azel
+
+    times = [day_utc + timedelta(seconds=float(t)) for t in np.arange(0.0, 86_400.0, step_s)]
+    az, el = azel(times, (lat_deg, lon_deg, 0.0))
+    keep = el >= np.radians(mask_deg)
+    az, el = az[keep], el[keep]
+    b = np.minimum((az / (2.0 * np.pi) * n_az).astype(int), n_az - 1)
+    return SatelliteSky(tuple(np.sort(el[b == k]) for k in range(n_az)), int(el.size))
 
 OPEN_MAX = 0.10
 """Largest blocked-sky share still called open (DESIGN.md §6)."""
@@ -30,10 +93,19 @@ def solid_boxes(site: Site) -> np.ndarray:
     return boxes_array([b for b in site.layout if not b.porous])
 
 
-def blocked_share(site: Site, east_m, north_m, mask_deg: float = ELEVATION_MASK_DEG, n_az: int = 360) -> np.ndarray:
-    """Share of sky above ``mask_deg`` hidden by solid structures at device height, shape (n,)."""
+def blocked_share(site: Site, east_m, north_m, mask_deg: float = ELEVATION_MASK_DEG, n_az: int = 360,
+                  sky: str = "uniform") -> np.ndarray:
+    """Share of sky above ``mask_deg`` hidden by solid structures at device height, shape (n,).
+
+    ``sky``: ``"uniform"`` (solid angle) or ``"satellites"`` (this site's satellite passes over a day).
+    """
+    if sky not in SKY_WEIGHTINGS:
+        raise ValueError(f"sky must be one of {SKY_WEIGHTINGS}, got {sky!r}")
     p = np.column_stack([np.ravel(east_m), np.ravel(north_m)])
-    return sky_blocked_fraction(p, solid_boxes(site), site.device_height_m, mask_deg=mask_deg, n_az=n_az)
+    weights = None
+    if sky == "satellites":
+        weights = satellite_sky(round(site.origin.lat_deg, 4), round(site.origin.lon_deg, 4), mask_deg, n_az)
+    return sky_blocked_fraction(p, solid_boxes(site), site.device_height_m, mask_deg=mask_deg, n_az=n_az, sky=weights)
 
 
 def classify_share(share) -> np.ndarray:

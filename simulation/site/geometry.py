@@ -89,12 +89,15 @@ def horizon_elevation(p_en: np.ndarray, az_rad: np.ndarray, boxes: np.ndarray, z
 
 
 def sky_blocked_fraction(p_en: np.ndarray, boxes: np.ndarray, z0_m: float, mask_deg: float = 10.0,
-                         n_az: int = 360, tile_m: float = 8.0) -> np.ndarray:
+                         n_az: int = 360, tile_m: float = 8.0, sky=None) -> np.ndarray:
     """Share of the sky above the elevation mask hidden by ``boxes``, per point.
 
-    Solid-angle weighted: the sky between the mask and elevation ``e`` along one
-    azimuth spans ∫cos(e')de' = sin(e) − sin(mask), the whole sky above the mask
-    2π(1 − sin(mask)). Returns ndarray of shape (n,) in [0, 1].
+    Solid-angle weighted by default: the sky between the mask and elevation ``e``
+    along one azimuth spans ∫cos(e')de' = sin(e) − sin(mask), the whole sky above
+    the mask 2π(1 − sin(mask)). With ``sky`` (an object whose ``blocked(hor_rad)``
+    maps skyline elevations of shape (n, n_az) to shares of shape (n,), e.g.
+    :class:`simulation.site.environment.SatelliteSky`), the share of that sky
+    distribution instead. Returns ndarray of shape (n,) in [0, 1].
 
     Points are processed in square tiles of ``tile_m``; a box is tested only
     against tiles within its reach (h − z0)/tan(mask), beyond which it cannot
@@ -125,7 +128,10 @@ def sky_blocked_fraction(p_en: np.ndarray, boxes: np.ndarray, z0_m: float, mask_
         if not near.any():
             continue
         hor = horizon_elevation(p[idx], az, tall[near], z0_m)
-        out[idx] = np.clip(np.sin(hor) - s_mask, 0.0, None).mean(axis=1) / (1.0 - s_mask)
+        if sky is None:
+            out[idx] = np.clip(np.sin(hor) - s_mask, 0.0, None).mean(axis=1) / (1.0 - s_mask)
+        else:
+            out[idx] = sky.blocked(hor)
     return out
 
 
