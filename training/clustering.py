@@ -6,6 +6,14 @@ clustering → clusters named open / light / heavy by severity
 K-means on the standardised 14-D windows (scikit-learn, ``n_init=10``), named
 by the same severity rule — the baseline a data scientist would try first.
 
+Large libraries: t-SNE and the density-peak search run on a seeded random
+subsample of at most ``max_windows`` complete windows (default 20,000, about
+a minute on one core); an :class:`models.environment.EnvironmentClassifier`
+fitted on the subsample's clusters then labels the other windows — the same
+classifier that classifies new windows online, so the library and a new
+window are treated alike. This keeps the whole model on 100,000 windows
+within minutes (``bench/bench_env_model.py``).
+
 Only windows with every feature (both modalities) are clustered: t-SNE and
 K-means need complete rows, and imputing a modality would invent the
 statistics the classes are told apart by. The others get label −1 (the
@@ -42,7 +50,7 @@ class ClusterResult:
 
 
 def cluster_windows(X: np.ndarray, *, method: str = "dpc", random_state: int = 0,
-                    n_clusters: int | None = None) -> ClusterResult:
+                    n_clusters: int | None = None, max_windows: int = 20_000) -> ClusterResult:
     """Cluster the complete windows of ``X`` (n, 14) and name the clusters by severity."""
     from models.embedding import EnvironmentEmbedding, name_clusters, severity_scores
 
@@ -53,15 +61,21 @@ def cluster_windows(X: np.ndarray, *, method: str = "dpc", random_state: int = 0
     if complete.sum() < 40:
         raise DataError(f"only {int(complete.sum())} windows have both GNSS and acoustic features; clustering "
                         "needs at least 40")
-    Xc = X[complete]
+    rows = np.flatnonzero(complete)
+    if rows.size > max_windows:
+        rows = np.sort(np.random.default_rng(random_state).choice(rows, size=max_windows, replace=False))
+    sub = np.zeros(len(X), bool)
+    sub[rows] = True
+    Xc = X[sub]
     labels = np.full(len(X), -1)
     if method == "dpc":
         emb = EnvironmentEmbedding(random_state=random_state, n_clusters=n_clusters).fit(Xc)
-        labels[complete] = [ENV_CLASSES.index(c) for c in emb.classes_]
+        labels[sub] = [ENV_CLASSES.index(c) for c in emb.classes_]
         embedding = np.full((len(X), 2), np.nan)
-        embedding[complete] = emb.embedding_
+        embedding[sub] = emb.embedding_
+        _label_rest(X, labels, complete & ~sub)
         return ClusterResult(labels, int(emb.n_clusters_), f"t-SNE + DPC ({_backend()})", embedding,
-                             emb.dpc_.rho_, emb.dpc_.delta_, np.asarray(emb.dpc_.centers_), complete)
+                             emb.dpc_.rho_, emb.dpc_.delta_, np.asarray(emb.dpc_.centers_), sub)
     if method == "kmeans":
         from sklearn.cluster import KMeans
         from sklearn.preprocessing import StandardScaler
@@ -69,9 +83,23 @@ def cluster_windows(X: np.ndarray, *, method: str = "dpc", random_state: int = 0
         Z = StandardScaler().fit_transform(Xc)
         km = KMeans(n_clusters=n_clusters or 3, n_init=10, random_state=random_state).fit(Z)
         names = name_clusters(severity_scores(Xc, km.labels_, FEATURES))
-        labels[complete] = [ENV_CLASSES.index(names[k]) for k in km.labels_]
-        return ClusterResult(labels, int(km.n_clusters), "K-means (k = 3)", clustered=complete)
+        labels[sub] = [ENV_CLASSES.index(names[k]) for k in km.labels_]
+        _label_rest(X, labels, complete & ~sub)
+        return ClusterResult(labels, int(km.n_clusters), "K-means (k = 3)", clustered=sub)
     raise DataError(f"clustering method must be 'dpc' or 'kmeans', got {method!r}")
+
+
+def _label_rest(X: np.ndarray, labels: np.ndarray, rest: np.ndarray) -> None:
+    """Label the complete windows left out of the subsample with a classifier of the subsample's clusters."""
+    if not rest.any():
+        return
+    from models.environment import EnvironmentClassifier
+
+    done = labels >= 0
+    if len(np.unique(labels[done])) < 2:
+        labels[rest] = int(np.bincount(labels[done]).argmax())
+        return
+    labels[rest] = EnvironmentClassifier().fit(X[done], labels[done]).predict(X[rest])
 
 
 def _backend() -> str:
