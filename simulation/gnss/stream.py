@@ -25,6 +25,7 @@ from simulation.gnss import signal as gnss_signal
 from simulation.site.geometry import boxes_array
 from simulation.gnss.nmea_writer import NMEA_SYSTEM_BDS, NMEA_SYSTEM_GPS, NmeaEpochs, format_nmea
 from simulation.gnss.orbits import SYSTEM_GPS, all_satellites, azel
+from simulation.gnss.velocity import velocity_errors
 from simulation.rng import stream_rng
 from simulation.streams import StreamContext, Trajectory
 
@@ -180,10 +181,15 @@ def simulate_gnss(site, traj: Trajectory, seed: int, corrections: bool = True, r
     reported = np.where(tracked, np.clip(np.rint(est), 0, 99), np.nan)
 
     sys_idx = np.where(sats.system == SYSTEM_GPS, 0, 1)
+    # Cycle slips restart both the carrier smoothing of the code and the RTK engine's lock.
+    slip = gnss_fix.cycle_slips(stream_rng(seed, "gnss", "slips"), reported, blk.nlos, fix_cfg)
+    untracked = ~tracked
+    reset = slip | untracked | np.vstack([np.ones((1, k), bool), untracked[:-1]])
     errors = gnss_fix.pseudorange_errors(stream_rng(seed, "gnss", "errors"), el, np.where(tracked, est, np.nan),
-                                         blk.nlos, blk.nlos_extra_m, clutter, speed, dt, cfg.wavelength_m, fix_cfg)
+                                         blk.nlos, blk.nlos_extra_m, clutter, speed, dt, cfg.wavelength_m, fix_cfg,
+                                         reset=reset)
     fix = gnss_fix.solve_fixes(stream_rng(seed, "gnss", "rtk"), az, el, sys_idx, tracked, reported, errors,
-                               blk.nlos, dt, corrections, fix_cfg)
+                               blk.nlos, dt, corrections, fix_cfg, slip=slip, wavelength_m=cfg.wavelength_m)
     truth = np.stack([east, north, up], axis=1)
     return GnssSimulation(
         t_s=t, unix_s=unix, truth_enu_m=truth, fix_enu_m=truth + fix.error_enu_m, quality=fix.quality,
@@ -194,7 +200,7 @@ def simulate_gnss(site, traj: Trajectory, seed: int, corrections: bool = True, r
 
 
 def to_nmea_epochs(sim: GnssSimulation, site, seed: int, traj: Trajectory) -> NmeaEpochs:
-    """Receiver-reported quantities for the NMEA writer (geodetic fix, velocity with Doppler-level noise).
+    """Receiver-reported quantities for the NMEA writer (geodetic fix, velocity from the Doppler solution).
 
     The site origin's ``alt_m`` is taken as the ground's height and written as
     GGA altitude with a geoid separation of 0.0 (no geoid model is simulated),
@@ -204,14 +210,16 @@ def to_nmea_epochs(sim: GnssSimulation, site, seed: int, traj: Trajectory) -> Nm
     lat, lon, alt = enu_to_geodetic(sim.fix_enu_m[:, 0], sim.fix_enu_m[:, 1], sim.fix_enu_m[:, 2],
                                     o.lat_deg, o.lon_deg, o.alt_m)
     # Up in the trajectory is the device height above ground at the origin; the origin's altitude is the ground.
-    rng = stream_rng(seed, "gnss", "velocity")
-    n = len(sim.t_s)
+    # Velocity: the true velocity plus the Doppler solution's error (simulation.gnss.velocity).
     speed_true = np.interp(sim.t_s, traj.t_s, traj.speed_m_s)
     idx = np.clip(np.searchsorted(traj.t_s, sim.t_s), 0, len(traj.t_s) - 1)
-    heading = np.degrees(np.mod(traj.heading_rad[idx], 2.0 * np.pi))
-    # Doppler velocity noise of a few cm/s (σ = 0.03 m/s per axis), a typical receiver figure.
-    ve = speed_true * np.sin(np.radians(heading)) + 0.03 * rng.standard_normal(n)
-    vn = speed_true * np.cos(np.radians(heading)) + 0.03 * rng.standard_normal(n)
+    hdg = np.mod(traj.heading_rad[idx], 2.0 * np.pi)
+    dt = float(np.median(np.diff(sim.t_s))) if len(sim.t_s) > 1 else 0.2
+    sys_idx = np.where(sim.system == SYSTEM_GPS, 0, 1)
+    dv = velocity_errors(stream_rng(seed, "gnss", "velocity"), sim.az_rad, sim.el_rad, sys_idx, sim.used,
+                         sim.cn0_reported_dbhz, sim.nlos, speed_true, dt, gnss_signal.WAVELENGTH_M)
+    ve = speed_true * np.sin(hdg) + dv[:, 0]
+    vn = speed_true * np.cos(hdg) + dv[:, 1]
     spd = np.hypot(ve, vn)
     course = np.where(spd > 0.1, np.mod(np.degrees(np.arctan2(ve, vn)), 360.0), np.nan)
     system = np.where(sim.system == SYSTEM_GPS, NMEA_SYSTEM_GPS, NMEA_SYSTEM_BDS)
