@@ -30,7 +30,6 @@ from typing import Iterator
 
 import numpy as np
 import soundfile as sf
-from tqdm import tqdm
 
 from features.fileio import atomic_path
 from features.site import Site
@@ -39,6 +38,7 @@ from simulation.acoustic.channel import PATH_KINDS, PathSet, build_scene, channe
 from simulation.acoustic.atmosphere import absorption_db_per_m, fresnel_number, maekawa_loss_db
 from simulation.acoustic.synthesis import CHUNK_SAMPLES, AmbientNoise, AudioConfig, ChirpRenderer, detection_range_m
 from simulation.acoustic.chirp import ChirpSpec, beacon_chirp, emission_times_s
+from simulation.progress import Progress
 from simulation.rng import stream_rng
 from simulation.streams import StreamContext, Trajectory
 
@@ -118,7 +118,7 @@ def render_audio(site: Site, trajectory: Trajectory, seed: int, wav_path,
     Randomness comes only from ``stream_rng(seed, "audio", ...)``: the same
     seed gives the same bytes, whatever ``block_samples``. With a truth path,
     memory is bounded by the block size, not the recording's length.
-    ``progress`` shows a bar of audio seconds rendered on stderr (terminals only).
+    ``progress`` shows audio seconds rendered on stderr: a bar on a terminal, plain lines otherwise.
     """
     cfg = cfg or AudioConfig()
     fs = cfg.fs_hz
@@ -178,13 +178,12 @@ def render_audio(site: Site, trajectory: Trajectory, seed: int, wav_path,
                 counts["clipped"] += int(np.count_nonzero(np.abs(q) > 32767))
                 out.write(np.clip(q, -32768, 32767).astype(np.int16))
 
-        bar = stack.enter_context(tqdm(total=int(math.ceil(trajectory.duration_s)), unit="s", desc="audio",
-                                       disable=None if progress else True, leave=False))
+        bar = stack.enter_context(Progress(int(math.ceil(trajectory.duration_s)), "audio", unit="s",
+                                           enabled=progress))
         for t_e, bid, i, b, spec in emissions:
             counts["emissions"] += 1
             done = int(min(max(t_e - true_start, 0.0), trajectory.duration_s))
-            if done > bar.n:
-                bar.update(done - bar.n)
+            bar.set(done)
             flush_until((t_e - true_start) * fs_true - _PRE_SAMPLES - 2)
             src = np.array([b.east_m, b.north_m, b.up_m])
             if spec not in alpha_min:
