@@ -34,15 +34,27 @@ the satellite with the largest standardised residual (Brown 1992, "A baseline
 GPS RAIM scheme", Navigation 39(3)), up to ``raim_max_exclusions`` times.
 
 Fix quality (GGA field 6): this module does not search integer ambiguities; it
-models the RTK engine's behaviour. RTK fixed (4) needs many satellites in
-continuous lock, PDOP ≤ ≈ 3 and few biased (NLOS) phases — biased phases make
-the ambiguity ratio test fail — held for a time-to-fix of a few seconds; its
-error is the carrier-phase WLS error (cm). RTK float (5) needs ≥ 5 satellites in
+models the RTK engine's behaviour from what a receiver sees, never from the
+true NLOS flags. RTK fixed (4) needs the acceptance test — the stand-in for the
+ambiguity ratio test — to hold for a time-to-fix of 3–10 s (after power-on and
+after every loss): at least ``rtk_min_sats`` satellites in continuous lock,
+PDOP ≤ ``rtk_max_pdop``, the code solution's a-posteriori variance factor
+≤ ``rtk_max_residual_var``, no RAIM exclusion, and at most
+``rtk_max_weak_share`` of the locked carriers below ``rtk_weak_dbhz``. Its
+error is the carrier-phase WLS error (cm) — unless the fix is wrong: each
+ambiguity fixed on a reflected carrier takes a wrong integer with a small
+probability, and the position offset persists until the receiver's validation
+resets the fix (:func:`_rtk_state`). RTK float (5) needs ≥ 5 satellites in
 lock; each satellite's float ambiguity converges from its code error as its
-lock ages (share 1 → ``float_floor`` with ``float_conv_tau_s``), and cycle slips
-— frequent on weak and reflected carriers — restart it. DGNSS (2) otherwise; autonomous (1) when
-corrections are off; no fix (0) when the geometry cannot be solved (fewer than
-4 satellites, or fewer than 3 + the number of systems).
+lock ages (share 1 → ``float_floor`` with ``float_conv_tau_s``), and cycle
+slips — frequent on weak and reflected carriers — restart it. DGNSS (2)
+otherwise; autonomous (1) when corrections are off; no fix (0) when the
+geometry cannot be solved (fewer than 4 satellites, or fewer than 3 + the
+number of systems).
+
+The truth NLOS flags enter only physics the receiver cannot choose: reflected
+carriers slip more often and bias the float ambiguities, which is what makes
+an accepted fix wrong.
 """
 
 from __future__ import annotations
@@ -98,7 +110,8 @@ class FixConfig:
     rtk_max_pdop: float = 3.0
     rtk_max_residual_var: float = 4.0
     rtk_weak_dbhz: float = 35.0
-    rtk_max_weak_share: float = 0.3
+    rtk_max_weak_share: float = 0.25
+    rtk_max_raim_exclusions: int = 1
     ttf_min_s: float = 3.0
     ttf_max_s: float = 10.0
     rtk_cold_start: bool = True
@@ -501,6 +514,7 @@ def solve_fixes(rng: np.random.Generator, az_rad: np.ndarray, el_rad: np.ndarray
     g = _design(az_rad, el_rad, sys_idx)
     cand = tracked & (el_rad >= np.radians(cfg.fix_mask_deg))
     used, ok = _solvable(cand, sys_idx)
+    used_before_raim = used.copy()
     atm_scale = cfg.dgnss_residual_fraction if corrections else 1.0
     code_err = errors["noise"] + errors["multipath"] + errors["nlos_bias"] + atm_scale * errors["atmosphere"]
     floor = cfg.rx_floor_differential_m if corrections else cfg.rx_floor_autonomous_m
@@ -546,15 +560,18 @@ def solve_fixes(rng: np.random.Generator, az_rad: np.ndarray, el_rad: np.ndarray
         n_lock = locked.sum(axis=1)
         # The acceptance test reads observables only: locked satellites, PDOP, the code solution's
         # a-posteriori variance factor (weighted residuals over the degrees of freedom, which biased
-        # reflections inflate) and the share of weak carriers among the locked ones.
+        # reflections inflate), the number of satellites RAIM had to exclude (outliers mean multipath
+        # the ambiguity search cannot trust) and the share of weak carriers among the locked ones.
         resid = code_err - np.matmul(g, theta_code[..., None])[..., 0]
         n_sys = (used[:, sys_idx == 0].any(axis=1).astype(int) + used[:, sys_idx == 1].any(axis=1))
         dof = np.maximum(used.sum(axis=1) - 3 - n_sys, 1)
         var_factor = (w * resid ** 2).sum(axis=1) / dof
         weak = locked & (np.nan_to_num(cn0_reported_dbhz, nan=0.0) < cfg.rtk_weak_dbhz)
         weak_share = weak.sum(axis=1) / np.maximum(n_lock, 1)
+        n_excluded = (used_before_raim & ~used).sum(axis=1)
         fixed_ok = (ok & (n_lock >= cfg.rtk_min_sats) & (pdop <= cfg.rtk_max_pdop)
-                    & (var_factor <= cfg.rtk_max_residual_var) & (weak_share <= cfg.rtk_max_weak_share))
+                    & (var_factor <= cfg.rtk_max_residual_var) & (weak_share <= cfg.rtk_max_weak_share)
+                    & (n_excluded <= cfg.rtk_max_raim_exclusions))
         float_ok = ok & (n_lock >= cfg.float_min_sats)
         fixed, episode, starts = _rtk_state(rng, fixed_ok, locked, nlos, errors["nlos_bias"] / wavelength_m,
                                             dt_s, cfg)

@@ -7,12 +7,13 @@ for tests and benchmarks); :func:`write_gnss` is the stream writer listed in
 change in one part never shifts the draws of another.
 
 Options read from ``StreamContext.options``: ``gnss_corrections`` (bool,
-default True: DGNSS/RTK corrections available), ``gnss_rate_hz`` (default 5).
+default True: DGNSS/RTK corrections available), ``gnss_rate_hz`` (default 5),
+``gnss_rtk_cold_start`` (default: True for a walk, False for a survey cell).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from datetime import timezone
 
 import numpy as np
@@ -241,7 +242,13 @@ def write_gnss(ctx: StreamContext) -> dict:
     rate_hz = ctx.options.get("gnss_rate_hz", DEFAULT_RATE_HZ)
     if isinstance(rate_hz, bool) or not isinstance(rate_hz, (int, float)) or not 0 < rate_hz <= 20:
         raise ConfigError(f"option gnss_rate_hz must lie in (0, 20], got {rate_hz!r}")
-    sim = simulate_gnss(ctx.site, ctx.trajectory, ctx.seed, corrections=corrections, rate_hz=float(rate_hz))
+    # A walk log starts with the receiver: its first RTK fix takes a time-to-fix. A survey crew keeps the
+    # receiver running between cells, so a cell's capture starts warm.
+    cold = ctx.options.get("gnss_rtk_cold_start", ctx.kind == "walk")
+    if not isinstance(cold, bool):
+        raise ConfigError(f"option gnss_rtk_cold_start must be true or false, got {cold!r}")
+    sim = simulate_gnss(ctx.site, ctx.trajectory, ctx.seed, corrections=corrections, rate_hz=float(rate_hz),
+                        fix_cfg=replace(gnss_fix.FixConfig(), rtk_cold_start=cold))
     text = format_nmea(to_nmea_epochs(sim, ctx.site, ctx.seed, ctx.trajectory))
     atomic_write_text(ctx.out_dir / GNSS_FILE, text)
     return {"gnss": {"file": GNSS_FILE, "rate_hz": float(rate_hz)}}
