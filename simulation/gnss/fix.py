@@ -109,11 +109,12 @@ class FixConfig:
     rtk_min_sats: int = 8
     rtk_max_pdop: float = 3.0
     rtk_max_residual_var: float = 4.0
-    rtk_weak_dbhz: float = 35.0
+    rtk_weak_dbhz: float = 33.0
     rtk_max_weak_share: float = 0.25
     rtk_max_raim_exclusions: int = 1
     ttf_min_s: float = 3.0
     ttf_max_s: float = 10.0
+    ttf_weak_gain: float = 2.0
     rtk_cold_start: bool = True
     wrong_fix_base_prob: float = 0.001
     wrong_fix_nlos_prob: float = 0.06
@@ -420,7 +421,7 @@ def cycle_slips(rng: np.random.Generator, cn0_dbhz: np.ndarray, nlos: np.ndarray
 
 
 def _rtk_state(rng: np.random.Generator, fixed_ok: np.ndarray, locked: np.ndarray, nlos: np.ndarray,
-               nlos_cycles: np.ndarray, dt_s: float, cfg: FixConfig) -> tuple[np.ndarray, np.ndarray, list]:
+               nlos_cycles: np.ndarray, dt_s: float, cfg: FixConfig, weak_share: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, list]:
     """The RTK engine's fixed state (n,) and its wrong-fix episodes.
 
     Returns ``fixed`` (n,) bool, ``episode`` (n,) int (−1 = right fix or no
@@ -430,7 +431,11 @@ def _rtk_state(rng: np.random.Generator, fixed_ok: np.ndarray, locked: np.ndarra
     A fix is declared after ``fixed_ok`` (the observable acceptance test) has
     held for a time-to-fix drawn from U(ttf_min, ttf_max) — also at the first
     epoch unless ``rtk_cold_start`` is off — and after every loss (the ZED-F9P
-    data sheet states RTK convergence "< 10 s"; u-blox UBX-17051259). Each
+    data sheet states RTK convergence "< 10 s"; u-blox UBX-17051259), stretched
+    by (1 + g·w/0.1) where w is the share of weak locked carriers (observable)
+    and g = ``ttf_weak_gain``: weak, multipath-prone carriers keep the ratio
+    test from passing for longer. A warm start (``rtk_cold_start`` off) has
+    already served the base time and waits only the stretch. Each
     ambiguity fixed — all locked satellites at a new fix, and every satellite
     that joins a running fix (rising, or re-locked after a slip) — takes a
     wrong integer with probability p₀ for a direct carrier and p_nlos for a
@@ -448,7 +453,9 @@ def _rtk_state(rng: np.random.Generator, fixed_ok: np.ndarray, locked: np.ndarra
     mean ``wrong_fix_reset_mean_s`` (then a new time-to-fix).
     """
     n, k = locked.shape
-    ttf = rng.uniform(cfg.ttf_min_s, cfg.ttf_max_s, n)
+    base = rng.uniform(cfg.ttf_min_s, cfg.ttf_max_s, n)
+    stretch = cfg.ttf_weak_gain * (np.zeros(n) if weak_share is None else weak_share) / 0.1
+    ttf = base * (1.0 + stretch)
     u_wrong = rng.random((n, k))
     cyc_draw = rng.integers(1, cfg.wrong_fix_max_cycles + 1, (n, k)) * rng.choice([-1, 1], (n, k))
     # A reflected carrier's float ambiguity is pulled by the code's extra path: its wrong integer is that
@@ -459,7 +466,7 @@ def _rtk_state(rng: np.random.Generator, fixed_ok: np.ndarray, locked: np.ndarra
     fixed = np.zeros(n, bool)
     episode = np.full(n, -1, int)
     starts: list[tuple[int, np.ndarray]] = []
-    held, need = 0.0, (ttf[0] if cfg.rtk_cold_start else 0.0)
+    held, need = 0.0, (ttf[0] if cfg.rtk_cold_start else base[0] * stretch[0])
     is_fixed, timer, ep = False, np.inf, -1
     prev_locked = np.zeros(k, bool)
     for i in range(n):
@@ -574,7 +581,7 @@ def solve_fixes(rng: np.random.Generator, az_rad: np.ndarray, el_rad: np.ndarray
                     & (n_excluded <= cfg.rtk_max_raim_exclusions))
         float_ok = ok & (n_lock >= cfg.float_min_sats)
         fixed, episode, starts = _rtk_state(rng, fixed_ok, locked, nlos, errors["nlos_bias"] / wavelength_m,
-                                            dt_s, cfg)
+                                            dt_s, cfg, weak_share)
         quality[ok] = QUALITY_DGNSS
         quality[float_ok] = QUALITY_RTK_FLOAT
         quality[fixed] = QUALITY_RTK_FIXED
