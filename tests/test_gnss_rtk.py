@@ -51,7 +51,7 @@ def test_rtk_decision_does_not_read_the_nlos_flags():
     err = _zero_errors(n)
     err["noise"] = 0.3 * rng.standard_normal((n, 12))
     cn0 = np.full((n, 12), 44.0)
-    cn0[200:260, :4] = 30.0  # weak carriers for a while: the acceptance test sees them
+    cn0[200:260, :4] = 30.0  # weak carriers (below the elevation SNR mask) for a while: the acceptance test sees them
     slip = np.zeros((n, 12), bool)
     cfg = FixConfig(wrong_fix_base_prob=0.0, wrong_fix_nlos_prob=0.0)
     q = []

@@ -53,7 +53,7 @@ def open_and_foot():
 def test_wall_foot_is_worse_than_open_sky(open_and_foot):
     for o, f in open_and_foot:
         assert f["untracked"] > o["untracked"] + 0.2
-        assert f["att_db"] > o["att_db"] + 3.0
+        assert f["att_db"] > o["att_db"] + 2.0  # was + 3.0: the per-receiver tracking threshold drops more weak sats
         assert f["err_m"] > 10 * o["err_m"] and f["err_m"] > 0.3
         assert f["fixed"] < 0.5
 

@@ -39,8 +39,9 @@ true NLOS flags. RTK fixed (4) needs the acceptance test — the stand-in for th
 ambiguity ratio test — to hold for a time-to-fix of 3–10 s (after power-on and
 after every loss): at least ``rtk_min_sats`` satellites in continuous lock,
 PDOP ≤ ``rtk_max_pdop``, the code solution's a-posteriori variance factor
-≤ ``rtk_max_residual_var``, no RAIM exclusion, and at most
-``rtk_max_weak_share`` of the locked carriers below ``rtk_weak_dbhz``. Its
+≤ ``rtk_max_residual_var``, at most ``rtk_max_raim_exclusions`` RAIM
+exclusions, and at most ``rtk_max_weak_share`` of the locked carriers below an
+elevation-dependent SNR mask (nominal open sky less ``rtk_snr_margin_db``). Its
 error is the carrier-phase WLS error (cm) — unless the fix is wrong: each
 ambiguity fixed on a reflected carrier takes a wrong integer with a small
 probability, and the position offset persists until the receiver's validation
@@ -66,6 +67,7 @@ from scipy.signal import lfilter
 from scipy.stats import chi2
 
 from features.errors import ConfigError
+from simulation.gnss.signal import open_sky_cn0_dbhz
 
 __all__ = ["FixConfig", "FixResult", "code_sigma_m", "carrier_sigma_m", "klobuchar_obliquity",
            "gauss_markov", "pseudorange_errors", "slip_probability", "cycle_slips", "hatch_smooth", "distance_gm_phi",
@@ -109,12 +111,13 @@ class FixConfig:
     rtk_min_sats: int = 8
     rtk_max_pdop: float = 3.0
     rtk_max_residual_var: float = 4.0
-    rtk_weak_dbhz: float = 33.0
+    rtk_snr_margin_db: float = 10.0
     rtk_max_weak_share: float = 0.25
     rtk_max_raim_exclusions: int = 1
     ttf_min_s: float = 3.0
     ttf_max_s: float = 10.0
-    ttf_weak_gain: float = 2.0
+    ttf_weak_gain: float = 3.0
+    ttf_weak_free_share: float = 0.1
     rtk_cold_start: bool = True
     wrong_fix_base_prob: float = 0.001
     wrong_fix_nlos_prob: float = 0.06
@@ -432,8 +435,8 @@ def _rtk_state(rng: np.random.Generator, fixed_ok: np.ndarray, locked: np.ndarra
     held for a time-to-fix drawn from U(ttf_min, ttf_max) — also at the first
     epoch unless ``rtk_cold_start`` is off — and after every loss (the ZED-F9P
     data sheet states RTK convergence "< 10 s"; u-blox UBX-17051259), stretched
-    by (1 + g·w/0.1) where w is the share of weak locked carriers (observable)
-    and g = ``ttf_weak_gain``: weak, multipath-prone carriers keep the ratio
+    by (1 + g·max(w − w₀, 0)/0.1) where w is the share of weak locked carriers
+    (observable), w₀ = ``ttf_weak_free_share`` and g = ``ttf_weak_gain``: weak, multipath-prone carriers keep the ratio
     test from passing for longer. A warm start (``rtk_cold_start`` off) has
     already served the base time and waits only the stretch. Each
     ambiguity fixed — all locked satellites at a new fix, and every satellite
@@ -454,7 +457,8 @@ def _rtk_state(rng: np.random.Generator, fixed_ok: np.ndarray, locked: np.ndarra
     """
     n, k = locked.shape
     base = rng.uniform(cfg.ttf_min_s, cfg.ttf_max_s, n)
-    stretch = cfg.ttf_weak_gain * (np.zeros(n) if weak_share is None else weak_share) / 0.1
+    w = np.zeros(n) if weak_share is None else np.asarray(weak_share, float)
+    stretch = cfg.ttf_weak_gain * np.maximum(w - cfg.ttf_weak_free_share, 0.0) / 0.1
     ttf = base * (1.0 + stretch)
     u_wrong = rng.random((n, k))
     cyc_draw = rng.integers(1, cfg.wrong_fix_max_cycles + 1, (n, k)) * rng.choice([-1, 1], (n, k))
@@ -504,7 +508,7 @@ def solve_fixes(rng: np.random.Generator, az_rad: np.ndarray, el_rad: np.ndarray
                 tracked: np.ndarray, cn0_reported_dbhz: np.ndarray, errors: dict[str, np.ndarray],
                 nlos: np.ndarray, dt_s: float, corrections: bool = True,
                 cfg: FixConfig = FixConfig(), slip: np.ndarray | None = None,
-                wavelength_m: float = 0.1903) -> FixResult:
+                wavelength_m: float = 0.1903, receiver_offset_db: float = 0.0) -> FixResult:
     """Weighted least squares with RAIM and the fix-quality state machine (module docstring).
 
     Parameters
@@ -516,6 +520,8 @@ def solve_fixes(rng: np.random.Generator, az_rad: np.ndarray, el_rad: np.ndarray
         accepted fix is wrong; the receiver's decisions (used set, RAIM, fixed/float) never read them
     corrections : differential corrections (DGNSS/RTK) available
     slip : (n, k) cycle slips (default: drawn here with :func:`cycle_slips`)
+    receiver_offset_db : the receiver's own C/N0 offset from the nominal open-sky curve, dB — its maker
+        tunes the SNR mask to its antenna, so the mask moves with it
     """
     n, k = el_rad.shape
     g = _design(az_rad, el_rad, sys_idx)
@@ -573,7 +579,11 @@ def solve_fixes(rng: np.random.Generator, az_rad: np.ndarray, el_rad: np.ndarray
         n_sys = (used[:, sys_idx == 0].any(axis=1).astype(int) + used[:, sys_idx == 1].any(axis=1))
         dof = np.maximum(used.sum(axis=1) - 3 - n_sys, 1)
         var_factor = (w * resid ** 2).sum(axis=1) / dof
-        weak = locked & (np.nan_to_num(cn0_reported_dbhz, nan=0.0) < cfg.rtk_weak_dbhz)
+        # Weak: below an elevation-dependent SNR mask, the nominal open-sky C/N0 less a margin (as
+        # RTKLIB's per-elevation snrmask rejects multipath-prone signals; Takasu, RTKLIB 2.4.2 manual,
+        # option pos1-snrmask).
+        mask = open_sky_cn0_dbhz(el_rad) + receiver_offset_db - cfg.rtk_snr_margin_db
+        weak = locked & (np.nan_to_num(cn0_reported_dbhz, nan=0.0) < mask)
         weak_share = weak.sum(axis=1) / np.maximum(n_lock, 1)
         n_excluded = (used_before_raim & ~used).sum(axis=1)
         fixed_ok = (ok & (n_lock >= cfg.rtk_min_sats) & (pdop <= cfg.rtk_max_pdop)

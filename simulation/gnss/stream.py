@@ -50,6 +50,7 @@ class GnssSimulation:
     cn0_open_dbhz : (n, k) open-sky C/N0 (with the satellite's offset)
     attenuation_db : (n, k) blockage + EMI loss (no fading), dB
     cn0_true_dbhz : (n, k) epoch-mean C/N0 with fading; cn0_reported_dbhz : (n, k) integer, NaN untracked
+    receiver_offset_db, receiver_threshold_db : this receiver's C/N0 offset and tracking-threshold offset, dB
     """
 
     t_s: np.ndarray
@@ -75,6 +76,8 @@ class GnssSimulation:
     attenuation_db: np.ndarray
     cn0_true_dbhz: np.ndarray
     cn0_reported_dbhz: np.ndarray
+    receiver_offset_db: float = 0.0
+    receiver_threshold_db: float = 0.0
 
     @property
     def horizontal_error_m(self) -> np.ndarray:
@@ -110,7 +113,8 @@ def _key_epochs(t_s: np.ndarray, p_en: np.ndarray, up_m: np.ndarray, move_m: flo
 
 def simulate_gnss(site, traj: Trajectory, seed: int, corrections: bool = True, rate_hz: float = DEFAULT_RATE_HZ,
                   signal_cfg: gnss_signal.SignalConfig = gnss_signal.SignalConfig(),
-                  fix_cfg: gnss_fix.FixConfig = gnss_fix.FixConfig()) -> GnssSimulation:
+                  fix_cfg: gnss_fix.FixConfig = gnss_fix.FixConfig(), receiver_seed: int | None = None,
+                  body: bool = True) -> GnssSimulation:
     """Simulate the receiver along ``traj`` at ``site`` (see the module docstrings of the parts).
 
     Parameters
@@ -118,6 +122,9 @@ def simulate_gnss(site, traj: Trajectory, seed: int, corrections: bool = True, r
     site : features.site.Site (origin, layout boxes, EMI zones)
     traj : Trajectory; its ``up_m`` is the device height above ground
     seed : the walk's or cell's seed; corrections : DGNSS/RTK corrections available
+    receiver_seed : the receiver's identity (its C/N0 and tracking offsets; default ``seed``): the cells of one
+        survey share one receiver, a walker keeps theirs
+    body : the wearer's body masks the sky behind them (a walk; a survey pole-mounted capture has no body)
     """
     if not rate_hz > 0:
         raise ConfigError(f"gnss rate_hz must be positive, got {rate_hz}")
@@ -158,8 +165,13 @@ def simulate_gnss(site, traj: Trajectory, seed: int, corrections: bool = True, r
         "loss_db", "nlos", "solid_blocked", "nlos_extra_m", "diffraction_db")))
     emi = gnss_signal.emi_loss_db(p_en, site.emi_zones)
     clutter = gnss_signal.clutter_index(p_en, boxes, porous, cfg.clutter_scale_m)
-    cn0_open = gnss_signal.open_sky_cn0_dbhz(el, sats.a_m[None, :], cfg) + offset[None, :]
+    rx_offset_db, rx_threshold_db = gnss_signal.receiver_draws(
+        stream_rng(seed if receiver_seed is None else receiver_seed, "gnss", "receiver"), cfg)
+    cn0_open = gnss_signal.open_sky_cn0_dbhz(el, sats.a_m[None, :], cfg) + offset[None, :] + rx_offset_db
     attenuation = blk.loss_db + emi[:, None]
+    if body:
+        idx = np.clip(np.searchsorted(traj.t_s, t), 0, len(traj.t_s) - 1)
+        attenuation = attenuation + gnss_signal.body_loss_db(az, el, traj.heading_rad[idx], cfg)
     cn0_mean = cn0_open - attenuation
 
     # Fading: K from clutter for direct/diffracted paths, Rayleigh for reflections; the receiver averages
@@ -178,7 +190,8 @@ def simulate_gnss(site, traj: Trajectory, seed: int, corrections: bool = True, r
 
     in_view = el > np.radians(cfg.in_view_mask_deg)
     est = gnss_signal.estimate_cn0(stream_rng(seed, "gnss", "estimator"), cn0_true, dt, cfg)
-    tracked = gnss_signal.track(est, in_view, dt, cfg)
+    tracked = gnss_signal.track(est, in_view, dt, replace(cfg, track_lose_dbhz=cfg.track_lose_dbhz + rx_threshold_db,
+                                                          track_acquire_dbhz=cfg.track_acquire_dbhz + rx_threshold_db))
     reported = np.where(tracked, np.clip(np.rint(est), 0, 99), np.nan)
 
     sys_idx = np.where(sats.system == SYSTEM_GPS, 0, 1)
@@ -190,14 +203,15 @@ def simulate_gnss(site, traj: Trajectory, seed: int, corrections: bool = True, r
                                          blk.nlos, blk.nlos_extra_m, clutter, speed, dt, cfg.wavelength_m, fix_cfg,
                                          reset=reset)
     fix = gnss_fix.solve_fixes(stream_rng(seed, "gnss", "rtk"), az, el, sys_idx, tracked, reported, errors,
-                               blk.nlos, dt, corrections, fix_cfg, slip=slip, wavelength_m=cfg.wavelength_m)
+                               blk.nlos, dt, corrections, fix_cfg, slip=slip, wavelength_m=cfg.wavelength_m,
+                               receiver_offset_db=rx_offset_db)
     truth = np.stack([east, north, up], axis=1)
     return GnssSimulation(
         t_s=t, unix_s=unix, truth_enu_m=truth, fix_enu_m=truth + fix.error_enu_m, quality=fix.quality,
         n_used=fix.n_used, hdop=fix.hdop, vdop=fix.vdop, pdop=fix.pdop, system=sats.system, prn=sats.prn,
         az_rad=az, el_rad=el, in_view=in_view, tracked=tracked, used=fix.used, los=in_view & ~blk.nlos,
         nlos=in_view & blk.nlos, blocked=in_view & blk.solid_blocked, cn0_open_dbhz=cn0_open, attenuation_db=attenuation, cn0_true_dbhz=cn0_true,
-        cn0_reported_dbhz=reported)
+        cn0_reported_dbhz=reported, receiver_offset_db=rx_offset_db, receiver_threshold_db=rx_threshold_db)
 
 
 def to_nmea_epochs(sim: GnssSimulation, site, seed: int, traj: Trajectory) -> NmeaEpochs:
@@ -248,7 +262,8 @@ def write_gnss(ctx: StreamContext) -> dict:
     if not isinstance(cold, bool):
         raise ConfigError(f"option gnss_rtk_cold_start must be true or false, got {cold!r}")
     sim = simulate_gnss(ctx.site, ctx.trajectory, ctx.seed, corrections=corrections, rate_hz=float(rate_hz),
-                        fix_cfg=replace(gnss_fix.FixConfig(), rtk_cold_start=cold))
+                        fix_cfg=replace(gnss_fix.FixConfig(), rtk_cold_start=cold), receiver_seed=ctx.person_seed,
+                        body=ctx.kind == "walk")
     text = format_nmea(to_nmea_epochs(sim, ctx.site, ctx.seed, ctx.trajectory))
     atomic_write_text(ctx.out_dir / GNSS_FILE, text)
     return {"gnss": {"file": GNSS_FILE, "rate_hz": float(rate_hz)}}
