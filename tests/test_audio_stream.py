@@ -35,6 +35,7 @@ def render_audio(*args, **kwargs):
     """The closed-form checks here test propagation, so the air is the site's stated air
     (simulation.acoustic.air is tested in test_acoustic_air.py)."""
     kwargs.setdefault("air", AirConfig(enabled=False))
+    kwargs.setdefault("hardware", None)  # ideal beacons and recorder (simulation.acoustic.hardware tested apart)
     return _render_audio(*args, **kwargs)
 
 

@@ -39,6 +39,7 @@ from simulation.acoustic.channel import PATH_KINDS, PathSet, build_scene, channe
 from simulation.acoustic.atmosphere import absorption_db_per_m, fresnel_number, maekawa_loss_db
 from simulation.acoustic.synthesis import CHUNK_SAMPLES, AmbientNoise, AudioConfig, ChirpRenderer, detection_range_m
 from simulation.acoustic.air import Air, AirConfig
+from simulation.acoustic.hardware import CodecFilter, HardwareConfig, beacon_delays_s, true_beacon_positions
 from simulation.acoustic.chirp import ChirpSpec, beacon_chirp, emission_times_s
 from simulation.progress import Progress
 from simulation.rng import stream_rng
@@ -113,7 +114,8 @@ def _emissions(site: Site, start_utc, t_begin_s: float, t_end_s: float) -> Itera
 
 def render_audio(site: Site, trajectory: Trajectory, seed: int, wav_path,
                  cfg: AudioConfig | None = None, truth_path=None, progress: bool = False,
-                 air: AirConfig = AirConfig(), crew_seed: int | None = None) -> AudioResult:
+                 air: AirConfig = AirConfig(), crew_seed: int | None = None,
+                 hardware: HardwareConfig | None = HardwareConfig()) -> AudioResult:
     """Simulate the recording along ``trajectory`` into the int16 WAV at ``wav_path`` (atomic).
 
     The per-emission truth goes to ``truth_path`` (``audio_truth.csv``, atomic)
@@ -124,7 +126,8 @@ def render_audio(site: Site, trajectory: Trajectory, seed: int, wav_path,
     ``progress`` shows audio seconds rendered on stderr: a bar on a terminal, plain lines otherwise.
     ``air``: the true air (:mod:`simulation.acoustic.air`: the crew's thermometer error drawn from
     ``crew_seed`` (default ``seed``), hot air over transformers, humidity, wind); the site's stated
-    temperature is what the receiver reads.
+    temperature is what the receiver reads. ``hardware``: beacon survey errors, emission delays and
+    jitter, the recorder's microphone/codec response (:mod:`simulation.acoustic.hardware`); None: ideal.
     """
     cfg = cfg or AudioConfig()
     fs = cfg.fs_hz
@@ -140,6 +143,15 @@ def render_audio(site: Site, trajectory: Trajectory, seed: int, wav_path,
     true_site = replace(site, atmosphere=replace(site.atmosphere, temperature_c=air_state.temperature_c))
     renderer = ChirpRenderer(true_site, cfg)
     renderer.c = air_state.mean_c()
+    if hardware is not None:
+        true_pos = true_beacon_positions(site, hardware)
+        delays = beacon_delays_s(site, hardware)
+        jitter_rng = stream_rng(seed, "audio", "emission_jitter")
+        codec = CodecFilter(fs, stream_rng(seed if crew_seed is None else crew_seed, "audio", "codec"), hardware)
+    else:
+        true_pos = {b.id: np.array([b.east_m, b.north_m, b.up_m]) for b in site.beacons}
+        delays = {b.id: 0.0 for b in site.beacons}
+        jitter_rng, codec = None, None
     ambient = AmbientNoise(site, trajectory, seed, cfg, true_start, fs_true)
     c = renderer.c
     sl_db = site.acoustic.source_level_db
@@ -184,7 +196,10 @@ def render_audio(site: Site, trajectory: Trajectory, seed: int, wav_path,
                     pieces.append(amb[:m])
                     carry = amb[m:]
                     next_chunk += 1
-                q = np.rint((acc.pop_block() + np.concatenate(pieces)) * 32767.0)
+                mixed = acc.pop_block() + np.concatenate(pieces)
+                if codec is not None:
+                    mixed = codec(mixed)
+                q = np.rint(mixed * 32767.0)
                 counts["clipped"] += int(np.count_nonzero(np.abs(q) > 32767))
                 out.write(np.clip(q, -32768, 32767).astype(np.int16))
 
@@ -192,10 +207,13 @@ def render_audio(site: Site, trajectory: Trajectory, seed: int, wav_path,
                                            enabled=progress))
         for t_e, bid, i, b, spec in emissions:
             counts["emissions"] += 1
+            t_sched = t_e  # the schedule slot (the truth file's key); t_e becomes the true emission instant
+            if jitter_rng is not None:  # the chirp leaves the tweeter late by the beacon's latency and jitter
+                t_e = t_e + delays[bid] + hardware.emission_jitter_s * float(jitter_rng.standard_normal())
             done = int(min(max(t_e - true_start, 0.0), trajectory.duration_s))
             bar.set(done)
             flush_until((t_e - true_start) * fs_true - _PRE_SAMPLES - 2)
-            src = np.array([b.east_m, b.north_m, b.up_m])
+            src = true_pos[bid]
             if spec not in alpha_min:
                 alpha_min[spec] = float(absorption_db_per_m(spec.f0_hz, site.atmosphere))
             # receiver position when the first path arrives: t_a = t_e + L(x(t_a))/c, straight line first
@@ -235,7 +253,7 @@ def render_audio(site: Site, trajectory: Trajectory, seed: int, wav_path,
             acc.add(start, seg)
             counts["rendered"] += 1
             if first_sample >= 0:
-                truth.row(bid, b.slot, t_e, t_a, first_sample, PATH_KINDS[paths.kind[0]], paths.length_m[0],
+                truth.row(bid, b.slot, t_sched, t_a, first_sample, PATH_KINDS[paths.kind[0]], paths.length_m[0],
                           paths.direct_m, int(paths.los), rx, _first_path_db_spl(paths, spec, sl_db, renderer), eta)
         flush_until(float(n_total))
         text = truth_file.getvalue() if truth_path is None else None
