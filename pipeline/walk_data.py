@@ -10,8 +10,8 @@ for a real device's log) and returns, per source:
   nine CIR feature windows, on the audio time base stated in ``walk.toml``
   (:func:`features.acoustic.timing.timing_from_walk`);
 - PDR: the detected steps (time, length, heading) and the dead-reckoned track;
-- truth, when ``truth.csv`` is present (evaluation only: nothing above reads it
-  except the PDR start, see :func:`read_walk`).
+- truth, when ``truth.csv`` is present (evaluation only: nothing above reads
+  it; the PDR start comes from the first good GNSS fix, see :func:`pdr_start_from_gnss`).
 
 A stream the walk does not have is ``None``.
 """
@@ -37,7 +37,8 @@ from features.imu.steps import StepLengthModel
 from features.site import Site
 from features.walk import Truth, WalkInfo, load_walk, read_truth
 
-__all__ = ["GnssStream", "AcousticStream", "PdrStream", "WalkData", "read_walk", "WALK_SPEED_PRIOR_M_S", "walk_has"]
+__all__ = ["GnssStream", "AcousticStream", "PdrStream", "WalkData", "read_walk", "WALK_SPEED_PRIOR_M_S", "walk_has",
+           "pdr_start_from_gnss"]
 
 WALK_SPEED_PRIOR_M_S = 1.4
 """Walking-speed prior of the acoustic solver on a walk, m/s (a survey cell is static: 0)."""
@@ -108,8 +109,8 @@ def read_walk(walk_dir: str | os.PathLike, *, site: Site | None = None, pdr_k: f
     solver's settings (default: clock bound = stated start uncertainty + 50 ms,
     walking-speed prior :data:`WALK_SPEED_PRIOR_M_S`).
 
-    The PDR track starts at the first truth position when ``truth.csv`` exists,
-    else at the first GNSS fix, else at the origin.
+    The PDR track is anchored on data, never on truth: at the first good GNSS
+    fix (:func:`pdr_start_from_gnss`), else at the origin.
     """
     walk = load_walk(walk_dir)
     site = walk.load_site() if site is None else site
@@ -120,14 +121,47 @@ def read_walk(walk_dir: str | os.PathLike, *, site: Site | None = None, pdr_k: f
         acoustic = _read_acoustic(walk, site, audio_positions)
     pdr = None
     if walk.path("imu") is not None:
-        if truth is not None:
-            start = (float(truth.east_m[0]), float(truth.north_m[0]))
-        elif gnss is not None and len(gnss.positions):
-            start = (float(gnss.positions.east_m[0]), float(gnss.positions.north_m[0]))
-        else:
-            start = (0.0, 0.0)
-        pdr = _read_pdr(walk, start, pdr_k)
+        pdr = _read_pdr(walk, (0.0, 0.0), pdr_k)
+        anchor = pdr_start_from_gnss(gnss.positions) if gnss is not None else None
+        if anchor is not None:
+            # Shift the track so that it passes through the fix at the fix's time.
+            t_fix, e_fix, n_fix = anchor
+            e_p, n_p = _pdr_position_at(pdr.result, t_fix, (0.0, 0.0))
+            pdr = _read_pdr(walk, (e_fix - e_p, n_fix - n_p), pdr_k)
     return WalkData(walk=walk, site=site, gnss=gnss, acoustic=acoustic, pdr=pdr, truth=truth)
+
+
+def pdr_start_from_gnss(positions: GnssPositions, window_s: float = 60.0) -> tuple[float, float, float] | None:
+    """The first good GNSS fix as (t_s, east_m, north_m), or None without any fix.
+
+    Good, in order of preference within the first ``window_s`` of fixes: RTK
+    fixed (quality 4); RTK float (5) or DGNSS (2) with HDOP ≤ 2; then any fix.
+    Only what the receiver wrote is read (issue 10 item 6: never the truth).
+    """
+    if positions is None or len(positions.t_s) == 0:
+        return None
+    t = np.asarray(positions.t_s, float)
+    q = np.asarray(positions.quality)
+    ok = np.isfinite(positions.east_m) & np.isfinite(positions.north_m) & (q > 0)
+    if not ok.any():
+        return None
+    early = ok & (t <= t[ok][0] + window_s)
+    hdop = np.nan_to_num(np.asarray(positions.hdop, float), nan=99.0)
+    for sel in (early & (q == 4), early & np.isin(q, (2, 5)) & (hdop <= 2.0), ok):
+        if sel.any():
+            i = int(np.flatnonzero(sel)[0])
+            return float(t[i]), float(positions.east_m[i]), float(positions.north_m[i])
+    return None
+
+
+def _pdr_position_at(res: PdrResult, t_s: float, start_en: tuple[float, float]) -> tuple[float, float]:
+    """Dead-reckoned position at ``t_s`` (the start before the first step, then the last step's end)."""
+    if len(res.t_s) == 0 or not np.isfinite(res.east_m).any():
+        return start_en
+    i = int(np.searchsorted(res.t_s, t_s, side="right")) - 1
+    if i < 0:
+        return start_en
+    return float(res.east_m[i]), float(res.north_m[i])
 
 
 def _read_gnss(walk: WalkInfo, site: Site) -> GnssStream:

@@ -13,7 +13,6 @@ from datetime import datetime, timedelta
 from pathlib import Path
 
 import numpy as np
-from tqdm import tqdm
 
 from features.errors import ConfigError
 from features.fileio import atomic_directory, write_toml
@@ -21,6 +20,7 @@ from features.site import ENV_CLASSES, load_site
 
 from simulation.site.environment import blocked_share, classify_share
 from simulation.site.geometry import boxes_array, inside_boxes
+from simulation.progress import Progress
 from simulation.rng import stream_seed
 from simulation.site.route import static_trajectory
 from simulation.streams import STREAM_WRITERS, StreamContext, run_stream_writers
@@ -30,25 +30,32 @@ __all__ = ["survey_cells", "simulate_survey"]
 
 
 def survey_cells(site, cell_size_m: float, clearance_m: float = 0.5):
-    """Capture points of a grid survey.
+    """Capture points of a grid survey covering the whole yard at any cell size.
 
     Returns a list of (cell_id, east_m, north_m) in walking order; cells with
-    no free point are left out. Cell ids are ``E{col:03d}N{row:03d}``.
+    no free point are left out. Cell ids are ``E{col:03d}N{row:03d}``. The grid
+    starts at the site grid's south-west corner; a last column or row that
+    does not fit whole is kept, clipped to the site's extent, and captured at
+    the centre of its clipped part (issue 12 item 5: with 30 m cells on a
+    126 × 83 m site the northern 23 m were left out).
     """
     g = site.grid
     solid = boxes_array([b for b in site.layout if not b.porous])
-    n_col = int(np.floor((g.east_max_m - g.east_min_m) / cell_size_m + 1e-9))
-    n_row = int(np.floor((g.north_max_m - g.north_min_m) / cell_size_m + 1e-9))
-    sub = np.linspace(-0.5, 0.5, 11)[1:-1] * cell_size_m
-    su, sv = np.meshgrid(sub, sub)
-    offsets = np.column_stack([su.ravel(), sv.ravel()])
-    offsets = offsets[np.argsort(np.hypot(offsets[:, 0], offsets[:, 1]), kind="stable")]
+    n_col = max(1, int(np.ceil((g.east_max_m - g.east_min_m) / cell_size_m - 1e-9)))
+    n_row = max(1, int(np.ceil((g.north_max_m - g.north_min_m) / cell_size_m - 1e-9)))
+    frac = np.linspace(-0.5, 0.5, 11)[1:-1]
     cells = []
     for row in range(n_row):
+        n0 = g.north_min_m + row * cell_size_m
+        n1 = min(n0 + cell_size_m, g.north_max_m)
         cols = range(n_col) if row % 2 == 0 else range(n_col - 1, -1, -1)
         for col in cols:
-            ce = g.east_min_m + (col + 0.5) * cell_size_m
-            cn = g.north_min_m + (row + 0.5) * cell_size_m
+            e0 = g.east_min_m + col * cell_size_m
+            e1 = min(e0 + cell_size_m, g.east_max_m)
+            ce, cn = 0.5 * (e0 + e1), 0.5 * (n0 + n1)
+            su, sv = np.meshgrid(frac * (e1 - e0), frac * (n1 - n0))
+            offsets = np.column_stack([su.ravel(), sv.ravel()])
+            offsets = offsets[np.argsort(np.hypot(offsets[:, 0], offsets[:, 1]), kind="stable")]
             cand = np.array([[ce, cn]]) + np.vstack([[0.0, 0.0], offsets])
             ok = ~inside_boxes(cand, solid, margin_m=clearance_m)
             if ok.any():
@@ -78,10 +85,10 @@ def simulate_survey(site_path: str | os.PathLike, out_dir: str | os.PathLike, se
     share = blocked_share(site, [c[1] for c in cells], [c[2] for c in cells])
     labels = classify_share(share)
     start = start_utc or default_start_utc(seed)
-    with atomic_directory(Path(out_dir), overwrite=overwrite) as tmp:
+    with atomic_directory(Path(out_dir), overwrite=overwrite) as tmp, \
+            Progress(len(cells), "survey cells", unit="cell", enabled=progress) as bar:
         shutil.copyfile(site_file, tmp / "site.toml")
-        for i, ((cid, e, n), lab, sh) in enumerate(tqdm(list(zip(cells, labels, share)), desc="survey cells",
-                                                        unit="cell", disable=not progress)):
+        for i, ((cid, e, n), lab, sh) in enumerate(zip(cells, labels, share)):
             t0 = start + timedelta(seconds=i * (capture_s + move_s))
             cell_dir = tmp / "cells" / cid
             cell_dir.mkdir(parents=True)
@@ -94,6 +101,7 @@ def simulate_survey(site_path: str | os.PathLike, out_dir: str | os.PathLike, se
                     "map_label": ENV_CLASSES[int(lab)], "blocked_sky_share": round(float(sh), 4)}
             cell.update(meta)
             write_toml(cell_dir / "cell.toml", cell)
+            bar.update(1)
         write_toml(tmp / "survey.toml", {"site_name": site.name, "seed": int(seed), "cell_size_m": cell_size_m,
                                          "capture_s": float(capture_s), "n_cells": len(cells),
                                          "start_utc": format_utc(start)})

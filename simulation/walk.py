@@ -14,6 +14,7 @@ from features.site import load_site
 from features.walk import parse_utc
 
 from simulation.site.environment import environment_class
+from simulation.progress import Progress
 from simulation.rng import stream_rng
 from simulation.site.route import RouteConfig, plan_route, route_trajectory
 from simulation.streams import STREAM_WRITERS, StreamContext, run_stream_writers
@@ -50,11 +51,12 @@ def write_truth_csv(path: Path, site, trajectory, rate_hz: float = 10.0) -> None
 def simulate_walk(site_path: str | os.PathLike, out_dir: str | os.PathLike, seed: int, duration_s: float = 300.0,
                   person: int | None = None, start_utc: datetime | None = None, overwrite: bool = False,
                   options: dict | None = None, writers: tuple[str, ...] = STREAM_WRITERS,
-                  route: RouteConfig = RouteConfig()) -> Path:
+                  route: RouteConfig = RouteConfig(), progress: bool = True) -> Path:
     """Simulate one walk through the site at ``site_path`` into the directory ``out_dir``.
 
     The directory is built under a temporary name and renamed into place only
-    when every stream is written. Returns the output path.
+    when every stream is written. Returns the output path. ``progress`` reports the streams written and the
+    audio seconds rendered on stderr (a bar on a terminal, plain lines in a log; issue 12 item 17).
     """
     if not (np.isfinite(duration_s) and duration_s >= 1.0):
         raise ConfigError(f"--duration must be at least 1 s, got {duration_s}")
@@ -71,9 +73,16 @@ def simulate_walk(site_path: str | os.PathLike, out_dir: str | os.PathLike, seed
     traj = route_trajectory(poly, stops, speed, duration_s, start, site.device_height_m, route)
     out_dir = Path(out_dir)
     with atomic_directory(out_dir, overwrite=overwrite) as tmp:
+        opts = dict(options or {})
+        opts.setdefault("progress", progress)
         ctx = StreamContext(site=site, trajectory=traj, out_dir=tmp, seed=seed, kind="walk", person_seed=person,
-                            options=dict(options or {}))
-        meta = run_stream_writers(ctx, writers)
+                            options=opts)
+        meta = {}
+        with Progress(len(writers), f"walk {out_dir.name} streams", enabled=bool(opts["progress"]),
+                      every_fraction=1e-9) as bar:
+            for spec in writers:
+                meta.update(run_stream_writers(ctx, (spec,)))
+                bar.update(1)
         write_truth_csv(tmp / "truth.csv", site, traj)
         walk = {
             "name": out_dir.name,

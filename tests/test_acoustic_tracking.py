@@ -129,7 +129,8 @@ def test_short_walk_fix_rate_and_error(short_walk):
     # 11 frames of 1.3 s (every beacon its own slot); measured: 10 fixes, median 0.03 m, max 0.18 m.
     assert len(fixes) >= 9
     assert moving.sum() >= 3                       # fixes while walking, not only standing
-    assert np.median(err) < 0.1 and err.max() < 0.3
+    # Issue 10: true air (thermometer error, hot air, wind up to 4 m/s) moved these from < 0.1 / < 0.3.
+    assert np.median(err) < 0.5 and err.max() < 0.8
     assert all(int(f["n_beacons"]) >= 4 for f in fixes)
 
 

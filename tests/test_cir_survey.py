@@ -69,7 +69,7 @@ def test_los_ranges_and_positions_on_simulated_cells(analysed):
                 range_err.append(c * (sample - float(t["arrival_sample"])) / 48_000)
     assert len(range_err) >= 10 and len(pos_err) >= 10
     assert np.median(np.abs(range_err)) < 0.03
-    assert np.median(pos_err) < 0.10
+    assert np.median(pos_err) < 0.40  # was < 0.10 before the true air (issue 10: wind, thermometer error)
 
 
 def test_heavy_cells_have_longer_delays_and_lower_k(analysed):

@@ -35,7 +35,8 @@ def _stats(sim):
         "untracked": (view & ~sim.tracked).sum() / view.sum(),
         "att_db": sim.attenuation_db[trk].mean(),
         "err_m": np.nanmedian(sim.horizontal_error_m),
-        "fixed": np.mean(sim.quality == 4),
+        "fixed": np.mean(sim.quality[sim.t_s >= FixConfig().ttf_max_s] == 4),  # after the cold-start time-to-fix
+        "first_fixed_s": float(sim.t_s[np.argmax(sim.quality == 4)]) if (sim.quality == 4).any() else np.inf,
     }
 
 
@@ -52,13 +53,15 @@ def open_and_foot():
 def test_wall_foot_is_worse_than_open_sky(open_and_foot):
     for o, f in open_and_foot:
         assert f["untracked"] > o["untracked"] + 0.2
-        assert f["att_db"] > o["att_db"] + 3.0
+        assert f["att_db"] > o["att_db"] + 2.0  # was + 3.0: the per-receiver tracking threshold drops more weak sats
         assert f["err_m"] > 10 * o["err_m"] and f["err_m"] > 0.3
         assert f["fixed"] < 0.5
 
 
 def test_open_sky_is_rtk_fixed_at_centimetre_level(open_and_foot):
     for o, _ in open_and_foot:
+        # Cold start: the first fix needs a time-to-fix of 3-10 s (ZED-F9P data sheet: RTK convergence < 10 s).
+        assert FixConfig().ttf_min_s <= o["first_fixed_s"] <= FixConfig().ttf_max_s + 0.2
         assert o["fixed"] >= 0.9
         assert o["err_m"] < 0.03
         assert o["untracked"] < 0.05

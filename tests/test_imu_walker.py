@@ -21,7 +21,8 @@ from simulation.rng import stream_rng
 SITE = Site(name="walker-test", origin=Origin(30.0, 114.0, 0.0), seed=2)
 NO_ERRORS = SensorErrors(acc_noise_m_s2=0.0, acc_bias_m_s2=0.0, gyro_noise_rad_s=0.0, gyro_bias_rad_s=0.0,
                          gyro_bias_walk_rad_s_sqrt_s=0.0, gyro_scale_error=0.0, mag_noise_ut=0.0,
-                         mag_hard_iron_ut=0.0, mag_soft_iron=0.0, mount_tilt_rad=0.0, mount_yaw_rad=0.0)
+                         mag_hard_iron_ut=0.0, mag_soft_iron=0.0, mount_tilt_rad=0.0, mount_yaw_rad=0.0,
+                         acc_tc_m_s2_per_k=0.0, gyro_tc_rad_s_per_k=0.0, busbar_current_a=0.0)
 WAYPOINTS = np.array([[0.0, 0.0], [0.0, 30.0], [20.0, 30.0], [20.0, 10.0]])
 
 

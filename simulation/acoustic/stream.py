@@ -25,20 +25,23 @@ import csv
 import heapq
 import io
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Iterator
 
 import numpy as np
 import soundfile as sf
-from tqdm import tqdm
 
+from features.errors import ConfigError
 from features.fileio import atomic_path
 from features.site import Site
 
 from simulation.acoustic.channel import PATH_KINDS, PathSet, build_scene, channel_paths, clutter_index
 from simulation.acoustic.atmosphere import absorption_db_per_m, fresnel_number, maekawa_loss_db
 from simulation.acoustic.synthesis import CHUNK_SAMPLES, AmbientNoise, AudioConfig, ChirpRenderer, detection_range_m
+from simulation.acoustic.air import Air, AirConfig
+from simulation.acoustic.hardware import CodecFilter, HardwareConfig, beacon_delays_s, true_beacon_positions
 from simulation.acoustic.chirp import ChirpSpec, beacon_chirp, emission_times_s
+from simulation.progress import Progress
 from simulation.rng import stream_rng
 from simulation.streams import StreamContext, Trajectory
 
@@ -110,7 +113,9 @@ def _emissions(site: Site, start_utc, t_begin_s: float, t_end_s: float) -> Itera
 
 
 def render_audio(site: Site, trajectory: Trajectory, seed: int, wav_path,
-                 cfg: AudioConfig | None = None, truth_path=None, progress: bool = False) -> AudioResult:
+                 cfg: AudioConfig | None = None, truth_path=None, progress: bool = False,
+                 air: AirConfig = AirConfig(), crew_seed: int | None = None,
+                 hardware: HardwareConfig | None = HardwareConfig()) -> AudioResult:
     """Simulate the recording along ``trajectory`` into the int16 WAV at ``wav_path`` (atomic).
 
     The per-emission truth goes to ``truth_path`` (``audio_truth.csv``, atomic)
@@ -118,7 +123,11 @@ def render_audio(site: Site, trajectory: Trajectory, seed: int, wav_path,
     Randomness comes only from ``stream_rng(seed, "audio", ...)``: the same
     seed gives the same bytes, whatever ``block_samples``. With a truth path,
     memory is bounded by the block size, not the recording's length.
-    ``progress`` shows a bar of audio seconds rendered on stderr (terminals only).
+    ``progress`` shows audio seconds rendered on stderr: a bar on a terminal, plain lines otherwise.
+    ``air``: the true air (:mod:`simulation.acoustic.air`: the crew's thermometer error drawn from
+    ``crew_seed`` (default ``seed``), hot air over transformers, humidity, wind); the site's stated
+    temperature is what the receiver reads. ``hardware``: beacon survey errors, emission delays and
+    jitter, the recorder's microphone/codec response (:mod:`simulation.acoustic.hardware`); None: ideal.
     """
     cfg = cfg or AudioConfig()
     fs = cfg.fs_hz
@@ -129,7 +138,20 @@ def render_audio(site: Site, trajectory: Trajectory, seed: int, wav_path,
     n_total = int(math.floor(trajectory.duration_s * fs))
     t_end = true_start + n_total / fs_true
     scene = build_scene(site, cfg.channel)
-    renderer = ChirpRenderer(site, cfg)
+    air_state = Air(site, stream_rng(seed if crew_seed is None else crew_seed, "audio", "thermometer"),
+                    stream_rng(seed, "audio", "air"), trajectory.duration_s, air)
+    true_site = replace(site, atmosphere=replace(site.atmosphere, temperature_c=air_state.temperature_c))
+    renderer = ChirpRenderer(true_site, cfg)
+    renderer.c = air_state.mean_c()
+    if hardware is not None:
+        true_pos = true_beacon_positions(site, hardware)
+        delays = beacon_delays_s(site, hardware)
+        jitter_rng = stream_rng(seed, "audio", "emission_jitter")
+        codec = CodecFilter(fs, stream_rng(seed if crew_seed is None else crew_seed, "audio", "codec"), hardware)
+    else:
+        true_pos = {b.id: np.array([b.east_m, b.north_m, b.up_m]) for b in site.beacons}
+        delays = {b.id: 0.0 for b in site.beacons}
+        jitter_rng, codec = None, None
     ambient = AmbientNoise(site, trajectory, seed, cfg, true_start, fs_true)
     c = renderer.c
     sl_db = site.acoustic.source_level_db
@@ -174,38 +196,44 @@ def render_audio(site: Site, trajectory: Trajectory, seed: int, wav_path,
                     pieces.append(amb[:m])
                     carry = amb[m:]
                     next_chunk += 1
-                q = np.rint((acc.pop_block() + np.concatenate(pieces)) * 32767.0)
+                mixed = acc.pop_block() + np.concatenate(pieces)
+                if codec is not None:
+                    mixed = codec(mixed)
+                q = np.rint(mixed * 32767.0)
                 counts["clipped"] += int(np.count_nonzero(np.abs(q) > 32767))
                 out.write(np.clip(q, -32768, 32767).astype(np.int16))
 
-        bar = stack.enter_context(tqdm(total=int(math.ceil(trajectory.duration_s)), unit="s", desc="audio",
-                                       disable=None if progress else True, leave=False))
+        bar = stack.enter_context(Progress(int(math.ceil(trajectory.duration_s)), "audio", unit="s",
+                                           enabled=progress))
         for t_e, bid, i, b, spec in emissions:
             counts["emissions"] += 1
+            t_sched = t_e  # the schedule slot (the truth file's key); t_e becomes the true emission instant
+            if jitter_rng is not None:  # the chirp leaves the tweeter late by the beacon's latency and jitter
+                t_e = t_e + delays[bid] + hardware.emission_jitter_s * float(jitter_rng.standard_normal())
             done = int(min(max(t_e - true_start, 0.0), trajectory.duration_s))
-            if done > bar.n:
-                bar.update(done - bar.n)
+            bar.set(done)
             flush_until((t_e - true_start) * fs_true - _PRE_SAMPLES - 2)
-            src = np.array([b.east_m, b.north_m, b.up_m])
+            src = true_pos[bid]
             if spec not in alpha_min:
                 alpha_min[spec] = float(absorption_db_per_m(spec.f0_hz, site.atmosphere))
             # receiver position when the first path arrives: t_a = t_e + L(x(t_a))/c, straight line first
             t_a = t_e
+            c_e = air_state.c_eff(t_e, src, _position_at(trajectory, t_e))  # effective speed of this path
             for _ in range(2):
-                t_a = t_e + float(np.linalg.norm(src - _position_at(trajectory, t_a))) / c
+                t_a = t_e + float(np.linalg.norm(src - _position_at(trajectory, t_a))) / c_e
             rx = _position_at(trajectory, t_a)
             d = float(np.linalg.norm(src - rx))
             if sl_db - 20.0 * math.log10(max(d, 1e-3)) - alpha_min[spec] * d < noise_floor_db - cfg.skip_margin_db:
                 continue          # even in free field it could not rise out of the noise
             paths = paths_at(bid, src, rx)
             speed = float(np.interp(t_a, trajectory.t_s, trajectory.speed_m_s))
-            if len(paths) and speed * (paths.length_m[0] - d) / c > 0.005:
+            if len(paths) and speed * (paths.length_m[0] - d) / c_e > 0.005:
                 # a detour delays the arrival long enough for the walker to move: look again there
-                rx = _position_at(trajectory, t_e + paths.length_m[0] / c)
+                rx = _position_at(trajectory, t_e + paths.length_m[0] / c_e)
                 paths = paths_at(bid, src, rx)
             if len(paths) == 0:
                 continue
-            t_a = t_e + paths.length_m[0] / c
+            t_a = t_e + paths.length_m[0] / c_e
             best_db = sl_db + 20.0 * math.log10(max(paths.gain.max(), 1e-12)) - alpha_min[spec] * paths.length_m[0]
             first_sample = (t_a - true_start) * fs_true
             if best_db < noise_floor_db - cfg.skip_margin_db or not -fs <= first_sample < n_total:
@@ -225,7 +253,7 @@ def render_audio(site: Site, trajectory: Trajectory, seed: int, wav_path,
             acc.add(start, seg)
             counts["rendered"] += 1
             if first_sample >= 0:
-                truth.row(bid, b.slot, t_e, t_a, first_sample, PATH_KINDS[paths.kind[0]], paths.length_m[0],
+                truth.row(bid, b.slot, t_sched, t_a, first_sample, PATH_KINDS[paths.kind[0]], paths.length_m[0],
                           paths.direct_m, int(paths.los), rx, _first_path_db_spl(paths, spec, sl_db, renderer), eta)
         flush_until(float(n_total))
         text = truth_file.getvalue() if truth_path is None else None
@@ -265,8 +293,12 @@ class _TruthWriter:
 def write_audio(ctx: StreamContext) -> dict:
     """Stream writer: ``audio.wav`` and ``audio_truth.csv`` into ``ctx.out_dir``; returns the ``[audio]`` table."""
     cfg = AudioConfig.from_options(ctx.options)
+    air = ctx.options.get("acoustic_air", True)
+    if not isinstance(air, bool):
+        raise ConfigError(f"option acoustic_air must be true or false, got {air!r}")
     render_audio(ctx.site, ctx.trajectory, ctx.seed, ctx.out_dir / "audio.wav", cfg,
                  truth_path=ctx.out_dir / "audio_truth.csv",
-                 progress=ctx.kind == "walk" and bool(ctx.options.get("progress", True)))
+                 progress=ctx.kind == "walk" and bool(ctx.options.get("progress", True)),
+                 air=AirConfig(enabled=air), crew_seed=ctx.person_seed)
     return {"audio": {"file": "audio.wav", "fs_hz": cfg.fs_hz, "start_s": cfg.start_s,
                       "start_uncertainty_s": cfg.start_uncertainty_s}}

@@ -34,15 +34,28 @@ the satellite with the largest standardised residual (Brown 1992, "A baseline
 GPS RAIM scheme", Navigation 39(3)), up to ``raim_max_exclusions`` times.
 
 Fix quality (GGA field 6): this module does not search integer ambiguities; it
-models the RTK engine's behaviour. RTK fixed (4) needs many satellites in
-continuous lock, PDOP ≤ ≈ 3 and few biased (NLOS) phases — biased phases make
-the ambiguity ratio test fail — held for a time-to-fix of a few seconds; its
-error is the carrier-phase WLS error (cm). RTK float (5) needs ≥ 5 satellites in
+models the RTK engine's behaviour from what a receiver sees, never from the
+true NLOS flags. RTK fixed (4) needs the acceptance test — the stand-in for the
+ambiguity ratio test — to hold for a time-to-fix of 3–10 s (after power-on and
+after every loss): at least ``rtk_min_sats`` satellites in continuous lock,
+PDOP ≤ ``rtk_max_pdop``, the code solution's a-posteriori variance factor
+≤ ``rtk_max_residual_var``, at most ``rtk_max_raim_exclusions`` RAIM
+exclusions, and at most ``rtk_max_weak_share`` of the locked carriers below an
+elevation-dependent SNR mask (nominal open sky less ``rtk_snr_margin_db``). Its
+error is the carrier-phase WLS error (cm) — unless the fix is wrong: each
+ambiguity fixed on a reflected carrier takes a wrong integer with a small
+probability, and the position offset persists until the receiver's validation
+resets the fix (:func:`_rtk_state`). RTK float (5) needs ≥ 5 satellites in
 lock; each satellite's float ambiguity converges from its code error as its
-lock ages (share 1 → ``float_floor`` with ``float_conv_tau_s``), and cycle slips
-— frequent on weak and reflected carriers — restart it. DGNSS (2) otherwise; autonomous (1) when
-corrections are off; no fix (0) when the geometry cannot be solved (fewer than
-4 satellites, or fewer than 3 + the number of systems).
+lock ages (share 1 → ``float_floor`` with ``float_conv_tau_s``), and cycle
+slips — frequent on weak and reflected carriers — restart it. DGNSS (2)
+otherwise; autonomous (1) when corrections are off; no fix (0) when the
+geometry cannot be solved (fewer than 4 satellites, or fewer than 3 + the
+number of systems).
+
+The truth NLOS flags enter only physics the receiver cannot choose: reflected
+carriers slip more often and bias the float ambiguities, which is what makes
+an accepted fix wrong.
 """
 
 from __future__ import annotations
@@ -54,9 +67,11 @@ from scipy.signal import lfilter
 from scipy.stats import chi2
 
 from features.errors import ConfigError
+from simulation.gnss.signal import open_sky_cn0_dbhz
 
 __all__ = ["FixConfig", "FixResult", "code_sigma_m", "carrier_sigma_m", "klobuchar_obliquity",
-           "gauss_markov", "pseudorange_errors", "slip_probability", "solve_fixes", "QUALITY_NONE", "QUALITY_AUTONOMOUS",
+           "gauss_markov", "pseudorange_errors", "slip_probability", "cycle_slips", "hatch_smooth", "distance_gm_phi",
+           "solve_fixes", "QUALITY_NONE", "QUALITY_AUTONOMOUS",
            "QUALITY_DGNSS", "QUALITY_RTK_FIXED", "QUALITY_RTK_FLOAT"]
 
 QUALITY_NONE, QUALITY_AUTONOMOUS, QUALITY_DGNSS, QUALITY_RTK_FIXED, QUALITY_RTK_FLOAT = 0, 1, 2, 4, 5
@@ -76,8 +91,12 @@ class FixConfig:
     mp_low_el_m: float = 1.2
     mp_el_scale_deg: float = 15.0
     mp_clutter_gain: float = 1.5
-    mp_tau_s: float = 10.0
-    mp_corr_dist_m: float = 1.0
+    mp_tau_s: float = 120.0
+    mp_corr_dist_m: float = 5.0
+    nlos_var_share: float = 0.5
+    nlos_tau_s: float = 60.0
+    nlos_corr_dist_m: float = 10.0
+    hatch_window_s: float = 20.0
     nlos_mp_sigma_m: float = 1.5
     orbit_clock_sigma_m: float = 0.8
     iono_zenith_sigma_m: float = 2.0
@@ -91,15 +110,26 @@ class FixConfig:
     rx_floor_differential_m: float = 0.6
     rtk_min_sats: int = 8
     rtk_max_pdop: float = 3.0
-    rtk_max_nlos_fraction: float = 0.15
-    ttf_min_s: float = 2.0
-    ttf_max_s: float = 6.0
+    rtk_max_residual_var: float = 4.0
+    rtk_snr_margin_db: float = 10.0
+    rtk_max_weak_share: float = 0.25
+    rtk_max_raim_exclusions: int = 1
+    ttf_min_s: float = 3.0
+    ttf_max_s: float = 10.0
+    ttf_weak_gain: float = 3.0
+    ttf_weak_free_share: float = 0.1
+    rtk_cold_start: bool = True
+    wrong_fix_base_prob: float = 0.001
+    wrong_fix_nlos_prob: float = 0.06
+    wrong_fix_max_cycles: int = 3
+    wrong_fix_nlos_max_cycles: int = 20
+    wrong_fix_reset_mean_s: float = 10.0
     float_min_sats: int = 5
     phase_lock_s: float = 3.0
     float_conv_tau_s: float = 30.0
     float_floor: float = 0.1
     warm_start_lock_s: float = 60.0
-    slip_nlos_prob: float = 0.2
+    slip_nlos_prob: float = 0.05
     slip_weak_prob: float = 0.5
     slip_weak_scale_db: float = 3.0
     rtk_atm_fraction: float = 0.003
@@ -108,6 +138,11 @@ class FixConfig:
         for name, value in vars(self).items():
             if not np.isfinite(value) or value < 0:
                 raise ConfigError(f"FixConfig.{name} must be finite and non-negative, got {value!r}")
+        for name in ("wrong_fix_base_prob", "wrong_fix_nlos_prob", "nlos_var_share", "rtk_max_weak_share"):
+            if getattr(self, name) > 1.0:
+                raise ConfigError(f"FixConfig.{name} must lie in [0, 1], got {getattr(self, name)}")
+        if self.wrong_fix_max_cycles < 1 or self.wrong_fix_nlos_max_cycles < 1:
+            raise ConfigError("FixConfig.wrong_fix_max_cycles and wrong_fix_nlos_max_cycles must be >= 1")
         if self.ttf_max_s < self.ttf_min_s:
             raise ConfigError(f"FixConfig.ttf_max_s ({self.ttf_max_s}) < ttf_min_s ({self.ttf_min_s})")
         if not 0.0 < self.raim_pfa < 1.0:
@@ -168,14 +203,70 @@ def gauss_markov(rng: np.random.Generator, phi: np.ndarray, shape: tuple[int, in
     return out
 
 
+def hatch_smooth(err_m: np.ndarray, reset: np.ndarray, window: int) -> np.ndarray:
+    """Carrier smoothing of the code-only error (Hatch 1982), shape (n, k).
+
+    The Hatch filter ρ̂ₖ = ρₖ/Nₖ + (Nₖ − 1)/Nₖ·(ρ̂ₖ₋₁ + Δφₖ) with a growing
+    window Nₖ = min(k − k_reset + 1, N) (Hatch 1982, "The synergism of GPS
+    code and carrier measurements", 3rd Int. Geodetic Symp. on Satellite
+    Doppler Positioning; RTCA DO-229 §2.1.4.1.1 for the 100 s form). What code
+    and carrier share (geometry, the reflected path's extra length) passes
+    through unchanged; what only the code carries — its thermal noise and code
+    multipath — is averaged: êₖ = eₖ/Nₖ + (Nₖ − 1)/Nₖ·êₖ₋₁. ``reset`` (n, k)
+    restarts the window (cycle slip or loss of lock); ``window`` N in epochs.
+
+    >>> e = np.array([[1.0], [0.0], [0.0], [3.0]]); r = np.array([[True], [False], [False], [True]])
+    >>> hatch_smooth(e, r, 100)[:, 0].tolist()
+    [1.0, 0.5, 0.3333333333333333, 3.0]
+    """
+    n, k = err_m.shape
+    out = np.empty((n, k))
+    count = np.zeros(k)
+    prev = np.zeros(k)
+    for i in range(n):
+        count = np.where(reset[i], 1.0, np.minimum(count + 1.0, float(window)))
+        prev = np.where(reset[i], err_m[i], err_m[i] / count + (count - 1.0) / count * prev)
+        out[i] = prev
+    return out
+
+
+def distance_gm_phi(speed_m_s: np.ndarray, dt_s: float, tau_s: float, corr_dist_m: float) -> np.ndarray:
+    """Per-epoch φ of a Gauss–Markov process in distance travelled with a time floor, shape (n,).
+
+    φᵢ = exp(−Δt/τ − vᵢ·Δt/d): the correlation falls with the metres walked
+    (the reflection geometry changes over about ``corr_dist_m``) and, standing
+    still, with the time constant ``tau_s`` (satellite motion changes static
+    multipath over minutes; Braasch 1996, "Multipath effects", in Parkinson &
+    Spilker, *GPS: Theory and Applications* I, ch. 14).
+
+    >>> round(float(distance_gm_phi(np.array([1.0]), 1.0, 10.0, 10.0)[0]), 4)
+    0.8187
+    """
+    v = np.asarray(speed_m_s, float)
+    return np.exp(-dt_s * (1.0 / tau_s + v / corr_dist_m))
+
+
 def pseudorange_errors(rng: np.random.Generator, el_rad: np.ndarray, cn0_dbhz: np.ndarray, nlos: np.ndarray,
                        nlos_extra_m: np.ndarray, clutter: np.ndarray, speed_m_s: np.ndarray, dt_s: float,
-                       wavelength_m: float, cfg: FixConfig = FixConfig()) -> dict[str, np.ndarray]:
+                       wavelength_m: float, cfg: FixConfig = FixConfig(),
+                       reset: np.ndarray | None = None) -> dict[str, np.ndarray]:
     """Error components, each of shape (n, k), metres.
 
-    Returns a dict with ``noise`` (code noise), ``multipath``, ``nlos_bias``,
-    ``atmosphere`` (orbit, clock, ionosphere and troposphere residuals before
-    any differential correction) and ``carrier`` (carrier-phase error for RTK).
+    Returns a dict with ``noise`` (code noise, carrier-smoothed), ``multipath``
+    (carrier-smoothed), ``nlos_bias``, ``atmosphere`` (orbit, clock, ionosphere
+    and troposphere residuals before any differential correction) and
+    ``carrier`` (carrier-phase error for RTK).
+
+    Code multipath and the NLOS extra path are Gauss–Markov processes in
+    distance travelled with a time floor (:func:`distance_gm_phi`), so a walker
+    passing a fire wall keeps a bias over metres and a standing one keeps it
+    over minutes; the NLOS extra path, geometric (≈ 2·d·cos el off the
+    reflector) plus an exponential part per satellite–reflector pair, is
+    modulated by (1 + s·u) with u such a process (s = ``nlos_var_share``),
+    since the reflecting face is not a mirror. The code-only parts (noise,
+    multipath) are carrier smoothed (:func:`hatch_smooth`), restarted where
+    ``reset`` (n, k) is True (cycle slips, loss of lock; default: where
+    ``cn0_dbhz`` is NaN, i.e. untracked, and the epoch after).
 
     Parameters
     ----------
@@ -185,6 +276,7 @@ def pseudorange_errors(rng: np.random.Generator, el_rad: np.ndarray, cn0_dbhz: n
     """
     n, k = el_rad.shape
     el = np.clip(el_rad, np.radians(1.0), np.pi / 2)
+    untracked = ~np.isfinite(cn0_dbhz)
     cn0 = np.nan_to_num(cn0_dbhz, nan=20.0)
     v = np.asarray(speed_m_s, float)
     noise = code_sigma_m(cn0, cfg.code_a_m, cfg.code_b_m_sqrt_hz) * gauss_markov(
@@ -192,7 +284,7 @@ def pseudorange_errors(rng: np.random.Generator, el_rad: np.ndarray, cn0_dbhz: n
     sigma_mp = ((cfg.mp_sigma_m + cfg.mp_low_el_m * np.exp(-np.degrees(el) / cfg.mp_el_scale_deg))
                 * (1.0 + cfg.mp_clutter_gain * clutter[:, None]))
     sigma_mp = np.where(nlos, np.hypot(sigma_mp, cfg.nlos_mp_sigma_m), sigma_mp)
-    phi_mp = np.exp(-dt_s * (1.0 / cfg.mp_tau_s + v / cfg.mp_corr_dist_m))
+    phi_mp = distance_gm_phi(v, dt_s, cfg.mp_tau_s, cfg.mp_corr_dist_m)
     multipath = sigma_mp * gauss_markov(rng, phi_mp, (n, k))
     sigma_atm = np.sqrt(cfg.orbit_clock_sigma_m ** 2 + (cfg.iono_zenith_sigma_m * klobuchar_obliquity(el)) ** 2
                         + (cfg.tropo_zenith_sigma_m / np.sin(el)) ** 2)
@@ -201,10 +293,18 @@ def pseudorange_errors(rng: np.random.Generator, el_rad: np.ndarray, cn0_dbhz: n
     sigma_cmp = cfg.carrier_mp_sigma_m * (1.0 + 2.0 * clutter[:, None]) * (1.0 + np.exp(-np.degrees(el) / 15.0))
     carrier = (carrier_sigma_m(cn0, cfg.carrier_c_m2_hz) * rng.standard_normal((n, k))
                + sigma_cmp * gauss_markov(rng, phi_cmp, (n, k)))
+    u = gauss_markov(rng, distance_gm_phi(v, dt_s, cfg.nlos_tau_s, cfg.nlos_corr_dist_m), (n, k))
+    extra = np.where(nlos, np.maximum(nlos_extra_m * (1.0 + cfg.nlos_var_share * u), 0.0), 0.0)
     # A reflected carrier is offset by the extra path modulo one cycle.
-    frac = np.mod(nlos_extra_m, wavelength_m) - 0.5 * wavelength_m
+    frac = np.mod(extra, wavelength_m) - 0.5 * wavelength_m
     carrier = np.where(nlos, carrier + frac, carrier)
-    return {"noise": noise, "multipath": multipath, "nlos_bias": np.where(nlos, nlos_extra_m, 0.0),
+    if reset is None:
+        reset = untracked | np.vstack([np.ones((1, k), bool), untracked[:-1]])
+    window = max(1, int(round(cfg.hatch_window_s / dt_s)))
+    if cfg.hatch_window_s > 0:
+        noise = hatch_smooth(noise, reset, window)
+        multipath = hatch_smooth(multipath, reset, window)
+    return {"noise": noise, "multipath": multipath, "nlos_bias": extra,
             "atmosphere": atmosphere, "carrier": carrier}
 
 
@@ -310,17 +410,105 @@ def slip_probability(cn0_dbhz: np.ndarray, nlos: np.ndarray, cfg: FixConfig = Fi
     Multisensor Integrated Navigation Systems*, 2nd ed., §9.2.4 and §10.4).
 
     >>> [round(float(x), 3) for x in slip_probability(np.array([25.0, 40.0]), np.array([False, True]))]
-    [0.5, 0.203]
+    [0.5, 0.053]
     """
     c = np.nan_to_num(np.asarray(cn0_dbhz, float), nan=0.0)
     p = cfg.slip_weak_prob * np.exp(-np.maximum(c - 25.0, 0.0) / cfg.slip_weak_scale_db)
     return np.clip(p + np.where(nlos, cfg.slip_nlos_prob, 0.0), 0.0, 1.0)
 
 
+def cycle_slips(rng: np.random.Generator, cn0_dbhz: np.ndarray, nlos: np.ndarray,
+                cfg: FixConfig = FixConfig()) -> np.ndarray:
+    """Cycle-slip events, bool (n, k), drawn with :func:`slip_probability`."""
+    return rng.random(np.shape(cn0_dbhz)) < slip_probability(cn0_dbhz, nlos, cfg)
+
+
+def _rtk_state(rng: np.random.Generator, fixed_ok: np.ndarray, locked: np.ndarray, nlos: np.ndarray,
+               nlos_cycles: np.ndarray, dt_s: float, cfg: FixConfig, weak_share: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, list]:
+    """The RTK engine's fixed state (n,) and its wrong-fix episodes.
+
+    Returns ``fixed`` (n,) bool, ``episode`` (n,) int (−1 = right fix or no
+    fix, else the index of the wrong-fix episode) and ``starts``, per episode
+    (epoch, cycles (k,)): the wrong integers at the epoch it began.
+
+    A fix is declared after ``fixed_ok`` (the observable acceptance test) has
+    held for a time-to-fix drawn from U(ttf_min, ttf_max) — also at the first
+    epoch unless ``rtk_cold_start`` is off — and after every loss (the ZED-F9P
+    data sheet states RTK convergence "< 10 s"; u-blox UBX-17051259), stretched
+    by (1 + g·max(w − w₀, 0)/0.1) where w is the share of weak locked carriers
+    (observable), w₀ = ``ttf_weak_free_share`` and g = ``ttf_weak_gain``: weak, multipath-prone carriers keep the ratio
+    test from passing for longer. A warm start (``rtk_cold_start`` off) has
+    already served the base time and waits only the stretch. Each
+    ambiguity fixed — all locked satellites at a new fix, and every satellite
+    that joins a running fix (rising, or re-locked after a slip) — takes a
+    wrong integer with probability p₀ for a direct carrier and p_nlos for a
+    reflected one. p₀ = 0.1 % is the ratio test's design failure rate for
+    unbiased data (the fixed-failure-rate ratio test, Teunissen & Verhagen
+    2009, "The GNSS ambiguity ratio-test revisited", Survey Review 41(312));
+    biased phases break its assumptions, and p_nlos is a calibration to the
+    0.5–5 % of wrong quality-4 epochs urban RTK users meet (bench/calibrate_sim.py
+    reports the realised share). A wrong integer is ±1…``wrong_fix_max_cycles``
+    cycles on a direct carrier and, on a reflected one, the extra path in
+    cycles (1…``wrong_fix_nlos_max_cycles``: its float ambiguity was pulled by
+    the code's NLOS bias); the position offset it causes stays (later ambiguities are fixed
+    consistently with the wrong position) until the fix is lost or the
+    receiver's continued validation resets it after an exponential time of
+    mean ``wrong_fix_reset_mean_s`` (then a new time-to-fix).
+    """
+    n, k = locked.shape
+    base = rng.uniform(cfg.ttf_min_s, cfg.ttf_max_s, n)
+    w = np.zeros(n) if weak_share is None else np.asarray(weak_share, float)
+    stretch = cfg.ttf_weak_gain * np.maximum(w - cfg.ttf_weak_free_share, 0.0) / 0.1
+    ttf = base * (1.0 + stretch)
+    u_wrong = rng.random((n, k))
+    cyc_draw = rng.integers(1, cfg.wrong_fix_max_cycles + 1, (n, k)) * rng.choice([-1, 1], (n, k))
+    # A reflected carrier's float ambiguity is pulled by the code's extra path: its wrong integer is that
+    # many cycles (the range comes out as long as the reflected path), at least one.
+    cyc_draw = np.where(nlos, np.clip(np.rint(nlos_cycles), 1, cfg.wrong_fix_nlos_max_cycles), cyc_draw)
+    reset_draw = rng.exponential(max(cfg.wrong_fix_reset_mean_s, 1e-9), n)
+    p_wrong = np.where(nlos, cfg.wrong_fix_nlos_prob, cfg.wrong_fix_base_prob)
+    fixed = np.zeros(n, bool)
+    episode = np.full(n, -1, int)
+    starts: list[tuple[int, np.ndarray]] = []
+    held, need = 0.0, (ttf[0] if cfg.rtk_cold_start else base[0] * stretch[0])
+    is_fixed, timer, ep = False, np.inf, -1
+    prev_locked = np.zeros(k, bool)
+    for i in range(n):
+        lk = locked[i]
+        if not fixed_ok[i]:
+            held, is_fixed, timer, ep = 0.0, False, np.inf, -1
+            prev_locked = lk
+            continue
+        if held == 0.0 and i > 0:
+            need = ttf[i]
+        held += dt_s
+        new = np.zeros(k, bool)
+        if not is_fixed and held >= need:
+            is_fixed, new = True, lk
+        elif is_fixed:
+            new = lk & ~prev_locked
+        hit = new & (u_wrong[i] < p_wrong[i])
+        if hit.any() and ep < 0:
+            # The wrong integers pull the fixed position; the engine then fixes every later ambiguity
+            # consistently with that position, so the offset stays until the fix is reset.
+            ep = len(starts)
+            starts.append((i, np.where(hit, cyc_draw[i], 0.0)))
+            timer = reset_draw[i]
+        if ep >= 0:
+            timer -= dt_s
+            if timer <= 0.0:  # validation caught it: back to float, a new time-to-fix
+                is_fixed, held, need, timer, ep = False, dt_s, ttf[i], np.inf, -1
+        fixed[i] = is_fixed
+        episode[i] = ep if is_fixed else -1
+        prev_locked = lk
+    return fixed, episode, starts
+
+
 def solve_fixes(rng: np.random.Generator, az_rad: np.ndarray, el_rad: np.ndarray, sys_idx: np.ndarray,
                 tracked: np.ndarray, cn0_reported_dbhz: np.ndarray, errors: dict[str, np.ndarray],
                 nlos: np.ndarray, dt_s: float, corrections: bool = True,
-                cfg: FixConfig = FixConfig()) -> FixResult:
+                cfg: FixConfig = FixConfig(), slip: np.ndarray | None = None,
+                wavelength_m: float = 0.1903, receiver_offset_db: float = 0.0) -> FixResult:
     """Weighted least squares with RAIM and the fix-quality state machine (module docstring).
 
     Parameters
@@ -328,13 +516,18 @@ def solve_fixes(rng: np.random.Generator, az_rad: np.ndarray, el_rad: np.ndarray
     az_rad, el_rad : (n, k); sys_idx : (k,) 0 = GPS, 1 = BeiDou
     tracked, cn0_reported_dbhz : (n, k) receiver tracking state and reported C/N0
     errors : from :func:`pseudorange_errors`
-    nlos : (n, k) truth NLOS flags — used only for the ambiguity-validation proxy of RTK fixed
+    nlos : (n, k) truth NLOS flags — physics only: they raise the slip rate and the chance that an
+        accepted fix is wrong; the receiver's decisions (used set, RAIM, fixed/float) never read them
     corrections : differential corrections (DGNSS/RTK) available
+    slip : (n, k) cycle slips (default: drawn here with :func:`cycle_slips`)
+    receiver_offset_db : the receiver's own C/N0 offset from the nominal open-sky curve, dB — its maker
+        tunes the SNR mask to its antenna, so the mask moves with it
     """
     n, k = el_rad.shape
     g = _design(az_rad, el_rad, sys_idx)
     cand = tracked & (el_rad >= np.radians(cfg.fix_mask_deg))
     used, ok = _solvable(cand, sys_idx)
+    used_before_raim = used.copy()
     atm_scale = cfg.dgnss_residual_fraction if corrections else 1.0
     code_err = errors["noise"] + errors["multipath"] + errors["nlos_bias"] + atm_scale * errors["atmosphere"]
     floor = cfg.rx_floor_differential_m if corrections else cfg.rx_floor_autonomous_m
@@ -373,26 +566,32 @@ def solve_fixes(rng: np.random.Generator, az_rad: np.ndarray, el_rad: np.ndarray
         quality[ok] = QUALITY_AUTONOMOUS
         err[ok] = theta_code[ok, :3]
     else:
-        slip = rng.random((n, k)) < slip_probability(cn0_reported_dbhz, nlos, cfg)
+        if slip is None:
+            slip = cycle_slips(rng, cn0_reported_dbhz, nlos, cfg)
         lock = _lock_age_s(tracked, slip, dt_s, cfg.warm_start_lock_s)
         locked = used & (lock >= cfg.phase_lock_s)
         n_lock = locked.sum(axis=1)
-        n_used = used.sum(axis=1)
-        nlos_frac = (used & nlos).sum(axis=1) / np.maximum(n_used, 1)
-        fixed_ok = ok & (n_lock >= cfg.rtk_min_sats) & (pdop <= cfg.rtk_max_pdop) & (nlos_frac <= cfg.rtk_max_nlos_fraction)
+        # The acceptance test reads observables only: locked satellites, PDOP, the code solution's
+        # a-posteriori variance factor (weighted residuals over the degrees of freedom, which biased
+        # reflections inflate), the number of satellites RAIM had to exclude (outliers mean multipath
+        # the ambiguity search cannot trust) and the share of weak carriers among the locked ones.
+        resid = code_err - np.matmul(g, theta_code[..., None])[..., 0]
+        n_sys = (used[:, sys_idx == 0].any(axis=1).astype(int) + used[:, sys_idx == 1].any(axis=1))
+        dof = np.maximum(used.sum(axis=1) - 3 - n_sys, 1)
+        var_factor = (w * resid ** 2).sum(axis=1) / dof
+        # Weak: below an elevation-dependent SNR mask, the nominal open-sky C/N0 less a margin (as
+        # RTKLIB's per-elevation snrmask rejects multipath-prone signals; Takasu, RTKLIB 2.4.2 manual,
+        # option pos1-snrmask).
+        mask = open_sky_cn0_dbhz(el_rad) + receiver_offset_db - cfg.rtk_snr_margin_db
+        weak = locked & (np.nan_to_num(cn0_reported_dbhz, nan=0.0) < mask)
+        weak_share = weak.sum(axis=1) / np.maximum(n_lock, 1)
+        n_excluded = (used_before_raim & ~used).sum(axis=1)
+        fixed_ok = (ok & (n_lock >= cfg.rtk_min_sats) & (pdop <= cfg.rtk_max_pdop)
+                    & (var_factor <= cfg.rtk_max_residual_var) & (weak_share <= cfg.rtk_max_weak_share)
+                    & (n_excluded <= cfg.rtk_max_raim_exclusions))
         float_ok = ok & (n_lock >= cfg.float_min_sats)
-        ttf_draws = rng.uniform(cfg.ttf_min_s, cfg.ttf_max_s, n)
-        fixed = np.zeros(n, bool)
-        # Warm start: the receiver was running in the same surroundings before the first epoch.
-        held, need = 0.0, 0.0
-        for i in range(n):
-            if fixed_ok[i]:
-                if held == 0.0 and i > 0:
-                    need = ttf_draws[i]  # a new time-to-fix after every loss of the fixed conditions
-                held += dt_s
-                fixed[i] = held >= need
-            else:
-                held = 0.0
+        fixed, episode, starts = _rtk_state(rng, fixed_ok, locked, nlos, errors["nlos_bias"] / wavelength_m,
+                                            dt_s, cfg, weak_share)
         quality[ok] = QUALITY_DGNSS
         quality[float_ok] = QUALITY_RTK_FLOAT
         quality[fixed] = QUALITY_RTK_FIXED
@@ -404,6 +603,11 @@ def solve_fixes(rng: np.random.Generator, az_rad: np.ndarray, el_rad: np.ndarray
         fl = quality == QUALITY_RTK_FLOAT
         err[fl] = theta_float[fl, :3]
         err[fixed] = theta_car[fixed, :3]
+        for e, (i0, cyc) in enumerate(starts):
+            # Offset of the wrong integers: δx = (GᵀWG)⁻¹GᵀW·λc at the epoch the episode began.
+            off, _ = _wls(g[i0:i0 + 1], w[i0:i0 + 1], (wavelength_m * cyc)[None])
+            sel = episode == e
+            err[sel] = theta_car[sel, :3] + off[0, :3]
     hdop = np.where(ok, hdop, np.nan)
     vdop = np.where(ok, vdop, np.nan)
     pdop = np.where(ok, pdop, np.nan)

@@ -7,12 +7,13 @@ for tests and benchmarks); :func:`write_gnss` is the stream writer listed in
 change in one part never shifts the draws of another.
 
 Options read from ``StreamContext.options``: ``gnss_corrections`` (bool,
-default True: DGNSS/RTK corrections available), ``gnss_rate_hz`` (default 5).
+default True: DGNSS/RTK corrections available), ``gnss_rate_hz`` (default 5),
+``gnss_rtk_cold_start`` (default: True for a walk, False for a survey cell).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from datetime import timezone
 
 import numpy as np
@@ -25,6 +26,7 @@ from simulation.gnss import signal as gnss_signal
 from simulation.site.geometry import boxes_array
 from simulation.gnss.nmea_writer import NMEA_SYSTEM_BDS, NMEA_SYSTEM_GPS, NmeaEpochs, format_nmea
 from simulation.gnss.orbits import SYSTEM_GPS, all_satellites, azel
+from simulation.gnss.velocity import velocity_errors
 from simulation.rng import stream_rng
 from simulation.streams import StreamContext, Trajectory
 
@@ -48,6 +50,7 @@ class GnssSimulation:
     cn0_open_dbhz : (n, k) open-sky C/N0 (with the satellite's offset)
     attenuation_db : (n, k) blockage + EMI loss (no fading), dB
     cn0_true_dbhz : (n, k) epoch-mean C/N0 with fading; cn0_reported_dbhz : (n, k) integer, NaN untracked
+    receiver_offset_db, receiver_threshold_db : this receiver's C/N0 offset and tracking-threshold offset, dB
     """
 
     t_s: np.ndarray
@@ -73,6 +76,8 @@ class GnssSimulation:
     attenuation_db: np.ndarray
     cn0_true_dbhz: np.ndarray
     cn0_reported_dbhz: np.ndarray
+    receiver_offset_db: float = 0.0
+    receiver_threshold_db: float = 0.0
 
     @property
     def horizontal_error_m(self) -> np.ndarray:
@@ -108,7 +113,8 @@ def _key_epochs(t_s: np.ndarray, p_en: np.ndarray, up_m: np.ndarray, move_m: flo
 
 def simulate_gnss(site, traj: Trajectory, seed: int, corrections: bool = True, rate_hz: float = DEFAULT_RATE_HZ,
                   signal_cfg: gnss_signal.SignalConfig = gnss_signal.SignalConfig(),
-                  fix_cfg: gnss_fix.FixConfig = gnss_fix.FixConfig()) -> GnssSimulation:
+                  fix_cfg: gnss_fix.FixConfig = gnss_fix.FixConfig(), receiver_seed: int | None = None,
+                  body: bool = True) -> GnssSimulation:
     """Simulate the receiver along ``traj`` at ``site`` (see the module docstrings of the parts).
 
     Parameters
@@ -116,6 +122,9 @@ def simulate_gnss(site, traj: Trajectory, seed: int, corrections: bool = True, r
     site : features.site.Site (origin, layout boxes, EMI zones)
     traj : Trajectory; its ``up_m`` is the device height above ground
     seed : the walk's or cell's seed; corrections : DGNSS/RTK corrections available
+    receiver_seed : the receiver's identity (its C/N0 and tracking offsets; default ``seed``): the cells of one
+        survey share one receiver, a walker keeps theirs
+    body : the wearer's body masks the sky behind them (a walk; a survey pole-mounted capture has no body)
     """
     if not rate_hz > 0:
         raise ConfigError(f"gnss rate_hz must be positive, got {rate_hz}")
@@ -156,8 +165,13 @@ def simulate_gnss(site, traj: Trajectory, seed: int, corrections: bool = True, r
         "loss_db", "nlos", "solid_blocked", "nlos_extra_m", "diffraction_db")))
     emi = gnss_signal.emi_loss_db(p_en, site.emi_zones)
     clutter = gnss_signal.clutter_index(p_en, boxes, porous, cfg.clutter_scale_m)
-    cn0_open = gnss_signal.open_sky_cn0_dbhz(el, sats.a_m[None, :], cfg) + offset[None, :]
+    rx_offset_db, rx_threshold_db = gnss_signal.receiver_draws(
+        stream_rng(seed if receiver_seed is None else receiver_seed, "gnss", "receiver"), cfg)
+    cn0_open = gnss_signal.open_sky_cn0_dbhz(el, sats.a_m[None, :], cfg) + offset[None, :] + rx_offset_db
     attenuation = blk.loss_db + emi[:, None]
+    if body:
+        idx = np.clip(np.searchsorted(traj.t_s, t), 0, len(traj.t_s) - 1)
+        attenuation = attenuation + gnss_signal.body_loss_db(az, el, traj.heading_rad[idx], cfg)
     cn0_mean = cn0_open - attenuation
 
     # Fading: K from clutter for direct/diffracted paths, Rayleigh for reflections; the receiver averages
@@ -176,25 +190,32 @@ def simulate_gnss(site, traj: Trajectory, seed: int, corrections: bool = True, r
 
     in_view = el > np.radians(cfg.in_view_mask_deg)
     est = gnss_signal.estimate_cn0(stream_rng(seed, "gnss", "estimator"), cn0_true, dt, cfg)
-    tracked = gnss_signal.track(est, in_view, dt, cfg)
+    tracked = gnss_signal.track(est, in_view, dt, replace(cfg, track_lose_dbhz=cfg.track_lose_dbhz + rx_threshold_db,
+                                                          track_acquire_dbhz=cfg.track_acquire_dbhz + rx_threshold_db))
     reported = np.where(tracked, np.clip(np.rint(est), 0, 99), np.nan)
 
     sys_idx = np.where(sats.system == SYSTEM_GPS, 0, 1)
+    # Cycle slips restart both the carrier smoothing of the code and the RTK engine's lock.
+    slip = gnss_fix.cycle_slips(stream_rng(seed, "gnss", "slips"), reported, blk.nlos, fix_cfg)
+    untracked = ~tracked
+    reset = slip | untracked | np.vstack([np.ones((1, k), bool), untracked[:-1]])
     errors = gnss_fix.pseudorange_errors(stream_rng(seed, "gnss", "errors"), el, np.where(tracked, est, np.nan),
-                                         blk.nlos, blk.nlos_extra_m, clutter, speed, dt, cfg.wavelength_m, fix_cfg)
+                                         blk.nlos, blk.nlos_extra_m, clutter, speed, dt, cfg.wavelength_m, fix_cfg,
+                                         reset=reset)
     fix = gnss_fix.solve_fixes(stream_rng(seed, "gnss", "rtk"), az, el, sys_idx, tracked, reported, errors,
-                               blk.nlos, dt, corrections, fix_cfg)
+                               blk.nlos, dt, corrections, fix_cfg, slip=slip, wavelength_m=cfg.wavelength_m,
+                               receiver_offset_db=rx_offset_db)
     truth = np.stack([east, north, up], axis=1)
     return GnssSimulation(
         t_s=t, unix_s=unix, truth_enu_m=truth, fix_enu_m=truth + fix.error_enu_m, quality=fix.quality,
         n_used=fix.n_used, hdop=fix.hdop, vdop=fix.vdop, pdop=fix.pdop, system=sats.system, prn=sats.prn,
         az_rad=az, el_rad=el, in_view=in_view, tracked=tracked, used=fix.used, los=in_view & ~blk.nlos,
         nlos=in_view & blk.nlos, blocked=in_view & blk.solid_blocked, cn0_open_dbhz=cn0_open, attenuation_db=attenuation, cn0_true_dbhz=cn0_true,
-        cn0_reported_dbhz=reported)
+        cn0_reported_dbhz=reported, receiver_offset_db=rx_offset_db, receiver_threshold_db=rx_threshold_db)
 
 
 def to_nmea_epochs(sim: GnssSimulation, site, seed: int, traj: Trajectory) -> NmeaEpochs:
-    """Receiver-reported quantities for the NMEA writer (geodetic fix, velocity with Doppler-level noise).
+    """Receiver-reported quantities for the NMEA writer (geodetic fix, velocity from the Doppler solution).
 
     The site origin's ``alt_m`` is taken as the ground's height and written as
     GGA altitude with a geoid separation of 0.0 (no geoid model is simulated),
@@ -204,14 +225,16 @@ def to_nmea_epochs(sim: GnssSimulation, site, seed: int, traj: Trajectory) -> Nm
     lat, lon, alt = enu_to_geodetic(sim.fix_enu_m[:, 0], sim.fix_enu_m[:, 1], sim.fix_enu_m[:, 2],
                                     o.lat_deg, o.lon_deg, o.alt_m)
     # Up in the trajectory is the device height above ground at the origin; the origin's altitude is the ground.
-    rng = stream_rng(seed, "gnss", "velocity")
-    n = len(sim.t_s)
+    # Velocity: the true velocity plus the Doppler solution's error (simulation.gnss.velocity).
     speed_true = np.interp(sim.t_s, traj.t_s, traj.speed_m_s)
     idx = np.clip(np.searchsorted(traj.t_s, sim.t_s), 0, len(traj.t_s) - 1)
-    heading = np.degrees(np.mod(traj.heading_rad[idx], 2.0 * np.pi))
-    # Doppler velocity noise of a few cm/s (σ = 0.03 m/s per axis), a typical receiver figure.
-    ve = speed_true * np.sin(np.radians(heading)) + 0.03 * rng.standard_normal(n)
-    vn = speed_true * np.cos(np.radians(heading)) + 0.03 * rng.standard_normal(n)
+    hdg = np.mod(traj.heading_rad[idx], 2.0 * np.pi)
+    dt = float(np.median(np.diff(sim.t_s))) if len(sim.t_s) > 1 else 0.2
+    sys_idx = np.where(sim.system == SYSTEM_GPS, 0, 1)
+    dv = velocity_errors(stream_rng(seed, "gnss", "velocity"), sim.az_rad, sim.el_rad, sys_idx, sim.used,
+                         sim.cn0_reported_dbhz, sim.nlos, speed_true, dt, gnss_signal.WAVELENGTH_M)
+    ve = speed_true * np.sin(hdg) + dv[:, 0]
+    vn = speed_true * np.cos(hdg) + dv[:, 1]
     spd = np.hypot(ve, vn)
     course = np.where(spd > 0.1, np.mod(np.degrees(np.arctan2(ve, vn)), 360.0), np.nan)
     system = np.where(sim.system == SYSTEM_GPS, NMEA_SYSTEM_GPS, NMEA_SYSTEM_BDS)
@@ -233,7 +256,14 @@ def write_gnss(ctx: StreamContext) -> dict:
     rate_hz = ctx.options.get("gnss_rate_hz", DEFAULT_RATE_HZ)
     if isinstance(rate_hz, bool) or not isinstance(rate_hz, (int, float)) or not 0 < rate_hz <= 20:
         raise ConfigError(f"option gnss_rate_hz must lie in (0, 20], got {rate_hz!r}")
-    sim = simulate_gnss(ctx.site, ctx.trajectory, ctx.seed, corrections=corrections, rate_hz=float(rate_hz))
+    # A walk log starts with the receiver: its first RTK fix takes a time-to-fix. A survey crew keeps the
+    # receiver running between cells, so a cell's capture starts warm.
+    cold = ctx.options.get("gnss_rtk_cold_start", ctx.kind == "walk")
+    if not isinstance(cold, bool):
+        raise ConfigError(f"option gnss_rtk_cold_start must be true or false, got {cold!r}")
+    sim = simulate_gnss(ctx.site, ctx.trajectory, ctx.seed, corrections=corrections, rate_hz=float(rate_hz),
+                        fix_cfg=replace(gnss_fix.FixConfig(), rtk_cold_start=cold), receiver_seed=ctx.person_seed,
+                        body=ctx.kind == "walk")
     text = format_nmea(to_nmea_epochs(sim, ctx.site, ctx.seed, ctx.trajectory))
     atomic_write_text(ctx.out_dir / GNSS_FILE, text)
     return {"gnss": {"file": GNSS_FILE, "rate_hz": float(rate_hz)}}

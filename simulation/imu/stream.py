@@ -12,7 +12,8 @@ the event the step detector reports.
 
 ``walk.toml`` gets ``[imu] file, rate_hz, body_frame = "FRD", declination_deg``:
 the declination is stated as a logger would state the WMM value for the
-site, so PDR can turn magnetic into true heading without peeking at the
+site — off the simulated local field by ±0.5–1° (:func:`stated_declination_error_deg`),
+so PDR turns magnetic into true heading as well as a real crew could, without peeking at the
 simulator.
 """
 
@@ -85,4 +86,19 @@ def write_imu(ctx: StreamContext) -> dict:
     atomic_write_text(ctx.out_dir / TRUTH_STEPS_FILE, truth_steps_csv_text(steps))
     declination_rad, _, _ = field_elements(earth_field_ned_ut(ctx.site.origin.lat_deg, ctx.site.origin.lon_deg))
     return {"imu": {"file": IMU_FILE, "rate_hz": IMU_RATE_HZ, "body_frame": "FRD",
-                    "declination_deg": round(math.degrees(declination_rad), 3)}}
+                    "declination_deg": round(math.degrees(declination_rad) + stated_declination_error_deg(ctx.seed),
+                                             3)}}
+
+
+def stated_declination_error_deg(seed: int, low_deg: float = 0.5, high_deg: float = 1.0) -> float:
+    """Error of the declination a logger states, degrees: ±U(0.5, 1.0)°.
+
+    The logger takes the declination from a global model (WMM/IGRF) for the
+    site's coordinates; the local field of a substation's soil, rebar and
+    buried steel departs from it by crustal anomalies of the order of a
+    degree (the WMM's stated declination uncertainty is about 0.4° globally,
+    larger at crustal anomalies; Chulliat et al. 2020, *The US/UK World
+    Magnetic Model for 2020–2025*, NOAA technical report, Table 18).
+    """
+    rng = stream_rng(seed, "imu", "declination")
+    return float(rng.choice([-1.0, 1.0]) * rng.uniform(low_deg, high_deg))

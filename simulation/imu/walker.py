@@ -51,9 +51,15 @@ Gait (per person, from ``stream_rng(person_seed, "person")``)
     at stride frequency).
 
 Sensor errors (consumer MEMS, e.g. Bosch BMI160 / AKM AK09916 data sheets)
-    accelerometer: white noise 0.02 m/s² rms at 100 Hz, constant bias
-    N(0, 0.05 m/s²) per axis, ±16 g clipping; gyro: white noise 0.07 °/s rms,
-    turn-on bias N(0, 0.3 °/s) per axis plus a random walk 0.002 °/s/√s,
+    accelerometer: white noise 0.02 m/s² rms at 100 Hz, turn-on bias
+    N(0, 0.13 m/s² ≈ 13 mg) per axis (BMI160 zero-g offset ±40 mg typ., taken
+    as the 3σ bound), ±16 g clipping; gyro: white noise 0.07 °/s rms,
+    turn-on bias N(0, 1.0 °/s) per axis (BMI160 zero-rate offset ±3 °/s typ.,
+    as the 3σ bound; ICM-20948 states ±5 °/s) plus a random walk 0.002 °/s/√s; both biases
+    drift as the device warms after power-on (:func:`warmup_kelvin`, 3–10 K
+    over τ = 5 min, temperature coefficients gyro N(0, 0.05 °/s/K), accelerometer
+    N(0, 1 mg/K)); the 50 Hz field of busbars overhead reaches the magnetometer
+    aliased at 100 Hz (:func:`mains_field_ned_ut`);
     scale-factor error N(0, 1 %) per axis,
     ±2000 °/s clipping; magnetometer: white noise 0.4 µT rms and the residual
     of a field calibration: hard iron N(0, 1.5 µT) per axis and a symmetric
@@ -162,10 +168,19 @@ class SensorErrors:
     """Error model of the device (see module docstring for sources)."""
 
     acc_noise_m_s2: float = 0.02
-    acc_bias_m_s2: float = 0.05
+    acc_bias_m_s2: float = 0.13
+    acc_tc_m_s2_per_k: float = 0.01
     acc_range_m_s2: float = 16.0 * GRAVITY_M_S2
     gyro_noise_rad_s: float = math.radians(0.07)
-    gyro_bias_rad_s: float = math.radians(0.3)
+    gyro_bias_rad_s: float = math.radians(1.0)
+    gyro_tc_rad_s_per_k: float = math.radians(0.05)
+    warmup_min_k: float = 3.0
+    warmup_max_k: float = 10.0
+    warmup_tau_s: float = 300.0
+    mains_hz: float = 50.0
+    mains_sigma_hz: float = 0.02
+    busbar_current_a: float = 400.0
+    mag_mains_gain: float = 0.3
     gyro_bias_walk_rad_s_sqrt_s: float = math.radians(0.002)
     gyro_range_rad_s: float = math.radians(2000.0)
     gyro_scale_error: float = 0.01
@@ -178,10 +193,14 @@ class SensorErrors:
     def __post_init__(self):
         for name in ("acc_noise_m_s2", "acc_bias_m_s2", "gyro_noise_rad_s", "gyro_bias_rad_s", "gyro_scale_error",
                      "gyro_bias_walk_rad_s_sqrt_s", "mag_noise_ut", "mag_hard_iron_ut", "mag_soft_iron",
-                     "mount_tilt_rad", "mount_yaw_rad"):
+                     "mount_tilt_rad", "mount_yaw_rad", "acc_tc_m_s2_per_k", "gyro_tc_rad_s_per_k", "warmup_min_k",
+                     "warmup_max_k", "warmup_tau_s", "mains_hz", "mains_sigma_hz", "busbar_current_a",
+                     "mag_mains_gain"):
             value = getattr(self, name)
             if not math.isfinite(value) or value < 0:
                 raise ValueError(f"SensorErrors.{name} must be finite and >= 0, got {value}")
+        if self.warmup_max_k < self.warmup_min_k or self.warmup_tau_s <= 0:
+            raise ValueError("SensorErrors needs warmup_min_k <= warmup_max_k and warmup_tau_s > 0")
         if self.acc_range_m_s2 <= 2 * GRAVITY_M_S2 or self.gyro_range_rad_s <= 1.0:
             raise ValueError("sensor ranges too small for walking")
 
@@ -380,10 +399,20 @@ def synthesise_imu(traj: Trajectory, site: Site, gait: Gait, steps: StepTruth, c
     dist = disturbance_ned_ut(dipoles, pos_ned)
     mag = np.einsum("nji,nj->ni", c_bn, b_earth[None, :] + dist)
 
-    # sensor errors
-    f_body += rng.normal(0.0, errors.acc_bias_m_s2, size=3) + rng.normal(0.0, errors.acc_noise_m_s2, size=(n, 3))
-    bias_g = rng.normal(0.0, errors.gyro_bias_rad_s, size=3) + np.cumsum(
-        rng.normal(0.0, errors.gyro_bias_walk_rad_s_sqrt_s * math.sqrt(dt), size=(n, 3)), axis=0)
+    # Child streams for the warm-up and mains draws (spawning does not advance ``rng``, so the other
+    # sensor draws stay as they were).
+    warm_rng, mains_rng = rng.spawn(2)
+    # 50 Hz fields of the busbars (sampled, aliased, at the IMU rate), in the body frame
+    mag = mag + np.einsum("nji,nj->ni", c_bn, mains_field_ned_ut(site, pos_ned, t, errors, mains_rng))
+
+    # sensor errors: turn-on biases, warm-up drift through the temperature coefficients, noise
+    d_temp = warmup_kelvin(t, errors, warm_rng)
+    f_body += (rng.normal(0.0, errors.acc_bias_m_s2, size=3)
+               + d_temp[:, None] * rng.normal(0.0, errors.acc_tc_m_s2_per_k, size=3)
+               + rng.normal(0.0, errors.acc_noise_m_s2, size=(n, 3)))
+    bias_g = (rng.normal(0.0, errors.gyro_bias_rad_s, size=3)
+              + d_temp[:, None] * rng.normal(0.0, errors.gyro_tc_rad_s_per_k, size=3)
+              + np.cumsum(rng.normal(0.0, errors.gyro_bias_walk_rad_s_sqrt_s * math.sqrt(dt), size=(n, 3)), axis=0))
     gyro *= 1.0 + rng.normal(0.0, errors.gyro_scale_error, size=3)
     gyro += bias_g + rng.normal(0.0, errors.gyro_noise_rad_s, size=(n, 3))
     soft = rng.normal(0.0, errors.mag_soft_iron, size=(3, 3))
@@ -392,6 +421,53 @@ def synthesise_imu(traj: Trajectory, site: Site, gait: Gait, steps: StepTruth, c
     np.clip(f_body, -errors.acc_range_m_s2, errors.acc_range_m_s2, out=f_body)
     np.clip(gyro, -errors.gyro_range_rad_s, errors.gyro_range_rad_s, out=gyro)
     return ImuSamples(t, f_body, gyro, mag, np.linalg.norm(dist, axis=1), float(mount_yaw))
+
+
+def warmup_kelvin(t_s: np.ndarray, errors: SensorErrors, rng: np.random.Generator) -> np.ndarray:
+    """Sensor temperature rise after power-on, K, shape (n,): ΔT(t) = ΔT∞·(1 − exp(−t/τ)), ΔT∞ ~ U(min, max).
+
+    A device switched on and clipped to the waist warms from ambient towards
+    body and electronics heat over minutes (first-order thermal response); its
+    biases follow through the data sheet's temperature coefficients (BMI160:
+    gyro zero-rate offset ±0.05 °/s/K, accelerometer ±1 mg/K; Bosch BST-BMI160-DS000).
+    """
+    d_inf = rng.uniform(errors.warmup_min_k, errors.warmup_max_k)
+    return d_inf * (1.0 - np.exp(-(np.asarray(t_s, float) - float(t_s[0])) / errors.warmup_tau_s))
+
+
+def mains_field_ned_ut(site: Site, pos_ned_m: np.ndarray, t_s: np.ndarray, errors: SensorErrors,
+                       rng: np.random.Generator) -> np.ndarray:
+    """The 50 Hz magnetic field of the busbars at the device, sampled at ``t_s``, µT NED, shape (n, 3).
+
+    Each gantry carries a busbar along its long axis at its top: an infinite
+    straight line current, B = μ0·I/(2π·r) along l̂ × r̂ (Biot–Savart), with a
+    random phase per busbar (three phases) and the mains frequency f = 50 Hz +
+    N(0, σ) of the day. The magnetometer samples at 100 Hz — exactly twice
+    50 Hz — so the tone aliases to a ±alternating sample pattern whose envelope
+    beats at |f − 50|·… Hz; its digital filter passes ``mag_mains_gain`` of it
+    (a modelling choice for a BMM150/AK09916-class sensor at 100 Hz output).
+    """
+    n = len(t_s)
+    out = np.zeros((n, 3))
+    if errors.busbar_current_a <= 0 or errors.mag_mains_gain <= 0:
+        return out
+    f = errors.mains_hz + rng.normal(0.0, errors.mains_sigma_hz)
+    mu0_over_2pi = 2e-7
+    for b in site.layout:
+        if b.kind != "gantry":
+            continue
+        along_east = (b.east_max_m - b.east_min_m) >= (b.north_max_m - b.north_min_m)
+        line_dir = np.array([0.0, 1.0, 0.0]) if along_east else np.array([1.0, 0.0, 0.0])  # NED
+        point = np.array([0.5 * (b.north_min_m + b.north_max_m), 0.5 * (b.east_min_m + b.east_max_m), -b.height_m])
+        r = pos_ned_m - point[None, :]
+        r = r - (r @ line_dir)[:, None] * line_dir[None, :]
+        dist = np.maximum(np.linalg.norm(r, axis=1), 0.5)
+        direction = np.cross(line_dir[None, :], r / dist[:, None])
+        amp_ut = mu0_over_2pi * errors.busbar_current_a / dist * 1e6
+        phase = rng.uniform(0.0, 2.0 * np.pi)
+        out += (errors.mag_mains_gain * amp_ut * np.sin(2.0 * np.pi * f * np.asarray(t_s, float) + phase))[:, None] \
+            * direction
+    return out
 
 
 def trajectory_from_waypoints(waypoints_en: np.ndarray, speed_m_s: float = 1.25, rate_hz: float = 100.0,

@@ -12,21 +12,26 @@ A yard of about 120 × 80 m with, from one long side to the other:
   narrow passage between them; small relay kiosks;
 * aisles (roads) between bays and round the yard.
 
-Beacons stand on 2.5–3 m poles on a 25–35 m grid in free space; TDMA slots
-are assigned greedily so that beacons sharing a slot are at least
-``reuse_distance_m`` apart. A layout is redrawn (deterministically) until each
+Beacons stand on 2.5–3 m poles placed as an installer would
+(:mod:`simulation.site.coverage`: greedy set cover until every walkable point,
+heavy zones included, hears four), alternating between two 2.9 kHz sub-bands
+(frequency division), with 80 ms TDMA slots assigned greedily per band so that
+slot-mates are at least ``reuse_distance_m`` apart: a frame of ≤ 12 slots,
+≤ 0.96 s (docs/beacon_protocol.md). ``beacon_placement="grid"`` keeps the
+earlier 25–35 m grid with one full-band slot each. A layout is redrawn (deterministically) until each
 environment class covers at least ``min_class_share`` of the walkable area, so
 every site has a real share of all three.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from features.site import AcousticConfig, Atmosphere, Beacon, Box, EmiZone, Grid, Origin, Site
 
+from simulation.site.coverage import CoverageConfig, place_beacons
 from simulation.site.environment import class_map, classify_share
 from simulation.site.geometry import boxes_array, inside_boxes
 from simulation.rng import stream_rng
@@ -47,6 +52,10 @@ class LayoutConfig:
     beacon_spacing_m: tuple[float, float] = (25.0, 35.0)
     beacon_height_m: tuple[float, float] = (2.5, 3.0)
     reuse_distance_m: float = 145.0  # ≥ 2 × the ≈ 70 m free-field detection range (tests/test_acoustic_sim.py)
+    beacon_placement: str = "grid"  # or "coverage": the installer's rule (simulation.site.coverage)
+    bands_hz: tuple[tuple[float, float], ...] = ((17_000.0, 19_900.0), (20_100.0, 23_000.0))
+    slot_s: float = 0.08
+    coverage: CoverageConfig = CoverageConfig()
     emi_zones: bool = True
     min_class_share: float = 0.04
     max_attempts: int = 20
@@ -56,6 +65,12 @@ class LayoutConfig:
     def __post_init__(self):
         if self.width_m[0] < 60 or self.depth_m[0] < 45:
             raise ValueError(f"site extent too small for a 220 kV yard: width_m={self.width_m}, depth_m={self.depth_m}")
+        if self.beacon_placement not in ("coverage", "grid"):
+            raise ValueError(f"beacon_placement must be 'coverage' or 'grid', got {self.beacon_placement!r}")
+        if not self.bands_hz or any(not 0 < lo < hi <= 24_000.0 for lo, hi in self.bands_hz):
+            raise ValueError(f"bands_hz must be non-empty (f0, f1) pairs in (0, 24000], got {self.bands_hz}")
+        if not 0.02 < self.slot_s <= 1.0:
+            raise ValueError(f"slot_s must lie in (0.02, 1], got {self.slot_s}")
         if not 0 <= self.min_class_share < 0.33:
             raise ValueError(f"min_class_share must lie in [0, 0.33), got {self.min_class_share}")
 
@@ -183,7 +198,7 @@ def assign_slots(east_m: np.ndarray, north_m: np.ndarray, reuse_distance_m: floa
     return slots
 
 
-def _beacons(rng, width, depth, boxes, cfg: LayoutConfig, z0: float):
+def _grid_beacons(rng, width, depth, boxes, cfg: LayoutConfig, z0: float):
     spacing = rng.uniform(*cfg.beacon_spacing_m)
     n_e = max(2, int(round((width - 10.0) / spacing)) + 1)
     n_n = max(2, int(round((depth - 10.0) / spacing)) + 1)
@@ -210,6 +225,31 @@ def _beacons(rng, width, depth, boxes, cfg: LayoutConfig, z0: float):
     return beacons, int(slots.max()) + 1
 
 
+def _coverage_beacons(rng, width, depth, boxes, cfg: LayoutConfig):
+    """Beacons placed by the installer's rule (:mod:`simulation.site.coverage`), bands alternating, slots per band.
+
+    Returns (beacons, n_slots): frequency division lets one slot hold one beacon per band, so a frame
+    lasts ⌈n / n_bands⌉ slots (docs/beacon_protocol.md §2).
+    """
+    probe = Site(name="probe", origin=Origin(0.0, 0.0), grid=Grid(cell_size_m=cfg.cell_size_m, east_min_m=0.0,
+                 east_max_m=round(width, 2), north_min_m=0.0, north_max_m=round(depth, 2)), layout=tuple(boxes))
+    xyz = place_beacons(probe, rng, cfg.beacon_height_m, cfg.coverage)
+    # Bands alternate along a sweep of the yard, so neighbours differ in band.
+    order = np.lexsort((xyz[:, 0], np.round(xyz[:, 1] / 10.0)))
+    xyz = xyz[order]
+    band = np.arange(len(xyz)) % len(cfg.bands_hz)
+    slots = np.zeros(len(xyz), int)
+    for k in range(len(cfg.bands_hz)):
+        sel = np.flatnonzero(band == k)
+        if sel.size:
+            slots[sel] = assign_slots(xyz[sel, 0], xyz[sel, 1], cfg.reuse_distance_m)
+    beacons = tuple(Beacon(id=i + 1, east_m=round(float(p[0]), 2), north_m=round(float(p[1]), 2),
+                           up_m=round(float(p[2]), 2), slot=int(s),
+                           f0_hz=float(cfg.bands_hz[b][0]), f1_hz=float(cfg.bands_hz[b][1]))
+                    for i, (p, s, b) in enumerate(zip(xyz, slots, band)))
+    return beacons, int(slots.max()) + 1
+
+
 def _draw(seed: int, attempt: int, cfg: LayoutConfig) -> Site:
     rng = stream_rng(seed, "layout", attempt)
     width = float(rng.uniform(*cfg.width_m))
@@ -220,7 +260,10 @@ def _draw(seed: int, attempt: int, cfg: LayoutConfig) -> Site:
     yard = _switchyard(rng, width, depth, tr_boxes + bld)
     kiosks = _kiosks(rng, width, depth, tr_boxes + bld + yard)
     boxes = tuple(tr_boxes + bld + yard + kiosks)
-    beacons, n_slots = _beacons(rng, width, depth, boxes, cfg, cfg.device_height_m)
+    # The grid beacons are drawn in every case (the layout's later draws follow them); the coverage
+    # placement replaces them in generate_site once the layout is accepted.
+    beacons, n_slots = _grid_beacons(rng, width, depth, boxes, cfg, cfg.device_height_m)
+    acoustic = AcousticConfig(n_slots=n_slots)
     atmo = Atmosphere(temperature_c=round(float(rng.uniform(5.0, 30.0)), 1),
                       relative_humidity_pct=round(float(rng.uniform(40.0, 85.0)), 1))
     return Site(
@@ -230,7 +273,7 @@ def _draw(seed: int, attempt: int, cfg: LayoutConfig) -> Site:
         atmosphere=atmo,
         grid=Grid(cell_size_m=cfg.cell_size_m, east_min_m=0.0, east_max_m=round(width, 2), north_min_m=0.0,
                   north_max_m=round(depth, 2)),
-        acoustic=AcousticConfig(n_slots=n_slots),
+        acoustic=acoustic,
         beacons=beacons,
         layout=boxes,
         emi_zones=tuple(emi) if cfg.emi_zones else (),
@@ -255,6 +298,12 @@ def generate_site(seed: int, config: LayoutConfig | None = None) -> Site:
     for attempt in range(cfg.max_attempts):
         site = _draw(seed, attempt, cfg)
         if class_shares(site, resolution_m=2.0).min() >= cfg.min_class_share:
+            if cfg.beacon_placement == "coverage":
+                g = site.grid
+                beacons, n_slots = _coverage_beacons(stream_rng(seed, "beacons", attempt), g.east_max_m,
+                                                     g.north_max_m, site.layout, cfg)
+                site = replace(site, beacons=beacons, acoustic=replace(site.acoustic, n_slots=n_slots,
+                                                                       slot_s=cfg.slot_s))
             return site
     raise RuntimeError(f"no layout for seed {seed} reached min_class_share={cfg.min_class_share} "
                        f"in {cfg.max_attempts} attempts")

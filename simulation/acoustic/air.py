@@ -1,0 +1,162 @@
+"""The air a chirp actually crosses: true temperature (not the crew's reading), hot air, humidity, wind.
+
+``site.toml`` carries what the crew measured — one thermometer reading, off
+by its error and by the hours between survey and walk. The true air of a
+recording is drawn here (seeded) and never written where the receiver reads:
+
+* **Air temperature**: T = T_site + ε, ε = ±U(1, 2) K (a hand thermometer
+  in sun or shade and the day's drift; the issue's ±1–2 K), drawn per crew
+  (``person_seed``: one survey, one reading).
+* **Warm air over equipment**: transformers run at 60–90 °C oil temperature
+  and heat the air beside them; the excess falls off with distance,
+  ΔT(x) = ΔT₀·Σ exp(−dᵢ/ℓ) over transformers (dᵢ horizontal distance to the
+  tank, ΔT₀ ~ U(2, 5) K, ℓ = 4 m; a modelling choice). The chirp's travel
+  time uses the mean of T along the straight beacon–receiver line (5 points),
+  the path-averaged sound speed of ray acoustics.
+* **Humidity**: the speed of sound of moist air from the virtual temperature,
+  c = 20.05·sqrt(T_v), T_v = T/(1 − 0.378·e/p), e = RH·p_sat(T) with p_sat of
+  ISO 9613-1 Annex B (Cramer 1993, J. Acoust. Soc. Am. 93(5), to within
+  0.1 % in this range; Ostashev & Wilson 2015, *Acoustics in Moving
+  Inhomogeneous Media*, 2nd ed., eq. (2.16)).
+* **Wind**: a mean vector (speed ~ U(0, ``wind_max_m_s``), direction
+  uniform) plus gusts, a Gauss–Markov process per axis (σ = ``gust_share``
+  of the mean speed plus 0.2 m/s, τ = ``gust_tau_s``). Sound moves with the
+  air: along a path of direction n̂ the effective speed is c_eff = c + w·n̂
+  (Ostashev & Wilson 2015, the effective sound speed approximation, eq. (3.28)).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from features.errors import ConfigError
+from features.site import Site
+from simulation.acoustic.atmosphere import speed_of_sound_m_s
+
+__all__ = ["AirConfig", "Air", "moist_speed_of_sound_m_s"]
+
+
+@dataclass(frozen=True)
+class AirConfig:
+    """Parameters of the true air (K, m/s, s, m as named); ``enabled`` False gives the site's stated air."""
+
+    enabled: bool = True
+    thermometer_min_k: float = 1.0
+    thermometer_max_k: float = 2.0
+    hot_air_min_k: float = 2.0
+    hot_air_max_k: float = 5.0
+    hot_air_scale_m: float = 4.0
+    wind_max_m_s: float = 4.0
+    gust_share: float = 0.3
+    gust_floor_m_s: float = 0.2
+    gust_tau_s: float = 5.0
+
+    def __post_init__(self):
+        for name, value in vars(self).items():
+            if name != "enabled" and not (math.isfinite(value) and value >= 0):
+                raise ConfigError(f"AirConfig.{name} must be finite and non-negative, got {value!r}")
+        if self.thermometer_max_k < self.thermometer_min_k or self.hot_air_max_k < self.hot_air_min_k:
+            raise ConfigError("AirConfig needs thermometer_min_k <= thermometer_max_k, hot_air_min_k <= hot_air_max_k")
+        if self.gust_tau_s <= 0 or self.hot_air_scale_m <= 0:
+            raise ConfigError("AirConfig needs gust_tau_s > 0 and hot_air_scale_m > 0")
+
+
+def moist_speed_of_sound_m_s(temperature_c, relative_humidity_pct: float, pressure_kpa: float = 101.325):
+    """Speed of sound in moist air, m/s: c = 20.05·sqrt(T_v), T_v = T/(1 − 0.378·e/p) (see module docstring).
+
+    >>> round(float(moist_speed_of_sound_m_s(20.0, 0.0)), 2), round(float(moist_speed_of_sound_m_s(20.0, 100.0)), 2)
+    (343.29, 344.79)
+    """
+    t_k = np.asarray(temperature_c, float) + 273.15
+    c_exp = -6.8346 * (273.16 / t_k) ** 1.261 + 4.6151          # ISO 9613-1 eq. B.3: p_sat / p_r = 10^C
+    e_over_p = relative_humidity_pct / 100.0 * 10.0 ** c_exp * 101.325 / pressure_kpa
+    return 20.05 * np.sqrt(t_k / (1.0 - 0.378 * e_over_p))
+
+
+class Air:
+    """The true air of one recording; :meth:`c_eff` gives the effective speed of sound of a path.
+
+    Parameters
+    ----------
+    site : the site (stated atmosphere, transformers); crew_seed_rng, rng : generators for the crew's
+        thermometer error and for this recording's hot air and wind; duration_s : recording length (the
+        gust process is tabulated over it at 0.1 s).
+    """
+
+    def __init__(self, site: Site, crew_rng: np.random.Generator, rng: np.random.Generator, duration_s: float,
+                 cfg: AirConfig = AirConfig()):
+        self.cfg = cfg
+        atm = site.atmosphere
+        self.rh_pct = atm.relative_humidity_pct
+        self.pressure_kpa = atm.pressure_kpa
+        if not cfg.enabled:
+            self.thermometer_error_k = 0.0
+            self.temperature_c = atm.temperature_c
+            self.hot_air_k = 0.0
+            self.wind_mean = np.zeros(2)
+            self._gust_t = np.array([0.0, max(duration_s, 1.0) + 10.0])
+            self._gust = np.zeros((2, 2))
+            self._tx = np.zeros((0, 4))
+            self._dry = True
+            return
+        self._dry = False
+        self.thermometer_error_k = float(crew_rng.choice([-1.0, 1.0])
+                                         * crew_rng.uniform(cfg.thermometer_min_k, cfg.thermometer_max_k))
+        self.temperature_c = atm.temperature_c - self.thermometer_error_k  # the reading = truth + error
+        self.hot_air_k = float(rng.uniform(cfg.hot_air_min_k, cfg.hot_air_max_k))
+        speed = float(rng.uniform(0.0, cfg.wind_max_m_s))
+        direction = float(rng.uniform(0.0, 2.0 * np.pi))
+        self.wind_mean = speed * np.array([math.sin(direction), math.cos(direction)])  # east, north
+        dt = 0.1
+        n = int(math.ceil((max(duration_s, 1.0) + 10.0) / dt)) + 1
+        self._gust_t = -5.0 + dt * np.arange(n)
+        phi = math.exp(-dt / cfg.gust_tau_s)
+        sigma = cfg.gust_share * speed + cfg.gust_floor_m_s
+        w = rng.standard_normal((n, 2))
+        g = np.empty((n, 2))
+        g[0] = w[0]
+        for i in range(1, n):
+            g[i] = phi * g[i - 1] + math.sqrt(1.0 - phi * phi) * w[i]
+        self._gust = sigma * g
+        self._tx = np.array([[b.east_min_m, b.east_max_m, b.north_min_m, b.north_max_m]
+                             for b in site.layout if b.kind == "transformer"]).reshape(-1, 4)
+
+    def temperature_at_c(self, east_m, north_m) -> np.ndarray:
+        """True air temperature at ground points, °C (hot air beside transformers)."""
+        e = np.atleast_1d(np.asarray(east_m, float))
+        n = np.atleast_1d(np.asarray(north_m, float))
+        t = np.full(e.shape, self.temperature_c)
+        if self._tx.shape[0] and self.hot_air_k > 0:
+            de = np.maximum(np.maximum(self._tx[:, 0] - e[:, None], e[:, None] - self._tx[:, 1]), 0.0)
+            dn = np.maximum(np.maximum(self._tx[:, 2] - n[:, None], n[:, None] - self._tx[:, 3]), 0.0)
+            t = t + self.hot_air_k * np.exp(-np.hypot(de, dn) / self.cfg.hot_air_scale_m).sum(axis=1)
+        return t
+
+    def wind_at(self, t_s: float) -> np.ndarray:
+        """Wind vector (east, north), m/s, at recording time ``t_s``."""
+        g = np.array([np.interp(t_s, self._gust_t, self._gust[:, 0]), np.interp(t_s, self._gust_t, self._gust[:, 1])])
+        return self.wind_mean + g
+
+    def c_eff(self, t_s: float, src_m: np.ndarray, rx_m: np.ndarray) -> float:
+        """Effective speed of sound from ``src_m`` to ``rx_m`` (ENU, m) at time ``t_s``: path-mean c + w·n̂."""
+        if self._dry:
+            return self.mean_c()
+        s = np.linspace(0.0, 1.0, 5)
+        pts = src_m[None, :2] + s[:, None] * (rx_m[None, :2] - src_m[None, :2])
+        c = float(np.mean(moist_speed_of_sound_m_s(self.temperature_at_c(pts[:, 0], pts[:, 1]), self.rh_pct,
+                                                   self.pressure_kpa)))
+        d = np.asarray(rx_m, float) - np.asarray(src_m, float)
+        norm = float(np.linalg.norm(d))
+        if norm < 1e-9:
+            return c
+        return c + float(self.wind_at(t_s) @ (d[:2] / norm))
+
+    def mean_c(self) -> float:
+        """Speed of sound of the air away from equipment, without wind, m/s (moist; dry ideal gas when disabled,
+        as the simulator had it before)."""
+        if self._dry:
+            return float(speed_of_sound_m_s(self.temperature_c))
+        return float(moist_speed_of_sound_m_s(self.temperature_c, self.rh_pct, self.pressure_kpa))
