@@ -40,6 +40,7 @@ survey, 94 cells: 4.1 vs 3.6 ms with 30 ms; 1.0 vs 2.6 ms with 15 ms).
 from __future__ import annotations
 
 import bisect
+import dataclasses
 import math
 import os
 from dataclasses import dataclass
@@ -69,6 +70,9 @@ _SIDELOBE_GUARD = 10 ** (25 / 20)
 """A maximum this much (25 dB) weaker than a neighbour within one chirp length is a sidelobe."""
 _ECHO_SPAN_S = 0.015
 """Acquisition ignores maxima this soon after a stronger one (its echoes and diffuse tail), s."""
+_SILENCE_REL = 1e-6
+"""Envelope values below this fraction of the segment's largest are digital silence, not noise
+(float32 round-off of the matched filter over exact zeros is ~1e-7 of the block's largest output)."""
 _RAYLEIGH_Q25 = math.sqrt(-2.0 * math.log(0.75))
 """25th percentile of a unit-scale Rayleigh variable."""
 
@@ -243,10 +247,45 @@ def detect_frames(path: str | os.PathLike, site: Site, timing: AudioTiming,
     if stats is not None:
         stats.truncated = info.truncated
         stats.duration_s = n_total / fs
+    timing = _frame_safe_timing(site, timing, config)
     if positions is None:
         positions = PositionConfig(max_clock_offset_s=timing.start_uncertainty_s + 0.05)
     det = _FrameDetector(path, site, timing, config, stats, positions, n_total)
     yield from det.frames()
+
+
+def _frame_safe_timing(site: Site, timing: AudioTiming, config: DetectorConfig) -> AudioTiming:
+    """The timing with a start uncertainty u for which one chirp falls in one frame's windows only.
+
+    Acquisition looks for beacon b's chirp of frame k in ``[t_tx − u, t_tx + u + r_max/c]``;
+    the same beacon's window in frame k + 1 starts ``frame_s`` later, so unless
+    ``2u + r_max/c ≤ frame_s`` one emission can be found in two frames and counted twice
+    (a phone FMCW system with 40 ms frames and the default ±0.05 s: a third of the
+    detections were duplicates; issue 12, item 3). A larger u cannot be resolved anyway —
+    the audio clock is then known only modulo a frame — so u is clamped to
+    ``(frame_s − r_max/c)/2`` with an :class:`~features.acoustic.audio.AudioWarning`; frames
+    shorter than the longest propagation delay are refused (:class:`ConfigError`).
+    """
+    frame_s = site.acoustic.frame_s
+    c = speed_of_sound_m_s(site.atmosphere.temperature_c)
+    r_max = config.max_range_m if config.max_range_m is not None else max_site_range_m(site)
+    delay_s = r_max / c
+    if delay_s >= frame_s:
+        raise ConfigError(f"TDMA frames of {frame_s:g} s are shorter than the longest propagation delay on the "
+                          f"site ({r_max:.1f} m, {delay_s:.3f} s): chirps of consecutive frames cannot be told apart; "
+                          f"give a smaller detector max_range_m or longer frames ([acoustic] slot_s × n_slots)")
+    limit = 0.5 * (frame_s - delay_s)
+    if timing.start_uncertainty_s <= limit:
+        return timing
+    import warnings
+
+    from features.acoustic.audio import AudioWarning
+
+    warnings.warn(f"audio start uncertainty ±{timing.start_uncertainty_s:g} s is more than frames of {frame_s:g} s "
+                  f"can resolve with ranges up to {r_max:.1f} m (one chirp would be counted in two frames); "
+                  f"clamped to ±{limit:.4f} s: the audio clock is then known only to a whole frame "
+                  f"([audio] start_uncertainty_s / --start-uncertainty-s)", AudioWarning, stacklevel=3)
+    return dataclasses.replace(timing, start_uncertainty_s=limit)
 
 
 class _FrameDetector:
@@ -269,7 +308,8 @@ class _FrameDetector:
         self.span = span = int(math.ceil(config.cir_span_s * fs))
         self.history = int(math.ceil(site.acoustic.frame_s * fs))
         self.stream = _Stream(path, config, mf, stats)
-        self.tracker = ClockPositionTracker(site, timing, fs, self.c, self.r_max, positions)
+        self.tracker = ClockPositionTracker(site, timing, fs, self.c, self.r_max, positions,
+                                            {b.id: s.range_doppler_lag_s for b, s in zip(site.beacons, specs)})
         self.maxima: dict = {}       # template -> (decimated indices, heights), ascending lists, for the current frame
         self.delay = bank.delay_samples
         self.bandwidth_of = [self.bandwidth[b.id] for b in site.beacons]
@@ -342,7 +382,8 @@ class _FrameDetector:
 
     # -- detect ---------------------------------------------------------------------------------
     def noise_scales(self, windows: list[SearchWindow]) -> np.ndarray:
-        """Rayleigh scale σ per template from the envelope of the frame before and under ``windows``."""
+        """Rayleigh scale σ per template from the envelope of the frame before and under ``windows``
+        (its exact zeros, digital silence, left out; 0 when nothing else is there)."""
         bank, dec, history, stream = self.bank, self.dec, self.history, self.stream
         j_hi = (max(w.hi for w in windows) + bank.delay_samples) // dec + 1
         j_lo = min((min(w.lo for w in windows) + bank.delay_samples) // dec, j_hi - history // dec)
@@ -352,7 +393,19 @@ class _FrameDetector:
         # Every 4th output: neighbours are correlated over ~1/B anyway, and it is 4× cheaper.
         sub = seg[:, ::4]
         q25 = np.partition(sub, sub.shape[1] // 4, axis=1)[:, sub.shape[1] // 4]
-        return q25.astype(float) / _RAYLEIGH_Q25
+        peak = sub.max(axis=1)
+        if np.all(q25 > _SILENCE_REL * peak):
+            return q25.astype(float) / _RAYLEIGH_Q25
+        # Digital silence (exact zero samples: a muted or not yet started input) is not noise: its
+        # envelope is 0, or float32 round-off of the FFT blocks it shares with sound (below 1e-6 of
+        # the loudest output). Left in, it pulled the quantile to ~0, the SNR to 126–3000 dB, and
+        # let the first noise after it pass for chirps (issue 12, item 4).
+        out = np.zeros(sub.shape[0])
+        for t, row in enumerate(sub):
+            nz = row[row > _SILENCE_REL * peak[t]]
+            if len(nz):
+                out[t] = float(np.partition(nz, len(nz) // 4)[len(nz) // 4]) / _RAYLEIGH_Q25
+        return out
 
     def gamma_of(self, w: SearchWindow, sigma: float) -> float:
         """Detection threshold γ of window ``w`` (see the module docstring)."""
@@ -512,7 +565,8 @@ class _FrameDetector:
             cir_lo = [min(max(-(-(w.lo + delay) // dec), g) - j, first_tap) for (w, _), g, j in zip(group, j_got, j_a)]
             noise_power = 2.0 * sigmas[t] ** 2   # Rayleigh envelope of scale σ: E[env²] = 2σ²
             # One tap beyond the search range, for the parabola of an arrival at its last tap (as the features see it).
-            toa = first_arrivals(cirs[:, :toa_taps + 1].tolist(), cir_lo, toa_taps, self.lead_taps, noise_power)
+            toa = first_arrivals(cirs[:, :toa_taps + 1].tolist(), cir_lo, toa_taps, self.lead_taps, noise_power,
+                                 self.cir_taps)
             for (w, _), found_r, j, row, lo in zip(group, toa, j_a, cirs, cir_lo):
                 if found_r is not None:
                     self.pending_cirs.append((slot, len(out), t, row, lo, noise_power))

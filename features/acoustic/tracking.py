@@ -73,8 +73,10 @@ class ClockPositionTracker:
     max_rms_m = 0.5
 
     def __init__(self, site: Site, timing: AudioTiming, fs_hz: float, c: float, r_max: float,
-                 positions: PositionConfig):
+                 positions: PositionConfig, range_lag_s: dict | None = None):
         self.site, self.timing, self.fs, self.c, self.r_max = site, timing, fs_hz, c, r_max
+        # Beacon id -> the chirp's range–Doppler lag (ChirpSpec.range_doppler_lag_s): see frame_fix.
+        self.range_lag_s = range_lag_s
         self.positions = positions
         self.order = sorted(range(len(site.beacons)), key=lambda i: (site.beacons[i].slot, site.beacons[i].id))
         # (index, slot offset s, east, north, up) of each beacon in slot order, for windows().
@@ -412,7 +414,7 @@ class ClockPositionTracker:
             predicted = (last.east_m + velocity[0] * dt, last.north_m + velocity[1] * dt, math.sqrt(
                 last.covariance[0, 0] + last.covariance[1, 1] + (self.max_turn_speed_m_s * dt) ** 2 + 0.25))
         fix = frame_fix(detections, self.site, self.c, bandwidth, config,
-                        self.last_fix if tracking else None, prior, velocity, predicted)
+                        self.last_fix if tracking else None, prior, velocity, predicted, self.range_lag_s)
         if fix is None or not self._clock_plausible(fix):
             if tracking and not self.confirmed:
                 self.last_fix = None                         # a tentative lock not confirmed is dropped
@@ -463,9 +465,10 @@ class ClockPositionTracker:
         1.5 m tolerance rarely fits to centimetres; a walker seeing the same four beacons does
         not stay within the agreement and waits for a fifth beacon.
         """
-        a = frame_fix(self._tentative_detections, self.site, self.c, bandwidth, self._strict_config)
+        a = frame_fix(self._tentative_detections, self.site, self.c, bandwidth, self._strict_config,
+                      range_lag_s=self.range_lag_s)
         b = frame_fix([d for d in detections if d.beacon_id in fix.used_ids], self.site, self.c, bandwidth,
-                      self._strict_config)
+                      self._strict_config, range_lag_s=self.range_lag_s)
         return (a is not None and b is not None and min(a.n_beacons, b.n_beacons) >= 4
                 and math.hypot(a.east_m - b.east_m, a.north_m - b.north_m) <= self.static_agreement_m)
 
@@ -520,31 +523,44 @@ def frame_fix(detections: list[ChirpDetection], site: Site, c: float, bandwidth:
               config: PositionConfig, start: AcousticFix | None = None,
               clock_prior: tuple[float, float] | None = None,
               velocity_m_s: tuple[float, float] | None = None,
-              position_prior: tuple[float, float, float] | None = None) -> AcousticFix | None:
+              position_prior: tuple[float, float, float] | None = None,
+              range_lag_s: dict | None = None) -> AcousticFix | None:
     """Position fix from one frame's detections (None when fewer than three beacons).
 
     ``start``: the previous fix (initial value); ``clock_prior``: (δ, σ_δ) of a tracked clock;
     ``velocity_m_s``: (east, north) velocity of the receiver during the frame, known from the
     track. A frame's chirps arrive up to a frame apart, so the receiver at arrival i stood at
     p + v·(tᵢ − t̄); since ‖p + v·(tᵢ − t̄) − sᵢ‖ = ‖p − (sᵢ − v·(tᵢ − t̄))‖, each beacon is
-    moved by −v·(tᵢ − t̄) and the fix p is the position at the mean arrival time t̄.
+    moved by −v·(tᵢ − t̄) and the fix p is the position at the mean arrival time t̄, which
+    is also its time tag (``t_s`` = t̄ − δ), whichever beacons the exclusion then keeps: the
+    excluded ones are usually the far, late ones, and a tag from the kept beacons alone was
+    0.10 s early on 75 % of walk fixes (issue 11, defect 1).
+
+    ``range_lag_s``: beacon id → the range–Doppler lag λ of its chirp
+    (:attr:`~features.acoustic.matched_filter.ChirpSpec.range_doppler_lag_s`). A moving
+    receiver's linear-chirp range is the range λ after the arrival (38 ms for the default
+    chirp, 5 cm at walking pace), so each range is taken at tᵢ = arrivalᵢ + λᵢ, for the motion
+    compensation and for the time tag alike; no velocity is needed, and with every beacon on
+    one chirp the correction is a shift of the tag by λ.
     """
     by_id = site.beacon_by_id
     used = [d for d in detections if d.associated]
     if len(used) < 3:
         return None
-    t_mean = sum(d.arrival_s for d in used) / len(used)
+    lag = range_lag_s or {}
+    t_range = [d.arrival_s + lag.get(d.beacon_id, 0.0) for d in used]
+    t_mean = sum(t_range) / len(used)
     ve, vn = (0.0, 0.0) if velocity_m_s is None else velocity_m_s
     # Walking during the frame: σᵢ² += ½·(v·(tᵢ − t̄))² (see PositionConfig; v = 0 when standing).
     v_motion = config.motion_speed_m_s if config.motion_speed_m_s > 0 else 0.0
     ranges = []
-    for d in used:
-        b, dt = by_id[d.beacon_id], d.arrival_s - t_mean
+    for d, t_i in zip(used, t_range):
+        b, dt = by_id[d.beacon_id], t_i - t_mean
         sigma_m = toa_range_sigma_m(d.snr_db, bandwidth[d.beacon_id], c)
         if v_motion:
             sigma_m = math.sqrt(sigma_m ** 2 + 0.5 * (v_motion * dt) ** 2)
         ranges.append(BeaconRange(d.beacon_id, b.east_m - ve * dt, b.north_m - vn * dt, b.up_m,
-                                  c * (d.arrival_s - d.tx_s), sigma_m, d.arrival_s))
+                                  c * (d.arrival_s - d.tx_s), sigma_m, t_i))
     # Start from the previous fix, moved to the track's prediction when there is one (fewer iterations).
     if start is None:
         x0 = None
@@ -552,7 +568,8 @@ def frame_fix(detections: list[ChirpDetection], site: Site, c: float, bandwidth:
         x0 = (position_prior[0], position_prior[1], start.clock_offset_s)
     else:
         x0 = (start.east_m, start.north_m, start.clock_offset_s)
-    return solve_position(ranges, site, c, config, x0, clock_prior, position_prior)
+    return solve_position(ranges, site, c, config, x0, clock_prior, position_prior,
+                          t_ref_s=t_mean if velocity_m_s is not None else None)
 
 
 def acquisition_windows(windows: list[SearchWindow], candidates, tracker: ClockPositionTracker, timing: AudioTiming,
