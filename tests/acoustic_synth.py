@@ -162,10 +162,11 @@ def single_path_run(gain: float, seconds: float, seed: int, tmp, echoes: tuple =
         k += 1
     path = Path(tmp) / f"single_{seed}_{gain:.6f}_{len(echoes)}.wav"
     write_wav(path, x, subtype="FLOAT")
-    timing = AudioTiming(start_s=0.0, start_uncertainty_s=0.01, frame_phase_s=0.0)
+    # 0.1 s frames: ranges up to 30 m (87 ms) leave ±6 ms of start uncertainty (detection._frame_safe_timing).
+    timing = AudioTiming(start_s=0.0, start_uncertainty_s=0.005, frame_phase_s=0.0)
     feats, snr, err = [], [], []
     true_arrivals = np.array(true_arrivals)
-    for fr in detect_frames(path, site, timing, DetectorConfig(max_range_m=40.0)):
+    for fr in detect_frames(path, site, timing, DetectorConfig(max_range_m=30.0)):
         for d in fr.detections:
             j = int(np.argmin(np.abs(true_arrivals - d.arrival_s)))
             feats.append(d.features.as_array())
