@@ -35,12 +35,20 @@ def _truth_at(truth, t):
     return np.interp(t, truth.t_s, truth.east_m), np.interp(t, truth.t_s, truth.north_m)
 
 
-def evaluate(walk_dirs: list[Path]) -> dict:
+def evaluate(walk_dirs: list[Path], uere_json: Path | None = None, acoustic: bool = True) -> dict:
     from features.acoustic.positions import PositionConfig
     from features.acoustic.features import analyse_audio
     from features.acoustic.timing import timing_from_walk
     from features.walk import load_walk, read_truth
-    from pipeline.walk_data import WALK_SPEED_PRIOR_M_S, _read_gnss
+    from features.gnss.nmea import epochs_on_time_base, read_nmea
+    from features.gnss.positions import fixes_to_enu
+    from pipeline.walk_data import WALK_SPEED_PRIOR_M_S
+
+    uere = None
+    if uere_json is not None:
+        from features.gnss.positions import UereTable
+
+        uere = UereTable.from_dict(json.loads(Path(uere_json).read_text()))
 
     ac = {k: {"nees": [], "err": [], "frames": 0, "fixed": 0, "along": [], "lag": []} for k in ENV_CLASSES}
     gn: dict = {}
@@ -51,16 +59,18 @@ def evaluate(walk_dirs: list[Path]) -> dict:
         timing = timing_from_walk(walk, site)
         pos = PositionConfig(max_clock_offset_s=timing.start_uncertainty_s + 0.05,
                              motion_speed_m_s=WALK_SPEED_PRIOR_M_S)
-        res = analyse_audio(walk.path("audio"), site, timing, positions=pos, keep_frames=True)
+        res = analyse_audio(walk.path("audio"), site, timing, positions=pos, keep_frames=True) if acoustic else None
+        frames = res.frames if acoustic else []
+        fixes = res.fixes if acoustic else []
         frame_s = site.acoustic.frame_s
-        for fr in res.frames:
+        for fr in frames:
             mid = fr.frame_start_s + 0.5 * frame_s
             if mid < truth.t_s[0] or mid > truth.t_s[-1]:
                 continue
             k = ENV_CLASSES[int(_class_at(truth, mid))]
             ac[k]["frames"] += 1
             ac[k]["fixed"] += fr.fix is not None
-        for f in res.fixes:
+        for f in fixes:
             if f.t_s < truth.t_s[0] or f.t_s > truth.t_s[-1]:
                 continue
             te, tn = _truth_at(truth, f.t_s)
@@ -77,14 +87,19 @@ def evaluate(walk_dirs: list[Path]) -> dict:
                 along = float((e[0] * ve + e[1] * vn) / speed)
                 ac[k]["along"].append(along)
                 ac[k]["lag"].append(along / speed)
-        g = _read_gnss(walk, site).positions
+        epochs, _ = read_nmea(walk.path("gnss"))
+        epochs = epochs_on_time_base(epochs, walk.start_utc)
+        o = site.origin
+        kw = {"uere": uere} if uere is not None else {}
+        g = fixes_to_enu(epochs, o.lat_deg, o.lon_deg, o.alt_m, **kw)
         for i in range(len(g.t_s)):
             t = float(g.t_s[i])
             if t < truth.t_s[0] or t > truth.t_s[-1]:
                 continue
             te, tn = _truth_at(truth, t)
-            s = float(g.sigma_en_m[i])
-            nees = ((g.east_m[i] - te) / s) ** 2 + ((g.north_m[i] - tn) / s) ** 2
+            se = float(g.sigma_en_m[i] if getattr(g, "sigma_east_m", None) is None else g.sigma_east_m[i])
+            sn = float(g.sigma_en_m[i] if getattr(g, "sigma_north_m", None) is None else g.sigma_north_m[i])
+            nees = ((g.east_m[i] - te) / se) ** 2 + ((g.north_m[i] - tn) / sn) ** 2
             key = (int(g.quality[i]), ENV_CLASSES[int(_class_at(truth, t))])
             gn.setdefault(key, []).append(float(nees))
     out = {"acoustic": {}, "gnss": {}}
@@ -115,8 +130,10 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("walks", nargs="+", type=Path)
     ap.add_argument("--json", type=Path, default=None)
+    ap.add_argument("--uere", type=Path, default=None, help="fitted UERE table (JSON) for the GNSS σ")
+    ap.add_argument("--gnss-only", action="store_true")
     args = ap.parse_args(argv)
-    out = evaluate(args.walks)
+    out = evaluate(args.walks, args.uere, acoustic=not args.gnss_only)
     print(f"{'acoustic':8s} {'fixes':>6s} {'NEES mean':>9s} {'median':>7s} {'rms m':>7s} {'p95 m':>7s} {'fix share':>9s}"
           f" {'along m':>8s} {'lag s':>7s}")
     for k, s in out["acoustic"].items():
