@@ -134,3 +134,20 @@ def test_cli_fit_uere_without_truth_is_a_clean_error(tmp_path, capsys):
                "--fit-uere", str(tmp_path / "u.json")])
     assert rc != 0 and "--fit-uere needs truth.csv" in capsys.readouterr().err
     assert not (tmp_path / "u.json").exists()
+
+
+@pytest.mark.parametrize("log", ["ublox-neo-m9n-nmea.log", "skytraq-dgps.log", "ublox-zed-f9p-nmea.log"])
+def test_gst_agrees_with_gpsd(log):
+    """gpsd's own decode of the same logs (its .chk GST objects: lat / lon σ, m) is the reference."""
+    from tests.conftest import shared_data
+
+    path = shared_data("nmea", "gpsd", log)
+    ref = {}
+    for line in Path(str(path) + ".chk").read_text().splitlines():
+        if '"class":"GST"' in line:
+            obj = json.loads(line)
+            hh, mm, ss = obj["time"][11:13], obj["time"][14:16], obj["time"][17:23]
+            ref[round(int(hh) * 3600 + int(mm) * 60 + float(ss), 3)] = (obj["lat"], obj["lon"])
+    ours = read_gst(path)
+    assert len(ref) >= 20 and set(ref) <= set(ours)
+    assert all(ours[t] == pytest.approx(ref[t], abs=1e-9) for t in ref)
