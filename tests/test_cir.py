@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 import scipy.stats
 
-from features.acoustic.cir import FEATURE_NAMES, K_MAX_DB, analyse_cir, analyse_cirs, find_paths, first_arrivals
+from features.acoustic.cir import (FEATURE_NAMES, K_MAX_DB, analyse_cir, analyse_cirs, find_paths, first_arrivals,
+                                   noise_threshold_factor)
 from features.acoustic.matched_filter import ChirpSpec, MatchedFilterBank
 from tests.acoustic_synth import FS_HZ, add_chirp
 
@@ -46,12 +47,18 @@ def test_tap_spacing_scales_delays_only():
         assert getattr(b, name) == pytest.approx(getattr(a, name))
 
 
-def test_thresholds_peak_minus_20db_and_noise_plus_6db():
+def test_thresholds_peak_minus_20db_and_the_noise_false_alarm_budget():
+    """Taps above max(peak − 20 dB, N₀·ln(n_taps / 1 %)): for 100 taps the noise threshold is
+    ln(10⁴) = 9.21 times (9.6 dB above) the noise power; a tap just above it is kept, just below dropped."""
     a = np.zeros(100)
     a[[10, 20, 30]] = [1.0, 0.11, 0.09]     # −19.2 dB kept, −20.9 dB dropped
     r = analyse_cir(a, 1.0, noise_power=1e-12)
     assert r.tap_index.tolist() == [10, 20]
-    r = analyse_cir(a, 1.0, noise_power=0.11 ** 2 / 10 ** 0.6 * 1.01)   # noise + 6 dB now above tap 20
+    factor = math.log(100 / 1e-2)
+    assert noise_threshold_factor(100) == pytest.approx(factor)
+    r = analyse_cir(a, 1.0, noise_power=0.11 ** 2 / factor * 0.99)     # threshold just below tap 20
+    assert r.tap_index.tolist() == [10, 20]
+    r = analyse_cir(a, 1.0, noise_power=0.11 ** 2 / factor * 1.01)     # now just above tap 20
     assert r.tap_index.tolist() == [10]
     assert r.features.rician_k_db == K_MAX_DB
     assert math.isnan(r.features.delay_skewness) and r.features.rms_delay_ms == 0.0

@@ -55,7 +55,15 @@ def test_real_file_positions_and_no_fix_file():
     epochs, _ = read_nmea(DATA / "good.nmea")
     pos = fixes_to_enu(epochs, 30.0, 120.0, 20.0)
     assert len(pos) == 2 and pos.quality.tolist() == [2, 2]
-    assert pos.sigma_en_m[0] == pytest.approx(1.0 * 1.2 / math.sqrt(2))
+    # σ = UERE·HDOP·g/√2 with the SIGMA-ε factor g² = mean 10^(aᵢ/10) of the five used satellites,
+    # aᵢ = C_ref(elᵢ) − C/N0ᵢ, C_ref = 38 dB-Hz at 5° to 50 at zenith, linear in sin(el) (worked here).
+    b = 12.0 / (1.0 - math.sin(math.radians(5.0)))
+    cref = lambda el: 38.0 + b * (math.sin(math.radians(el)) - math.sin(math.radians(5.0)))
+    used = [(45.0, 44.0), (30.0, 40.0), (60.0, 48.0), (50.0, 41.0), (20.0, 33.0)]
+    g = math.sqrt(np.mean([10 ** (max(0.0, cref(el) - c) / 10) for el, c in used]))
+    assert g == pytest.approx(1.769, abs=1e-3)
+    assert pos.sigma_en_m[0] == pytest.approx(1.0 * 1.2 * g / math.sqrt(2))   # was 0.849 before the factor
+    assert pos.sigma_source.tolist() == ["cn0", "cn0"]
     assert pos.up_m[0] == pytest.approx(0.0, abs=1e-6)  # 15 m MSL + 5 m geoid = 20 m ellipsoidal
     epochs, _ = read_nmea(DATA / "no_fix.nmea")
     assert len(fixes_to_enu(epochs, 30.0, 120.0, 0.0)) == 0

@@ -82,7 +82,10 @@ def test_first_arrival_agrees_with_the_chip(uwb):
 
 def test_per_class_medians_order_and_values(uwb):
     x, y, _, _ = uwb
-    assert len(y) == 328
+    # Pinned from the code's own output (change detectors). Issue 11's tap threshold (noise + 10.6 dB
+    # for 1016 taps, was + 6 dB) moved: 328 -> 327 CIRs valid, NLOS (5.59, 5.75, -5.16) -> (5.57,
+    # 5.74, -5.13), NDP NLOS rms 7.88 -> 7.63 ns; the class order (the finding) is unchanged.
+    assert len(y) == 327
     excess_ns = {c: 1e6 * _median(x, y, c, "mean_excess_delay_ms") for c in CLASSES}
     rms_ns = {c: 1e6 * _median(x, y, c, "rms_delay_ms") for c in CLASSES}
     k_db = {c: _median(x, y, c, "rician_k_db") for c in CLASSES}
@@ -90,7 +93,7 @@ def test_per_class_medians_order_and_values(uwb):
     assert excess_ns["LOS"] < excess_ns["NLOS"] < excess_ns["NDP NLOS"]
     assert rms_ns["LOS"] < rms_ns["NLOS"] < rms_ns["NDP NLOS"]
     assert k_db["LOS"] > k_db["NLOS"] > k_db["NDP NLOS"]
-    pinned = {"LOS": (2.28, 3.93, -1.42), "NLOS": (5.59, 5.75, -5.16), "NDP NLOS": (11.82, 7.88, -12.58)}
+    pinned = {"LOS": (2.28, 3.93, -1.42), "NLOS": (5.57, 5.74, -5.13), "NDP NLOS": (11.82, 7.63, -12.58)}
     for c, (e, r, k) in pinned.items():
         assert excess_ns[c] == pytest.approx(e, abs=0.05)
         assert rms_ns[c] == pytest.approx(r, abs=0.05)
@@ -119,7 +122,7 @@ def test_classifier_with_files_split(uwb):
             pred = cross_val_predict(clf, x, labels, groups=groups, cv=cv)
             acc[name, cname] = float(np.mean(pred == labels))
     assert acc["binary", "forest"] == pytest.approx(0.915, abs=0.03)
-    assert acc["binary", "logistic"] == pytest.approx(0.826, abs=0.03)
+    assert acc["binary", "logistic"] == pytest.approx(0.859, abs=0.03)     # 0.826 with the 6 dB tap threshold
     assert acc["three", "forest"] == pytest.approx(0.625, abs=0.05)
     assert acc["three", "logistic"] == pytest.approx(0.540, abs=0.05)
     # Well above the majority-class rate (72 % NLOS in the binary task, 41 % NDP in three classes).

@@ -10,9 +10,30 @@ Steps (DESIGN.md §5):
    caller, or estimated robustly as ``median(|h|²)/ln 2`` (the median of an
    exponential power distribution is ``ln 2`` times its mean), valid when most
    taps are noise, as in a UWB accumulator window.
-2. **Tap selection**: taps with power above ``max(peak − 20 dB, noise + 6 dB)``.
+2. **Tap selection**: taps with power above ``max(peak − 20 dB, γ_n)``, with the
+   noise threshold γ_n set from a false-alarm budget over the CIR (Kay,
+   "Fundamentals of Statistical Signal Processing, Vol. II: Detection", 1998,
+   §7.6, the union bound over cells as in :mod:`features.acoustic.detection`).
+   In noise alone the envelope is Rayleigh, so a tap's power is exponential
+   with mean N₀ and P(p > γ) = exp(−γ/N₀); requiring at most ``CIR_P_FA``
+   (1 %) noise taps per CIR of ``n_taps`` taps gives
+
+       γ_n = N₀ · ln(n_taps / CIR_P_FA)
+
+   — 10.0 dB above the noise for the 211-tap audio CIR, 10.6 dB for the
+   1016-tap UWB accumulator. The old rule, noise + 6 dB, let a noise tap through
+   with probability e⁻⁴ ≈ 1.8 % each, about two per audio CIR: a noise tap
+   10 ms after a 20 dB peak adds about 1 ms of rms delay, so the features
+   measured SNR rather than multipath (docs/cir_features.md gives the figures).
+   Taps after the search range from the first one stronger than the peak on
+   (less one pulse width: its rising edge) are another chirp, not this one's
+   multipath, and are cut, so every selected tap lies at or below the peak and
+   every gain is ≤ 0 dB.
 3. **First arrival τ₀ by leading-edge detection**: the earliest tap above the
-   threshold within ``max_lead_s`` before the strongest tap; τ₀ is the first
+   same threshold within ``max_lead_s`` before the strongest tap (with the
+   budget above, a noise tap in a 30-tap lead window precedes the chirp with
+   probability ≤ 30 · 1 %/211 ≈ 0.14 %, against 1 − (1 − e⁻⁴)³⁰ ≈ 42 % for the
+   old 6 dB margin at the threshold's floor); τ₀ is the first
    local maximum at or after it (the peak of the first path's lobe), refined to
    a fraction of a tap by a parabola through the log-amplitudes of the peak
    and its neighbours (exact for a Gaussian lobe; Jacobsen & Kootsookos 2007,
@@ -46,13 +67,26 @@ import numpy as np
 from features.errors import DataError
 
 __all__ = ["CirFeatures", "CirAnalysis", "CirBatch", "analyse_cir", "analyse_cirs", "first_arrivals", "find_paths", "robust_noise_power",
-           "FEATURE_NAMES", "K_MAX_DB", "PEAK_DYNAMIC_RANGE_DB", "NOISE_MARGIN_DB"]
+           "FEATURE_NAMES", "K_MAX_DB", "PEAK_DYNAMIC_RANGE_DB", "CIR_P_FA",
+           "noise_threshold_factor"]
 
 PEAK_DYNAMIC_RANGE_DB = 20.0
 """Taps more than this far below the strongest are ignored (DESIGN.md §5)."""
 
-NOISE_MARGIN_DB = 6.0
-"""Taps must exceed the noise floor by this much (DESIGN.md §5)."""
+CIR_P_FA = 1e-2
+"""False-alarm budget of the tap selection: expected noise taps selected per CIR (module docstring, step 2)."""
+
+
+def noise_threshold_factor(n_taps: int, p_fa: float = CIR_P_FA) -> float:
+    """γ_n / N₀ = ln(n_taps / p_fa): the tap-power threshold over the mean noise power (step 2).
+
+    Union bound over the taps of an exponential (Rayleigh-envelope) noise power
+    (Kay 1998, Vol. II, §7.6). At least e (a 4.3 dB floor for tiny CIRs).
+
+    >>> round(10 * math.log10(noise_threshold_factor(211)), 1), round(10 * math.log10(noise_threshold_factor(1016)), 1)
+    (10.0, 10.6)
+    """
+    return max(math.log(max(n_taps, 1) / p_fa), 1.0)
 
 K_MAX_DB = 40.0
 """Rician K reported when the first path is the only selected energy, dB."""
@@ -178,7 +212,7 @@ def _sparse_moments(row: np.ndarray, x: np.ndarray, w: np.ndarray, n: int, origi
 
 
 def _first_arrivals(a: np.ndarray, power: np.ndarray, idx: np.ndarray, noise: np.ndarray, search_start,
-                    search_stop, lead: int, length: int):
+                    search_stop, lead: int, length: int, noise_factor: float):
     """Steps 2–3 of the module docstring for the rows of ``a`` (n, L): the strongest tap in
     the search range, the tap threshold, validity, the leading edge and τ₀ (log-parabolic).
 
@@ -196,7 +230,7 @@ def _first_arrivals(a: np.ndarray, power: np.ndarray, idx: np.ndarray, noise: np
     # Powers are >= 0, so -1 marks the taps outside the search range.
     peak = np.argmax(np.where((idx >= start_col) & (idx < stop_col), power, -1.0), axis=1)
     p_peak = power[rows, peak]
-    threshold = np.maximum(p_peak * 10 ** (-PEAK_DYNAMIC_RANGE_DB / 10), noise * 10 ** (NOISE_MARGIN_DB / 10))
+    threshold = np.maximum(p_peak * 10 ** (-PEAK_DYNAMIC_RANGE_DB / 10), noise * noise_factor)
     valid = np.isfinite(p_peak) & (p_peak > threshold)
     # Leading edge: the earliest tap above the threshold, at most ``lead`` taps before the peak.
     lo = np.maximum(start, peak - lead)
@@ -216,14 +250,17 @@ def _first_arrivals(a: np.ndarray, power: np.ndarray, idx: np.ndarray, noise: np
     return valid, peak, p_peak, threshold, edge, first + delta, np.exp(y0 - 0.25 * (ym - yp) * delta)
 
 
-def first_arrivals(rows: list, search_start: list, search_stop: int, lead: int, noise_power: float) -> list:
+def first_arrivals(rows: list, search_start: list, search_stop: int, lead: int, noise_power: float,
+                   n_taps: int | None = None) -> list:
     """Steps 2–3 of the module docstring for a few CIRs, in scalar Python: per row,
     ``(τ₀ in fractional taps, peak SNR in dB)``, or None when no tap clears the threshold.
 
     ``rows``: amplitude envelopes as lists of floats (all of one length L);
     ``search_start`` (one per row) and ``search_stop``: the strongest tap is sought in
-    ``[start, stop)``; ``lead``: how many taps before it the leading edge may lie.
-    The same arithmetic as :func:`analyse_cirs` (``with_features=False``), which a
+    ``[start, stop)``; ``lead``: how many taps before it the leading edge may lie;
+    ``n_taps``: the length of the whole CIR the noise threshold is budgeted over
+    (:func:`noise_threshold_factor`; default L, give the full length when ``rows``
+    are the first columns of longer CIRs). The same arithmetic as :func:`analyse_cirs` (``with_features=False``), which a
     test checks row for row; written out because the receiver times a handful of
     chirps per TDMA frame, where numpy's per-call overhead costs several times the
     arithmetic (on a 2-core test machine ~60 µs here against ~150 µs for eight CIRs).
@@ -231,10 +268,10 @@ def first_arrivals(rows: list, search_start: list, search_stop: int, lead: int, 
     out = []
     if not rows:
         return out
-    noise_floor = noise_power * 10 ** (NOISE_MARGIN_DB / 10)
+    length = len(rows[0])
+    noise_floor = noise_power * noise_threshold_factor(length if n_taps is None else n_taps)
     dynamic_range = 10 ** (-PEAK_DYNAMIC_RANGE_DB / 10)
     snr_ref = max(noise_power, 1e-300)
-    length = len(rows[0])
     stop = min(max(search_stop, 1), length)
     log, isfinite = math.log, math.isfinite
     for a, start in zip(rows, search_start):
@@ -317,8 +354,18 @@ def analyse_cirs(amplitude: np.ndarray, tap_s: float, *, noise_power=None, max_l
     # Every index the first-arrival step returns lies before the search stop (plus one tap for the parabola).
     width = length if search_stop is None else min(length, int(np.max(search_stop)) + 1)
     valid, peak, p_peak, threshold, edge, tau0, amp0 = _first_arrivals(
-        a[:, :width], power[:, :width], idx[:, :width], noise, search_start, search_stop, lead, length)
+        a[:, :width], power[:, :width], idx[:, :width], noise, search_start, search_stop, lead, length,
+        noise_threshold_factor(length))
     sel = (power >= threshold[:, None]) & (idx >= edge[:, None]) & valid[:, None]
+    if width < length:
+        # Another chirp: from the first tap after the search range stronger than the peak, less one
+        # pulse width (its rising edge), nothing belongs to this CIR (module docstring, step 2).
+        over = power[:, width - 1:] > p_peak[:, None]
+        has_over = over.any(axis=1)
+        if has_over.any():
+            pulse_taps = int(math.ceil((pulse_width_s if pulse_width_s is not None else tap_s) / tap_s))
+            cut = np.where(has_over, np.maximum(width - 1 + np.argmax(over, axis=1) - pulse_taps, peak + 1), length)
+            sel &= idx < cut[:, None]
     if not with_features:
         return CirBatch(valid=valid, features=np.full((n, len(FEATURE_NAMES)), np.nan), first_arrival_tap=tau0,
                         first_arrival_amplitude=amp0, peak_tap=peak,

@@ -15,6 +15,13 @@ does not void the others), the counts behind them, and flags:
 Flags join with ``+`` in one column. Positions come per TDMA frame from
 :mod:`features.acoustic.positions`.
 
+Windows lie on the walk's time base (``t_s`` the window centre, the same grid
+whatever the clock); a chirp goes to the window of its true arrival time, its
+stated arrival less the receiver clock offset of the latest fix (before the
+first fix: none). The stated audio start is off by up to its uncertainty
+(tens of ms), which otherwise moved the chirps near a window edge into the
+wrong window (issue 11).
+
 Memory: detections are folded into per-hop accumulators and per-frame groups
 as they stream past; nothing grows with the file but a few numbers per second.
 """
@@ -146,12 +153,15 @@ def analyse_audio(path: str | os.PathLike, site: Site, timing: AudioTiming,
     fixes: list[AcousticFix] = []
     n_det = 0
     kept = [] if keep_frames else None
+    clock_s = 0.0          # the receiver clock offset (stated − true) of the latest fix: chirps go to windows by true time
     for frame in detect_frames(path, site, timing, detector, stats, positions):
         if kept is not None:
             kept.append(frame)
+        if frame.fix is not None:
+            clock_s = frame.fix.clock_offset_s
         for det in frame.detections:
             n_det += 1
-            k = math.floor((det.arrival_s - timing.start_s) / windows.hop_s)
+            k = math.floor((det.arrival_s - clock_s - timing.start_s) / windows.hop_s)
             if k >= 0:
                 bins.add(k, det.features, det.snr_db, det.beacon_id)
         if frame.fix is not None:

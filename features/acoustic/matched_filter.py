@@ -93,6 +93,29 @@ class ChirpSpec:
     def bandwidth_hz(self) -> float:
         return self.f1_hz - self.f0_hz
 
+    @property
+    def range_doppler_lag_s(self) -> float:
+        """Range–Doppler coupling of the linear chirp: the matched-filter peak moves by −(η − 1)·this, s.
+
+        A receiver closing on the beacon at v_r hears s(η·(t − t_a)), η = 1 + v_r/c
+        (moving observer): every frequency scaled by η and the sweep rate k by η².
+        Aligning the heard instantaneous frequency η·f0 + η²·k·u with the template's
+        f0 + k·(u − L) at the chirp's centre (u = T/2), to first order in η − 1,
+
+            L = −(η − 1)·(f0/k + T) = −(η − 1)·T·f1/B,
+
+        the LFM's range–Doppler coupling (Levanon & Mozeson, "Radar Signals", 2004,
+        §4.2, where a frequency offset Δf moves the peak by −Δf·T/B; the time
+        compression adds the f0 → f1 of the centre). The range read is therefore
+        c·L = −v_r·T·f1/B too short when closing: ρ = r(t_a) + ṙ·T·f1/B ≈ r(t_a + T·f1/B),
+        the range T·f1/B later (38.3 ms for 17→23 kHz in 10 ms). On a Doppler-scaled
+        simulated chirp the peak moves by −38.2 ms per unit η − 1 (a test checks).
+
+        >>> round(ChirpSpec(17000.0, 23000.0, 0.010, 0.2).range_doppler_lag_s * 1e3, 2)
+        38.33
+        """
+        return self.duration_s * self.f1_hz / (self.f1_hz - self.f0_hz)
+
 
 def chirp_template(spec: ChirpSpec, fs_hz: float) -> np.ndarray:
     """The transmitted chirp sampled at ``fs_hz``: shape ``(round(duration·fs),)``, peak 1.

@@ -108,7 +108,9 @@ class PositionConfig:
 
 
 class BeaconRange(NamedTuple):
-    """One pseudorange: beacon position (ENU m), ``pseudorange_m`` = c·(arrival − emission), σ in m."""
+    """One pseudorange: beacon position (ENU m), ``pseudorange_m`` = c·(arrival − emission), σ in m;
+    ``arrival_s`` the stated time the range refers to (the arrival plus the chirp's range–Doppler
+    lag, see :func:`features.acoustic.tracking.frame_fix`), used for the fix's time tag."""
 
     beacon_id: int
     east_m: float
@@ -290,7 +292,8 @@ def _gauss_newton(ranges: list[BeaconRange], height_m: float, c: float, iteratio
 def solve_position(ranges: list[BeaconRange], site: Site, speed_m_s: float,
                    config: PositionConfig = PositionConfig(), start: np.ndarray | None = None,
                    clock_prior: tuple[float, float] | None = None,
-                   position_prior: tuple[float, float, float] | None = None) -> AcousticFix | None:
+                   position_prior: tuple[float, float, float] | None = None,
+                   t_ref_s: float | None = None) -> AcousticFix | None:
     """Gauss-Newton fix with NLOS exclusion; None when too few beacons or no plausible solution.
 
     ``start``: optional initial (east_m, north_m, clock_offset_s), e.g. the previous fix.
@@ -300,6 +303,11 @@ def solve_position(ranges: list[BeaconRange], site: Site, speed_m_s: float,
     not enter the fix, only the choice among subsets of equal size that pass the test
     (smallest chi² + ‖p − p̂‖²/σ², the innovation's share): under poor geometry a subset
     keeping an NLOS-biased beacon can fit as well as the right one, but lies metres off.
+    ``t_ref_s``: the stated time the ranges were motion-compensated to (see
+    :func:`features.acoustic.tracking.frame_fix`); the fix's ``t_s`` is then that time less
+    the clock offset, whichever beacons the exclusion keeps. Without it, ``t_s`` is the
+    mean arrival of the kept beacons less the clock offset (the static model: the fix is
+    where the receiver stood while they were heard).
     """
     ranges = list(ranges)
     h = site.device_height_m
@@ -324,7 +332,8 @@ def solve_position(ranges: list[BeaconRange], site: Site, speed_m_s: float,
     if not _plausible(x, site, config):
         return None
     east, north, clock = x.tolist()
-    t_true = sum(r.arrival_s for r in ranges) / len(ranges) - clock
+    t_stated = sum(r.arrival_s for r in ranges) / len(ranges) if t_ref_s is None else t_ref_s
+    t_true = t_stated - clock
     return AcousticFix(t_s=t_true, east_m=east, north_m=north, clock_offset_s=clock,
                        n_beacons=len(ranges), covariance=cov,
                        rms_residual_m=math.sqrt(float(res @ res) / len(res)),

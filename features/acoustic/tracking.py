@@ -16,6 +16,7 @@ import statistics
 
 import numpy as np
 
+from features.acoustic.clock import ClockState
 from features.acoustic.positions import AcousticFix, BeaconRange, PositionConfig, solve_position, toa_range_sigma_m
 from features.acoustic.timing import AudioTiming, ChirpDetection, SearchWindow
 from features.site import Site
@@ -48,10 +49,13 @@ class ClockPositionTracker:
     ``max_speed_m_s`` and a clock drift of ``max_drift_ppm`` over the elapsed
     time; an NLOS first arrival may come up to ``nlos_slack_m`` later. Beacons
     predicted beyond ``r_max`` are not searched. The clock offset drifts (a
-    sample clock off by 10 ppm gains 6 ms in 10 minutes), so it is tracked
-    rather than estimated once: each tracked fix takes the last offset as a
-    prior widened by ``clock_drift_prior_ppm`` over the elapsed time, which
-    leaves three beacons a degree of freedom for the residual test. Once two
+    sample clock off by 10 ppm gains 6 ms in 10 minutes), so it is tracked by a
+    two-state offset + drift filter (:mod:`features.acoustic.clock`; Brown &
+    Hwang's clock model): each tracked fix takes the predicted offset as a prior
+    and its ranges are corrected for the drift within the frame, which leaves
+    three beacons a degree of freedom for the residual test; three-beacon fixes
+    that pass it carry the track on. (The one-state model before — last offset,
+    σ² + (20 ppm·Δt)² — biased the clock 3–5σ at 50 ppm.) Once two
     fixes give a velocity, each frame's ranges are compensated for the motion
     during the frame (:func:`frame_fix`), the exclusion search prefers the
     subset nearest the constant-velocity prediction, and a fix farther from it
@@ -65,7 +69,6 @@ class ClockPositionTracker:
     nlos_slack_m = 10.0
     track_timeout_s = 4.0
     acquisition_min_beacons = 4
-    clock_drift_prior_ppm = 20.0
     max_fix_sigma_m = 0.5
     residual_speed_m_s = 0.5
     max_turn_speed_m_s = 1.0
@@ -73,8 +76,10 @@ class ClockPositionTracker:
     max_rms_m = 0.5
 
     def __init__(self, site: Site, timing: AudioTiming, fs_hz: float, c: float, r_max: float,
-                 positions: PositionConfig):
+                 positions: PositionConfig, range_lag_s: dict | None = None):
         self.site, self.timing, self.fs, self.c, self.r_max = site, timing, fs_hz, c, r_max
+        # Beacon id -> the chirp's range–Doppler lag (ChirpSpec.range_doppler_lag_s): see frame_fix.
+        self.range_lag_s = range_lag_s
         self.positions = positions
         self.order = sorted(range(len(site.beacons)), key=lambda i: (site.beacons[i].slot, site.beacons[i].id))
         # (index, slot offset s, east, north, up) of each beacon in slot order, for windows().
@@ -99,6 +104,7 @@ class ClockPositionTracker:
         self._tentative_detections: list[ChirpDetection] = []
         self._tentative_ids: set = set()
         self._clock_anchor: tuple[float, float] | None = None
+        self._clock: ClockState | None = None          # the two-state clock filter, from the first confirmed track
         self._anchor_fix: AcousticFix | None = None
 
     @property
@@ -393,12 +399,13 @@ class ClockPositionTracker:
         """Fix of one frame, or None; updates the lock (acquisition → tentative → confirmed)."""
         tracking = self.tracking_at(frame_start_s)
         prior = None
+        clock_pred = None
+        drift = 0.0
         if tracking:
-            # The sample clock drifts slowly: the last fix's offset, widened by the drift since.
-            last = self.last_fix
-            dt = max(0.0, frame_start_s - last.t_s)
-            prior = (last.clock_offset_s, math.sqrt(max(last.covariance[2, 2], 0.0) + (
-                self.clock_drift_prior_ppm * 1e-6 * dt) ** 2 + 1e-10))
+            # The two-state clock filter's offset at this frame's fix time, and its drift (features.acoustic.clock).
+            clock_pred = self._clock_base().predict(self._fix_time(detections, frame_start_s))
+            prior = (clock_pred.offset_s, math.sqrt(max(clock_pred.p00, 0.0) + 1e-14))
+            drift = clock_pred.drift
         elif self.last_fix is not None:
             self.last_fix, self._previous_fix, self.confirmed = None, None, False   # lock lost: re-acquire
         velocity = self._velocity() if tracking else None
@@ -412,7 +419,7 @@ class ClockPositionTracker:
             predicted = (last.east_m + velocity[0] * dt, last.north_m + velocity[1] * dt, math.sqrt(
                 last.covariance[0, 0] + last.covariance[1, 1] + (self.max_turn_speed_m_s * dt) ** 2 + 0.25))
         fix = frame_fix(detections, self.site, self.c, bandwidth, config,
-                        self.last_fix if tracking else None, prior, velocity, predicted)
+                        self.last_fix if tracking else None, prior, velocity, predicted, self.range_lag_s, drift)
         if fix is None or not self._clock_plausible(fix):
             if tracking and not self.confirmed:
                 self.last_fix = None                         # a tentative lock not confirmed is dropped
@@ -450,11 +457,32 @@ class ClockPositionTracker:
             if self._sane(last) and math.hypot(fix.east_m - last.east_m, fix.north_m - last.north_m) <= (
                     1.5 * dt + 3.0 * math.sqrt(max(fix.covariance[0, 0] + fix.covariance[1, 1], 0.0)) + 0.5):
                 self._confirmed_tentative = last
-        if fix.n_beacons >= 4:
-            self._previous_fix, self.last_fix = self.last_fix, fix
-            self._clock_anchor = (fix.t_s, fix.clock_offset_s)
-            self._anchor_fix = fix
+        # With the drift-aware clock prior a three-beacon fix keeps a degree of freedom for the residual
+        # test (issue 11, defect 7): it carries the track on, as four or more do.
+        self._previous_fix, self.last_fix = self.last_fix, fix
+        self._clock_anchor = (fix.t_s, fix.clock_offset_s)
+        self._anchor_fix = fix
+        self._clock = clock_pred.conditioned(fix.clock_offset_s, float(fix.covariance[2, 2]))._replace(t_s=fix.t_s)
         return fix
+
+    def _clock_base(self) -> ClockState:
+        """The clock filter's state including the last fix (a new lock's first fix, solved without
+        the filter's prior, is an ordinary measurement of it; the very first starts the filter)."""
+        st, last = self._clock, self.last_fix
+        var = max(float(last.covariance[2, 2]), 0.0)
+        if st is None:
+            return ClockState.first(last.t_s, last.clock_offset_s, var)
+        if st.t_s < last.t_s - 1e-9:
+            return st.measured(last.t_s, last.clock_offset_s, var)
+        return st
+
+    def _fix_time(self, detections: list[ChirpDetection], frame_start_s: float) -> float:
+        """The time the frame's fix will carry (:func:`frame_fix`), from the last fix's clock offset."""
+        used = [d for d in detections if d.associated]
+        if not used:
+            return frame_start_s + 0.5 * self.site.acoustic.frame_s
+        lag = self.range_lag_s or {}
+        return sum(d.arrival_s + lag.get(d.beacon_id, 0.0) for d in used) / len(used) - self.last_fix.clock_offset_s
 
     def _static_confirmation(self, detections: list[ChirpDetection], fix: AcousticFix, bandwidth: dict) -> bool:
         """Four beacons only, the same in both frames: both frames pass the static residual test
@@ -463,9 +491,10 @@ class ClockPositionTracker:
         1.5 m tolerance rarely fits to centimetres; a walker seeing the same four beacons does
         not stay within the agreement and waits for a fifth beacon.
         """
-        a = frame_fix(self._tentative_detections, self.site, self.c, bandwidth, self._strict_config)
+        a = frame_fix(self._tentative_detections, self.site, self.c, bandwidth, self._strict_config,
+                      range_lag_s=self.range_lag_s)
         b = frame_fix([d for d in detections if d.beacon_id in fix.used_ids], self.site, self.c, bandwidth,
-                      self._strict_config)
+                      self._strict_config, range_lag_s=self.range_lag_s)
         return (a is not None and b is not None and min(a.n_beacons, b.n_beacons) >= 4
                 and math.hypot(a.east_m - b.east_m, a.north_m - b.north_m) <= self.static_agreement_m)
 
@@ -520,31 +549,48 @@ def frame_fix(detections: list[ChirpDetection], site: Site, c: float, bandwidth:
               config: PositionConfig, start: AcousticFix | None = None,
               clock_prior: tuple[float, float] | None = None,
               velocity_m_s: tuple[float, float] | None = None,
-              position_prior: tuple[float, float, float] | None = None) -> AcousticFix | None:
+              position_prior: tuple[float, float, float] | None = None,
+              range_lag_s: dict | None = None, clock_drift: float = 0.0) -> AcousticFix | None:
     """Position fix from one frame's detections (None when fewer than three beacons).
 
     ``start``: the previous fix (initial value); ``clock_prior``: (δ, σ_δ) of a tracked clock;
     ``velocity_m_s``: (east, north) velocity of the receiver during the frame, known from the
     track. A frame's chirps arrive up to a frame apart, so the receiver at arrival i stood at
     p + v·(tᵢ − t̄); since ‖p + v·(tᵢ − t̄) − sᵢ‖ = ‖p − (sᵢ − v·(tᵢ − t̄))‖, each beacon is
-    moved by −v·(tᵢ − t̄) and the fix p is the position at the mean arrival time t̄.
+    moved by −v·(tᵢ − t̄) and the fix p is the position at the mean arrival time t̄, which
+    is also its time tag (``t_s`` = t̄ − δ), whichever beacons the exclusion then keeps: the
+    excluded ones are usually the far, late ones, and a tag from the kept beacons alone was
+    0.10 s early on 75 % of walk fixes (issue 11, defect 1).
+
+    ``range_lag_s``: beacon id → the range–Doppler lag λ of its chirp
+    (:attr:`~features.acoustic.matched_filter.ChirpSpec.range_doppler_lag_s`). A moving
+    receiver's linear-chirp range is the range λ after the arrival (38 ms for the default
+    chirp, 5 cm at walking pace), so each range is taken at tᵢ = arrivalᵢ + λᵢ, for the motion
+    compensation and for the time tag alike; no velocity is needed, and with every beacon on
+    one chirp the correction is a shift of the tag by λ.
+
+    ``clock_drift``: the receiver clock's drift δ̇ (s/s, from the tracker's clock filter). The
+    offset at arrival i is δ + δ̇·(tᵢ − t̄), so each pseudorange loses c·δ̇·(tᵢ − t̄) and the fix's
+    δ is the offset at t̄ (100 ppm over a 2 s frame is ±3.4 cm of range otherwise).
     """
     by_id = site.beacon_by_id
     used = [d for d in detections if d.associated]
     if len(used) < 3:
         return None
-    t_mean = sum(d.arrival_s for d in used) / len(used)
+    lag = range_lag_s or {}
+    t_range = [d.arrival_s + lag.get(d.beacon_id, 0.0) for d in used]
+    t_mean = sum(t_range) / len(used)
     ve, vn = (0.0, 0.0) if velocity_m_s is None else velocity_m_s
     # Walking during the frame: σᵢ² += ½·(v·(tᵢ − t̄))² (see PositionConfig; v = 0 when standing).
     v_motion = config.motion_speed_m_s if config.motion_speed_m_s > 0 else 0.0
     ranges = []
-    for d in used:
-        b, dt = by_id[d.beacon_id], d.arrival_s - t_mean
+    for d, t_i in zip(used, t_range):
+        b, dt = by_id[d.beacon_id], t_i - t_mean
         sigma_m = toa_range_sigma_m(d.snr_db, bandwidth[d.beacon_id], c)
         if v_motion:
             sigma_m = math.sqrt(sigma_m ** 2 + 0.5 * (v_motion * dt) ** 2)
         ranges.append(BeaconRange(d.beacon_id, b.east_m - ve * dt, b.north_m - vn * dt, b.up_m,
-                                  c * (d.arrival_s - d.tx_s), sigma_m, d.arrival_s))
+                                  c * (d.arrival_s - d.tx_s - clock_drift * dt), sigma_m, t_i))
     # Start from the previous fix, moved to the track's prediction when there is one (fewer iterations).
     if start is None:
         x0 = None
@@ -552,7 +598,8 @@ def frame_fix(detections: list[ChirpDetection], site: Site, c: float, bandwidth:
         x0 = (position_prior[0], position_prior[1], start.clock_offset_s)
     else:
         x0 = (start.east_m, start.north_m, start.clock_offset_s)
-    return solve_position(ranges, site, c, config, x0, clock_prior, position_prior)
+    return solve_position(ranges, site, c, config, x0, clock_prior, position_prior,
+                          t_ref_s=t_mean if velocity_m_s is not None else None)
 
 
 def acquisition_windows(windows: list[SearchWindow], candidates, tracker: ClockPositionTracker, timing: AudioTiming,

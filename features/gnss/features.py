@@ -20,10 +20,14 @@ elevation mask (default 10°):
    satellites, minus 1, averaged over the window's epochs; 10 when fewer than
    4 are tracked (or their geometry is singular).
 
-HDOP from azimuth/elevation only, with one common receiver clock: rows
-``[cos el sin az, cos el cos az, sin el, 1]`` of the geometry matrix G,
+HDOP from azimuth/elevation only, with one receiver clock per GNSS system (as
+the receivers' own HDOP: GPS and BeiDou time differ): rows
+``[cos el sin az, cos el cos az, sin el, 1_sys]`` of the geometry matrix G,
 Q = (GᵀG)⁻¹, HDOP = sqrt(Q_EE + Q_NN) — the textbook definition (Kaplan &
-Hegarty, *Understanding GPS*, 2nd ed. 2006, ch. 7, dilution of precision).
+Hegarty, *Understanding GPS*, 2nd ed. 2006, ch. 7, dilution of precision)
+with the inter-system clock of multi-GNSS solutions. A satellite listed without
+azimuth or elevation has no line of sight and stays out of G (it was read as
+north before).
 
 The open-sky reference C_ref(el) = a + b·sin(el) defaults to ≈ 38 dB-Hz at 5°
 and 50 dB-Hz at zenith (DESIGN.md §6). The linear form in sin(el) is an
@@ -184,22 +188,40 @@ def sky_arrays(epochs: Sequence) -> SkyArrays:
     return SkyArrays(t_s, tuple(index), el, az, cn0, in_view, used, hdop)
 
 
-def _hdop(el_rad: np.ndarray, az_rad: np.ndarray, weight: np.ndarray) -> np.ndarray:
-    """HDOP per epoch from the satellites where ``weight`` is True; NaN if < 4 or singular. Shapes (n, m) → (n,)."""
+def _hdop(el_rad: np.ndarray, az_rad: np.ndarray, weight: np.ndarray, system_index: np.ndarray | None = None
+          ) -> np.ndarray:
+    """HDOP per epoch from the satellites where ``weight`` is True; NaN if too few or singular. Shapes (n, m) → (n,).
+
+    One receiver clock column per GNSS system (``system_index`` (m,) ints; default one clock):
+    GPS and BeiDou time differ, and receivers solve a clock per system, so their own HDOP
+    does. A system with no satellite in an epoch gets a unit diagonal (its clock decoupled),
+    and an epoch needs 3 + (systems present) satellites. Satellites without an elevation or
+    azimuth have no line of sight to put in G and are left out.
+    """
+    if system_index is None:
+        system_index = np.zeros(el_rad.shape[1], dtype=int)
+    n_sys = int(system_index.max()) + 1 if system_index.size else 1
+    weight = weight & np.isfinite(el_rad) & np.isfinite(az_rad)
     ce = np.cos(el_rad)
-    g = np.stack([ce * np.sin(az_rad), ce * np.cos(az_rad), np.sin(el_rad), np.ones_like(el_rad)], axis=-1)
+    clocks = np.broadcast_to((system_index[None, :, None] == np.arange(n_sys)[None, None, :]).astype(float),
+                             el_rad.shape + (n_sys,))
+    g = np.concatenate([np.stack([ce * np.sin(az_rad), ce * np.cos(az_rad), np.sin(el_rad)], axis=-1), clocks],
+                       axis=-1)
     g = np.where(weight[..., None], np.nan_to_num(g), 0.0)
-    # A = GᵀG per epoch, shape (n, 4, 4)
+    # A = GᵀG per epoch, shape (n, 3 + n_sys, 3 + n_sys)
     a = np.einsum("nmi,nmj->nij", g, g)
+    present = np.einsum("nm,mk->nk", weight.astype(float), (system_index[:, None] == np.arange(n_sys)).astype(float)) > 0
+    idx = 3 + np.arange(n_sys)
+    a[:, idx, idx] += ~present                     # an absent system's clock: unit diagonal, no coupling
     count = weight.sum(axis=1)
     out = np.full(a.shape[0], np.nan)
-    ok = count >= 4
+    ok = count >= 3 + present.sum(axis=1)
     if ok.any():
         sub = a[ok]
         # singular geometry (e.g. all satellites on one cone): |det(GᵀG)| negligible against its scale
         # count⁴ (entries are O(count)); LU determinant, cheaper than an SVD condition number
         det = np.linalg.det(sub)
-        good = np.isfinite(det) & (np.abs(det) > 1e-10 * count[ok].astype(float) ** 4)
+        good = np.isfinite(det) & (np.abs(det) > 1e-10 * count[ok].astype(float) ** sub.shape[1])
         q = np.full_like(sub, np.nan)
         if good.any():
             q[good] = np.linalg.inv(sub[good])
@@ -209,10 +231,12 @@ def _hdop(el_rad: np.ndarray, az_rad: np.ndarray, weight: np.ndarray) -> np.ndar
 
 
 def epoch_dop_growth(el_deg: np.ndarray, az_deg: np.ndarray, in_view: np.ndarray, tracked: np.ndarray,
-                     cap: float = 10.0) -> np.ndarray:
-    """λ per epoch: HDOP(tracked) / HDOP(in view) − 1, in [0, cap]; cap when < 4 tracked; NaN when none in view.
+                     cap: float = 10.0, system_index: np.ndarray | None = None) -> np.ndarray:
+    """λ per epoch: HDOP(tracked) / HDOP(in view) − 1, in [0, cap]; cap when too few are tracked
+    (4 with one system) or the geometry is singular; NaN when none in view.
 
-    All inputs of shape (n, m); ``tracked`` ⊆ ``in_view``.
+    All inputs of shape (n, m); ``tracked`` ⊆ ``in_view``; ``system_index`` (m,): one clock per
+    system (see :func:`_hdop`; default one clock for all).
 
     >>> el = np.array([[80.0, 30, 30, 30, 30]]); az = np.array([[0.0, 0, 90, 180, 270]])
     >>> view = np.ones((1, 5), bool)
@@ -221,8 +245,8 @@ def epoch_dop_growth(el_deg: np.ndarray, az_deg: np.ndarray, in_view: np.ndarray
     [0.0, 0.4142, 10.0]
     """
     el_rad, az_rad = np.radians(el_deg), np.radians(az_deg)
-    h_view = _hdop(el_rad, az_rad, in_view)
-    h_trk = _hdop(el_rad, az_rad, tracked)
+    h_view = _hdop(el_rad, az_rad, in_view, system_index)
+    h_trk = _hdop(el_rad, az_rad, tracked, system_index)
     with np.errstate(invalid="ignore", divide="ignore"):
         growth = h_trk / h_view - 1.0
     n_trk = tracked.sum(axis=1)
@@ -307,7 +331,9 @@ def gnss_features(sky: SkyArrays, config: GnssFeatureConfig | None = None,
     tracked = view & np.isfinite(sky.cn0_dbhz)
     att = np.where(tracked, np.maximum(0.0, reference.cref_dbhz(sky.el_deg) - sky.cn0_dbhz), 0.0)
     ext = fluctuation_extrema(np.where(tracked, sky.cn0_dbhz, np.nan), tracked, config.fluct_threshold_dbhz)
-    lam = epoch_dop_growth(sky.el_deg, sky.az_deg, view, tracked, config.dop_growth_cap)
+    systems = sorted({k[0] for k in sky.sat_keys})
+    system_index = np.array([systems.index(k[0]) for k in sky.sat_keys], dtype=int)
+    lam = epoch_dop_growth(sky.el_deg, sky.az_deg, view, tracked, config.dop_growth_cap, system_index)
 
     def cum(a):
         a = np.asarray(a, dtype=float)

@@ -422,19 +422,24 @@ def read_nmea(path: str | os.PathLike, *, parser: Literal["fast", "pynmea2"] = "
 def epochs_on_time_base(epochs: list[Epoch], start_utc) -> list[Epoch]:
     """Shift the epochs' ``t_s`` so that 0 is ``start_utc`` (a walk's time base).
 
-    ``start_utc`` is a timezone-aware datetime (naive is taken as UTC). The
-    shift comes from the first epoch that carries a date (RMC/ZDA); a file
-    without any date raises :class:`NmeaError`.
+    ``start_utc`` is a timezone-aware datetime (naive is taken as UTC). Every
+    epoch that carries a date (RMC/ZDA) implies a shift, (UTC − start) − t_s;
+    the median of them is taken, not the first one's: a receiver's first dated
+    epochs after a cold start can carry a bogus date (the firmware's build date,
+    1980-01-06, a week-rollover date) until it has decoded the real one, and one
+    such epoch would move every epoch by years. A file without any date raises
+    :class:`NmeaError`.
     """
     import dataclasses
     import datetime as dt
+    import statistics
 
     if start_utc.tzinfo is None:
         start_utc = start_utc.replace(tzinfo=dt.timezone.utc)
-    dated = next((e for e in epochs if e.time_utc is not None), None)
-    if dated is None:
+    shifts = [(e.time_utc - start_utc).total_seconds() - e.t_s for e in epochs if e.time_utc is not None]
+    if not shifts:
         raise NmeaError("the NMEA file carries no date (no RMC/ZDA), so it cannot be put on the walk's time base")
-    shift = (dated.time_utc - start_utc).total_seconds() - dated.t_s
+    shift = statistics.median_low(shifts)
     if shift == 0.0:
         return list(epochs)
     return [dataclasses.replace(e, t_s=e.t_s + shift) for e in epochs]

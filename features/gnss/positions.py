@@ -28,6 +28,34 @@ quality  mode (GGA field 6)          UERE (1σ)     reasoning
 =======  ==========================  ============  =========================================
 
 so σ_axis = UERE·HDOP/√2 (e.g. RTK fixed ≈ 0.02 m·HDOP, DGNSS ≈ 0.7 m·HDOP).
+
+**What the epoch shows.** The table cannot see NLOS: on simulated walks with
+truth (6,004 fixes) the mean NEES was 0.49 / 12.8 / 119 in open / light /
+heavy, RTK float 4.2 / 47 / 128. Each fix's σ is therefore scaled, in order
+of preference, by:
+
+1. **GST** (NMEA 0183 GST, "GNSS pseudorange error statistics": the
+   receiver's own 1σ latitude and longitude errors from its residuals) when the
+   receiver sends it for that epoch: σ_east, σ_north = GST's σ_lon, σ_lat
+   (:func:`read_gst`, matched by UTC time of day);
+2. otherwise the **C/N0 of the used satellites**: the SIGMA-ε variance model
+   (Hartinger & Brunner 1999, "Variances of GPS phase observations: the
+   SIGMA-ε model", GPS Solutions 2(4); Wieser & Brunner 2000) gives each
+   satellite σᵢ² ∝ 10^(−C/N0ᵢ/10), so relative to open sky
+   σᵢ²/σ²_open = 10^(aᵢ/10) with aᵢ = max(0, C_ref(elᵢ) − C/N0ᵢ) the
+   attenuation of the GNSS features (:class:`features.gnss.features.Cn0Reference`).
+   With equal geometry weights the position variance scales by the mean,
+   g² = mean ᵢ 10^(aᵢ/10), and σ_axis = UERE·HDOP·g/√2 (not for RTK fixed,
+   whose carrier-phase error the code's C/N0 does not describe: table only);
+3. a **fitted table** (:class:`UereTable`, :func:`fit_uere`, ``envfuse features
+   gnss --fit-uere``) replaces 1–2 for the fix modes it holds: UERE per fix
+   quality and per bin of the used satellites' mean attenuation, fitted from
+   walks with truth as UERE² = mean(|e|²/HDOP²) (the maximum-likelihood
+   estimate for a 2-D Gaussian error with per-axis σ = UERE·HDOP/√2, so the
+   fitted fixes have mean NEES 2 by construction).
+
+The invisible ratio was tried as a fourth factor and left out: on the same
+walks it added nothing the attenuation did not already show (bench/eval_receiver.py).
 Vertical: σ_up = UERE·VDOP when VDOP is known, else UERE·1.5·HDOP (VDOP ≈
 1.5 HDOP for typical open-sky geometry). When HDOP is missing, 2.0 is assumed
 (a middling geometry) and the row is flagged ``hdop_assumed``. Qualities 0
@@ -46,7 +74,11 @@ import numpy as np
 from features.errors import DataError
 from features.geodesy import geodetic_to_enu
 
-__all__ = ["UERE_BY_QUALITY_M", "ASSUMED_HDOP", "GnssPositions", "fixes_to_enu", "sigma_axis_m"]
+__all__ = ["UERE_BY_QUALITY_M", "ASSUMED_HDOP", "GnssPositions", "fixes_to_enu", "sigma_axis_m", "UereTable",
+           "fit_uere", "epoch_attenuation", "read_gst", "ATTENUATION_BIN_EDGES_DB"]
+
+ATTENUATION_BIN_EDGES_DB = (2.0, 4.0, 7.0)
+"""Bins of the used satellites' mean attenuation (dB) of a fitted :class:`UereTable`: <2, 2–4, 4–7, ≥7."""
 
 UERE_BY_QUALITY_M = {1: 4.0, 2: 1.0, 3: 2.8, 4: 0.03, 5: 0.4, 6: 15.0, 9: 1.0}
 """User-equivalent range error (1σ, metres) per GGA quality code (module docstring table)."""
@@ -64,11 +96,165 @@ def sigma_axis_m(quality: int, hdop: float) -> float:
     return UERE_BY_QUALITY_M[quality] * hdop / math.sqrt(2.0)
 
 
+def epoch_attenuation(epoch, reference=None) -> tuple[float, float]:
+    """(mean attenuation of the used satellites in dB, SIGMA-ε factor g) of one epoch (module docstring).
+
+    Used = flagged used by GSA and tracked with an elevation; without any, (0, 1) — nothing
+    to say. A satellite listed on several signals counts once, with its best C/N0.
+
+    >>> from features.gnss.nmea import Epoch, Fix, Satellite
+    >>> sats = (Satellite("GP", 1, None, 90.0, 0.0, 50.0, True), Satellite("GP", 2, None, 90.0, 0.0, 40.0, True))
+    >>> a, g = epoch_attenuation(Epoch(0.0, None, 0.0, Fix(0, 0, 0, 0, 1, 2, 1.0, None, None, 3), sats, True))
+    >>> round(a, 1), round(g, 3)
+    (5.0, 2.345)
+    """
+    if reference is None:
+        from features.gnss.features import Cn0Reference
+
+        reference = _DEFAULT_REFERENCE or _default_reference()
+    best: dict = {}
+    for sat in epoch.satellites:
+        if sat.used and sat.cn0_dbhz is not None and sat.el_deg is not None:
+            key = (sat.system, sat.prn)
+            if key not in best or sat.cn0_dbhz > best[key][1]:
+                best[key] = (sat.el_deg, sat.cn0_dbhz)
+    if not best:
+        return 0.0, 1.0
+    el = np.array([v[0] for v in best.values()])
+    cn0 = np.array([v[1] for v in best.values()])
+    att = np.maximum(0.0, reference.cref_dbhz(el) - cn0)
+    return float(att.mean()), float(math.sqrt(np.mean(10.0 ** (att / 10.0))))
+
+
+_DEFAULT_REFERENCE = None
+
+
+def _default_reference():
+    global _DEFAULT_REFERENCE
+    from features.gnss.features import Cn0Reference
+
+    _DEFAULT_REFERENCE = Cn0Reference()
+    return _DEFAULT_REFERENCE
+
+
+@dataclass(frozen=True)
+class UereTable:
+    """UERE (1σ, m) per GGA quality and attenuation bin, fitted from walks with truth (:func:`fit_uere`).
+
+    ``uere_m`` maps a quality code to one UERE per bin of :attr:`bin_edges_db` (len(edges) + 1;
+    None where a bin had too few fixes: the built-in model serves it); ``n_fixes`` the counts
+    behind them. JSON via :meth:`to_dict` / :meth:`from_dict`.
+    """
+
+    uere_m: dict
+    n_fixes: dict
+    bin_edges_db: tuple = ATTENUATION_BIN_EDGES_DB
+    source: str = ""
+
+    def lookup(self, quality: int, attenuation_db: float) -> float | None:
+        """The fitted UERE for a fix, or None (use the built-in model)."""
+        row = self.uere_m.get(int(quality))
+        if row is None:
+            return None
+        return row[int(np.searchsorted(np.asarray(self.bin_edges_db), attenuation_db, side="right"))]
+
+    def to_dict(self) -> dict:
+        return {"bin_edges_db": list(self.bin_edges_db),
+                "uere_m": {str(q): list(v) for q, v in sorted(self.uere_m.items())},
+                "n_fixes": {str(q): list(v) for q, v in sorted(self.n_fixes.items())}, "source": self.source}
+
+    @classmethod
+    def from_dict(cls, data: dict) -> "UereTable":
+        from features.errors import ConfigError
+
+        try:
+            edges = tuple(float(x) for x in data["bin_edges_db"])
+            uere = {int(q): tuple(None if v is None else float(v) for v in row) for q, row in data["uere_m"].items()}
+            counts = {int(q): tuple(int(v) for v in row) for q, row in data.get("n_fixes", {}).items()}
+        except (KeyError, TypeError, ValueError, AttributeError) as exc:
+            raise ConfigError(f"UERE table needs bin_edges_db and uere_m {{quality: [m per bin]}}: {exc}") from None
+        for q, row in uere.items():
+            if len(row) != len(edges) + 1 or any(v is not None and not (math.isfinite(v) and v > 0) for v in row):
+                raise ConfigError(f"UERE table quality {q}: need {len(edges) + 1} positive values or nulls, got {row}")
+        return cls(uere, counts, edges, str(data.get("source", "")))
+
+
+def fit_uere(positions: Sequence, truths: Sequence, *, min_fixes: int = 20, source: str = "") -> UereTable:
+    """Fit a :class:`UereTable` from GNSS positions with truth: UERE² = mean(|e|² / HDOP²) per cell.
+
+    ``positions``: :class:`GnssPositions` of one or more walks (on the walks' time bases);
+    ``truths``: one (t_s, east_m, north_m) triple of arrays per walk (truth.csv), the truth
+    interpolated at each fix. Cells (quality, attenuation bin) with fewer than ``min_fixes``
+    fixes get None. Fixes outside their walk's truth span are ignored.
+    """
+    if len(positions) != len(truths):
+        raise DataError(f"fit_uere needs one truth per positions table, got {len(positions)} and {len(truths)}")
+    edges = np.asarray(ATTENUATION_BIN_EDGES_DB)
+    acc: dict = {}
+    for pos, (tt, te, tn) in zip(positions, truths):
+        tt, te, tn = (np.asarray(x, dtype=float) for x in (tt, te, tn))
+        if len(pos) == 0 or len(tt) < 2:
+            continue
+        inside = (pos.t_s >= tt[0]) & (pos.t_s <= tt[-1])
+        e2 = (pos.east_m - np.interp(pos.t_s, tt, te)) ** 2 + (pos.north_m - np.interp(pos.t_s, tt, tn)) ** 2
+        ratio = e2 / pos.hdop ** 2
+        bins = np.searchsorted(edges, pos.attenuation_db, side="right")
+        for q, b, r in zip(pos.quality[inside].tolist(), bins[inside].tolist(), ratio[inside].tolist()):
+            acc.setdefault(q, [[] for _ in range(len(edges) + 1)])[b].append(r)
+    uere = {q: tuple(math.sqrt(float(np.mean(v))) if len(v) >= min_fixes else None for v in rows)
+            for q, rows in acc.items()}
+    counts = {q: tuple(len(v) for v in rows) for q, rows in acc.items()}
+    return UereTable(uere, counts, tuple(float(x) for x in edges), source)
+
+
+def read_gst(path) -> dict:
+    """GST sentences of an NMEA file: {UTC time of day, s (rounded to ms): (σ_lat_m, σ_lon_m)}.
+
+    NMEA 0183 GST ("GNSS pseudorange error statistics"): fields 6 and 7 are the 1σ errors of
+    latitude and longitude in metres. Sentences with a bad checksum, empty or non-positive
+    σ are skipped. A small reader of its own: the epoch reader does not keep GST's fields.
+
+    >>> import functools, os, tempfile
+    >>> body = "GPGST,082356.00,1.8,,,,1.7,1.3,2.2"
+    >>> cs = functools.reduce(lambda x, ch: x ^ ord(ch), body, 0)
+    >>> fh = tempfile.NamedTemporaryFile("w", suffix=".nmea", delete=False)
+    >>> n = fh.write("$" + body + "*" + format(cs, "02X") + "\\r\\n"); fh.close()
+    >>> read_gst(fh.name)
+    {30236.0: (1.7, 1.3)}
+    >>> os.unlink(fh.name)
+    """
+    out = {}
+    with open(path, "rb") as fh:
+        for raw in fh:
+            line = raw.decode("ascii", "replace").strip()
+            i = line.find("$")
+            if i < 0 or line[i + 3: i + 6] != "GST":
+                continue
+            body, _, cs = line[i + 1:].partition("*")
+            x = 0
+            for ch in body:
+                x ^= ord(ch)
+            if len(cs) < 2 or cs[:2].upper() != f"{x:02X}":
+                continue
+            f = body.split(",")
+            try:
+                hh, mm, ss = int(f[1][0:2]), int(f[1][2:4]), float(f[1][4:])
+                s_lat, s_lon = float(f[6]), float(f[7])
+            except (IndexError, ValueError):
+                continue
+            if s_lat > 0 and s_lon > 0 and math.isfinite(s_lat + s_lon):
+                out[round(hh * 3600 + mm * 60 + ss, 3)] = (s_lat, s_lon)
+    return out
+
+
 @dataclass(frozen=True)
 class GnssPositions:
     """Fix positions on the site's ENU frame; every array of shape (n,).
 
-    ``sigma_en_m`` is σ per horizontal axis (east and north alike).
+    ``sigma_en_m`` is σ per horizontal axis (the larger of east and north when GST gives
+    them apart), ``sigma_east_m`` / ``sigma_north_m`` per axis; ``attenuation_db`` the used
+    satellites' mean attenuation and ``sigma_source`` how σ was found: ``gst``, ``cn0``
+    (table × SIGMA-ε factor), ``table`` (RTK fixed) or ``fitted`` (:class:`UereTable`).
     """
 
     t_s: np.ndarray
@@ -81,16 +267,27 @@ class GnssPositions:
     n_used: np.ndarray
     hdop: np.ndarray
     hdop_assumed: np.ndarray
+    sigma_east_m: np.ndarray | None = None
+    sigma_north_m: np.ndarray | None = None
+    attenuation_db: np.ndarray | None = None
+    sigma_source: np.ndarray | None = None
 
     COLUMNS = ("t_s", "east_m", "north_m", "up_m", "sigma_en_m", "sigma_up_m", "quality", "n_used", "hdop",
-               "hdop_assumed")
+               "hdop_assumed", "sigma_east_m", "sigma_north_m", "attenuation_db", "sigma_source")
 
     def __len__(self) -> int:
         return int(self.t_s.shape[0])
 
 
-def fixes_to_enu(epochs: Sequence, lat0_deg: float, lon0_deg: float, alt0_m: float) -> GnssPositions:
-    """Convert the epochs' fixes to ENU about (lat0, lon0, alt0 ellipsoidal); no fix → no row."""
+def fixes_to_enu(epochs: Sequence, lat0_deg: float, lon0_deg: float, alt0_m: float, *,
+                 uere: UereTable | None = None, gst: dict | None = None, cn0_reference=None) -> GnssPositions:
+    """Convert the epochs' fixes to ENU about (lat0, lon0, alt0 ellipsoidal); no fix → no row.
+
+    σ per the module docstring: ``gst`` ({UTC time of day s: (σ_lat, σ_lon)}, :func:`read_gst`)
+    where it has the epoch, else a fitted ``uere`` table where it has the cell, else
+    UERE(quality)·HDOP·g/√2 with the SIGMA-ε factor g of the used satellites' C/N0
+    (``cn0_reference``: the open-sky C_ref, default built-in).
+    """
     for name, value in (("lat0_deg", lat0_deg), ("lon0_deg", lon0_deg), ("alt0_m", alt0_m)):
         if not math.isfinite(value):
             raise DataError(f"site origin {name} must be finite, got {value}")
@@ -102,15 +299,29 @@ def fixes_to_enu(epochs: Sequence, lat0_deg: float, lon0_deg: float, alt0_m: flo
         hdop = f.hdop
         assumed = hdop is None
         hdop = ASSUMED_HDOP if assumed else hdop
-        uere = UERE_BY_QUALITY_M[f.quality]
+        att_db, g = epoch_attenuation(e, cn0_reference)
+        fitted = uere.lookup(f.quality, att_db) if uere is not None else None
+        if fitted is not None:
+            u, source = fitted, "fitted"
+        elif f.quality == 4:
+            # RTK fixed: carrier phase, whose error the code's C/N0 model does not describe (a wrong
+            # integer fix is a blunder, not a variance): the table alone.
+            u, source = UERE_BY_QUALITY_M[4], "table"
+        else:
+            u, source = UERE_BY_QUALITY_M[f.quality] * g, "cn0"
+        s_e = s_n = u * hdop / math.sqrt(2.0)
+        sigma_up = u * (f.vdop if f.vdop is not None else 1.5 * hdop)
+        stats = gst.get(round(e.time_of_day_s, 3)) if gst else None
+        if stats is not None:
+            s_n, s_e = stats
+            source = "gst"
         alt = (f.alt_m or 0.0) + (f.geoid_sep_m or 0.0) if f.alt_m is not None else alt0_m
-        sigma_up = uere * (f.vdop if f.vdop is not None else 1.5 * hdop)
-        rows.append((e.t_s, f.lat_deg, f.lon_deg, alt, uere * hdop / math.sqrt(2.0), sigma_up, f.quality,
-                     -1 if f.n_used is None else f.n_used, hdop, assumed))
+        rows.append((e.t_s, f.lat_deg, f.lon_deg, alt, max(s_e, s_n), sigma_up, f.quality,
+                     -1 if f.n_used is None else f.n_used, hdop, assumed, s_e, s_n, att_db, source))
     if not rows:
         empty = np.zeros(0)
         return GnssPositions(empty, empty, empty, empty, empty, empty, np.zeros(0, int), np.zeros(0, int), empty,
-                             np.zeros(0, bool))
+                             np.zeros(0, bool), empty, empty, empty, np.zeros(0, dtype="<U6"))
     cols = list(zip(*rows))
     lat, lon, alt = (np.asarray(c, dtype=float) for c in cols[1:4])
     e, n, u = geodetic_to_enu(lat, lon, alt, lat0_deg, lon0_deg, alt0_m)
@@ -118,5 +329,7 @@ def fixes_to_enu(epochs: Sequence, lat0_deg: float, lon0_deg: float, alt0_m: flo
         t_s=np.asarray(cols[0], float), east_m=np.asarray(e, float), north_m=np.asarray(n, float),
         up_m=np.asarray(u, float), sigma_en_m=np.asarray(cols[4], float), sigma_up_m=np.asarray(cols[5], float),
         quality=np.asarray(cols[6], int), n_used=np.asarray(cols[7], int), hdop=np.asarray(cols[8], float),
-        hdop_assumed=np.asarray(cols[9], bool),
+        hdop_assumed=np.asarray(cols[9], bool), sigma_east_m=np.asarray(cols[10], float),
+        sigma_north_m=np.asarray(cols[11], float), attenuation_db=np.asarray(cols[12], float),
+        sigma_source=np.asarray(cols[13]),
     )

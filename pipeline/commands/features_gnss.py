@@ -39,6 +39,9 @@ def register(sub) -> None:
                         "else the first epoch")
     p.add_argument("--epochs", type=Path, default=None, help="also write each decoded epoch as a JSON line")
     p.add_argument("--positions", type=Path, default=None, help="also write fixes in site ENU with sigma (CSV)")
+    p.add_argument("--fit-uere", type=Path, default=None, metavar="JSON",
+                   help="fit the UERE table (per fix quality and C/N0 attenuation) to the fixes' errors against "
+                        "the truth.csv beside the file (a simulated walk) and write it as JSON")
     p.set_defaults(func=_run)
 
 
@@ -73,6 +76,21 @@ def _on_time_base(epochs, start_utc: str | None):
     from features.gnss.nmea import epochs_on_time_base
     from features.walk import parse_utc
     return epochs_on_time_base(epochs, parse_utc(start_utc, "--start-utc"))
+
+
+def _fit_uere(args, epochs, site) -> str:
+    """--fit-uere: the UERE table fitted against truth.csv beside the NMEA file, as JSON text."""
+    from features.gnss.positions import fit_uere, fixes_to_enu
+    from features.walk import read_truth
+
+    truth_path = Path(args.nmea).parent / "truth.csv"
+    if site is None or not truth_path.is_file():
+        raise ConfigError(f"--fit-uere needs truth.csv beside {args.nmea} and the site (--site or walk.toml)")
+    truth = read_truth(truth_path)
+    o = site.origin
+    table = fit_uere([fixes_to_enu(epochs, o.lat_deg, o.lon_deg, o.alt_m)], [(truth.t_s, truth.east_m, truth.north_m)],
+                     source=f"fitted to {args.nmea}")
+    return json.dumps(table.to_dict(), indent=2) + "\n"
 
 
 def _run(args) -> int:
@@ -121,6 +139,9 @@ def _run(args) -> int:
         pos = fixes_to_enu(epochs, o.lat_deg, o.lon_deg, o.alt_m)
         outputs[args.positions] = _csv({n: getattr(pos, n) for n in pos.COLUMNS}, pos.COLUMNS)
         n_pos = len(pos)
+    if args.fit_uere is not None:
+        outputs[args.fit_uere] = _fit_uere(args, epochs, site if site is not None else (
+            walk.load_site() if walk is not None and walk.site_ref is not None else None))
     atomic_write_many(outputs)
     n_with_sky = int(sky.n_epochs)
     msg = (f"{args.nmea}: {len(epochs)} epochs ({n_with_sky} with satellites, "
