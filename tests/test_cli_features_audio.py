@@ -16,8 +16,9 @@ from features.fileio import write_toml
 from features.site import save_site
 from pipeline.cli import main
 from tests.acoustic_synth import add_chirp, square_site, static_capture, write_wav
+from tests.conftest import SHARED_DATA
 
-ULTRASENSE = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "audio_ultrasense"
+ULTRASENSE = SHARED_DATA / "audio_ultrasense"
 
 
 def _rows(path):

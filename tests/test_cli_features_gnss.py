@@ -9,6 +9,7 @@ from pathlib import Path
 import pytest
 
 from pipeline.cli import main
+from tests.conftest import SHARED_DATA
 
 DATA = Path(__file__).resolve().parent / "data"
 
@@ -65,7 +66,7 @@ def test_positions_need_a_site(tmp_path, capsys):
 
 
 def test_fit_reference_round_trip(tmp_path, capsys):
-    gpsd = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "nmea" / "gpsd"
+    gpsd = SHARED_DATA / "nmea" / "gpsd"
     log = gpsd / "quectel-l76k-nmea.log"
     if not log.exists():
         pytest.skip(f"{log} absent")

@@ -20,9 +20,10 @@ from hypothesis import strategies as st
 from features.errors import NmeaError
 from features.gnss.nmea import ReadStats, epochs_from_bytes, iter_epochs, parse_sentence, read_nmea
 from features.gnss.quirks import gsa_fields, gsv_fields, parse_time_of_day, satellite_id
+from tests.conftest import SHARED_DATA
 
 DATA = Path(__file__).resolve().parent / "data"
-SHARED = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "nmea"
+SHARED = SHARED_DATA / "nmea"
 GPSD = SHARED / "gpsd"
 GNSSID = {"GPS": 0, "SBAS": 1, "Galileo": 2, "BeiDou": 3, "QZSS": 5, "GLONASS": 6, "NavIC": 7}
 

@@ -6,7 +6,8 @@ import math
 import sys
 from pathlib import Path
 
-from pipeline.args import finite, positive
+from features.errors import DataError
+from pipeline.args import bounded, finite, positive
 
 GROUP = "features"
 
@@ -18,15 +19,22 @@ def register(sub) -> None:
                     "NaN and clipped samples (counts on stderr; t_s must be seconds, 10-2000 Hz), detect steps, estimate step length (Weinberg) "
                     "and heading (gyro + magnetometer complementary filter), and dead-reckon from the start "
                     "point. Accelerometer-only files give steps and lengths with empty heading/position.",
-        epilog="Example: envfuse features imu walk7/imu.csv --start-east 12.5 --start-north 3.0 --k 0.48 "
+        epilog="Example: envfuse features imu walk7/imu.csv --start-east-m 12.5 --start-north-m 3.0 --k 0.48 "
                "--out steps.csv")
     p.add_argument("imu", type=Path, help="IMU CSV file")
     p.add_argument("--out", type=Path, required=True,
                    help="steps CSV: t_s (heel strike), step_length_m, heading_rad, east_m, north_m")
-    p.add_argument("--start-east", type=finite, default=0.0, help="start east, m (default 0)")
-    p.add_argument("--start-north", type=finite, default=0.0, help="start north, m (default 0)")
-    p.add_argument("--k", type=positive, default=None, help="Weinberg constant K (default 0.47; calibrate it)")
-    p.add_argument("--declination-deg", type=finite, default=None,
+    p.add_argument("--start-east-m", "--start-east", dest="start_east", type=finite, default=0.0,
+                   help="start east, m (default 0)")
+    p.add_argument("--start-north-m", "--start-north", dest="start_north", type=finite, default=0.0,
+                   help="start north, m (default 0)")
+    p.add_argument("--k", type=bounded(0.05, 3.0), default=None,
+                   help="Weinberg constant K, 0.05 to 3 (default 0.47; calibrate it)")
+    p.add_argument("--accel-unit", choices=("auto", "m/s2", "g", "mg"), default="auto",
+                   help="accelerometer unit (default auto: the unit in which the median |a| is gravity)")
+    p.add_argument("--gyro-unit", choices=("auto", "rad/s", "deg/s"), default="auto",
+                   help="gyro unit (default auto: deg/s when the 99th percentile of |w| exceeds 20, else rad/s)")
+    p.add_argument("--declination-deg", type=bounded(-180.0, 180.0, "deg"), default=None,
                    help="magnetic declination, degrees east (default: [imu] declination_deg of walk.toml "
                         "beside the file, else 0)")
     p.add_argument("--calibrate-distance-m", type=positive, default=None,
@@ -54,7 +62,8 @@ def _run(args) -> int:
     from features.imu.pdr import PdrConfig, run_pdr, write_steps_csv
     from features.imu.steps import StepLengthModel, calibrate_weinberg_k
 
-    imu = read_imu_csv(args.imu)
+    imu = read_imu_csv(args.imu, accel_unit=args.accel_unit, gyro_unit=args.gyro_unit)
+    print(f"envfuse: {args.imu}: {imu.units}", file=sys.stderr)
     if imu.report.n_defects:
         print(f"envfuse: {args.imu}: repaired: {imu.report.summary()}", file=sys.stderr)
     heading = HeadingConfig(declination_rad=math.radians(_declination_deg(args.imu, args.declination_deg)))
@@ -62,7 +71,13 @@ def _run(args) -> int:
     config = PdrConfig(length=length, heading=heading)
     result = run_pdr(imu, args.start_east, args.start_north, config)
     if args.calibrate_distance_m is not None:
-        k = calibrate_weinberg_k(result.steps, args.calibrate_distance_m)
+        try:
+            k = calibrate_weinberg_k(result.steps, args.calibrate_distance_m)
+        except DataError as exc:
+            raise DataError(f"--calibrate-distance-m: {exc}") from None
+        if not 0.05 <= k <= 3.0:
+            raise DataError(f"--calibrate-distance-m {args.calibrate_distance_m:g} over {len(result.steps)} "
+                            f"detected steps gives K = {k:.4g}, outside the plausible 0.05-3: check the distance")
         result = run_pdr(imu, args.start_east, args.start_north,
                          PdrConfig(length=StepLengthModel(k=k), heading=heading))
         print(f"K = {k:.4f} (Weinberg, from {args.calibrate_distance_m:g} m)")
@@ -70,5 +85,8 @@ def _run(args) -> int:
     if result.heading is None:
         print(f"envfuse: {args.imu}: no gyro/magnetometer columns: heading and positions left empty",
               file=sys.stderr)
+    if len(result) == 0:
+        print(f"envfuse: warning: {args.imu}: no steps detected in {imu.t_s[-1] - imu.t_s[0]:.1f} s "
+              f"({imu.units}); if the person walked, check --accel-unit", file=sys.stderr)
     print(f"{len(result)} steps, {result.distance_m:.1f} m -> {args.out}")
     return 0
