@@ -10,12 +10,15 @@ status 1; usage errors one line and status 2; never a traceback (set
 from __future__ import annotations
 
 import argparse
+import contextlib
 import importlib
 import os
 import pkgutil
+import signal
 import sys
 
 from features.errors import EnvfuseError
+from pipeline.args import UsageError
 
 __all__ = ["main", "build_parser", "CliParser"]
 
@@ -27,10 +30,6 @@ GROUPS = {
     "evaluate": "evaluate fusion methods on walk logs",
     "report": "tables and plots of what a walk recorded",
 }
-
-
-class UsageError(Exception):
-    """Raised by :class:`CliParser` instead of printing usage and exiting."""
 
 
 class CliParser(argparse.ArgumentParser):
@@ -68,16 +67,47 @@ def build_parser() -> CliParser:
     return parser
 
 
+_OUTPUT_OPTIONS = ("out", "epochs", "positions", "fit_cn0_reference", "gpsd_json")
+
+
+def _terminate(signum, frame):  # noqa: ARG001 - signal handler API
+    """SIGTERM ends a run like Ctrl-C: the KeyboardInterrupt unwinds every temporary output."""
+    raise KeyboardInterrupt
+
+
+@contextlib.contextmanager
+def _sigterm_as_interrupt():
+    try:
+        previous = signal.signal(signal.SIGTERM, _terminate)
+    except ValueError:  # not the main thread: leave signals alone
+        yield
+        return
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
+def _run(args) -> int:
+    """Run a command; with an output ``-`` its data goes to stdout and its summary lines to stderr."""
+    from features.fileio import data_stdout, is_stdout
+
+    if any(is_stdout(getattr(args, name, None)) for name in _OUTPUT_OPTIONS):
+        with data_stdout(sys.stdout), contextlib.redirect_stdout(sys.stderr):
+            return int(args.func(args) or 0)
+    return int(args.func(args) or 0)
+
+
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     try:
-        parser = build_parser()
-        args = parser.parse_args(argv)
-        if not hasattr(args, "func"):
-            (getattr(args, "_group_parser", None) or parser).print_help()
-            return 2
-        result = args.func(args)
-        return int(result or 0)
+        with _sigterm_as_interrupt():
+            parser = build_parser()
+            args = parser.parse_args(argv)
+            if not hasattr(args, "func"):
+                (getattr(args, "_group_parser", None) or parser).print_help()
+                return 2
+            return _run(args)
     except UsageError as exc:
         print(exc, file=sys.stderr)
         return 2

@@ -13,10 +13,29 @@ import numpy as np  # noqa: E402
 from matplotlib.colors import ListedColormap  # noqa: E402
 from matplotlib.patches import Patch, Rectangle  # noqa: E402
 
+from features.errors import ConfigError  # noqa: E402
 from features.fileio import atomic_path  # noqa: E402
 from features.site import ENV_CLASSES, Site  # noqa: E402
 
-__all__ = ["CLASS_COLOURS", "plot_site", "save_figure"]
+__all__ = ["CLASS_COLOURS", "PLOT_FORMATS", "plot_format", "plot_site", "save_figure"]
+
+PLOT_FORMATS = ("png", "pdf", "svg")
+"""Figure formats written, chosen by the output's suffix (``-``, standard output, is PNG)."""
+
+
+def plot_format(path: str | os.PathLike) -> str:
+    """The format a plot path asks for, or ValueError naming the suffixes accepted.
+
+    >>> plot_format("walk.PDF"), plot_format("-"), plot_format("map.svg")
+    ('pdf', 'png', 'svg')
+    """
+    if str(path) == "-":
+        return "png"
+    suffix = Path(path).suffix.lower().lstrip(".")
+    if suffix not in PLOT_FORMATS:
+        raise ValueError(f"{path}: a plot is written as .png, .pdf or .svg (by its suffix), "
+                         f"not {'.' + suffix if suffix else 'a name without a suffix'}")
+    return suffix
 
 CLASS_COLOURS = {"open": "#cfe8cf", "light": "#f6d98b", "heavy": "#e58a7a"}
 _KIND_COLOURS = {"transformer": "#4a5a6a", "firewall": "#8b8b8b", "building": "#a06a4a", "gantry": "#5b7fa6",
@@ -24,11 +43,18 @@ _KIND_COLOURS = {"transformer": "#4a5a6a", "firewall": "#8b8b8b", "building": "#
 
 
 def save_figure(fig, path: str | os.PathLike, dpi: int = 130) -> Path:
-    """Save a figure atomically as PNG and close it."""
+    """Save a figure atomically in the format of the path's suffix (PNG, PDF, SVG) and close it."""
+    try:
+        fmt = plot_format(path)
+    except ValueError as exc:
+        plt.close(fig)
+        raise ConfigError(str(exc)) from None
     path = Path(path)
-    with atomic_path(path, suffix=".png") as tmp:
-        fig.savefig(tmp, dpi=dpi, bbox_inches="tight", format="png")
-    plt.close(fig)
+    try:
+        with atomic_path(path, suffix="." + fmt) as tmp:
+            fig.savefig(tmp, dpi=dpi, bbox_inches="tight", format=fmt)
+    finally:
+        plt.close(fig)
     return path
 
 

@@ -9,7 +9,7 @@ import warnings
 from pathlib import Path
 
 from features.errors import ConfigError
-from pipeline.args import bounded, non_negative, positive
+from pipeline.args import bounded, check_outputs, non_negative, open_interval, positive
 
 GROUP = "features"
 
@@ -33,7 +33,7 @@ def register(sub) -> None:
                         "when --walk is not given")
     p.add_argument("--start-uncertainty-s", type=bounded(0.0, 2.0, "s"), default=None,
                    help="stated uncertainty of the audio start, s (default: from --walk, else 0.05)")
-    p.add_argument("--out", type=Path, required=True, help="feature CSV, one row per window")
+    p.add_argument("--out", type=Path, required=True, help="feature CSV, one row per window; - for stdout")
     p.add_argument("--positions", type=Path, default=None, help="also write one position row per frame (CSV)")
     p.add_argument("--window-s", type=bounded(0.2, 3600.0, "s"), default=2.0, help="window length, s (default 2)")
     p.add_argument("--hop-s", type=bounded(0.05, 3600.0, "s"), default=1.0, help="window hop, s (default 1)")
@@ -92,6 +92,8 @@ def _run(args) -> int:
     from features.site import load_site
     from features.walk import load_walk
 
+    check_outputs({"WAV": args.wav, "--site": args.site, "--walk": args.walk},
+                  {"--out": args.out, "--positions": args.positions})
     if args.walk is None:
         beside = [args.wav.parent / n for n in ("walk.toml", "cell.toml") if (args.wav.parent / n).is_file()]
         args.walk = beside[0] if beside else None

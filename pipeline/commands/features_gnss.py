@@ -9,7 +9,7 @@ import sys
 from pathlib import Path
 
 from features.errors import ConfigError
-from pipeline.args import bounded, positive
+from pipeline.args import bounded, check_outputs, positive
 
 GROUP = "features"
 
@@ -23,7 +23,7 @@ def register(sub) -> None:
         epilog="Example: envfuse features gnss walk7/gnss.nmea --site site1 --out gnss_features.csv "
                "--epochs epochs.jsonl --positions fixes.csv")
     p.add_argument("nmea", type=Path, help="NMEA 0183 file")
-    p.add_argument("--out", type=Path, required=True, help="feature CSV, one row per window")
+    p.add_argument("--out", type=Path, required=True, help="feature CSV, one row per window; - for stdout")
     p.add_argument("--site", type=Path, default=None, help="site directory or site.toml (for --positions; default: the site named by walk.toml beside the file)")
     p.add_argument("--window-s", type=bounded(0.2, 3600.0, "s"), default=2.0, help="window length, s (default 2)")
     p.add_argument("--hop-s", type=bounded(0.05, 3600.0, "s"), default=1.0, help="window hop, s (default 1)")
@@ -82,6 +82,9 @@ def _run(args) -> int:
     )
     from features.gnss.nmea import read_nmea
 
+    check_outputs({"NMEA": args.nmea, "--site": args.site, "--cn0-reference": args.cn0_reference},
+                  {"--out": args.out, "--epochs": args.epochs, "--positions": args.positions,
+                   "--fit-cn0-reference": args.fit_cn0_reference})
     config = GnssFeatureConfig(window_s=args.window_s, hop_s=args.hop_s, elevation_mask_deg=args.elevation_mask_deg,
                                fluct_threshold_dbhz=args.fluct_threshold_dbhz)
     reference = Cn0Reference()

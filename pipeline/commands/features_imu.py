@@ -7,7 +7,7 @@ import sys
 from pathlib import Path
 
 from features.errors import DataError
-from pipeline.args import bounded, finite, positive
+from pipeline.args import bounded, check_outputs, finite, positive
 
 GROUP = "features"
 
@@ -23,7 +23,7 @@ def register(sub) -> None:
                "--out steps.csv")
     p.add_argument("imu", type=Path, help="IMU CSV file")
     p.add_argument("--out", type=Path, required=True,
-                   help="steps CSV: t_s (heel strike), step_length_m, heading_rad, east_m, north_m")
+                   help="steps CSV: t_s (heel strike), step_length_m, heading_rad, east_m, north_m; - for stdout")
     p.add_argument("--start-east-m", "--start-east", dest="start_east", type=finite, default=0.0,
                    help="start east, m (default 0)")
     p.add_argument("--start-north-m", "--start-north", dest="start_north", type=finite, default=0.0,
@@ -62,10 +62,10 @@ def _run(args) -> int:
     from features.imu.pdr import PdrConfig, run_pdr, write_steps_csv
     from features.imu.steps import StepLengthModel, calibrate_weinberg_k
 
+    check_outputs({"IMU": args.imu}, {"--out": args.out})
     imu = read_imu_csv(args.imu, accel_unit=args.accel_unit, gyro_unit=args.gyro_unit)
-    print(f"envfuse: {args.imu}: {imu.units}", file=sys.stderr)
-    if imu.report.n_defects:
-        print(f"envfuse: {args.imu}: repaired: {imu.report.summary()}", file=sys.stderr)
+    repaired = f"; repaired: {imu.report.summary()}" if imu.report.n_defects else ""
+    print(f"envfuse: {args.imu}: {imu.units}{repaired}", file=sys.stderr)
     heading = HeadingConfig(declination_rad=math.radians(_declination_deg(args.imu, args.declination_deg)))
     length = StepLengthModel() if args.k is None else StepLengthModel(k=args.k)
     config = PdrConfig(length=length, heading=heading)

@@ -5,7 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from features.errors import ConfigError
-from pipeline.args import positive
+from pipeline.args import check_outputs, plot_path, positive
 
 GROUP = "report"
 
@@ -17,7 +17,9 @@ def register(sub) -> None:
                                    "source and environment class, and draw the map and errors over time.",
                        epilog="Example: envfuse report walk walk7 --out walk7.png")
     p.add_argument("walk", type=Path, help="walk directory (walk.toml, streams, truth.csv)")
-    p.add_argument("--out", type=Path, default=None, help="PNG to write (default: WALK/sources.png)")
+    p.add_argument("--out", type=plot_path, default=None,
+                   help="plot to write, format by suffix: .png, .pdf or .svg; - for PNG on stdout "
+                        "(default: WALK/sources.png)")
     p.add_argument("--k", type=positive, default=None,
                    help="Weinberg K for PDR (default: calibrated on RTK-fixed GNSS steps of the walk)")
     p.set_defaults(func=_run)
@@ -28,6 +30,8 @@ def _run(args) -> int:
 
     if not (args.walk / "walk.toml").is_file():
         raise ConfigError(f"{args.walk}: no walk.toml (expected a walk directory)")
+    if args.out is not None:
+        check_outputs({f"WALK file {f.name}": f for f in args.walk.iterdir() if f.is_file()}, {"--out": args.out})
     src = walk_sources(args.walk, pdr_k=args.k)
     if not src.tracks:
         raise ConfigError(f"{args.walk}: walk.toml lists no gnss, audio or imu stream")

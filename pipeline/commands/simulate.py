@@ -5,7 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from features.errors import ConfigError
-from pipeline.args import bounded, positive, seed
+from pipeline.args import bounded, check_outputs, positive, seed
 
 GROUP = "simulate"
 
@@ -89,6 +89,7 @@ def _options(args) -> dict:
 def _walk(args) -> int:
     from simulation.walk import simulate_walk
 
+    check_outputs({"SITE": args.site}, {}, {"--out": args.out})
     start = _start(args.start)
     out = simulate_walk(args.site, args.out, seed=args.seed, duration_s=args.duration, person=args.person,
                         start_utc=start, overwrite=args.force, options=_options(args))
@@ -100,6 +101,7 @@ def _walk(args) -> int:
 def _survey(args) -> int:
     from simulation.survey import simulate_survey
 
+    check_outputs({"SITE": args.site}, {}, {"--out": args.out})
     start = _start(args.start)
     out = simulate_survey(args.site, args.out, seed=args.seed, cell_size_m=args.cell_size, capture_s=args.capture_s,
                           start_utc=start, overwrite=args.force, options=_options(args))
