@@ -131,3 +131,28 @@ def plot_path(text: str) -> Path:
     except ValueError as exc:
         raise argparse.ArgumentTypeError(str(exc)) from None
     return Path(text)
+
+
+def resolve_site(walk, override=None, option: str = "--site"):
+    """The site of a walk or survey cell: ``override`` (the user's --site), else the ``site`` its walk.toml
+    names, else, for a survey cell (``SURVEY/cells/<id>/cell.toml``), the survey's own ``SURVEY/site.toml``.
+
+    ``walk`` is a :class:`features.walk.WalkInfo` or None. Raises ConfigError naming what was looked for.
+    """
+    from features.errors import ConfigError
+    from features.site import load_site
+
+    if override is not None:
+        return load_site(override)
+    if walk is None:
+        raise ConfigError(f"{option} is needed (no walk.toml or cell.toml beside the file names a site)")
+    if walk.site_ref is not None:
+        return walk.load_site()
+    is_cell = (walk.directory / "cell.toml").is_file() and not (walk.directory / "walk.toml").is_file()
+    if is_cell:
+        survey_site = walk.directory.parent.parent / "site.toml"
+        if survey_site.is_file():
+            return load_site(survey_site)
+        raise ConfigError(f"{walk.directory / 'cell.toml'}: the survey cell names no site and there is no "
+                          f"{survey_site} (SURVEY/site.toml two folders up); pass {option}")
+    raise ConfigError(f"{walk.directory / 'walk.toml'}: the walk names no site (no 'site' key); pass {option}")

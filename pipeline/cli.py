@@ -22,6 +22,13 @@ from pipeline.args import UsageError
 
 __all__ = ["main", "build_parser", "CliParser"]
 
+GROUP_EXAMPLES = {
+    "simulate": "envfuse simulate site --seed 1 --out site1 --plot",
+    "features": "envfuse features gnss walk7/gnss.nmea --site site1 --out gnss_features.csv",
+    "report": "envfuse report walk walk7 --out walk7.png",
+}
+"""One example per command group, shown at the foot of ``envfuse GROUP --help``."""
+
 GROUPS = {
     "simulate": "write a synthetic substation, walk or survey in device formats",
     "features": "extract features, fixes and steps from raw device files",
@@ -39,12 +46,23 @@ class CliParser(argparse.ArgumentParser):
         raise UsageError(f"{self.prog}: {message} (see '{self.prog} --help')")
 
 
+def _version() -> str:
+    """The installed distribution's version (pyproject.toml), or 'unknown' when run from an uninstalled tree."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("envfuse")
+    except PackageNotFoundError:
+        return "unknown"
+
+
 def build_parser() -> CliParser:
     parser = CliParser(
         prog="envfuse",
         description="Environment-aware GNSS / acoustic / PDR positioning for substations.",
         epilog="Example: envfuse simulate site --seed 1 --out site1 --plot",
     )
+    parser.add_argument("--version", action="version", version=f"envfuse {_version()}")
     sub = parser.add_subparsers(dest="group", metavar="COMMAND", parser_class=CliParser)
     group_parsers = {}
     modules = sorted(m.name for m in pkgutil.iter_modules(importlib.import_module("pipeline.commands").__path__))
@@ -54,7 +72,9 @@ def build_parser() -> CliParser:
         if group is None:
             continue
         if group not in group_parsers:
-            gp = sub.add_parser(group, help=GROUPS.get(group, ""), description=GROUPS.get(group, ""))
+            example = GROUP_EXAMPLES.get(group)
+            gp = sub.add_parser(group, help=GROUPS.get(group, ""), description=GROUPS.get(group, ""),
+                                epilog=f"Example: {example}" if example else None)
             group_parsers[group] = gp.add_subparsers(dest="command", metavar="SUBCOMMAND", parser_class=CliParser)
             group_parsers[group].required = True
             gp.set_defaults(_group_parser=gp)

@@ -66,7 +66,8 @@ def test_survey_cells(site_dir, tmp_path, capsys):
     (["simulate", "walk", "{site}", "--seed", "1", "--start", "9999-12-31T23:59:59Z", "--out", "{out}"], "outside 1980-2099"),
     (["demo", "--seed", "-1", "--out", "{out}"], "non-negative integer"),
     (["demo", "--duration", "-5", "--out", "{out}"], "expected a value in [10, 3600] s"),
-    (["simulate", "survey", "{site}", "--out", "{out}", "--cell-size", "0.1"], "--cell-size must lie in"),
+    (["simulate", "survey", "{site}", "--out", "{out}", "--cell-size", "0.1"],
+     "--cell-size-m/--cell-size: expected a value in [0.5, 50] m"),  # usage error (2) under either name
     (["simulate", "teleport"], "invalid choice"),
 ])
 def test_bad_input_one_line_nonzero_nothing_written(tmp_path, site_dir, capsys, argv, needle):

@@ -16,8 +16,8 @@ def register_top(sub) -> None:
                        epilog="Example: envfuse demo --out demo_out")
     p.add_argument("--out", type=Path, default=Path("demo_out"), help="output directory (default demo_out)")
     p.add_argument("--seed", type=seed, default=1, help="site and walk seed (default 1)")
-    p.add_argument("--duration", type=bounded(10.0, 3600.0, "s"), default=120.0,
-                   help="walk length in seconds, 10 to 3600 (default 120)")
+    p.add_argument("--duration-s", "--duration", dest="duration", type=bounded(10.0, 3600.0, "s"), default=120.0,
+                   help="walk length, s, 10 to 3600 (default 120; --duration is the old name)")
     p.set_defaults(func=run_demo)
 
 

@@ -8,8 +8,8 @@ import sys
 import warnings
 from pathlib import Path
 
-from features.errors import ConfigError
-from pipeline.args import bounded, check_outputs, non_negative, open_interval, positive
+from features.errors import AudioError, ConfigError
+from pipeline.args import bounded, check_outputs, non_negative, open_interval, positive, resolve_site
 
 GROUP = "features"
 
@@ -39,7 +39,8 @@ def register(sub) -> None:
     p.add_argument("--hop-s", type=bounded(0.05, 3600.0, "s"), default=1.0, help="window hop, s (default 1)")
     p.add_argument("--max-range-m", type=positive, default=None,
                    help="largest range at which a beacon is searched, m (default: the site's extent)")
-    p.add_argument("--p-fa", type=float, default=1e-6, help="false-alarm probability per search window (1e-6)")
+    p.add_argument("--p-fa", type=open_interval(0.0, 1.0), default=1e-6,
+                   help="false-alarm probability per search window, in (0, 1) (default 1e-6)")
     p.add_argument("--motion-speed-m-s", type=non_negative, default=None,
                    help="walking-speed prior for positions, m/s (default: 0 for a survey cell.toml, whose capture "
                         "is static, else 1.4)")
@@ -97,12 +98,11 @@ def _run(args) -> int:
     if args.walk is None:
         beside = [args.wav.parent / n for n in ("walk.toml", "cell.toml") if (args.wav.parent / n).is_file()]
         args.walk = beside[0] if beside else None
-    if args.site is None:
-        if args.walk is None:
-            raise ConfigError("--site is needed (no walk.toml/cell.toml beside the WAV names one)")
-        site = load_walk(args.walk).load_site()
-    else:
-        site = load_site(args.site)
+    if args.wav.is_dir():
+        raise AudioError(f"{args.wav}: is a directory, expected a WAV file")
+    if not args.wav.exists():
+        raise AudioError(f"{args.wav}: does not exist")
+    site = resolve_site(None if args.walk is None else load_walk(args.walk), args.site)
     if not site.beacons:
         raise ConfigError(f"{args.site or args.walk}: the site lists no [[beacons]]")
     _check_audio(args.wav, site)
@@ -111,8 +111,6 @@ def _run(args) -> int:
         timing = timing_from_walk(None if args.walk is None else load_walk(args.walk), site,
                                   args.start_uncertainty_s, where=args.walk)
     _print_warnings(caught)
-    if not 0 < args.p_fa < 1:
-        raise ConfigError(f"--p-fa must lie in (0, 1), got {args.p_fa}")
     detector = DetectorConfig(p_fa=args.p_fa, max_range_m=args.max_range_m)
     motion = args.motion_speed_m_s
     if motion is None:

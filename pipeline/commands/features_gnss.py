@@ -8,8 +8,8 @@ import math
 import sys
 from pathlib import Path
 
-from features.errors import ConfigError
-from pipeline.args import bounded, check_outputs, positive
+from features.errors import ConfigError, NmeaError
+from pipeline.args import bounded, check_outputs, positive, resolve_site
 
 GROUP = "features"
 
@@ -27,7 +27,8 @@ def register(sub) -> None:
     p.add_argument("--site", type=Path, default=None, help="site directory or site.toml (for --positions; default: the site named by walk.toml beside the file)")
     p.add_argument("--window-s", type=bounded(0.2, 3600.0, "s"), default=2.0, help="window length, s (default 2)")
     p.add_argument("--hop-s", type=bounded(0.05, 3600.0, "s"), default=1.0, help="window hop, s (default 1)")
-    p.add_argument("--elevation-mask-deg", type=float, default=10.0, help="elevation mask, degrees (default 10)")
+    p.add_argument("--elevation-mask-deg", type=bounded(0.0, 89.9, "deg"), default=10.0,
+                   help="elevation mask, degrees, 0 to 89.9 (default 10)")
     p.add_argument("--fluct-threshold-dbhz", type=positive, default=2.0,
                    help="smallest C/N0 swing counted as a fluctuation, dB-Hz (default 2: NMEA C/N0 is in whole dB-Hz)")
     p.add_argument("--cn0-reference", type=Path, default=None,
@@ -37,6 +38,9 @@ def register(sub) -> None:
     p.add_argument("--start-utc", default=None,
                    help="t_s origin, ISO 8601 UTC; default: start_utc of the walk.toml/cell.toml beside the file, "
                         "else the first epoch")
+    p.add_argument("--allow-missing-checksum", action="store_true",
+                   help="use sentences that carry no *hh checksum (some phone logs); a wrong checksum is "
+                        "still skipped")
     p.add_argument("--epochs", type=Path, default=None, help="also write each decoded epoch as a JSON line")
     p.add_argument("--positions", type=Path, default=None, help="also write fixes in site ENU with sigma (CSV)")
     p.set_defaults(func=_run)
@@ -94,19 +98,23 @@ def _run(args) -> int:
         except (OSError, UnicodeDecodeError, ValueError, KeyError, TypeError, AttributeError) as exc:
             raise ConfigError(f"cannot read C/N0 reference {args.cn0_reference}: "
                               f"{type(exc).__name__}: {str(exc)[:200]}") from None
-    site = None
-    if args.site is not None:
-        from features.site import load_site
-        site = load_site(args.site)
-    elif args.positions is not None and (_walk_beside(args.nmea) is None or _walk_beside(args.nmea).site_ref is None):
-        raise ConfigError("--positions needs --site (the ENU origin)")
-
     walk = _walk_beside(args.nmea)
+    site = None
+    if args.site is None and args.positions is not None and walk is None:
+        raise ConfigError("--positions needs --site (the ENU origin; no walk.toml or cell.toml beside the file)")
+    if args.site is not None or args.positions is not None:
+        try:
+            site = resolve_site(walk, args.site)
+        except ConfigError as exc:
+            raise ConfigError(f"--positions needs --site (the ENU origin): {exc}") from None
     if args.start_utc is None and walk is not None:
         args.start_utc = walk.start_utc.isoformat()  # t_s on the walk's time base
-    if site is None and walk is not None and walk.site_ref is not None and args.positions is not None:
-        site = walk.load_site()
-    epochs, stats = read_nmea(args.nmea)
+    try:
+        epochs, stats = read_nmea(args.nmea, require_checksum=not args.allow_missing_checksum)
+    except NmeaError as exc:
+        hint = ("; the sentences carry no checksum: if that is how the device writes them, pass "
+                "--allow-missing-checksum") if "no checksum" in str(exc) and not args.allow_missing_checksum else ""
+        raise NmeaError(f"{exc}{hint}") from None
     epochs = _on_time_base(epochs, args.start_utc)
     sky = sky_arrays(epochs)
     table = gnss_features(sky, config, reference)

@@ -64,8 +64,6 @@ def _run(args) -> int:
 
     check_outputs({"IMU": args.imu}, {"--out": args.out})
     imu = read_imu_csv(args.imu, accel_unit=args.accel_unit, gyro_unit=args.gyro_unit)
-    repaired = f"; repaired: {imu.report.summary()}" if imu.report.n_defects else ""
-    print(f"envfuse: {args.imu}: {imu.units}{repaired}", file=sys.stderr)
     heading = HeadingConfig(declination_rad=math.radians(_declination_deg(args.imu, args.declination_deg)))
     length = StepLengthModel() if args.k is None else StepLengthModel(k=args.k)
     config = PdrConfig(length=length, heading=heading)
@@ -82,6 +80,8 @@ def _run(args) -> int:
                          PdrConfig(length=StepLengthModel(k=k), heading=heading))
         print(f"K = {k:.4f} (Weinberg, from {args.calibrate_distance_m:g} m)")
     write_steps_csv(args.out, result)
+    repaired = f"; repaired: {imu.report.summary()}" if imu.report.n_defects else ""
+    print(f"envfuse: {args.imu}: {imu.units}{repaired}", file=sys.stderr)
     if result.heading is None:
         print(f"envfuse: {args.imu}: no gyro/magnetometer columns: heading and positions left empty",
               file=sys.stderr)

@@ -23,10 +23,11 @@ def register(sub) -> None:
 
     p = sub.add_parser("walk", help="simulate a walk log (walk.toml, gnss.nmea, truth.csv, ...)",
                        description="Simulate a person walking the site's aisles, writing every device stream.",
-                       epilog="Example: envfuse simulate walk site1 --seed 7 --duration 300 --out walk7")
+                       epilog="Example: envfuse simulate walk site1 --seed 7 --duration-s 300 --out walk7")
     p.add_argument("site", type=Path, help="site directory or site.toml")
     p.add_argument("--seed", type=seed, required=True, help="walk seed")
-    p.add_argument("--duration", type=bounded(1.0, 21_600.0, "s"), default=300.0, help="seconds, 1 to 21600 (default 300)")
+    p.add_argument("--duration-s", "--duration", dest="duration", type=bounded(1.0, 21_600.0, "s"), default=300.0,
+                   help="walk length, s, 1 to 21600 (default 300; --duration is the old name)")
     p.add_argument("--person", type=seed, default=None, help="walker identity: same person, same gait (default: seed)")
     p.add_argument("--start", default=None, help="start time, ISO 8601 UTC (default: drawn from the seed)")
     p.add_argument("--no-corrections", action="store_true", help="GNSS without RTK/DGNSS corrections")
@@ -36,10 +37,11 @@ def register(sub) -> None:
 
     p = sub.add_parser("survey", help="simulate a grid fingerprint survey (cells/<id>/...)",
                        description="Simulate a crew's static captures on a grid of cells over the site.",
-                       epilog="Example: envfuse simulate survey site1 --out survey1 --cell-size 5 --capture-s 30")
+                       epilog="Example: envfuse simulate survey site1 --out survey1 --cell-size-m 5 --capture-s 30")
     p.add_argument("site", type=Path, help="site directory or site.toml")
     p.add_argument("--out", type=Path, required=True, help="output survey directory")
-    p.add_argument("--cell-size", type=positive, default=None, help="cell size in metres (default: site grid, 5)")
+    p.add_argument("--cell-size-m", "--cell-size", dest="cell_size", type=bounded(0.5, 50.0, "m"), default=None,
+                   help="cell size, m, 0.5 to 50 (default: the site's grid, 5; --cell-size is the old name)")
     p.add_argument("--capture-s", type=bounded(1.0, 3600.0, "s"), default=30.0, help="capture length per cell, s, 1 to 3600 (default 30)")
     p.add_argument("--seed", type=seed, default=0, help="survey seed (default 0)")
     p.add_argument("--start", default=None, help="start time, ISO 8601 UTC")
