@@ -256,7 +256,8 @@ class Site:
 
 
 def _check_beacon_protocol(beacons, acoustic: AcousticConfig) -> None:
-    """Per-beacon chirps fit their slot and band; slot-mates stand at least :data:`SLOT_REUSE_MIN_M` apart."""
+    """Per-beacon chirps fit their slot and band; slot-mates whose bands overlap stand at least
+    :data:`SLOT_REUSE_MIN_M` apart (frequency-divided beacons, in disjoint bands, may share a slot anywhere)."""
     for b in beacons:
         for name in ("f0_hz", "f1_hz", "chirp_duration_s"):
             v = getattr(b, name)
@@ -270,14 +271,19 @@ def _check_beacon_protocol(beacons, acoustic: AcousticConfig) -> None:
         f1 = acoustic.f1_hz if b.f1_hz is None else b.f1_hz
         if not 0 < f0 < f1 <= 24_000.0:
             raise ConfigError(f"[[beacons]] id {b.id}: band must satisfy 0 < f0_hz < f1_hz <= 24000, got {f0:g}..{f1:g}")
+    def band(b):
+        return (acoustic.f0_hz if b.f0_hz is None else b.f0_hz, acoustic.f1_hz if b.f1_hz is None else b.f1_hz)
+
     for i, a in enumerate(beacons):
         for b in beacons[i + 1:]:
-            if a.slot == b.slot:
+            (a0, a1), (b0, b1) = band(a), band(b)
+            if a.slot == b.slot and a0 < b1 and b0 < a1:  # same slot, overlapping bands: they would collide
                 d = math.hypot(a.east_m - b.east_m, a.north_m - b.north_m)
                 if d < SLOT_REUSE_MIN_M:
-                    raise ConfigError(f"[[beacons]] id {a.id} and id {b.id} share slot {a.slot} but stand "
-                                      f"{d:.1f} m apart; a slot is reused only by beacons at least "
-                                      f"{SLOT_REUSE_MIN_M:g} m apart (give one of them another slot)")
+                    raise ConfigError(f"[[beacons]] id {a.id} and id {b.id} share slot {a.slot} and band but "
+                                      f"stand {d:.1f} m apart; a slot is reused only by beacons at least "
+                                      f"{SLOT_REUSE_MIN_M:g} m apart or in disjoint bands (give one of them "
+                                      f"another slot)")
 
 
 def _build(cls, data, where: str):

@@ -90,9 +90,13 @@ def build_parser() -> CliParser:
 _OUTPUT_OPTIONS = ("out", "epochs", "positions", "fit_cn0_reference", "gpsd_json")
 
 
+class Terminated(BaseException):
+    """Raised by the SIGTERM handler: unwinds like Ctrl-C's KeyboardInterrupt (every temporary output is
+    removed by the ``except BaseException`` of :mod:`features.fileio`), and ends with status 143 (128 + 15)."""
+
+
 def _terminate(signum, frame):  # noqa: ARG001 - signal handler API
-    """SIGTERM ends a run like Ctrl-C: the KeyboardInterrupt unwinds every temporary output."""
-    raise KeyboardInterrupt
+    raise Terminated
 
 
 @contextlib.contextmanager
@@ -138,6 +142,10 @@ def main(argv: list[str] | None = None) -> int:
         print("envfuse: interrupted; files already written are complete, nothing half-written was kept",
               file=sys.stderr)
         return 130
+    except Terminated:
+        print("envfuse: terminated (SIGTERM); files already written are complete, nothing half-written was kept",
+              file=sys.stderr)
+        return 143
     except (OSError, MemoryError) as exc:
         print(f"envfuse: error: {exc}", file=sys.stderr)
         return 1

@@ -68,8 +68,9 @@ def test_site_messages_name_the_toml_keys():
 
 def test_slot_mates_closer_than_the_protocol_allows_are_refused():
     site_from_dict(_site())                                    # 200 m apart: fine
-    with pytest.raises(ConfigError, match=r"id 1 and id 2 share slot 0 but stand 30.0 m apart.*145 m"):
+    with pytest.raises(ConfigError, match=r"id 1 and id 2 share slot 0 and band but stand 30.0 m apart.*145 m"):
         site_from_dict(_site(east_m=30.0))
+    site_from_dict(_site(east_m=30.0, f0_hz=23_500.0, f1_hz=24_000.0))   # disjoint bands may share a slot
     d = _site(east_m=30.0, slot=1)
     d["acoustic"] = {"n_slots": 2}
     site_from_dict(d)                                          # own slots: fine
