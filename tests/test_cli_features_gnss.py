@@ -33,7 +33,7 @@ def test_writes_features_epochs_and_positions(tmp_path, site_dir, capsys):
     assert rows[1]["n_tracked"] == "5" and rows[1]["n_in_view"] == "6"  # PRN 24 at 5° is under the mask
     assert float(rows[1]["invisible_ratio"]) == pytest.approx(1 / 6, rel=1e-9)
     lines = [json.loads(x) for x in ep.read_text().splitlines()]
-    assert len(lines) == 2 and lines[0]["time"] == "2024-06-15T12:00:00Z"
+    assert len(lines) == 2 and lines[0]["time"] == "2024-06-15T12:00:00.000Z"   # fixed precision (issue 12 item 19)
     assert lines[1]["satellites"][0] == {"system": "GPS", "prn": 10, "signal": 1, "el_deg": 45.0, "az_deg": 90.0,
                                          "cn0_dbhz": 46.0, "used": True}
     prow = list(csv.DictReader(pos.open()))

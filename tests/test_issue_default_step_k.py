@@ -8,8 +8,6 @@ Measured when written (distance error %, persons 1-8, 120-s walks, seeds 101-108
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import pytest
 

@@ -33,7 +33,7 @@ def _lc79d(n_epochs: int, last_signal: str = "8", drop_part: int | None = None) 
             sig = last_signal if i == 3 else "1"
             out.append(_s(f"GPGSV,3,{i},10,{','.join(part)},{sig}"))
         # a genuine second signal group (L5, signal 8) of one part
-        out.append(_s(f"GPGSV,1,1,02,01,15,020,28,02,20,040,29,8"))
+        out.append(_s("GPGSV,1,1,02,01,15,020,28,02,20,040,29,8"))
     return "".join(out).encode()
 
 

@@ -52,7 +52,7 @@ def test_fifo_is_written_through(tmp_path):
     assert _gnss(fifo) == 0
     reader.join(10)
     assert stat.S_ISFIFO(os.lstat(fifo).st_mode)
-    assert got and got[0].startswith(b"t_s,att_mean_db")
+    assert got and got[0].startswith(b"t_s,time_utc,att_mean_db")
 
 
 def test_symlink_is_kept_and_its_target_replaced(tmp_path):
@@ -61,13 +61,13 @@ def test_symlink_is_kept_and_its_target_replaced(tmp_path):
     link = tmp_path / "link.csv"
     link.symlink_to(target)
     assert _gnss(link) == 0
-    assert link.is_symlink() and target.read_text().startswith("t_s,att_mean_db")
+    assert link.is_symlink() and target.read_text().startswith("t_s,time_utc,att_mean_db")
 
 
 def test_dash_writes_the_table_to_stdout_and_the_summary_to_stderr(capsys):
     assert _gnss("-") == 0
     cap = capsys.readouterr()
-    assert cap.out.startswith("t_s,att_mean_db") and "with a fix" not in cap.out
+    assert cap.out.startswith("t_s,time_utc,att_mean_db") and "with a fix" not in cap.out
     assert "epochs" in cap.err and "windows" in cap.err
 
 

@@ -114,12 +114,18 @@ class Epoch:
         return len({(s.system, s.prn) for s in self.satellites if s.cn0_dbhz is not None})
 
     def to_json_dict(self) -> dict:
-        """The epoch as plain JSON types (the ``--epochs`` JSON-lines format)."""
+        """The epoch as plain JSON types (the ``--epochs`` JSON-lines format).
+
+        Times have a fixed precision: ``time`` ISO 8601 UTC with three decimals (``...T12:00:00.000Z``),
+        ``t_s`` and ``time_of_day_s`` rounded to the millisecond.
+        """
         f = self.fix
+        from features.gnss.gpsd import iso_utc_ms
+
         return {
             "t_s": round(self.t_s, 3),
-            "time": self.time_utc.isoformat().replace("+00:00", "Z") if self.time_utc else None,
-            "time_of_day_s": self.time_of_day_s,
+            "time": iso_utc_ms(self.time_utc),
+            "time_of_day_s": round(self.time_of_day_s, 3),
             "fix": {"lat_deg": f.lat_deg, "lon_deg": f.lon_deg, "alt_m": f.alt_m, "geoid_sep_m": f.geoid_sep_m,
                     "quality": f.quality, "n_used": f.n_used, "hdop": f.hdop, "pdop": f.pdop, "vdop": f.vdop,
                     "mode": f.mode},

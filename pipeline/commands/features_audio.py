@@ -2,14 +2,13 @@
 
 from __future__ import annotations
 
-import io
-import math
 import sys
 import warnings
 from pathlib import Path
 
 from features.errors import AudioError, ConfigError
 from pipeline.args import bounded, check_outputs, non_negative, open_interval, positive, resolve_site
+from pipeline.tables import csv_text, with_geodetic, with_time_utc
 
 GROUP = "features"
 
@@ -47,18 +46,8 @@ def register(sub) -> None:
     p.set_defaults(func=_run)
 
 
-def _fmt(value) -> str:
-    if isinstance(value, float):
-        return "" if math.isnan(value) else f"{value:.10g}"
-    return str(value)
-
-
-def _csv(rows: list[dict], names) -> str:
-    buf = io.StringIO()
-    buf.write(",".join(names) + "\n")
-    for row in rows:
-        buf.write(",".join(_fmt(row[n]) for n in names) + "\n")
-    return buf.getvalue()
+def _columns(rows: list[dict], names) -> dict:
+    return {n: [r[n] for r in rows] for n in names}
 
 
 def _check_audio(wav: Path, site) -> None:
@@ -90,7 +79,7 @@ def _run(args) -> int:
     from features.acoustic.detection import DetectorConfig
     from features.fileio import atomic_write_many
     from features.acoustic.timing import timing_from_walk
-    from features.site import load_site
+
     from features.walk import load_walk
 
     check_outputs({"WAV": args.wav, "--site": args.site, "--walk": args.walk},
@@ -122,9 +111,15 @@ def _run(args) -> int:
         warnings.simplefilter("always", AudioWarning)
         result = analyse_audio(args.wav, site, timing, detector, windows, positions)
     _print_warnings(caught)
-    outputs = {args.out: _csv(result.rows, FEATURE_COLUMNS)}
+    walk = None if args.walk is None else load_walk(args.walk)
+    origin_utc = None if walk is None else walk.start_utc  # t_s counts from the walk's start_utc
+    names, cols = with_time_utc(FEATURE_COLUMNS, _columns(result.rows, FEATURE_COLUMNS), origin_utc)
+    outputs = {args.out: csv_text(names, cols)}
     if args.positions is not None:
-        outputs[args.positions] = _csv([f.as_row() for f in result.fixes], POSITION_COLUMNS)
+        rows = [f.as_row() for f in result.fixes]
+        names, cols = with_time_utc(POSITION_COLUMNS, _columns(rows, POSITION_COLUMNS), origin_utc)
+        names, cols = with_geodetic(names, cols, site.origin, up_m=site.device_height_m)
+        outputs[args.positions] = csv_text(names, cols)
     atomic_write_many(outputs)
     msg = (f"{args.wav}: {result.duration_s:.1f} s, {result.n_detections} chirps detected, "
            f"{sum(r['acoustic_available'] for r in result.rows)}/{len(result.rows)} windows with a chirp "

@@ -5,11 +5,11 @@ from __future__ import annotations
 import io
 import json
 import math
-import sys
 from pathlib import Path
 
 from features.errors import ConfigError, NmeaError
 from pipeline.args import bounded, check_outputs, positive, resolve_site
+from pipeline.tables import with_geodetic, with_time_utc
 
 GROUP = "features"
 
@@ -42,7 +42,10 @@ def register(sub) -> None:
                    help="use sentences that carry no *hh checksum (some phone logs); a wrong checksum is "
                         "still skipped")
     p.add_argument("--epochs", type=Path, default=None, help="also write each decoded epoch as a JSON line")
-    p.add_argument("--positions", type=Path, default=None, help="also write fixes in site ENU with sigma (CSV)")
+    p.add_argument("--positions", type=Path, default=None,
+                   help="also write fixes in site ENU with sigma, and lat/lon/ellipsoidal height (CSV)")
+    p.add_argument("--gpsd-json", type=Path, default=None, metavar="JSONL",
+                   help="also write the epochs as gpsd's JSON (TPV and SKY objects, one per line)")
     p.set_defaults(func=_run)
 
 
@@ -79,6 +82,14 @@ def _on_time_base(epochs, start_utc: str | None):
     return epochs_on_time_base(epochs, parse_utc(start_utc, "--start-utc"))
 
 
+def _utc_of_t0(epochs):
+    """The UTC time of t_s = 0, from the first epoch that carries a date (None without any)."""
+    import datetime as dt
+
+    dated = next((e for e in epochs if e.time_utc is not None), None)
+    return None if dated is None else dated.time_utc - dt.timedelta(seconds=dated.t_s)
+
+
 def _run(args) -> int:
     from features.fileio import atomic_write_many
     from features.gnss.features import (
@@ -88,7 +99,7 @@ def _run(args) -> int:
 
     check_outputs({"NMEA": args.nmea, "--site": args.site, "--cn0-reference": args.cn0_reference},
                   {"--out": args.out, "--epochs": args.epochs, "--positions": args.positions,
-                   "--fit-cn0-reference": args.fit_cn0_reference})
+                   "--fit-cn0-reference": args.fit_cn0_reference, "--gpsd-json": args.gpsd_json})
     config = GnssFeatureConfig(window_s=args.window_s, hop_s=args.hop_s, elevation_mask_deg=args.elevation_mask_deg,
                                fluct_threshold_dbhz=args.fluct_threshold_dbhz)
     reference = Cn0Reference()
@@ -119,9 +130,13 @@ def _run(args) -> int:
     sky = sky_arrays(epochs)
     table = gnss_features(sky, config, reference)
     names = ("t_s",) + FEATURE_COLUMNS + COUNT_COLUMNS
-    outputs = {args.out: _csv(table, names)}
+    origin_utc = _utc_of_t0(epochs)
+    outputs = {args.out: _csv(*reversed(with_time_utc(names, table, origin_utc)))}
     if args.epochs is not None:
         outputs[args.epochs] = "".join(json.dumps(e.to_json_dict()) + "\n" for e in epochs)
+    if args.gpsd_json is not None:
+        from features.gnss.gpsd import gpsd_json_lines
+        outputs[args.gpsd_json] = gpsd_json_lines(epochs)
     if args.fit_cn0_reference is not None:
         fitted = fit_cn0_reference(sky.el_deg, sky.cn0_dbhz)
         outputs[args.fit_cn0_reference] = json.dumps(fitted.to_dict(), indent=2) + "\n"
@@ -130,7 +145,9 @@ def _run(args) -> int:
         from features.gnss.positions import fixes_to_enu
         o = site.origin
         pos = fixes_to_enu(epochs, o.lat_deg, o.lon_deg, o.alt_m)
-        outputs[args.positions] = _csv({n: getattr(pos, n) for n in pos.COLUMNS}, pos.COLUMNS)
+        names, cols = with_time_utc(pos.COLUMNS, {n: getattr(pos, n) for n in pos.COLUMNS}, origin_utc)
+        names, cols = with_geodetic(names, cols, o)
+        outputs[args.positions] = _csv(cols, names)
         n_pos = len(pos)
     atomic_write_many(outputs)
     n_with_sky = int(sky.n_epochs)

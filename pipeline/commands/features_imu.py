@@ -8,6 +8,7 @@ from pathlib import Path
 
 from features.errors import DataError
 from pipeline.args import bounded, check_outputs, finite, positive
+from pipeline.tables import csv_text, with_geodetic, with_time_utc
 
 GROUP = "features"
 
@@ -56,10 +57,44 @@ def _declination_deg(imu_path: Path, given: float | None) -> float:
     return 0.0
 
 
+def _walk_beside(imu_path: Path):
+    """The walk.toml beside the IMU file (its start time and site), or None."""
+    if not (imu_path.parent / "walk.toml").is_file():
+        return None
+    from features.walk import load_walk
+
+    return load_walk(imu_path.parent)
+
+
+_STEP_FORMATS = {"t_s": ".3f", "step_length_m": ".4f", "heading_rad": ".5f", "east_m": ".3f", "north_m": ".3f"}
+
+
+def _steps_table(imu_path: Path, result) -> str:
+    """steps.csv: t_s, time_utc, step_length_m, heading_rad, east_m, north_m, lat_deg, lon_deg, h_ell_m
+    (UTC and geodetic empty without a walk.toml beside the file naming its start and site)."""
+    from features.errors import ConfigError
+
+    walk = _walk_beside(imu_path)
+    site = None
+    if walk is not None and walk.site_ref is not None:
+        try:
+            site = walk.load_site()
+        except ConfigError:
+            site = None
+    names = tuple(_STEP_FORMATS)
+    cols = {"t_s": result.t_s, "step_length_m": result.step_length_m, "heading_rad": result.heading_rad,
+            "east_m": result.east_m, "north_m": result.north_m}
+    names, cols = with_time_utc(names, cols, None if walk is None else walk.start_utc)
+    up = None if site is None else site.device_height_m
+    names, cols = with_geodetic(names, cols, None if site is None else site.origin, up_m=up)
+    return csv_text(names, cols, _STEP_FORMATS)
+
+
 def _run(args) -> int:
     from features.imu.heading import HeadingConfig
     from features.imu.reader import read_imu_csv
-    from features.imu.pdr import PdrConfig, run_pdr, write_steps_csv
+    from features.fileio import atomic_write_text
+    from features.imu.pdr import PdrConfig, run_pdr
     from features.imu.steps import StepLengthModel, calibrate_weinberg_k
 
     check_outputs({"IMU": args.imu}, {"--out": args.out})
@@ -79,7 +114,7 @@ def _run(args) -> int:
         result = run_pdr(imu, args.start_east, args.start_north,
                          PdrConfig(length=StepLengthModel(k=k), heading=heading))
         print(f"K = {k:.4f} (Weinberg, from {args.calibrate_distance_m:g} m)")
-    write_steps_csv(args.out, result)
+    atomic_write_text(args.out, _steps_table(args.imu, result))
     repaired = f"; repaired: {imu.report.summary()}" if imu.report.n_defects else ""
     print(f"envfuse: {args.imu}: {imu.units}{repaired}", file=sys.stderr)
     if result.heading is None:

@@ -5,7 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from features.errors import ConfigError
-from pipeline.args import bounded, check_outputs, positive, seed
+from pipeline.args import bounded, check_outputs, seed
 
 GROUP = "simulate"
 
