@@ -47,6 +47,7 @@ def _run(args) -> int:
         extra = ", ".join(f"{k}={v:.3g}" if isinstance(v, float) else f"{k}={v}" for k, v in tr.info.items())
         print(f"  {name}: {len(tr.t_s)} positions" + (f" ({extra})" if extra else ""))
     out = args.out or args.walk / "sources.png"
-    plot_walk(src, out, title=f"{args.walk.name}: sources against truth")
+    plot_walk(src, out, title=f"{args.walk.name}: sources" + (" against truth" if src.truth is not None else
+                                                               " (no truth.csv)"))
     print(f"plot -> {out}")
     return 0
