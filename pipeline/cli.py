@@ -132,8 +132,9 @@ def main(argv: list[str] | None = None) -> int:
                 (getattr(args, "_group_parser", None) or parser).print_help()
                 return 2
             return _run(args)
-    except UsageError as exc:
-        print(exc, file=sys.stderr)
+    except UsageError as exc:  # the parser's carry the command's name; a command's own get the prefix
+        text = str(exc)
+        print(text if text.startswith("envfuse") else f"envfuse: error: {text}", file=sys.stderr)
         return 2
     except EnvfuseError as exc:
         print(f"envfuse: error: {exc}", file=sys.stderr)

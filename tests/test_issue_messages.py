@@ -148,3 +148,31 @@ def test_real_no_checksum_file_with_the_opt_in(tmp_path, capsys):
     capsys.readouterr()
     assert main(["features", "gnss", str(path), "--out", str(tmp_path / "f.csv"), "--allow-missing-checksum"]) == 0
     assert "2 epochs" in capsys.readouterr().out
+
+
+def test_command_level_usage_errors_name_options_and_carry_the_prefix(tmp_path, capsys):
+    wav = tmp_path / "a.wav"
+    import numpy as np
+    import soundfile as sf
+
+    sf.write(wav, np.zeros(48_000, dtype=np.float32), 48_000)
+    (tmp_path / "site.toml").write_text('name = "t"\n[origin]\nlat_deg = 30.0\nlon_deg = 120.0\n'
+                                        '[[beacons]]\nid = 1\neast_m = 0.0\nnorth_m = 0.0\nup_m = 3.0\nslot = 0\n')
+    assert main(["features", "audio", str(wav), "--site", str(tmp_path), "--out", str(tmp_path / "f.csv"),
+                 "--window-s", "1", "--hop-s", "3"]) == 2
+    err = _err(capsys)
+    assert err.startswith("envfuse: error: --window-s") and "window_s" not in err
+    nmea = tmp_path / "x.nmea"
+    nmea.write_bytes((DATA / "good.nmea").read_bytes())
+    assert main(["features", "gnss", str(nmea), "--out", str(nmea)]) == 2
+    assert _err(capsys).startswith("envfuse: error: --out")
+    assert main(["report", "walk", str(tmp_path), "--k", "100"]) == 2
+    assert "--k" in _err(capsys)
+
+
+def test_bad_walk_toml_declination_names_the_key(tmp_path, capsys):
+    (tmp_path / "imu.csv").write_bytes((DATA / "imu_good.csv").read_bytes())
+    (tmp_path / "walk.toml").write_text('start_utc = "2026-06-01T08:00:00Z"\n[imu]\nfile = "imu.csv"\n'
+                                        'declination_deg = 400\n')
+    assert main(["features", "imu", str(tmp_path / "imu.csv"), "--out", str(tmp_path / "s.csv")]) == 1
+    assert "[imu] declination_deg" in _err(capsys)

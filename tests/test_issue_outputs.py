@@ -138,12 +138,15 @@ def test_sigterm_during_a_survey_leaves_nothing_behind(tmp_path):
     assert main(["simulate", "site", "--seed", "3", "--out", str(site)]) == 0
     env = dict(os.environ, PYTHONPATH=str(REPO))
     proc = subprocess.Popen([sys.executable, "-m", "pipeline", "simulate", "survey", str(site), "--out",
-                             str(tmp_path / "survey"), "--cell-size", "5", "--capture-s", "30"],
+                             str(tmp_path / "survey"), "--cell-size-m", "10", "--capture-s", "30"],
                             cwd=REPO, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
-    deadline = time.monotonic() + 120
-    while not list(tmp_path.glob(".survey.*.partial")) and time.monotonic() < deadline:
+    deadline = time.monotonic() + 300      # generous: the suite may share two cores with other work
+    while not list(tmp_path.glob(".survey.*.partial")) and time.monotonic() < deadline and proc.poll() is None:
         time.sleep(0.2)
-    assert list(tmp_path.glob(".survey.*.partial")), "the survey never started"
+    if not list(tmp_path.glob(".survey.*.partial")):
+        proc.kill()
+        _, err = proc.communicate()
+        pytest.fail(f"the survey never started (exit {proc.returncode}): {err.decode()[-500:]}")
     time.sleep(1.0)
     proc.send_signal(signal.SIGTERM)
     _, err = proc.communicate(timeout=120)

@@ -7,7 +7,8 @@ import warnings
 from pathlib import Path
 
 from features.errors import AudioError, ConfigError
-from pipeline.args import bounded, check_outputs, non_negative, open_interval, positive, resolve_site
+from pipeline.args import (UsageError, bounded, check_outputs, non_negative, open_interval, positive,
+                           resolve_site)
 from pipeline.tables import csv_text, with_geodetic, with_time_utc
 
 GROUP = "features"
@@ -106,7 +107,10 @@ def _run(args) -> int:
         static = args.walk is not None and (args.walk.name == "cell.toml" or (args.walk / "cell.toml").is_file())
         motion = 0.0 if static else 1.4
     positions = PositionConfig(max_clock_offset_s=timing.start_uncertainty_s + 0.05, motion_speed_m_s=motion)
-    windows = WindowConfig(window_s=args.window_s, hop_s=args.hop_s)
+    try:
+        windows = WindowConfig(window_s=args.window_s, hop_s=args.hop_s)
+    except ConfigError as exc:  # name the options, not the config fields
+        raise UsageError(str(exc).replace("window_s", "--window-s").replace("hop_s", "--hop-s")) from None
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", AudioWarning)
         result = analyse_audio(args.wav, site, timing, detector, windows, positions)

@@ -8,7 +8,7 @@ import math
 from pathlib import Path
 
 from features.errors import ConfigError, NmeaError
-from pipeline.args import bounded, check_outputs, positive, resolve_site
+from pipeline.args import bounded, check_outputs, resolve_site
 from pipeline.tables import with_geodetic, with_time_utc
 
 GROUP = "features"
@@ -29,7 +29,7 @@ def register(sub) -> None:
     p.add_argument("--hop-s", type=bounded(0.05, 3600.0, "s"), default=1.0, help="window hop, s (default 1)")
     p.add_argument("--elevation-mask-deg", type=bounded(0.0, 89.9, "deg"), default=10.0,
                    help="elevation mask, degrees, 0 to 89.9 (default 10)")
-    p.add_argument("--fluct-threshold-dbhz", type=positive, default=2.0,
+    p.add_argument("--fluct-threshold-dbhz", type=bounded(0.1, 30.0, "dB-Hz"), default=2.0,
                    help="smallest C/N0 swing counted as a fluctuation, dB-Hz (default 2: NMEA C/N0 is in whole dB-Hz)")
     p.add_argument("--cn0-reference", type=Path, default=None,
                    help="JSON file with a fitted C_ref model {intercept_dbhz, slope_dbhz} (default: built-in)")
@@ -107,8 +107,9 @@ def _run(args) -> int:
         try:
             reference = Cn0Reference.from_dict(json.loads(args.cn0_reference.read_text()))
         except (OSError, UnicodeDecodeError, ValueError, KeyError, TypeError, AttributeError) as exc:
-            raise ConfigError(f"cannot read C/N0 reference {args.cn0_reference}: "
-                              f"{type(exc).__name__}: {str(exc)[:200]}") from None
+            detail = str(exc)[:200].replace("Cn0Reference.", "")
+            raise ConfigError(f"--cn0-reference {args.cn0_reference}: cannot read it as a C/N0 reference "
+                              f"({type(exc).__name__}: {detail})") from None
     walk = _walk_beside(args.nmea)
     site = None
     if args.site is None and args.positions is not None and walk is None:

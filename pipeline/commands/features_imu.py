@@ -6,7 +6,7 @@ import math
 import sys
 from pathlib import Path
 
-from features.errors import DataError
+from features.errors import ConfigError, DataError
 from pipeline.args import bounded, check_outputs, finite, positive
 from pipeline.tables import csv_text, with_geodetic, with_time_utc
 
@@ -53,6 +53,8 @@ def _declination_deg(imu_path: Path, given: float | None) -> float:
         imu_table = read_toml(walk_toml).get("imu", {})
         value = imu_table.get("declination_deg") if isinstance(imu_table, dict) else None
         if isinstance(value, (int, float)) and math.isfinite(value):
+            if not -180.0 <= value <= 180.0:
+                raise ConfigError(f"{walk_toml}: [imu] declination_deg must lie in [-180, 180], got {value}")
             return float(value)
     return 0.0
 

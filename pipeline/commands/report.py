@@ -5,7 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from features.errors import ConfigError
-from pipeline.args import check_outputs, plot_path, positive
+from pipeline.args import bounded, check_outputs, plot_path
 
 GROUP = "report"
 
@@ -20,8 +20,8 @@ def register(sub) -> None:
     p.add_argument("--out", type=plot_path, default=None,
                    help="plot to write, format by suffix: .png, .pdf or .svg; - for PNG on stdout "
                         "(default: WALK/sources.png)")
-    p.add_argument("--k", type=positive, default=None,
-                   help="Weinberg K for PDR (default: calibrated on RTK-fixed GNSS steps of the walk)")
+    p.add_argument("--k", type=bounded(0.05, 3.0), default=None,
+                   help="Weinberg K for PDR, 0.05 to 3 (default: calibrated on RTK-fixed GNSS steps of the walk)")
     p.set_defaults(func=_run)
 
 
