@@ -5,9 +5,10 @@ the target (``os.replace`` is atomic on POSIX). Directories are built under a
 temporary sibling name and renamed into place when complete.
 
 What is not a regular file is never replaced: ``-`` means standard output;
-an existing device, FIFO or socket (``/dev/stdout``, ``/dev/null``) is
-written through once the content is complete; a symbolic link is followed
-and its target replaced atomically, the link kept.
+an existing device, FIFO or socket, and any path under ``/dev`` or ``/proc``
+(``/dev/stdout`` even when the shell redirected it to a file), is written
+through once the content is complete; a symbolic link is followed and its
+target replaced atomically, the link kept.
 
 Temporary names carry the writer's process id (``.NAME.<pid>.XXXX.partial``,
 ``.tmp``); one left by a process that no longer runs (killed by SIGKILL, a
@@ -52,9 +53,16 @@ STDOUT = "-"
 _DATA_STDOUT: contextvars.ContextVar = contextvars.ContextVar("envfuse_data_stdout", default=None)
 
 
+_STDOUT_ALIASES = ("/dev/stdout", "/dev/fd/1", "/proc/self/fd/1")
+
+
 def is_stdout(path) -> bool:
-    """True for the output name ``-`` (standard output)."""
-    return path is not None and str(path) == STDOUT
+    """True for ``-`` and the names of this process's standard output (``/dev/stdout``, ``/dev/fd/1``).
+
+    >>> is_stdout("-"), is_stdout("/dev/stdout"), is_stdout("out.csv")
+    (True, True, False)
+    """
+    return path is not None and (str(path) == STDOUT or str(path) in _STDOUT_ALIASES)
 
 
 @contextlib.contextmanager
@@ -151,6 +159,9 @@ def atomic_path(path: str | os.PathLike, suffix: str = "") -> Iterator[Path]:
     """
     through = is_stdout(path)
     path = Path(path)
+    # /dev/stdout, /dev/fd/N, /proc/self/fd/N name an open descriptor (a pipe, a terminal, or the file a
+    # shell redirected to): write through it, never replace what it resolves to
+    through = through or Path(os.path.abspath(path)).parts[1:2] in (("dev",), ("proc",))
     if not through and path.is_dir():
         raise EnvfuseError(f"cannot write {path}: it is a directory")
     if not through and path.is_symlink():

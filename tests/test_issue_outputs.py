@@ -180,3 +180,24 @@ def test_report_walk_writes_a_real_pdf(walk_dir, tmp_path, capsys):
     out = tmp_path / "walk.pdf"
     assert main(["report", "walk", str(walk_dir), "--out", str(out)]) == 0
     assert out.read_bytes().startswith(b"%PDF")
+
+
+def test_dev_stdout_redirected_to_a_file_keeps_the_table_whole(tmp_path):
+    """`--out /dev/stdout > file`: the table lands whole in the file (written through the descriptor, not
+    by replacing the file it resolves to), and the summary goes to stderr."""
+    target = tmp_path / "redirected.csv"
+    env = dict(os.environ, PYTHONPATH=str(REPO))
+    with open(target, "wb") as fh:
+        res = subprocess.run([sys.executable, "-m", "pipeline", "features", "gnss", str(DATA / "good.nmea"),
+                              "--out", "/dev/stdout"], cwd=REPO, env=env, stdout=fh, stderr=subprocess.PIPE,
+                             timeout=120)
+    assert res.returncode == 0, res.stderr.decode()
+    lines = target.read_text().splitlines()
+    assert lines[0].startswith("t_s,time_utc,att_mean_db") and len(lines) == 2
+    assert b"epochs" in res.stderr
+
+
+def test_report_plot_to_stdout(walk_dir, capsysbinary):
+    assert main(["report", "walk", str(walk_dir), "--out", "-"]) == 0
+    cap = capsysbinary.readouterr()
+    assert cap.out.startswith(b"\x89PNG") and b"horizontal error" in cap.err
