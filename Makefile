@@ -27,6 +27,7 @@ test: $(STAMP)
 	$(BIN)/python -m pytest -n 2 -q
 
 bench: $(STAMP)
+	$(BIN)/python -m pip install --quiet -e ".[compare]"
 	for f in bench/*.py; do $(BIN)/python $$f || exit 1; done
 
 clean:

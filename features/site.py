@@ -37,12 +37,26 @@ ENV_CLASSES = ("open", "light", "heavy")
 
 BOX_KINDS = ("transformer", "firewall", "building", "gantry", "equipment")
 
+SLOT_REUSE_MIN_M = 145.0
+"""Least horizontal distance between two beacons sharing a TDMA slot, m: twice the ≈ 70 m free-field
+detection range, so no receiver hears two slot-mates (README, "Beacon protocol")."""
+
+_TOML_TABLE = {"Origin": "origin", "Atmosphere": "atmosphere", "Grid": "grid", "AcousticConfig": "acoustic",
+               "Beacon": "", "Box": "", "EmiZone": "", "Site": ""}
+"""The site.toml table each dataclass is read from, so messages name the key the user wrote (entries of
+[[beacons]], [[layout]], [[emi_zones]] are named by the loader: "[[beacons]] #2 (id 7): east_m ...")."""
+
+
+def _key(obj, name: str) -> str:
+    table = _TOML_TABLE.get(type(obj).__name__, type(obj).__name__)
+    return f"{table}.{name}" if table else name
+
 
 def _require_finite(obj, *names: str) -> None:
     for name in names:
         value = getattr(obj, name)
         if not isinstance(value, (int, float)) or isinstance(value, bool) or not math.isfinite(value):
-            raise ConfigError(f"{type(obj).__name__}.{name} must be a finite number, got {value!r}")
+            raise ConfigError(f"{_key(obj, name)} must be a finite number, got {value!r}")
 
 
 @dataclass(frozen=True)
@@ -215,6 +229,7 @@ class Site:
         for b in self.beacons:
             if b.slot >= self.acoustic.n_slots:
                 raise ConfigError(f"beacon {b.id} slot {b.slot} >= acoustic.n_slots {self.acoustic.n_slots}")
+        _check_beacon_protocol(self.beacons, self.acoustic)
 
     @functools.cached_property
     def beacon_by_id(self) -> dict:
@@ -240,6 +255,37 @@ class Site:
         return out
 
 
+def _check_beacon_protocol(beacons, acoustic: AcousticConfig) -> None:
+    """Per-beacon chirps fit their slot and band; slot-mates whose bands overlap stand at least
+    :data:`SLOT_REUSE_MIN_M` apart (frequency-divided beacons, in disjoint bands, may share a slot anywhere)."""
+    for b in beacons:
+        for name in ("f0_hz", "f1_hz", "chirp_duration_s"):
+            v = getattr(b, name)
+            if v is not None and (isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v)):
+                raise ConfigError(f"[[beacons]] id {b.id}: {name} must be a finite number, got {v!r}")
+        if b.chirp_duration_s is not None and not 0 < b.chirp_duration_s < acoustic.slot_s:
+            raise ConfigError(f"[[beacons]] id {b.id}: chirp_duration_s {b.chirp_duration_s:g} must lie in "
+                              f"(0, acoustic.slot_s = {acoustic.slot_s:g}): a chirp longer than its slot "
+                              f"overlaps the next beacon's")
+        f0 = acoustic.f0_hz if b.f0_hz is None else b.f0_hz
+        f1 = acoustic.f1_hz if b.f1_hz is None else b.f1_hz
+        if not 0 < f0 < f1 <= 24_000.0:
+            raise ConfigError(f"[[beacons]] id {b.id}: band must satisfy 0 < f0_hz < f1_hz <= 24000, got {f0:g}..{f1:g}")
+    def band(b):
+        return (acoustic.f0_hz if b.f0_hz is None else b.f0_hz, acoustic.f1_hz if b.f1_hz is None else b.f1_hz)
+
+    for i, a in enumerate(beacons):
+        for b in beacons[i + 1:]:
+            (a0, a1), (b0, b1) = band(a), band(b)
+            if a.slot == b.slot and a0 < b1 and b0 < a1:  # same slot, overlapping bands: they would collide
+                d = math.hypot(a.east_m - b.east_m, a.north_m - b.north_m)
+                if d < SLOT_REUSE_MIN_M:
+                    raise ConfigError(f"[[beacons]] id {a.id} and id {b.id} share slot {a.slot} and band but "
+                                      f"stand {d:.1f} m apart; a slot is reused only by beacons at least "
+                                      f"{SLOT_REUSE_MIN_M:g} m apart or in disjoint bands (give one of them "
+                                      f"another slot)")
+
+
 def _build(cls, data, where: str):
     if not isinstance(data, dict):
         raise ConfigError(f"{where}: expected a table, got {type(data).__name__}")
@@ -250,6 +296,12 @@ def _build(cls, data, where: str):
     try:
         return cls(**data)
     except TypeError as exc:
+        from dataclasses import MISSING
+
+        required = {f.name for f in fields(cls) if f.default is MISSING and f.default_factory is MISSING}
+        missing = sorted(required - set(data))
+        raise ConfigError(f"{where}: missing key(s) {missing}" if missing else f"{where}: {exc}") from None
+    except ConfigError as exc:
         raise ConfigError(f"{where}: {exc}") from None
 
 
@@ -270,7 +322,9 @@ def site_from_dict(data: dict, where: str = "site.toml") -> Site:
         items = data.get(key, [])
         if not isinstance(items, list):
             raise ConfigError(f"{where}: '{key}' must be an array of tables")
-        return tuple(_build(cls, it, f"{where} [[{key}]] #{i}") for i, it in enumerate(items))
+        return tuple(_build(cls, it, f"{where} [[{key}]] #{i + 1}"
+                            + (f" (id {it['id']})" if isinstance(it, dict) and "id" in it else ""))
+                     for i, it in enumerate(items))
 
     try:
         return Site(

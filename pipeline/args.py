@@ -4,8 +4,15 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
+from pathlib import Path
 
-__all__ = ["seed", "positive", "non_negative", "finite", "bounded"]
+__all__ = ["seed", "positive", "non_negative", "finite", "bounded", "open_interval", "UsageError", "check_outputs",
+           "plot_path"]
+
+
+class UsageError(Exception):
+    """A usage error (exit status 2): raised by the parser, and by a command for options that clash."""
 
 
 def _number(text: str) -> float:
@@ -64,3 +71,88 @@ def bounded(lo: float, hi: float, unit: str = ""):
         return value
     parse.__name__ = f"bounded[{lo:g},{hi:g}]"
     return parse
+
+
+def open_interval(lo: float, hi: float, unit: str = ""):
+    """A type accepting finite numbers in (lo, hi), both ends excluded.
+
+    >>> open_interval(0, 1)("1e-6")
+    1e-06
+    """
+    def parse(text: str) -> float:
+        value = _number(text)
+        if not lo < value < hi:
+            raise argparse.ArgumentTypeError(f"expected a value in ({lo:g}, {hi:g}){' ' + unit if unit else ''}, "
+                                             f"got {text!r}")
+        return value
+    parse.__name__ = f"open_interval({lo:g},{hi:g})"
+    return parse
+
+
+def _inside(child: Path, parent: Path) -> bool:
+    child, parent = Path(os.path.realpath(child)), Path(os.path.realpath(parent))
+    return child == parent or parent in child.parents
+
+
+def check_outputs(inputs: dict, outputs: dict, directory_outputs: dict | None = None) -> None:
+    """Refuse an output that would overwrite an input, or two outputs naming one file (exit 2).
+
+    ``inputs``/``outputs``/``directory_outputs`` map the option the user wrote
+    (``"--out"``, ``"NMEA"``) to a path or None; ``-`` (stdout) never clashes.
+    A directory output clashes with every input inside it.
+    """
+    from features.fileio import is_stdout, same_file
+
+    ins = {k: Path(v) for k, v in inputs.items() if v is not None and not is_stdout(v)}
+    outs = {k: Path(v) for k, v in outputs.items() if v is not None and not is_stdout(v)}
+    for ko, o in outs.items():
+        for ki, i in ins.items():
+            if same_file(o, i):
+                raise UsageError(f"{ko} {o} is the input {ki}: an output never overwrites an input")
+    names = list(outs.items())
+    for n, (ka, a) in enumerate(names):
+        for kb, b in names[n + 1:]:
+            if same_file(a, b):
+                raise UsageError(f"{ka} and {kb} name the same file {a}")
+    for ko, d in (directory_outputs or {}).items():
+        if d is None:
+            continue
+        for ki, i in ins.items():
+            if _inside(i, Path(d)):
+                raise UsageError(f"{ko} {d} holds the input {ki} ({i}): an output never replaces an input")
+
+
+def plot_path(text: str) -> Path:
+    """An output plot path whose suffix is .png, .pdf or .svg (or ``-`` for PNG on stdout)."""
+    from pipeline.plots import plot_format
+
+    try:
+        plot_format(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+    return Path(text)
+
+
+def resolve_site(walk, override=None, option: str = "--site"):
+    """The site of a walk or survey cell: ``override`` (the user's --site), else the ``site`` its walk.toml
+    names, else, for a survey cell (``SURVEY/cells/<id>/cell.toml``), the survey's own ``SURVEY/site.toml``.
+
+    ``walk`` is a :class:`features.walk.WalkInfo` or None. Raises ConfigError naming what was looked for.
+    """
+    from features.errors import ConfigError
+    from features.site import load_site
+
+    if override is not None:
+        return load_site(override)
+    if walk is None:
+        raise ConfigError(f"{option} is needed (no walk.toml or cell.toml beside the file names a site)")
+    if walk.site_ref is not None:
+        return walk.load_site()
+    is_cell = (walk.directory / "cell.toml").is_file() and not (walk.directory / "walk.toml").is_file()
+    if is_cell:
+        survey_site = walk.directory.parent.parent / "site.toml"
+        if survey_site.is_file():
+            return load_site(survey_site)
+        raise ConfigError(f"{walk.directory / 'cell.toml'}: the survey cell names no site and there is no "
+                          f"{survey_site} (SURVEY/site.toml two folders up); pass {option}")
+    raise ConfigError(f"{walk.directory / 'walk.toml'}: the walk names no site (no 'site' key); pass {option}")

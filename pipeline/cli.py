@@ -10,14 +10,24 @@ status 1; usage errors one line and status 2; never a traceback (set
 from __future__ import annotations
 
 import argparse
+import contextlib
 import importlib
 import os
 import pkgutil
+import signal
 import sys
 
 from features.errors import EnvfuseError
+from pipeline.args import UsageError
 
 __all__ = ["main", "build_parser", "CliParser"]
+
+GROUP_EXAMPLES = {
+    "simulate": "envfuse simulate site --seed 1 --out site1 --plot",
+    "features": "envfuse features gnss walk7/gnss.nmea --site site1 --out gnss_features.csv",
+    "report": "envfuse report walk walk7 --out walk7.png",
+}
+"""One example per command group, shown at the foot of ``envfuse GROUP --help``."""
 
 GROUPS = {
     "simulate": "write a synthetic substation, walk or survey in device formats",
@@ -29,15 +39,21 @@ GROUPS = {
 }
 
 
-class UsageError(Exception):
-    """Raised by :class:`CliParser` instead of printing usage and exiting."""
-
-
 class CliParser(argparse.ArgumentParser):
     """ArgumentParser whose errors are one line, not a usage dump."""
 
     def error(self, message):  # noqa: D401 - argparse API
         raise UsageError(f"{self.prog}: {message} (see '{self.prog} --help')")
+
+
+def _version() -> str:
+    """The installed distribution's version (pyproject.toml), or 'unknown' when run from an uninstalled tree."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("envfuse")
+    except PackageNotFoundError:
+        return "unknown"
 
 
 def build_parser() -> CliParser:
@@ -46,6 +62,7 @@ def build_parser() -> CliParser:
         description="Environment-aware GNSS / acoustic / PDR positioning for substations.",
         epilog="Example: envfuse simulate site --seed 1 --out site1 --plot",
     )
+    parser.add_argument("--version", action="version", version=f"envfuse {_version()}")
     sub = parser.add_subparsers(dest="group", metavar="COMMAND", parser_class=CliParser)
     group_parsers = {}
     modules = sorted(m.name for m in pkgutil.iter_modules(importlib.import_module("pipeline.commands").__path__))
@@ -55,7 +72,9 @@ def build_parser() -> CliParser:
         if group is None:
             continue
         if group not in group_parsers:
-            gp = sub.add_parser(group, help=GROUPS.get(group, ""), description=GROUPS.get(group, ""))
+            example = GROUP_EXAMPLES.get(group)
+            gp = sub.add_parser(group, help=GROUPS.get(group, ""), description=GROUPS.get(group, ""),
+                                epilog=f"Example: {example}" if example else None)
             group_parsers[group] = gp.add_subparsers(dest="command", metavar="SUBCOMMAND", parser_class=CliParser)
             group_parsers[group].required = True
             gp.set_defaults(_group_parser=gp)
@@ -68,18 +87,54 @@ def build_parser() -> CliParser:
     return parser
 
 
+_OUTPUT_OPTIONS = ("out", "epochs", "positions", "fit_cn0_reference", "gpsd_json")
+
+
+class Terminated(BaseException):
+    """Raised by the SIGTERM handler: unwinds like Ctrl-C's KeyboardInterrupt (every temporary output is
+    removed by the ``except BaseException`` of :mod:`features.fileio`), and ends with status 143 (128 + 15)."""
+
+
+def _terminate(signum, frame):  # noqa: ARG001 - signal handler API
+    raise Terminated
+
+
+@contextlib.contextmanager
+def _sigterm_as_interrupt():
+    try:
+        previous = signal.signal(signal.SIGTERM, _terminate)
+    except ValueError:  # not the main thread: leave signals alone
+        yield
+        return
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
+def _run(args) -> int:
+    """Run a command; with an output ``-`` its data goes to stdout and its summary lines to stderr."""
+    from features.fileio import data_stdout, is_stdout
+
+    if any(is_stdout(getattr(args, name, None)) for name in _OUTPUT_OPTIONS):
+        with data_stdout(sys.stdout), contextlib.redirect_stdout(sys.stderr):
+            return int(args.func(args) or 0)
+    return int(args.func(args) or 0)
+
+
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     try:
-        parser = build_parser()
-        args = parser.parse_args(argv)
-        if not hasattr(args, "func"):
-            (getattr(args, "_group_parser", None) or parser).print_help()
-            return 2
-        result = args.func(args)
-        return int(result or 0)
-    except UsageError as exc:
-        print(exc, file=sys.stderr)
+        with _sigterm_as_interrupt():
+            parser = build_parser()
+            args = parser.parse_args(argv)
+            if not hasattr(args, "func"):
+                (getattr(args, "_group_parser", None) or parser).print_help()
+                return 2
+            return _run(args)
+    except UsageError as exc:  # the parser's carry the command's name; a command's own get the prefix
+        text = str(exc)
+        print(text if text.startswith("envfuse") else f"envfuse: error: {text}", file=sys.stderr)
         return 2
     except EnvfuseError as exc:
         print(f"envfuse: error: {exc}", file=sys.stderr)
@@ -88,6 +143,10 @@ def main(argv: list[str] | None = None) -> int:
         print("envfuse: interrupted; files already written are complete, nothing half-written was kept",
               file=sys.stderr)
         return 130
+    except Terminated:
+        print("envfuse: terminated (SIGTERM); files already written are complete, nothing half-written was kept",
+              file=sys.stderr)
+        return 143
     except (OSError, MemoryError) as exc:
         print(f"envfuse: error: {exc}", file=sys.stderr)
         return 1

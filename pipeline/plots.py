@@ -13,28 +13,60 @@ import numpy as np  # noqa: E402
 from matplotlib.colors import ListedColormap  # noqa: E402
 from matplotlib.patches import Patch, Rectangle  # noqa: E402
 
+from features.errors import ConfigError  # noqa: E402
 from features.fileio import atomic_path  # noqa: E402
 from features.site import ENV_CLASSES, Site  # noqa: E402
 
-__all__ = ["CLASS_COLOURS", "plot_site", "save_figure"]
+__all__ = ["CLASS_COLOURS", "PLOT_FORMATS", "plot_format", "plot_site", "save_figure", "EMI_COLOUR"]
+
+PLOT_FORMATS = ("png", "pdf", "svg")
+"""Figure formats written, chosen by the output's suffix (``-``, standard output, is PNG)."""
+
+
+def plot_format(path: str | os.PathLike) -> str:
+    """The format a plot path asks for, or ValueError naming the suffixes accepted.
+
+    >>> plot_format("walk.PDF"), plot_format("-"), plot_format("map.svg")
+    ('pdf', 'png', 'svg')
+    """
+    if str(path) == "-":
+        return "png"
+    suffix = Path(path).suffix.lower().lstrip(".")
+    if suffix not in PLOT_FORMATS:
+        raise ValueError(f"{path}: a plot is written as .png, .pdf or .svg (by its suffix), "
+                         f"not {'.' + suffix if suffix else 'a name without a suffix'}")
+    return suffix
 
 CLASS_COLOURS = {"open": "#cfe8cf", "light": "#f6d98b", "heavy": "#e58a7a"}
-_KIND_COLOURS = {"transformer": "#4a5a6a", "firewall": "#8b8b8b", "building": "#a06a4a", "gantry": "#5b7fa6",
-                 "equipment": "#33424f"}
+_KIND_COLOURS = {"transformer": "#151515", "firewall": "#8b8b8b", "building": "#a06a4a", "gantry": "#5b7fa6",
+                 "equipment": "#2f7f8f"}
+"""Structure colours, distinct from each other and from the class colours (transformers near-black,
+switchyard equipment teal)."""
+EMI_COLOUR = "purple"
 
 
 def save_figure(fig, path: str | os.PathLike, dpi: int = 130) -> Path:
-    """Save a figure atomically as PNG and close it."""
+    """Save a figure atomically in the format of the path's suffix (PNG, PDF, SVG) and close it."""
+    try:
+        fmt = plot_format(path)
+    except ValueError as exc:
+        plt.close(fig)
+        raise ConfigError(str(exc)) from None
     path = Path(path)
-    with atomic_path(path, suffix=".png") as tmp:
-        fig.savefig(tmp, dpi=dpi, bbox_inches="tight", format="png")
-    plt.close(fig)
+    try:
+        with atomic_path(path, suffix="." + fmt) as tmp:
+            fig.savefig(tmp, dpi=dpi, bbox_inches="tight", format=fmt)
+    finally:
+        plt.close(fig)
     return path
 
 
 def plot_site(site: Site, path: str | os.PathLike, resolution_m: float = 0.5, title: str | None = None) -> Path:
     """Layout, beacons (with TDMA slot) and the ground-truth environment class map."""
-    from simulation.site.environment import class_map, classify_share  # pipeline may import simulation
+    from matplotlib.cm import ScalarMappable
+    from matplotlib.colors import BoundaryNorm
+
+    from simulation.site.environment import LIGHT_MAX, OPEN_MAX, class_map, classify_share  # pipeline may import simulation
     east, north, share = class_map(site, resolution_m=resolution_m, n_az=120)
     cls = np.where(np.isfinite(share), classify_share(np.nan_to_num(share)), -1).astype(float)
     cls[cls < 0] = np.nan
@@ -48,7 +80,7 @@ def plot_site(site: Site, path: str | os.PathLike, resolution_m: float = 0.5, ti
                                facecolor="none" if b.porous else _KIND_COLOURS[b.kind],
                                edgecolor=_KIND_COLOURS[b.kind], hatch="////" if b.porous else None, lw=1.0))
     for z in site.emi_zones:
-        ax.add_patch(plt.Circle((z.east_m, z.north_m), z.radius_m, fill=False, ls=":", color="purple", lw=0.8))
+        ax.add_patch(plt.Circle((z.east_m, z.north_m), z.radius_m, fill=False, ls=":", color=EMI_COLOUR, lw=1.0))
     for bc in site.beacons:
         ax.plot(bc.east_m, bc.north_m, marker="^", color="black", ms=7)
         ax.annotate(f"{bc.id}/s{bc.slot}", (bc.east_m, bc.north_m), xytext=(3, 3), textcoords="offset points",
@@ -56,7 +88,15 @@ def plot_site(site: Site, path: str | os.PathLike, resolution_m: float = 0.5, ti
     handles = [Patch(color=CLASS_COLOURS[c], label=f"{c} ({100 * s:.0f} %)") for c, s in zip(ENV_CLASSES, shares)]
     handles += [Patch(color=_KIND_COLOURS[k], label=k) for k in _KIND_COLOURS]
     handles += [plt.Line2D([], [], marker="^", color="black", ls="", label="beacon id/slot")]
+    if site.emi_zones:
+        handles += [plt.Line2D([], [], ls=":", color=EMI_COLOUR, lw=1.0, label="EMI zone (C/N0 loss)")]
     ax.legend(handles=handles, loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8)
+    # colour bar of the blocked-sky share with the class thresholds (the map shows the class of each share)
+    norm = BoundaryNorm([0.0, OPEN_MAX, LIGHT_MAX, 1.0], cmap.N)
+    bar = fig.colorbar(ScalarMappable(norm=norm, cmap=cmap), ax=ax, location="bottom", fraction=0.04, pad=0.08,
+                       aspect=40, ticks=[0.0, OPEN_MAX, LIGHT_MAX, 1.0], spacing="proportional")
+    bar.ax.set_xticklabels(["0 %", f"{100 * OPEN_MAX:.0f} %", f"{100 * LIGHT_MAX:.0f} %", "100 %"])
+    bar.set_label("blocked sky share above 10° elevation: open < 10 % <= light <= 40 % < heavy", fontsize=8)
     ax.set_xlabel("east (m)")
     ax.set_ylabel("north (m)")
     ax.set_aspect("equal")

@@ -117,53 +117,96 @@ def _stats(err):
     return (int(err.size), float(np.mean(err)), float(np.median(err)), float(np.percentile(err, 95)))
 
 
-_SRC_STYLE = {"GNSS": dict(color="#d62728", s=6), "acoustic": dict(color="#ff7f0e", s=6),
+_SRC_STYLE = {"GNSS": dict(color="#d62728", marker="o", s=9, edgecolors="#4a0000", linewidths=0.3),
+              "acoustic": dict(color="#6a3d9a", marker="D", s=14, edgecolors="black", linewidths=0.4),
               "PDR": dict(color="#1f77b4", s=4)}
+"""Source styles: dark-edged markers stay visible on every class background (acoustic was orange, lost
+on the light and heavy shading)."""
+_MAP_MARGIN_M = 5.0
+
+
+def _walk_extent(src: WalkSources) -> tuple[float, float, float, float]:
+    """East/north limits of the truth and every track (finite points), with a margin, clipped to the site."""
+    es, ns = [], []
+    if src.truth is not None:
+        es.append(np.asarray(src.truth.east_m, float))
+        ns.append(np.asarray(src.truth.north_m, float))
+    for tr in src.tracks.values():
+        es.append(np.asarray(tr.east_m, float))
+        ns.append(np.asarray(tr.north_m, float))
+    e = np.concatenate(es) if es else np.zeros(0)
+    n = np.concatenate(ns) if ns else np.zeros(0)
+    ok = np.isfinite(e) & np.isfinite(n)
+    g = src.site.grid
+    if not ok.any():
+        return g.east_min_m, g.east_max_m, g.north_min_m, g.north_max_m
+    e0, e1 = np.percentile(e[ok], [0.5, 99.5])
+    n0, n1 = np.percentile(n[ok], [0.5, 99.5])
+    e0, e1 = max(e0 - _MAP_MARGIN_M, g.east_min_m - _MAP_MARGIN_M), min(e1 + _MAP_MARGIN_M, g.east_max_m + _MAP_MARGIN_M)
+    n0, n1 = max(n0 - _MAP_MARGIN_M, g.north_min_m - _MAP_MARGIN_M), min(n1 + _MAP_MARGIN_M, g.north_max_m + _MAP_MARGIN_M)
+    return float(e0), float(e1), float(n0), float(n1)
 
 
 def plot_walk(src: WalkSources, path: str | os.PathLike, title: str = "") -> Path:
-    """Map of the sources against truth, and their errors over time with the truth class shaded."""
+    """Map of the sources (zoomed to the walk) and, with a truth, their errors over time on the truth class.
+
+    Legends sit outside the axes, so nothing covers the track; without ``truth.csv`` there is only the map.
+    """
     import matplotlib.pyplot as plt
-    from matplotlib.patches import Rectangle
+    from matplotlib.patches import Patch, Rectangle
 
     from pipeline.plots import CLASS_COLOURS, save_figure
 
-    fig, (ax, ax2) = plt.subplots(1, 2, figsize=(15, 6), gridspec_kw={"width_ratios": [1.1, 1]})
+    has_truth = src.truth is not None
+    if has_truth:
+        fig, (ax, ax2) = plt.subplots(1, 2, figsize=(16, 6.5), gridspec_kw={"width_ratios": [1.1, 1]})
+    else:
+        fig, ax = plt.subplots(figsize=(9, 6.5))
+        ax2 = None
     for b in src.site.layout:
         ax.add_patch(Rectangle((b.east_min_m, b.north_min_m), b.east_max_m - b.east_min_m,
                                b.north_max_m - b.north_min_m, facecolor="none" if b.porous else "#cccccc",
                                edgecolor="#999999", hatch="//" if b.porous else None, lw=0.6))
     for bc in src.site.beacons:
         ax.plot(bc.east_m, bc.north_m, "k^", ms=5)
-    if src.truth is not None:
-        ax.plot(src.truth.east_m, src.truth.north_m, "k-", lw=1.2, label="truth")
+    if has_truth:
+        ax.plot(src.truth.east_m, src.truth.north_m, "k-", lw=1.2, label="truth", zorder=3)
     for name, tr in src.tracks.items():
         style = _SRC_STYLE.get(name, {})
         if name == "PDR":
             lab = name + (" (K, yaw from RTK GNSS)" if "calibrated_steps" in tr.info else "")
-            ax.plot(tr.east_m, tr.north_m, "-", color=style["color"], lw=1, label=lab)
+            ax.plot(tr.east_m, tr.north_m, "-", color=style["color"], lw=1, label=lab, zorder=4)
         else:
-            ax.scatter(tr.east_m, tr.north_m, label=name, alpha=0.6, **style)
-    ax.set_xlim(src.site.grid.east_min_m, src.site.grid.east_max_m)
-    ax.set_ylim(src.site.grid.north_min_m, src.site.grid.north_max_m)
+            ax.scatter(tr.east_m, tr.north_m, label=name, alpha=0.8, zorder=5, **style)
+    ax.plot([], [], "k^", ms=5, ls="", label="beacon")
+    e0, e1, n0, n1 = _walk_extent(src)
+    ax.set_xlim(e0, e1)
+    ax.set_ylim(n0, n1)
     ax.set_aspect("equal")
     ax.set_xlabel("east (m)")
     ax.set_ylabel("north (m)")
-    ax.legend(loc="upper right", fontsize=8)
-    ax.set_title(title or "walk: sources against truth")
-    if src.truth is not None:
+    ax.legend(loc="upper left", bbox_to_anchor=(0.0, -0.12), ncol=3, fontsize=8, frameon=False)
+    ax.set_title(title or ("walk: sources against truth" if has_truth else "walk: sources (no truth.csv)"))
+    if has_truth:
         t = src.truth.t_s
         c = src.truth.env_class
         edges = np.flatnonzero(np.diff(c)) + 1
         for a, b in zip(np.r_[0, edges], np.r_[edges, len(t)]):
-            ax2.axvspan(t[a], t[min(b, len(t) - 1)], color=CLASS_COLOURS[ENV_CLASSES[c[a]]], lw=0)
+            ax2.axvspan(t[a], t[min(b, len(t) - 1)], color=CLASS_COLOURS[ENV_CLASSES[c[a]]], alpha=0.6, lw=0)
+        handles = []
         for name, tr in src.tracks.items():
             ok = np.isfinite(tr.east_m)
             te, tn = src.truth.at(tr.t_s[ok])
-            ax2.semilogy(tr.t_s[ok], np.maximum(np.hypot(tr.east_m[ok] - te, tr.north_m[ok] - tn), 1e-3), ".",
-                         ms=2, color=_SRC_STYLE.get(name, {}).get("color"), label=name)
+            style = dict(_SRC_STYLE.get(name, {}))
+            style["s"] = max(4, style.get("s", 4) - 3)
+            h = ax2.scatter(tr.t_s[ok], np.maximum(np.hypot(tr.east_m[ok] - te, tr.north_m[ok] - tn), 1e-3),
+                            label=name, zorder=3, **style)
+            handles.append(h)
+        ax2.set_yscale("log")
+        handles += [Patch(color=CLASS_COLOURS[k], alpha=0.6, label=f"truth class: {k}") for k in ENV_CLASSES]
         ax2.set_xlabel("t (s)")
         ax2.set_ylabel("horizontal error (m)")
-        ax2.set_title("error over time; background = truth class (open / light / heavy)")
-        ax2.legend(fontsize=8)
+        ax2.set_title("horizontal error over time, on the truth class")
+        ax2.legend(handles=handles, loc="upper left", bbox_to_anchor=(0.0, -0.12), ncol=3, fontsize=8,
+                   frameon=False)
     return save_figure(fig, path)

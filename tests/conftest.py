@@ -7,7 +7,20 @@ from pathlib import Path
 import pytest
 
 REPO = Path(__file__).resolve().parents[1]
-SHARED_DATA = REPO.parent / "shared" / "data"
+
+
+def _shared_data_root() -> Path:
+    """../shared/data beside the repo; from a git worktree (``wt/<name>``) the one beside the main checkout;
+    ``ENVFUSE_SHARED_DATA`` overrides both."""
+    import os
+
+    if os.environ.get("ENVFUSE_SHARED_DATA"):
+        return Path(os.environ["ENVFUSE_SHARED_DATA"])
+    candidates = [REPO.parent / "shared" / "data", REPO.parent.parent / "shared" / "data"]
+    return next((c for c in candidates if c.is_dir()), candidates[0])
+
+
+SHARED_DATA = _shared_data_root()
 
 
 def shared_data(*parts: str) -> Path:

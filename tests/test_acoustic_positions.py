@@ -132,8 +132,11 @@ def test_los_range_and_position_errors_must_show(los_runs):
     assert np.max(pos_err) < 0.3
 
 
-def test_los_figures(los_runs, capsys):
-    """Print the measured figures (for the issue note); asserts only that they exist."""
+def test_los_figures(los_runs):
+    """Change detector (issue 12 item 26: this test used to print and assert only non-empty lists).
+    Measured when written on these six synthetic LOS captures: range error median |e| 0.09 mm (n=220),
+    position error median 0.07 mm (n=24); bounds about 3x either side. The spec (< 3 cm, < 10 cm) is
+    test_los_range_and_position_errors_must_show; the closed-form reference is the exact-range test."""
     range_err, pos_err = [], []
     for site, east, north, clock, frames in los_runs:
         by_id = {b.id: b for b in site.beacons}
@@ -144,10 +147,9 @@ def test_los_figures(los_runs, capsys):
                                  - math.dist((east, north, 1.0), (b.east_m, b.north_m, b.up_m)))
             if fr.fix is not None and fr.fix.n_beacons >= 4:
                 pos_err.append(math.hypot(fr.fix.east_m - east, fr.fix.north_m - north))
-    with capsys.disabled():
-        print(f"\nLOS synthetic: range error median |e| {1e3 * np.median(np.abs(range_err)):.2f} mm "
-              f"(n={len(range_err)}), position error median {1e3 * np.median(pos_err):.2f} mm (n={len(pos_err)})")
-    assert range_err and pos_err
+    assert 200 <= len(range_err) <= 240 and 20 <= len(pos_err) <= 28
+    assert 0.03e-3 < np.median(np.abs(range_err)) < 0.27e-3
+    assert 0.02e-3 < np.median(pos_err) < 0.21e-3
 
 
 def test_walking_receiver_is_tracked():

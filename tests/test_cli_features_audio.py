@@ -16,8 +16,9 @@ from features.fileio import write_toml
 from features.site import save_site
 from pipeline.cli import main
 from tests.acoustic_synth import add_chirp, square_site, static_capture, write_wav
+from tests.conftest import SHARED_DATA
 
-ULTRASENSE = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "audio_ultrasense"
+ULTRASENSE = SHARED_DATA / "audio_ultrasense"
 
 
 def _rows(path):
@@ -50,7 +51,7 @@ def test_features_and_positions(tmp_path, site_path, capsys):
                "--out", str(tmp_path / "f.csv"), "--positions", str(tmp_path / "p.csv")])
     assert rc == 0
     rows = _rows(tmp_path / "f.csv")
-    assert list(rows[0]) == list(FEATURE_COLUMNS)
+    assert list(rows[0]) == ["t_s", "time_utc", *FEATURE_COLUMNS[1:]]   # time_utc beside t_s (issue 12 item 19)
     assert [float(r["t_s"]) for r in rows] == [1.0, 2.0, 3.0, 4.0, 5.0]
     assert all(r["acoustic_available"] == "1" and r["flags"] == "" for r in rows)
     assert all(int(r["n_chirps"]) >= 8 for r in rows)
@@ -60,7 +61,9 @@ def test_features_and_positions(tmp_path, site_path, capsys):
     assert all(0.1 < e < 0.6 for e in excess)
     assert all(5.0 < float(r["rician_k_db"]) < 14.0 for r in rows)
     pos = _rows(tmp_path / "p.csv")
-    assert list(pos[0]) == list(POSITION_COLUMNS)
+    i = POSITION_COLUMNS.index("north_m") + 1
+    assert list(pos[0]) == ["t_s", "time_utc", *POSITION_COLUMNS[1:i], "lat_deg", "lon_deg", "h_ell_m",
+                            *POSITION_COLUMNS[i:]]
     assert len(pos) >= 5
     err = [math.hypot(float(p["east_m"]) - 31.0, float(p["north_m"]) - 24.0) for p in pos]
     assert np.median(err) < 0.05

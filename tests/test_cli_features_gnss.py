@@ -9,6 +9,7 @@ from pathlib import Path
 import pytest
 
 from pipeline.cli import main
+from tests.conftest import SHARED_DATA
 
 DATA = Path(__file__).resolve().parent / "data"
 
@@ -32,7 +33,7 @@ def test_writes_features_epochs_and_positions(tmp_path, site_dir, capsys):
     assert rows[1]["n_tracked"] == "5" and rows[1]["n_in_view"] == "6"  # PRN 24 at 5° is under the mask
     assert float(rows[1]["invisible_ratio"]) == pytest.approx(1 / 6, rel=1e-9)
     lines = [json.loads(x) for x in ep.read_text().splitlines()]
-    assert len(lines) == 2 and lines[0]["time"] == "2024-06-15T12:00:00Z"
+    assert len(lines) == 2 and lines[0]["time"] == "2024-06-15T12:00:00.000Z"   # fixed precision (issue 12 item 19)
     assert lines[1]["satellites"][0] == {"system": "GPS", "prn": 10, "signal": 1, "el_deg": 45.0, "az_deg": 90.0,
                                          "cn0_dbhz": 46.0, "used": True}
     prow = list(csv.DictReader(pos.open()))
@@ -65,7 +66,7 @@ def test_positions_need_a_site(tmp_path, capsys):
 
 
 def test_fit_reference_round_trip(tmp_path, capsys):
-    gpsd = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "nmea" / "gpsd"
+    gpsd = SHARED_DATA / "nmea" / "gpsd"
     log = gpsd / "quectel-l76k-nmea.log"
     if not log.exists():
         pytest.skip(f"{log} absent")

@@ -66,7 +66,8 @@ def test_survey_cells(site_dir, tmp_path, capsys):
     (["simulate", "walk", "{site}", "--seed", "1", "--start", "9999-12-31T23:59:59Z", "--out", "{out}"], "outside 1980-2099"),
     (["demo", "--seed", "-1", "--out", "{out}"], "non-negative integer"),
     (["demo", "--workers", "0", "--out", "{out}"], "--workers must be at least 1"),
-    (["simulate", "survey", "{site}", "--out", "{out}", "--cell-size", "0.1"], "--cell-size must lie in"),
+    (["simulate", "survey", "{site}", "--out", "{out}", "--cell-size", "0.1"],
+     "--cell-size-m/--cell-size: expected a value in [0.5, 50] m"),  # usage error (2) under either name
     (["simulate", "teleport"], "invalid choice"),
 ])
 def test_bad_input_one_line_nonzero_nothing_written(tmp_path, site_dir, capsys, argv, needle):
@@ -113,8 +114,10 @@ def test_features_gnss_takes_time_base_and_site_from_walk_toml(tmp_path, capsys)
     rows = (tmp_path / "p.csv").read_text().splitlines()
     assert rows[1].split(",")[0] == "0"  # first fix at the walk's start: t_s on the walk's time base
     truth = (tmp_path / "w" / "truth.csv").read_text().splitlines()[1].split(",")
-    first = rows[1].split(",")
-    assert abs(float(first[1]) - float(truth[1])) < 1.0 and abs(float(first[2]) - float(truth[2])) < 1.0
+    first = dict(zip(rows[0].split(","), rows[1].split(",")))
+    assert abs(float(first["east_m"]) - float(truth[1])) < 1.0 and abs(float(first["north_m"]) - float(truth[2])) < 1.0
+    walk_start = tomllib.loads((tmp_path / "w" / "walk.toml").read_text())["start_utc"]
+    assert first["time_utc"][:19] == walk_start[:19]      # t_s = 0 is the walk's start_utc (issue 12 item 19)
     assert tomllib.loads((tmp_path / "w" / "walk.toml").read_text())["gnss"]["file"] == "gnss.nmea"
     # the audio command likewise finds walk.toml (time base, frames) and the site through it
     code = cli(["features", "audio", str(tmp_path / "w" / "audio.wav"), "--out", str(tmp_path / "a.csv")])

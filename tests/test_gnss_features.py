@@ -16,9 +16,10 @@ from features.gnss.features import (
     fit_cn0_reference, fluctuation_extrema, gnss_features, sky_arrays,
 )
 from features.gnss.nmea import read_nmea
+from tests.conftest import SHARED_DATA
 
 DATA = Path(__file__).resolve().parent / "data"
-GPSD = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "nmea" / "gpsd"
+GPSD = SHARED_DATA / "nmea" / "gpsd"
 REF = Cn0Reference()
 
 

@@ -2,7 +2,8 @@
 
 Truth: the foot-mounted reference's cumulative count (column 6); the paper's
 own algorithm's count is column 5. One detector configuration for all
-files (no per-file tuning). Pinned figures (ours / truth / published):
+files (no per-file tuning). The bound against the truth is the reference test; "ours" is pinned from
+this code's own output, a change detector. Figures (ours / truth / published):
 armband 337/335/316, backpocket 342/343/501, bag 349/346/321,
 frontpocket 325/327/338, hand 328/326/311, neckpouch 347/346/344.
 """

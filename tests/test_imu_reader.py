@@ -89,8 +89,10 @@ def test_cli_writes_steps_and_reports_repairs(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "n_gaps=1" in err and "n_duplicate_t=5" in err
     rows = out.read_text().splitlines()
-    assert rows[0] == "t_s,step_length_m,heading_rad,east_m,north_m"
-    vals = np.array([[float(x) for x in r.split(",")] for r in rows[1:]])
+    # time_utc and lat/lon/h_ell_m are empty: no walk.toml beside the file names a start or a site
+    assert rows[0] == "t_s,time_utc,step_length_m,heading_rad,east_m,north_m,lat_deg,lon_deg,h_ell_m"
+    cols = [0, 2, 3, 4, 5]
+    vals = np.array([[float(r.split(",")[c]) for c in cols] for r in rows[1:]])
     assert len(vals) >= 16 and np.all(np.diff(vals[:, 0]) > 0)
     # the walk starts north from (10, -5): the first step lies within a step length of the start
     assert np.hypot(vals[0, 3] - 10.0, vals[0, 4] + 5.0) == pytest.approx(vals[0, 1], abs=0.05)
@@ -113,11 +115,13 @@ def test_cli_calibrates_k_from_a_known_distance_and_rejects_a_bad_k(tmp_path, ca
     out = tmp_path / "steps.csv"
     assert main(["features", "imu", str(DATA / "imu_good.csv"), "--calibrate-distance-m", "13.4",
                  "--out", str(out)]) == 0
-    lengths = np.array([float(r.split(",")[1]) for r in out.read_text().splitlines()[1:]])
+    lengths = np.array([float(r.split(",")[2]) for r in out.read_text().splitlines()[1:]])  # step_length_m
     assert lengths.sum() == pytest.approx(13.4, abs=0.01)
     assert "K = " in capsys.readouterr().out
-    assert main(["features", "imu", str(DATA / "imu_good.csv"), "--k", "5", "--out", str(tmp_path / "x.csv")]) == 1
-    assert "StepLengthModel.k must lie in [0.05, 3], got 5.0" in capsys.readouterr().err
+    # a bad --k is a usage error (2) naming the option, not the internal StepLengthModel.k (issue 12 item 12)
+    assert main(["features", "imu", str(DATA / "imu_good.csv"), "--k", "5", "--out", str(tmp_path / "x.csv")]) == 2
+    err = capsys.readouterr().err
+    assert "--k" in err and "expected a value in [0.05, 3]" in err and "StepLengthModel" not in err
 
 
 def _with_every_50th_az(tmp_path, value: str):

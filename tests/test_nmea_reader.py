@@ -20,9 +20,10 @@ from hypothesis import strategies as st
 from features.errors import NmeaError
 from features.gnss.nmea import ReadStats, epochs_from_bytes, iter_epochs, parse_sentence, read_nmea
 from features.gnss.quirks import gsa_fields, gsv_fields, parse_time_of_day, satellite_id
+from tests.conftest import SHARED_DATA
 
 DATA = Path(__file__).resolve().parent / "data"
-SHARED = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "nmea"
+SHARED = SHARED_DATA / "nmea"
 GPSD = SHARED / "gpsd"
 GNSSID = {"GPS": 0, "SBAS": 1, "Galileo": 2, "BeiDou": 3, "QZSS": 5, "GLONASS": 6, "NavIC": 7}
 
@@ -207,7 +208,9 @@ def test_parse_time_rejects_nonsense():
 
 # ---------------------------------------------------------------- real logs
 
-# file: (epochs, epochs with sky, epochs with a position, satellite entries in view, tracked entries, skipped)
+# Change detector: counts pinned from this reader's own output on gpsd's logs
+# (file: epochs, epochs with sky, epochs with a position, satellite entries in view, tracked entries, skipped).
+# Agreement with gpsd's own decoding (*.log.chk, an independent reference) is checked separately.
 PINNED = {
     "beidou-bd.log": (10, 2, 5, 64, 36, 0),
     "beidou-gb.log": (5, 5, 2, 139, 86, 0),
@@ -233,6 +236,7 @@ def _counts(epochs, stats):
 
 @pytest.mark.parametrize("name", sorted(PINNED))
 def test_real_gpsd_logs_pinned_counts(name):
+    """Change detector: the counts of PINNED (this reader's own output when pinned)."""
     _need_gpsd()
     epochs, stats = read_nmea(GPSD / name)
     assert _counts(epochs, stats) == PINNED[name]
@@ -444,6 +448,7 @@ def test_parse_sentence_contract():
     ("nmea_w_wrong_checksum.nmea", (2, 0, 2, 0, 0, 2)),        # the two bad-checksum lines skipped, counted
 ])
 def test_gnss_lib_py_files_pinned(name, counts):
+    """Change detector: counts pinned from this reader's own output."""
     path = SHARED / "gnss_lib_py" / name
     if not path.exists():
         pytest.skip(f"{path} absent")

@@ -90,9 +90,16 @@ def test_counts_agree_between_gga_gsa_gsv_and_the_simulation(sim_and_text):
                 assert (snr == "") == (not sim.tracked[i, c])
                 if snr:
                     assert int(snr) == sim.cn0_reported_dbhz[i, c]
-    # The capture crosses midnight: RMC dates roll over.
-    dates = {m.datestamp for m in _sentences(text) if m.sentence_type == "RMC"}
-    assert len(dates) == 2
+    # The capture crosses midnight: the RMC date advances by exactly one day, once, at 00:00:00
+    # (issue 12 item 26: this checked only that there were two dates).
+    rmc = [(m.datestamp, m.timestamp) for m in _sentences(text) if m.sentence_type == "RMC"]
+    assert rmc[0][0] == START.date()
+    changes = [k for k in range(1, len(rmc)) if rmc[k][0] != rmc[k - 1][0]]
+    assert len(changes) == 1
+    k = changes[0]
+    assert (rmc[k][0] - rmc[k - 1][0]).days == 1
+    assert rmc[k][1].hour == 0 and rmc[k][1].minute == 0 and rmc[k][1].second == 0
+    assert rmc[k - 1][1].hour == 23 and rmc[k - 1][1].minute == 59
 
 
 def test_heavy_site_lists_untracked_satellites(sim_and_text):

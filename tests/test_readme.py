@@ -46,9 +46,11 @@ def test_tour_commands_run(tmp_path, monkeypatch, capsys):
         assert code == 0, f"{line}\n{err}"
     tour = tmp_path / "tour"
     assert (tour / "site" / "site.png").is_file() and (tour / "walk.png").stat().st_size > 20_000
-    for name, header in (("steps.csv", "t_s,step_length_m,heading_rad,east_m,north_m"),
-                         ("gnss_features.csv", "t_s,att_mean_db,att_std_db,fluct_per_s,invisible_ratio,dop_growth"),
-                         ("audio_features.csv", "t_s,"), ("gnss_positions.csv", "t_s,east_m,north_m")):
+    for name, header in (("steps.csv", "t_s,time_utc,step_length_m,heading_rad,east_m,north_m,lat_deg,lon_deg,h_ell_m"),
+                         ("gnss_features.csv",
+                          "t_s,time_utc,att_mean_db,att_std_db,fluct_per_s,invisible_ratio,dop_growth"),
+                         ("audio_features.csv", "t_s,time_utc,"),
+                         ("gnss_positions.csv", "t_s,time_utc,east_m,north_m,up_m,lat_deg,lon_deg,h_ell_m")):
         lines = (tour / name).read_text().splitlines()
         assert lines[0].startswith(header) and len(lines) > 5, name
     assert len((tour / "survey" / "cells").iterdir().__next__().name) > 0

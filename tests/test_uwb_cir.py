@@ -32,8 +32,9 @@ import pytest
 
 from features.acoustic.cir import FEATURE_NAMES, analyse_cirs
 from features.acoustic.uwb import DW1000_PULSE_WIDTH_S, DW1000_TAP_S, read_decawave_log
+from tests.conftest import SHARED_DATA
 
-DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "cir_uwb"
+DATA = SHARED_DATA / "cir_uwb"
 CLASSES = ("LOS", "NLOS", "NDP NLOS")
 PACKETS_PER_FILE = 15
 

@@ -114,12 +114,18 @@ class Epoch:
         return len({(s.system, s.prn) for s in self.satellites if s.cn0_dbhz is not None})
 
     def to_json_dict(self) -> dict:
-        """The epoch as plain JSON types (the ``--epochs`` JSON-lines format)."""
+        """The epoch as plain JSON types (the ``--epochs`` JSON-lines format).
+
+        Times have a fixed precision: ``time`` ISO 8601 UTC with three decimals (``...T12:00:00.000Z``),
+        ``t_s`` and ``time_of_day_s`` rounded to the millisecond.
+        """
         f = self.fix
+        from features.gnss.gpsd import iso_utc_ms
+
         return {
             "t_s": round(self.t_s, 3),
-            "time": self.time_utc.isoformat().replace("+00:00", "Z") if self.time_utc else None,
-            "time_of_day_s": self.time_of_day_s,
+            "time": iso_utc_ms(self.time_utc),
+            "time_of_day_s": round(self.time_of_day_s, 3),
             "fix": {"lat_deg": f.lat_deg, "lon_deg": f.lon_deg, "alt_m": f.alt_m, "geoid_sep_m": f.geoid_sep_m,
                     "quality": f.quality, "n_used": f.n_used, "hdop": f.hdop, "pdop": f.pdop, "vdop": f.vdop,
                     "mode": f.mode},
@@ -234,6 +240,7 @@ def _assemble(sentences: Iterable[list[str]], stats: ReadStats, resync_after: in
     last_t_s = None
     last_interval = _EPOCH_GAP_DEFAULT_S
     gsv_parts: dict = {}
+    gsv_open: dict = {}  # talker -> (group key, n_msgs, n_in_view, next part) of its last GSV
     orphaned = False
     current_time_text = None
 
@@ -314,6 +321,7 @@ def _assemble(sentences: Iterable[list[str]], stats: ReadStats, resync_after: in
                 if first_rel is None:
                     first_rel = rel
                 gsv_parts.clear()
+                gsv_open.clear()
             elif date is not None:
                 current.date = date
             stats.used_sentences += 1
@@ -325,6 +333,8 @@ def _assemble(sentences: Iterable[list[str]], stats: ReadStats, resync_after: in
                 current.rmc = payload
             continue
         if current is None:
+            if kind == "GSV":
+                stats.gsv_before_time += 1
             continue  # sky data before any time: no epoch to attach it to
         if orphaned:
             stats.time_jumps += 1
@@ -336,10 +346,21 @@ def _assemble(sentences: Iterable[list[str]], stats: ReadStats, resync_after: in
         current.sky = True
         key = (talker, payload.signal)
         expected = gsv_parts.get(key, 1)
+        signal = payload.signal
         if payload.msg_num != expected:
-            stats.gsv_incomplete += 1
+            # Quectel LC79D sends a group's last part under another signal id: a part that continues the
+            # talker's open group exactly (same part count, the next part number) belongs to that group.
+            open_group = gsv_open.get(talker)
+            if (open_group is not None and payload.msg_num > 1
+                    and (open_group[1], open_group[3]) == (payload.n_msgs, payload.msg_num)):
+                key = open_group[0]
+                signal = key[1]
+                stats.gsv_signal_continued += 1
+            else:
+                stats.gsv_incomplete += 1
         gsv_parts[key] = payload.msg_num % payload.n_msgs + 1
-        sats, signal = current.sats, payload.signal
+        gsv_open[talker] = (key, payload.n_msgs, payload.n_in_view, gsv_parts[key])
+        sats = current.sats
         for sat in payload.satellites:
             sats[(sat[0], sat[1], signal)] = sat
     if current is not None:
@@ -414,6 +435,10 @@ def read_nmea(path: str | os.PathLike, *, parser: Literal["fast", "pynmea2"] = "
     except IsADirectoryError:
         raise NmeaError(f"NMEA path {path} is a directory, not a file") from None
     if not any(e.sky_reported or e.fix.has_position for e in epochs):
+        if stats.gsv_before_time:
+            raise NmeaError(f"{path}: {stats.gsv_before_time} GSV sentences list satellites in view, but no "
+                            f"sentence carries a time (GGA, RMC, GNS, GLL or ZDA), so they cannot be placed "
+                            f"on a time base; {stats.summary()}")
         raise NmeaError(f"{path}: no usable epoch (no fix and no satellites in view) in "
                         f"{stats.lines} lines; {stats.summary()}")
     return epochs, stats

@@ -58,6 +58,10 @@ class ReadStats:
     time_jumps: int = 0
     time_resets: int = 0
     gsv_incomplete: int = 0
+    gsv_signal_continued: int = 0
+    """GSV parts that continue a group under another signal id (Quectel LC79D): joined, not incomplete."""
+    gsv_before_time: int = 0
+    """GSV sentences before the first timed sentence (no epoch to hold them)."""
     other_types: Counter = field(default_factory=Counter)
 
     @property
@@ -77,6 +81,8 @@ class ReadStats:
             text += f"; time base reset {self.time_resets}x"
         if self.gsv_incomplete:
             text += f"; {self.gsv_incomplete} incomplete GSV groups"
+        if self.gsv_signal_continued:
+            text += f"; {self.gsv_signal_continued} GSV groups ended under another signal id (joined)"
         return text
 
 

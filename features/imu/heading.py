@@ -271,8 +271,15 @@ def imufusion_heading(acc_m_s2: np.ndarray, gyro_rad_s: np.ndarray, mag_ut: np.n
     with the specific force as measured (in g) and the gyro in °/s; the
     magnetic-rejection threshold ``rejection_deg`` is imufusion's own gate.
     One Python call per sample (≈ 3 µs). Returns rad from true north, clockwise, shape (n,).
+
+    Needs the optional extra ``compare`` (``pip install -e ".[compare]"``); without it a
+    :class:`~features.errors.ConfigError` says so.
     """
-    import imufusion
+    try:
+        import imufusion
+    except ImportError:
+        raise ConfigError('imufusion_heading needs imufusion, the optional extra "compare": '
+                          'pip install -e ".[compare]"') from None
 
     settings = imufusion.AhrsSettings()
     settings.convention = imufusion.CONVENTION_NED

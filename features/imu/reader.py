@@ -36,10 +36,21 @@ Repair (never an exception for a few bad samples; counts in
   ``max_gap_s`` are counted and flagged in ``valid`` (False inside them).
 
 A file without the required columns raises one :class:`ImuError` naming them.
+
+Units (:func:`detect_units`): the accelerometer may be in m/s², g or mg and
+the gyro in rad/s or deg/s (x-io and many loggers write g and deg/s). With
+``accel_unit="auto"`` the unit is the one for which the median magnitude of
+the specific force is gravity: median |a| in [0.5, 2] → g, in [5, 20] →
+m/s², in [500, 2000] → mg; anything else is refused with one message (name
+the unit with ``--accel-unit``). With ``gyro_unit="auto"`` the 99th
+percentile of |ω| decides: above 20 (1146 °/s in rad/s, beyond a walking
+body, foot swing included) the gyro is in deg/s, otherwise rad/s. Both
+choices are recorded in :attr:`ImuData.units`, and the command prints them.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import io
 import math
 import os
@@ -51,7 +62,16 @@ import numpy as np
 
 from features.errors import ImuError
 
-__all__ = ["ImuData", "ImuRepairReport", "RepairConfig", "read_imu_csv", "repair_imu", "REQUIRED_COLUMNS"]
+__all__ = ["ImuData", "ImuRepairReport", "RepairConfig", "read_imu_csv", "repair_imu", "REQUIRED_COLUMNS",
+           "ACCEL_UNITS", "GYRO_UNITS", "detect_units"]
+
+ACCEL_UNITS = {"m/s2": 1.0, "g": 9.80665, "mg": 9.80665e-3}
+"""Accelerometer units accepted, with the factor to m/s² (standard gravity, BIPM)."""
+GYRO_UNITS = {"rad/s": 1.0, "deg/s": math.pi / 180.0}
+"""Gyro units accepted, with the factor to rad/s."""
+_GRAVITY_MEDIAN_RANGES = (("g", 0.5, 2.0), ("m/s2", 5.0, 20.0), ("mg", 500.0, 2000.0))
+_GYRO_DEG_S_ABOVE = 20.0
+"""A 99th-percentile |ω| above this is taken as deg/s: 20 rad/s (1146 °/s) is beyond human motion."""
 
 REQUIRED_COLUMNS = ("t_s", "ax", "ay", "az")
 GYRO_COLUMNS = ("gx", "gy", "gz")
@@ -159,6 +179,8 @@ class ImuData:
     saturated: np.ndarray
     rate_hz: float
     report: ImuRepairReport = field(default_factory=ImuRepairReport)
+    units: str = ""
+    """How the file's units were taken, e.g. ``accelerometer in g (median |a| 1.00), gyro in deg/s (...)``."""
 
     def __len__(self) -> int:
         return len(self.t_s)
@@ -369,8 +391,67 @@ def _parse_table(text: str, path: str) -> tuple[list[str], np.ndarray, int]:
     return header, np.asarray(rows, dtype=float).reshape(-1, ncol), n_bad
 
 
-def read_imu_csv(path: str | os.PathLike, config: RepairConfig = RepairConfig()) -> ImuData:
-    """Read ``imu.csv`` (columns per module docstring), repair it, return :class:`ImuData`."""
+def detect_units(acc, gyro=None, accel_unit: str = "auto", gyro_unit: str = "auto",
+                 where: str = "IMU data") -> tuple[float, float, str]:
+    """Factors to m/s² and rad/s for raw samples, and a note saying how they were chosen.
+
+    acc : array of shape (n, 3), gyro : array of shape (n, 3) or None.
+
+    >>> acc = [[0.0, 0.0, 1.0]] * 10                          # at rest, in g
+    >>> gyro = [[0.0, 0.0, 90.0]] * 10                        # a turn, in deg/s
+    >>> fa, fg, note = detect_units(acc, gyro)
+    >>> round(fa, 5), round(fg, 6), note
+    (9.80665, 0.017453, 'accelerometer in g (median |a| 1, gravity), gyro in deg/s (p99 |w| 90 > 20)')
+    """
+    if accel_unit != "auto" and accel_unit not in ACCEL_UNITS:
+        raise ImuError(f"--accel-unit must be auto, {', '.join(ACCEL_UNITS)}; got {accel_unit!r}")
+    if gyro_unit != "auto" and gyro_unit not in GYRO_UNITS:
+        raise ImuError(f"--gyro-unit must be auto, {', '.join(GYRO_UNITS)}; got {gyro_unit!r}")
+    acc = np.asarray(acc, dtype=float)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        norm = np.linalg.norm(acc, axis=1)
+        med = float(np.nanmedian(norm)) if np.isfinite(norm).any() else math.nan
+    if accel_unit == "auto":
+        unit = next((u for u, lo, hi in _GRAVITY_MEDIAN_RANGES if lo <= med <= hi), None)
+        if unit is None:
+            raise ImuError(f"{where}: median accelerometer magnitude {med:.4g} is gravity in none of m/s2 "
+                           f"(5-20), g (0.5-2) or mg (500-2000): the file's unit is unknown; state it with "
+                           f"--accel-unit (m/s2, g, mg)")
+        parts = [f"accelerometer in {unit} (median |a| {med:.3g}, gravity)"]
+    else:
+        unit = accel_unit
+        parts = [f"accelerometer in {unit} (given)"]
+        g_med = med * ACCEL_UNITS[unit]
+        if not 5.0 <= g_med <= 20.0:
+            raise ImuError(f"{where}: with --accel-unit {unit} the median accelerometer magnitude is "
+                           f"{g_med:.4g} m/s2, not gravity (9.81): check the unit")
+    f_acc = ACCEL_UNITS[unit]
+    f_gyro = 1.0
+    if gyro is not None:
+        g = np.asarray(gyro, dtype=float)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            w = np.linalg.norm(g, axis=1)
+            p99 = float(np.nanpercentile(w, 99)) if np.isfinite(w).any() else 0.0
+        if gyro_unit == "auto":
+            gunit = "deg/s" if p99 > _GYRO_DEG_S_ABOVE else "rad/s"
+            rel = ">" if gunit == "deg/s" else "<="
+            parts.append(f"gyro in {gunit} (p99 |w| {p99:.3g} {rel} {_GYRO_DEG_S_ABOVE:g})")
+        else:
+            gunit = gyro_unit
+            parts.append(f"gyro in {gunit} (given)")
+        f_gyro = GYRO_UNITS[gunit]
+    return f_acc, f_gyro, ", ".join(parts)
+
+
+def read_imu_csv(path: str | os.PathLike, config: RepairConfig = RepairConfig(), *,
+                 accel_unit: str = "auto", gyro_unit: str = "auto") -> ImuData:
+    """Read ``imu.csv`` (columns per module docstring), repair it, return :class:`ImuData`.
+
+    ``accel_unit`` (``auto``, ``m/s2``, ``g``, ``mg``) and ``gyro_unit``
+    (``auto``, ``rad/s``, ``deg/s``): see :func:`detect_units`.
+    """
     path = Path(path)
     try:
         text = path.read_text(encoding="utf-8-sig", errors="replace")
@@ -398,5 +479,9 @@ def read_imu_csv(path: str | os.PathLike, config: RepairConfig = RepairConfig())
     report = ImuRepairReport(n_rows=len(data), n_bad_lines=n_bad)
     if len(data) < 2:
         raise ImuError(f"{path}: fewer than 2 data rows")
-    return repair_imu(data[:, col["t_s"]], data[:, [col["ax"], col["ay"], col["az"]]],
-                      triple(GYRO_COLUMNS), triple(MAG_COLUMNS), config=config, report=report)
+    acc = data[:, [col["ax"], col["ay"], col["az"]]]
+    gyro = triple(GYRO_COLUMNS)
+    f_acc, f_gyro, note = detect_units(acc, gyro, accel_unit, gyro_unit, where=str(path))
+    imu = repair_imu(data[:, col["t_s"]], acc * f_acc, None if gyro is None else gyro * f_gyro,
+                     triple(MAG_COLUMNS), config=config, report=report)
+    return dataclasses.replace(imu, units=note)

@@ -2,14 +2,14 @@
 
 from __future__ import annotations
 
-import io
-import math
 import sys
 import warnings
 from pathlib import Path
 
-from features.errors import ConfigError
-from pipeline.args import bounded, non_negative, positive
+from features.errors import AudioError, ConfigError
+from pipeline.args import (UsageError, bounded, check_outputs, non_negative, open_interval, positive,
+                           resolve_site)
+from pipeline.tables import csv_text, with_geodetic, with_time_utc
 
 GROUP = "features"
 
@@ -33,31 +33,22 @@ def register(sub) -> None:
                         "when --walk is not given")
     p.add_argument("--start-uncertainty-s", type=bounded(0.0, 2.0, "s"), default=None,
                    help="stated uncertainty of the audio start, s (default: from --walk, else 0.05)")
-    p.add_argument("--out", type=Path, required=True, help="feature CSV, one row per window")
+    p.add_argument("--out", type=Path, required=True, help="feature CSV, one row per window; - for stdout")
     p.add_argument("--positions", type=Path, default=None, help="also write one position row per frame (CSV)")
     p.add_argument("--window-s", type=bounded(0.2, 3600.0, "s"), default=2.0, help="window length, s (default 2)")
     p.add_argument("--hop-s", type=bounded(0.05, 3600.0, "s"), default=1.0, help="window hop, s (default 1)")
     p.add_argument("--max-range-m", type=positive, default=None,
                    help="largest range at which a beacon is searched, m (default: the site's extent)")
-    p.add_argument("--p-fa", type=float, default=1e-6, help="false-alarm probability per search window (1e-6)")
+    p.add_argument("--p-fa", type=open_interval(0.0, 1.0), default=1e-6,
+                   help="false-alarm probability per search window, in (0, 1) (default 1e-6)")
     p.add_argument("--motion-speed-m-s", type=non_negative, default=None,
                    help="walking-speed prior for positions, m/s (default: 0 for a survey cell.toml, whose capture "
                         "is static, else 1.4)")
     p.set_defaults(func=_run)
 
 
-def _fmt(value) -> str:
-    if isinstance(value, float):
-        return "" if math.isnan(value) else f"{value:.10g}"
-    return str(value)
-
-
-def _csv(rows: list[dict], names) -> str:
-    buf = io.StringIO()
-    buf.write(",".join(names) + "\n")
-    for row in rows:
-        buf.write(",".join(_fmt(row[n]) for n in names) + "\n")
-    return buf.getvalue()
+def _columns(rows: list[dict], names) -> dict:
+    return {n: [r[n] for r in rows] for n in names}
 
 
 def _check_audio(wav: Path, site) -> None:
@@ -89,18 +80,19 @@ def _run(args) -> int:
     from features.acoustic.detection import DetectorConfig
     from features.fileio import atomic_write_many
     from features.acoustic.timing import timing_from_walk
-    from features.site import load_site
+
     from features.walk import load_walk
 
+    check_outputs({"WAV": args.wav, "--site": args.site, "--walk": args.walk},
+                  {"--out": args.out, "--positions": args.positions})
     if args.walk is None:
         beside = [args.wav.parent / n for n in ("walk.toml", "cell.toml") if (args.wav.parent / n).is_file()]
         args.walk = beside[0] if beside else None
-    if args.site is None:
-        if args.walk is None:
-            raise ConfigError("--site is needed (no walk.toml/cell.toml beside the WAV names one)")
-        site = load_walk(args.walk).load_site()
-    else:
-        site = load_site(args.site)
+    if args.wav.is_dir():
+        raise AudioError(f"{args.wav}: is a directory, expected a WAV file")
+    if not args.wav.exists():
+        raise AudioError(f"{args.wav}: does not exist")
+    site = resolve_site(None if args.walk is None else load_walk(args.walk), args.site)
     if not site.beacons:
         raise ConfigError(f"{args.site or args.walk}: the site lists no [[beacons]]")
     _check_audio(args.wav, site)
@@ -109,22 +101,29 @@ def _run(args) -> int:
         timing = timing_from_walk(None if args.walk is None else load_walk(args.walk), site,
                                   args.start_uncertainty_s, where=args.walk)
     _print_warnings(caught)
-    if not 0 < args.p_fa < 1:
-        raise ConfigError(f"--p-fa must lie in (0, 1), got {args.p_fa}")
     detector = DetectorConfig(p_fa=args.p_fa, max_range_m=args.max_range_m)
     motion = args.motion_speed_m_s
     if motion is None:
         static = args.walk is not None and (args.walk.name == "cell.toml" or (args.walk / "cell.toml").is_file())
         motion = 0.0 if static else 1.4
     positions = PositionConfig(max_clock_offset_s=timing.start_uncertainty_s + 0.05, motion_speed_m_s=motion)
-    windows = WindowConfig(window_s=args.window_s, hop_s=args.hop_s)
+    try:
+        windows = WindowConfig(window_s=args.window_s, hop_s=args.hop_s)
+    except ConfigError as exc:  # name the options, not the config fields
+        raise UsageError(str(exc).replace("window_s", "--window-s").replace("hop_s", "--hop-s")) from None
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", AudioWarning)
         result = analyse_audio(args.wav, site, timing, detector, windows, positions)
     _print_warnings(caught)
-    outputs = {args.out: _csv(result.rows, FEATURE_COLUMNS)}
+    walk = None if args.walk is None else load_walk(args.walk)
+    origin_utc = None if walk is None else walk.start_utc  # t_s counts from the walk's start_utc
+    names, cols = with_time_utc(FEATURE_COLUMNS, _columns(result.rows, FEATURE_COLUMNS), origin_utc)
+    outputs = {args.out: csv_text(names, cols)}
     if args.positions is not None:
-        outputs[args.positions] = _csv([f.as_row() for f in result.fixes], POSITION_COLUMNS)
+        rows = [f.as_row() for f in result.fixes]
+        names, cols = with_time_utc(POSITION_COLUMNS, _columns(rows, POSITION_COLUMNS), origin_utc)
+        names, cols = with_geodetic(names, cols, site.origin, up_m=site.device_height_m)
+        outputs[args.positions] = csv_text(names, cols)
     atomic_write_many(outputs)
     msg = (f"{args.wav}: {result.duration_s:.1f} s, {result.n_detections} chirps detected, "
            f"{sum(r['acoustic_available'] for r in result.rows)}/{len(result.rows)} windows with a chirp "

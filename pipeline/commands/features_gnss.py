@@ -5,11 +5,11 @@ from __future__ import annotations
 import io
 import json
 import math
-import sys
 from pathlib import Path
 
-from features.errors import ConfigError
-from pipeline.args import bounded, positive
+from features.errors import ConfigError, NmeaError
+from pipeline.args import bounded, check_outputs, resolve_site
+from pipeline.tables import with_geodetic, with_time_utc
 
 GROUP = "features"
 
@@ -23,12 +23,13 @@ def register(sub) -> None:
         epilog="Example: envfuse features gnss walk7/gnss.nmea --site site1 --out gnss_features.csv "
                "--epochs epochs.jsonl --positions fixes.csv")
     p.add_argument("nmea", type=Path, help="NMEA 0183 file")
-    p.add_argument("--out", type=Path, required=True, help="feature CSV, one row per window")
+    p.add_argument("--out", type=Path, required=True, help="feature CSV, one row per window; - for stdout")
     p.add_argument("--site", type=Path, default=None, help="site directory or site.toml (for --positions; default: the site named by walk.toml beside the file)")
     p.add_argument("--window-s", type=bounded(0.2, 3600.0, "s"), default=2.0, help="window length, s (default 2)")
     p.add_argument("--hop-s", type=bounded(0.05, 3600.0, "s"), default=1.0, help="window hop, s (default 1)")
-    p.add_argument("--elevation-mask-deg", type=float, default=10.0, help="elevation mask, degrees (default 10)")
-    p.add_argument("--fluct-threshold-dbhz", type=positive, default=2.0,
+    p.add_argument("--elevation-mask-deg", type=bounded(0.0, 89.9, "deg"), default=10.0,
+                   help="elevation mask, degrees, 0 to 89.9 (default 10)")
+    p.add_argument("--fluct-threshold-dbhz", type=bounded(0.1, 30.0, "dB-Hz"), default=2.0,
                    help="smallest C/N0 swing counted as a fluctuation, dB-Hz (default 2: NMEA C/N0 is in whole dB-Hz)")
     p.add_argument("--cn0-reference", type=Path, default=None,
                    help="JSON file with a fitted C_ref model {intercept_dbhz, slope_dbhz} (default: built-in)")
@@ -37,11 +38,16 @@ def register(sub) -> None:
     p.add_argument("--start-utc", default=None,
                    help="t_s origin, ISO 8601 UTC; default: start_utc of the walk.toml/cell.toml beside the file, "
                         "else the first epoch")
+    p.add_argument("--allow-missing-checksum", action="store_true",
+                   help="use sentences that carry no *hh checksum (some phone logs); a wrong checksum is "
+                        "still skipped")
     p.add_argument("--epochs", type=Path, default=None, help="also write each decoded epoch as a JSON line")
-    p.add_argument("--positions", type=Path, default=None, help="also write fixes in site ENU with sigma (CSV)")
+    p.add_argument("--positions", type=Path, default=None, help="also write fixes in site ENU with sigma, and lat/lon/ellipsoidal height (CSV)")
     p.add_argument("--fit-uere", type=Path, default=None, metavar="JSON",
                    help="fit the UERE table (per fix quality and C/N0 attenuation) to the fixes' errors against "
                         "the truth.csv beside the file (a simulated walk) and write it as JSON")
+    p.add_argument("--gpsd-json", type=Path, default=None, metavar="JSONL",
+                   help="also write the epochs as gpsd's JSON (TPV and SKY objects, one per line)")
     p.set_defaults(func=_run)
 
 
@@ -93,6 +99,14 @@ def _fit_uere(args, epochs, site) -> str:
     return json.dumps(table.to_dict(), indent=2) + "\n"
 
 
+def _utc_of_t0(epochs):
+    """The UTC time of t_s = 0, from the first epoch that carries a date (None without any)."""
+    import datetime as dt
+
+    dated = next((e for e in epochs if e.time_utc is not None), None)
+    return None if dated is None else dated.time_utc - dt.timedelta(seconds=dated.t_s)
+
+
 def _run(args) -> int:
     from features.fileio import atomic_write_many
     from features.gnss.features import (
@@ -100,6 +114,9 @@ def _run(args) -> int:
     )
     from features.gnss.nmea import read_nmea
 
+    check_outputs({"NMEA": args.nmea, "--site": args.site, "--cn0-reference": args.cn0_reference},
+                  {"--out": args.out, "--epochs": args.epochs, "--positions": args.positions,
+                   "--fit-cn0-reference": args.fit_cn0_reference, "--gpsd-json": args.gpsd_json})
     config = GnssFeatureConfig(window_s=args.window_s, hop_s=args.hop_s, elevation_mask_deg=args.elevation_mask_deg,
                                fluct_threshold_dbhz=args.fluct_threshold_dbhz)
     reference = Cn0Reference()
@@ -107,28 +124,37 @@ def _run(args) -> int:
         try:
             reference = Cn0Reference.from_dict(json.loads(args.cn0_reference.read_text()))
         except (OSError, UnicodeDecodeError, ValueError, KeyError, TypeError, AttributeError) as exc:
-            raise ConfigError(f"cannot read C/N0 reference {args.cn0_reference}: "
-                              f"{type(exc).__name__}: {str(exc)[:200]}") from None
-    site = None
-    if args.site is not None:
-        from features.site import load_site
-        site = load_site(args.site)
-    elif args.positions is not None and (_walk_beside(args.nmea) is None or _walk_beside(args.nmea).site_ref is None):
-        raise ConfigError("--positions needs --site (the ENU origin)")
-
+            detail = str(exc)[:200].replace("Cn0Reference.", "")
+            raise ConfigError(f"--cn0-reference {args.cn0_reference}: cannot read it as a C/N0 reference "
+                              f"({type(exc).__name__}: {detail})") from None
     walk = _walk_beside(args.nmea)
+    site = None
+    if args.site is None and args.positions is not None and walk is None:
+        raise ConfigError("--positions needs --site (the ENU origin; no walk.toml or cell.toml beside the file)")
+    if args.site is not None or args.positions is not None:
+        try:
+            site = resolve_site(walk, args.site)
+        except ConfigError as exc:
+            raise ConfigError(f"--positions needs --site (the ENU origin): {exc}") from None
     if args.start_utc is None and walk is not None:
         args.start_utc = walk.start_utc.isoformat()  # t_s on the walk's time base
-    if site is None and walk is not None and walk.site_ref is not None and args.positions is not None:
-        site = walk.load_site()
-    epochs, stats = read_nmea(args.nmea)
+    try:
+        epochs, stats = read_nmea(args.nmea, require_checksum=not args.allow_missing_checksum)
+    except NmeaError as exc:
+        hint = ("; the sentences carry no checksum: if that is how the device writes them, pass "
+                "--allow-missing-checksum") if "no checksum" in str(exc) and not args.allow_missing_checksum else ""
+        raise NmeaError(f"{exc}{hint}") from None
     epochs = _on_time_base(epochs, args.start_utc)
     sky = sky_arrays(epochs)
     table = gnss_features(sky, config, reference)
     names = ("t_s",) + FEATURE_COLUMNS + COUNT_COLUMNS
-    outputs = {args.out: _csv(table, names)}
+    origin_utc = _utc_of_t0(epochs)
+    outputs = {args.out: _csv(*reversed(with_time_utc(names, table, origin_utc)))}
     if args.epochs is not None:
         outputs[args.epochs] = "".join(json.dumps(e.to_json_dict()) + "\n" for e in epochs)
+    if args.gpsd_json is not None:
+        from features.gnss.gpsd import gpsd_json_lines
+        outputs[args.gpsd_json] = gpsd_json_lines(epochs)
     if args.fit_cn0_reference is not None:
         fitted = fit_cn0_reference(sky.el_deg, sky.cn0_dbhz)
         outputs[args.fit_cn0_reference] = json.dumps(fitted.to_dict(), indent=2) + "\n"
@@ -137,7 +163,9 @@ def _run(args) -> int:
         from features.gnss.positions import fixes_to_enu
         o = site.origin
         pos = fixes_to_enu(epochs, o.lat_deg, o.lon_deg, o.alt_m)
-        outputs[args.positions] = _csv({n: getattr(pos, n) for n in pos.COLUMNS}, pos.COLUMNS)
+        names, cols = with_time_utc(pos.COLUMNS, {n: getattr(pos, n) for n in pos.COLUMNS}, origin_utc)
+        names, cols = with_geodetic(names, cols, o)
+        outputs[args.positions] = _csv(cols, names)
         n_pos = len(pos)
     if args.fit_uere is not None:
         outputs[args.fit_uere] = _fit_uere(args, epochs, site if site is not None else (

@@ -5,7 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from features.errors import ConfigError
-from pipeline.args import positive
+from pipeline.args import bounded, check_outputs, plot_path
 
 GROUP = "report"
 
@@ -17,9 +17,11 @@ def register(sub) -> None:
                                    "source and environment class, and draw the map and errors over time.",
                        epilog="Example: envfuse report walk walk7 --out walk7.png")
     p.add_argument("walk", type=Path, help="walk directory (walk.toml, streams, truth.csv)")
-    p.add_argument("--out", type=Path, default=None, help="PNG to write (default: WALK/sources.png)")
-    p.add_argument("--k", type=positive, default=None,
-                   help="Weinberg K for PDR (default: calibrated on RTK-fixed GNSS steps of the walk)")
+    p.add_argument("--out", type=plot_path, default=None,
+                   help="plot to write, format by suffix: .png, .pdf or .svg; - for PNG on stdout "
+                        "(default: WALK/sources.png)")
+    p.add_argument("--k", type=bounded(0.05, 3.0), default=None,
+                   help="Weinberg K for PDR, 0.05 to 3 (default: calibrated on RTK-fixed GNSS steps of the walk)")
     p.set_defaults(func=_run)
 
 
@@ -28,6 +30,8 @@ def _run(args) -> int:
 
     if not (args.walk / "walk.toml").is_file():
         raise ConfigError(f"{args.walk}: no walk.toml (expected a walk directory)")
+    if args.out is not None:
+        check_outputs({f"WALK file {f.name}": f for f in args.walk.iterdir() if f.is_file()}, {"--out": args.out})
     src = walk_sources(args.walk, pdr_k=args.k)
     if not src.tracks:
         raise ConfigError(f"{args.walk}: walk.toml lists no gnss, audio or imu stream")
@@ -43,6 +47,7 @@ def _run(args) -> int:
         extra = ", ".join(f"{k}={v:.3g}" if isinstance(v, float) else f"{k}={v}" for k, v in tr.info.items())
         print(f"  {name}: {len(tr.t_s)} positions" + (f" ({extra})" if extra else ""))
     out = args.out or args.walk / "sources.png"
-    plot_walk(src, out, title=f"{args.walk.name}: sources against truth")
+    plot_walk(src, out, title=f"{args.walk.name}: sources" + (" against truth" if src.truth is not None else
+                                                               " (no truth.csv)"))
     print(f"plot -> {out}")
     return 0
