@@ -116,7 +116,8 @@ def _run(args) -> int:
 
     check_outputs({"NMEA": args.nmea, "--site": args.site, "--cn0-reference": args.cn0_reference},
                   {"--out": args.out, "--epochs": args.epochs, "--positions": args.positions,
-                   "--fit-cn0-reference": args.fit_cn0_reference, "--gpsd-json": args.gpsd_json})
+                   "--fit-cn0-reference": args.fit_cn0_reference, "--gpsd-json": args.gpsd_json,
+                   "--fit-uere": args.fit_uere})
     config = GnssFeatureConfig(window_s=args.window_s, hop_s=args.hop_s, elevation_mask_deg=args.elevation_mask_deg,
                                fluct_threshold_dbhz=args.fluct_threshold_dbhz)
     reference = Cn0Reference()
