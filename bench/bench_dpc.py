@@ -83,8 +83,7 @@ def _run(task: str) -> dict:
         out.update(wall_s=time.perf_counter() - t0, n_clusters=int(m.n_clusters_), dc=m.dc_,
                    halo=float(m.halo_.mean()))
     elif task.startswith("dense"):
-        sys.path.insert(0, str(ROOT / "tests"))
-        from dpc_reference import dense_dpc
+        from tests.dpc_reference import dense_dpc
         X = points_2d(int(task[5:]))
         t0 = time.perf_counter()
         ref = dense_dpc(X)

@@ -26,6 +26,8 @@ GROUP_EXAMPLES = {
     "simulate": "envfuse simulate site --seed 1 --out site1 --plot",
     "features": "envfuse features gnss walk7/gnss.nmea --site site1 --out gnss_features.csv",
     "report": "envfuse report walk walk7 --out walk7.png",
+    "train": "envfuse train env --library fp.sqlite --out env_model",
+    "survey": "envfuse survey build survey1 --library fp.sqlite",
 }
 """One example per command group, shown at the foot of ``envfuse GROUP --help``."""
 
@@ -34,7 +36,6 @@ GROUPS = {
     "features": "extract features, fixes and steps from raw device files",
     "train": "fit environment and fusion models",
     "survey": "fingerprint survey of a substation",
-    "evaluate": "evaluate fusion methods on walk logs",
     "report": "tables and plots of what a walk recorded",
 }
 
