@@ -1,6 +1,6 @@
 """``fingerprints.survey.build_library`` and ``envfuse survey build|export`` on a small simulated survey.
 
-The survey: site seed 3, 30 m cells (8 cells), 4 s captures, so each cell has
+The survey: site seed 3, 30 m cells (15 cells), 4 s captures, so each cell has
 exactly three 2 s windows (centres 1, 2, 3 s) wholly inside the capture.
 """
 
@@ -31,7 +31,7 @@ from fingerprints.survey import SurveyConfig, SurveyWarning, build_library, cali
 from pipeline.cli import main
 
 REPO = Path(__file__).resolve().parents[1]
-N_CELLS = 8
+N_CELLS = 15                  # 5 × 3 cells of 30 m over the 126 × 83 m yard, the last row and column clipped
 WINDOWS_PER_CELL = 3
 
 
@@ -150,10 +150,11 @@ def test_cn0_reference_is_the_survey_quantile_rule(built, survey):
     w = np.sqrt([b["n"] for b in info["bins"]])
     (a, slope), *_ = np.linalg.lstsq(np.column_stack([w, w * x]), w * y, rcond=None)
     assert (a, slope) == pytest.approx((rx.reference.intercept_dbhz, rx.reference.slope_dbhz), abs=1e-9)
-    # change detector (the simulator's own open-sky line is the built-in default): the upper quantile sits
-    # 3.8-4 dB above it at zenith, measured; on a 94-cell survey all cells vs open cells only differ by < 0.6 dB
+    # change detector: the simulator's open-sky line is the built-in default; the 90th percentile sits ~4 dB
+    # above it for an average receiver, and this survey's simulated receiver has its own C/N0 offset
+    # (U(-5, 0) dB, issue 10 item 5): measured -0.73 dB at zenith for survey seed 5
     zenith = rx.reference.cref_dbhz(90.0) - Cn0Reference().cref_dbhz(90.0)
-    assert 2.5 < zenith < 5.5
+    assert -2.0 < zenith < 0.5
 
 
 def test_uncalibratable_reference_falls_back_with_a_warning():

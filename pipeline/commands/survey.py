@@ -73,11 +73,8 @@ def _export(args) -> int:
     from fingerprints.library import FingerprintLibrary
 
     with FingerprintLibrary.open(args.library, create=False) as lib:
-        if args.out == "-":
-            n = lib.export_csv(sys.stdout, site=args.site)
-            sys.stdout.flush()
-        else:
-            n = lib.export_csv(Path(args.out), site=args.site)
-    print(f"{n} samples{' of site ' + args.site if args.site else ''} -> {args.out}",
-          file=sys.stderr if args.out == "-" else sys.stdout)
+        # "-" (or /dev/stdout) goes through the atomic writer to the real standard output; the CLI sends
+        # this summary to stderr then.
+        n = lib.export_csv(Path(args.out), site=args.site)
+    print(f"{n} samples{' of site ' + args.site if args.site else ''} -> {args.out}")
     return 0
