@@ -44,11 +44,13 @@ def test_rtk_is_not_an_oracle(figures):
 def test_gnss_errors_are_correlated_in_time(figures):
     g, _ = figures
     ac = g["autocorr"]
-    # measured lag 1 / 5 / 20 s: open +0.75 / +0.19 / +0.06, light +0.46 / +0.14 / -0.01, heavy +0.26 / +0.06 / -0.05
+    # measured lag 1 / 5 / 20 s: open +0.91 / +0.53 / +0.04, light +0.93 / +0.48 / -0.12, heavy +0.89 / +0.20 / -0.22
+    # (the old simulator: +0.25 / +0.10 / +0.06, +0.55 / +0.14 / +0.03, +0.53 / +0.19 / +0.05). At 20 s the class
+    # mean removed over short visits to a class makes the figure swing; issue 10's target (>= 0.2) is not met.
     for c in (0, 1, 2):
-        assert 0.15 <= ac[c][0] <= 1.0, ac
-        assert -0.2 <= ac[c][2] <= 0.6, ac
-    assert ac[0][1] >= 0.05 and ac[1][1] >= 0.0
+        assert 0.6 <= ac[c][0] <= 1.0, ac
+        assert -0.45 <= ac[c][2] <= 0.6, ac
+    assert ac[0][1] >= 0.3 and ac[1][1] >= 0.3 and ac[2][1] >= 0.1, ac
 
 
 def test_rmc_speed_error_comes_from_the_doppler_solution(figures):
