@@ -134,6 +134,7 @@ def gnss_walk_figures(site_seeds, walk_seeds, duration_s: float) -> dict:
     feats = {c: [] for c in range(3)}
     los, nlos = [], []
     speed_err = {c: [] for c in range(3)}
+    att_all = {c: [] for c in range(3)}
     err_series = []
     for s in site_seeds:
         site = generate_site(s)
@@ -156,6 +157,11 @@ def gnss_walk_figures(site_seeds, walk_seeds, duration_s: float) -> dict:
             refix.append(refix_times_s(sim.t_s, sim.quality))
             err_series.append((sim.t_s, e, cls))
             view = sim.tracked & (sim.el_rad > np.radians(10))
+            above = sim.in_view & (sim.el_rad > np.radians(10))
+            for c in range(3):
+                m = (cls == c)[:, None] & above
+                if m.any():
+                    att_all[c].append(sim.attenuation_db[m])
             los.append(sim.cn0_reported_dbhz[view & sim.los])
             nlos.append(sim.cn0_reported_dbhz[view & sim.nlos])
             f = _nmea_features(sim, site, 1000 * s + w, traj)
@@ -192,6 +198,7 @@ def gnss_walk_figures(site_seeds, walk_seeds, duration_s: float) -> dict:
         se = np.concatenate(speed_err[c])
         out["speed_err_med"][c] = float(np.median(se)) if se.size else np.nan
         out["speed_err_p95"][c] = float(np.percentile(se, 95)) if se.size else np.nan
+    out["att_all_mean"] = {c: float(np.mean(np.concatenate(v))) for c, v in att_all.items() if v}
     r = np.concatenate(refix)
     out["refix_median_s"] = float(np.median(r)) if r.size else np.nan
     out["refix_p90_s"] = float(np.percentile(r, 90)) if r.size else np.nan
@@ -236,6 +243,7 @@ def walk_figures(site_seed: int, walk_seed: int, duration_s: float) -> dict:
         sim_wall = time.perf_counter() - t0
         src = walk_sources(wd)
         table = error_table(src)
+        ranging = _ranging_errors(wd, src.site, src.truth)
         frame_s = site.acoustic.frame_s
         ac = src.tracks.get("acoustic")
         truth = src.truth
@@ -253,7 +261,36 @@ def walk_figures(site_seed: int, walk_seed: int, duration_s: float) -> dict:
             tracks[name] = (tr.t_s[ok], np.column_stack([tr.east_m[ok] - te, tr.north_m[ok] - tn]),
                             truth.class_at(tr.t_s[ok]))
     return {"table": table, "frame_s": frame_s, "frame_fix_share": share, "sim_wall_s": sim_wall,
-            "tracks": tracks}
+            "tracks": tracks, "ranging": ranging}
+
+
+def _ranging_errors(walk_dir, site, truth) -> dict:
+    """LOS arrival error in metres (receiver's arrival against the simulator's, 10-25 m direct paths),
+    standing (< 0.1 m/s) and walking: {"static": array, "walking": array}."""
+    import csv
+
+    from features.acoustic.features import analyse_audio
+    from features.acoustic.timing import speed_of_sound_m_s, timing_from_walk
+    from features.walk import load_walk
+
+    walk = load_walk(walk_dir)
+    timing = timing_from_walk(walk, site)
+    res = analyse_audio(walk.path("audio"), site, timing, keep_frames=True)
+    rows = {(int(r["beacon_id"]), round(float(r["emit_t_s"]), 6)): r
+            for r in csv.DictReader(open(Path(walk_dir) / "audio_truth.csv"))}
+    c = speed_of_sound_m_s(site.atmosphere.temperature_c)
+    t_tr = truth.t_s
+    sp = np.hypot(np.gradient(truth.east_m, t_tr), np.gradient(truth.north_m, t_tr))
+    out = {"static": [], "walking": []}
+    for fr in res.frames:
+        for d in fr.detections:
+            r = rows.get((d.beacon_id, round(d.tx_s, 6)))
+            if r is None or r["first_path"] != "direct" or not 10.0 <= float(r["direct_m"]) <= 25.0:
+                continue
+            err = c * ((d.arrival_s - timing.start_s) * 48_000 - float(r["arrival_sample"])) / 48_000
+            v = float(np.interp(float(r["arrival_t_s"]), t_tr, sp))
+            out["static" if v < 0.1 else "walking"].append(abs(err))
+    return {k: np.asarray(v) for k, v in out.items()}
 
 
 def _fmt(x, f="{:.3f}"):
@@ -275,6 +312,9 @@ def print_report(g: dict, sv: dict, wk: dict | None) -> None:
     print(f"GNSS features (medians of windows) μ dB, σ dB, ζ, λ, β /s   [real: ζ {REAL['zeta']}; μ {REAL['mu']}]")
     for c, v in g["features"].items():
         print(f"  {ENV_CLASSES[c]:6s} μ {v[0]:5.2f}  σ {v[1]:5.2f}  ζ {v[2]:5.3f}  λ {v[3]:5.3f}  β {v[4]:5.3f}")
+    print("true attenuation of every in-view satellite above 10 deg, tracked or not (mean dB): "
+          + "  ".join(f"{ENV_CLASSES[c]} {v:.1f}" for c, v in g["att_all_mean"].items())
+          + "   [paper: light 5-10, heavy 18-23 dB]")
     print(f"C/N0 LOS {g['cn0_los'][0]:.1f} ± {g['cn0_los'][1]:.1f}, NLOS {g['cn0_nlos'][0]:.1f} ± "
           f"{g['cn0_nlos'][1]:.1f} dB-Hz   [{REAL['cn0']}]")
     print("== Survey fix error, median of cell medians (n cells) per site seed ==")
@@ -285,6 +325,10 @@ def print_report(g: dict, sv: dict, wk: dict | None) -> None:
     print(f"== Walk (every stream): frame {wk['frame_s']:.2f} s, simulated in {wk['sim_wall_s']:.1f} s ==")
     print("  share of frames with an acoustic fix [target >= 70 % in every class]: "
           + "  ".join(f"{ENV_CLASSES[c]} {_fmt(v, '{:.2f}')}" for c, v in wk["frame_fix_share"].items()))
+    for k, v in wk["ranging"].items():
+        if v.size:
+            print(f"  LOS arrival error 10-25 m, {k}: median {1000 * np.median(v):.1f} mm, p90 "
+                  f"{1000 * np.percentile(v, 90):.1f} mm (n={v.size})   [Lazik & Rowe 2012: 95 % ~10 cm static indoors]")
     print("  source    class   n     median   p95   (m)")
     for name, row in wk["table"].items():
         for c in ("all",) + ENV_CLASSES:

@@ -19,7 +19,8 @@ from simulation.rng import stream_rng
 from simulation.site.route import RouteConfig, plan_route, route_trajectory
 from simulation.streams import STREAM_WRITERS, StreamContext, run_stream_writers
 
-__all__ = ["DEFAULT_EPOCH_UTC", "default_start_utc", "parse_utc", "format_utc", "write_truth_csv", "simulate_walk"]
+__all__ = ["DEFAULT_EPOCH_UTC", "default_start_utc", "parse_utc", "format_utc", "write_truth_csv", "simulate_walk",
+           "device_height_m"]
 
 DEFAULT_EPOCH_UTC = datetime(2026, 6, 1, tzinfo=timezone.utc)
 """Day on which simulated walks start unless told otherwise."""
@@ -48,6 +49,14 @@ def write_truth_csv(path: Path, site, trajectory, rate_hz: float = 10.0) -> None
     path.write_text("\n".join(lines) + "\n")
 
 
+def device_height_m(site, person: int, sigma_m: float = 0.07) -> float:
+    """The waist-worn device's true height for this walker, m: the site's nominal height plus N(0, σ), clipped
+    to ±2.5σ — waist height varies by ≈ ±7 cm (1σ) among adults (anthropometric tables, e.g. NASA-STD-3000
+    Vol. I §3, waist height), and the belt is worn higher or lower. ``site.toml`` keeps the nominal value."""
+    d = float(stream_rng(person, "device-height").normal(0.0, sigma_m))
+    return float(site.device_height_m + np.clip(d, -2.5 * sigma_m, 2.5 * sigma_m))
+
+
 def simulate_walk(site_path: str | os.PathLike, out_dir: str | os.PathLike, seed: int, duration_s: float = 300.0,
                   person: int | None = None, start_utc: datetime | None = None, overwrite: bool = False,
                   options: dict | None = None, writers: tuple[str, ...] = STREAM_WRITERS,
@@ -70,7 +79,7 @@ def simulate_walk(site_path: str | os.PathLike, out_dir: str | os.PathLike, seed
     person = seed if person is None else person
     start = start_utc or default_start_utc(seed)
     poly, stops, speed = plan_route(site, stream_rng(seed, "route"), duration_s, route)
-    traj = route_trajectory(poly, stops, speed, duration_s, start, site.device_height_m, route)
+    traj = route_trajectory(poly, stops, speed, duration_s, start, device_height_m(site, person), route)
     out_dir = Path(out_dir)
     with atomic_directory(out_dir, overwrite=overwrite) as tmp:
         opts = dict(options or {})

@@ -32,3 +32,22 @@ def test_codec_rolls_off_the_top_of_the_band():
     g = CodecFilter(48_000, np.random.default_rng(1))
     y = np.concatenate([g(x[:3000]), g(x[3000:])])
     assert np.allclose(y, signal.sosfilt(f.sos, x))
+
+
+def test_piston_directivity_and_torso():
+    from simulation.acoustic.hardware import beacon_axes, piston_directivity, torso_shadow
+    # 25 mm tweeter at 20 kHz: about -6.5 dB at 30° (the issue's -6.6 dB), a null near 57°, floored
+    d30 = 20 * np.log10(piston_directivity(np.radians(30.0), 20_000.0, 0.0125))
+    assert d30 == pytest.approx(-6.5, abs=0.3)
+    assert 20 * np.log10(piston_directivity(np.radians(57.0), 20_000.0, 0.0125)) == pytest.approx(-20.0, abs=0.01)
+    assert piston_directivity(0.0, 20_000.0, 0.0125) == pytest.approx(1.0)
+    # four 12 mm tweeters: never worse than at 45°
+    assert 20 * np.log10(piston_directivity(np.radians(45.0), 20_000.0, 0.006)) == pytest.approx(-2.8, abs=0.3)
+    site = generate_site(4)
+    ax = beacon_axes(site, 4)[site.beacons[0].id]
+    assert ax.shape == (4, 3) and np.allclose(np.linalg.norm(ax, axis=1), 1.0) and np.allclose(ax[:, 2], 0.0)
+    # torso: nothing in front, 0.1-0.3 m and 10-20 dB round the back
+    assert torso_shadow(np.radians(80.0), 0.0) == (0.0, 0.0)
+    extra, loss = torso_shadow(np.radians(135.0), 0.0)
+    assert 0.1 < extra < 0.3 and 10.0 <= loss <= 20.0
+    assert torso_shadow(np.pi, 0.0)[1] == pytest.approx(20.0)

@@ -149,3 +149,26 @@ def test_doppler_velocity_noise_grows_with_weak_and_reflected_signals():
     s2 = np.hypot(*weak_nlos.T).mean()
     assert 0.005 < s1 < 0.05
     assert s2 > 5 * s1
+
+
+def test_receivers_differ_and_the_body_masks_the_sky_behind():
+    from datetime import datetime, timezone
+
+    from features.site import Origin, Site
+    from simulation.gnss.stream import simulate_gnss
+    from simulation.site.route import static_trajectory
+
+    site = Site("open", Origin(35.0, 115.0, 50.0))
+    traj = static_trajectory(0.0, 0.0, 1.0, 20.0, datetime(2026, 5, 1, 3, 0, tzinfo=timezone.utc))  # facing north
+    offs = [simulate_gnss(site, traj, seed=1, receiver_seed=r).receiver_offset_db for r in range(8)]
+    assert all(-5.0 <= o <= 0.0 for o in offs) and np.ptp(offs) > 1.0
+    front = simulate_gnss(site, traj, seed=1, receiver_seed=0, body=False)
+    worn = simulate_gnss(site, traj, seed=1, receiver_seed=0, body=True)
+    az = np.degrees(front.az_rad)
+    el = np.degrees(front.el_rad)
+    behind = (np.abs(((az - 180.0) + 180.0) % 360.0 - 180.0) < 60.0) & (el > 5) & (el < 35) & front.in_view
+    ahead = (np.abs(((az + 180.0) % 360.0) - 180.0) < 60.0) & (el > 10) & front.in_view
+    assert behind.any() and ahead.any()
+    drop_behind = np.mean(front.cn0_true_dbhz[behind] - worn.cn0_true_dbhz[behind])
+    drop_ahead = np.mean(front.cn0_true_dbhz[ahead] - worn.cn0_true_dbhz[ahead])
+    assert 1.0 < drop_behind < 10.5 and abs(drop_ahead) < 0.5

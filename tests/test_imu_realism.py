@@ -64,3 +64,12 @@ def test_pdr_start_is_the_first_good_fix_not_the_first_fix():
     p = _positions([0.0, 0.2], [1, 1], [10.0, 11.0], [5.0, 5.0])
     assert pdr_start_from_gnss(p) == (0.0, 10.0, 0.0)            # any fix
     assert pdr_start_from_gnss(_positions([0.0], [0], [np.nan], [np.nan])) is None
+
+
+def test_device_height_differs_per_walker_and_stays_per_walker():
+    from simulation.site.layout import generate_site
+    from simulation.walk import device_height_m
+    site = generate_site(3)
+    h = np.array([device_height_m(site, p) for p in range(300)])
+    assert np.all(np.abs(h - site.device_height_m) <= 0.175 + 1e-12)
+    assert 0.05 < h.std() < 0.09 and device_height_m(site, 5) == device_height_m(site, 5)

@@ -39,7 +39,8 @@ from simulation.acoustic.channel import PATH_KINDS, PathSet, build_scene, channe
 from simulation.acoustic.atmosphere import absorption_db_per_m, fresnel_number, maekawa_loss_db
 from simulation.acoustic.synthesis import CHUNK_SAMPLES, AmbientNoise, AudioConfig, ChirpRenderer, detection_range_m
 from simulation.acoustic.air import Air, AirConfig
-from simulation.acoustic.hardware import CodecFilter, HardwareConfig, beacon_delays_s, true_beacon_positions
+from simulation.acoustic.hardware import (CodecFilter, HardwareConfig, beacon_axes, beacon_delays_s,
+                                         piston_directivity, torso_shadow, true_beacon_positions)
 from simulation.acoustic.chirp import ChirpSpec, beacon_chirp, emission_times_s
 from simulation.progress import Progress
 from simulation.rng import stream_rng
@@ -148,6 +149,7 @@ def render_audio(site: Site, trajectory: Trajectory, seed: int, wav_path,
         delays = beacon_delays_s(site, hardware)
         jitter_rng = stream_rng(seed, "audio", "emission_jitter")
         codec = CodecFilter(fs, stream_rng(seed if crew_seed is None else crew_seed, "audio", "codec"), hardware)
+        axes = beacon_axes(site, hardware.n_tweeters)
     else:
         true_pos = {b.id: np.array([b.east_m, b.north_m, b.up_m]) for b in site.beacons}
         delays = {b.id: 0.0 for b in site.beacons}
@@ -233,6 +235,8 @@ def render_audio(site: Site, trajectory: Trajectory, seed: int, wav_path,
                 paths = paths_at(bid, src, rx)
             if len(paths) == 0:
                 continue
+            if hardware is not None:
+                paths = _hardware_paths(paths, src, rx, axes[bid], spec, renderer.c, trajectory, t_e, hardware)
             t_a = t_e + paths.length_m[0] / c_e
             best_db = sl_db + 20.0 * math.log10(max(paths.gain.max(), 1e-12)) - alpha_min[spec] * paths.length_m[0]
             first_sample = (t_a - true_start) * fs_true
@@ -260,6 +264,27 @@ def render_audio(site: Site, trajectory: Trajectory, seed: int, wav_path,
     return AudioResult(true_start_s=true_start, drift_ppm=drift_ppm, n_samples=n_total,
                        n_emissions=counts["emissions"],
                        n_rendered=counts["rendered"], n_clipped=counts["clipped"], truth_csv=text)
+
+
+def _hardware_paths(paths: PathSet, src: np.ndarray, rx: np.ndarray, axis: np.ndarray, spec: ChirpSpec, c: float,
+                    trajectory: Trajectory, t_s: float, hw: HardwareConfig) -> PathSet:
+    """Apply the tweeter's directivity and the wearer's torso to every path of one emission (by the direct
+    bearing; :mod:`simulation.acoustic.hardware`)."""
+    d = rx - src
+    dist = float(np.linalg.norm(d))
+    gain = 1.0
+    if hw.piston_radius_m > 0 and dist > 1e-6:
+        theta = np.arccos(np.clip(axis @ d / dist, -1.0, 1.0))     # off each tweeter's axis
+        gain *= float(np.max(piston_directivity(theta, 0.5 * (spec.f0_hz + spec.f1_hz), hw.piston_radius_m, c,
+                                                hw.piston_floor_db)))
+    i = min(int(np.searchsorted(trajectory.t_s, t_s)), len(trajectory.t_s) - 1)
+    bearing = math.atan2(-d[0], -d[1])  # from the receiver towards the beacon, from north clockwise
+    # the heading is held through stops, so a standing wearer shadows too
+    extra, loss_db = torso_shadow(bearing, float(trajectory.heading_rad[i]), hw)
+    gain *= 10.0 ** (-loss_db / 20.0)
+    if gain == 1.0 and extra == 0.0:
+        return paths
+    return replace(paths, length_m=paths.length_m + extra, gain=paths.gain * gain)
 
 
 def _first_path_db_spl(paths: PathSet, spec: ChirpSpec, source_level_db: float,

@@ -120,7 +120,7 @@ class FixConfig:
     ttf_weak_free_share: float = 0.1
     rtk_cold_start: bool = True
     wrong_fix_base_prob: float = 0.001
-    wrong_fix_nlos_prob: float = 0.06
+    wrong_fix_nlos_prob: float = 0.04
     wrong_fix_max_cycles: int = 3
     wrong_fix_nlos_max_cycles: int = 20
     wrong_fix_reset_mean_s: float = 10.0
@@ -128,6 +128,7 @@ class FixConfig:
     phase_lock_s: float = 3.0
     float_conv_tau_s: float = 30.0
     float_floor: float = 0.1
+    float_filter_tau_s: float = 8.0
     warm_start_lock_s: float = 60.0
     slip_nlos_prob: float = 0.05
     slip_weak_prob: float = 0.5
@@ -417,6 +418,29 @@ def slip_probability(cn0_dbhz: np.ndarray, nlos: np.ndarray, cfg: FixConfig = Fi
     return np.clip(p + np.where(nlos, cfg.slip_nlos_prob, 0.0), 0.0, 1.0)
 
 
+def _smooth_runs(x: np.ndarray, mask: np.ndarray, dt_s: float, tau_s: float) -> np.ndarray:
+    """First-order smoothing of ``x`` (n, d) within each run of ``mask``, restarted at every run's start.
+
+    The float and code solutions come out of the receiver's Kalman filter (ambiguity states, a pedestrian
+    dynamic model) whose states carry the past: a slip or a change of the satellite set moves the position by
+    a fraction of the new error per epoch, not all at once — x̂ᵢ = x̂ᵢ₋₁ + α·(xᵢ − x̂ᵢ₋₁), α = 1 − exp(−Δt/τ), the steady-state gain of a
+    random-walk state observed in white noise (Brown & Hwang 2012, *Introduction to Random Signals and
+    Applied Kalman Filtering*, 4th ed., §4.6, scalar steady-state filter).
+    """
+    if tau_s <= 0:
+        return x
+    alpha = 1.0 - np.exp(-dt_s / tau_s)
+    out = x.copy()
+    prev = None
+    for i in range(len(x)):
+        if not mask[i]:
+            prev = None
+            continue
+        prev = x[i] if prev is None else prev + alpha * (x[i] - prev)
+        out[i] = prev
+    return out
+
+
 def cycle_slips(rng: np.random.Generator, cn0_dbhz: np.ndarray, nlos: np.ndarray,
                 cfg: FixConfig = FixConfig()) -> np.ndarray:
     """Cycle-slip events, bool (n, k), drawn with :func:`slip_probability`."""
@@ -564,7 +588,7 @@ def solve_fixes(rng: np.random.Generator, az_rad: np.ndarray, el_rad: np.ndarray
     err = np.full((n, 3), np.nan)
     if not corrections:
         quality[ok] = QUALITY_AUTONOMOUS
-        err[ok] = theta_code[ok, :3]
+        err[ok] = _smooth_runs(theta_code[:, :3], ok, dt_s, cfg.float_filter_tau_s)[ok]
     else:
         if slip is None:
             slip = cycle_slips(rng, cn0_reported_dbhz, nlos, cfg)
@@ -601,7 +625,9 @@ def solve_fixes(rng: np.random.Generator, az_rad: np.ndarray, el_rad: np.ndarray
         share = cfg.float_floor + (1.0 - cfg.float_floor) * np.exp(-lock / cfg.float_conv_tau_s)
         theta_float, _ = _wls(g, w, carrier_dd + share * code_err)
         fl = quality == QUALITY_RTK_FLOAT
-        err[fl] = theta_float[fl, :3]
+        raw = np.where(fl[:, None], theta_float[:, :3], theta_code[:, :3])
+        free = ok & ~fixed  # the float and code solutions come out of the receiver's navigation filter
+        err[free] = _smooth_runs(raw, free, dt_s, cfg.float_filter_tau_s)[free]
         err[fixed] = theta_car[fixed, :3]
         for e, (i0, cyc) in enumerate(starts):
             # Offset of the wrong integers: δx = (GᵀWG)⁻¹GᵀW·λc at the epoch the episode began.
