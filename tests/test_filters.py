@@ -413,11 +413,19 @@ def test_scalar_loop_matches_matrix_form(mixed):
     cases = [(EkfConfig(), FixedNoise(1.5, 0.3), {}),
              (EkfConfig(outlier="huber"), QualityNoise(), {}),
              (EkfConfig(outlier="none"), pc, {"class_at": lambda e, n: 0 if e > 0 else 2}),
-             (EkfConfig(gate_prob=0.9), pc, {"classes": ClassTrack(np.array([0.0]), np.array([[0.2, 0.3, 0.5]]))})]
+             (EkfConfig(gate_prob=0.9), pc, {"classes": ClassTrack(np.array([0.0]), np.array([[0.2, 0.3, 0.5]]))}),
+             (EkfConfig(), VBAdaptiveNoise(1.0, 0.2), {}),
+             (EkfConfig(outlier="huber"), VBAdaptiveNoise(1.0, 0.2, n_iter=1), {}),
+             (EkfConfig(outlier="none"), VBAdaptiveNoise(1.0, 0.2, n_iter=4, rho=0.9), {}),
+             (EkfConfig(), SageHusaNoise(1.0, 0.2), {}),
+             (EkfConfig(outlier="huber"), SageHusaNoise(1.0, 0.2, b=0.9, n_prior=2), {})]
     for cfg, noise, kw in cases:
         a = EventEKF(cfg, noise, fast=True).run(ev, **kw)
         b = EventEKF(cfg, noise, fast=False).run(ev, **kw)
         assert a.info["fast"] and not b.info["fast"]
+        assert a.info["n_guarded"] == b.info["n_guarded"]
+        if "r_history" in b.info:
+            np.testing.assert_allclose(a.info["r_history"], b.info["r_history"], rtol=1e-9)
         np.testing.assert_array_equal(a.accepted, b.accepted)
         for f in ("x", "P", "x_prior", "P_prior", "F", "nu", "S", "K", "R", "nis", "weight"):
             np.testing.assert_allclose(getattr(a, f), getattr(b, f), rtol=1e-9, atol=1e-10, err_msg=f)

@@ -309,8 +309,8 @@ def _h_matrices(cfg: EkfConfig) -> dict:
 class EventEKF:
     """The event-driven EKF with one noise policy (:mod:`models.fusion.noise`).
 
-    ``fast``: run the 4-state model with a feedback-free policy through the scalar loop of
-    :mod:`models.fusion.fast` (same results to rounding; ``False`` forces the matrix form).
+    ``fast``: run the 4-state model through the scalar loop of :mod:`models.fusion.fast` (same results
+    to rounding; ``False`` forces the matrix form, which the bias states and ``correct`` always use).
 
     >>> import numpy as np
     >>> from models.fusion.events import GnssEvents, StepEvents, merge_events
@@ -357,6 +357,9 @@ class EventEKF:
 
             rec = run_fast4(stream, cfg, runner, x, P, q)
             info["fast"] = True
+            info["n_guarded"] = getattr(runner, "n_guarded", 0)
+            if hasattr(runner, "history"):
+                info["r_history"] = np.array(runner.history).reshape(-1, 4)   # event, kind, R_ee, R_nn
             return FilterRun(self.method, stream.t_s, stream.kind, x0, P0, available=stream.available, info=info,
                              **rec)
         rec = _records(m, n)
