@@ -11,12 +11,14 @@ loop is timed first as a gauge, and a fixed ``scipy.signal.oaconvolve``
 runs so that the ratio method/yardstick is comparable across days and
 machines (the pattern of bench/bench_audio.py).
 
-Methods (issue 14 names): ``kf`` in the scalar loop (models/fusion/fast.py)
-and in the matrix form, ``kf_quality``, ``kf_map`` (a map callable per
-fix), ``adaptive_nobp`` (per-class noise from a class track: the per-class
-filter of the 50,000 steps/s target), ``aekf`` (VB-AKF and Sage–Husa), the
-6-state filter with the GNSS bias, ``imm`` (3 modes), ``huber``, and the RTS
-smoother of a ``kf`` run.
+Methods (issue 14 names): ``kf`` in the scalar loop (models/fusion/fast.py,
+the default for every 4-state method) and in the matrix form (numpy, the
+reference), ``kf_quality``, ``kf_map`` (a map callable per fix),
+``adaptive_nobp`` (per-class noise from a class track: the per-class filter
+of the 50,000 steps/s target), ``huber``, ``aekf`` (VB-AKF with 3
+variational iterations, and Sage–Husa), the 6-state filter with the GNSS
+bias (matrix form only), ``imm`` (3 modes, models/fusion/fast_imm.py), and
+the RTS smoother of a ``kf`` run.
 
 Run: ``.venv/bin/python bench/bench_fusion.py`` (prints a table; no assertions).
 """
