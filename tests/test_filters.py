@@ -552,3 +552,35 @@ def test_events_from_reader_outputs():
     ev = merge_events(gnss=g, acoustic=a)
     assert ev.kind.tolist() == [GNSS, ACOUSTIC, GNSS, GNSS]
     np.testing.assert_allclose(ev.cov_m2[1], [[0.04, 0.01], [0.01, 0.09]])
+
+
+def test_quality_and_class_policies_beat_one_fixed_r():
+    # fix quality alternates every 30 s between DGNSS (UERE 1 m) and autonomous (UERE 4 m), HDOP 1:
+    # true σ per axis UERE/√2; the receiver's reported σ is one middling value for all fixes.
+    # Errors after the first 30 s (the start transient is the same for all).
+    q_of_t = lambda t: np.where((np.asarray(t) // 30) % 2 == 0, 2, 1)                  # noqa: E731
+    sig_of_t = lambda t: np.where(q_of_t(t) == 2, 1.0, 4.0) / math.sqrt(2)             # noqa: E731
+    s = synth_walk(5, duration_s=300, gnss_sigma_m=sig_of_t, gnss_reported_sigma_m=2.0, gnss_quality=q_of_t)
+    kw = dict(x0=s.x0, P0=s.P0)
+    late = s.stream.t_s > 30
+    fixed = EventEKF(noise=FixedNoise(2.0, 0.3)).run(s.stream, **kw)
+    quality = EventEKF(noise=QualityNoise(uere_m={1: 4.0, 2: 1.0})).run(s.stream, **kw)
+    ratio_q = rms(quality.x[late], s.truth[late]) / rms(fixed.x[late], s.truth[late])
+    # the same regimes as environment classes: from a class track (adaptive_nobp) ...
+    t = np.arange(0.0, 300.0, 1.0)
+    ct = ClassTrack.from_labels(t, (q_of_t(t) == 1).astype(int), 2)
+    pc = PerClassNoise(2)
+    pc.R_gnss_ = np.array([np.eye(2) * 0.5, np.eye(2) * 8.0])
+    pc.R_acoustic_ = np.array([np.eye(2) * 0.1] * 2)
+    by_track = EventEKF(noise=pc).run(s.stream, classes=ct, **kw)
+    np.testing.assert_allclose(by_track.x, quality.x, atol=1e-9)      # same R per fix, same filter
+    # ... and from a map at the last estimate (kf_map): σ 0.5 m west of east = 0, 3 m east of it
+    m = synth_walk(6, duration_s=300, gnss_sigma_at=lambda e, n: 0.5 if e < 0 else 3.0, gnss_reported_sigma_m=2.0)
+    pc.R_gnss_ = np.array([np.eye(2) * 0.25, np.eye(2) * 9.0])
+    late = m.stream.t_s > 30
+    mapped = EventEKF(noise=pc).run(m.stream, class_at=lambda e, n: 0 if e < 0 else 1, x0=m.x0, P0=m.P0)
+    plain = EventEKF(noise=FixedNoise(2.0, 0.3)).run(m.stream, x0=m.x0, P0=m.P0)
+    ratio_m = rms(mapped.x[late], m.truth[late]) / rms(plain.x[late], m.truth[late])
+    # measured: 0.78 (quality vs fixed) and 0.87 (map vs fixed)
+    assert 0.5 < ratio_q < 0.9
+    assert 0.6 < ratio_m < 0.95
