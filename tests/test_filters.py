@@ -418,7 +418,9 @@ def test_scalar_loop_matches_matrix_form(mixed):
              (EkfConfig(outlier="huber"), VBAdaptiveNoise(1.0, 0.2, n_iter=1), {}),
              (EkfConfig(outlier="none"), VBAdaptiveNoise(1.0, 0.2, n_iter=4, rho=0.9), {}),
              (EkfConfig(), SageHusaNoise(1.0, 0.2), {}),
-             (EkfConfig(outlier="huber"), SageHusaNoise(1.0, 0.2, b=0.9, n_prior=2), {})]
+             (EkfConfig(outlier="huber"), SageHusaNoise(1.0, 0.2, b=0.9, n_prior=2), {}),
+             (EkfConfig(joseph=False), FixedNoise(1.5, 0.3), {}),
+             (EkfConfig(joseph=False, outlier="huber"), VBAdaptiveNoise(1.0, 0.2), {})]
     for cfg, noise, kw in cases:
         a = EventEKF(cfg, noise, fast=True).run(ev, **kw)
         b = EventEKF(cfg, noise, fast=False).run(ev, **kw)
@@ -481,7 +483,8 @@ def test_imm_batched_matches_mode_by_mode(mixed, outlier):
     pc = PerClassNoise(3, 1.5, 0.3).fit()
     pc.R_gnss_ = np.array([np.eye(2) * 0.5, np.eye(2) * 2.25, np.eye(2) * 30.0])
     classes = ClassTrack.from_labels(np.array([0.0, 60.0]), np.array([0, 1]), 3)
-    for cfg in (EkfConfig(outlier=outlier), EkfConfig(outlier=outlier, gnss_bias=True)):
+    for cfg in (EkfConfig(outlier=outlier), EkfConfig(outlier=outlier, gnss_bias=True),
+                EkfConfig(outlier=outlier, joseph=False)):
         ref = IMMFilter(pc, cfg, batched=False, fast=False).run(ev, classes=classes)
         for other in (IMMFilter(pc, cfg, fast=False), IMMFilter(pc, cfg, fast=True)):   # batched; scalar (4 states)
             a = other.run(ev, classes=classes)
@@ -584,3 +587,12 @@ def test_quality_and_class_policies_beat_one_fixed_r():
     # measured: 0.78 (quality vs fixed) and 0.87 (map vs fixed)
     assert 0.5 < ratio_q < 0.9
     assert 0.6 < ratio_m < 0.95
+
+
+def test_short_form_update_agrees_with_joseph(mixed):
+    ev = mixed[0]
+    a = EventEKF(EkfConfig(joseph=True), FixedNoise(1.5, 0.3)).run(ev)
+    b = EventEKF(EkfConfig(joseph=False), FixedNoise(1.5, 0.3)).run(ev)
+    np.testing.assert_allclose(b.x, a.x, atol=1e-9)
+    np.testing.assert_allclose(b.P, a.P, rtol=1e-7, atol=1e-12)
+    assert min_eig(b.P) > 0

@@ -35,6 +35,12 @@ Kirubarajan 2001, ch. 5). Outliers (``outlier``):
   usual covariance-inflation form);
 * ``"none"``.
 
+``joseph=False`` switches to the short form P = (I − KH)P, symmetrised:
+equal for the optimal gain up to rounding, half the arithmetic of the
+scalar loop's update, but without the Joseph form's guarantee of a PD P
+when the gain is perturbed (Huber-weighted R stays optimal for its own R,
+so both apply; the default is Joseph).
+
 Written by hand rather than on ``filterpy.kalman.ExtendedKalmanFilter``: the
 predict is a control-driven step whose Jacobian and Q change per event, H
 and R change per event, every update must be recorded (K, ν, S, NIS,
@@ -78,6 +84,7 @@ class EkfConfig:
     outlier: str = "gate"
     gate_prob: float = 0.999
     huber_k: float = 2.5
+    joseph: bool = True
     gnss_bias: bool = False
     bias_sigma_m: float = 1.5
     bias_tau_s: float = 30.0
@@ -280,7 +287,11 @@ def _update(x, P, z, R, H, cfg, runner, k, gate_nis):
         x = x_prior + K @ nu
         # P = (I − KH) P⁻ (I − KH)' + K R K'   (Joseph form: symmetric PD for any K)
         A = np.eye(n) - K @ H
-        P = A @ P_prior @ A.T + K @ R @ K.T
+        if cfg.joseph:
+            P = A @ P_prior @ A.T + K @ R @ K.T
+        else:
+            # P = (I − KH) P⁻   (short form: exact for the optimal K only)
+            P = A @ P_prior
         P = 0.5 * (P + P.T)
         if it + 1 < runner.n_iter:
             # variational step: R from the residual of this iterate

@@ -64,6 +64,7 @@ def run_fast4(stream, cfg, runner, x0: np.ndarray, P0: np.ndarray, q: np.ndarray
     mode = {"gate": 0, "huber": 1, "none": 2}[cfg.outlier]
     gate = cfg.gate_nis
     hk = cfg.huber_k
+    joseph = cfg.joseph
     sin, cos, sqrt = math.sin, math.cos, math.sqrt
     x0_, x1, x2, x3 = (float(v) for v in x0)
     p00, p01, p02, p03, p11, p12, p13, p22, p23, p33 = (float(v) for v in P0[_IU])
@@ -116,7 +117,7 @@ def run_fast4(stream, cfg, runner, x0: np.ndarray, P0: np.ndarray, q: np.ndarray
             continue
         if adaptive:
             md = _adaptive_update(k, (x0_, x1, x2, x3, p00, p01, p02, p03, p11, p12, p13, p22, p23, p33), z,
-                                  runner, mode, gate, hk, ups_a)
+                                  runner, mode, gate, hk, ups_a, joseph)
             x0_, x1, x2, x3, p00, p01, p02, p03, p11, p12, p13, p22, p23, p33 = md
             post_a(md)
             continue
@@ -157,6 +158,16 @@ def run_fast4(stream, cfg, runner, x0: np.ndarray, P0: np.ndarray, q: np.ndarray
         x1 += k10 * v0 + k11 * v1
         x2 += k20 * v0 + k21 * v1
         x3 += k30 * v0 + k31 * v1
+        if not joseph:
+            # P = (I − KH) P⁻   (short form, upper triangle): P_ij = p_ij − K_i0 p_0j − K_i1 p_1j
+            p00, p01, p02, p03, p11, p12, p13, p22, p23, p33 = (
+                p00 - k00 * p00 - k01 * p01, p01 - k00 * p01 - k01 * p11, p02 - k00 * p02 - k01 * p12,
+                p03 - k00 * p03 - k01 * p13, p11 - k10 * p01 - k11 * p11, p12 - k10 * p02 - k11 * p12,
+                p13 - k10 * p03 - k11 * p13, p22 - k20 * p02 - k21 * p12, p23 - k20 * p03 - k21 * p13,
+                p33 - k30 * p03 - k31 * p13)
+            ups_a((k, v0, v1, s00, s01, s11, r00, r01, r11, nis, w, 1.0, k00, k01, k10, k11, k20, k21, k30, k31))
+            post_a((x0_, x1, x2, x3, p00, p01, p02, p03, p11, p12, p13, p22, p23, p33))
+            continue
         # M = (I − KH) P⁻:  M_ij = p_ij − K_i0 p_0j − K_i1 p_1j   (M is not symmetric; M_32 is not needed)
         m00 = p00 - k00 * p00 - k01 * p01
         m01 = p01 - k00 * p01 - k01 * p11
@@ -194,7 +205,7 @@ def run_fast4(stream, cfg, runner, x0: np.ndarray, P0: np.ndarray, q: np.ndarray
     return _assemble(stream, post, fab, ups, x0, P0, q)
 
 
-def _adaptive_update(k, md, z, runner, mode, gate, hk, ups_a):
+def _adaptive_update(k, md, z, runner, mode, gate, hk, ups_a, joseph=True):
     """One fix with an innovation-adaptive policy (VB-AKF iterations, Sage–Husa feedback), through the
     per-mode scalar update of :mod:`models.fusion.fast_imm`; records as the inline update does."""
     from models.fusion.fast_imm import _update
@@ -206,7 +217,7 @@ def _adaptive_update(k, md, z, runner, mode, gate, hk, ups_a):
     s00, s01, s11 = p00 + r00, p01 + r01, p11 + r11
     # NIS = ν' S⁻¹ ν   (with the first iterate's R)
     nis = (s11 * v0 * v0 - 2.0 * s01 * v0 * v1 + s00 * v1 * v1) / (s00 * s11 - s01 * s01)
-    post, _, w, ok, K = _update(md, z0, z1, r00, r01, r11, mode, gate, hk)
+    post, _, w, ok, K = _update(md, z0, z1, r00, r01, r11, mode, gate, hk, joseph)
     if not ok:
         runner.feedback_s(k, v0, v1, p00, p01, p11, False)
         ups_a((k, v0, v1, s00, s01, s11, r00, r01, r11, nis, 0.0, 0.0))
@@ -219,7 +230,7 @@ def _adaptive_update(k, md, z, runner, mode, gate, hk, ups_a):
     for _ in range(1, n_iter):
         # variational step: R from the residual of this iterate, then the update again from the prior
         r00, r01, r11 = runner.refine_s(k, z0 - post[0], z1 - post[1], post[4], post[8])
-        post, _, _, _, K = _update(md, z0, z1, r00, r01, r11, 2, gate, hk)
+        post, _, _, _, K = _update(md, z0, z1, r00, r01, r11, 2, gate, hk, joseph)
     if hasattr(runner, "refine_s"):
         # the posterior residual sets this update's β
         runner.refine_s(k, z0 - post[0], z1 - post[1], post[4], post[8])
