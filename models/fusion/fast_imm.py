@@ -147,7 +147,6 @@ def _update(md, z0, z1, r00, r01, r11, mode, gate, hk, joseph=True):
 
 def run_imm4(stream, cfg, tables, mu0, x0, P0, q, switch_rate_hz, rows, proba, w_ev) -> tuple[dict, np.ndarray]:
     """IMM over M modes for the 4-state model; ``tables`` {kind: (M, 2, 2)}. Returns (records, mode_proba)."""
-    m = len(stream)
     M = len(mu0)
     rtab = {c: [tuple(map(float, (r[0, 0], r[0, 1], r[1, 1]))) for r in t] for c, t in tables.items()}
     mode = {"gate": 0, "huber": 1, "none": 2}[cfg.outlier]
