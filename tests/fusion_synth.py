@@ -44,10 +44,12 @@ def synth_walk(seed: int, duration_s: float = 120.0, cfg: EkfConfig = EkfConfig(
                gnss_hz: float | None = 5.0, gnss_sigma_m=1.5, gnss_reported_sigma_m=None,
                acoustic_hz: float | None = None, acoustic_sigma_m=0.3, turn_every_s: float = 20.0,
                bias_sigma_m: float = 0.0, bias_tau_s: float = 30.0, start_en=(0.0, 0.0),
-               irregular: bool = False) -> Synth:
+               irregular: bool = False, gnss_sigma_at=None, gnss_quality=None) -> Synth:
     """One walk. Unset ``heading_offset_rad``/``scale_error`` are drawn from the filter's prior
     (so NEES tests see the prior the filter assumes); the start position likewise.
-    ``irregular``: fix times with exponential gaps of the same mean rate instead of a fixed period."""
+    ``irregular``: fix times with exponential gaps of the same mean rate instead of a fixed period.
+    ``gnss_sigma_at``: callable (east_m, north_m) → true σ at the true position (overrides
+    ``gnss_sigma_m``, the reported σ stays as given); ``gnss_quality``: callable t → GGA quality (n,)."""
     rng = np.random.default_rng(seed)
     n_state = cfg.n_state
     x0 = np.zeros(n_state)
@@ -114,13 +116,15 @@ def synth_walk(seed: int, duration_s: float = 120.0, cfg: EkfConfig = EkfConfig(
             p[0] += len_m[i] * math.sin(psi_m[i])
             p[1] += len_m[i] * math.cos(psi_m[i])
         elif c == GNSS:
-            ge[i], gn[i] = x[:2] + x[4:6] + rng.normal(0.0, g_sig[i], 2)
+            sig = g_sig[i] if gnss_sigma_at is None else float(gnss_sigma_at(x[0], x[1]))
+            ge[i], gn[i] = x[:2] + x[4:6] + rng.normal(0.0, sig, 2)
         elif c == ACOUSTIC:
             ae[i], an[i] = x[:2] + rng.normal(0.0, a_sig[i], 2)
         truth[k] = x
         pdr[k] = p
     if gnss_hz:
-        gnss = GnssEvents.from_sigma(gnss_t, ge, gn, g_rep, hdop=np.full(len(gnss_t), 1.0))
+        quality = None if gnss_quality is None else np.asarray(gnss_quality(gnss_t), int)
+        gnss = GnssEvents.from_sigma(gnss_t, ge, gn, g_rep, hdop=np.full(len(gnss_t), 1.0), quality=quality)
     if acoustic_hz:
         ac = AcousticEvents.from_sigma(ac_t, ae, an, a_sig)
     stream = merge_events(steps, gnss, ac, t0_s=0.0)

@@ -35,6 +35,12 @@ Kirubarajan 2001, ch. 5). Outliers (``outlier``):
   usual covariance-inflation form);
 * ``"none"``.
 
+``joseph=False`` switches to the short form P = (I − KH)P, symmetrised:
+equal for the optimal gain up to rounding, half the arithmetic of the
+scalar loop's update, but without the Joseph form's guarantee of a PD P
+when the gain is perturbed (Huber-weighted R stays optimal for its own R,
+so both apply; the default is Joseph).
+
 Written by hand rather than on ``filterpy.kalman.ExtendedKalmanFilter``: the
 predict is a control-driven step whose Jacobian and Q change per event, H
 and R change per event, every update must be recorded (K, ν, S, NIS,
@@ -78,6 +84,7 @@ class EkfConfig:
     outlier: str = "gate"
     gate_prob: float = 0.999
     huber_k: float = 2.5
+    joseph: bool = True
     gnss_bias: bool = False
     bias_sigma_m: float = 1.5
     bias_tau_s: float = 30.0
@@ -280,7 +287,11 @@ def _update(x, P, z, R, H, cfg, runner, k, gate_nis):
         x = x_prior + K @ nu
         # P = (I − KH) P⁻ (I − KH)' + K R K'   (Joseph form: symmetric PD for any K)
         A = np.eye(n) - K @ H
-        P = A @ P_prior @ A.T + K @ R @ K.T
+        if cfg.joseph:
+            P = A @ P_prior @ A.T + K @ R @ K.T
+        else:
+            # P = (I − KH) P⁻   (short form: exact for the optimal K only)
+            P = A @ P_prior
         P = 0.5 * (P + P.T)
         if it + 1 < runner.n_iter:
             # variational step: R from the residual of this iterate
@@ -309,8 +320,8 @@ def _h_matrices(cfg: EkfConfig) -> dict:
 class EventEKF:
     """The event-driven EKF with one noise policy (:mod:`models.fusion.noise`).
 
-    ``fast``: run the 4-state model with a feedback-free policy through the scalar loop of
-    :mod:`models.fusion.fast` (same results to rounding; ``False`` forces the matrix form).
+    ``fast``: run the 4-state model through the scalar loop of :mod:`models.fusion.fast` (same results
+    to rounding; ``False`` forces the matrix form, which the bias states and ``correct`` always use).
 
     >>> import numpy as np
     >>> from models.fusion.events import GnssEvents, StepEvents, merge_events
@@ -357,6 +368,9 @@ class EventEKF:
 
             rec = run_fast4(stream, cfg, runner, x, P, q)
             info["fast"] = True
+            info["n_guarded"] = getattr(runner, "n_guarded", 0)
+            if hasattr(runner, "history"):
+                info["r_history"] = np.array(runner.history).reshape(-1, 4)   # event, kind, R_ee, R_nn
             return FilterRun(self.method, stream.t_s, stream.kind, x0, P0, available=stream.available, info=info,
                              **rec)
         rec = _records(m, n)

@@ -6,9 +6,10 @@ of them per event; written out, with P held as its 10 distinct entries
 (p00 p01 p02 p03 p11 p12 p13 p22 p23 p33), a step costs ~40 float operations
 and a Joseph-form update ~150, which CPython runs several times faster
 (bench/bench_fusion.py gives the figures). Used by :class:`~models.fusion.ekf.EventEKF`
-for the 4-state model with a noise policy whose R needs no feedback (fixed,
-quality, per class, map lookup); tests/test_filters.py checks it against the
-matrix form to rounding.
+for the 4-state model with every noise policy (fixed, quality, per class, map
+lookup inline; VB-AKF and Sage–Husa through their float interfaces and the
+per-mode update of :mod:`models.fusion.fast_imm`); tests/test_filters.py
+checks it against the matrix form to rounding.
 
 With F = I + [[0, 0, a, b], [0, 0, c, d], 0, 0] (the step Jacobian), F P F' needs only
 rows 0 and 1::
@@ -47,7 +48,8 @@ def _to_full(p10: np.ndarray) -> np.ndarray:
 def run_fast4(stream, cfg, runner, x0: np.ndarray, P0: np.ndarray, q: np.ndarray) -> dict:
     """Filter ``stream`` with the 4-state model; returns the record arrays of a FilterRun."""
     m = len(stream)
-    static = hasattr(runner, "R")
+    adaptive = hasattr(runner, "r_s")
+    static = not adaptive and hasattr(runner, "R")
     if static:
         R = runner.R
         rl = np.stack([R[:, 0, 0], R[:, 0, 1], R[:, 1, 1]], axis=1).tolist()
@@ -62,6 +64,7 @@ def run_fast4(stream, cfg, runner, x0: np.ndarray, P0: np.ndarray, q: np.ndarray
     mode = {"gate": 0, "huber": 1, "none": 2}[cfg.outlier]
     gate = cfg.gate_nis
     hk = cfg.huber_k
+    joseph = cfg.joseph
     sin, cos, sqrt = math.sin, math.cos, math.sqrt
     x0_, x1, x2, x3 = (float(v) for v in x0)
     p00, p01, p02, p03, p11, p12, p13, p22, p23, p33 = (float(v) for v in P0[_IU])
@@ -112,6 +115,12 @@ def run_fast4(stream, cfg, runner, x0: np.ndarray, P0: np.ndarray, q: np.ndarray
         if not av:
             post_a((x0_, x1, x2, x3, p00, p01, p02, p03, p11, p12, p13, p22, p23, p33))
             continue
+        if adaptive:
+            md = _adaptive_update(k, (x0_, x1, x2, x3, p00, p01, p02, p03, p11, p12, p13, p22, p23, p33), z,
+                                  runner, mode, gate, hk, ups_a, joseph)
+            x0_, x1, x2, x3, p00, p01, p02, p03, p11, p12, p13, p22, p23, p33 = md
+            post_a(md)
+            continue
         if r is None:
             rm = runner.r(k, (x0_, x1))
             r00, r01, r11 = float(rm[0, 0]), float(rm[0, 1]), float(rm[1, 1])
@@ -149,6 +158,16 @@ def run_fast4(stream, cfg, runner, x0: np.ndarray, P0: np.ndarray, q: np.ndarray
         x1 += k10 * v0 + k11 * v1
         x2 += k20 * v0 + k21 * v1
         x3 += k30 * v0 + k31 * v1
+        if not joseph:
+            # P = (I − KH) P⁻   (short form, upper triangle): P_ij = p_ij − K_i0 p_0j − K_i1 p_1j
+            p00, p01, p02, p03, p11, p12, p13, p22, p23, p33 = (
+                p00 - k00 * p00 - k01 * p01, p01 - k00 * p01 - k01 * p11, p02 - k00 * p02 - k01 * p12,
+                p03 - k00 * p03 - k01 * p13, p11 - k10 * p01 - k11 * p11, p12 - k10 * p02 - k11 * p12,
+                p13 - k10 * p03 - k11 * p13, p22 - k20 * p02 - k21 * p12, p23 - k20 * p03 - k21 * p13,
+                p33 - k30 * p03 - k31 * p13)
+            ups_a((k, v0, v1, s00, s01, s11, r00, r01, r11, nis, w, 1.0, k00, k01, k10, k11, k20, k21, k30, k31))
+            post_a((x0_, x1, x2, x3, p00, p01, p02, p03, p11, p12, p13, p22, p23, p33))
+            continue
         # M = (I − KH) P⁻:  M_ij = p_ij − K_i0 p_0j − K_i1 p_1j   (M is not symmetric; M_32 is not needed)
         m00 = p00 - k00 * p00 - k01 * p01
         m01 = p01 - k00 * p01 - k01 * p11
@@ -184,6 +203,41 @@ def run_fast4(stream, cfg, runner, x0: np.ndarray, P0: np.ndarray, q: np.ndarray
         ups_a((k, v0, v1, s00, s01, s11, r00, r01, r11, nis, w, 1.0, k00, k01, k10, k11, k20, k21, k30, k31))
         post_a((x0_, x1, x2, x3, p00, p01, p02, p03, p11, p12, p13, p22, p23, p33))
     return _assemble(stream, post, fab, ups, x0, P0, q)
+
+
+def _adaptive_update(k, md, z, runner, mode, gate, hk, ups_a, joseph=True):
+    """One fix with an innovation-adaptive policy (VB-AKF iterations, Sage–Husa feedback), through the
+    per-mode scalar update of :mod:`models.fusion.fast_imm`; records as the inline update does."""
+    from models.fusion.fast_imm import _update
+
+    z0, z1 = z
+    p00, p01, p11 = md[4], md[5], md[8]
+    r00, r01, r11 = runner.r_s(k, md[0], md[1])
+    v0, v1 = z0 - md[0], z1 - md[1]
+    s00, s01, s11 = p00 + r00, p01 + r01, p11 + r11
+    # NIS = ν' S⁻¹ ν   (with the first iterate's R)
+    nis = (s11 * v0 * v0 - 2.0 * s01 * v0 * v1 + s00 * v1 * v1) / (s00 * s11 - s01 * s01)
+    post, _, w, ok, K = _update(md, z0, z1, r00, r01, r11, mode, gate, hk, joseph)
+    if not ok:
+        runner.feedback_s(k, v0, v1, p00, p01, p11, False)
+        ups_a((k, v0, v1, s00, s01, s11, r00, r01, r11, nis, 0.0, 0.0))
+        ups_a((0.0,) * 8)
+        return md
+    if mode == 1:
+        # the Huber weight of the first iterate: R ← R / w
+        r00, r01, r11 = r00 / w, r01 / w, r11 / w
+    n_iter = runner.n_iter
+    for _ in range(1, n_iter):
+        # variational step: R from the residual of this iterate, then the update again from the prior
+        r00, r01, r11 = runner.refine_s(k, z0 - post[0], z1 - post[1], post[4], post[8])
+        post, _, _, _, K = _update(md, z0, z1, r00, r01, r11, 2, gate, hk, joseph)
+    if hasattr(runner, "refine_s"):
+        # the posterior residual sets this update's β
+        runner.refine_s(k, z0 - post[0], z1 - post[1], post[4], post[8])
+    runner.feedback_s(k, v0, v1, p00, p01, p11, True)
+    ups_a((k, v0, v1, p00 + r00, p01 + r01, p11 + r11, r00, r01, r11, nis, w, 1.0))
+    ups_a(K)
+    return post
 
 
 def _view(buf: array.array, width: int) -> np.ndarray:

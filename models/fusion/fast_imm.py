@@ -85,7 +85,7 @@ def _step(md, L, psi, sl2, sp2):
             (fa, fb, fc, fd))
 
 
-def _update(md, z0, z1, r00, r01, r11, mode, gate, hk):
+def _update(md, z0, z1, r00, r01, r11, mode, gate, hk, joseph=True):
     """Joseph-form update of one mode by a position fix; returns (mode, ln Λ, w, accepted, K 8-tuple)."""
     x0, x1, x2, x3, p00, p01, p02, p03, p11, p12, p13, p22, p23, p33 = md
     # ν = z − H x⁻,  S = H P⁻ H' + R
@@ -110,6 +110,13 @@ def _update(md, z0, z1, r00, r01, r11, mode, gate, hk):
     k10, k11 = p01 * i00 + p11 * i01, p01 * i01 + p11 * i11
     k20, k21 = p02 * i00 + p12 * i01, p02 * i01 + p12 * i11
     k30, k31 = p03 * i00 + p13 * i01, p03 * i01 + p13 * i11
+    xn = (x0 + k00 * v0 + k01 * v1, x1 + k10 * v0 + k11 * v1, x2 + k20 * v0 + k21 * v1, x3 + k30 * v0 + k31 * v1)
+    if not joseph:
+        # P = (I − KH) P⁻   (short form, upper triangle)
+        return (xn + (p00 - k00 * p00 - k01 * p01, p01 - k00 * p01 - k01 * p11, p02 - k00 * p02 - k01 * p12,
+                      p03 - k00 * p03 - k01 * p13, p11 - k10 * p01 - k11 * p11, p12 - k10 * p02 - k11 * p12,
+                      p13 - k10 * p03 - k11 * p13, p22 - k20 * p02 - k21 * p12, p23 - k20 * p03 - k21 * p13,
+                      p33 - k30 * p03 - k31 * p13), loglik, w, True, (k00, k01, k10, k11, k20, k21, k30, k31))
     # M = (I − KH) P⁻
     m00 = p00 - k00 * p00 - k01 * p01
     m01 = p01 - k00 * p01 - k01 * p11
@@ -131,8 +138,7 @@ def _update(md, z0, z1, r00, r01, r11, mode, gate, hk):
     d10, d11 = k10 * r00 + k11 * r01 - m10, k10 * r01 + k11 * r11 - m11
     d20, d21 = k20 * r00 + k21 * r01 - m20, k20 * r01 + k21 * r11 - m21
     d30, d31 = k30 * r00 + k31 * r01 - m30, k30 * r01 + k31 * r11 - m31
-    out = (x0 + k00 * v0 + k01 * v1, x1 + k10 * v0 + k11 * v1, x2 + k20 * v0 + k21 * v1, x3 + k30 * v0 + k31 * v1,
-           m00 + d00 * k00 + d01 * k01, m01 + d00 * k10 + d01 * k11, m02 + d00 * k20 + d01 * k21,
+    out = xn + (m00 + d00 * k00 + d01 * k01, m01 + d00 * k10 + d01 * k11, m02 + d00 * k20 + d01 * k21,
            m03 + d00 * k30 + d01 * k31, m11 + d10 * k10 + d11 * k11, m12 + d10 * k20 + d11 * k21,
            m13 + d10 * k30 + d11 * k31, m22 + d20 * k20 + d21 * k21, m23 + d20 * k30 + d21 * k31,
            m33 + d30 * k30 + d31 * k31)
@@ -141,11 +147,10 @@ def _update(md, z0, z1, r00, r01, r11, mode, gate, hk):
 
 def run_imm4(stream, cfg, tables, mu0, x0, P0, q, switch_rate_hz, rows, proba, w_ev) -> tuple[dict, np.ndarray]:
     """IMM over M modes for the 4-state model; ``tables`` {kind: (M, 2, 2)}. Returns (records, mode_proba)."""
-    m = len(stream)
     M = len(mu0)
     rtab = {c: [tuple(map(float, (r[0, 0], r[0, 1], r[1, 1]))) for r in t] for c, t in tables.items()}
     mode = {"gate": 0, "huber": 1, "none": 2}[cfg.outlier]
-    gate, hk = cfg.gate_nis, cfg.huber_k
+    gate, hk, joseph = cfg.gate_nis, cfg.huber_k, cfg.joseph
     sl2, sp2 = cfg.sigma_step_length_m ** 2, cfg.sigma_heading_rad ** 2
     off_share = 1.0 / max(M - 1, 1)
     start = tuple(float(v) for v in x0) + tuple(float(P0[a, b]) for a, b in _PAIRS)
@@ -181,7 +186,7 @@ def run_imm4(stream, cfg, tables, mu0, x0, P0, q, switch_rate_hz, rows, proba, w
         if c != STEP and av:
             z0, z1 = z
             rs = rtab[c]
-            res = [_update(md, z0, z1, *rs[j], mode, gate, hk) for j, md in enumerate(modes)]
+            res = [_update(md, z0, z1, *rs[j], mode, gate, hk, joseph) for j, md in enumerate(modes)]
             modes = [r_[0] for r_ in res]
             # 3. μ_j ∝ Λ_j c̄_j   (in logs)
             lp = [r_[1] + math.log(max(cb, 1e-300)) for r_, cb in zip(res, cbar)]

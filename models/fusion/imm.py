@@ -149,7 +149,11 @@ def _batch_update(xs, Ps, z, R, H, cfg, gate):
     xn = xs + (K @ nu[:, :, None])[:, :, 0]
     # P = (I − KH) P⁻ (I − KH)' + K R K'   (Joseph form)
     A = np.eye(n) - K @ H
-    Pn = A @ Ps @ np.swapaxes(A, 1, 2) + K @ R @ np.swapaxes(K, 1, 2)
+    if cfg.joseph:
+        Pn = A @ Ps @ np.swapaxes(A, 1, 2) + K @ R @ np.swapaxes(K, 1, 2)
+    else:
+        # P = (I − KH) P⁻   (short form)
+        Pn = A @ Ps
     Pn = 0.5 * (Pn + np.swapaxes(Pn, 1, 2))
     if not ok.all():
         xn[~ok], Pn[~ok], K[~ok] = xs[~ok], Ps[~ok], 0.0

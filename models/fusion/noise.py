@@ -6,7 +6,10 @@ when a filter run starts, hands the filter a private per-run object with
 
 * ``r(k, x)`` — R (2, 2) of event ``k`` given the prior state ``x``;
 * ``refine(k, res, hph)`` — variational iterations only (``n_iter > 1``);
-* ``feedback(k, nu, hph_prior, accepted)`` — after the update (innovation-adaptive policies).
+* ``feedback(k, nu, hph_prior, accepted)`` — after the update (innovation-adaptive policies);
+
+and the innovation-adaptive ones the same in floats (``r_s``, ``refine_s``,
+``feedback_s``) for the scalar loop of :mod:`models.fusion.fast`.
 
 R of the policies that need nothing from the filter is computed for the whole
 stream at once, so the filter loop only indexes an array.
@@ -299,36 +302,55 @@ class PerClassNoise:
 
 
 class _VB:
-    """Per-run state of the VB-AKF: inverse-gamma (α, β) per source and axis."""
+    """Per-run state of the VB-AKF: inverse-gamma (α, β) per source and axis.
+
+    Two equal interfaces: arrays (``r``, ``refine``, ``feedback``) for the matrix form, floats
+    (``r_s``, ``refine_s``, ``feedback_s``) for the scalar loop of :mod:`models.fusion.fast`.
+    """
+
+    fast = True
 
     def __init__(self, kind, r0, rho, n_iter, dof0):
         self.kind, self.rho, self.n_iter = kind, rho, n_iter
-        self.alpha = {GNSS: np.full(2, dof0), ACOUSTIC: np.full(2, dof0)}
-        self.beta = {s: dof0 * np.diag(r0[s]).copy() for s in (GNSS, ACOUSTIC)}
+        self.alpha = {GNSS: (dof0, dof0), ACOUSTIC: (dof0, dof0)}
+        self.beta = {s: (dof0 * float(r0[s][0, 0]), dof0 * float(r0[s][1, 1])) for s in (GNSS, ACOUSTIC)}
         self.history = []
 
-    def r(self, k, x):
+    def r_s(self, k, x0, x1):
         s = self.kind[k]
+        rho = self.rho
         # α⁻ = ρ·α,  β⁻ = ρ·β   (the heuristic forgetting dynamics of Särkkä & Nummenmaa 2009)
-        self._a_pred = self.rho * self.alpha[s]
-        self._b_pred = self.rho * self.beta[s]
+        ae, an = self.alpha[s]
+        be, bn = self.beta[s]
+        self._bp = (rho * be, rho * bn)
         # α = α⁻ + 1/2   (one measurement per axis)
-        self._a = self._a_pred + 0.5
-        self._b = self._b_pred.copy()
+        self._a = (rho * ae + 0.5, rho * an + 0.5)
+        self._b = self._bp
         # first iterate: R = diag(β⁻ / α)
-        return np.diag(self._b_pred / self._a)
+        return self._bp[0] / self._a[0], 0.0, self._bp[1] / self._a[1]
 
-    def refine(self, k, res, hph):
+    def refine_s(self, k, res0, res1, hp00, hp11):
         # β = β⁻ + ½ (z − Hx)² + ½ diag(H P H')
-        self._b = self._b_pred + 0.5 * res * res + 0.5 * np.diag(hph)
+        self._b = (self._bp[0] + 0.5 * (res0 * res0 + hp00), self._bp[1] + 0.5 * (res1 * res1 + hp11))
         # R = diag(β / α)
-        return np.diag(self._b / self._a)
+        return self._b[0] / self._a[0], 0.0, self._b[1] / self._a[1]
 
-    def feedback(self, k, nu, hph, accepted):
+    def feedback_s(self, k, v0, v1, h00, h01, h11, accepted):
         if accepted:
             s = self.kind[k]
             self.alpha[s], self.beta[s] = self._a, self._b
-            self.history.append((k, int(s), float(self._b[0] / self._a[0]), float(self._b[1] / self._a[1])))
+            self.history.append((k, int(s), self._b[0] / self._a[0], self._b[1] / self._a[1]))
+
+    def r(self, k, x):
+        r00, _, r11 = self.r_s(k, x[0], x[1])
+        return np.diag([r00, r11])
+
+    def refine(self, k, res, hph):
+        r00, _, r11 = self.refine_s(k, res[0], res[1], hph[0, 0], hph[1, 1])
+        return np.diag([r00, r11])
+
+    def feedback(self, k, nu, hph, accepted):
+        self.feedback_s(k, nu[0], nu[1], hph[0, 0], hph[0, 1], hph[1, 1], accepted)
 
 
 class VBAdaptiveNoise:
@@ -364,36 +386,50 @@ class VBAdaptiveNoise:
 
 
 class _SageHusa:
-    """Per-run state of the Sage–Husa estimator."""
+    """Per-run state of the Sage–Husa estimator (array and float interfaces, as :class:`_VB`)."""
 
     n_iter = 1
+    fast = True
 
     def __init__(self, kind, r0, b, floor_m2, n_prior):
         self.kind, self.b, self.floor = kind, b, floor_m2
-        self.R = {s: r0[s].copy() for s in (GNSS, ACOUSTIC)}
+        self.R = {s: (float(r0[s][0, 0]), float(r0[s][0, 1]), float(r0[s][1, 1])) for s in (GNSS, ACOUSTIC)}
         self.count = {GNSS: n_prior, ACOUSTIC: n_prior}
         self.n_guarded = 0
 
-    def r(self, k, x):
+    def r_s(self, k, x0, x1):
         return self.R[self.kind[k]]
 
-    def feedback(self, k, nu, hph, accepted):
+    def feedback_s(self, k, v0, v1, h00, h01, h11, accepted):
         if not accepted:
             return
         s = self.kind[k]
         c = self.count[s]
         # d_k = (1 − b) / (1 − b^(k+1))   (fading memory weight)
         d = (1.0 - self.b) / (1.0 - self.b ** (c + 1))
-        r_old = self.R[s]
-        nn = np.outer(nu, nu)
+        o00, o01, o11 = self.R[s]
+        e = 1.0 - d
         # R_k = (1 − d)·R_{k−1} + d·(νν' − H P⁻ H')
-        r = (1.0 - d) * r_old + d * (nn - hph)
-        if r[0, 0] <= self.floor or r[1, 1] <= self.floor or r[0, 0] * r[1, 1] - r[0, 1] * r[1, 0] <= self.floor ** 2:
+        r00, r01, r11 = e * o00 + d * (v0 * v0 - h00), e * o01 + d * (v0 * v1 - h01), e * o11 + d * (v1 * v1 - h11)
+        fl = self.floor
+        if r00 <= fl or r11 <= fl or r00 * r11 - r01 * r01 <= fl * fl:
             # guard: νν' − HP⁻H' indefinite; the biased form R = (1 − d)·R + d·νν' stays PD
-            r = (1.0 - d) * r_old + d * nn
+            r00, r01, r11 = e * o00 + d * v0 * v0, e * o01 + d * v0 * v1, e * o11 + d * v1 * v1
             self.n_guarded += 1
-        self.R[s] = _floor_pd(r, self.floor)
+        # smallest eigenvalue, λ = tr/2 − √((tr/2)² − det); clip at the floor only when below it
+        h = 0.5 * (r00 + r11)
+        if h - math.sqrt(max(h * h - (r00 * r11 - r01 * r01), 0.0)) < fl:
+            r = _floor_pd(np.array([[r00, r01], [r01, r11]]), fl)
+            r00, r01, r11 = float(r[0, 0]), float(r[0, 1]), float(r[1, 1])
+        self.R[s] = (r00, r01, r11)
         self.count[s] = c + 1
+
+    def r(self, k, x):
+        r00, r01, r11 = self.R[self.kind[k]]
+        return np.array([[r00, r01], [r01, r11]])
+
+    def feedback(self, k, nu, hph, accepted):
+        self.feedback_s(k, nu[0], nu[1], hph[0, 0], hph[0, 1], hph[1, 1], accepted)
 
 
 class SageHusaNoise:
