@@ -5,9 +5,9 @@ the target (``os.replace`` is atomic on POSIX). Directories are built under a
 temporary sibling name and renamed into place when complete.
 
 What is not a regular file is never replaced: ``-`` means standard output;
-an existing device, FIFO or socket, and any path under ``/dev`` or ``/proc``
-(``/dev/stdout`` even when the shell redirected it to a file), is written
-through once the content is complete; a symbolic link is followed and its
+an existing device, FIFO or socket, and a descriptor's name (``/dev/fd/N``,
+``/proc/...``; ``/dev/stdout`` is standard output even when the shell
+redirected it to a file), is written through once the content is complete; a symbolic link is followed and its
 target replaced atomically, the link kept.
 
 Temporary names carry the writer's process id (``.NAME.<pid>.XXXX.partial``,
@@ -160,8 +160,8 @@ def atomic_path(path: str | os.PathLike, suffix: str = "") -> Iterator[Path]:
     through = is_stdout(path)
     path = Path(path)
     # /dev/stdout, /dev/fd/N, /proc/self/fd/N name an open descriptor (a pipe, a terminal, or the file a
-    # shell redirected to): write through it, never replace what it resolves to
-    through = through or Path(os.path.abspath(path)).parts[1:2] in (("dev",), ("proc",))
+    # shell redirected to): write through it, never replace what it resolves to (/dev/shm/x stays atomic)
+    through = through or os.path.abspath(path).startswith(("/dev/fd/", "/dev/stderr", "/proc/"))
     if not through and path.is_dir():
         raise EnvfuseError(f"cannot write {path}: it is a directory")
     if not through and path.is_symlink():

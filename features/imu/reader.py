@@ -46,6 +46,9 @@ the unit with ``--accel-unit``). With ``gyro_unit="auto"`` the 99th
 percentile of |ω| decides: above 20 (1146 °/s in rad/s, beyond a walking
 body, foot swing included) the gyro is in deg/s, otherwise rad/s. Both
 choices are recorded in :attr:`ImuData.units`, and the command prints them.
+Limitation: a deg/s record that hardly turns (99th percentile under 20 °/s,
+e.g. standing still) reads as rad/s; walking at the waist turns faster than
+that, and ``--gyro-unit`` settles any doubt.
 """
 
 from __future__ import annotations
