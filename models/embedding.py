@@ -61,8 +61,9 @@ def tsne_2d(Z: np.ndarray, *, backend: str = "auto", perplexity: float = 30.0, r
     """2-D t-SNE of ``Z`` (n_samples, n_features), shape (n_samples, 2).
 
     ``backend``: "opentsne", "sklearn" or "auto" (openTSNE when installed; module docstring).
-    Both start from the PCA initialisation, with the learning rate n / early exaggeration
-    (Belkina et al., Nat. Commun. 10:5415, 2019), at each library's default iterations.
+    Both start from the PCA initialisation, with the learning rate of each library's "auto"
+    rule (growing with n, after Belkina et al., Nat. Commun. 10:5415, 2019) and its default
+    iterations (openTSNE 250 + 500, scikit-learn 1000 in all).
     """
     if backend == "auto":
         backend = "opentsne" if _opentsne_available() else "sklearn"
