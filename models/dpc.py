@@ -20,8 +20,10 @@ Definitions made here, each stated where it is computed:
   neighbour and the labels are deterministic; ties in distance go to the higher-density point;
 * d_c from the paper's rule of thumb ("the average number of neighbours is around 1 to 2 % of
   the total number of points"): k = percent·(n − 1)/100 neighbours, at most ``max_neighbors``
-  (so the cost stays near n log n on large sets), and d_c = the mean over points of the distance
-  to their k-th nearest neighbour (over an evenly strided subset of at most 20,000 points);
+  (so the cost stays near n log n on large sets), and d_c = the median over points of the
+  distance to their k-th nearest neighbour, so that the typical point has k neighbours within
+  d_c (the median, not the mean, of an evenly strided subset of at most 20,000 points, trimmed
+  to an even count so that d_c is the midpoint of two distances rather than a pair distance);
 * the gaussian sum runs over each point's ``n_neighbors`` nearest neighbours (default 3k,
   reaching about √3·d_c in 2-D, where the kernel is e⁻³ ≈ 5 %); pass ``n - 1`` for the full sum;
 * automatic centres: the largest ratio between consecutive values of γ sorted in decreasing

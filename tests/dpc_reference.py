@@ -37,18 +37,22 @@ def dense_dpc(X, *, kernel="cutoff", dc=None, percent=2.0, max_neighbors=100, n_
     D = distance_matrix(X)
     k = _rule_neighbors(n, percent, max_neighbors)
     dc_given = dc is not None
+    blocks = [np.arange(s, min(n, s + 1024)) for s in range(0, n, 1024)]    # bound the temporaries
     if not dc_given:
         q = _rule_queries(n)
-        dc = float(np.median(np.partition(D[q], k, axis=1)[:, k]))     # k-th other (self is the 0th)
+        kth = np.concatenate([np.partition(D[q[s:s + 1024]], k, axis=1)[:, k]      # k-th other (self is 0th)
+                              for s in range(0, len(q), 1024)])
+        dc = float(np.median(kth))
     if kernel == "cutoff":
-        rho = (D < dc).sum(axis=1).astype(float) - 1.0
+        rho = np.concatenate([(D[b] < dc).sum(axis=1) for b in blocks]).astype(float) - 1.0
     else:
         m = min(n - 1, n_neighbors if n_neighbors is not None else 3 * (max_neighbors if dc_given else k))
-        Do = D.copy()
-        np.fill_diagonal(Do, np.inf)
-        near = np.sort(np.partition(Do, m - 1, axis=1)[:, :m], axis=1)
-        rho = np.exp(-(near / dc) ** 2).sum(axis=1)
-        del Do
+        rho = np.empty(n)
+        for b in blocks:
+            Do = D[b].copy()
+            Do[np.arange(len(b)), b] = np.inf                                      # others only
+            near = np.sort(np.partition(Do, m - 1, axis=1)[:, :m], axis=1)
+            rho[b] = np.exp(-(near / dc) ** 2).sum(axis=1)
     order = np.lexsort((np.arange(n), -rho))
     rank = np.empty(n, dtype=np.int64)
     rank[order] = np.arange(n)
