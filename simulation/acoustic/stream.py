@@ -316,14 +316,22 @@ class _TruthWriter:
 
 
 def write_audio(ctx: StreamContext) -> dict:
-    """Stream writer: ``audio.wav`` and ``audio_truth.csv`` into ``ctx.out_dir``; returns the ``[audio]`` table."""
+    """Stream writer: ``audio.wav`` and ``audio_truth.csv`` into ``ctx.out_dir``; returns the ``[audio]`` table.
+
+    Options (all on by default): ``acoustic_air`` (wind, warm air, humidity and the crew's thermometer error,
+    :mod:`simulation.acoustic.air`), ``acoustic_hardware`` (beacon survey errors, emission delays, codec;
+    :mod:`simulation.acoustic.hardware`). Receiver tests that check one equation switch them off.
+    """
     cfg = AudioConfig.from_options(ctx.options)
     air = ctx.options.get("acoustic_air", True)
-    if not isinstance(air, bool):
-        raise ConfigError(f"option acoustic_air must be true or false, got {air!r}")
+    hardware = ctx.options.get("acoustic_hardware", True)
+    for name, value in (("acoustic_air", air), ("acoustic_hardware", hardware)):
+        if not isinstance(value, bool):
+            raise ConfigError(f"option {name} must be true or false, got {value!r}")
     render_audio(ctx.site, ctx.trajectory, ctx.seed, ctx.out_dir / "audio.wav", cfg,
                  truth_path=ctx.out_dir / "audio_truth.csv",
                  progress=ctx.kind == "walk" and bool(ctx.options.get("progress", True)),
-                 air=AirConfig(enabled=air), crew_seed=ctx.person_seed)
+                 air=AirConfig(enabled=air), hardware=HardwareConfig() if hardware else None,
+                 crew_seed=ctx.person_seed)
     return {"audio": {"file": "audio.wav", "fs_hz": cfg.fs_hz, "start_s": cfg.start_s,
                       "start_uncertainty_s": cfg.start_uncertainty_s}}
