@@ -7,8 +7,10 @@ elevation mask (default 10°):
    attenuation = max(0, C_ref(el) − C/N0) (Xue, Han & Wang 2023, §2.1);
 2. ``att_std_db`` σ — its (population) standard deviation;
 3. ``fluct_per_s`` β — local extrema of each tracked satellite's C/N0 series
-   whose swing from the previous extremum is ≥ 2 dB-Hz, per second, averaged
-   over the satellites tracked in the window. DESIGN.md says 1 dB-Hz, but NMEA
+   whose swing from the previous extremum is ≥ 2 dB-Hz, per second of
+   tracking: the extrema of all satellites over their tracked satellite-seconds
+   in the window (the per-satellite rates weighted by tracked time; equal to
+   their plain mean when every satellite is tracked throughout). DESIGN.md says 1 dB-Hz, but NMEA
    reports C/N0 in whole dB-Hz, so a 1 dB-Hz swing is a single quantisation
    step: it counts the estimator flicker of strong line-of-sight signals and
    the feature then orders the classes backwards (open > heavy on simulated
@@ -364,7 +366,9 @@ def gnss_features(sky: SkyArrays, config: GnssFeatureConfig | None = None,
         mu = _window_sums(c_att, lo, hi) / n_pairs_trk
         var = _window_sums(c_att2, lo, hi) / n_pairs_trk - mu ** 2
         sigma = np.sqrt(np.maximum(var, 0.0))
-        beta = _window_sums(c_ext, lo, hi) / n_sat_trk / config.window_s
+        # Extrema per second of tracking: Σ extrema / Σ tracked satellite-seconds, each epoch standing for
+        # window_s / n_epochs of the window (a satellite tracked for a moment no longer counts as a whole one).
+        beta = _window_sums(c_ext, lo, hi) * (hi - lo) / (n_pairs_trk * config.window_s)
         zeta = 1.0 - n_pairs_trk / n_pairs_view
         lam_w = np.clip(_window_sums(c_lam, lo, hi) / _window_sums(c_lam_n, lo, hi), 0.0, config.dop_growth_cap)
     no_trk = n_pairs_trk == 0
