@@ -89,3 +89,18 @@ def test_fluctuation_rate_weights_satellites_by_tracked_time():
                     np.isfinite(cn0), np.ones(t.size))
     f = gnss_features(sky, GnssFeatureConfig(window_s=10.0, hop_s=10.0))
     assert f["fluct_per_s"][0] == pytest.approx(32 / (4 * 10 + 0.4))
+
+
+def test_gnss_windows_lie_on_the_walks_grid():
+    """Issue 11 (smaller): the GNSS window grid started at the first epoch (here 0.4 s), so its
+    windows were 0.4 s off the audio windows (whole seconds from t = 0); now both lie on one grid."""
+    from features.gnss.features import GnssFeatureConfig, SkyArrays, gnss_features
+
+    t = np.arange(0.4, 6.0, 0.2)
+    el = np.tile(np.array([70.0, 40, 40, 40, 25]), (t.size, 1))
+    az = np.tile(np.array([0.0, 90, 180, 270, 45]), (t.size, 1))
+    sky = SkyArrays(t, tuple(("GPS", i + 1) for i in range(5)), el, az, np.full(el.shape, 40.0),
+                    np.ones(el.shape, bool), np.ones(el.shape, bool), np.ones(t.size))
+    f = gnss_features(sky, GnssFeatureConfig(window_s=2.0, hop_s=1.0))
+    assert f["t_s"].tolist() == [1.0, 2.0, 3.0, 4.0, 5.0]          # before: 1.4, 2.4, …, 5.4
+    assert f["n_epochs"].tolist()[:2] == [8, 10]                          # [0, 2) holds 0.4 … 1.8

@@ -315,8 +315,10 @@ def gnss_features(sky: SkyArrays, config: GnssFeatureConfig | None = None,
     """The five features and their counts per window.
 
     Returns a dict of arrays of shape (n_windows,): ``t_s`` (window centre),
-    ``FEATURE_COLUMNS`` and ``COUNT_COLUMNS``. Windows start at the first
-    epoch and step by ``hop_s``; windows holding no epoch are omitted. A
+    ``FEATURE_COLUMNS`` and ``COUNT_COLUMNS``. Windows start at whole multiples
+    of ``hop_s`` on the epochs' time base (the walk's, the grid of the audio
+    windows), the first at or before the first epoch; windows holding no epoch
+    are omitted. A
     feature is NaN when its inputs are absent (no tracked satellite above the
     mask for μ, σ, β; none in view for ζ, λ).
     """
@@ -347,12 +349,15 @@ def gnss_features(sky: SkyArrays, config: GnssFeatureConfig | None = None,
     c_lam, c_lam_n = cum(np.nan_to_num(lam)), cum(np.isfinite(lam))
     c_trk_sat, c_view_sat = cum(tracked), cum(view)
 
-    span = t[-1] - t[0]
+    # One window grid on the walk's time base: windows start at whole multiples of hop_s (as the
+    # audio windows do from the audio's start, t = 0 on a walk), not at the first epoch.
+    first = config.hop_s * math.floor(t[0] / config.hop_s + 1e-9)
+    span = t[-1] - first
     n_win = 1 if span < config.window_s else int(math.floor((span - config.window_s) / config.hop_s + 1e-9)) + 2
     if n_win > MAX_WINDOWS:
         raise DataError(f"{n_win} windows ({span:.0f} s of epochs at hop {config.hop_s:g} s) exceed the "
                         f"{MAX_WINDOWS} a feature table may hold; use a larger hop_s")
-    starts = t[0] + config.hop_s * np.arange(n_win)
+    starts = first + config.hop_s * np.arange(n_win)
     lo = np.searchsorted(t, starts - 1e-9, side="left")
     hi = np.searchsorted(t, starts + config.window_s - 1e-9, side="left")
     keep = hi > lo
