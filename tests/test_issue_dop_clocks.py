@@ -70,3 +70,37 @@ def test_simulated_receiver_hdop_is_reproduced(walk_dir):
     r = r[np.isfinite(r)]
     assert len(r) > 100
     assert np.median(r) == pytest.approx(1.0, abs=0.01)          # one clock: 0.96–0.98
+
+
+def test_fluctuation_rate_weights_satellites_by_tracked_time():
+    """Issue 11 (smaller): β weighted satellites equally however briefly they were tracked. Four
+    satellites tracked 10 s with 8 extrema each, a fifth for 0.4 s with none: before 32/5/10 =
+    0.64 per s (the brief one diluting as a whole satellite), now 32/(4·10 + 0.4) = 0.792."""
+    from features.gnss.features import GnssFeatureConfig, SkyArrays, gnss_features
+
+    t = np.arange(0.0, 10.0, 0.2)
+    el = np.tile(np.array([70.0, 40, 40, 40, 25]), (t.size, 1))
+    az = np.tile(np.array([0.0, 90, 180, 270, 45]), (t.size, 1))
+    wave = 40.0 + 3.0 * np.sign(np.sin(2 * np.pi * 0.5 * t + 0.1))
+    cn0 = np.tile(wave[:, None], (1, 5))
+    cn0[:, 4] = np.nan
+    cn0[20:22, 4] = 40.0                                    # the fifth: two epochs, steady
+    sky = SkyArrays(t, tuple(("GPS", i + 1) for i in range(5)), el, az, cn0, np.ones(el.shape, bool),
+                    np.isfinite(cn0), np.ones(t.size))
+    f = gnss_features(sky, GnssFeatureConfig(window_s=10.0, hop_s=10.0))
+    assert f["fluct_per_s"][0] == pytest.approx(32 / (4 * 10 + 0.4))
+
+
+def test_gnss_windows_lie_on_the_walks_grid():
+    """Issue 11 (smaller): the GNSS window grid started at the first epoch (here 0.4 s), so its
+    windows were 0.4 s off the audio windows (whole seconds from t = 0); now both lie on one grid."""
+    from features.gnss.features import GnssFeatureConfig, SkyArrays, gnss_features
+
+    t = np.arange(0.4, 6.0, 0.2)
+    el = np.tile(np.array([70.0, 40, 40, 40, 25]), (t.size, 1))
+    az = np.tile(np.array([0.0, 90, 180, 270, 45]), (t.size, 1))
+    sky = SkyArrays(t, tuple(("GPS", i + 1) for i in range(5)), el, az, np.full(el.shape, 40.0),
+                    np.ones(el.shape, bool), np.ones(el.shape, bool), np.ones(t.size))
+    f = gnss_features(sky, GnssFeatureConfig(window_s=2.0, hop_s=1.0))
+    assert f["t_s"].tolist() == [1.0, 2.0, 3.0, 4.0, 5.0]          # before: 1.4, 2.4, …, 5.4
+    assert f["n_epochs"].tolist()[:2] == [8, 10]                          # [0, 2) holds 0.4 … 1.8

@@ -290,24 +290,27 @@ def _compressed(row: list, centre: int, main_taps: int, max_width_taps: int, noi
     (True, False)
     """
     n = len(row)
-    lo, hi = max(centre - 2, 0), min(centre + 3, n)
+    lo = centre - 2 if centre > 2 else 0
+    hi = centre + 3 if centre + 3 < n else n
     if lo >= hi:
         return False
-    seg = row[lo:hi]
-    v = max(seg)
-    p = lo + seg.index(v)
+    v = max(row[lo:hi])
+    p = row.index(v, lo, hi)
     half = 0.5 * v
     left = p
-    while left > 0 and row[left - 1] >= half and p - left < max_width_taps:
+    while left > 0 and row[left - 1] >= half:
         left -= 1
+        if p - left >= max_width_taps:
+            return False
     right = p
-    while right < n - 1 and row[right + 1] >= half and right - left < max_width_taps:
+    while right < n - 1 and row[right + 1] >= half:
         right += 1
-    if right - left + 1 > max_width_taps:
-        return False
-    a, b = max(p - main_taps, 0), min(p + main_taps + 1, n)
+        if right - left >= max_width_taps:
+            return False
+    a = p - main_taps if p > main_taps else 0
+    b = p + main_taps + 1
     seg = row[a:b]
-    e_main = sum(map(mul, seg, seg)) - (b - a) * noise_power       # map(mul): C-level, 4× a generator
+    e_main = sum(map(mul, seg, seg)) - len(seg) * noise_power       # map(mul): C-level, 4× a generator
     e_all = sum(map(mul, row, row)) - n * noise_power
     return e_all > 0 and e_main >= _MIN_COMPRESSED_SHARE * e_all
 
@@ -453,10 +456,13 @@ class _FrameDetector:
             return np.zeros(bank.n_templates)
         # Every 4th output: neighbours are correlated over ~1/B anyway, and it is 4× cheaper.
         sub = seg[:, ::4]
-        q25 = np.partition(sub, sub.shape[1] // 4, axis=1)[:, sub.shape[1] // 4]
-        peak = sub.max(axis=1)
-        if np.all(q25 > _SILENCE_REL * peak):
-            return q25.astype(float) / _RAYLEIGH_Q25
+        k = sub.shape[1] // 4
+        # One partition gives the quartile and the largest (for the silence test below).
+        part = np.partition(sub, (k, sub.shape[1] - 1), axis=1)
+        q25 = part[:, k].astype(float)
+        peak = part[:, -1].tolist()
+        if all(q > _SILENCE_REL * m for q, m in zip(q25.tolist(), peak)):
+            return q25 / _RAYLEIGH_Q25
         # Digital silence (exact zero samples: a muted or not yet started input) is not noise: its
         # envelope is 0, or float32 round-off of the FFT blocks it shares with sound (below 1e-6 of
         # the loudest output). Left in, it pulled the quantile to ~0, the SNR to 126–3000 dB, and

@@ -7,8 +7,10 @@ elevation mask (default 10°):
    attenuation = max(0, C_ref(el) − C/N0) (Xue, Han & Wang 2023, §2.1);
 2. ``att_std_db`` σ — its (population) standard deviation;
 3. ``fluct_per_s`` β — local extrema of each tracked satellite's C/N0 series
-   whose swing from the previous extremum is ≥ 2 dB-Hz, per second, averaged
-   over the satellites tracked in the window. DESIGN.md says 1 dB-Hz, but NMEA
+   whose swing from the previous extremum is ≥ 2 dB-Hz, per second of
+   tracking: the extrema of all satellites over their tracked satellite-seconds
+   in the window (the per-satellite rates weighted by tracked time; equal to
+   their plain mean when every satellite is tracked throughout). DESIGN.md says 1 dB-Hz, but NMEA
    reports C/N0 in whole dB-Hz, so a 1 dB-Hz swing is a single quantisation
    step: it counts the estimator flicker of strong line-of-sight signals and
    the feature then orders the classes backwards (open > heavy on simulated
@@ -313,8 +315,10 @@ def gnss_features(sky: SkyArrays, config: GnssFeatureConfig | None = None,
     """The five features and their counts per window.
 
     Returns a dict of arrays of shape (n_windows,): ``t_s`` (window centre),
-    ``FEATURE_COLUMNS`` and ``COUNT_COLUMNS``. Windows start at the first
-    epoch and step by ``hop_s``; windows holding no epoch are omitted. A
+    ``FEATURE_COLUMNS`` and ``COUNT_COLUMNS``. Windows start at whole multiples
+    of ``hop_s`` on the epochs' time base (the walk's, the grid of the audio
+    windows), the first at or before the first epoch; windows holding no epoch
+    are omitted. A
     feature is NaN when its inputs are absent (no tracked satellite above the
     mask for μ, σ, β; none in view for ζ, λ).
     """
@@ -345,12 +349,15 @@ def gnss_features(sky: SkyArrays, config: GnssFeatureConfig | None = None,
     c_lam, c_lam_n = cum(np.nan_to_num(lam)), cum(np.isfinite(lam))
     c_trk_sat, c_view_sat = cum(tracked), cum(view)
 
-    span = t[-1] - t[0]
+    # One window grid on the walk's time base: windows start at whole multiples of hop_s (as the
+    # audio windows do from the audio's start, t = 0 on a walk), not at the first epoch.
+    first = config.hop_s * math.floor(t[0] / config.hop_s + 1e-9)
+    span = t[-1] - first
     n_win = 1 if span < config.window_s else int(math.floor((span - config.window_s) / config.hop_s + 1e-9)) + 2
     if n_win > MAX_WINDOWS:
         raise DataError(f"{n_win} windows ({span:.0f} s of epochs at hop {config.hop_s:g} s) exceed the "
                         f"{MAX_WINDOWS} a feature table may hold; use a larger hop_s")
-    starts = t[0] + config.hop_s * np.arange(n_win)
+    starts = first + config.hop_s * np.arange(n_win)
     lo = np.searchsorted(t, starts - 1e-9, side="left")
     hi = np.searchsorted(t, starts + config.window_s - 1e-9, side="left")
     keep = hi > lo
@@ -364,7 +371,9 @@ def gnss_features(sky: SkyArrays, config: GnssFeatureConfig | None = None,
         mu = _window_sums(c_att, lo, hi) / n_pairs_trk
         var = _window_sums(c_att2, lo, hi) / n_pairs_trk - mu ** 2
         sigma = np.sqrt(np.maximum(var, 0.0))
-        beta = _window_sums(c_ext, lo, hi) / n_sat_trk / config.window_s
+        # Extrema per second of tracking: Σ extrema / Σ tracked satellite-seconds, each epoch standing for
+        # window_s / n_epochs of the window (a satellite tracked for a moment no longer counts as a whole one).
+        beta = _window_sums(c_ext, lo, hi) * (hi - lo) / (n_pairs_trk * config.window_s)
         zeta = 1.0 - n_pairs_trk / n_pairs_view
         lam_w = np.clip(_window_sums(c_lam, lo, hi) / _window_sums(c_lam_n, lo, hi), 0.0, config.dop_growth_cap)
     no_trk = n_pairs_trk == 0
