@@ -5,6 +5,7 @@ from __future__ import annotations
 import io
 import json
 import math
+import sys
 from pathlib import Path
 
 from features.errors import ConfigError, NmeaError
@@ -184,4 +185,10 @@ def _run(args) -> int:
     if n_with_sky == 0:
         msg += "; no GSV in the file, so every feature is empty"
     print(msg)
+    if args.cn0_reference is None:
+        # Issue 12 item 6: a real receiver's C/N0 sits dB away from the built-in curve (a ZED-F9P log reads
+        # 20.5 dB "attenuated" under it, 9.3 dB under its own calibrated reference).
+        print("envfuse: warning: att_mean_db / att_std_db use the built-in open-sky C/N0 reference, not one "
+              "calibrated for this receiver; fit one with --fit-cn0-reference on open-sky data and pass it with "
+              "--cn0-reference ('survey build' calibrates every receiver of a survey itself)", file=sys.stderr)
     return 0
