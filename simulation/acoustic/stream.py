@@ -113,6 +113,82 @@ def _emissions(site: Site, start_utc, t_begin_s: float, t_end_s: float) -> Itera
     return heapq.merge(*(one(b) for b in site.beacons), key=lambda e: (e[0], e[1]))
 
 
+class _Emitter:
+    """One emission through the time-varying channel: where the walker is when it arrives, its paths
+    (with body and transducers), Doppler, clutter tail; the rendered samples."""
+
+    def __init__(self, site, trajectory, seed, cfg, scene, renderer, air_state, hardware, axes, true_start,
+                 fs_true, n_total):
+        self.site, self.trajectory, self.seed, self.cfg = site, trajectory, seed, cfg
+        self.scene, self.renderer, self.air_state, self.hardware, self.axes = scene, renderer, air_state, hardware, axes
+        self.true_start, self.fs_true, self.n_total = true_start, fs_true, n_total
+        self.c = renderer.c
+        self.sl_db = site.acoustic.source_level_db
+        self.noise_floor_db = cfg.inband_noise_db_spl
+        self.level_scale = 10.0 ** ((self.sl_db - cfg.full_scale_db_spl) / 20.0)
+        self.v_east, self.v_north = _velocity_table(trajectory)
+        self.alpha_min: dict[ChirpSpec, float] = {}
+        self.clutter_cache: dict[tuple[int, int], float] = {}
+        self.path_cache: dict[tuple, PathSet] = {}     # a static receiver sees the same geometry every frame
+
+    def paths_at(self, bid: int, src: np.ndarray, rx: np.ndarray) -> PathSet:
+        key = (bid, *np.round(rx, 4).tolist())
+        if key not in self.path_cache:
+            if len(self.path_cache) > 512:
+                self.path_cache.clear()
+            self.path_cache[key] = channel_paths(self.scene, src, rx)
+        return self.path_cache[key]
+
+    def render(self, t_e: float, bid: int, src: np.ndarray, spec: ChirpSpec):
+        """(start, samples, paths, t_a, first_sample, rx, η) of the emission at true time ``t_e``, or None
+        when it cannot be heard (below the noise even in free field, no path, outside the recording)."""
+        site, trajectory, cfg, air_state = self.site, self.trajectory, self.cfg, self.air_state
+        sl_db, noise_floor_db, fs = self.sl_db, self.noise_floor_db, cfg.fs_hz
+        if spec not in self.alpha_min:
+            self.alpha_min[spec] = float(absorption_db_per_m(spec.f0_hz, site.atmosphere))
+        alpha = self.alpha_min[spec]
+        # receiver position when the first path arrives: t_a = t_e + L(x(t_a))/c, straight line first
+        t_a = t_e
+        c_e = air_state.c_eff(t_e, src, _position_at(trajectory, t_e))  # effective speed of this path
+        for _ in range(2):
+            t_a = t_e + float(np.linalg.norm(src - _position_at(trajectory, t_a))) / c_e
+        rx = _position_at(trajectory, t_a)
+        d = float(np.linalg.norm(src - rx))
+        if sl_db - 20.0 * math.log10(max(d, 1e-3)) - alpha * d < noise_floor_db - cfg.skip_margin_db:
+            return None          # even in free field it could not rise out of the noise
+        paths = self.paths_at(bid, src, rx)
+        speed = float(np.interp(t_a, trajectory.t_s, trajectory.speed_m_s))
+        if len(paths) and speed * (paths.length_m[0] - d) / c_e > 0.005:
+            # a detour delays the arrival long enough for the walker to move: look again there
+            rx = _position_at(trajectory, t_e + paths.length_m[0] / c_e)
+            paths = self.paths_at(bid, src, rx)
+        if len(paths) == 0:
+            return None
+        if self.hardware is not None:
+            paths = _hardware_paths(paths, src, rx, self.axes[bid], spec, self.renderer.c, trajectory, t_e,
+                                    self.hardware)
+        t_a = t_e + paths.length_m[0] / c_e
+        best_db = sl_db + 20.0 * math.log10(max(paths.gain.max(), 1e-12)) - alpha * paths.length_m[0]
+        first_sample = (t_a - self.true_start) * self.fs_true
+        if best_db < noise_floor_db - cfg.skip_margin_db or not -fs <= first_sample < self.n_total:
+            return None
+        eta = 1.0
+        if cfg.doppler:       # moving observer: η = 1 + v·u/c, u the unit vector to the beacon
+            u = (src - rx) / max(np.linalg.norm(src - rx), 1e-6)
+            v = np.array([np.interp(t_a, trajectory.t_s, self.v_east), np.interp(t_a, trajectory.t_s, self.v_north),
+                          0.0])
+            eta = 1.0 + float(v @ u) / self.c
+        cell = (int(math.floor(rx[0])), int(math.floor(rx[1])))      # clutter on a 1 m grid
+        if cell not in self.clutter_cache:
+            self.clutter_cache[cell] = clutter_index(self.scene, np.array([cell[0] + 0.5, cell[1] + 0.5]))
+        # the tail realisation belongs to the place (1 cm grid): a static receiver hears the same tail every
+        # frame, a walker (≥ 1 m between a beacon's chirps, ≫ λ/2 ≈ 8 mm) an independent one
+        rng = stream_rng(self.seed, "audio", "tail", bid, *(int(round(x_m * 100.0)) + 10**8 for x_m in rx))
+        start, seg = self.renderer.render(paths, spec, eta, first_sample, self.clutter_cache[cell], rng,
+                                          self.level_scale)
+        return start, seg, paths, t_a, first_sample, rx, eta
+
+
 def render_audio(site: Site, trajectory: Trajectory, seed: int, wav_path,
                  cfg: AudioConfig | None = None, truth_path=None, progress: bool = False,
                  air: AirConfig = AirConfig(), crew_seed: int | None = None,
@@ -155,27 +231,14 @@ def render_audio(site: Site, trajectory: Trajectory, seed: int, wav_path,
         delays = {b.id: 0.0 for b in site.beacons}
         jitter_rng, codec = None, None
     ambient = AmbientNoise(site, trajectory, seed, cfg, true_start, fs_true)
-    c = renderer.c
     sl_db = site.acoustic.source_level_db
-    noise_floor_db = cfg.inband_noise_db_spl
-    level_scale = 10.0 ** ((sl_db - cfg.full_scale_db_spl) / 20.0)
-    v_east, v_north = _velocity_table(trajectory)
+    emitter = _Emitter(site, trajectory, seed, cfg, scene, renderer, air_state, hardware,
+                       axes if hardware is not None else None, true_start, fs_true, n_total)
     emissions = _emissions(site, trajectory.start_utc, true_start - 0.5, t_end)
-    alpha_min: dict[ChirpSpec, float] = {}
-    clutter_cache: dict[tuple[int, int], float] = {}
-    path_cache: dict[tuple, PathSet] = {}         # a static receiver sees the same geometry every frame
     acc = _Accumulator(cfg.block_samples, n_total)
     counts = {"emissions": 0, "rendered": 0, "clipped": 0}
     next_chunk = 0
     carry = np.zeros(0)
-
-    def paths_at(bid: int, src: np.ndarray, rx: np.ndarray) -> PathSet:
-        key = (bid, *np.round(rx, 4).tolist())
-        if key not in path_cache:
-            if len(path_cache) > 512:
-                path_cache.clear()
-            path_cache[key] = channel_paths(scene, src, rx)
-        return path_cache[key]
 
     with contextlib.ExitStack() as stack:
         tmp = stack.enter_context(atomic_path(wav_path, suffix=".wav"))
@@ -215,45 +278,10 @@ def render_audio(site: Site, trajectory: Trajectory, seed: int, wav_path,
             done = int(min(max(t_e - true_start, 0.0), trajectory.duration_s))
             bar.set(done)
             flush_until((t_e - true_start) * fs_true - _PRE_SAMPLES - 2)
-            src = true_pos[bid]
-            if spec not in alpha_min:
-                alpha_min[spec] = float(absorption_db_per_m(spec.f0_hz, site.atmosphere))
-            # receiver position when the first path arrives: t_a = t_e + L(x(t_a))/c, straight line first
-            t_a = t_e
-            c_e = air_state.c_eff(t_e, src, _position_at(trajectory, t_e))  # effective speed of this path
-            for _ in range(2):
-                t_a = t_e + float(np.linalg.norm(src - _position_at(trajectory, t_a))) / c_e
-            rx = _position_at(trajectory, t_a)
-            d = float(np.linalg.norm(src - rx))
-            if sl_db - 20.0 * math.log10(max(d, 1e-3)) - alpha_min[spec] * d < noise_floor_db - cfg.skip_margin_db:
-                continue          # even in free field it could not rise out of the noise
-            paths = paths_at(bid, src, rx)
-            speed = float(np.interp(t_a, trajectory.t_s, trajectory.speed_m_s))
-            if len(paths) and speed * (paths.length_m[0] - d) / c_e > 0.005:
-                # a detour delays the arrival long enough for the walker to move: look again there
-                rx = _position_at(trajectory, t_e + paths.length_m[0] / c_e)
-                paths = paths_at(bid, src, rx)
-            if len(paths) == 0:
+            got = emitter.render(t_e, bid, true_pos[bid], spec)
+            if got is None:
                 continue
-            if hardware is not None:
-                paths = _hardware_paths(paths, src, rx, axes[bid], spec, renderer.c, trajectory, t_e, hardware)
-            t_a = t_e + paths.length_m[0] / c_e
-            best_db = sl_db + 20.0 * math.log10(max(paths.gain.max(), 1e-12)) - alpha_min[spec] * paths.length_m[0]
-            first_sample = (t_a - true_start) * fs_true
-            if best_db < noise_floor_db - cfg.skip_margin_db or not -fs <= first_sample < n_total:
-                continue
-            eta = 1.0
-            if cfg.doppler:       # moving observer: η = 1 + v·u/c, u the unit vector to the beacon
-                u = (src - rx) / max(np.linalg.norm(src - rx), 1e-6)
-                v = np.array([np.interp(t_a, trajectory.t_s, v_east), np.interp(t_a, trajectory.t_s, v_north), 0.0])
-                eta = 1.0 + float(v @ u) / c
-            cell = (int(math.floor(rx[0])), int(math.floor(rx[1])))      # clutter on a 1 m grid
-            if cell not in clutter_cache:
-                clutter_cache[cell] = clutter_index(scene, np.array([cell[0] + 0.5, cell[1] + 0.5]))
-            # the tail realisation belongs to the place (1 cm grid): a static receiver hears the same tail every
-            # frame, a walker (≥ 1 m between a beacon's chirps, ≫ λ/2 ≈ 8 mm) an independent one
-            rng = stream_rng(seed, "audio", "tail", bid, *(int(round(x_m * 100.0)) + 10**8 for x_m in rx))
-            start, seg = renderer.render(paths, spec, eta, first_sample, clutter_cache[cell], rng, level_scale)
+            start, seg, paths, t_a, first_sample, rx, eta = got
             acc.add(start, seg)
             counts["rendered"] += 1
             if first_sample >= 0:
