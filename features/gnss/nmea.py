@@ -232,6 +232,48 @@ def iter_epochs(lines: Iterable[bytes | str], stats: ReadStats | None = None, *,
     return _assemble(fields_from_lines(lines, stats, tokenise, require_checksum), stats, resync_after)
 
 
+def _finish(b: _EpochBuilder, first_rel: float) -> Epoch:
+    """The epoch a builder collected, on the time base whose zero is the first epoch."""
+    used = set()
+    for g in b.gsa:
+        used.update(g.used)
+    # GSA names satellites, not signals: a signal listed without C/N0 is not tracked and
+    # cannot contribute to the fix, so only tracked signals of a GSA satellite are "used"
+    # (gpsd's rule too; it matters for 4.10+ receivers that list L2/L5 untracked).
+    sats = tuple([_tuple_new(Satellite, (system, prn, sig, el, az, cn0, cn0 is not None and (system, prn) in used))
+                  for (system, prn, sig), (_, _, el, az, cn0) in b.sats.items()])
+    when = None
+    if b.date is not None:
+        when = (dt.datetime(b.date.year, b.date.month, b.date.day, tzinfo=dt.timezone.utc)
+                + dt.timedelta(seconds=b.tod))
+    return Epoch(b.rel_s - first_rel, when, b.tod, _fix_of(b, len(used)), sats, b.sky)
+
+
+def _add_gsv(current: _EpochBuilder, talker: str, payload, gsv_parts: dict, gsv_open: dict,
+             stats: ReadStats) -> None:
+    """One GSV part into the epoch: its satellites, and the bookkeeping of the talker's open group."""
+    current.sky = True
+    key = (talker, payload.signal)
+    expected = gsv_parts.get(key, 1)
+    signal = payload.signal
+    if payload.msg_num != expected:
+        # Quectel LC79D sends a group's last part under another signal id: a part that continues the
+        # talker's open group exactly (same part count, the next part number) belongs to that group.
+        open_group = gsv_open.get(talker)
+        if (open_group is not None and payload.msg_num > 1
+                and (open_group[1], open_group[3]) == (payload.n_msgs, payload.msg_num)):
+            key = open_group[0]
+            signal = key[1]
+            stats.gsv_signal_continued += 1
+        else:
+            stats.gsv_incomplete += 1
+    gsv_parts[key] = payload.msg_num % payload.n_msgs + 1
+    gsv_open[talker] = (key, payload.n_msgs, payload.n_in_view, gsv_parts[key])
+    sats = current.sats
+    for sat in payload.satellites:
+        sats[(sat[0], sat[1], signal)] = sat
+
+
 def _assemble(sentences: Iterable[list[str]], stats: ReadStats, resync_after: int) -> Iterator[Epoch]:
     """Epochs from checked, comma-split sentences (address first)."""
     clock = _Clock()
@@ -243,21 +285,6 @@ def _assemble(sentences: Iterable[list[str]], stats: ReadStats, resync_after: in
     gsv_open: dict = {}  # talker -> (group key, n_msgs, n_in_view, next part) of its last GSV
     orphaned = False
     current_time_text = None
-
-    def finish(b: _EpochBuilder) -> Epoch:
-        used = set()
-        for g in b.gsa:
-            used.update(g.used)
-        # GSA names satellites, not signals: a signal listed without C/N0 is not tracked and
-        # cannot contribute to the fix, so only tracked signals of a GSA satellite are "used"
-        # (gpsd's rule too; it matters for 4.10+ receivers that list L2/L5 untracked).
-        sats = tuple([_tuple_new(Satellite, (system, prn, sig, el, az, cn0, cn0 is not None and (system, prn) in used))
-                      for (system, prn, sig), (_, _, el, az, cn0) in b.sats.items()])
-        when = None
-        if b.date is not None:
-            when = (dt.datetime(b.date.year, b.date.month, b.date.day, tzinfo=dt.timezone.utc)
-                    + dt.timedelta(seconds=b.tod))
-        return Epoch(b.rel_s - first_rel, when, b.tod, _fix_of(b, len(used)), sats, b.sky)
 
     for fields in sentences:
         address = fields[0]
@@ -311,7 +338,7 @@ def _assemble(sentences: Iterable[list[str]], stats: ReadStats, resync_after: in
             clock.accept(tod, day, date)
             if current is None or rel != current.rel_s:
                 if current is not None:
-                    epoch = finish(current)
+                    epoch = _finish(current, first_rel)
                     if last_t_s is not None and epoch.t_s > last_t_s:
                         last_interval = epoch.t_s - last_t_s
                     last_t_s = epoch.t_s
@@ -343,28 +370,9 @@ def _assemble(sentences: Iterable[list[str]], stats: ReadStats, resync_after: in
         if kind == "GSA":
             current.gsa.append(payload)
             continue
-        current.sky = True
-        key = (talker, payload.signal)
-        expected = gsv_parts.get(key, 1)
-        signal = payload.signal
-        if payload.msg_num != expected:
-            # Quectel LC79D sends a group's last part under another signal id: a part that continues the
-            # talker's open group exactly (same part count, the next part number) belongs to that group.
-            open_group = gsv_open.get(talker)
-            if (open_group is not None and payload.msg_num > 1
-                    and (open_group[1], open_group[3]) == (payload.n_msgs, payload.msg_num)):
-                key = open_group[0]
-                signal = key[1]
-                stats.gsv_signal_continued += 1
-            else:
-                stats.gsv_incomplete += 1
-        gsv_parts[key] = payload.msg_num % payload.n_msgs + 1
-        gsv_open[talker] = (key, payload.n_msgs, payload.n_in_view, gsv_parts[key])
-        sats = current.sats
-        for sat in payload.satellites:
-            sats[(sat[0], sat[1], signal)] = sat
+        _add_gsv(current, talker, payload, gsv_parts, gsv_open, stats)
     if current is not None:
-        yield finish(current)
+        yield _finish(current, first_rel)
 
 
 def _timed_payload(kind: str, data: list[str]):
