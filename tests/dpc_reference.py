@@ -40,7 +40,7 @@ def dense_dpc(X, *, kernel="cutoff", dc=None, percent=2.0, max_neighbors=100, n_
     blocks = [np.arange(s, min(n, s + 1024)) for s in range(0, n, 1024)]    # bound the temporaries
     if not dc_given:
         q = _rule_queries(n)
-        kth = np.concatenate([np.partition(D[q[s:s + 1024]], k, axis=1)[:, k]      # k-th other (self is 0th)
+        kth = np.concatenate([np.partition(D[q[s:s + 1024]], k, axis=1)[:, k].copy()  # k-th other (self: 0th)
                               for s in range(0, len(q), 1024)])
         dc = float(np.median(kth))
     if kernel == "cutoff":
