@@ -41,6 +41,9 @@ def register(sub) -> None:
     p.add_argument("--env-model", type=Path, required=True, help="environment model directory (train env)")
     p.add_argument("--out", type=Path, required=True, help="model directory to write")
     p.add_argument("--no-bp", action="store_true", help="fit the noise only, no BP network")
+    p.add_argument("--outlier", choices=("huber", "gate", "none"), default="huber",
+                   help="outlier handling of the filter: Huber down-weighting (default: held on held-out sites "
+                        "where the chi-square gate locked out), the 99.9 %% chi-square gate, or none")
     p.add_argument("--hidden", type=int, default=8, help="BP hidden units (default 8, as the source method)")
     p.add_argument("--seed", type=seed, default=0, help="seed of the BP network's training (default 0)")
     p.add_argument("--overwrite", action="store_true", help="replace an existing model directory")
@@ -100,7 +103,10 @@ def _run_fusion(args) -> int:
         if not (w / "walk.toml").is_file():
             raise ConfigError(f"--walks {w}: no walk.toml (expected a walk directory)")
     clf, env_meta = load_env_model(args.env_model)
+    from models.fusion.ekf import EkfConfig
+
     model = train_fusion(args.walks, clf, bp=not args.no_bp, bp_config=BPConfig(hidden=args.hidden, seed=args.seed),
+                         ekf=EkfConfig(outlier=args.outlier),
                          meta={"env_model": str(args.env_model), "env_meta": env_meta},
                          progress=lambda line: print(line, file=sys.stderr))
     save_fusion_model(model, args.out, overwrite=args.overwrite)
