@@ -17,7 +17,7 @@ FOCUS = ("gnss", "acoustic", "pdr", "kf", "kf_quality", "aekf", "imm", "adaptive
 
 _COLOURS = {"gnss": "#d62728", "acoustic": "#ff7f0e", "pdr": "#1f77b4", "kf": "#7f7f7f", "kf_quality": "#8c564b",
             "kf_map": "#bcbd22", "aekf": "#17becf", "imm": "#9467bd", "adaptive_nobp": "#2ca02c",
-            "adaptive": "#006400"}
+            "adaptive": "#006400", "adaptive_closed": "#e377c2"}
 
 
 def _colour(m: str):
