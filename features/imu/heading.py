@@ -178,14 +178,30 @@ def complementary_heading(rate_rad_s: np.ndarray, mag_heading_unwrapped: np.ndar
     return psi, bias
 
 
+STATIC_RATE_DEVIATION_RAD_S = math.radians(3.0)
+"""A standing device's angular rate stays within this of its own start value (the turn-on bias), rad/s."""
+
+MAX_TURN_ON_BIAS_RAD_S = math.radians(8.0)
+"""Largest start rate read as a gyro bias rather than a turn: consumer MEMS datasheets state a zero-rate
+offset of ±3 °/s typical (BMI160; ICM-20948 ±5 °/s), so 8 °/s covers them with margin."""
+
+
 def _static_start(acc: np.ndarray, gyro: np.ndarray, rate_hz: float, seconds: float) -> int:
-    """Number of leading samples (≥ ``seconds``) during which the device stands still, else 0."""
+    """Number of leading samples (≥ ``seconds``) during which the device stands still, else 0.
+
+    Still means the accelerometer magnitude and the angular rate both stay at their start values: the rate
+    is compared with its own median over the first ``seconds``, not with zero, because a turn-on bias of a
+    few °/s (:data:`MAX_TURN_ON_BIAS_RAD_S`) is exactly what this interval is used to measure.
+    """
     n = int(round(seconds * rate_hz))
     if len(acc) < 2 * n or n < 2:
         return 0
     a = np.linalg.norm(acc, axis=1)
-    w = np.linalg.norm(gyro, axis=1)
-    still = (np.abs(a - np.median(a[:n])) < 0.3) & (w < math.radians(3.0))
+    w0 = np.median(gyro[:n], axis=0)
+    if np.linalg.norm(w0) > MAX_TURN_ON_BIAS_RAD_S:
+        return 0                                    # turning from the start, not a biased gyro at rest
+    w = np.linalg.norm(gyro - w0, axis=1)
+    still = (np.abs(a - np.median(a[:n])) < 0.3) & (w < STATIC_RATE_DEVIATION_RAD_S)
     moving = np.nonzero(~still)[0]
     m = int(moving[0]) if len(moving) else len(acc)
     return m if m >= n else 0
