@@ -10,12 +10,13 @@ is left to a classifier trained on these labels.
 t-SNE backend: openTSNE (Poličar et al., J. Stat. Softw. 109(3), 2024; FFT-accelerated
 interpolation, Linderman et al., Nat. Methods 16:243, 2019) or scikit-learn's Barnes–Hut TSNE.
 Measured in one run of ``bench/bench_dpc.py`` (20,000 synthetic 14-feature windows, one core
-each on a loaded 2-core VM, perplexity 30, PCA initialisation, each at its default iterations):
-t-SNE + DPC with openTSNE 571 s, scikit-learn 848 s (2.2x when each is divided by the
-``oaconvolve`` yardstick timed in its own process); trustworthiness (k = 10, on a fixed 5,000-window
-subset) 0.9607 and 0.9646; both give 3 clusters named with ARI 0.997 against the synthetic
-classes. openTSNE is the faster at trustworthiness equal to 0.004, so ``tsne="auto"`` means
-openTSNE when it is installed, scikit-learn otherwise.
+each on a shared 2-core VM, perplexity 30, PCA initialisation, each at its default iterations):
+t-SNE + DPC with openTSNE 245 s, scikit-learn 482 s (2.0x, also when each is divided by the
+``oaconvolve`` yardstick timed in its own process; an earlier run on a busier machine gave
+571 s and 848 s); trustworthiness (k = 10, on a fixed 5,000-window subset) 0.9607 and 0.9646;
+both give 3 clusters, named with ARI 0.997 against the synthetic classes. openTSNE is the
+faster at trustworthiness equal to 0.004, so ``tsne="auto"`` means openTSNE when it is
+installed, scikit-learn otherwise.
 """
 
 from __future__ import annotations
