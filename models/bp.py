@@ -221,28 +221,7 @@ class BPCorrector:
         raw, var = self.predict(X)
         ood = self.is_ood(X)
         insignificant = np.sum(raw ** 2, axis=1) < np.sum(var, axis=1)
-        m = len(raw)
-        off = np.zeros(m, bool)
-        window = self.config.guard_window
-        nis_raw, nis_cor = [], []
-        applied_prev = np.zeros(2)
-        enabled = True
-        for i in range(m):
-            if updated[i] and np.all(np.isfinite(S[i])) and np.all(np.isfinite(z_en[i])):
-                s_inv = np.linalg.inv(S[i])
-                v0 = z_en[i] - prior_en[i]
-                v1 = v0 - applied_prev
-                nis_raw.append(float(v0 @ s_inv @ v0))
-                nis_cor.append(float(v1 @ s_inv @ v1))
-                if len(nis_raw) > window:
-                    nis_raw.pop(0)
-                    nis_cor.pop(0)
-                enabled = np.mean(nis_cor) <= np.mean(nis_raw) if len(nis_raw) >= 3 else True
-            off[i] = not enabled
-            if not (ood[i] or insignificant[i]):
-                applied_prev = raw[i]          # what the corrected output would have been before the next fix
-            else:
-                applied_prev = np.zeros(2)
+        off = _innovation_off(raw, ood | insignificant, prior_en, z_en, S, updated, self.config.guard_window)
         delta = np.where((ood | insignificant | off)[:, None], 0.0, raw)
         return Correction(delta_m=delta, raw_m=raw, var_m2=var, ood=ood, insignificant=insignificant,
                           innovation_off=off)
@@ -275,6 +254,40 @@ class BPCorrector:
                 raise ValueError(f"BP member {k}: weight shapes do not match hidden={h}")
             self.members_.append(w)
         return self
+
+
+def _innovation_off(raw: np.ndarray, withheld: np.ndarray, prior_en: np.ndarray, z_en: np.ndarray, S: np.ndarray,
+                    updated: np.ndarray, window: int) -> np.ndarray:
+    """The innovation guard (module docstring, guard 3), vectorised: (m,) True where the correction is off.
+
+    At each processed fix the NIS of the fix against the prior, and against the prior moved by the
+    correction the previous event would have applied (zero where that one was withheld), are compared as
+    means over the last ``window`` fixes; once that window holds three fixes, the guard is off while the corrected mean
+    is the larger, and holds its state between fixes.
+    """
+    m = len(raw)
+    applied_prev = np.zeros((m, 2))
+    applied_prev[1:] = np.where(withheld[:-1, None], 0.0, raw[:-1])
+    use = np.asarray(updated, bool) & np.all(np.isfinite(S), axis=(1, 2)) & np.all(np.isfinite(z_en), axis=1)
+    k = np.flatnonzero(use)
+    off = np.zeros(m, bool)
+    if k.size == 0:
+        return off
+    s_inv = np.linalg.inv(S[k])
+    v0 = z_en[k] - prior_en[k]
+    v1 = v0 - applied_prev[k]
+    # NIS = ν' S⁻¹ ν, uncorrected and corrected
+    n0 = np.einsum("ni,nij,nj->n", v0, s_inv, v0)
+    n1 = np.einsum("ni,nij,nj->n", v1, s_inv, v1)
+    c0, c1 = np.concatenate([[0.0], np.cumsum(n0)]), np.concatenate([[0.0], np.cumsum(n1)])
+    j = np.arange(1, k.size + 1)
+    lo = np.maximum(j - window, 0)
+    # equal window lengths: comparing the sums is comparing the means
+    disabled = ((c1[j] - c1[lo]) > (c0[j] - c0[lo])) & (np.minimum(j, window) >= 3)
+    # hold the state of the latest fix at or before each event (enabled before the first)
+    idx = np.searchsorted(k, np.arange(m), side="right") - 1
+    off[idx >= 0] = disabled[idx[idx >= 0]]
+    return off
 
 
 def _train_member(xt, yt, xv, yv, cfg: BPConfig, seed: int):

@@ -105,3 +105,39 @@ def test_seeded_and_round_trip(trained):
         BPConfig(hidden=0)
     with pytest.raises(ValueError, match="too few"):
         BPCorrector(small).fit([X[:5]], [np.zeros((5, 2))])
+
+
+def _guard_loop(raw, withheld, prior, z, S, updated, window):
+    """The innovation guard written as the plain loop of its definition: the oracle of the vectorised one."""
+    off = np.zeros(len(raw), bool)
+    n0s, n1s, prev, enabled = [], [], np.zeros(2), True
+    for i in range(len(raw)):
+        if updated[i] and np.all(np.isfinite(S[i])) and np.all(np.isfinite(z[i])):
+            si = np.linalg.inv(S[i])
+            v0 = z[i] - prior[i]
+            v1 = v0 - prev
+            n0s.append(float(v0 @ si @ v0))
+            n1s.append(float(v1 @ si @ v1))
+            n0s, n1s = n0s[-window:], n1s[-window:]
+            enabled = np.mean(n1s) <= np.mean(n0s) if len(n0s) >= 3 else True
+        off[i] = not enabled
+        prev = np.zeros(2) if withheld[i] else raw[i]
+    return off
+
+
+def test_vectorised_innovation_guard_equals_its_loop():
+    from models.bp import _innovation_off
+
+    rng = np.random.default_rng(8)
+    for _ in range(20):
+        m = int(rng.integers(5, 300))
+        raw = rng.normal(0, 0.5, (m, 2))
+        withheld = rng.random(m) < 0.3
+        prior = rng.normal(0, 1, (m, 2))
+        z = prior + rng.normal(0, 0.5, (m, 2)) + (raw if rng.random() < 0.5 else -raw)
+        z[rng.random(m) < 0.1] = np.nan
+        S = np.tile(np.eye(2) * 0.3, (m, 1, 1)) * rng.uniform(0.5, 2, (m, 1, 1))
+        updated = rng.random(m) < 0.6
+        window = int(rng.integers(1, 15))
+        assert np.array_equal(_innovation_off(raw, withheld, prior, z, S, updated, window),
+                              _guard_loop(raw, withheld, prior, z, S, updated, window))
