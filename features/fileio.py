@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import contextlib
 import contextvars
+import hashlib
 import os
 import re
 import shutil
@@ -45,7 +46,8 @@ def _publish_mode(path: Path, directory: bool) -> None:
 
 
 __all__ = ["atomic_write_text", "atomic_write_bytes", "atomic_write_many", "atomic_path", "atomic_directory",
-           "read_toml", "write_toml", "STDOUT", "is_stdout", "data_stdout", "same_file", "clean_stale_temporaries"]
+           "read_toml", "write_toml", "STDOUT", "is_stdout", "data_stdout", "same_file", "clean_stale_temporaries",
+           "sha256_file"]
 
 STDOUT = "-"
 """The output name meaning standard output."""
@@ -258,6 +260,15 @@ def atomic_write_many(outputs: dict) -> None:
         for path, text in outputs.items():
             tmp = stack.enter_context(atomic_path(path))
             tmp.write_bytes(text.encode("utf-8"))
+
+
+def sha256_file(path: str | os.PathLike) -> str:
+    """Hex SHA-256 of a file's bytes, read in 1 MiB blocks (source-file hashes, model bundles, libraries)."""
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for chunk in iter(lambda: fh.read(1 << 20), b""):
+            h.update(chunk)
+    return h.hexdigest()
 
 
 def read_toml(path: str | os.PathLike) -> dict:

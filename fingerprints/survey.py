@@ -48,7 +48,6 @@ where it stopped and the rerun adds nothing twice.
 
 from __future__ import annotations
 
-import hashlib
 import math
 import os
 import sys
@@ -62,6 +61,7 @@ from features.acoustic.features import WindowConfig, analyse_audio
 from features.acoustic.timing import timing_from_walk
 from features.constants import ELEVATION_MASK_DEG
 from features.errors import ConfigError, DataError
+from features.fileio import sha256_file
 from features.gnss.features import Cn0Reference, GnssFeatureConfig, fit_cn0_reference, gnss_features, sky_arrays
 from features.gnss.nmea import epochs_on_time_base, read_nmea
 from features.site import load_site
@@ -136,14 +136,6 @@ class _CellPlan:
     paths: dict
 
 
-def _sha256(path: Path) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as fh:
-        for chunk in iter(lambda: fh.read(1 << 20), b""):
-            h.update(chunk)
-    return h.hexdigest()
-
-
 def survey_cell_dirs(survey_dir: str | os.PathLike) -> list[Path]:
     """The cell directories of a survey, sorted by name (hidden names, e.g. partial outputs, ignored)."""
     cells = Path(survey_dir) / "cells"
@@ -176,7 +168,7 @@ def _plan_cell(cell_dir: Path, default_receiver: str) -> _CellPlan:
         p = cell_dir / str(name)
         if p.is_file():
             paths[stream] = p
-            hashes[stream] = _sha256(p)
+            hashes[stream] = sha256_file(p)
         elif table:
             notes.append(f"{stream}: {name} not found")
         else:
@@ -378,7 +370,7 @@ def build_library(survey_dir: str | os.PathLike, library: str | os.PathLike, con
     if not site_file.is_file():
         raise ConfigError(f"{survey_dir}: not a survey directory (no site.toml)")
     site = load_site(site_file)
-    site_sha = _sha256(site_file)
+    site_sha = sha256_file(site_file)
     plans = [_plan_cell(d, receiver) for d in survey_cell_dirs(survey_dir)]
     ids = [p.capture.cell_id for p in plans]
     if len(set(ids)) != len(ids):

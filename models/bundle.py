@@ -19,7 +19,6 @@ damaged bundle fails, naming the file), and returns plain dicts.
 
 from __future__ import annotations
 
-import hashlib
 import json
 import os
 import shutil
@@ -31,6 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from features.errors import EnvfuseError
+from features.fileio import sha256_file
 
 __all__ = ["BundleError", "Bundle", "save_bundle", "load_bundle", "FORMAT", "FORMAT_VERSION"]
 
@@ -63,14 +63,6 @@ def _version() -> str:
         return version("envfuse")
     except Exception:  # noqa: BLE001 - not installed as a distribution (a source checkout): say so
         return "unknown"
-
-
-def _sha256(path: Path) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as fh:
-        for chunk in iter(lambda: fh.read(1 << 20), b""):
-            h.update(chunk)
-    return h.hexdigest()
 
 
 def save_bundle(path: str | os.PathLike, kind: str, params: dict, arrays: dict, meta: dict | None = None,
@@ -106,7 +98,7 @@ def save_bundle(path: str | os.PathLike, kind: str, params: dict, arrays: dict, 
                     raise BundleError(f"array {part}/{k} has dtype object; bundles hold numeric arrays only")
             f = tmp / f"{part}.safetensors"
             save_file(clean, str(f))
-            hashes[f.name] = _sha256(f)
+            hashes[f.name] = sha256_file(f)
         doc = {"format": FORMAT, "format_version": FORMAT_VERSION, "kind": kind, "envfuse_version": _version(),
                "created_utc": datetime.now(timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ"), "params": params,
                "meta": meta or {}, "files": hashes}
@@ -161,7 +153,7 @@ def load_bundle(path: str | os.PathLike, kind: str) -> Bundle:
             raise BundleError(f"{doc_path}: bad array file name {name!r}")
         if not f.is_file():
             raise BundleError(f"{path}: {name} is missing")
-        if _sha256(f) != digest:
+        if sha256_file(f) != digest:
             raise BundleError(f"{path}: {name} is damaged (its SHA-256 differs from bundle.json)")
         try:
             arrays[name[: -len(".safetensors")]] = load_file(str(f))

@@ -34,7 +34,7 @@ from features.acoustic.cir import FEATURE_NAMES as _CIR_FEATURES
 from features.gnss.features import FEATURE_COLUMNS as _GNSS_FEATURES
 from models.dpc import DensityPeakClustering
 
-__all__ = ["ENV_FEATURES", "ENV_CLASSES", "SEVERITY_WEIGHTS", "EnvironmentEmbedding", "tsne_2d",
+__all__ = ["ENV_FEATURES", "ENV_CLASSES", "SEVERITY_WEIGHTS", "EnvironmentEmbedding", "tsne_2d", "tsne_backend",
            "severity_scores", "name_clusters"]
 
 ENV_FEATURES: tuple[str, ...] = tuple(_GNSS_FEATURES) + tuple(_CIR_FEATURES)
@@ -59,6 +59,13 @@ def _opentsne_available() -> bool:
     return True
 
 
+def tsne_backend(backend: str = "auto") -> str:
+    """The t-SNE implementation ``backend`` means: "opentsne" or "sklearn" ("auto": openTSNE when installed)."""
+    if backend == "auto":
+        return "opentsne" if _opentsne_available() else "sklearn"
+    return backend
+
+
 def tsne_2d(Z: np.ndarray, *, backend: str = "auto", perplexity: float = 30.0, random_state: int = 0,
             n_jobs: int = 1) -> np.ndarray:
     """2-D t-SNE of ``Z`` (n_samples, n_features), shape (n_samples, 2).
@@ -68,8 +75,7 @@ def tsne_2d(Z: np.ndarray, *, backend: str = "auto", perplexity: float = 30.0, r
     rule (growing with n, after Belkina et al., Nat. Commun. 10:5415, 2019) and its default
     iterations (openTSNE 250 + 500, scikit-learn 1000 in all).
     """
-    if backend == "auto":
-        backend = "opentsne" if _opentsne_available() else "sklearn"
+    backend = tsne_backend(backend)
     if backend == "opentsne":
         from openTSNE import TSNE as OpenTSNE
         emb = OpenTSNE(n_components=2, perplexity=perplexity, initialization="pca", random_state=random_state,

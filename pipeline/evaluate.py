@@ -18,7 +18,7 @@ import numpy as np
 
 from features.errors import ConfigError
 from features.fileio import atomic_write_text
-from pipeline.fusion import METHODS, METRIC_COLUMNS, run_methods, score, walk_inputs
+from pipeline.fusion import METHODS, METRIC_COLUMNS, metric_rows, run_methods, score, track_errors, walk_inputs
 from pipeline.parallel import TaskFailure, map_walks
 from pipeline.walk_data import read_walk
 
@@ -44,12 +44,11 @@ def evaluate_walk(walk, model_dir: str, methods: tuple, force: bool = False) -> 
     series = {}
     if data.truth is not None:
         for m, tr in tracks.items():
-            ok = np.isfinite(tr.east_m) & (tr.t_s >= data.truth.t_s[0]) & (tr.t_s <= data.truth.t_s[-1])
-            te, tn = data.truth.at(tr.t_s[ok])
-            e = np.stack([tr.east_m[ok] - te, tr.north_m[ok] - tn], axis=1)
-            series[m] = {"t_s": tr.t_s[ok].astype(np.float32), "err_m": np.hypot(e[:, 0], e[:, 1]).astype(np.float32),
+            te = track_errors(tr, data.truth)
+            ok = te["ok"]
+            series[m] = {"t_s": te["t_s"].astype(np.float32), "err_m": te["err_m"].astype(np.float32),
                          "east_m": tr.east_m[ok].astype(np.float32), "north_m": tr.north_m[ok].astype(np.float32),
-                         "cls": data.truth.class_at(tr.t_s[ok]).astype(np.int8), "nees": _nees(e, tr, ok)}
+                         "cls": te["cls"].astype(np.int8), "nees": te["nees"].astype(np.float32)}
         series["_truth"] = {"t_s": data.truth.t_s.astype(np.float32), "cls": data.truth.env_class.astype(np.int8),
                             "east_m": data.truth.east_m.astype(np.float32),
                             "north_m": data.truth.north_m.astype(np.float32)}
@@ -59,20 +58,8 @@ def evaluate_walk(walk, model_dir: str, methods: tuple, force: bool = False) -> 
             "site": data.site.name}
 
 
-def _nees(e: np.ndarray, tr, ok: np.ndarray) -> np.ndarray:
-    out = np.full(len(e), np.nan, np.float32)
-    if tr.cov_m2 is not None:
-        c = tr.cov_m2[ok]
-        good = np.all(np.isfinite(c), axis=(1, 2)) & (np.linalg.det(c) > 0)
-        out[good] = np.einsum("ni,nij,nj->n", e[good], np.linalg.inv(c[good]), e[good])
-    return out
-
-
 def pooled_rows(results: list[dict]) -> list[dict]:
     """Per method and class over all walks, every epoch of every walk pooled (walk = 'all')."""
-    from models.fusion.consistency import chi2_bounds
-
-    lo, hi = chi2_bounds(2)
     pools: dict = {}
     for res in results:
         for m, s in res["series"].items():
@@ -83,15 +70,7 @@ def pooled_rows(results: list[dict]) -> list[dict]:
         err = np.concatenate([s["err_m"] for s in pools[m]]).astype(float)
         cls = np.concatenate([s["cls"] for s in pools[m]])
         nees = np.concatenate([s["nees"] for s in pools[m]]).astype(float)
-        for label, sel in [("all", np.ones(len(err), bool))] + [(c, cls == k) for k, c in
-                                                                enumerate(("open", "light", "heavy"))]:
-            if not sel.any():
-                continue
-            x, v = err[sel], nees[sel]
-            nib = float(np.mean((v >= lo) & (v <= hi))) if np.isfinite(v).any() else float("nan")
-            rows.append({"walk": "all", "method": m, "env_class": label, "n": int(x.size), "mean_m": float(x.mean()),
-                         "median_m": float(np.median(x)), "p95_m": float(np.percentile(x, 95)),
-                         "max_m": float(x.max()), "nees_in_bounds": nib})
+        rows += metric_rows(err, nees, cls, "all", m)
     return rows
 
 

@@ -47,7 +47,7 @@ from models.fusion_model import FusionModel
 from pipeline.walk_data import WalkData
 
 __all__ = ["METHODS", "FILTER_METHODS", "WalkInputs", "Track", "walk_inputs", "window_features", "run_methods",
-           "score", "METRIC_COLUMNS", "STAND_GAP_S", "split_steps", "adaptive_noise", "bp_features"]
+           "score", "track_errors", "metric_rows", "METRIC_COLUMNS", "STAND_GAP_S", "split_steps", "adaptive_noise", "bp_features"]
 
 METHODS = ("gnss", "acoustic", "pdr", "kf", "kf_quality", "kf_map", "aekf", "imm", "adaptive_nobp", "adaptive",
            "adaptive_closed")
@@ -387,35 +387,46 @@ def _closed_loop(model: FusionModel, inputs: WalkInputs) -> Track:
                   "bp_disabled_share": (state["off"] + state["withheld"]) / calls, "run": run})
 
 
-def score(tracks: dict, data: WalkData, walk_name: str = "") -> list[dict]:
-    """Metric rows (:data:`METRIC_COLUMNS`) per method and class ('all' first) against the walk's truth."""
-    truth = data.truth
-    if truth is None:
-        return []
+def track_errors(tr: Track, truth) -> dict:
+    """A track against truth at its epochs inside the truth's span: ``t_s`` (k,), ``e`` (k, 2) east/north
+    error, ``err_m`` (k,), ``nees`` (k,) e'P⁻¹e (NaN without a usable covariance), ``cls`` (k,) truth class."""
+    ok = np.isfinite(tr.east_m) & (tr.t_s >= truth.t_s[0]) & (tr.t_s <= truth.t_s[-1])
+    te, tn = truth.at(tr.t_s[ok])
+    e = np.stack([tr.east_m[ok] - te, tr.north_m[ok] - tn], axis=1)
+    nees = np.full(len(e), np.nan)
+    if tr.cov_m2 is not None:
+        c = tr.cov_m2[ok]
+        good = np.all(np.isfinite(c), axis=(1, 2)) & (np.linalg.det(c) > 0)
+        # ε = e' P⁻¹ e
+        nees[good] = np.einsum("ni,nij,nj->n", e[good], np.linalg.inv(c[good]), e[good])
+    return {"ok": ok, "t_s": tr.t_s[ok], "e": e, "err_m": np.hypot(e[:, 0], e[:, 1]), "nees": nees,
+            "cls": truth.class_at(tr.t_s[ok])}
+
+
+def metric_rows(err_m: np.ndarray, nees: np.ndarray, cls: np.ndarray, walk: str, method: str) -> list[dict]:
+    """Rows of :data:`METRIC_COLUMNS` ('all' first, then each class present) from per-epoch errors, NEES
+    and truth classes; ``nees_in_bounds`` is the share inside the two-sided 95 % χ²₂ region."""
     lo, hi = chi2_bounds(2)
     out = []
-    for name, tr in tracks.items():
-        ok = np.isfinite(tr.east_m) & (tr.t_s >= truth.t_s[0]) & (tr.t_s <= truth.t_s[-1])
-        if not ok.any():
+    for label, sel in [("all", np.ones(len(err_m), bool))] + [(c, cls == k) for k, c in enumerate(ENV_CLASSES)]:
+        if not sel.any():
             continue
-        te, tn = truth.at(tr.t_s[ok])
-        e = np.stack([tr.east_m[ok] - te, tr.north_m[ok] - tn], axis=1)
-        err = np.hypot(e[:, 0], e[:, 1])
-        if tr.cov_m2 is not None:
-            c = tr.cov_m2[ok]
-            good = np.all(np.isfinite(c), axis=(1, 2)) & (np.linalg.det(c) > 0)
-            eps = np.full(len(err), np.nan)
-            eps[good] = np.einsum("ni,nij,nj->n", e[good], np.linalg.inv(c[good]), e[good])
-        else:
-            eps = np.full(len(err), np.nan)
-        cls = truth.class_at(tr.t_s[ok])
-        for label, sel in [("all", np.ones(len(err), bool))] + [(c, cls == k) for k, c in enumerate(ENV_CLASSES)]:
-            if not sel.any():
-                continue
-            v = eps[sel]
-            nib = float(np.mean((v >= lo) & (v <= hi))) if np.isfinite(v).any() else float("nan")
-            x = err[sel]
-            out.append({"walk": walk_name, "method": name, "env_class": label, "n": int(x.size),
-                        "mean_m": float(x.mean()), "median_m": float(np.median(x)),
-                        "p95_m": float(np.percentile(x, 95)), "max_m": float(x.max()), "nees_in_bounds": nib})
+        v = nees[sel]
+        nib = float(np.mean((v >= lo) & (v <= hi))) if np.isfinite(v).any() else float("nan")
+        x = err_m[sel]
+        out.append({"walk": walk, "method": method, "env_class": label, "n": int(x.size), "mean_m": float(x.mean()),
+                    "median_m": float(np.median(x)), "p95_m": float(np.percentile(x, 95)), "max_m": float(x.max()),
+                    "nees_in_bounds": nib})
+    return out
+
+
+def score(tracks: dict, data: WalkData, walk_name: str = "") -> list[dict]:
+    """Metric rows (:data:`METRIC_COLUMNS`) per method and class ('all' first) against the walk's truth."""
+    if data.truth is None:
+        return []
+    out = []
+    for name, tr in tracks.items():
+        te = track_errors(tr, data.truth)
+        if len(te["err_m"]):
+            out += metric_rows(te["err_m"], te["nees"], te["cls"], walk_name, name)
     return out

@@ -52,7 +52,7 @@ class ClusterResult:
 def cluster_windows(X: np.ndarray, *, method: str = "dpc", random_state: int = 0,
                     n_clusters: int | None = None, max_windows: int = 20_000) -> ClusterResult:
     """Cluster the complete windows of ``X`` (n, 14) and name the clusters by severity."""
-    from models.embedding import EnvironmentEmbedding, name_clusters, severity_scores
+    from models.embedding import EnvironmentEmbedding, name_clusters, severity_scores, tsne_backend
 
     X = np.asarray(X, float)
     if X.ndim != 2 or X.shape[1] != len(FEATURES):
@@ -74,7 +74,8 @@ def cluster_windows(X: np.ndarray, *, method: str = "dpc", random_state: int = 0
         embedding = np.full((len(X), 2), np.nan)
         embedding[sub] = emb.embedding_
         _label_rest(X, labels, complete & ~sub)
-        return ClusterResult(labels, int(emb.n_clusters_), f"t-SNE + DPC ({_backend()})", embedding,
+        backend = {"opentsne": "openTSNE", "sklearn": "scikit-learn"}[tsne_backend(emb.tsne)]
+        return ClusterResult(labels, int(emb.n_clusters_), f"t-SNE + DPC ({backend})", embedding,
                              emb.dpc_.rho_, emb.dpc_.delta_, np.asarray(emb.dpc_.centers_), sub)
     if method == "kmeans":
         from sklearn.cluster import KMeans
@@ -100,12 +101,3 @@ def _label_rest(X: np.ndarray, labels: np.ndarray, rest: np.ndarray) -> None:
         labels[rest] = int(np.bincount(labels[done]).argmax())
         return
     labels[rest] = EnvironmentClassifier().fit(X[done], labels[done]).predict(X[rest])
-
-
-def _backend() -> str:
-    try:
-        import openTSNE  # noqa: F401
-
-        return "openTSNE"
-    except ImportError:
-        return "scikit-learn"

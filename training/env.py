@@ -20,7 +20,6 @@ the library's hash and the sites and sample counts it was fitted on.
 
 from __future__ import annotations
 
-import hashlib
 import os
 from dataclasses import dataclass
 from pathlib import Path
@@ -28,6 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from features.errors import ConfigError, DataError
+from features.fileio import sha256_file
 from features.schema import ENV_CLASSES, FEATURES
 from fingerprints.library import FingerprintLibrary
 from fingerprints.records import feature_matrix
@@ -131,14 +131,6 @@ def fit_env_model(data: TrainingSet, mode: str = "supervised", *, random_state: 
     return clf, info
 
 
-def _sha256(path: Path) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as fh:
-        for chunk in iter(lambda: fh.read(1 << 20), b""):
-            h.update(chunk)
-    return h.hexdigest()
-
-
 def save_env_model(clf: EnvironmentClassifier, path, info: dict, library: str | os.PathLike | None = None,
                    overwrite: bool = False) -> Path:
     """Save the classifier as an ``environment`` bundle with what it was fitted on."""
@@ -147,7 +139,7 @@ def save_env_model(clf: EnvironmentClassifier, path, info: dict, library: str | 
     meta["cn0_reference"] = "per receiver, calibrated from the survey's own data (stored in the library)"
     if library is not None:
         meta["library"] = str(library)
-        meta["library_sha256"] = _sha256(Path(library))
+        meta["library_sha256"] = sha256_file(Path(library))
     return save_bundle(path, "environment", params, {"classifier": arrays}, meta=meta, overwrite=overwrite)
 
 

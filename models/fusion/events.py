@@ -55,6 +55,14 @@ def _finite(name: str, a: np.ndarray) -> None:
         raise EventError(f"{name} must be finite, got {int(np.sum(~np.isfinite(a)))} non-finite value(s)")
 
 
+def _iso_cov(sigma_m) -> np.ndarray:
+    """(n, 2, 2) covariances σ²·I from one σ per fix, ``sigma_m`` of shape (n,)."""
+    s = np.asarray(sigma_m, float)
+    cov = np.zeros((s.shape[0], 2, 2))
+    cov[:, 0, 0] = cov[:, 1, 1] = s * s
+    return cov
+
+
 def _cov(name: str, cov, n: int) -> np.ndarray:
     c = np.asarray(cov, dtype=float)
     if c.shape != (n, 2, 2):
@@ -132,10 +140,7 @@ class GnssEvents:
     @classmethod
     def from_sigma(cls, t_s, east_m, north_m, sigma_m, **kw) -> "GnssEvents":
         """Fixes with one σ per axis (east and north alike), ``sigma_m`` of shape (n,)."""
-        s = np.asarray(sigma_m, float)
-        cov = np.zeros((s.shape[0], 2, 2))
-        cov[:, 0, 0] = cov[:, 1, 1] = s * s
-        return cls(t_s, east_m, north_m, cov, **kw)
+        return cls(t_s, east_m, north_m, _iso_cov(sigma_m), **kw)
 
     @classmethod
     def from_positions(cls, positions, gst_sigma_m=None, available=None) -> "GnssEvents":
@@ -176,10 +181,7 @@ class AcousticEvents:
     @classmethod
     def from_sigma(cls, t_s, east_m, north_m, sigma_m, **kw) -> "AcousticEvents":
         """Fixes with one σ per axis, ``sigma_m`` of shape (n,)."""
-        s = np.asarray(sigma_m, float)
-        cov = np.zeros((s.shape[0], 2, 2))
-        cov[:, 0, 0] = cov[:, 1, 1] = s * s
-        return cls(t_s, east_m, north_m, cov, **kw)
+        return cls(t_s, east_m, north_m, _iso_cov(sigma_m), **kw)
 
     @classmethod
     def from_columns(cls, t_s, east_m, north_m, var_east_m2, cov_en_m2, var_north_m2, **kw) -> "AcousticEvents":
