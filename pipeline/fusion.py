@@ -33,6 +33,7 @@ NEES lies inside the two-sided 95 % χ²₂ region.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -200,13 +201,9 @@ def walk_inputs(data: WalkData, model: FusionModel) -> WalkInputs:
 
 def _map_lookup(data: WalkData):
     """Class at (east, north) from the site's layout map (the paper's method 1), or None without a layout."""
-    site = data.site
-    if not site.layout:
+    if not data.site.layout:
         return None
-    from simulation.site.environment import class_map, classify_share   # the map baseline reads the drawing
-
-    east, north, share = class_map(site, resolution_m=2.0)
-    cls = classify_share(share)              # inside a structure (NaN share): heavy
+    east, north, cls = _site_class_grid(data.site)
     e0, n0 = float(east[0]), float(north[0])
     de = float(east[1] - east[0]) if len(east) > 1 else 1.0
     dn = float(north[1] - north[0]) if len(north) > 1 else 1.0
@@ -218,6 +215,15 @@ def _map_lookup(data: WalkData):
         return int(cls[i, j])
 
     return at
+
+
+@functools.lru_cache(maxsize=8)
+def _site_class_grid(site):
+    """The site's class map on a 2 m grid (~0.2 s), once per site and process: every walk of a site shares it."""
+    from simulation.site.environment import class_map, classify_share   # the map baseline reads the drawing
+
+    east, north, share = class_map(site, resolution_m=2.0)
+    return east, north, classify_share(share)              # inside a structure (NaN share): heavy
 
 
 def adaptive_noise(model: FusionModel):
