@@ -105,6 +105,7 @@ class Truth:
     east_m: np.ndarray
     north_m: np.ndarray
     env_class: np.ndarray  # int codes into ENV_CLASSES
+    blocked_share: np.ndarray | None = None  # the continuous share behind the class, when truth.csv has it
 
     def at(self, t_s) -> tuple[np.ndarray, np.ndarray]:
         """Interpolated (east_m, north_m) at times ``t_s``."""
@@ -117,7 +118,7 @@ class Truth:
 
 
 def read_truth(path: str | os.PathLike) -> Truth:
-    """Read ``truth.csv`` (t_s, east_m, north_m, env_class)."""
+    """Read ``truth.csv`` (t_s, east_m, north_m, env_class; optional blocked_sky_share)."""
     path = Path(path)
     if path.is_dir():
         path = path / "truth.csv"
@@ -134,6 +135,8 @@ def read_truth(path: str | os.PathLike) -> Truth:
         e = np.array([float(r["east_m"]) for r in rows])
         n = np.array([float(r["north_m"]) for r in rows])
         c = np.array([ENV_CLASSES.index(r["env_class"]) for r in rows])
-    except (ValueError, KeyError) as exc:
+        share = (np.array([float(r["blocked_sky_share"]) for r in rows])
+                 if "blocked_sky_share" in rows[0] else None)
+    except (ValueError, KeyError, TypeError) as exc:
         raise DataError(f"{path}: malformed row ({exc})") from None
-    return Truth(t, e, n, c)
+    return Truth(t, e, n, c, share)

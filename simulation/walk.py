@@ -10,10 +10,10 @@ import numpy as np
 
 from features.errors import ConfigError
 from features.fileio import atomic_directory, write_toml
-from features.site import load_site
+from features.site import ENV_CLASSES, load_site
 from features.walk import parse_utc
 
-from simulation.site.environment import environment_class
+from simulation.site.environment import blocked_share, classify_share
 from simulation.progress import Progress
 from simulation.rng import stream_rng
 from simulation.site.route import RouteConfig, plan_route, route_trajectory
@@ -22,14 +22,20 @@ from simulation.streams import STREAM_WRITERS, StreamContext, run_stream_writers
 __all__ = ["DEFAULT_EPOCH_UTC", "default_start_utc", "parse_utc", "format_utc", "write_truth_csv", "simulate_walk",
            "device_height_m"]
 
-DEFAULT_EPOCH_UTC = datetime(2026, 6, 1, tzinfo=timezone.utc)
-"""Day on which simulated walks start unless told otherwise."""
+DEFAULT_EPOCH_UTC = datetime(2026, 1, 1, tzinfo=timezone.utc)
+"""Start of the year within which simulated walks and surveys start unless told otherwise."""
+
+START_SPAN_DAYS = 365
+"""Days after :data:`DEFAULT_EPOCH_UTC` over which seeded start times are spread."""
 
 
 def default_start_utc(seed: int) -> datetime:
-    """A start time on :data:`DEFAULT_EPOCH_UTC`, drawn from the seed so walks see different skies."""
+    """A start time drawn from the seed: a day of :data:`START_SPAN_DAYS` and a time of day (10 s steps),
+    so sites and walks see different constellations — GPS geometry repeats each sidereal day, shifting
+    ≈ 4 min a day, and BeiDou MEO every 7 days, so the day matters as well as the hour."""
     rng = stream_rng(seed, "start-time")
-    return DEFAULT_EPOCH_UTC + timedelta(seconds=int(rng.integers(0, 86_400 // 10)) * 10)
+    day = int(rng.integers(0, START_SPAN_DAYS))
+    return DEFAULT_EPOCH_UTC + timedelta(days=day, seconds=int(rng.integers(0, 86_400 // 10)) * 10)
 
 
 def format_utc(t: datetime) -> str:
@@ -38,14 +44,17 @@ def format_utc(t: datetime) -> str:
 
 
 def write_truth_csv(path: Path, site, trajectory, rate_hz: float = 10.0) -> None:
-    """``truth.csv``: t_s, east_m, north_m, env_class at ``rate_hz`` (class by the blocked-sky rule)."""
+    """``truth.csv``: t_s, east_m, north_m, env_class, blocked_sky_share at ``rate_hz`` (class by the
+    blocked-sky rule of :mod:`simulation.site.environment`; the share beside it tells every error's distance
+    from a class boundary)."""
     step = max(1, int(round(trajectory.rate_hz / rate_hz)))
     t = trajectory.t_s[::step]
     e = trajectory.east_m[::step]
     n = trajectory.north_m[::step]
-    cls = environment_class(site, e, n)
-    lines = ["t_s,east_m,north_m,env_class"]
-    lines += [f"{ti:.2f},{ei:.3f},{ni:.3f},{ci}" for ti, ei, ni, ci in zip(t, e, n, cls)]
+    share = blocked_share(site, e, n)
+    cls = [ENV_CLASSES[i] for i in classify_share(share)]
+    lines = ["t_s,east_m,north_m,env_class,blocked_sky_share"]
+    lines += [f"{ti:.2f},{ei:.3f},{ni:.3f},{ci},{si:.4f}" for ti, ei, ni, ci, si in zip(t, e, n, cls, share)]
     path.write_text("\n".join(lines) + "\n")
 
 

@@ -35,7 +35,8 @@ def register(sub) -> None:
     p.add_argument("--duration-s", "--duration", dest="duration", type=bounded(1.0, 21_600.0, "s"), default=300.0,
                    help="walk length, s, 1 to 21600 (default 300; --duration is the old name)")
     p.add_argument("--person", type=seed, default=None, help="walker identity: same person, same gait (default: seed)")
-    p.add_argument("--start", default=None, help="start time, ISO 8601 UTC (default: drawn from the seed)")
+    p.add_argument("--start-utc", "--start", dest="start", default=None,
+                   help="start time, ISO 8601 UTC (default: a day of 2026 and an hour drawn from the seed)")
     p.add_argument("--no-corrections", action="store_true", help="GNSS without RTK/DGNSS corrections")
     p.add_argument("--out", type=Path, required=True, help="output walk directory")
     p.add_argument("--force", action="store_true", help="replace a non-empty output directory")
@@ -53,7 +54,9 @@ def register(sub) -> None:
                    help="refuse to write more than this, GB (default 2; the estimate is printed first and a "
                         f"warning given above {SIZE_WARN_GB:g} GB)")
     p.add_argument("--seed", type=seed, default=0, help="survey seed (default 0)")
-    p.add_argument("--start", default=None, help="start time, ISO 8601 UTC")
+    p.add_argument("--start-utc", "--start", dest="start", default=None,
+                   help="start time of the first capture, ISO 8601 UTC (default: a day of 2026 and an hour "
+                        "drawn from the seed, so sites differ in constellation too)")
     p.add_argument("--no-corrections", action="store_true", help="GNSS without RTK/DGNSS corrections")
     p.add_argument("--force", action="store_true", help="replace a non-empty output directory")
     p.set_defaults(func=_survey)
@@ -87,9 +90,9 @@ def _start(text: str | None):
     if not text:
         return None
     from features.walk import parse_utc
-    t = parse_utc(text, "--start")
+    t = parse_utc(text, "--start-utc")
     if not 1980 <= t.year <= 2099:
-        raise ConfigError(f"--start {text!r} lies outside 1980-2099")
+        raise ConfigError(f"--start-utc {text!r} lies outside 1980-2099")
     return t
 
 

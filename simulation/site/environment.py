@@ -7,11 +7,12 @@ their capture point.
 
 Two ways of weighting the sky (``sky=``):
 
-- ``"uniform"`` (the default, as the project was specified): solid-angle
-  weighted, every direction above the mask alike;
-- ``"satellites"``: weighted by where this site's GPS and BeiDou satellites
-  actually pass over a day (:class:`SatelliteSky`) — the share of satellite
-  time blocked. At 30° N, say, no GPS satellite ever passes near the north
+- ``"satellites"`` (the default since issue 13): weighted by where this
+  site's GPS and BeiDou satellites actually pass over a day
+  (:class:`SatelliteSky`) — the share of satellite time blocked, which is what
+  the receiver's signal statistics can see;
+- ``"uniform"`` (the definition the project started with): solid-angle
+  weighted, every direction above the mask alike. At 30° N, say, no GPS satellite ever passes near the north
   celestial pole and the BeiDou GEO belt hangs in the south, so a fire wall
   north of a walker hides much uniform sky and few satellites: the uniform
   label calls heavy what the receiver sees as light (issue 13 item 0).
@@ -94,7 +95,7 @@ def solid_boxes(site: Site) -> np.ndarray:
 
 
 def blocked_share(site: Site, east_m, north_m, mask_deg: float = ELEVATION_MASK_DEG, n_az: int = 360,
-                  sky: str = "uniform") -> np.ndarray:
+                  sky: str = "satellites") -> np.ndarray:
     """Share of sky above ``mask_deg`` hidden by solid structures at device height, shape (n,).
 
     ``sky``: ``"uniform"`` (solid angle) or ``"satellites"`` (this site's satellite passes over a day).

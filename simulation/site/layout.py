@@ -153,8 +153,9 @@ def _switchyard(rng, width, depth, keep_out):
                 s = rng.uniform(1.2, 2.0)
                 box = _box("equipment", "steel", False, ce - s / 2, ce + s / 2, cn - s / 2, cn + s / 2,
                            rng.uniform(3.5, 5.0))
-                if not _overlaps(box, keep_out, margin=2.0):
-                    boxes.append(box)
+                if not (_overlaps(box, keep_out, margin=2.0)
+                        or _overlaps(box, [o for o in boxes if not o.porous], margin=0.5)):
+                    boxes.append(box)  # clear of the other apparatus too (two supports never share ground)
     return boxes
 
 
