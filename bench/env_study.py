@@ -17,13 +17,20 @@ cells (a cell takes the class of its windows' combined probabilities, or their m
 clustering modes). Then mean ± SD over test sites, clusters found, the continuous estimate's residual SD
 (points), missing-modality accuracy, and the OOD share on held-out windows vs shifted windows.
 
-Usage: ``python bench/env_study.py --split quick --out /tmp/env_study``
+``--sky both`` (the default) scores every mode twice on the same surveys and windows: once against the
+label of the satellites' sky (the definition since issue 13) and once against the uniform (solid-angle)
+sky the project started with, recomputed from the same cells' capture points, so the effect of the
+definition shows apart from the model. ``--cell-size-m`` / ``--capture-s`` override the split's survey
+(the split's 10 m cells give 6–12 heavy cells a site; 5 m cells give 22–36).
+
+Usage: ``python bench/env_study.py --split standard --cell-size-m 5 --capture-s 4 --out /tmp/env_study``
 """
 
 from __future__ import annotations
 
 import argparse
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -82,9 +89,18 @@ def main() -> None:
     ap.add_argument("--out", type=Path, required=True)
     ap.add_argument("--margin", type=float, default=0.03, help="distance from a class boundary, share (0.03)")
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--sky", default="both", choices=("both", "satellites", "uniform"),
+                    help="label definition(s) to score against (both: the same windows twice)")
+    ap.add_argument("--cell-size-m", type=float, default=None, help="survey cell size (default: the split's)")
+    ap.add_argument("--capture-s", type=float, default=None, help="capture per cell (default: the split's)")
+    ap.add_argument("--workers", type=int, default=2, help="simulation processes (default 2)")
     args = ap.parse_args()
-    layout = build_split(args.split, args.out / "data", progress=lambda s: print("  simulated", s, flush=True),
-                         walks=False)
+    split = SPLITS[args.split]
+    if args.cell_size_m or args.capture_s:
+        split = replace(split, name=f"{split.name}-c{args.cell_size_m or split.cell_size_m:g}",
+                        cell_size_m=args.cell_size_m or split.cell_size_m, capture_s=args.capture_s or split.capture_s)
+    layout = build_split(split, args.out / "data", progress=lambda s: print("  simulated", s, flush=True),
+                         walks=False, workers=args.workers)
     sp = layout.split
     lib = args.out / "fingerprints.sqlite"
     for site in sp.train_sites + sp.test_sites:
@@ -94,6 +110,42 @@ def main() -> None:
     train_names = [n for n in site_names if int(n.split("-")[-1]) in sp.train_sites]
     test_names = [n for n in site_names if int(n.split("-")[-1]) in sp.test_sites]
     print(f"library: {len(all_ts)} windows; training sites {train_names}; test sites {test_names}")
+    skies = ("satellites", "uniform") if args.sky == "both" else (args.sky,)
+    for sky in skies:
+        ts = relabel(all_ts, layout, sky)
+        n_heavy = [len(set(ts.cell[(ts.site == n) & (ts.label == 2)].tolist())) for n in test_names]
+        print(f"\n=== label: {sky} sky; heavy cells per test site {n_heavy} ===")
+        study(ts, train_names, test_names, args)
+
+
+def relabel(all_ts, layout, sky: str):
+    """The same windows with map label and share recomputed under the ``sky`` weighting, from each cell's
+    capture point (cell.toml) and the site's layout (simulated sites only)."""
+    from dataclasses import replace as dc_replace
+
+    from features.fileio import read_toml
+    from features.site import load_site
+    from simulation.site.environment import blocked_share, classify_share
+
+    label, share = all_ts.label.copy(), all_ts.share.copy()
+    for seed in layout.split.train_sites + layout.split.test_sites:
+        d = layout.survey_dir(seed)
+        site = load_site(d / "site.toml")
+        sel = all_ts.site == site.name
+        cells = sorted(set(all_ts.cell[sel].tolist()))
+        pts = [read_toml(d / "cells" / c / "cell.toml") for c in cells]
+        sh = blocked_share(site, [p["east_m"] for p in pts], [p["north_m"] for p in pts], sky=sky)
+        by_cell = dict(zip(cells, zip(classify_share(sh), sh)))
+        for i in np.flatnonzero(sel):
+            label[i], share[i] = by_cell[all_ts.cell[i]]
+    return dc_replace(all_ts, label=label, share=share)
+
+
+def study(all_ts, train_names, test_names, args) -> None:
+    """Every mode on ``test_names`` (models fitted on ``train_names`` or the site itself); prints the tables."""
+    from models.environment import EnvironmentClassifier
+    from training.clustering import cluster_windows
+
     train = all_ts.subset(np.isin(all_ts.site, train_names))
     rows = {}   # (mode, unit, subset) -> list of per-site [r_open, r_light, r_heavy, f1]
     nclust = {"paper": [], "kmeans": [], "transfer": []}

@@ -3,7 +3,8 @@
 :func:`run_benchmark` is what ``envfuse benchmark`` and ``envfuse demo`` run:
 
 1. build the split (:mod:`training.benchmark`): training and test sites, a survey
-   of each, walks on each — resumable, what exists is kept;
+   of each, walks on each — resumable, what exists is kept; simulated in ``workers`` processes
+   (default one per core), the same bytes as a serial build;
 2. ingest the *training* sites' surveys into one fingerprint library;
 3. fit the environment model on it (mode ``env_mode``);
 4. fit the fusion model on the training walks;
@@ -40,7 +41,8 @@ def run_benchmark(split: str, out: str | os.PathLike, *, env_mode: str = "superv
         say(f"[{time.perf_counter() - t0:6.1f} s] {text}")
 
     stage(f"split {split!r}: simulating sites, surveys and walks (kept if already there)")
-    layout = build_split(split, out / "data", progress=lambda line: stage(f"  simulated {line}"))
+    layout = build_split(split, out / "data", progress=lambda line: stage(f"  simulated {line}"),
+                         workers=workers or os.cpu_count() or 1)
     sp = layout.split
     library = out / "fingerprints.sqlite"
     for site in sp.train_sites:

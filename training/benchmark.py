@@ -123,23 +123,25 @@ def split_layout(root: str | os.PathLike) -> SplitLayout:
 
 
 def build_split(split: BenchmarkSplit | str, root: str | os.PathLike,
-                progress: Callable[[str], None] | None = None, walks: bool = True) -> SplitLayout:
+                progress: Callable[[str], None] | None = None, walks: bool = True, workers: int = 1) -> SplitLayout:
     """Simulate every site, survey and walk of ``split`` into ``root``; what already exists is kept.
 
     Each site, survey and walk is written atomically by the simulator, so an
     interrupted build resumes where it stopped: a directory that exists is
     complete. ``progress`` receives one line per item built; ``walks=False`` builds sites and surveys only
-    (an environment-model study needs no walks).
+    (an environment-model study needs no walks). ``workers`` > 1 simulates the surveys and walks in that
+    many processes (sites first, serially); every item is a pure function of its seeds, so the files are
+    the same bytes whatever the number of workers.
     """
     from features.site import save_site
     from simulation.site.layout import generate_site
-    from simulation.survey import simulate_survey
-    from simulation.walk import simulate_walk
 
     if isinstance(split, str):
         if split not in SPLITS:
             raise ConfigError(f"unknown split {split!r}; choose one of {sorted(SPLITS)}")
         split = SPLITS[split]
+    if workers < 1:
+        raise ConfigError(f"workers must be >= 1, got {workers}")
     root = Path(root)
     root.mkdir(parents=True, exist_ok=True)
     doc = {k: (list(v) if isinstance(v, tuple) else v) for k, v in asdict(split).items()}
@@ -150,6 +152,7 @@ def build_split(split: BenchmarkSplit | str, root: str | os.PathLike,
         write_toml(root / "split.toml", doc)
     layout = SplitLayout(root, split)
     say = progress or (lambda line: None)
+    tasks = []
     for site in split.train_sites + split.test_sites:
         sdir = layout.site_dir(site)
         if not (sdir / "site.toml").is_file():
@@ -158,14 +161,34 @@ def build_split(split: BenchmarkSplit | str, root: str | os.PathLike,
             say(f"site {site}")
         if not layout.survey_dir(site).is_dir():
             layout.survey_dir(site).parent.mkdir(parents=True, exist_ok=True)
-            simulate_survey(sdir, layout.survey_dir(site), seed=site, cell_size_m=split.cell_size_m,
-                            capture_s=split.capture_s, progress=False)
-            say(f"survey {site}")
+            tasks.append(("survey", str(sdir), str(layout.survey_dir(site)), site, split.cell_size_m,
+                          split.capture_s, f"survey {site}"))
         for k in range(split.walks_per_site if walks else 0):
             wdir = layout.walk_dir(site, k)
             if not wdir.is_dir():
                 wdir.parent.mkdir(parents=True, exist_ok=True)
-                simulate_walk(sdir, wdir, seed=split.walk_seed(site, k), duration_s=split.walk_s,
-                              person=split.person(site, k))
-                say(f"walk {site}/w{k}")
+                tasks.append(("walk", str(sdir), str(wdir), split.walk_seed(site, k), split.walk_s,
+                              split.person(site, k), f"walk {site}/w{k}"))
+    if workers == 1 or len(tasks) <= 1:
+        for task in tasks:
+            say(_simulate_item(task, progress=True))
+    else:
+        from concurrent.futures import ProcessPoolExecutor, as_completed
+
+        with ProcessPoolExecutor(max_workers=workers) as pool:
+            for fut in as_completed([pool.submit(_simulate_item, t, False) for t in tasks]):
+                say(fut.result())
     return layout
+
+
+def _simulate_item(task: tuple, progress: bool) -> str:
+    """One survey or walk of a split (a top-level function, so a process pool can run it)."""
+    from simulation.survey import simulate_survey
+    from simulation.walk import simulate_walk
+
+    kind, site_dir, out, a, b, c, label = task
+    if kind == "survey":
+        simulate_survey(site_dir, out, seed=a, cell_size_m=b, capture_s=c, progress=False)
+    else:
+        simulate_walk(site_dir, out, seed=a, duration_s=b, person=c, progress=progress)
+    return label
