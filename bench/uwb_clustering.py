@@ -1,0 +1,294 @@
+"""Real channels: the measured UWB CIRs clustered without labels by the environment model's DPC.
+
+RESULTS_PLACEHOLDER
+"""
+
+from __future__ import annotations
+
+import os
+
+for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")          # one core, set before numpy loads
+
+import argparse
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+import numpy as np
+from sklearn.cluster import KMeans
+from sklearn.ensemble import RandomForestClassifier
+from sklearn.metrics import adjusted_rand_score
+from sklearn.model_selection import LeaveOneGroupOut
+from sklearn.preprocessing import StandardScaler
+
+from features.acoustic.cir import FEATURE_NAMES
+from features.acoustic.uwb import LabelledUwbFeatures, read_labelled_uwb
+from models.dpc import DensityPeakClustering
+from models.embedding import name_clusters, severity_scores, tsne_2d
+
+UWB_CLASSES: tuple[str, ...] = ("LOS", "NLOS", "NDP NLOS")
+"""Labels of the dataset, least to most severe (no direct path is the most obstructed)."""
+
+UWB_SEVERITY_WEIGHTS: dict[str, float] = {"rms_delay_ms": 1.0, "mean_excess_delay_ms": 1.0, "rician_k_db": -1.0}
+"""Severity of a UWB cluster, the CIR half of :data:`models.embedding.SEVERITY_WEIGHTS` plus the
+first path's weakness: delay spread τ_rms rises under blocking, the Rician K (first path over the
+rest) falls, and the mean excess delay (the power centroid's lag behind the first arrival) rises as
+the first path weakens against later paths (Rappaport, "Wireless Communications", eq. 5.35–5.36).
+Fixed before any clustering was run; no label is read to choose it."""
+
+METHODS: tuple[str, ...] = ("dpc", "tsne_dpc", "kmeans")
+"""DPC on the standardised 9 features; t-SNE (2-D) then DPC (the paper's route); K-means, k = 3."""
+
+GROUPINGS: tuple[str, ...] = ("anchor", "tag", "file")
+"""Groups held out by the supervised forest: the anchor (the primary split, "a new site"), the tag
+location, and the single log (the split of tests/test_uwb_cir.py)."""
+
+
+class _Progress:
+    """Elapsed-time lines on stderr (the full run takes about two minutes on one core)."""
+
+    def __init__(self, enabled: bool):
+        self.enabled, self.t0 = enabled, time.perf_counter()
+
+    def __call__(self, msg: str) -> None:
+        if self.enabled:
+            print(f"[{time.perf_counter() - self.t0:6.1f} s] {msg}", file=sys.stderr, flush=True)
+
+
+@dataclass
+class Clustering:
+    """One clustering of one scope: cluster ids, their class names and the scores against the labels."""
+
+    labels: np.ndarray
+    n_clusters: int
+    named: np.ndarray                     # class name of every packet, from the severity order
+    ari: float                            # cluster ids against the 3 labels
+    ari_named: float                      # named classes against the 3 labels
+    accuracy: float                       # named classes == labels
+    ari_file: float                       # cluster ids against the log (geometry) each packet came from
+    embedding: np.ndarray | None = None   # t-SNE map, (n, 2)
+    dpc: DensityPeakClustering | None = None
+
+
+@dataclass
+class Scope:
+    """Packets of one scope (all anchors pooled, or one anchor) and their clusterings by method."""
+
+    name: str
+    rows: np.ndarray
+    runs: dict[str, Clustering] = field(default_factory=dict)
+
+
+def _score(X, y, files, labels, **extra) -> Clustering:
+    sev = severity_scores(X, labels, FEATURE_NAMES, UWB_SEVERITY_WEIGHTS)
+    named = np.asarray(name_clusters(sev, UWB_CLASSES))[labels]
+    return Clustering(labels=labels, n_clusters=int(labels.max()) + 1, named=named,
+                      ari=float(adjusted_rand_score(y, labels)), ari_named=float(adjusted_rand_score(y, named)),
+                      accuracy=float(np.mean(named == y)), ari_file=float(adjusted_rand_score(files, labels)),
+                      **extra)
+
+
+def cluster_scope(X: np.ndarray, y: np.ndarray, files: np.ndarray, seed: int, tsne: str = "auto") -> dict:
+    """The three :data:`METHODS` on ``X`` (n, 9), standardised within this scope; labels only score."""
+    Z = StandardScaler().fit_transform(X)
+    out = {"dpc": _score(X, y, files, DensityPeakClustering().fit(Z).labels_)}
+    emb = tsne_2d(Z, backend=tsne, perplexity=min(30.0, (len(Z) - 1) / 3.0), random_state=seed)
+    dpc = DensityPeakClustering().fit(emb)
+    out["tsne_dpc"] = _score(X, y, files, dpc.labels_, embedding=emb, dpc=dpc)
+    km = KMeans(n_clusters=3, n_init=10, random_state=seed).fit(Z)
+    out["kmeans"] = _score(X, y, files, km.labels_.astype(np.int64))
+    return out
+
+
+def unsupervised(data: LabelledUwbFeatures, seed: int = 0, tsne: str = "auto", progress=None) -> list[Scope]:
+    """Pooled (every anchor together) and per anchor (each anchor's own survey, clustered alone)."""
+    progress = progress or (lambda msg: None)
+    scopes = [Scope("pooled", np.arange(len(data.label)))]
+    scopes += [Scope(f"anchor {a}", np.flatnonzero(data.anchor == a)) for a in np.unique(data.anchor)]
+    for s in scopes:
+        progress(f"clustering {s.name} ({len(s.rows)} packets)")
+        s.runs = cluster_scope(data.features[s.rows], data.label[s.rows], data.file_id[s.rows], seed, tsne)
+    return scopes
+
+
+def per_site_summary(data: LabelledUwbFeatures, scopes: list[Scope], method: str) -> dict:
+    """Per-anchor clusterings taken together: packet-weighted accuracy, mean and spread over anchors."""
+    sites = [s for s in scopes if s.name != "pooled"]
+    named = np.empty(len(data.label), dtype=object)
+    for s in sites:
+        named[s.rows] = s.runs[method].named
+    acc = np.array([s.runs[method].accuracy for s in sites])
+    ari = np.array([s.runs[method].ari for s in sites])
+    return {"accuracy": float(np.mean(named == data.label)), "accuracy_mean": float(acc.mean()),
+            "accuracy_sd": float(acc.std(ddof=1)), "ari_mean": float(ari.mean()), "ari_sd": float(ari.std(ddof=1)),
+            "ari_named": float(adjusted_rand_score(data.label, named.astype(str))),
+            "files_right": _files_right(data, named)}
+
+
+def _files_right(data: LabelledUwbFeatures, named: np.ndarray) -> int:
+    """Logs whose packets' most common named class is their label (a log is one geometry, like a cell)."""
+    right = 0
+    for f in np.unique(data.file_id):
+        m = data.file_id == f
+        names, counts = np.unique(named[m].astype(str), return_counts=True)
+        right += int(names[counts.argmax()] == data.label[m][0])
+    return right
+
+
+def supervised(data: LabelledUwbFeatures, grouping: str, seed: int = 0, n_estimators: int = 100) -> dict:
+    """Random forest trained with one group held out at a time (:data:`GROUPINGS`).
+
+    Beside its accuracy: the rule "predict the training folds' majority class", and the held-out
+    group's own majority share (the best any constant guess could do, known only with its labels).
+    """
+    groups = getattr(data, {"anchor": "anchor", "tag": "tag", "file": "file_id"}[grouping])
+    X, y = data.features, data.label
+    pred = np.empty(len(y), dtype=object)
+    train_major = np.empty(len(y), dtype=object)
+    folds = []
+    for train, test in LeaveOneGroupOut().split(X, y, groups):
+        forest = RandomForestClassifier(n_estimators=n_estimators, min_samples_leaf=3, random_state=seed, n_jobs=1)
+        pred[test] = forest.fit(X[train], y[train]).predict(X[test])
+        names, counts = np.unique(y[train], return_counts=True)
+        train_major[test] = names[counts.argmax()]
+        _, own = np.unique(y[test], return_counts=True)
+        folds.append({"group": int(groups[test][0]), "n": len(test), "accuracy": float(np.mean(pred[test] == y[test])),
+                      "train_majority": float(np.mean(train_major[test] == y[test])),
+                      "own_majority": float(own.max() / len(test))})
+    return {"accuracy": float(np.mean(pred == y)), "train_majority": float(np.mean(train_major == y)),
+            "own_majority": float(sum(f["own_majority"] * f["n"] for f in folds) / len(y)),
+            "pooled_majority": float(max(np.mean(y == c) for c in UWB_CLASSES)),
+            "files_right": _files_right(data, pred), "folds": folds}
+
+
+def file_severity(data: LabelledUwbFeatures) -> list[tuple[int, int, str, float]]:
+    """(anchor, file, label, severity score of the log's packets within its anchor), by anchor then severity.
+
+    The same score that names the clusters, with each log taken as one cluster: shows where the
+    features' order of the logs disagrees with the geometric labels.
+    """
+    out = []
+    for a in np.unique(data.anchor):
+        m = data.anchor == a
+        files = data.file_id[m]
+        ids = np.unique(files)
+        sev = severity_scores(data.features[m], np.searchsorted(ids, files), FEATURE_NAMES, UWB_SEVERITY_WEIGHTS)
+        lab = {f: data.label[m][files == f][0] for f in ids}
+        out += sorted(((int(a), int(f), str(lab[f]), float(s)) for f, s in zip(ids, sev)), key=lambda r: r[3])
+    return out
+
+
+def run(packets_per_file: int | None = None, seed: int = 0, folder: str | os.PathLike | None = None,
+        tsne: str = "auto", groupings: tuple[str, ...] = GROUPINGS, progress: bool = False) -> dict:
+    """Everything the report prints: data, unsupervised scopes, per-site summaries, forests."""
+    from tests.conftest import SHARED_DATA
+
+    say = _Progress(progress)
+    folder = Path(folder) if folder is not None else SHARED_DATA / "cir_uwb"
+    say(f"reading {folder}")
+    data = read_labelled_uwb(folder, packets_per_file=packets_per_file, random_state=seed)
+    scopes = unsupervised(data, seed, tsne, say)
+    say("supervised forests")
+    forests = {g: supervised(data, g, seed) for g in groupings}
+    say("done")
+    return {"data": data, "scopes": scopes, "per_site": {m: per_site_summary(data, scopes, m) for m in METHODS},
+            "forests": forests, "file_severity": file_severity(data)}
+
+
+def report(res: dict) -> str:
+    """The tables of the module docstring, from :func:`run`'s result."""
+    data, scopes = res["data"], res["scopes"]
+    n_files = len(np.unique(data.file_id))
+    lines = [f"{len(data.label)} packets from {n_files} logs, {len(np.unique(data.anchor))} anchors "
+             f"({data.n_dropped} packets without a valid CIR feature left out); labels "
+             + ", ".join(f"{c} {np.mean(data.label == c):.1%}" for c in UWB_CLASSES), "",
+             "Unsupervised (labels only score): ARI of the clusters and of the severity-named classes against",
+             "LOS / NLOS / NDP, accuracy of the named classes, ARI of the clusters against the log id.", "",
+             f"{'scope':<10s} {'packets':>7s} {'method':<9s} {'k':>3s} {'ARI':>6s} {'ARI nm':>6s} {'acc':>6s} "
+             f"{'ARI log':>7s}"]
+    for s in scopes:
+        for m in METHODS:
+            r = s.runs[m]
+            lines.append(f"{s.name:<10s} {len(s.rows):7d} {m:<9s} {r.n_clusters:3d} {r.ari:6.3f} {r.ari_named:6.3f} "
+                         f"{r.accuracy:6.3f} {r.ari_file:7.3f}")
+    lines += ["", "Per site (each anchor clustered alone, then taken together):", "",
+              f"{'method':<9s} {'acc':>6s} {'acc mean±sd':>13s} {'ARI mean±sd':>13s} {'logs right':>10s}"]
+    for m in METHODS:
+        p = res["per_site"][m]
+        lines.append(f"{m:<9s} {p['accuracy']:6.3f} {p['accuracy_mean']:6.3f}±{p['accuracy_sd']:5.3f} "
+                     f"{p['ari_mean']:6.3f}±{p['ari_sd']:5.3f} {p['files_right']:5d}/{n_files}")
+    lines += ["", "Supervised random forest, one group held out at a time:", "",
+              f"{'held out':<8s} {'forest':>6s} {'train-majority':>14s} {'own majority':>12s} {'logs right':>10s}"]
+    for g, f in res["forests"].items():
+        lines.append(f"{g:<8s} {f['accuracy']:6.3f} {f['train_majority']:14.3f} {f['own_majority']:12.3f} "
+                     f"{f['files_right']:5d}/{n_files}")
+    lines += ["", "Leave-one-anchor-out, per anchor:", ""]
+    lines += [f"anchor {f['group']}: forest {f['accuracy']:.3f}, train-majority {f['train_majority']:.3f}, "
+              f"own majority {f['own_majority']:.3f} ({f['n']} packets)" for f in res["forests"]["anchor"]["folds"]]
+    lines += ["", "Logs by severity within each anchor (the order the naming imposes) and their labels:", ""]
+    for a in np.unique(data.anchor):
+        rows = [r for r in res["file_severity"] if r[0] == a]
+        lines.append(f"anchor {a}: " + ", ".join(f"{f} {lab.replace(' NLOS', '')} {s:+.2f}" for _, f, lab, s in rows))
+    return "\n".join(lines)
+
+
+def plot(res: dict, path: Path) -> None:
+    """Per scope: t-SNE map by named cluster, the same map by label, and the decision graph."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    colours = dict(zip(UWB_CLASSES, ("tab:green", "tab:orange", "tab:red")))
+    scopes = res["scopes"]
+    fig, axes = plt.subplots(len(scopes), 3, figsize=(13, 3.9 * len(scopes)), squeeze=False)
+    for row, s in zip(axes, scopes):
+        r = s.runs["tsne_dpc"]
+        y = res["data"].label[s.rows]
+        for ax, values, title in ((row[0], r.named, f"{r.n_clusters} clusters named by severity: "
+                                                     f"acc {r.accuracy:.2f}, ARI {r.ari:.2f}"),
+                                  (row[1], y, "label")):
+            for c in UWB_CLASSES:
+                m = values == c
+                ax.scatter(r.embedding[m, 0], r.embedding[m, 1], s=3, c=colours[c], label=f"{c} ({m.sum()})")
+            ax.set_title(f"{s.name}: {title}", fontsize=10)
+            ax.set_xticks([]), ax.set_yticks([])
+        centres = r.embedding[r.dpc.centers_]
+        row[0].scatter(centres[:, 0], centres[:, 1], marker="x", c="k", s=40, label="DPC centres")
+        for ax in row[:2]:
+            ax.legend(fontsize=7, markerscale=2, loc="best", framealpha=0.6)
+        ax = row[2]
+        ax.scatter(r.dpc.rho_, r.dpc.delta_, s=3, c="0.5")
+        ax.scatter(r.dpc.rho_[r.dpc.centers_], r.dpc.delta_[r.dpc.centers_], s=30, c="k", marker="x",
+                   label="chosen centres")
+        ax.set_xlabel("density ρ"), ax.set_ylabel("δ (t-SNE units)")
+        ax.set_title(f"{s.name}: decision graph", fontsize=10)
+        ax.legend(fontsize=7)
+    fig.suptitle("UWB CIRs (Kolakowski & Modelski 2018): t-SNE + DPC on the nine CIR features", fontsize=12)
+    fig.tight_layout(rect=(0, 0, 1, 0.985))
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0],
+                                 epilog="example: .venv/bin/python bench/uwb_clustering.py --png uwb_clustering.png")
+    ap.add_argument("--packets-per-file", type=int, default=None, help="subsample each log (default: all packets)")
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--data", default=None, help="the cir_uwb folder (default ../shared/data/cir_uwb)")
+    ap.add_argument("--png", default="uwb_clustering.png", help="figure path ('' for none)")
+    args = ap.parse_args(argv)
+    res = run(args.packets_per_file, args.seed, args.data, progress=True)
+    print(report(res))
+    if args.png:
+        plot(res, Path(args.png))
+        print(f"\nfigure: {args.png}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
