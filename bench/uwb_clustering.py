@@ -182,6 +182,43 @@ def file_severity(data: LabelledUwbFeatures) -> list[tuple[int, int, str, float]
     return out
 
 
+def order_concordance(data: LabelledUwbFeatures, within_anchor: bool = True) -> tuple[int, int]:
+    """(pairs ordered as their labels, pairs) over pairs of logs with different labels, each log's
+    severity score (each log taken as one cluster) compared: within each anchor (scores
+    standardised per anchor, the per-site way) or over all logs pooled (scores standardised over all).
+    Ties in score count as discordant."""
+    rank = {c: i for i, c in enumerate(UWB_CLASSES)}
+    parts = [data.anchor == a for a in np.unique(data.anchor)] if within_anchor else [np.ones(len(data.label), bool)]
+    good = total = 0
+    for m in parts:
+        files = data.file_id[m]
+        ids = np.unique(files)
+        sev = severity_scores(data.features[m], np.searchsorted(ids, files), FEATURE_NAMES, UWB_SEVERITY_WEIGHTS)
+        lab = np.array([rank[data.label[m][files == f][0]] for f in ids])
+        for i in range(len(ids)):
+            for j in range(len(ids)):
+                if lab[i] < lab[j]:
+                    total += 1
+                    good += int(sev[i] < sev[j])
+    return good, total
+
+
+def seed_spread(data: LabelledUwbFeatures, seeds, tsne: str = "auto", progress=None) -> dict:
+    """Accuracy and ARI of every method, pooled and per site, over several seeds: {(scope, method): arrays}."""
+    out: dict = {}
+    for seed in seeds:
+        scopes = unsupervised(data, seed, tsne, progress)
+        for m in METHODS:
+            pooled = scopes[0].runs[m]
+            per = per_site_summary(data, scopes, m)
+            for key, acc, ari in ((("pooled", m), pooled.accuracy, pooled.ari),
+                                  (("per site", m), per["accuracy"], per["ari_mean"])):
+                out.setdefault(key, {"accuracy": [], "ari": []})
+                out[key]["accuracy"].append(acc)
+                out[key]["ari"].append(ari)
+    return {k: {n: np.array(v) for n, v in d.items()} for k, d in out.items()}
+
+
 def run(packets_per_file: int | None = None, seed: int = 0, folder: str | os.PathLike | None = None,
         tsne: str = "auto", groupings: tuple[str, ...] = GROUPINGS, progress: bool = False) -> dict:
     """Everything the report prints: data, unsupervised scopes, per-site summaries, forests."""
@@ -196,7 +233,8 @@ def run(packets_per_file: int | None = None, seed: int = 0, folder: str | os.Pat
     forests = {g: supervised(data, g, seed) for g in groupings}
     say("done")
     return {"data": data, "scopes": scopes, "per_site": {m: per_site_summary(data, scopes, m) for m in METHODS},
-            "forests": forests, "file_severity": file_severity(data)}
+            "forests": forests, "file_severity": file_severity(data),
+            "concordance": {"per site": order_concordance(data, True), "pooled": order_concordance(data, False)}}
 
 
 def report(res: dict) -> str:
@@ -233,6 +271,20 @@ def report(res: dict) -> str:
     for a in np.unique(data.anchor):
         rows = [r for r in res["file_severity"] if r[0] == a]
         lines.append(f"anchor {a}: " + ", ".join(f"{f} {lab.replace(' NLOS', '')} {s:+.2f}" for _, f, lab, s in rows))
+    c = res["concordance"]
+    lines += ["", "Pairs of differently labelled logs whose severity scores are in label order: "
+              f"within an anchor {c['per site'][0]}/{c['per site'][1]}, all logs pooled {c['pooled'][0]}/{c['pooled'][1]}"]
+    return "\n".join(lines)
+
+
+def report_spread(spread: dict, seeds) -> str:
+    """Mean ± sd and range over ``seeds`` of :func:`seed_spread`'s figures."""
+    lines = [f"Over seeds {list(seeds)} (t-SNE and K-means seeds; DPC itself is deterministic):", "",
+             f"{'scope':<9s} {'method':<9s} {'accuracy mean±sd [min, max]':>30s} {'ARI mean±sd [min, max]':>30s}"]
+    for (scope, m), d in spread.items():
+        a, r = d["accuracy"], d["ari"]
+        lines.append(f"{scope:<9s} {m:<9s} {a.mean():12.3f}±{a.std():.3f} [{a.min():.3f}, {a.max():.3f}] "
+                     f"{r.mean():12.3f}±{r.std():.3f} [{r.min():.3f}, {r.max():.3f}]")
     return "\n".join(lines)
 
 
@@ -245,13 +297,13 @@ def plot(res: dict, path: Path) -> None:
 
     colours = dict(zip(UWB_CLASSES, ("tab:green", "tab:orange", "tab:red")))
     scopes = res["scopes"]
-    fig, axes = plt.subplots(len(scopes), 3, figsize=(13, 3.9 * len(scopes)), squeeze=False)
+    fig, axes = plt.subplots(len(scopes), 3, figsize=(13.5, 4.1 * len(scopes)), squeeze=False)
     for row, s in zip(axes, scopes):
         r = s.runs["tsne_dpc"]
         y = res["data"].label[s.rows]
-        for ax, values, title in ((row[0], r.named, f"{r.n_clusters} clusters named by severity: "
-                                                     f"acc {r.accuracy:.2f}, ARI {r.ari:.2f}"),
-                                  (row[1], y, "label")):
+        for ax, values, title in ((row[0], r.named, f"{r.n_clusters} DPC clusters, severity-named\n"
+                                                     f"(accuracy {r.accuracy:.2f}, ARI {r.ari:.2f})"),
+                                  (row[1], y, "label\n")):
             for c in UWB_CLASSES:
                 m = values == c
                 ax.scatter(r.embedding[m, 0], r.embedding[m, 1], s=3, c=colours[c], label=f"{c} ({m.sum()})")
@@ -266,7 +318,7 @@ def plot(res: dict, path: Path) -> None:
         ax.scatter(r.dpc.rho_[r.dpc.centers_], r.dpc.delta_[r.dpc.centers_], s=30, c="k", marker="x",
                    label="chosen centres")
         ax.set_xlabel("density ρ"), ax.set_ylabel("δ (t-SNE units)")
-        ax.set_title(f"{s.name}: decision graph", fontsize=10)
+        ax.set_title(f"{s.name}: decision graph\n", fontsize=10)
         ax.legend(fontsize=7)
     fig.suptitle("UWB CIRs (Kolakowski & Modelski 2018): t-SNE + DPC on the nine CIR features", fontsize=12)
     fig.tight_layout(rect=(0, 0, 1, 0.985))
@@ -281,9 +333,14 @@ def main(argv=None) -> int:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--data", default=None, help="the cir_uwb folder (default ../shared/data/cir_uwb)")
     ap.add_argument("--png", default="uwb_clustering.png", help="figure path ('' for none)")
+    ap.add_argument("--seeds", type=int, default=1,
+                    help="also repeat the unsupervised part over this many seeds from --seed and print the spread")
     args = ap.parse_args(argv)
     res = run(args.packets_per_file, args.seed, args.data, progress=True)
     print(report(res))
+    if args.seeds > 1:
+        seeds = range(args.seed, args.seed + args.seeds)
+        print("\n" + report_spread(seed_spread(res["data"], seeds, progress=_Progress(True)), seeds))
     if args.png:
         plot(res, Path(args.png))
         print(f"\nfigure: {args.png}")
