@@ -93,3 +93,21 @@ def test_same_seed_same_clusters(res):
     for method in a:
         np.testing.assert_array_equal(a[method].labels, b[method].labels)
         np.testing.assert_array_equal(a[method].labels, s.runs[method].labels)
+
+
+def test_labelled_reader_names_what_is_missing(tmp_path):
+    from features.acoustic.uwb import read_labelled_uwb
+    from features.errors import DataError
+
+    with pytest.raises(DataError, match="labels.csv does not exist"):
+        read_labelled_uwb(tmp_path)
+    (tmp_path / "labels.csv").write_text("file_id,label\n1,LOS\n")
+    (tmp_path / "pairs.csv").write_text("file_number,anchor_location,tag_location\n1,1,1\n")
+    with pytest.raises(DataError, match="no <id>.log.gz"):
+        read_labelled_uwb(tmp_path)
+    (tmp_path / "7.log.gz").write_bytes(b"")
+    with pytest.raises(DataError, match="file id 7 missing"):
+        read_labelled_uwb(tmp_path)
+    (tmp_path / "pairs.csv").write_text("file,anchor\n1,1\n")
+    with pytest.raises(DataError, match="expected columns"):
+        read_labelled_uwb(tmp_path)

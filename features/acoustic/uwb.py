@@ -7,7 +7,9 @@ sampled at 2 × 499.2 MHz, i.e. every 1.0016 ns (DW1000 User Manual v2.17,
 (first-path) index in taps, then ``Accum Len N`` and N lines ``re, im``.
 
 These CIRs go through :func:`features.acoustic.cir.analyse_cirs` unchanged; only the tap
-spacing differs from the acoustic CIRs (tests/test_uwb_cir.py).
+spacing differs from the acoustic CIRs (tests/test_uwb_cir.py): :func:`uwb_cir_features`.
+:func:`read_labelled_uwb` reads a labelled folder (``labels.csv``, ``pairs.csv``, as in the
+Kolakowski & Modelski dataset) into one feature row per packet (bench/uwb_clustering.py).
 """
 
 from __future__ import annotations
