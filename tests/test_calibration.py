@@ -50,13 +50,14 @@ def test_gnss_errors_are_correlated_in_time(figures):
     g, _ = figures
     ac, pairs = g["autocorr"], g["autocorr_pairs"]
     # Pairs within one visit of the class, class mean removed per walk (bench/calibrate_sim.autocorr_sums).
-    # measured lag 1 / 5 / 20 s: open +0.96 / +0.77 / +0.01, light +0.95 / +0.63 / -0.06, heavy +0.88 / -0.16 / n/a
-    # (no heavy visit of 20 s here); before this round +0.91 / +0.53 / +0.04, +0.93 / +0.48 / -0.12, +0.89 / +0.20 /
-    # -0.22 (other sites, pairs across visits); the old simulator: +0.25 / +0.10 / +0.06, +0.55 / +0.14 / +0.03.
+    # measured lag 1 / 5 / 20 s: open +0.96 / +0.82 / +0.08, light +0.91 / +0.46 / -0.06, heavy +0.80 / +0.07 / n/a
+    # (369 heavy pairs at 5 s, none at 20 s: no heavy visit of 20 s here; on 30 walks of sites 21-25 light reaches
+    # +0.96 / +0.77 / +0.18). Before this round, on sites 31-32 with pairs across visits: +0.91 / +0.53 / +0.04,
+    # +0.93 / +0.48 / -0.12, +0.89 / +0.20 / -0.22; the old simulator: +0.25 / +0.10 / +0.06, +0.55 / +0.14 / +0.03.
     for c in (0, 1, 2):
-        assert 0.75 <= ac[c][0] <= 1.0, ac
-    assert 0.55 <= ac[0][1] <= 0.95 and 0.45 <= ac[1][1] <= 0.9, ac
-    assert -0.4 <= ac[2][1] <= 0.9, ac                                # 369 pairs: a handful of heavy visits
+        assert 0.7 <= ac[c][0] <= 1.0, ac
+    assert 0.55 <= ac[0][1] <= 0.95 and 0.3 <= ac[1][1] <= 0.9, ac
+    assert -0.4 <= ac[2][1] <= 0.9, ac                                # a handful of heavy visits
     for c in (0, 1):
         assert pairs[c][2] >= 500 and -0.35 <= ac[c][2] <= 0.7, (ac, pairs)
 
@@ -120,4 +121,4 @@ def test_survey_fix_error_per_class(figures):
     for s, row in sv.items():
         assert 0.002 <= row[0][1] < 0.03, (s, row)               # open cells: centimetres (measured 0.007-0.012)
     heavy = [row[2][1] for row in sv.values() if row[2][0] > 0]
-    assert 0.1 < np.nanmedian(heavy) < 10.0                       # heavy cells: decimetres to metres (1.5, 8.3)
+    assert 0.1 < np.nanmedian(heavy) < 10.0                       # heavy cells: decimetres to metres (1.5, 6.7)

@@ -49,7 +49,12 @@ resets the fix (:func:`_rtk_state`). RTK float (5) needs ≥ 5 satellites in
 lock; each satellite's float ambiguity carries the mean of its code error since
 its lock began (:func:`float_ambiguity_bias`), so a bias held while locked stays
 in the float solution until the carrier slips, and cycle slips — frequent on
-weak and reflected carriers — restart it. The float filter runs beneath the
+weak and reflected carriers — restart it. The float solution weights each
+carrier by its ambiguity's precision, 1/(σ²_code/N + σ²_carrier) with N the
+epochs of lock (capped at ``float_weight_window_s``): the filter assumes white
+code errors, so a freshly locked carrier counts as little as its code, a long
+locked one much more (least squares over N epochs, the same growing-window
+mean as :func:`float_ambiguity_bias`). The float filter runs beneath the
 fixed output (not restarted when a fix is declared or lost). The fix gate
 counts only carriers locked for ``rtk_conv_lock_s`` (20 s): a single-frequency
 (L1/B1) engine's float ambiguities need tens of seconds to converge (the
@@ -134,6 +139,7 @@ class FixConfig:
     float_min_sats: int = 5
     phase_lock_s: float = 3.0
     float_filter_tau_s: float = 8.0
+    float_weight_window_s: float = 30.0
     warm_start_lock_s: float = 60.0
     slip_nlos_prob: float = 0.05
     slip_weak_prob: float = 0.5
@@ -669,7 +675,12 @@ def solve_fixes(rng: np.random.Generator, az_rad: np.ndarray, el_rad: np.ndarray
         # (:func:`float_ambiguity_bias`), so a bias the code carried while locked stays in the solution
         # until the carrier slips, and a satellite that keeps slipping (NLOS) carries its current code error.
         bias = float_ambiguity_bias(code_err, lock, dt_s)
-        theta_float, _ = _wls(g, w, carrier_dd + bias)
+        # Weights of the float solution: carrier plus an ambiguity known to σ²_code/N after N epochs of lock
+        # (the filter assumes white code errors), so a freshly locked carrier counts little.
+        n_eff = np.minimum(lock / dt_s + 1.0, max(cfg.float_weight_window_s / dt_s, 1.0))
+        w_float = np.where(used, 1.0 / (sig2 / n_eff + carrier_sigma_m(np.nan_to_num(cn0_reported_dbhz, nan=0.0),
+                                                                     cfg.carrier_c_m2_hz) ** 2), 0.0)
+        theta_float, _ = _wls(g, w_float, carrier_dd + bias)
         raw = np.where(float_ok[:, None], theta_float[:, :3], theta_code[:, :3])
         # The float (or code) filter runs beneath the fixed output and is not restarted when a fix is
         # declared or lost: a lost fix falls back to the float state it had all along.
