@@ -19,7 +19,7 @@ Writes a PNG (error autocorrelation per source, error CDFs per source and
 class). ``tests/test_calibration.py`` pins the figures inside their bands.
 
 Why some simulated figures sit outside the real ones (measured on site seeds
-21–25, 2 × 400 s walks; see the report issue-10 round 2):
+21–25, 2 × 400 s walks, 2026-12-01):
 
 - **Open-sky ζ ≈ 0.06 vs the gpsd logs' 0.12–0.67.** The simulated untracked
   satellites above 10° come from physical causes only: 84 % of them lie below
