@@ -4,8 +4,8 @@ the direction of the fix error (issue 12 item 22)."""
 import numpy as np
 import pytest
 
-from simulation.gnss.fix import (FixConfig, QUALITY_RTK_FIXED, distance_gm_phi, gauss_markov, hatch_smooth,
-                                 pseudorange_errors, solve_fixes)
+from simulation.gnss.fix import (FixConfig, QUALITY_RTK_FIXED, QUALITY_RTK_FLOAT, distance_gm_phi,
+                                 float_ambiguity_bias, gauss_markov, hatch_smooth, pseudorange_errors, solve_fixes)
 from simulation.gnss.velocity import fll_jitter_hz, velocity_errors
 
 # A fixed sky of 12 satellites: 4 azimuths × 3 elevations, 6 GPS and 6 BeiDou.
@@ -95,6 +95,53 @@ def test_wrong_fixes_need_reflected_carriers_and_persist():
                         np.zeros((n, 12), bool), 0.2, cfg=cfg, slip=slip)
     h2 = np.hypot(clean.error_enu_m[:, 0], clean.error_enu_m[:, 1])
     assert np.nanmax(h2[clean.quality == QUALITY_RTK_FIXED]) < 0.01
+
+
+def test_float_ambiguity_keeps_a_bias_held_in_lock_until_a_slip():
+    """A code bias held while the carriers stayed locked stays in the float solution after it is gone; a slip
+    (a new ambiguity) clears it. The float filter is not restarted by the receiver's fix state."""
+    n = 400
+    az, el = _sky(n)
+    err = _zero_errors(n)
+    err["nlos_bias"][100:200, :3] = 3.0  # three satellites reflected for 20 s, direct again afterwards
+    cn0 = np.full((n, 12), 44.0)
+    cfg = FixConfig(rtk_min_sats=12, rtk_conv_lock_s=1e6)  # float throughout
+    out = []
+    for slip_at_end in (False, True):
+        slip = np.zeros((n, 12), bool)
+        slip[200, :3] = slip_at_end
+        fix = solve_fixes(np.random.default_rng(0), az, el, SYS, np.ones((n, 12), bool), cn0, err,
+                          np.zeros((n, 12), bool), 0.2, cfg=cfg, slip=slip)
+        assert np.all(fix.quality[20:] == QUALITY_RTK_FLOAT)
+        out.append(np.hypot(fix.error_enu_m[:, 0], fix.error_enu_m[:, 1]))
+    held, slipped = out
+    assert held[199] > 0.1                                     # the bias entered the float ambiguities
+    # Without a slip it is still there 20 s later (the mean since lock: 100 of 500 epochs at 3 m) ...
+    assert held[300] > 0.5 * held[199]
+    # ... with a slip the new ambiguities start from the clean code: gone once the navigation filter (τ 8 s)
+    # has settled.
+    assert slipped[380] < 0.1 * held[380]
+    # Growing-window mean, the reference: 1/N-weighted, restarted where the lock age does not grow.
+    e = np.array([[2.0], [4.0], [6.0], [0.0], [0.0]])
+    age = np.array([[10.0], [10.2], [10.4], [0.0], [0.2]])
+    assert float_ambiguity_bias(e, age, 0.2)[:, 0] == pytest.approx([2.0, 2.0 + 2.0 / 52, 2.0 + 2.0 / 52
+                                                                     + (6.0 - 2.0 - 2.0 / 52) / 53, 0.0, 0.0])
+
+
+def test_fix_waits_for_converged_carriers():
+    """Carriers that slip every 10 s never stay locked the 20 s a single-frequency engine needs: float, never
+    fixed; with the convergence requirement off the same sky fixes."""
+    n = 1500
+    az, el = _sky(n)
+    cn0 = np.full((n, 12), 44.0)
+    slip = np.zeros((n, 12), bool)
+    slip[::50] = True
+    q = {}
+    for conv in (20.0, 0.0):
+        q[conv] = solve_fixes(np.random.default_rng(4), az, el, SYS, np.ones((n, 12), bool), cn0, _zero_errors(n),
+                              np.zeros((n, 12), bool), 0.2, cfg=FixConfig(rtk_conv_lock_s=conv), slip=slip).quality
+    assert not np.any(q[20.0] == QUALITY_RTK_FIXED) and np.mean(q[20.0] == QUALITY_RTK_FLOAT) > 0.5
+    assert np.mean(q[0.0] == QUALITY_RTK_FIXED) > 0.1
 
 
 def test_hatch_filter_reduces_white_code_noise_by_sqrt_n():

@@ -261,7 +261,9 @@ def test_raim_excludes_the_biased_satellite():
 
 
 def test_rtk_fix_needs_phase_lock_then_time_to_fix():
-    n, k = 120, 14
+    """Code-differential until the carriers lock, float until they have been locked rtk_conv_lock_s (20 s, the
+    single-frequency convergence; before: the time-to-fix ran from phase lock), then fixed after a time-to-fix."""
+    n, k = 250, 14
     az = np.tile(np.radians(np.linspace(0.0, 330.0, k)), (n, 1))
     el = np.tile(np.radians(np.linspace(20.0, 85.0, k)), (n, 1))
     sys_idx = np.arange(k) % 2  # GPS and BeiDou interleaved round the sky: PDOP ≈ 2
@@ -276,7 +278,8 @@ def test_rtk_fix_needs_phase_lock_then_time_to_fix():
     assert np.all(q[:10] == 0)
     locked_at = 10 + int(round(cfg.phase_lock_s / 0.2)) - 1  # lock age counts the acquiring epoch as 0.2 s
     assert np.all(q[10:locked_at] == 2)                     # code-differential until the carriers are locked
+    converged_at = 10 + int(round(cfg.rtk_conv_lock_s / 0.2)) - 1
     first_fix = int(np.flatnonzero(q == 4)[0])
-    ttf_s = (first_fix - locked_at) * 0.2
+    ttf_s = (first_fix - converged_at) * 0.2
     assert cfg.ttf_min_s - 0.21 <= ttf_s <= cfg.ttf_max_s + 0.21
     assert np.all(q[locked_at:first_fix] == 5) and np.all(q[first_fix:] == 4)

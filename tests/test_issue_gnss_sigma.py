@@ -124,9 +124,13 @@ def test_cli_fit_uere_on_one_walk_makes_another_consistent(walk_dir, second_walk
     q, nees = _nees(second_walk, table)
     fixed = q == 4
     assert fixed.sum() > 100
-    assert 1.0 < np.mean(nees[fixed]) < 4.0                        # built-in table: see the module table
+    # The median, not the mean: the held-out walk now carries a wrong-fix episode (issue 10: 10.8 % of its
+    # fixed epochs at NEES > 20, mean 165), which no σ table can cover; the others are consistent (median
+    # 0.92; χ²₂ median 1.39). Before (no wrong fix on this walk): mean in (1, 4).
+    assert 0.5 < np.median(nees[fixed]) < 2.5
+    assert np.mean(nees[fixed] > 20) < 0.2
     q0, nees0 = _nees(second_walk)
-    assert np.mean(nees0[q0 == 4]) < 1.0                           # the built-in 3 cm is pessimistic here
+    assert np.median(nees0[q0 == 4]) < 1.0                         # the built-in 3 cm is pessimistic here (median; was the mean)
 
 
 def test_cli_fit_uere_without_truth_is_a_clean_error(tmp_path, capsys):

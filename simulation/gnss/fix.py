@@ -46,9 +46,20 @@ error is the carrier-phase WLS error (cm) — unless the fix is wrong: each
 ambiguity fixed on a reflected carrier takes a wrong integer with a small
 probability, and the position offset persists until the receiver's validation
 resets the fix (:func:`_rtk_state`). RTK float (5) needs ≥ 5 satellites in
-lock; each satellite's float ambiguity converges from its code error as its
-lock ages (share 1 → ``float_floor`` with ``float_conv_tau_s``), and cycle
-slips — frequent on weak and reflected carriers — restart it. DGNSS (2)
+lock; each satellite's float ambiguity carries the mean of its code error since
+its lock began (:func:`float_ambiguity_bias`), so a bias held while locked stays
+in the float solution until the carrier slips, and cycle slips — frequent on
+weak and reflected carriers — restart it. The float solution weights each
+carrier by its ambiguity's precision, 1/(σ²_code/N + σ²_carrier) with N the
+epochs of lock (capped at ``float_weight_window_s``): the filter assumes white
+code errors, so a freshly locked carrier counts as little as its code, a long
+locked one much more (least squares over N epochs, the same growing-window
+mean as :func:`float_ambiguity_bias`). The float filter runs beneath the
+fixed output (not restarted when a fix is declared or lost). The fix gate
+counts only carriers locked for ``rtk_conv_lock_s`` (20 s): a single-frequency
+(L1/B1) engine's float ambiguities need tens of seconds to converge (the
+NEO-M8P single-frequency RTK data sheet states a convergence time < 60 s,
+u-blox UBX-15016700), so carriers that keep slipping never join a fix. DGNSS (2)
 otherwise; autonomous (1) when corrections are off; no fix (0) when the
 geometry cannot be solved (fewer than 4 satellites, or fewer than 3 + the
 number of systems).
@@ -70,7 +81,7 @@ from features.errors import ConfigError
 from simulation.gnss.signal import open_sky_cn0_dbhz
 
 __all__ = ["FixConfig", "FixResult", "code_sigma_m", "carrier_sigma_m", "klobuchar_obliquity",
-           "gauss_markov", "pseudorange_errors", "slip_probability", "cycle_slips", "hatch_smooth", "distance_gm_phi",
+           "gauss_markov", "pseudorange_errors", "slip_probability", "cycle_slips", "hatch_smooth", "float_ambiguity_bias", "distance_gm_phi",
            "solve_fixes", "QUALITY_NONE", "QUALITY_AUTONOMOUS",
            "QUALITY_DGNSS", "QUALITY_RTK_FIXED", "QUALITY_RTK_FLOAT"]
 
@@ -114,21 +125,21 @@ class FixConfig:
     rtk_snr_margin_db: float = 10.0
     rtk_max_weak_share: float = 0.25
     rtk_max_raim_exclusions: int = 1
+    rtk_conv_lock_s: float = 20.0
     ttf_min_s: float = 3.0
     ttf_max_s: float = 10.0
     ttf_weak_gain: float = 3.0
     ttf_weak_free_share: float = 0.1
     rtk_cold_start: bool = True
     wrong_fix_base_prob: float = 0.001
-    wrong_fix_nlos_prob: float = 0.04
+    wrong_fix_nlos_prob: float = 0.10
     wrong_fix_max_cycles: int = 3
     wrong_fix_nlos_max_cycles: int = 20
     wrong_fix_reset_mean_s: float = 10.0
     float_min_sats: int = 5
     phase_lock_s: float = 3.0
-    float_conv_tau_s: float = 30.0
-    float_floor: float = 0.1
     float_filter_tau_s: float = 8.0
+    float_weight_window_s: float = 30.0
     warm_start_lock_s: float = 60.0
     slip_nlos_prob: float = 0.05
     slip_weak_prob: float = 0.5
@@ -441,6 +452,35 @@ def _smooth_runs(x: np.ndarray, mask: np.ndarray, dt_s: float, tau_s: float) -> 
     return out
 
 
+def float_ambiguity_bias(code_err_m: np.ndarray, lock_age_s: np.ndarray, dt_s: float) -> np.ndarray:
+    """Range error a float ambiguity carries, (n, k) m: the mean of the code error since the lock began.
+
+    An ambiguity held constant in the RTK filter (no process noise) is estimated from code minus
+    carrier; its least-squares estimate after N epochs of lock is the mean of the N code errors
+    (the growing-window Hatch filter, Hatch 1982; Misra & Enge 2011, *Global Positioning System*,
+    2nd ed., §6.2 on carrier smoothing as ambiguity estimation). White noise averages down as 1/√N,
+    a bias the code held while the carrier stayed locked (an NLOS delay, slow multipath) stays in the
+    float solution until a slip restarts the lock. Lock present at the first epoch (warm start, age
+    > 0) starts from the first code error with the weight of its age.
+
+    >>> e = np.array([[1.0], [3.0], [5.0], [7.0]]); age = np.array([[0.0], [1.0], [2.0], [0.0]])
+    >>> float_ambiguity_bias(e, age, 1.0)[:, 0].tolist()
+    [1.0, 2.0, 3.0, 7.0]
+    """
+    n, k = code_err_m.shape
+    out = np.empty((n, k))
+    count = np.rint(lock_age_s / dt_s) + 1.0
+    restart = np.zeros((n, k), bool)
+    restart[0] = True
+    restart[1:] = lock_age_s[1:] <= lock_age_s[:-1]
+    prev = code_err_m[0].copy()
+    out[0] = prev
+    for i in range(1, n):
+        prev = np.where(restart[i], code_err_m[i], prev + (code_err_m[i] - prev) / count[i])
+        out[i] = prev
+    return out
+
+
 def cycle_slips(rng: np.random.Generator, cn0_dbhz: np.ndarray, nlos: np.ndarray,
                 cfg: FixConfig = FixConfig()) -> np.ndarray:
     """Cycle-slip events, bool (n, k), drawn with :func:`slip_probability`."""
@@ -469,9 +509,15 @@ def _rtk_state(rng: np.random.Generator, fixed_ok: np.ndarray, locked: np.ndarra
     reflected one. p₀ = 0.1 % is the ratio test's design failure rate for
     unbiased data (the fixed-failure-rate ratio test, Teunissen & Verhagen
     2009, "The GNSS ambiguity ratio-test revisited", Survey Review 41(312));
-    biased phases break its assumptions, and p_nlos is a calibration to the
-    0.5–5 % of wrong quality-4 epochs urban RTK users meet (bench/calibrate_sim.py
-    reports the realised share). A wrong integer is ±1…``wrong_fix_max_cycles``
+    biased phases break its assumptions: a float-ambiguity bias β (cycles)
+    lowers the rounding success rate to Φ((1−2β)/2σ) + Φ((1+2β)/2σ) − 1
+    (Teunissen 2001, "Integer estimation in the presence of biases", J. Geodesy
+    75), about 50 % at β ≈ ½ cycle whatever σ, and a reflected carrier's
+    float ambiguity is pulled by the varying part of its extra path (metres).
+    Most such candidates fail the ratio test; p_nlos = 10 % of the reflected
+    ambiguities in an accepted fix being wrong is not published but
+    calibrated (tuning site seeds 1–4) to the 0.5–5 % of wrong quality-4 epochs
+    issue 10 asks for; bench/calibrate_sim.py reports the realised share. A wrong integer is ±1…``wrong_fix_max_cycles``
     cycles on a direct carrier and, on a reflected one, the extra path in
     cycles (1…``wrong_fix_nlos_max_cycles``: its float ambiguity was pulled by
     the code's NLOS bias); the position offset it causes stays (later ambiguities are fixed
@@ -610,7 +656,12 @@ def solve_fixes(rng: np.random.Generator, az_rad: np.ndarray, el_rad: np.ndarray
         weak = locked & (np.nan_to_num(cn0_reported_dbhz, nan=0.0) < mask)
         weak_share = weak.sum(axis=1) / np.maximum(n_lock, 1)
         n_excluded = (used_before_raim & ~used).sum(axis=1)
-        fixed_ok = (ok & (n_lock >= cfg.rtk_min_sats) & (pdop <= cfg.rtk_max_pdop)
+        # The ratio test of a single-frequency engine passes only on ambiguities whose float estimates
+        # have converged: carriers in continuous lock for at least rtk_conv_lock_s (the lock time is an
+        # observable, reported per signal in RTCM MSM; the NEO-M8P single-frequency RTK data sheet gives
+        # a convergence time < 60 s, u-blox UBX-15016700).
+        n_conv = (locked & (lock >= cfg.rtk_conv_lock_s)).sum(axis=1)
+        fixed_ok = (ok & (n_conv >= cfg.rtk_min_sats) & (pdop <= cfg.rtk_max_pdop)
                     & (var_factor <= cfg.rtk_max_residual_var) & (weak_share <= cfg.rtk_max_weak_share)
                     & (n_excluded <= cfg.rtk_max_raim_exclusions))
         float_ok = ok & (n_lock >= cfg.float_min_sats)
@@ -620,14 +671,21 @@ def solve_fixes(rng: np.random.Generator, az_rad: np.ndarray, el_rad: np.ndarray
         quality[float_ok] = QUALITY_RTK_FLOAT
         quality[fixed] = QUALITY_RTK_FIXED
         err[ok] = theta_code[ok, :3]
-        # Float: each satellite's ambiguity converges from its code error as its lock ages, so a
-        # satellite that keeps slipping (NLOS) carries most of its code error into the solution.
-        share = cfg.float_floor + (1.0 - cfg.float_floor) * np.exp(-lock / cfg.float_conv_tau_s)
-        theta_float, _ = _wls(g, w, carrier_dd + share * code_err)
-        fl = quality == QUALITY_RTK_FLOAT
-        raw = np.where(fl[:, None], theta_float[:, :3], theta_code[:, :3])
-        free = ok & ~fixed  # the float and code solutions come out of the receiver's navigation filter
-        err[free] = _smooth_runs(raw, free, dt_s, cfg.float_filter_tau_s)[free]
+        # Float: each satellite's ambiguity is the mean of its code-minus-carrier since its lock began
+        # (:func:`float_ambiguity_bias`), so a bias the code carried while locked stays in the solution
+        # until the carrier slips, and a satellite that keeps slipping (NLOS) carries its current code error.
+        bias = float_ambiguity_bias(code_err, lock, dt_s)
+        # Weights of the float solution: carrier plus an ambiguity known to σ²_code/N after N epochs of lock
+        # (the filter assumes white code errors), so a freshly locked carrier counts little.
+        n_eff = np.minimum(lock / dt_s + 1.0, max(cfg.float_weight_window_s / dt_s, 1.0))
+        w_float = np.where(used, 1.0 / (sig2 / n_eff + carrier_sigma_m(np.nan_to_num(cn0_reported_dbhz, nan=0.0),
+                                                                     cfg.carrier_c_m2_hz) ** 2), 0.0)
+        theta_float, _ = _wls(g, w_float, carrier_dd + bias)
+        raw = np.where(float_ok[:, None], theta_float[:, :3], theta_code[:, :3])
+        # The float (or code) filter runs beneath the fixed output and is not restarted when a fix is
+        # declared or lost: a lost fix falls back to the float state it had all along.
+        free = ok & ~fixed
+        err[free] = _smooth_runs(raw, ok, dt_s, cfg.float_filter_tau_s)[free]
         err[fixed] = theta_car[fixed, :3]
         for e, (i0, cyc) in enumerate(starts):
             # Offset of the wrong integers: δx = (GᵀWG)⁻¹GᵀW·λc at the epoch the episode began.
