@@ -54,8 +54,17 @@ of preference, by:
    estimate for a 2-D Gaussian error with per-axis σ = UERE·HDOP/√2, so the
    fitted fixes have mean NEES 2 by construction).
 
-The invisible ratio was tried as a fourth factor and left out: on the same
-walks it added nothing the attenuation did not already show (bench/eval_receiver.py).
+The epoch's invisible ratio ζ (in-view-but-untracked share above the mask,
+``GnssPositions.invisible_ratio``) was tried as a further factor, variance ×
+(1 + c_q·ζ) with c_q per quality fitted on site seeds 1–4, and left out: on
+held-out walks (site seeds 41/52/63, 9 walks of 300 s, 13,500 fixes;
+``bench/bench_gnss_sigma.py``) it pushed RTK float open/heavy and DGNSS heavy
+far below NEES 2 (DGNSS heavy 0.22 → 0.01) while mending RTK float light
+(3.3 → 1.1–2.1): the mean |ln(NEES/2)| over the quality × class cells went
+1.04 → 1.45 (c_q by the cells' criterion) or 1.63 (by maximum likelihood). The
+SIGMA-ε factor already sees most of what ζ shows (weak satellites are lost
+first). GST's rms residual (field 2) adds nothing where GST's own σ_lat/σ_lon
+are used, and the simulated receiver sends no GST, so it was not tried.
 Vertical: σ_up = UERE·VDOP when VDOP is known, else UERE·1.5·HDOP (VDOP ≈
 1.5 HDOP for typical open-sky geometry). When HDOP is missing, 2.0 is assumed
 (a middling geometry) and the row is flagged ``hdop_assumed``. Qualities 0
