@@ -98,3 +98,38 @@ def test_sky_attenuation_equals_epoch_attenuation_and_counts_the_invisible(walk_
             best[(s.system, s.prn)] = best.get((s.system, s.prn), False) or s.cn0_dbhz is not None
     assert zeta[0] == pytest.approx(1.0 - sum(best.values()) / len(best))
     assert np.nanmax(zeta) > 0.0
+
+
+def _loop_sky(epochs):
+    """sky_arrays as it was, one satellite at a time (the reference of the vectorised form)."""
+    sky = [e for e in epochs if e.sky_reported]
+    index: dict = {}
+    for e in sky:
+        for s in e.satellites:
+            index.setdefault((s.system, s.prn), len(index))
+    shape = (len(sky), len(index))
+    el, az, cn0 = np.full(shape, np.nan), np.full(shape, np.nan), np.full(shape, np.nan)
+    view, used = np.zeros(shape, bool), np.zeros(shape, bool)
+    for i, e in enumerate(sky):
+        for s in e.satellites:
+            j = index[(s.system, s.prn)]
+            if s.cn0_dbhz is not None:
+                cn0[i, j] = np.fmax(cn0[i, j], s.cn0_dbhz)
+            if s.el_deg is not None:
+                el[i, j] = s.el_deg
+            if s.az_deg is not None:
+                az[i, j] = s.az_deg
+            view[i, j] = True
+            used[i, j] |= s.used
+    return tuple(index), el, az, cn0, view, used
+
+
+def test_vectorised_sky_arrays_equal_the_loop(walk_dir):
+    logs = [walk_dir / "gnss.nmea"] + (sorted(GPSD.glob("*.log")) if GPSD.is_dir() else [])
+    for log in logs:
+        epochs, _ = read_nmea(log)
+        keys, *arrays = _loop_sky(epochs)
+        sky = sky_arrays(epochs)
+        assert sky.sat_keys == keys, log.name
+        for got, want in zip((sky.el_deg, sky.az_deg, sky.cn0_dbhz, sky.in_view, sky.used), arrays):
+            np.testing.assert_array_equal(got, want, err_msg=log.name)

@@ -174,25 +174,39 @@ def _median_step(t_s) -> float:
 
 
 def sky_arrays(epochs: Sequence) -> SkyArrays:
-    """Stack the epochs that reported a sky into :class:`SkyArrays` (one column per satellite)."""
+    """Stack the epochs that reported a sky into :class:`SkyArrays` (one column per satellite, in order
+    of first appearance)."""
     sky = [e for e in epochs if e.sky_reported]
-    flat = [(i, s) for i, e in enumerate(sky) for s in e.satellites]
-    index: dict = {}
-    cols = [index.setdefault((s[0], s[1]), len(index)) for _, s in flat]
-    n, m = len(sky), len(index)
+    counts = np.fromiter((len(e.satellites) for e in sky), dtype=np.intp, count=len(sky))
+    flat = [s for e in sky for s in e.satellites]
+    n = len(sky)
+    if flat:
+        # Satellite fields: (system, prn, signal, el_deg, az_deg, cn0_dbhz, used); None → NaN
+        system, prn, _, el_l, az_l, cn0_l, used_l = zip(*flat)
+        r = np.repeat(np.arange(n, dtype=np.intp), counts)
+        names = sorted(set(system))
+        code = {name: k for k, name in enumerate(names)}
+        key = np.fromiter((code[x] for x in system), dtype=np.int64, count=len(flat)) * 100_000 \
+            + np.asarray(prn, dtype=np.int64)
+        uniq, first, inv = np.unique(key, return_index=True, return_inverse=True)
+        order = np.argsort(first, kind="stable")          # columns in order of first appearance
+        rank = np.empty_like(order)
+        rank[order] = np.arange(order.size)
+        c = rank[inv.ravel()]
+        m = uniq.size
+        index = tuple((names[int(k // 100_000)], int(k % 100_000)) for k in uniq[order].tolist())
+    else:
+        m, index = 0, ()
     el = np.full((n, m), np.nan)
     az = np.full((n, m), np.nan)
     cn0 = np.full((n, m), np.nan)
     in_view = np.zeros((n, m), dtype=bool)
     used = np.zeros((n, m), dtype=bool)
     if flat:
-        r = np.fromiter((i for i, _ in flat), dtype=np.intp, count=len(flat))
-        c = np.asarray(cols, dtype=np.intp)
-        # Satellite fields: (system, prn, signal, el_deg, az_deg, cn0_dbhz, used); None → NaN
-        el_v = np.array([s[3] for _, s in flat], dtype=float)
-        az_v = np.array([s[4] for _, s in flat], dtype=float)
-        cn0_v = np.array([s[5] for _, s in flat], dtype=float)
-        used_v = np.array([s[6] for _, s in flat], dtype=bool)
+        el_v = np.array(el_l, dtype=float)
+        az_v = np.array(az_l, dtype=float)
+        cn0_v = np.array(cn0_l, dtype=float)
+        used_v = np.array(used_l, dtype=bool)
         # Several signals of one satellite: C/N0 = max over signals (fmax ignores NaN),
         # el/az from any listing that has them.
         np.fmax.at(cn0, (r, c), cn0_v)
@@ -205,7 +219,7 @@ def sky_arrays(epochs: Sequence) -> SkyArrays:
     hdop = np.array([np.nan if e.fix.hdop is None else e.fix.hdop for e in sky], dtype=float)
     t_s = np.array([e.t_s for e in sky], dtype=float)
     interval = _median_step([e.t_s for e in epochs]) if len(epochs) > 1 else float("nan")
-    return SkyArrays(t_s, tuple(index), el, az, cn0, in_view, used, hdop, interval)
+    return SkyArrays(t_s, index, el, az, cn0, in_view, used, hdop, interval)
 
 
 def _hdop(el_rad: np.ndarray, az_rad: np.ndarray, weight: np.ndarray, system_index: np.ndarray | None = None
