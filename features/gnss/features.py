@@ -243,8 +243,8 @@ def _hdop(el_rad: np.ndarray, az_rad: np.ndarray, weight: np.ndarray, system_ind
                        axis=-1)
     g = np.where(weight[..., None], np.nan_to_num(g), 0.0)
     # A = GᵀG per epoch, shape (n, 3 + n_sys, 3 + n_sys)
-    a = np.einsum("nmi,nmj->nij", g, g)
-    present = np.einsum("nm,mk->nk", weight.astype(float), (system_index[:, None] == np.arange(n_sys)).astype(float)) > 0
+    a = np.matmul(g.transpose(0, 2, 1), g)  # batched GᵀG (matmul: several times faster than einsum here)
+    present = (weight.astype(float) @ (system_index[:, None] == np.arange(n_sys)).astype(float)) > 0
     idx = 3 + np.arange(n_sys)
     a[:, idx, idx] += ~present                     # an absent system's clock: unit diagonal, no coupling
     count = weight.sum(axis=1)
