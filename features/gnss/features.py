@@ -49,6 +49,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import asdict, dataclass
+from operator import itemgetter
 from typing import Sequence
 
 import numpy as np
@@ -182,11 +183,11 @@ def sky_arrays(epochs: Sequence) -> SkyArrays:
     n = len(sky)
     if flat:
         # Satellite fields: (system, prn, signal, el_deg, az_deg, cn0_dbhz, used); None → NaN
-        system, prn, _, el_l, az_l, cn0_l, used_l = zip(*flat)
+        system, prn, el_l, az_l, cn0_l, used_l = (list(map(itemgetter(k), flat)) for k in (0, 1, 3, 4, 5, 6))
         r = np.repeat(np.arange(n, dtype=np.intp), counts)
         names = sorted(set(system))
         code = {name: k for k, name in enumerate(names)}
-        key = np.fromiter((code[x] for x in system), dtype=np.int64, count=len(flat)) * 100_000 \
+        key = np.array([code[x] for x in system], dtype=np.int64) * 100_000 \
             + np.asarray(prn, dtype=np.int64)
         uniq, first, inv = np.unique(key, return_index=True, return_inverse=True)
         order = np.argsort(first, kind="stable")          # columns in order of first appearance
