@@ -18,6 +18,7 @@ Usage: ``python bench/bench_pipeline.py [--quick]`` (``--quick``: 2-minute walks
 from __future__ import annotations
 
 import argparse
+import gc
 import os
 import resource
 import sys
@@ -99,13 +100,13 @@ def pipeline_rate(walk: Path, model_dir: Path) -> tuple[float, float, dict]:
     return duration / best, n_events, rates
 
 
-def stage_breakdown(walk: Path, model_dir: Path, repeat: int = 3) -> dict:
+def stage_breakdown(walk: Path, model_dir: Path, repeat: int = 5) -> dict:
     """CPU seconds (best of ``repeat``, process time) of each stage of raw files -> adaptive track.
 
     The stages :func:`pipeline.walk_data.read_walk` and the fusion run one after another:
-    NMEA reading, GNSS positions (time base, ENU, sigma), GNSS sky arrays and features, the
-    acoustic receiver, IMU reading and PDR, the fusion inputs (events, the 14 window features,
-    the classifier) and the ``adaptive`` filter.
+    NMEA reading (and the walk's time base), GNSS sky arrays and positions (ENU, sigma), GNSS
+    features, the acoustic receiver, IMU reading and PDR, the fusion inputs from the read walk
+    (events, the 14 window features, the classifier) and the ``adaptive`` filter.
     """
     from features.gnss.features import gnss_features, sky_arrays
     from features.gnss.nmea import epochs_on_time_base, read_nmea
@@ -137,25 +138,26 @@ def stage_breakdown(walk: Path, model_dir: Path, repeat: int = 3) -> dict:
     def imu():
         wd._read_pdr(info, (0.0, 0.0), None)
 
+    state["data"] = wd.read_walk(walk)
+
     def inputs():
-        state["inputs"] = walk_inputs(wd.read_walk(walk), model)
+        state["inputs"] = walk_inputs(state["data"], model)
 
     def fusion():
         run_methods(model, state["inputs"], ("adaptive",), smooth=False)
 
     stages = {"NMEA read + time base": nmea, "GNSS sky arrays + positions": gnss_positions,
               "GNSS features": gnss_feats, "acoustic receiver": audio, "IMU read + PDR": imu,
-              "fusion inputs (read_walk excluded)": inputs, "adaptive filter": fusion}
+              "fusion inputs (events, windows, classifier)": inputs, "adaptive filter": fusion}
     out = {}
     for name, fn in stages.items():
         best = np.inf
         for _ in range(repeat):
+            gc.collect()  # each stage starts from a collected heap (the build left much garbage behind)
             t0 = time.process_time()
             fn()
             best = min(best, time.process_time() - t0)
         out[name] = best
-    # walk_inputs includes its own read_walk: subtract the reading stages timed above
-    out["fusion inputs (read_walk excluded)"] -= sum(out[k] for k in list(stages)[:5])
     return out
 
 
@@ -190,7 +192,7 @@ def main() -> None:
               f"(oaconvolve matched filter {yard:,.0f}x in the same run; ratio {rate / yard:.3f}; target 500x)")
         stages = stage_breakdown(walks[-1], model_dir)
         total = sum(stages.values())
-        print(f"breakdown of one run (CPU s, best of 3; sum {total:.3f} s = {walk_s / total:,.0f}x real time, "
+        print(f"breakdown of one run (CPU s, best of 5; sum {total:.3f} s = {walk_s / total:,.0f}x real time, "
               f"ratio to oaconvolve {walk_s / total / yard:.3f}):")
         for name, sec in stages.items():
             print(f"  {name:36s} {sec:7.3f} s  {100 * sec / total:5.1f} %  ({walk_s / sec:,.0f}x real time)")
