@@ -65,6 +65,12 @@ far below NEES 2 (DGNSS heavy 0.22 → 0.01) while mending RTK float light
 SIGMA-ε factor already sees most of what ζ shows (weak satellites are lost
 first). GST's rms residual (field 2) adds nothing where GST's own σ_lat/σ_lon
 are used, and the simulated receiver sends no GST, so it was not tried.
+Known limit of the built-in model: on walks without corrections (SPS, 3
+held-out walks, 4,503 fixes) the SIGMA-ε factor over-inflates the code
+solution (mean NEES 0.19 / 0.28 / 0.21 heavy / light / open, against 2.5 /
+1.2 / 0.74 for the table alone), as it does DGNSS heavy (0.22): the 4 m / 1 m
+UEREs already budget some multipath. A fitted table replaces it where it has
+the cell.
 Vertical: σ_up = UERE·VDOP when VDOP is known, else UERE·1.5·HDOP (VDOP ≈
 1.5 HDOP for typical open-sky geometry). When HDOP is missing, 2.0 is assumed
 (a middling geometry) and the row is flagged ``hdop_assumed``. Qualities 0
