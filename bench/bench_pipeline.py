@@ -18,6 +18,7 @@ Usage: ``python bench/bench_pipeline.py [--quick]`` (``--quick``: 2-minute walks
 from __future__ import annotations
 
 import argparse
+import gc
 import os
 import resource
 import sys
@@ -99,6 +100,67 @@ def pipeline_rate(walk: Path, model_dir: Path) -> tuple[float, float, dict]:
     return duration / best, n_events, rates
 
 
+def stage_breakdown(walk: Path, model_dir: Path, repeat: int = 5) -> dict:
+    """CPU seconds (best of ``repeat``, process time) of each stage of raw files -> adaptive track.
+
+    The stages :func:`pipeline.walk_data.read_walk` and the fusion run one after another:
+    NMEA reading (and the walk's time base), GNSS sky arrays and positions (ENU, sigma), GNSS
+    features, the acoustic receiver, IMU reading and PDR, the fusion inputs from the read walk
+    (events, the 14 window features, the classifier) and the ``adaptive`` filter.
+    """
+    from features.gnss.features import gnss_features, sky_arrays
+    from features.gnss.nmea import epochs_on_time_base, read_nmea
+    from features.gnss.positions import fixes_to_enu
+    from features.walk import load_walk
+    from models.fusion_model import load_fusion_model
+    from pipeline import walk_data as wd
+    from pipeline.fusion import run_methods, walk_inputs
+
+    model = load_fusion_model(model_dir)
+    info = load_walk(walk)
+    site = info.load_site()
+    o = site.origin
+    state: dict = {}
+
+    def nmea():
+        state["epochs"] = epochs_on_time_base(read_nmea(info.path("gnss"))[0], info.start_utc)
+
+    def gnss_positions():
+        state["sky"] = sky_arrays(state["epochs"])
+        fixes_to_enu(state["epochs"], o.lat_deg, o.lon_deg, o.alt_m, sky=state["sky"])
+
+    def gnss_feats():
+        gnss_features(state["sky"])
+
+    def audio():
+        wd._read_acoustic(info, site, None)
+
+    def imu():
+        wd._read_pdr(info, (0.0, 0.0), None)
+
+    state["data"] = wd.read_walk(walk)
+
+    def inputs():
+        state["inputs"] = walk_inputs(state["data"], model)
+
+    def fusion():
+        run_methods(model, state["inputs"], ("adaptive",), smooth=False)
+
+    stages = {"NMEA read + time base": nmea, "GNSS sky arrays + positions": gnss_positions,
+              "GNSS features": gnss_feats, "acoustic receiver": audio, "IMU read + PDR": imu,
+              "fusion inputs (events, windows, classifier)": inputs, "adaptive filter": fusion}
+    out = {}
+    for name, fn in stages.items():
+        best = np.inf
+        for _ in range(repeat):
+            gc.collect()  # each stage starts from a collected heap (the build left much garbage behind)
+            t0 = time.process_time()
+            fn()
+            best = min(best, time.process_time() - t0)
+        out[name] = best
+    return out
+
+
 def evaluate_scaling(walks, model_dir: Path, tmp: Path) -> dict:
     from pipeline.evaluate import evaluate
 
@@ -113,8 +175,12 @@ def evaluate_scaling(walks, model_dir: Path, tmp: Path) -> dict:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="2-minute walks, 4 walks")
+    ap.add_argument("--breakdown-only", action="store_true",
+                    help="3 walks (2 to train, 1 timed): the per-stage breakdown, no evaluate scaling")
     args = ap.parse_args()
     walk_s, n_walks = (120.0, 4) if args.quick else (600.0, 8)
+    if args.breakdown_only:
+        n_walks = 3
     with tempfile.TemporaryDirectory() as d:
         tmp = Path(d)
         t0 = time.perf_counter()
@@ -124,9 +190,17 @@ def main() -> None:
         yard = oaconvolve_rate(walks[-1] / "audio.wav")
         print(f"raw files -> adaptive track, one core: {rate:,.0f}x real time "
               f"(oaconvolve matched filter {yard:,.0f}x in the same run; ratio {rate / yard:.3f}; target 500x)")
+        stages = stage_breakdown(walks[-1], model_dir)
+        total = sum(stages.values())
+        print(f"breakdown of one run (CPU s, best of 5; sum {total:.3f} s = {walk_s / total:,.0f}x real time, "
+              f"ratio to oaconvolve {walk_s / total / yard:.3f}):")
+        for name, sec in stages.items():
+            print(f"  {name:36s} {sec:7.3f} s  {100 * sec / total:5.1f} %  ({walk_s / sec:,.0f}x real time)")
         print(f"fusion alone, {n_events:,} events of a {walk_s:.0f} s walk (events per second, best of 3):")
         for m, r in step_rates.items():
             print(f"  {m:16s} {r:12,.0f}")
+        if args.breakdown_only:
+            return
         times = evaluate_scaling(walks, model_dir, tmp)
         eff = times[1] / (2 * times[2])
         rss_mib = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024

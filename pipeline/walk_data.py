@@ -18,6 +18,7 @@ A stream the walk does not have is ``None``.
 
 from __future__ import annotations
 
+import dataclasses
 import os
 from dataclasses import dataclass
 from pathlib import Path
@@ -124,10 +125,12 @@ def read_walk(walk_dir: str | os.PathLike, *, site: Site | None = None, pdr_k: f
         pdr = _read_pdr(walk, (0.0, 0.0), pdr_k)
         anchor = pdr_start_from_gnss(gnss.positions) if gnss is not None else None
         if anchor is not None:
-            # Shift the track so that it passes through the fix at the fix's time.
+            # Shift the track so that it passes through the fix at the fix's time. The dead-reckoned
+            # track is start + Σ steps (features.imu.pdr.dead_reckon), so the shift is a translation of
+            # the track computed once (the same numbers as rerunning PDR from the shifted start).
             t_fix, e_fix, n_fix = anchor
             e_p, n_p = _pdr_position_at(pdr.result, t_fix, (0.0, 0.0))
-            pdr = _read_pdr(walk, (e_fix - e_p, n_fix - n_p), pdr_k)
+            pdr = _shift_pdr(pdr, e_fix - e_p, n_fix - n_p)
     return WalkData(walk=walk, site=site, gnss=gnss, acoustic=acoustic, pdr=pdr, truth=truth)
 
 
@@ -164,12 +167,21 @@ def _pdr_position_at(res: PdrResult, t_s: float, start_en: tuple[float, float]) 
     return float(res.east_m[i]), float(res.north_m[i])
 
 
+def _shift_pdr(pdr: PdrStream, d_east_m: float, d_north_m: float) -> PdrStream:
+    """The PDR stream started (d_east_m, d_north_m) away: its track translated."""
+    r = pdr.result
+    moved = dataclasses.replace(r, east_m=d_east_m + r.east_m, north_m=d_north_m + r.north_m)
+    start = (pdr.start_en_m[0] + d_east_m, pdr.start_en_m[1] + d_north_m)
+    return PdrStream(result=moved, config=pdr.config, start_en_m=start)
+
+
 def _read_gnss(walk: WalkInfo, site: Site) -> GnssStream:
     epochs, stats = read_nmea(walk.path("gnss"))
     epochs = epochs_on_time_base(epochs, walk.start_utc)
     o = site.origin
-    positions = fixes_to_enu(epochs, o.lat_deg, o.lon_deg, o.alt_m)
-    return GnssStream(positions=positions, features=gnss_features(sky_arrays(epochs)), nmea_summary=stats.summary())
+    sky = sky_arrays(epochs)  # once, for both the positions' sigma and the features
+    positions = fixes_to_enu(epochs, o.lat_deg, o.lon_deg, o.alt_m, sky=sky)
+    return GnssStream(positions=positions, features=gnss_features(sky), nmea_summary=stats.summary())
 
 
 def _read_acoustic(walk: WalkInfo, site: Site, positions: PositionConfig | None) -> AcousticStream:

@@ -29,7 +29,9 @@ def test_writes_features_epochs_and_positions(tmp_path, site_dir, capsys):
     report = capsys.readouterr().out
     assert "skipped 2 (bad checksum 2)" in report and "2 epochs" in report
     rows = list(csv.DictReader(out.open()))
-    assert [r["t_s"] for r in rows] == ["0.5", "1.5"]
+    # 1 Hz epochs at t = 0, 1 are tagged by the second each measured, (t − 1, t]: windows [−1, 0) and
+    # [0, 1) (issue 11 window centring; before, by t: 0.5, 1.5)
+    assert [r["t_s"] for r in rows] == ["-0.5", "0.5"]
     assert rows[1]["n_tracked"] == "5" and rows[1]["n_in_view"] == "6"  # PRN 24 at 5° is under the mask
     assert float(rows[1]["invisible_ratio"]) == pytest.approx(1 / 6, rel=1e-9)
     lines = [json.loads(x) for x in ep.read_text().splitlines()]
@@ -44,7 +46,8 @@ def test_start_utc_shifts_the_time_base(tmp_path):
     out = tmp_path / "f.csv"
     assert main(["features", "gnss", str(DATA / "good.nmea"), "--out", str(out),
                  "--start-utc", "2024-06-15T11:59:50Z"]) == 0
-    assert list(csv.DictReader(out.open()))[0]["t_s"] == "11"
+    # first epoch at t = 10 s, tagged 9.5 (1 Hz, issue 11): first window [9, 11) (before: [10, 12))
+    assert list(csv.DictReader(out.open()))[0]["t_s"] == "10"
 
 
 def test_no_usable_epoch_is_one_clean_error(tmp_path, capsys):

@@ -117,9 +117,10 @@ def test_dop_growth_closed_form_and_cap():
 
 
 def test_fluctuations_count_extrema_per_satellite_per_second():
-    t = np.arange(0.0, 10.0, 0.2)  # 5 Hz, 50 epochs
+    t0 = np.arange(0.0, 10.0, 0.2)  # 5 Hz, 50 epochs
+    t = t0 + 0.2  # measuring (0, 10]: all in the window [0, 10) by their tags t − 0.1 (issue 11)
     el, az = _geometry(t.size, m=5)
-    wave = 40.0 + 3.0 * np.sign(np.sin(2 * np.pi * 0.5 * t + 0.1))  # square wave: 2 extrema per second
+    wave = 40.0 + 3.0 * np.sign(np.sin(2 * np.pi * 0.5 * t0 + 0.1))  # square wave: 2 extrema per second
     cn0 = np.tile(wave[:, None], (1, 5))
     cn0[:, 4] = 40.0  # steady satellite: no extremum
     ext = fluctuation_extrema(cn0, np.isfinite(cn0))
@@ -137,7 +138,9 @@ def test_windows_and_missing_values():
     cn0 = np.full(el.shape, np.nan)  # nothing tracked
     t = np.array([0.0, 1.0, 2.0, 3.0, 10.0, 11.0])  # a gap: windows with no epoch are omitted
     f = gnss_features(_sky(t, el, az, cn0))
-    assert f["t_s"].tolist() == [1.0, 2.0, 3.0, 4.0, 10.0, 11.0]  # the last window [10, 12) holds t = 11
+    # 1 Hz epochs are tagged t − 0.5 (the middle of the second each measured, issue 11): [−1, 1) holds
+    # t = 0 and 1, …, [9, 11) holds t = 10 and 11 (before, by t: 1, 2, 3, 4, 10, 11)
+    assert f["t_s"].tolist() == [0.0, 1.0, 2.0, 3.0, 9.0, 10.0]
     assert f["n_epochs"].tolist() == [2, 2, 2, 1, 1, 2]
     for k in ("att_mean_db", "att_std_db", "fluct_per_s"):
         assert np.isnan(f[k]).all()

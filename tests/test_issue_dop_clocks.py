@@ -78,10 +78,11 @@ def test_fluctuation_rate_weights_satellites_by_tracked_time():
     0.64 per s (the brief one diluting as a whole satellite), now 32/(4·10 + 0.4) = 0.792."""
     from features.gnss.features import GnssFeatureConfig, SkyArrays, gnss_features
 
-    t = np.arange(0.0, 10.0, 0.2)
+    t0 = np.arange(0.0, 10.0, 0.2)
+    t = t0 + 0.2              # 5 Hz epochs measuring (0, 10]: all in the window [0, 10) by their tags t − 0.1
     el = np.tile(np.array([70.0, 40, 40, 40, 25]), (t.size, 1))
     az = np.tile(np.array([0.0, 90, 180, 270, 45]), (t.size, 1))
-    wave = 40.0 + 3.0 * np.sign(np.sin(2 * np.pi * 0.5 * t + 0.1))
+    wave = 40.0 + 3.0 * np.sign(np.sin(2 * np.pi * 0.5 * t0 + 0.1))
     cn0 = np.tile(wave[:, None], (1, 5))
     cn0[:, 4] = np.nan
     cn0[20:22, 4] = 40.0                                    # the fifth: two epochs, steady
@@ -103,4 +104,4 @@ def test_gnss_windows_lie_on_the_walks_grid():
                     np.ones(el.shape, bool), np.ones(el.shape, bool), np.ones(t.size))
     f = gnss_features(sky, GnssFeatureConfig(window_s=2.0, hop_s=1.0))
     assert f["t_s"].tolist() == [1.0, 2.0, 3.0, 4.0, 5.0]          # before: 1.4, 2.4, …, 5.4
-    assert f["n_epochs"].tolist()[:2] == [8, 10]                          # [0, 2) holds 0.4 … 1.8
+    assert f["n_epochs"].tolist()[:2] == [9, 10]   # [0, 2) holds the epochs 0.4 … 2.0 (tags t − 0.1; before 0.4 … 1.8: 8)

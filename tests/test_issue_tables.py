@@ -35,8 +35,10 @@ def test_gnss_tables_carry_utc_and_geodetic(tmp_path, origin_site):
                  "--positions", str(pos), "--epochs", str(ep), "--window-s", "1", "--hop-s", "1"]) == 0
     rows = list(csv.DictReader(out.open()))
     assert list(rows[0])[:2] == ["t_s", "time_utc"]
-    assert [(r["t_s"], r["time_utc"]) for r in rows] == [("0.5", "2024-06-15T12:00:00.500Z"),
-                                                          ("1.5", "2024-06-15T12:00:01.500Z")]
+    # 1 Hz epochs at 12:00:00 and :01 each measured the second before them (issue 11 window centring):
+    # windows [−1, 0) and [0, 1) s (before, by the fix time: 0.5 and 1.5 s)
+    assert [(r["t_s"], r["time_utc"]) for r in rows] == [("-0.5", "2024-06-15T11:59:59.500Z"),
+                                                          ("0.5", "2024-06-15T12:00:00.500Z")]
     epochs = [json.loads(x) for x in ep.read_text().splitlines()]
     prow = list(csv.DictReader(pos.open()))
     assert list(prow[0])[:8] == ["t_s", "time_utc", "east_m", "north_m", "up_m", "lat_deg", "lon_deg", "h_ell_m"]

@@ -44,3 +44,15 @@ def test_a_missing_stream_is_none(walk_dir, tmp_path):
     assert walk_has(d) == {"gnss": True, "audio": False, "imu": True, "truth": True}
     partial = read_walk(d)
     assert partial.acoustic is None and partial.gnss is not None and partial.pdr is not None
+
+
+def test_pdr_is_run_once_and_translated_to_the_gnss_anchor(walk_dir):
+    """Issue 14 (speed): read_walk ran PDR twice (from the origin, then from the anchor); the track
+    is start + Σ steps, so translating the first run gives exactly the rerun's numbers."""
+    from pipeline import walk_data as wd
+
+    data = wd.read_walk(walk_dir)
+    rerun = wd._read_pdr(data.walk, data.pdr.start_en_m, None)
+    np.testing.assert_array_equal(data.pdr.result.east_m, rerun.result.east_m)
+    np.testing.assert_array_equal(data.pdr.result.north_m, rerun.result.north_m)
+    assert data.pdr.start_en_m != (0.0, 0.0)

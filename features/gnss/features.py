@@ -49,6 +49,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import asdict, dataclass
+from operator import itemgetter
 from typing import Sequence
 
 import numpy as np
@@ -139,7 +140,9 @@ class SkyArrays:
 
     t_s : (n,) seconds; sat_keys : m tuples (system, prn);
     el_deg, az_deg, cn0_dbhz : (n, m), NaN when not listed / not tracked;
-    in_view, used : (n, m) bool; hdop : (n,) receiver HDOP (NaN when absent).
+    in_view, used : (n, m) bool; hdop : (n,) receiver HDOP (NaN when absent);
+    interval_s : the receiver's epoch interval (median step of all its epochs, sky or not; NaN:
+    take it from ``t_s``).
     """
 
     t_s: np.ndarray
@@ -150,32 +153,61 @@ class SkyArrays:
     in_view: np.ndarray
     used: np.ndarray
     hdop: np.ndarray
+    interval_s: float = float("nan")
 
     @property
     def n_epochs(self) -> int:
         return int(self.t_s.shape[0])
 
+    @property
+    def epoch_interval_s(self) -> float:
+        """The epoch interval: :attr:`interval_s` when known, else the median step of ``t_s`` (0 for one epoch)."""
+        if math.isfinite(self.interval_s) and self.interval_s >= 0:
+            return float(self.interval_s)
+        return _median_step(self.t_s)
+
+
+def _median_step(t_s) -> float:
+    """Median positive step of a time series, s (0 when it has none)."""
+    d = np.diff(np.asarray(t_s, dtype=float))
+    d = d[d > 0]
+    return float(np.median(d)) if d.size else 0.0
+
 
 def sky_arrays(epochs: Sequence) -> SkyArrays:
-    """Stack the epochs that reported a sky into :class:`SkyArrays` (one column per satellite)."""
+    """Stack the epochs that reported a sky into :class:`SkyArrays` (one column per satellite, in order
+    of first appearance)."""
     sky = [e for e in epochs if e.sky_reported]
-    flat = [(i, s) for i, e in enumerate(sky) for s in e.satellites]
-    index: dict = {}
-    cols = [index.setdefault((s[0], s[1]), len(index)) for _, s in flat]
-    n, m = len(sky), len(index)
+    counts = np.fromiter((len(e.satellites) for e in sky), dtype=np.intp, count=len(sky))
+    flat = [s for e in sky for s in e.satellites]
+    n = len(sky)
+    if flat:
+        # Satellite fields: (system, prn, signal, el_deg, az_deg, cn0_dbhz, used); None → NaN
+        system, prn, el_l, az_l, cn0_l, used_l = (list(map(itemgetter(k), flat)) for k in (0, 1, 3, 4, 5, 6))
+        r = np.repeat(np.arange(n, dtype=np.intp), counts)
+        names = sorted(set(system))
+        code = {name: k for k, name in enumerate(names)}
+        key = np.array([code[x] for x in system], dtype=np.int64) * 100_000 \
+            + np.asarray(prn, dtype=np.int64)
+        uniq, first, inv = np.unique(key, return_index=True, return_inverse=True)
+        order = np.argsort(first, kind="stable")          # columns in order of first appearance
+        rank = np.empty_like(order)
+        rank[order] = np.arange(order.size)
+        c = rank[inv.ravel()]
+        m = uniq.size
+        index = tuple((names[int(k // 100_000)], int(k % 100_000)) for k in uniq[order].tolist())
+    else:
+        m, index = 0, ()
     el = np.full((n, m), np.nan)
     az = np.full((n, m), np.nan)
     cn0 = np.full((n, m), np.nan)
     in_view = np.zeros((n, m), dtype=bool)
     used = np.zeros((n, m), dtype=bool)
     if flat:
-        r = np.fromiter((i for i, _ in flat), dtype=np.intp, count=len(flat))
-        c = np.asarray(cols, dtype=np.intp)
-        # Satellite fields: (system, prn, signal, el_deg, az_deg, cn0_dbhz, used); None → NaN
-        el_v = np.array([s[3] for _, s in flat], dtype=float)
-        az_v = np.array([s[4] for _, s in flat], dtype=float)
-        cn0_v = np.array([s[5] for _, s in flat], dtype=float)
-        used_v = np.array([s[6] for _, s in flat], dtype=bool)
+        el_v = np.array(el_l, dtype=float)
+        az_v = np.array(az_l, dtype=float)
+        cn0_v = np.array(cn0_l, dtype=float)
+        used_v = np.array(used_l, dtype=bool)
         # Several signals of one satellite: C/N0 = max over signals (fmax ignores NaN),
         # el/az from any listing that has them.
         np.fmax.at(cn0, (r, c), cn0_v)
@@ -187,7 +219,8 @@ def sky_arrays(epochs: Sequence) -> SkyArrays:
         np.logical_or.at(used, (r, c), used_v)
     hdop = np.array([np.nan if e.fix.hdop is None else e.fix.hdop for e in sky], dtype=float)
     t_s = np.array([e.t_s for e in sky], dtype=float)
-    return SkyArrays(t_s, tuple(index), el, az, cn0, in_view, used, hdop)
+    interval = _median_step([e.t_s for e in epochs]) if len(epochs) > 1 else float("nan")
+    return SkyArrays(t_s, index, el, az, cn0, in_view, used, hdop, interval)
 
 
 def _hdop(el_rad: np.ndarray, az_rad: np.ndarray, weight: np.ndarray, system_index: np.ndarray | None = None
@@ -211,8 +244,8 @@ def _hdop(el_rad: np.ndarray, az_rad: np.ndarray, weight: np.ndarray, system_ind
                        axis=-1)
     g = np.where(weight[..., None], np.nan_to_num(g), 0.0)
     # A = GᵀG per epoch, shape (n, 3 + n_sys, 3 + n_sys)
-    a = np.einsum("nmi,nmj->nij", g, g)
-    present = np.einsum("nm,mk->nk", weight.astype(float), (system_index[:, None] == np.arange(n_sys)).astype(float)) > 0
+    a = np.matmul(g.transpose(0, 2, 1), g)  # batched GᵀG (matmul: several times faster than einsum here)
+    present = (weight.astype(float) @ (system_index[:, None] == np.arange(n_sys)).astype(float)) > 0
     idx = 3 + np.arange(n_sys)
     a[:, idx, idx] += ~present                     # an absent system's clock: unit diagonal, no coupling
     count = weight.sum(axis=1)
@@ -318,7 +351,16 @@ def gnss_features(sky: SkyArrays, config: GnssFeatureConfig | None = None,
     ``FEATURE_COLUMNS`` and ``COUNT_COLUMNS``. Windows start at whole multiples
     of ``hop_s`` on the epochs' time base (the walk's, the grid of the audio
     windows), the first at or before the first epoch; windows holding no epoch
-    are omitted. A
+    are omitted.
+
+    An epoch goes to a window by its true tag, the middle of the interval it
+    measured: a receiver's C/N0 at fix time t is its estimate over the epoch
+    interval ending at t, (t − Δt, t] (the tracking loops integrate up to the
+    measurement epoch; the simulator averages power over that interval,
+    ``simulation/gnss/stream.py``), so the tag is t − Δt/2, Δt the receiver's
+    epoch interval (:attr:`SkyArrays.epoch_interval_s`). Taken at t instead, a
+    window's epochs covered [start − Δt, start + window − Δt): centred Δt/2
+    early, 0.1 s at 5 Hz and 0.5 s at 1 Hz (issue 11). A
     feature is NaN when its inputs are absent (no tracked satellite above the
     mask for μ, σ, β; none in view for ζ, λ).
     """
@@ -351,15 +393,16 @@ def gnss_features(sky: SkyArrays, config: GnssFeatureConfig | None = None,
 
     # One window grid on the walk's time base: windows start at whole multiples of hop_s (as the
     # audio windows do from the audio's start, t = 0 on a walk), not at the first epoch.
-    first = config.hop_s * math.floor(t[0] / config.hop_s + 1e-9)
-    span = t[-1] - first
+    tag = t - 0.5 * sky.epoch_interval_s   # the middle of the interval each epoch measured (docstring)
+    first = config.hop_s * math.floor(tag[0] / config.hop_s + 1e-9)
+    span = tag[-1] - first
     n_win = 1 if span < config.window_s else int(math.floor((span - config.window_s) / config.hop_s + 1e-9)) + 2
     if n_win > MAX_WINDOWS:
         raise DataError(f"{n_win} windows ({span:.0f} s of epochs at hop {config.hop_s:g} s) exceed the "
                         f"{MAX_WINDOWS} a feature table may hold; use a larger hop_s")
     starts = first + config.hop_s * np.arange(n_win)
-    lo = np.searchsorted(t, starts - 1e-9, side="left")
-    hi = np.searchsorted(t, starts + config.window_s - 1e-9, side="left")
+    lo = np.searchsorted(tag, starts - 1e-9, side="left")
+    hi = np.searchsorted(tag, starts + config.window_s - 1e-9, side="left")
     keep = hi > lo
     lo, hi, starts = lo[keep], hi[keep], starts[keep]
 

@@ -47,6 +47,8 @@ _USED_TYPES = USED_TYPES
 _FIX_TYPES = frozenset(("GGA", "RMC", "GNS", "ZDA"))  # timed sentences that carry more than the time
 _EPOCH_GAP_DEFAULT_S = 1.0
 _tuple_new = tuple.__new__  # builds a NamedTuple without its Python-level __new__ (hot loop)
+_SKY_CACHE_SIZE = 8192
+"""Distinct GSV/GSA sentences remembered by one read (cleared when full)."""
 
 
 class Satellite(NamedTuple):
@@ -285,6 +287,7 @@ def _assemble(sentences: Iterable[list[str]], stats: ReadStats, resync_after: in
     gsv_open: dict = {}  # talker -> (group key, n_msgs, n_in_view, next part) of its last GSV
     orphaned = False
     current_time_text = None
+    sky_cache: dict = {}  # GSV/GSA fields -> their (immutable) interpretation
 
     for fields in sentences:
         address = fields[0]
@@ -313,7 +316,15 @@ def _assemble(sentences: Iterable[list[str]], stats: ReadStats, resync_after: in
                     date = dt.date(int(data[3]), int(data[2]), int(data[1]))
                 payload = _timed_payload(kind, data)
             else:
-                payload = gsv_fields(talker, data) if kind == "GSV" else gsa_fields(talker, data)
+                # GSV/GSA repeat verbatim from epoch to epoch (at 5 Hz half the GSV and nearly every GSA of
+                # a walk): their interpretation, an immutable tuple, is looked up by the sentence's fields.
+                key = (address, *data)
+                payload = sky_cache.get(key)
+                if payload is None:
+                    payload = gsv_fields(talker, data) if kind == "GSV" else gsa_fields(talker, data)
+                    if len(sky_cache) >= _SKY_CACHE_SIZE:
+                        sky_cache.clear()
+                    sky_cache[key] = payload
         except (ValueError, IndexError, OverflowError):
             stats.malformed += 1
             continue

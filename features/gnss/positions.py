@@ -54,8 +54,23 @@ of preference, by:
    estimate for a 2-D Gaussian error with per-axis σ = UERE·HDOP/√2, so the
    fitted fixes have mean NEES 2 by construction).
 
-The invisible ratio was tried as a fourth factor and left out: on the same
-walks it added nothing the attenuation did not already show (bench/eval_receiver.py).
+The epoch's invisible ratio ζ (in-view-but-untracked share above the mask,
+``GnssPositions.invisible_ratio``) was tried as a further factor, variance ×
+(1 + c_q·ζ) with c_q per quality fitted on site seeds 1–4, and left out: on
+held-out walks (site seeds 41/52/63, 9 walks of 300 s, 13,500 fixes;
+``bench/bench_gnss_sigma.py``) it pushed RTK float open/heavy and DGNSS heavy
+far below NEES 2 (DGNSS heavy 0.22 → 0.01) while mending RTK float light
+(3.3 → 1.1–2.1): the mean |ln(NEES/2)| over the quality × class cells went
+1.04 → 1.45 (c_q by the cells' criterion) or 1.63 (by maximum likelihood). The
+SIGMA-ε factor already sees most of what ζ shows (weak satellites are lost
+first). GST's rms residual (field 2) adds nothing where GST's own σ_lat/σ_lon
+are used, and the simulated receiver sends no GST, so it was not tried.
+Known limit of the built-in model: on walks without corrections (SPS, 3
+held-out walks, 4,503 fixes) the SIGMA-ε factor over-inflates the code
+solution (mean NEES 0.19 / 0.28 / 0.21 heavy / light / open, against 2.5 /
+1.2 / 0.74 for the table alone), as it does DGNSS heavy (0.22): the 4 m / 1 m
+UEREs already budget some multipath. A fitted table replaces it where it has
+the cell.
 Vertical: σ_up = UERE·VDOP when VDOP is known, else UERE·1.5·HDOP (VDOP ≈
 1.5 HDOP for typical open-sky geometry). When HDOP is missing, 2.0 is assumed
 (a middling geometry) and the row is flagged ``hdop_assumed``. Qualities 0
@@ -75,7 +90,7 @@ from features.errors import DataError
 from features.geodesy import geodetic_to_enu
 
 __all__ = ["UERE_BY_QUALITY_M", "ASSUMED_HDOP", "GnssPositions", "fixes_to_enu", "sigma_axis_m", "UereTable",
-           "fit_uere", "epoch_attenuation", "read_gst", "ATTENUATION_BIN_EDGES_DB"]
+           "fit_uere", "epoch_attenuation", "sky_attenuation", "read_gst", "ATTENUATION_BIN_EDGES_DB"]
 
 ATTENUATION_BIN_EDGES_DB = (2.0, 4.0, 7.0)
 """Bins of the used satellites' mean attenuation (dB) of a fitted :class:`UereTable`: <2, 2–4, 4–7, ≥7."""
@@ -254,7 +269,8 @@ class GnssPositions:
     ``sigma_en_m`` is σ per horizontal axis (the larger of east and north when GST gives
     them apart), ``sigma_east_m`` / ``sigma_north_m`` per axis; ``attenuation_db`` the used
     satellites' mean attenuation and ``sigma_source`` how σ was found: ``gst``, ``cn0``
-    (table × SIGMA-ε factor), ``table`` (RTK fixed) or ``fitted`` (:class:`UereTable`).
+    (table × SIGMA-ε factor), ``table`` (RTK fixed) or ``fitted`` (:class:`UereTable`);
+    ``invisible_ratio`` the epoch's in-view-but-untracked share above the mask (NaN without a sky).
     """
 
     t_s: np.ndarray
@@ -271,65 +287,119 @@ class GnssPositions:
     sigma_north_m: np.ndarray | None = None
     attenuation_db: np.ndarray | None = None
     sigma_source: np.ndarray | None = None
+    invisible_ratio: np.ndarray | None = None
 
     COLUMNS = ("t_s", "east_m", "north_m", "up_m", "sigma_en_m", "sigma_up_m", "quality", "n_used", "hdop",
-               "hdop_assumed", "sigma_east_m", "sigma_north_m", "attenuation_db", "sigma_source")
+               "hdop_assumed", "sigma_east_m", "sigma_north_m", "attenuation_db", "sigma_source", "invisible_ratio")
 
     def __len__(self) -> int:
         return int(self.t_s.shape[0])
 
 
+def _sky_rows(epochs: Sequence, sky) -> np.ndarray:
+    """Row of ``sky`` (:class:`~features.gnss.features.SkyArrays` of these epochs) per epoch, −1 without a sky."""
+    t = np.fromiter((e.t_s for e in epochs), dtype=float, count=len(epochs))
+    if sky.n_epochs == 0:
+        return np.full(len(epochs), -1, dtype=np.intp)
+    j = np.clip(np.searchsorted(sky.t_s, t), 0, sky.n_epochs - 1)
+    has = np.fromiter((e.sky_reported for e in epochs), dtype=bool, count=len(epochs))
+    if not np.array_equal(sky.t_s[j[has]], t[has]):
+        raise DataError("fixes_to_enu: the sky arrays given are not those of these epochs (times differ)")
+    return np.where(has, j, -1)
+
+
+def sky_attenuation(sky, reference=None, elevation_mask_deg: float | None = None
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per sky epoch: used satellites' mean attenuation (dB), SIGMA-ε factor g, invisible ratio; each (n,).
+
+    The vectorised :func:`epoch_attenuation` over :class:`~features.gnss.features.SkyArrays`
+    (equal to it on every epoch, a test), and the epoch's invisible ratio: in-view-but-untracked
+    satellites above ``elevation_mask_deg`` (default the features' mask) over those in view
+    (NaN when none is in view), the GNSS feature ζ of one epoch.
+    """
+    from features.constants import ELEVATION_MASK_DEG
+
+    reference = reference or _DEFAULT_REFERENCE or _default_reference()
+    mask = ELEVATION_MASK_DEG if elevation_mask_deg is None else elevation_mask_deg
+    el, cn0 = sky.el_deg, sky.cn0_dbhz
+    with np.errstate(invalid="ignore"):
+        use = sky.used & np.isfinite(cn0) & np.isfinite(el)
+        a = np.where(use, np.maximum(0.0, reference.cref_dbhz(np.where(use, el, 0.0)) - np.where(use, cn0, 0.0)), 0.0)
+        n = use.sum(axis=1)
+        att = np.where(n > 0, a.sum(axis=1) / np.maximum(n, 1), 0.0)
+        g = np.where(n > 0, np.sqrt(np.where(use, 10.0 ** (a / 10.0), 0.0).sum(axis=1) / np.maximum(n, 1)), 1.0)
+        view = sky.in_view & (el >= mask)
+        n_view = view.sum(axis=1)
+        n_trk = (view & np.isfinite(cn0)).sum(axis=1)
+        zeta = np.where(n_view > 0, 1.0 - n_trk / np.maximum(n_view, 1), np.nan)
+    return att, g, zeta
+
+
 def fixes_to_enu(epochs: Sequence, lat0_deg: float, lon0_deg: float, alt0_m: float, *,
-                 uere: UereTable | None = None, gst: dict | None = None, cn0_reference=None) -> GnssPositions:
+                 uere: UereTable | None = None, gst: dict | None = None, cn0_reference=None,
+                 sky=None) -> GnssPositions:
     """Convert the epochs' fixes to ENU about (lat0, lon0, alt0 ellipsoidal); no fix → no row.
 
     σ per the module docstring: ``gst`` ({UTC time of day s: (σ_lat, σ_lon)}, :func:`read_gst`)
     where it has the epoch, else a fitted ``uere`` table where it has the cell, else
     UERE(quality)·HDOP·g/√2 with the SIGMA-ε factor g of the used satellites' C/N0
-    (``cn0_reference``: the open-sky C_ref, default built-in).
+    (``cn0_reference``: the open-sky C_ref, default built-in). ``sky``: the
+    :class:`~features.gnss.features.SkyArrays` of these same epochs when the caller has them
+    (computed here otherwise). Vectorised over fixes.
     """
+    from features.gnss.features import sky_arrays
+
     for name, value in (("lat0_deg", lat0_deg), ("lon0_deg", lon0_deg), ("alt0_m", alt0_m)):
         if not math.isfinite(value):
             raise DataError(f"site origin {name} must be finite, got {value}")
-    rows = []
-    for e in epochs:
-        f = e.fix
-        if not f.has_position or f.quality not in UERE_BY_QUALITY_M:
-            continue
-        hdop = f.hdop
-        assumed = hdop is None
-        hdop = ASSUMED_HDOP if assumed else hdop
-        att_db, g = epoch_attenuation(e, cn0_reference)
-        fitted = uere.lookup(f.quality, att_db) if uere is not None else None
-        if fitted is not None:
-            u, source = fitted, "fitted"
-        elif f.quality == 4:
-            # RTK fixed: carrier phase, whose error the code's C/N0 model does not describe (a wrong
-            # integer fix is a blunder, not a variance): the table alone.
-            u, source = UERE_BY_QUALITY_M[4], "table"
-        else:
-            u, source = UERE_BY_QUALITY_M[f.quality] * g, "cn0"
-        s_e = s_n = u * hdop / math.sqrt(2.0)
-        sigma_up = u * (f.vdop if f.vdop is not None else 1.5 * hdop)
-        stats = gst.get(round(e.time_of_day_s, 3)) if gst else None
-        if stats is not None:
-            s_n, s_e = stats
-            source = "gst"
-        alt = (f.alt_m or 0.0) + (f.geoid_sep_m or 0.0) if f.alt_m is not None else alt0_m
-        rows.append((e.t_s, f.lat_deg, f.lon_deg, alt, max(s_e, s_n), sigma_up, f.quality,
-                     -1 if f.n_used is None else f.n_used, hdop, assumed, s_e, s_n, att_db, source))
-    if not rows:
+    fixed = [e for e in epochs if e.fix.quality in UERE_BY_QUALITY_M and e.fix.has_position]
+    n = len(fixed)
+    if n == 0:
         empty = np.zeros(0)
         return GnssPositions(empty, empty, empty, empty, empty, empty, np.zeros(0, int), np.zeros(0, int), empty,
-                             np.zeros(0, bool), empty, empty, empty, np.zeros(0, dtype="<U6"))
-    cols = list(zip(*rows))
-    lat, lon, alt = (np.asarray(c, dtype=float) for c in cols[1:4])
-    e, n, u = geodetic_to_enu(lat, lon, alt, lat0_deg, lon0_deg, alt0_m)
+                             np.zeros(0, bool), empty, empty, empty, np.zeros(0, dtype="<U6"), empty)
+    if sky is None:
+        sky = sky_arrays(epochs)
+    nan = float("nan")
+    cols = np.array([(e.t_s, f.lat_deg, f.lon_deg, nan if f.alt_m is None else f.alt_m,
+                      0.0 if f.geoid_sep_m is None else f.geoid_sep_m, f.quality, -1 if f.n_used is None else f.n_used,
+                      nan if f.hdop is None else f.hdop, nan if f.vdop is None else f.vdop, e.time_of_day_s)
+                     for e in fixed for f in (e.fix,)], dtype=float).reshape(n, 10)
+    t, lat, lon, alt_msl, sep, quality, n_used, hdop, vdop, tod = cols.T
+    quality = quality.astype(int)
+    assumed = np.isnan(hdop)
+    hdop = np.where(assumed, ASSUMED_HDOP, hdop)
+    att_sky, g_sky, zeta_sky = sky_attenuation(sky, cn0_reference)
+    row = _sky_rows(fixed, sky)
+    has = row >= 0
+    att = np.where(has, att_sky[np.maximum(row, 0)] if sky.n_epochs else 0.0, 0.0)
+    g = np.where(has, g_sky[np.maximum(row, 0)] if sky.n_epochs else 1.0, 1.0)
+    zeta = np.where(has, zeta_sky[np.maximum(row, 0)] if sky.n_epochs else nan, nan)
+    table = np.array([UERE_BY_QUALITY_M[q] for q in quality.tolist()])
+    # RTK fixed: carrier phase, whose error the code's C/N0 model does not describe (a wrong
+    # integer fix is a blunder, not a variance): the table alone. Others: table × SIGMA-ε factor.
+    u = np.where(quality == 4, table, table * g)
+    source = np.where(quality == 4, "table", "cn0").astype("<U6")
+    if uere is not None:
+        fitted = np.array([np.nan if v is None else v
+                           for v in (uere.lookup(q, a) for q, a in zip(quality.tolist(), att.tolist()))])
+        ok = np.isfinite(fitted)
+        u = np.where(ok, fitted, u)
+        source[ok] = "fitted"
+    s_e = u * hdop / math.sqrt(2.0)
+    s_n = s_e.copy()
+    sigma_up = u * np.where(np.isnan(vdop), 1.5 * hdop, vdop)
+    if gst:
+        for i, key in enumerate(np.round(tod, 3).tolist()):
+            stats = gst.get(key)
+            if stats is not None:
+                s_n[i], s_e[i] = stats
+                source[i] = "gst"
+    alt = np.where(np.isnan(alt_msl), alt0_m, alt_msl + sep)
+    e, nn, up = geodetic_to_enu(lat, lon, alt, lat0_deg, lon0_deg, alt0_m)
     return GnssPositions(
-        t_s=np.asarray(cols[0], float), east_m=np.asarray(e, float), north_m=np.asarray(n, float),
-        up_m=np.asarray(u, float), sigma_en_m=np.asarray(cols[4], float), sigma_up_m=np.asarray(cols[5], float),
-        quality=np.asarray(cols[6], int), n_used=np.asarray(cols[7], int), hdop=np.asarray(cols[8], float),
-        hdop_assumed=np.asarray(cols[9], bool), sigma_east_m=np.asarray(cols[10], float),
-        sigma_north_m=np.asarray(cols[11], float), attenuation_db=np.asarray(cols[12], float),
-        sigma_source=np.asarray(cols[13]),
+        t_s=t, east_m=np.asarray(e, float), north_m=np.asarray(nn, float), up_m=np.asarray(up, float),
+        sigma_en_m=np.maximum(s_e, s_n), sigma_up_m=sigma_up, quality=quality, n_used=n_used.astype(int),
+        hdop=hdop, hdop_assumed=assumed, sigma_east_m=s_e, sigma_north_m=s_n, attenuation_db=att,
+        sigma_source=source, invisible_ratio=zeta,
     )

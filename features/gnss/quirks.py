@@ -190,28 +190,41 @@ def gsv_fields(talker: str, data: list[str]) -> GsvFields:
         body = body[:-2]
     satellites = []
     append = satellites.append
-    sat_id = _satellite_id_cached
+    one = _gsv_satellite
     n_body = len(body)
     if n_body % 4:
         body = body + [""] * (4 - n_body % 4)  # a last satellite cut short: its missing fields are empty
     for i in range(0, n_body, 4):
-        prn_t, el_t, az_t, cn_t = body[i], body[i + 1], body[i + 2], body[i + 3]
+        prn_t = body[i]
         if not prn_t:
             continue  # empty padding group, or a satellite without number (Quectel): nothing to key it by
-        sat = sat_id(talker, int(prn_t), system_hint)
-        el = float(el_t) if el_t else None
-        az = float(az_t) if az_t else None
-        cn0 = float(cn_t) if cn_t else None
-        if (el is not None and not -90.0 <= el <= 90.0) or (az is not None and not 0.0 <= az <= 360.0) \
-                or (cn0 is not None and not 0.0 <= cn0 <= 99.0):
-            raise ValueError(f"GSV satellite fields {body[i:i + 4]} out of range")
-        if sat is None:
-            continue
-        if cn0 == 0.0:
-            cn0 = None  # 0 dB-Hz is "not tracked" for many receivers (NMEA: null when not tracking)
-        # = GsvSatellite(...), skipping its Python-level __new__ (hot loop)
-        append(_tuple_new(GsvSatellite, (sat[0], sat[1], el, az, cn0)))
+        sat = one(talker, system_hint, prn_t, body[i + 1], body[i + 2], body[i + 3])
+        if sat is not None:
+            append(sat)
     return GsvFields(n_msgs, msg_num, n_in_view, signal, tuple(satellites))
+
+
+@functools.lru_cache(maxsize=16384)
+def _gsv_satellite(talker: str, system_hint: str | None, prn_t: str, el_t: str, az_t: str, cn_t: str
+                   ) -> GsvSatellite | None:
+    """One ``prn,el,az,cn0`` group of a GSV sentence (None: a number no system owns); ValueError when invalid.
+
+    Memoised: a satellite's group repeats verbatim over many epochs (elevation and azimuth move
+    by whole degrees every few minutes), so each distinct group is interpreted once.
+    """
+    sat = _satellite_id_cached(talker, int(prn_t), system_hint)
+    el = float(el_t) if el_t else None
+    az = float(az_t) if az_t else None
+    cn0 = float(cn_t) if cn_t else None
+    if (el is not None and not -90.0 <= el <= 90.0) or (az is not None and not 0.0 <= az <= 360.0) \
+            or (cn0 is not None and not 0.0 <= cn0 <= 99.0):
+        raise ValueError(f"GSV satellite fields {[prn_t, el_t, az_t, cn_t]} out of range")
+    if sat is None:
+        return None
+    if cn0 == 0.0:
+        cn0 = None  # 0 dB-Hz is "not tracked" for many receivers (NMEA: null when not tracking)
+    # = GsvSatellite(...), skipping its Python-level __new__
+    return _tuple_new(GsvSatellite, (sat[0], sat[1], el, az, cn0))
 
 
 def _dop(text: str) -> float | None:
