@@ -37,7 +37,12 @@ def test_walk_files_and_same_seed_same_bytes(site_dir, tmp_path, capsys):
     walk = tomllib.loads((a / "walk.toml").read_text())
     assert walk["seed"] == 9 and walk["duration_s"] == 20.0 and walk["gnss"]["rate_hz"] == 5.0
     truth = (a / "truth.csv").read_text().splitlines()
-    assert truth[0] == "t_s,east_m,north_m,env_class" and len(truth) == 1 + 201
+    # the share beside the class since issue 13 (the satellite-sky label): every error can be told by its
+    # distance from a class boundary
+    assert truth[0] == "t_s,east_m,north_m,env_class,blocked_sky_share" and len(truth) == 1 + 201
+    for row in truth[1:]:
+        cls, share = row.split(",")[3:]
+        assert cls == ("open" if float(share) < 0.10 else "light" if float(share) <= 0.40 else "heavy")
     code, _, err = run(capsys, "simulate", "walk", str(site_dir), "--seed", "10", "--duration", "20",
                        "--out", str(tmp_path / "c"))
     assert (tmp_path / "c" / "gnss.nmea").read_bytes() != (a / "gnss.nmea").read_bytes()
