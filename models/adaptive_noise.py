@@ -23,7 +23,7 @@ import math
 import numpy as np
 
 from models.fusion.events import ACOUSTIC, GNSS, ClassTrack, EventStream
-from models.fusion.noise import NoiseError, QualityNoise
+from models.fusion.noise import NoiseError, QualityNoise, chi2_2_mean
 
 __all__ = ["ClassQualityNoise"]
 
@@ -67,9 +67,11 @@ class ClassQualityNoise:
         self.combine = combine
 
     def fit(self, gnss_class, quality, hdop, gnss_errors_m, acoustic_class=None, acoustic_cov_m2=None,
-            acoustic_errors_m=None, prior: QualityNoise | None = None) -> "ClassQualityNoise":
+            acoustic_errors_m=None, prior: QualityNoise | None = None,
+            estimator: str = "mean") -> "ClassQualityNoise":
         """Fit from training fixes: GNSS class (n,), quality (n,), hdop (n,), errors (n, 2) fix − truth;
-        acoustic class (k,), covariance (k, 2, 2), errors (k, 2). ``prior``: the class-free fit it falls back to."""
+        acoustic class (k,), covariance (k, 2, 2), errors (k, 2). ``prior``: the class-free fit it falls back to.
+        ``estimator``: see :func:`models.fusion.noise.chi2_2_mean`."""
         if self.combine not in ("mean", "argmax"):
             raise NoiseError(f"combine must be 'mean' or 'argmax', got {self.combine!r}")
         prior = prior if prior is not None else QualityNoise().fit()
@@ -89,7 +91,7 @@ class ClassQualityNoise:
                 sel = ok & (cls == c) & (q == code)
                 if sel.sum() >= self.min_samples:
                     # UERE² = E[(e² + n²) / HDOP²]
-                    table[int(code)] = float(math.sqrt(np.mean(r2[sel] / h[sel] ** 2)))
+                    table[int(code)] = float(math.sqrt(chi2_2_mean(r2[sel] / h[sel] ** 2, estimator)))
             self.uere_m_[c] = table
         self.acoustic_scale_ = np.full(self.n_classes, float(prior.acoustic_scale_))
         if acoustic_errors_m is not None and len(acoustic_errors_m):
@@ -103,7 +105,7 @@ class ClassQualityNoise:
                 sel = good & (ac == c)
                 if sel.sum() >= self.min_samples:
                     # k² = E[e' C⁻¹ e] / 2
-                    self.acoustic_scale_[c] = float(math.sqrt(np.mean(d2[sel]) / 2.0))
+                    self.acoustic_scale_[c] = float(math.sqrt(chi2_2_mean(d2[sel], estimator) / 2.0))
         self.assumed_hdop_ = float(prior.assumed_hdop)
         return self
 

@@ -62,8 +62,9 @@ DEFAULT_EKF = EkfConfig(outlier="huber")
 
 def train_fusion(walk_dirs: list, classifier: EnvironmentClassifier, *, bp: bool = True,
                  bp_config: BPConfig = BPConfig(), ekf: EkfConfig = DEFAULT_EKF, meta: dict | None = None,
-                 progress: Callable[[str], None] | None = None) -> FusionModel:
-    """Fit a :class:`~models.fusion_model.FusionModel` on ``walk_dirs`` (each with truth.csv)."""
+                 progress: Callable[[str], None] | None = None, noise_estimator: str = "mean") -> FusionModel:
+    """Fit a :class:`~models.fusion_model.FusionModel` on ``walk_dirs`` (each with truth.csv);
+    ``noise_estimator``: :func:`models.fusion.noise.chi2_2_mean`."""
     say = progress or (lambda line: None)
     provisional = FusionModel(classifier=classifier, fixed=None, quality=None, per_class_map=None, per_class=None)
     walks = []
@@ -92,4 +93,4 @@ def train_fusion(walk_dirs: list, classifier: EnvironmentClassifier, *, bp: bool
     meta["training_walks"] = [n for n, _, _ in walks]
     meta["sites"] = sorted({d.site.name for _, d, _ in walks})
     return fit_fusion_model(rows, classifier, bp_data if bp else None, bp_config=bp_config, ekf=ekf, meta=meta,
-                            progress=(lambda k, n: say(f"BP network {k}/{n}")))
+                            progress=(lambda k, n: say(f"BP network {k}/{n}")), noise_estimator=noise_estimator)

@@ -61,8 +61,8 @@ def _cat(rows, name, shape_tail):
     return np.concatenate(parts) if parts else np.zeros((0,) + shape_tail)
 
 
-def fit_noise(rows: list[WalkTraining], n_classes: int = 3) -> tuple[FixedNoise, QualityNoise, PerClassNoise,
-                                                                       PerClassNoise]:
+def fit_noise(rows: list[WalkTraining], n_classes: int = 3, estimator: str = "mean"
+              ) -> tuple[FixedNoise, QualityNoise, PerClassNoise, PerClassNoise]:
     """(fixed, quality, per-class by map, per-class by classifier) noise policies from training walks."""
     g_err, a_err = _cat(rows, "g_err", (2,)), _cat(rows, "a_err", (2,))
     if len(g_err) + len(a_err) == 0:
@@ -72,7 +72,7 @@ def fit_noise(rows: list[WalkTraining], n_classes: int = 3) -> tuple[FixedNoise,
     fixed = FixedNoise().fit(gnss_errors_m=g, acoustic_errors_m=a)
     quality = QualityNoise().fit(quality=_cat(rows, "g_quality", ()), hdop=_cat(rows, "g_hdop", ()),
                                  gnss_errors_m=g, acoustic_cov_m2=_cat(rows, "a_cov", (2, 2)) if a is not None else None,
-                                 acoustic_errors_m=a)
+                                 acoustic_errors_m=a, estimator=estimator)
     per_map = PerClassNoise(n_classes=n_classes).fit(
         gnss_class=_cat(rows, "g_map_class", ()) if g is not None else None, gnss_errors_m=g,
         acoustic_class=_cat(rows, "a_map_class", ()) if a is not None else None, acoustic_errors_m=a)
@@ -82,29 +82,36 @@ def fit_noise(rows: list[WalkTraining], n_classes: int = 3) -> tuple[FixedNoise,
     return fixed, quality, per_map, per_cls
 
 
-def fit_class_quality(rows: list[WalkTraining], quality: QualityNoise, n_classes: int = 3) -> ClassQualityNoise:
+def fit_class_quality(rows: list[WalkTraining], quality: QualityNoise, n_classes: int = 3,
+                      estimator: str = "mean") -> ClassQualityNoise:
     """UERE per (predicted class, GGA quality) and acoustic scale per predicted class (the adaptive method)."""
     has_a = sum(len(r.a_err) for r in rows) > 0
     return ClassQualityNoise(n_classes=n_classes).fit(
         _cat(rows, "g_pred_class", ()), _cat(rows, "g_quality", ()), _cat(rows, "g_hdop", ()),
         _cat(rows, "g_err", (2,)), _cat(rows, "a_pred_class", ()) if has_a else None,
         _cat(rows, "a_cov", (2, 2)) if has_a else None, _cat(rows, "a_err", (2,)) if has_a else None,
-        prior=quality)
+        prior=quality, estimator=estimator)
 
 
 def fit_fusion_model(rows: list[WalkTraining], classifier: EnvironmentClassifier,
                      bp_data: Callable[[FusionModel], tuple[list, list]] | None = None,
                      bp_config: BPConfig = BPConfig(), ekf: EkfConfig = EkfConfig(), meta: dict | None = None,
-                     progress: Callable[[int, int], None] | None = None) -> FusionModel:
+                     progress: Callable[[int, int], None] | None = None,
+                     noise_estimator: str = "mean") -> FusionModel:
     """Fit the noise policies, then (when ``bp_data`` is given) the BP network.
+
+    ``noise_estimator``: how the UERE table and the acoustic and GST scales are fitted from the training
+    errors (:func:`models.fusion.noise.chi2_2_mean`).
 
     ``bp_data(model)`` runs ``adaptive_nobp`` of the noise-only model on every training walk and returns
     (inputs per walk, targets per walk) — the caller reads the walks, this module stays free of file I/O.
     """
-    fixed, quality, per_map, per_cls = fit_noise(rows, classifier.n_classes_)
+    fixed, quality, per_map, per_cls = fit_noise(rows, classifier.n_classes_, estimator=noise_estimator)
     model = FusionModel(classifier=classifier, fixed=fixed, quality=quality, per_class_map=per_map, per_class=per_cls,
-                        class_quality=fit_class_quality(rows, quality, classifier.n_classes_), ekf=ekf, bp=None,
-                        meta=dict(meta or {}))
+                        class_quality=fit_class_quality(rows, quality, classifier.n_classes_,
+                                                        estimator=noise_estimator),
+                        ekf=ekf, bp=None, meta=dict(meta or {}))
+    model.meta["noise_estimator"] = noise_estimator
     if bp_data is not None:
         X, Y = bp_data(model)
         model.bp = BPCorrector(bp_config).fit(X, Y, progress=progress)

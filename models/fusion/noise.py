@@ -50,6 +50,23 @@ from models.fusion.events import ACOUSTIC, GNSS, ClassTrack, EventStream
 __all__ = ["FixedNoise", "QualityNoise", "PerClassNoise", "VBAdaptiveNoise", "SageHusaNoise", "NoiseError",
            "second_moment_m2"]
 
+
+SCALE_ESTIMATORS = ("mean", "median")
+
+
+def chi2_2_mean(x, estimator: str = "mean") -> float:
+    """The mean of samples ``x`` of a quantity distributed as c·χ²₂ (a horizontal error over its per-axis
+    variance), estimated as their ``"mean"`` (the moment estimate: every outlier counts in full) or from
+    their ``"median"``: median/ln 2, since the median of χ²₂ is 2 ln 2 against a mean of 2 — the robust
+    scale of Huber (1981, §5.1) for the core of a heavy-tailed error, the tails left to the filter's
+    outlier handling (Huber weights or the gate)."""
+    x = np.asarray(x, float)
+    if estimator == "mean":
+        return float(np.mean(x))
+    if estimator == "median":
+        return float(np.median(x) / math.log(2.0))
+    raise NoiseError(f"estimator must be one of {SCALE_ESTIMATORS}, got {estimator!r}")
+
 _EIG_FLOOR_M2 = 1e-6
 """Smallest eigenvalue any fitted or adapted R is allowed, m² (1 mm σ)."""
 
@@ -151,12 +168,12 @@ class QualityNoise:
         self.assumed_hdop = assumed_hdop
 
     def fit(self, quality=None, hdop=None, gnss_errors_m=None, gst_sigma_m=None, acoustic_cov_m2=None,
-            acoustic_errors_m=None, min_samples: int = 10):
+            acoustic_errors_m=None, min_samples: int = 10, estimator: str = "mean"):
         """Refit the UERE per quality, the GST scale and the acoustic scale from training samples.
 
         quality, hdop : (n,); gnss_errors_m : (n, 2) fix − truth; gst_sigma_m : (n, 2) or None;
         acoustic_cov_m2 : (k, 2, 2) with acoustic_errors_m : (k, 2). Qualities with fewer than
-        ``min_samples`` fixes keep the prior table's value.
+        ``min_samples`` fixes keep the prior table's value. ``estimator``: see :func:`chi2_2_mean`.
         """
         table = dict(UERE_BY_QUALITY_M if self.uere_m is None else self.uere_m)
         gst_scale, ac_scale = float(self.gst_scale), float(self.acoustic_scale)
@@ -170,13 +187,13 @@ class QualityNoise:
                 sel = (q == code) & np.isfinite(r2)
                 if np.sum(sel) >= min_samples:
                     # UERE² = E[(e² + n²) / HDOP²]   (σ_axis = UERE·HDOP/√2)
-                    table[int(code)] = float(math.sqrt(np.mean(r2[sel] / h[sel] ** 2)))
+                    table[int(code)] = float(math.sqrt(chi2_2_mean(r2[sel] / h[sel] ** 2, estimator)))
             if gst_sigma_m is not None:
                 g = np.asarray(gst_sigma_m, float)
                 ok = np.all(np.isfinite(g), axis=1) & np.all(g > 0, axis=1) & np.all(np.isfinite(e), axis=1)
                 if np.sum(ok) >= min_samples:
                     # k² = E[(e/σ_e)² + (n/σ_n)²] / 2
-                    gst_scale = float(math.sqrt(np.mean(np.sum((e[ok] / g[ok]) ** 2, axis=1)) / 2.0))
+                    gst_scale = float(math.sqrt(chi2_2_mean(np.sum((e[ok] / g[ok]) ** 2, axis=1), estimator) / 2.0))
         if acoustic_errors_m is not None:
             c = np.asarray(acoustic_cov_m2, float)
             e = np.asarray(acoustic_errors_m, float)
@@ -184,7 +201,7 @@ class QualityNoise:
             if np.sum(ok) >= min_samples:
                 # k² = E[e' C⁻¹ e] / 2   (Mahalanobis under the reported covariance, 2 dof)
                 d2 = np.einsum("ni,nij,nj->n", e[ok], np.linalg.inv(c[ok]), e[ok])
-                ac_scale = float(math.sqrt(np.mean(d2) / 2.0))
+                ac_scale = float(math.sqrt(chi2_2_mean(d2, estimator) / 2.0))
         self.uere_m_ = table
         self.gst_scale_ = gst_scale
         self.acoustic_scale_ = ac_scale
