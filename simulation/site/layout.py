@@ -52,7 +52,7 @@ class LayoutConfig:
     beacon_spacing_m: tuple[float, float] = (25.0, 35.0)
     beacon_height_m: tuple[float, float] = (2.5, 3.0)
     reuse_distance_m: float = 145.0  # ≥ 2 × the ≈ 70 m free-field detection range (tests/test_acoustic_sim.py)
-    beacon_placement: str = "grid"  # or "coverage": the installer's rule (simulation.site.coverage)
+    beacon_placement: str = "coverage"  # the installer's rule (simulation.site.coverage), or "grid"
     bands_hz: tuple[tuple[float, float], ...] = ((17_000.0, 19_900.0), (20_100.0, 23_000.0))
     slot_s: float = 0.08
     coverage: CoverageConfig = CoverageConfig()
