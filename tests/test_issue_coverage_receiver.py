@@ -127,3 +127,17 @@ def test_cold_start_three_beacon_mirror_rate():
           f"wrong, {refused} refused as ambiguous")
     assert cold_n > 350 and 0.0 < cold_wrong / cold_n < 0.2
     assert prior_n > 300 and prior_wrong / prior_n < 0.01
+
+
+def test_innovation_gate_drops_arrivals_metres_off_the_prediction_and_keeps_nlos_ones():
+    from features.acoustic.tracking import _innovation_gate
+
+    rng = np.random.default_rng(2)
+    ang = np.linspace(0, 2 * np.pi, 10, endpoint=False)
+    site = _site([(60 + 30 * math.cos(a), 40 + 25 * math.sin(a)) for a in ang])
+    bias = {1: 6.0, 4: -7.0, 7: 12.0, 9: 0.8}          # three wrong arrivals, one NLOS first path 0.8 m late
+    r = _ranges(site, (58.0, 41.0), 0.01, rng, bias=bias)
+    kept = _innovation_gate(r, site.device_height_m, C, (58.4, 40.7, 0.5), (0.01, 2e-5))
+    assert {x.beacon_id for x in r} - {x.beacon_id for x in kept} == {1, 4, 7}
+    # never fewer than three: then the frame is left to the exclusion as it was
+    assert len(_innovation_gate(r[:4], site.device_height_m, C, (20.0, 20.0, 0.5), (0.01, 2e-5))) == 4

@@ -113,7 +113,7 @@ class PositionConfig:
     max_excluded_share: float = 0.0
     path_rel_sigma: float = 0.002
     air_rel_sigma: float = 0.003
-    wind_sigma_m_s: float = 1.5
+    wind_sigma_m_s: float = 2.0
 
     def __post_init__(self):
         for name, most in (("path_rel_sigma", 0.1), ("air_rel_sigma", 0.1), ("wind_sigma_m_s", 20.0)):

@@ -18,6 +18,12 @@ receiver really detects; :func:`coverage_counts` is the installer's
 planning rule, and ``bench/calibrate_sim.py`` reports the share of frames
 with a fix on simulated walks.
 
+Candidates are poles on a grid of free ground and wall mounts on fire walls and
+buildings (:func:`_mount_points`); at most ``max_beacons`` = 24, so that two bands
+of 80 ms slots make a frame of at most 0.96 s. On site 2 the mounts raised the
+share of heavy points hearing four by the planning rule from 0.41 (20 poles) to
+0.48, and by the simulated channel (:func:`heard_by_channel`) from 0.79 to 0.97.
+
 Bands and slots: beacons alternate between ``bands`` (frequency division:
 each beacon's chirp sweeps its own sub-band, ``f0_hz``/``f1_hz`` in
 ``site.toml``), and within a band take TDMA slots greedily so that slot-mates
