@@ -379,15 +379,21 @@ def _consider_covariance(ranges: list[BeaconRange], x: np.ndarray, cov: np.ndarr
 
         # P_c = P + K·G·Σ·Gᵀ·Kᵀ,  Σ = diag(σ_w², σ_w², σ_k²)
     """
-    s = np.array([[r.east_m, r.north_m, r.up_m] for r in ranges])
-    w = 1.0 / np.array([r.sigma_m for r in ranges]) ** 2
-    d = np.column_stack([x[0] - s[:, 0], x[1] - s[:, 1], h - s[:, 2]])
-    r = np.linalg.norm(d, axis=1)
-    jac = np.column_stack([d[:, 0] / r, d[:, 1] / r, np.full(len(r), c)])
-    gain = cov @ (jac * w[:, None]).T                                  # (3, n)
-    g = np.column_stack([-d[:, 0] / c * config.wind_sigma_m_s, -d[:, 1] / c * config.wind_sigma_m_s,
-                         -r * config.air_rel_sigma])                   # G·Σ^½, (n, 3)
-    kg = gain @ g
+    # K·G = P·Σᵢ wᵢ·jᵢ·gᵢᵀ: one 3×3 sum over the ranges (scalar Python: a frame has a few to a few
+    # tens, and numpy's per-call overhead would cost the receiver several % of its time).
+    e, n = float(x[0]), float(x[1])
+    sw, sk = config.wind_sigma_m_s / c, config.air_rel_sigma
+    m = [[0.0] * 3 for _ in range(3)]
+    for r in ranges:
+        de, dn, du = e - r.east_m, n - r.north_m, h - r.up_m
+        dist = math.sqrt(de * de + dn * dn + du * du)
+        w = 1.0 / (r.sigma_m * r.sigma_m)
+        j = (w * de / dist, w * dn / dist, w * c)
+        g = (-de * sw, -dn * sw, -dist * sk)                    # G·Σ^½ row
+        for a in range(3):
+            for b in range(3):
+                m[a][b] += j[a] * g[b]
+    kg = np.asarray(cov) @ np.array(m)
     out = cov + kg @ kg.T
     return 0.5 * (out + out.T)
 

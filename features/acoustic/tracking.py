@@ -42,7 +42,15 @@ class ClockPositionTracker:
     tentative fix is then reported for its own frame
     (:meth:`take_confirmed_tentative`). After a confirmed lock the clock offset
     is known up to drift: a re-acquisition must agree with it within
-    ``max_drift_ppm`` over the time since, plus 1 ms.
+    ``max_drift_ppm`` over the time since, plus 1 ms. With
+    ``clock_aided_reacquisition`` (default) the re-acquisition instead votes over
+    position alone with the clock filter's prediction (:meth:`_acquire_with_clock`),
+    accepts ``reacquisition_min_beacons`` (4) with the clock prior, refuses a fix
+    another solution fits as well (:meth:`mirror_free`), and is confirmed by a second
+    sane fix on four beacons or more between the two frames (issue 11, defect 7).
+    Tracked frames gate each arrival on its innovation at the constant-velocity
+    prediction (:func:`_innovation_gate`) before the exclusion, which may leave out up
+    to ``track_excluded_share`` of the rest.
 
     Tracking (a fix at most ``track_timeout_s`` old): the window is centred on
     the arrival predicted from the last fix, ``tx + ‖p − s_b‖/c + δ``, with a
@@ -326,6 +334,7 @@ class ClockPositionTracker:
 
     @staticmethod
     def _tx_of(items: list, i: int, t: float) -> float:
+        """Emission time of beacon ``i``'s candidate arrival ``t`` among the (index, tx, t) items."""
         return next(tx for j, tx, tt in items if j == i and tt == t)
 
     def mirror_free(self, fix: AcousticFix, ranges_fix) -> bool:
