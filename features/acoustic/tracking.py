@@ -707,7 +707,7 @@ class ClockPositionTracker:
 
 TORSO_RADIUS_M = 0.13
 """Radius of the cylinder a waist-worn receiver's torso is taken for, m (half the median adult waist
-depth, 0.25–0.27 m; ANSUR II anthropometric survey, Gordon et al. 2014): see :func:`frame_ranges`."""
+depth, 0.22–0.25 m for women and men; ANSUR II anthropometric survey, Gordon et al. 2014): see :func:`frame_ranges`."""
 
 
 def _inside(x, site: Site, margin_m: float = 5.0) -> bool:
@@ -811,7 +811,7 @@ def frame_ranges(used: list[ChirpDetection], site: Site, c: float, bandwidth: di
     The wearer's body. A waist-worn device hears a beacon behind the wearer only round the torso:
     the creeping path round a cylinder of radius R is R·(θ − π/2) longer for a beacon θ off the
     walking direction (θ > π/2; Keller 1962, geometrical theory of diffraction), 0.1–0.3 m for a
-    torso of 0.26 m waist depth (ANSUR II, men's median 0.25–0.27 m: R ≈ :data:`TORSO_RADIUS_M`).
+    torso of 0.22–0.25 m waist depth (ANSUR II means, women and men: R ≈ :data:`TORSO_RADIUS_M`).
     While walking (≥ 0.5 m/s, the direction from the track's velocity, the position from its
     prediction ``position_en``) that excess is taken off the range and a third of it added as σ
     (the radius and the device's place on the belt vary). Left uncorrected, beacons behind read
