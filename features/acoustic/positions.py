@@ -383,19 +383,28 @@ def _consider_covariance(ranges: list[BeaconRange], x: np.ndarray, cov: np.ndarr
     # tens, and numpy's per-call overhead would cost the receiver several % of its time).
     e, n = float(x[0]), float(x[1])
     sw, sk = config.wind_sigma_m_s / c, config.air_rel_sigma
-    m = [[0.0] * 3 for _ in range(3)]
+    m00 = m01 = m02 = m10 = m11 = m12 = m20 = m21 = m22 = 0.0
     for r in ranges:
         de, dn, du = e - r.east_m, n - r.north_m, h - r.up_m
         dist = math.sqrt(de * de + dn * dn + du * du)
         w = 1.0 / (r.sigma_m * r.sigma_m)
-        j = (w * de / dist, w * dn / dist, w * c)
-        g = (-de * sw, -dn * sw, -dist * sk)                    # G·Σ^½ row
-        for a in range(3):
-            for b in range(3):
-                m[a][b] += j[a] * g[b]
-    kg = np.asarray(cov) @ np.array(m)
-    out = cov + kg @ kg.T
-    return 0.5 * (out + out.T)
+        j0, j1, j2 = w * de / dist, w * dn / dist, w * c          # wᵢ·jᵢ
+        g0, g1, g2 = -de * sw, -dn * sw, -dist * sk               # gᵢ·Σ^½
+        m00 += j0 * g0
+        m01 += j0 * g1
+        m02 += j0 * g2
+        m10 += j1 * g0
+        m11 += j1 * g1
+        m12 += j1 * g2
+        m20 += j2 * g0
+        m21 += j2 * g1
+        m22 += j2 * g2
+    p = cov.tolist()
+    kg = [(q[0] * m00 + q[1] * m10 + q[2] * m20, q[0] * m01 + q[1] * m11 + q[2] * m21,
+           q[0] * m02 + q[1] * m12 + q[2] * m22) for q in p]
+    # P_c = P + (KG)(KG)ᵀ, symmetric by construction
+    return np.array([[p[a][b] + kg[a][0] * kg[b][0] + kg[a][1] * kg[b][1] + kg[a][2] * kg[b][2]
+                      for b in range(3)] for a in range(3)])
 
 
 def _inverse3_batch(m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
