@@ -9,6 +9,9 @@ import numpy as np
 import pytest
 
 from features.acoustic.positions import RANGE_SIGMA_FLOOR_M, BeaconRange, PositionConfig, solve_position, toa_range_sigma_m
+
+EXACT = PositionConfig(path_rel_sigma=0.0, air_rel_sigma=0.0, wind_sigma_m_s=0.0)
+"""The sound speed is exact in these tests: no air terms (PositionConfig's docstring)."""
 from features.acoustic.detection import AudioTiming, DetectorConfig, detect_frames, speed_of_sound_m_s
 from features.site import AcousticConfig, Beacon, Grid, Origin, Site
 from tests.acoustic_synth import static_capture, write_wav
@@ -36,7 +39,7 @@ def _ranges(site, east, north, clock_s, bias=None, sigma=0.01):
 
 def test_exact_ranges_give_exact_fix_and_spd_covariance():
     site = _ring_site()
-    fix = solve_position(_ranges(site, 12.3, 17.9, 0.0123), site, C)
+    fix = solve_position(_ranges(site, 12.3, 17.9, 0.0123), site, C, EXACT)
     assert fix.east_m == pytest.approx(12.3, abs=1e-6)
     assert fix.north_m == pytest.approx(17.9, abs=1e-6)
     assert fix.clock_offset_s == pytest.approx(0.0123, abs=1e-9)
@@ -55,7 +58,7 @@ def test_covariance_matches_monte_carlo_scatter():
     for _ in range(300):
         ranges = [BeaconRange(r.beacon_id, r.east_m, r.north_m, r.up_m, r.pseudorange_m + rng.normal(0, 0.02), 0.02,
                               r.arrival_s) for r in _ranges(site, 10.0, 20.0, 0.0)]
-        fix = solve_position(ranges, site, C, PositionConfig(chi2_alpha=1e-9))
+        fix = solve_position(ranges, site, C, PositionConfig(chi2_alpha=1e-9, path_rel_sigma=0.0, air_rel_sigma=0.0, wind_sigma_m_s=0.0))
         errs.append((fix.east_m - 10.0, fix.north_m - 20.0))
         cov = fix.covariance
     scatter = np.cov(np.array(errs).T)
@@ -68,12 +71,12 @@ def test_nlos_biased_beacon_is_rejected():
     rng = np.random.default_rng(1)
     ranges = [BeaconRange(r.beacon_id, r.east_m, r.north_m, r.up_m, r.pseudorange_m + rng.normal(0, 0.01), 0.01,
                           r.arrival_s) for r in _ranges(site, 8.0, 11.0, -0.004, bias={3: 2.5})]
-    fix = solve_position(ranges, site, C)
+    fix = solve_position(ranges, site, C, EXACT)
     assert fix.rejected_ids == (3,)
     assert math.hypot(fix.east_m - 8.0, fix.north_m - 11.0) < 0.03
     # Without exclusion the 2.5 m bias drags the fix by decimetres (σ = 10 m for every range:
     # the same least-squares solution, a chi² far below any test limit).
-    naive = solve_position([r._replace(sigma_m=10.0) for r in ranges], site, C)
+    naive = solve_position([r._replace(sigma_m=10.0) for r in ranges], site, C, EXACT)
     assert naive.rejected_ids == ()
     assert math.hypot(naive.east_m - 8.0, naive.north_m - 11.0) > 0.1
 
@@ -81,9 +84,9 @@ def test_nlos_biased_beacon_is_rejected():
 def test_three_beacons_exactly_determined_and_two_refused():
     site = _ring_site()
     r = _ranges(site, 15.0, 14.0, 0.002)
-    fix = solve_position([r[0], r[2], r[5]], site, C)
+    fix = solve_position([r[0], r[2], r[5]], site, C, EXACT)
     assert fix.n_beacons == 3 and fix.east_m == pytest.approx(15.0, abs=1e-5)
-    assert solve_position(r[:2], site, C) is None
+    assert solve_position(r[:2], site, C, EXACT) is None
 
 
 def test_toa_sigma_falls_with_snr_to_the_floor():
@@ -238,6 +241,6 @@ def test_degenerate_geometry_gives_no_exception():
     site = _ring_site()
     flat = [BeaconRange(r.beacon_id, r.east_m, r.north_m, site.device_height_m, r.pseudorange_m, 0.05, r.arrival_s)
             for r in _ranges(site, 15.0, 0.0, 0.0)]
-    fix = solve_position(flat, site, C, start=np.array([15.0, 0.0, 0.0]))
+    fix = solve_position(flat, site, C, EXACT, start=np.array([15.0, 0.0, 0.0]))
     assert fix is None or math.hypot(fix.east_m - 15.0, fix.north_m) < 0.3
-    assert solve_position([r._replace(sigma_m=0.0) for r in flat], site, C) is None
+    assert solve_position([r._replace(sigma_m=0.0) for r in flat], site, C, EXACT) is None

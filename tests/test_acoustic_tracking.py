@@ -22,7 +22,8 @@ _NAN_FEATURES = CirFeatures(*([float("nan")] * 9))
 
 def _tracker(site):
     timing = AudioTiming(start_s=0.0, start_uncertainty_s=0.02, frame_phase_s=0.0)
-    positions = PositionConfig(max_clock_offset_s=0.07, motion_speed_m_s=1.4)
+    positions = PositionConfig(max_clock_offset_s=0.07, motion_speed_m_s=1.4, path_rel_sigma=0.0, air_rel_sigma=0.0,
+                               wind_sigma_m_s=0.0)   # exact sound speed in these hand-built frames
     return ClockPositionTracker(site, timing, 48_000.0, C, 90.0, positions)
 
 

@@ -68,7 +68,9 @@ def test_los_ranges_and_positions_on_simulated_cells(analysed):
                 sample = (d.arrival_s - timing.start_s) * 48_000
                 range_err.append(c * (sample - float(t["arrival_sample"])) / 48_000)
     assert len(range_err) >= 10 and len(pos_err) >= 10
-    assert np.median(np.abs(range_err)) < 0.03
+    # Re-pinned 0.03 → 0.05 for the coverage deployment (issue 10 item 7): its 2.9 kHz sub-bands
+    # halve the bandwidth, so the Cramér–Rao bound of an arrival doubles; measured 0.042 m.
+    assert np.median(np.abs(range_err)) < 0.05
     assert np.median(pos_err) < 0.40  # was < 0.10 before the true air (issue 10: wind, thermometer error)
 
 

@@ -40,7 +40,8 @@ def _run(ppm: float, ids: set, seed: int, n_frames: int = 40, sigma_m: float = 0
     site = square_site(5)
     rng = np.random.default_rng(seed)
     tracker = ClockPositionTracker(site, AudioTiming(0.0, 0.02, 0.0), 48_000.0, C, 90.0,
-                                   PositionConfig(max_clock_offset_s=0.07))
+                                   PositionConfig(max_clock_offset_s=0.07, path_rel_sigma=0.0, air_rel_sigma=0.0,
+                                                  wind_sigma_m_s=0.0))     # the sound speed is exact here
     bw = {b.id: 6000.0 for b in site.beacons}
     nees, failed, clock_z = [], 0, []
     for k in range(n_frames):

@@ -100,7 +100,12 @@ def test_walk_fixes_are_not_ahead_of_their_tags(ideal_air_walk):
     over speed within ±40 ms (measured −23 ms over 18 fixes, +4 ms before: this short walk
     rarely excludes a late beacon, and one fix's error/speed scatters by ~35 ms; a coupling
     correction of the wrong sign would read −100 ms). The before/after figure is from 300 s
-    walks: +35 → −2 ms held out, +149 → −0.5 ms on site 31 walk 2."""
+    walks: +35 → −2 ms held out, +149 → −0.5 ms on site 31 walk 2.
+
+    Re-pinned ±40 → ±70 ms: the receiver now takes the wearer's torso off the ranges of beacons
+    behind (``tracking.frame_ranges``, 0.1–0.2 m), and this walk is simulated without hardware
+    (no torso), so its fixes trail slightly: measured −51 ms (coverage deployment, 0.96 s frames).
+    On the held-out walks, which have the torso, the lag fell from 0.086 to 0.054 s."""
     from pipeline.walk_data import read_walk
 
     wd = read_walk(ideal_air_walk)
@@ -114,4 +119,4 @@ def test_walk_fixes_are_not_ahead_of_their_tags(ideal_air_walk):
             de, dn = e - np.interp(t, tr.t_s, tr.east_m), n - np.interp(t, tr.t_s, tr.north_m)
             lags.append((de * ve + dn * vn) / speed / speed)
     assert len(lags) >= 10
-    assert abs(float(np.median(lags))) < 0.04
+    assert abs(float(np.median(lags))) < 0.07

@@ -55,18 +55,26 @@ def test_plausible_yard(sites, seed):
 
 @pytest.mark.parametrize("seed", SEEDS)
 def test_beacons_on_poles_in_free_space_with_safe_slot_reuse(sites, seed):
+    """Default coverage deployment (issue 10 item 7): poles 1.2 m clear of structures, or wall mounts
+    0.15 m off a fire wall / building face; slot-mates of one band ≥ reuse distance apart.
+    Re-pinned: the grid's nearest-neighbour median 18–40 m → coverage 8–30 m (24 beacons, mounts
+    6 m apart on walls), len ≥ 9 → 15–24."""
     site = sites[seed]
-    b = np.array([[x.east_m, x.north_m, x.up_m, x.slot] for x in site.beacons])
-    assert len(b) >= 9
+    b = np.array([[x.east_m, x.north_m, x.up_m, x.slot, x.f0_hz or 0.0] for x in site.beacons])
+    assert 15 <= len(b) <= 24
     assert np.all((b[:, 2] >= 2.5) & (b[:, 2] <= 3.0))
-    assert not inside_boxes(b[:, :2], boxes_array(site.layout), margin_m=1.0).any()
+    solid = boxes_array([x for x in site.layout if not x.porous])
+    pole = ~inside_boxes(b[:, :2], solid, margin_m=1.0)
+    mount = ~inside_boxes(b[:, :2], solid, margin_m=0.05) & inside_boxes(b[:, :2], solid, margin_m=0.3)
+    assert np.all(pole | mount)
     d = np.hypot(b[:, None, 0] - b[None, :, 0], b[:, None, 1] - b[None, :, 1])
     np.fill_diagonal(d, np.inf)
     nn = d.min(axis=1)
-    assert 18.0 <= np.median(nn) <= 40.0
-    same = (b[:, None, 3] == b[None, :, 3])
+    assert 8.0 <= np.median(nn) <= 30.0
+    same = (b[:, None, 3] == b[None, :, 3]) & (b[:, None, 4] == b[None, :, 4])
     assert np.all(d[same] >= LayoutConfig().reuse_distance_m)
     assert site.acoustic.n_slots == int(b[:, 3].max()) + 1
+    assert site.acoustic.frame_s <= 1.0 + 1e-9
 
 
 @pytest.mark.parametrize("seed", SEEDS)

@@ -383,7 +383,11 @@ class _FrameDetector:
         self.tap_offsets = np.arange(self.cir_taps)
         # Pulse-compression test (module docstring): half the −20 dB main lobe each side, and the widest peak.
         self.main_taps = [max(1, int(math.ceil(0.5 * m * fs / dec))) for m in bank.mainlobe_s]
-        self.max_width_taps = max(3, int(math.ceil(_MAX_PEAK_WIDTH_S * fs / dec)))
+        # The widest peak scales with 1/B (6/B: 1 ms at 6 kHz, 2.1 ms for a 2.9 kHz sub-band, whose
+        # main lobe is twice as wide; with 1 ms the compression test dropped 47 % of the true chirps
+        # of a two-band deployment's walk).
+        self.max_width_taps = [max(3, int(math.ceil(max(_MAX_PEAK_WIDTH_S, 6.0 / s.bandwidth_hz) * fs / dec)))
+                               for s in unique]
         self.pending_cirs: list = []  # (frame list index, detection index, template, cir row, search start, noise power)
         self.held: list = []          # frames waiting for their CIR features: [k, start, detections, fix, tracking]
 
@@ -636,7 +640,7 @@ class _FrameDetector:
             toa = first_arrivals(rows, cir_lo, toa_taps, self.lead_taps, noise_power, self.cir_taps)
             main_taps = self.main_taps[t]
             for (w, _), found_r, j, row, lo, row_l in zip(group, toa, j_a, cirs, cir_lo, rows):
-                if found_r is not None and _compressed(row_l, first_tap, main_taps, self.max_width_taps, noise_power):
+                if found_r is not None and _compressed(row_l, first_tap, main_taps, self.max_width_taps[t], noise_power):
                     self.pending_cirs.append((slot, len(out), t, row, lo, noise_power))
                     out.append(ChirpDetection(frame, beacon_ids[w.beacon_index], w.tx_s,
                                               self.timing.start_s + (dec * (j + found_r[0]) - delay) / fs, found_r[1],

@@ -83,6 +83,25 @@ class PositionConfig:
     walks a 1.4 m/s prior let wrong associations pass the residual test and
     gave more but worse fixes (metres instead of decimetres); the fusion
     filter, which knows the motion, is the better place to weigh them.
+
+    ``max_excluded_share``: with many beacons heard (a coverage deployment hears 8–18) more
+    than ``max_excluded`` of them can be NLOS or wrongly associated; up to this share of the
+    frame's beacons may then be left out, by backward elimination once the subsets of a size
+    exceed :data:`_MAX_SUBSETS` (see :func:`_exclude`). 0 keeps ``max_excluded`` alone.
+
+    The air. The receiver turns times into ranges with c from the crew's thermometer, dry air:
+    the reading is off by ±1–2 K (0.17–0.35 % of c; c ∝ √T, Cramer 1993), humidity adds
+    0.2–0.3 %, a wind w along the path c_eff = c + w·n̂ (Ostashev & Wilson 2015), and warm
+    air over transformers differs path by path. ``path_rel_sigma`` is the per-path part (each
+    range's variance takes (ε·ρ)², :func:`features.acoustic.tracking.frame_ranges`);
+    ``air_rel_sigma`` (a common scale error of c) and ``wind_sigma_m_s`` (per horizontal axis)
+    are common to every beacon of a fix, which a diagonal weight cannot describe: they enter the
+    fix's covariance as *consider parameters* (Tapley, Schutz & Born, "Statistical Orbit
+    Determination", 2004, §6.3: P_c = P + K·G·Σ·Gᵀ·Kᵀ, K = (JᵀWJ)⁻¹JᵀW, G = ∂ρ/∂(w_e, w_n, k)),
+    without moving the estimate (:func:`_consider_covariance`). Without them a fix on 10–15
+    beacons claimed 3 cm while it stood 0.2–0.4 m off for tens of seconds in a steady wind
+    (NEES 40–200 on the coverage deployment's walks). Set all three to 0 for an exactly known
+    sound speed (Monte Carlo tests of the solver).
     """
 
     chi2_alpha: float = 1e-3
@@ -91,14 +110,23 @@ class PositionConfig:
     bounds_margin_m: float = 20.0
     motion_speed_m_s: float = 0.0
     max_excluded: int = 3
+    max_excluded_share: float = 0.0
+    path_rel_sigma: float = 0.002
+    air_rel_sigma: float = 0.003
+    wind_sigma_m_s: float = 2.0
 
     def __post_init__(self):
+        for name, most in (("path_rel_sigma", 0.1), ("air_rel_sigma", 0.1), ("wind_sigma_m_s", 20.0)):
+            if not 0 <= getattr(self, name) < most:
+                raise ConfigError(f"{name} must lie in [0, {most:g}), got {getattr(self, name)}")
         if self.max_clock_offset_s is not None and not self.max_clock_offset_s > 0:
             raise ConfigError(f"max_clock_offset_s must be positive, got {self.max_clock_offset_s}")
         if not self.bounds_margin_m >= 0:
             raise ConfigError(f"bounds_margin_m must be >= 0, got {self.bounds_margin_m}")
         if not isinstance(self.max_excluded, int) or self.max_excluded < 0:
             raise ConfigError(f"max_excluded must be an integer >= 0, got {self.max_excluded!r}")
+        if not 0 <= self.max_excluded_share < 0.5:
+            raise ConfigError(f"max_excluded_share must lie in [0, 0.5), got {self.max_excluded_share}")
         if not 0 <= self.motion_speed_m_s < 10:
             raise ConfigError(f"motion_speed_m_s must lie in [0, 10), got {self.motion_speed_m_s}")
         if not 0 < self.chi2_alpha < 1:
@@ -331,6 +359,8 @@ def solve_position(ranges: list[BeaconRange], site: Site, speed_m_s: float,
         ranges = [ranges[i] for i in keep]
     if not _plausible(x, site, config):
         return None
+    if config.air_rel_sigma > 0 or config.wind_sigma_m_s > 0:
+        cov = _consider_covariance(ranges, x, cov, h, speed_m_s, config)
     east, north, clock = x.tolist()
     t_stated = sum(r.arrival_s for r in ranges) / len(ranges) if t_ref_s is None else t_ref_s
     t_true = t_stated - clock
@@ -338,6 +368,43 @@ def solve_position(ranges: list[BeaconRange], site: Site, speed_m_s: float,
                        n_beacons=len(ranges), covariance=cov,
                        rms_residual_m=math.sqrt(float(res @ res) / len(res)),
                        used_ids=tuple(r.beacon_id for r in ranges), rejected_ids=tuple(rejected))
+
+
+def _consider_covariance(ranges: list[BeaconRange], x: np.ndarray, cov: np.ndarray, h: float, c: float,
+                         config: PositionConfig) -> np.ndarray:
+    """The fix covariance with the air's common errors as consider parameters (see :class:`PositionConfig`).
+
+    ρᵢ = rᵢ·(1 − w·n̂ᵢ/c − k) + c·δ, so ∂ρᵢ/∂w = −(p − sᵢ)_h/c and ∂ρᵢ/∂k = −rᵢ; the estimator's gain
+    K = P·JᵀW (the clock prior's row has no air term) maps them onto (e, n, δ):
+
+        # P_c = P + K·G·Σ·Gᵀ·Kᵀ,  Σ = diag(σ_w², σ_w², σ_k²)
+    """
+    # K·G = P·Σᵢ wᵢ·jᵢ·gᵢᵀ: one 3×3 sum over the ranges (scalar Python: a frame has a few to a few
+    # tens, and numpy's per-call overhead would cost the receiver several % of its time).
+    e, n = float(x[0]), float(x[1])
+    sw, sk = config.wind_sigma_m_s / c, config.air_rel_sigma
+    m00 = m01 = m02 = m10 = m11 = m12 = m20 = m21 = m22 = 0.0
+    for r in ranges:
+        de, dn, du = e - r.east_m, n - r.north_m, h - r.up_m
+        dist = math.sqrt(de * de + dn * dn + du * du)
+        w = 1.0 / (r.sigma_m * r.sigma_m)
+        j0, j1, j2 = w * de / dist, w * dn / dist, w * c          # wᵢ·jᵢ
+        g0, g1, g2 = -de * sw, -dn * sw, -dist * sk               # gᵢ·Σ^½
+        m00 += j0 * g0
+        m01 += j0 * g1
+        m02 += j0 * g2
+        m10 += j1 * g0
+        m11 += j1 * g1
+        m12 += j1 * g2
+        m20 += j2 * g0
+        m21 += j2 * g1
+        m22 += j2 * g2
+    p = cov.tolist()
+    kg = [(q[0] * m00 + q[1] * m10 + q[2] * m20, q[0] * m01 + q[1] * m11 + q[2] * m21,
+           q[0] * m02 + q[1] * m12 + q[2] * m22) for q in p]
+    # P_c = P + (KG)(KG)ᵀ, symmetric by construction
+    return np.array([[p[a][b] + kg[a][0] * kg[b][0] + kg[a][1] * kg[b][1] + kg[a][2] * kg[b][2]
+                      for b in range(3)] for a in range(3)])
 
 
 def _inverse3_batch(m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -433,13 +500,16 @@ def _exclude(ranges: list[BeaconRange], h: float, c: float, config: PositionConf
     (:func:`_gauss_newton_subsets`).
     Returns (kept indices, Gauss-Newton solution) or None. With n − k beacons
     kept, k NLOS-biased beacons can be excluded, which the classic one-at-a-time
-    leave-one-out cannot do reliably once two are biased.
+    leave-one-out cannot do reliably once two are biased. Where the budget runs out
+    (before, a frame of 13 or more beacons with one NLOS among them got no fix at all) or
+    ``max_excluded_share`` allows more exclusions, :func:`_backward_elimination` goes on.
     """
     n = len(ranges)
     n_prior = 0 if clock_prior is None else 1
     smallest = 4 - n_prior            # one degree of freedom left for the test
     sig = np.array([r.sigma_m for r in ranges])
     tried = 0
+    truncated = False
     for size in range(n - 1, max(smallest - 1, n - 1 - config.max_excluded), -1):
         combos = list(itertools.islice(itertools.combinations(range(n), size), _MAX_SUBSETS - tried + 1))
         truncated = tried + len(combos) > _MAX_SUBSETS
@@ -477,7 +547,44 @@ def _exclude(ranges: list[BeaconRange], h: float, c: float, config: PositionConf
                 m = masks[best]
                 return keep, (x[best], cov[best], res[best][m], sig[m], float(chi2[best]))
         if truncated:
+            break
+    if not truncated and math.floor(config.max_excluded_share * n) <= config.max_excluded:
+        return None
+    # Beyond the exhaustive search: its budget ran out (13 or more beacons), or more may be left out.
+    return _backward_elimination(ranges, h, c, config, start, clock_prior, position_prior, smallest)
+
+
+def _backward_elimination(ranges, h, c, config, start, clock_prior, position_prior, smallest):
+    """Iterative exclusion (RAIM FDE's one-at-a-time form; Brown 1992, "A baseline GPS RAIM scheme",
+    Navigation 39(3)): leave each remaining beacon out in turn (one batched solve), drop the one
+    whose removal leaves the smallest score (chi² plus the position prior's share), until the test
+    passes. Used beyond the exhaustive search's budget: at most ``max(max_excluded,
+    ⌊max_excluded_share·n⌋)`` beacons are dropped and at least ``smallest`` kept.
+    """
+    n = len(ranges)
+    n_prior = 0 if clock_prior is None else 1
+    most = max(config.max_excluded, math.floor(config.max_excluded_share * n))
+    sig = np.array([r.sigma_m for r in ranges])
+    keep = list(range(n))
+    x0 = start
+    while len(keep) - 1 >= smallest and n - len(keep) < most:
+        size = len(keep) - 1
+        masks = np.zeros((len(keep), n), dtype=bool)
+        masks[:, keep] = True
+        masks[np.arange(len(keep)), keep] = False
+        x, cov, res, chi2, ok = _gauss_newton_subsets(ranges, masks, h, c, config.max_iterations, x0, clock_prior)
+        score = np.where(ok, chi2, np.inf)
+        if position_prior is not None:
+            pe, pn, ps = position_prior
+            score = score + ((x[:, 0] - pe) ** 2 + (x[:, 1] - pn) ** 2) / ps ** 2
+        best = int(np.argmin(score))
+        if not np.isfinite(score[best]):
             return None
+        keep = [i for i in keep if i != keep[best]]
+        x0 = x[best]
+        if chi2[best] <= _chi2_limit(size + n_prior - 3, config.chi2_alpha):
+            m = masks[best]
+            return tuple(keep), (x[best], cov[best], res[best][m], sig[m], float(chi2[best]))
     return None
 
 

@@ -17,7 +17,8 @@ import statistics
 import numpy as np
 
 from features.acoustic.clock import ClockState
-from features.acoustic.positions import AcousticFix, BeaconRange, PositionConfig, solve_position, toa_range_sigma_m
+from features.acoustic.positions import (AcousticFix, BeaconRange, PositionConfig, _chi2_limit,
+                                        _gauss_newton, solve_position, toa_range_sigma_m)
 from features.acoustic.timing import AudioTiming, ChirpDetection, SearchWindow
 from features.site import Site
 
@@ -41,7 +42,15 @@ class ClockPositionTracker:
     tentative fix is then reported for its own frame
     (:meth:`take_confirmed_tentative`). After a confirmed lock the clock offset
     is known up to drift: a re-acquisition must agree with it within
-    ``max_drift_ppm`` over the time since, plus 1 ms.
+    ``max_drift_ppm`` over the time since, plus 1 ms. With
+    ``clock_aided_reacquisition`` (default) the re-acquisition instead votes over
+    position alone with the clock filter's prediction (:meth:`_acquire_with_clock`),
+    accepts ``reacquisition_min_beacons`` (4) with the clock prior, refuses a fix
+    another solution fits as well (:meth:`mirror_free`), and is confirmed by a second
+    sane fix on four beacons or more between the two frames (issue 11, defect 7).
+    Tracked frames gate each arrival on its innovation at the constant-velocity
+    prediction (:func:`_innovation_gate`) before the exclusion, which may leave out up
+    to ``track_excluded_share`` of the rest.
 
     Tracking (a fix at most ``track_timeout_s`` old): the window is centred on
     the arrival predicted from the last fix, ``tx + ‖p − s_b‖/c + δ``, with a
@@ -69,11 +78,14 @@ class ClockPositionTracker:
     nlos_slack_m = 10.0
     track_timeout_s = 4.0
     acquisition_min_beacons = 4
+    reacquisition_min_beacons = 4
+    clock_aided_reacquisition = True
     max_fix_sigma_m = 0.5
     residual_speed_m_s = 0.5
     max_turn_speed_m_s = 1.0
     static_agreement_m = 0.3
     max_rms_m = 0.5
+    track_excluded_share = 0.4
 
     def __init__(self, site: Site, timing: AudioTiming, fs_hz: float, c: float, r_max: float,
                  positions: PositionConfig, range_lag_s: dict | None = None):
@@ -91,12 +103,15 @@ class ClockPositionTracker:
         # test is what rejects wrong associations; tracking uses ``positions`` as given.
         self._acquire_config = positions
         self._verify_config = dataclasses.replace(positions, motion_speed_m_s=0.0, max_excluded=1)
-        self._track_config = positions
+        # A tracked frame of a coverage deployment hears 8–18 beacons, several NLOS: up to
+        # ``track_excluded_share`` of them may be excluded (positions._backward_elimination).
+        self._track_config = dataclasses.replace(
+            positions, max_excluded_share=max(positions.max_excluded_share, self.track_excluded_share))
         self._strict_config = dataclasses.replace(positions, motion_speed_m_s=0.0, max_excluded=0)
         # With the velocity known from the track, what remains of the motion is its change over
         # a frame (turns, stops): at most ``residual_speed_m_s``.
         self._compensated_config = dataclasses.replace(
-            positions, motion_speed_m_s=min(positions.motion_speed_m_s, self.residual_speed_m_s))
+            self._track_config, motion_speed_m_s=min(positions.motion_speed_m_s, self.residual_speed_m_s))
         self._skip_acquisition = False
         self.confirmed = False
         self._previous_fix: AcousticFix | None = None
@@ -106,6 +121,9 @@ class ClockPositionTracker:
         self._clock_anchor: tuple[float, float] | None = None
         self._clock: ClockState | None = None          # the two-state clock filter, from the first confirmed track
         self._anchor_fix: AcousticFix | None = None
+        self._reacquired: AcousticFix | None = None       # the clock-aided vote's fix (_acquire_with_clock)
+        self._tentative_clock_aided = False
+        self.mirror_refused = 0                            # re-acquisition fixes refused as ambiguous
 
     @property
     def grid_step_m(self) -> float:
@@ -169,6 +187,11 @@ class ClockPositionTracker:
         Returns beacon index → arrival time.
         """
         items = [(i, tx, t) for i, (tx, times) in candidates.items() for t in times]
+        self._reacquired = None
+        if self.clock_aided_reacquisition and self._clock is not None and items:
+            t_end = max((tx for tx, _ in candidates.values()), default=0.0) + self.r_max / self.c
+            if self._search_disk(t_end) is not None:
+                return self._acquire_with_clock(items)
         g = self.site.grid
         coarse = 4.0 * self.grid_step_m
         # The last beacon of the frame is heard up to r_max/c after its emission: the disk must hold
@@ -234,6 +257,127 @@ class ClockPositionTracker:
             if best_key is None or key > best_key:
                 best, best_key = refined, key
         return best
+
+    def _acquire_with_clock(self, items: list) -> dict:
+        """Re-acquisition with the clock known (issue 11, defect 7): a vote over position alone.
+
+        Only within the search disk of :meth:`_search_disk` (the receiver can have walked at most
+        ``max_speed_m_s`` since the anchoring fix); beyond it the full vote of :meth:`acquire` runs.
+
+        After a confirmed track the two-state clock filter (:mod:`features.acoustic.clock`) predicts
+        δ to σ_δ (10 ppm of drift known to ~1 ppm: tens of µs after a minute), so each candidate
+        arrival is a range ρ − c·δ̂, not a pseudorange, and a grid point p gets the vote of every
+        beacon with a candidate within ``tol`` of ‖p − s_b‖ (tol = half the grid diagonal plus
+        3·c·σ_δ plus 0.3 m): the Hough transform of :meth:`acquire` with the clock dimension
+        collapsed, far fewer chance alignments, and three beacons enough. The best few points
+        (distinct by 3 m) are solved by least squares with the clock prior (3 beacons leave one
+        degree of freedom); the fix keeping most beacons, then the smallest rms, wins. The solution
+        is kept for :meth:`frame_done` (its start, and the mirror-solution check).
+        """
+        t_frame = sum(tx for _, tx, _ in items) / len(items) + 0.5 * self.r_max / self.c
+        clock = self._clock.predict(t_frame)
+        sigma_d = math.sqrt(max(clock.p00, 0.0))
+        disk = self._search_disk(t_frame + 0.5 * self.r_max / self.c)
+        if disk is None:
+            return {}
+        g, h, c = self.site.grid, self.site.device_height_m, self.c
+        step = self.grid_step_m
+        ee, nn = np.meshgrid(np.arange(g.east_min_m, g.east_max_m + step, step),
+                             np.arange(g.north_min_m, g.north_max_m + step, step))
+        ee, nn = ee.ravel(), nn.ravel()
+        if disk is not None:
+            inside = np.hypot(ee - disk[0], nn - disk[1]) <= disk[2] + step
+            ee, nn = ee[inside], nn[inside]
+        if len(ee) == 0:
+            return {}
+        items = sorted(items)                                        # by beacon index, then time
+        bi = np.array([i for i, _, _ in items])
+        rng_m = c * (np.array([t - tx for _, tx, t in items]) - clock.offset_s)
+        b = self.site.beacons
+        bpos = np.array([[b[i].east_m, b[i].north_m, b[i].up_m] for i in bi])
+        tol = step / math.sqrt(2.0) + 3.0 * c * sigma_d + 0.3
+        r = np.sqrt((ee[:, None] - bpos[None, :, 0]) ** 2 + (nn[:, None] - bpos[None, :, 1]) ** 2
+                    + (h - bpos[None, :, 2]) ** 2)
+        agree = np.abs(rng_m[None, :] - r) <= tol                   # (n_points, n_candidates)
+        starts = np.flatnonzero(np.r_[True, bi[1:] != bi[:-1]])
+        votes = np.logical_or.reduceat(agree, starts, axis=1).sum(axis=1)   # distinct beacons per point
+        order = np.argsort(-votes, kind="stable")
+        seeds: list = []
+        for k in order[:400].tolist():
+            if votes[k] < 3 or len(seeds) >= 6:
+                break
+            if all(math.hypot(ee[k] - p[0], nn[k] - p[1]) > 3.0 for p in seeds):
+                seeds.append((float(ee[k]), float(nn[k])))
+        best, best_key = {}, None
+        prior = (clock.offset_s, math.sqrt(clock.p00 + 1e-14))
+        for pe, pn in seeds:
+            rr = np.sqrt((pe - bpos[:, 0]) ** 2 + (pn - bpos[:, 1]) ** 2 + (h - bpos[:, 2]) ** 2)
+            chosen: dict = {}
+            for k, i in enumerate(bi.tolist()):
+                if abs(rng_m[k] - rr[k]) <= tol and (i not in chosen or items[k][2] < chosen[i]):
+                    chosen[i] = items[k][2]                          # the earliest: echoes come later
+            # The frame's chirps are heard up to a frame apart while the receiver walks: the range
+            # variance takes the walking term of PositionConfig (½·(v·(tᵢ − t̄))²).
+            t_bar = sum(chosen.values()) / max(len(chosen), 1)
+            v = self._track_config.motion_speed_m_s
+            ranges = [BeaconRange(b[i].id, b[i].east_m, b[i].north_m, b[i].up_m, c * (t - self._tx_of(items, i, t)),
+                                  math.sqrt(0.05 ** 2 + 0.5 * (v * (t - t_bar)) ** 2), t) for i, t in chosen.items()]
+            fix = solve_position(ranges, self.site, c, self._verify_config, np.array([pe, pn, clock.offset_s]),
+                                 prior) if len(ranges) >= 3 else None
+            if fix is None or math.hypot(fix.east_m - pe, fix.north_m - pn) > 2.0 * tol + step:
+                continue
+            key = (fix.n_beacons, -fix.rms_residual_m)
+            if best_key is None or key > best_key:
+                kept = {i: t for i, t in chosen.items() if b[i].id in fix.used_ids}
+                best, best_key, self._reacquired = kept, key, fix
+        return best
+
+    @staticmethod
+    def _tx_of(items: list, i: int, t: float) -> float:
+        """Emission time of beacon ``i``'s candidate arrival ``t`` among the (index, tx, t) items."""
+        return next(tx for j, tx, tt in items if j == i and tt == t)
+
+    def mirror_free(self, fix: AcousticFix, ranges_fix) -> bool:
+        """No second solution fits the same beacons (the mirror-solution check).
+
+        A pseudorange fix on few beacons can have two solutions (Abel & Chaffee 1991, IEEE Trans.
+        AES 27(6); with three beacons and a free clock both fit exactly). Gauss-Newton is started
+        from the fix mirrored across the beacons' principal axis and through their centroid, and
+        from the four quarters of the site (with the clock prior); if any converges more than 1 m away, outside every solid
+        structure of the site's layout, and passes the same chi-square test, the fix is ambiguous
+        and refused. Beacons heard in a line (wall mounts along one face) mirror a fix across it
+        at any number of beacons.
+        """
+        ranges, prior = ranges_fix
+        h, c = self.site.device_height_m, self.c
+        xy = np.array([[r.east_m, r.north_m] for r in ranges])
+        centre = xy.mean(axis=0)
+        # The mirror image across the beacons' principal axis (their line, when they stand in one).
+        _, vecs = np.linalg.eigh((xy - centre).T @ (xy - centre))
+        u = vecs[:, -1]
+        p = np.array([fix.east_m, fix.north_m]) - centre
+        mirror = centre + 2.0 * (u @ p) * u - p
+        g = self.site.grid
+        starts = [(float(mirror[0]), float(mirror[1])), (2 * centre[0] - fix.east_m, 2 * centre[1] - fix.north_m)] + [
+            (g.east_min_m + fe * (g.east_max_m - g.east_min_m), g.north_min_m + fn * (g.north_max_m - g.north_min_m))
+            for fe in (0.25, 0.75) for fn in (0.25, 0.75)]
+        dof = len(ranges) + (prior is not None) - 3
+        limit = _chi2_limit(dof, self._verify_config.chi2_alpha) if dof > 0 else math.inf
+        for e0, n0 in starts:
+            sol = _gauss_newton(ranges, h, c, self._verify_config.max_iterations,
+                                np.array([e0, n0, fix.clock_offset_s]), prior)
+            if sol is None:
+                continue
+            x, _, _, _, chi2 = sol
+            if (math.hypot(x[0] - fix.east_m, x[1] - fix.north_m) > 1.0 and chi2 <= limit and _inside(x, self.site)
+                    and not self._in_solid(x)):
+                return False
+        return True
+
+    def _in_solid(self, x) -> bool:
+        """Whether (east, north) lies inside a solid box of the layout (no receiver can be there)."""
+        return any(not b.porous and b.east_min_m < x[0] < b.east_max_m and b.north_min_m < x[1] < b.north_max_m
+                   for b in self.site.layout)
 
     def _search_disk(self, t_s: float) -> tuple[float, float, float] | None:
         """(east, north, radius) the receiver can have reached by ``t_s`` since the last fix that
@@ -351,6 +495,8 @@ class ClockPositionTracker:
 
     def skip_acquisition(self) -> bool:
         """After a failed attempt the next frame skips acquisition (halves its cost while unlocked)."""
+        if self.clock_aided_reacquisition and self._clock is not None:
+            return False               # clock-aided re-acquisition votes over a disk: cheap, never skipped
         skip = self._skip_acquisition
         self._skip_acquisition = not skip
         return skip
@@ -408,6 +554,19 @@ class ClockPositionTracker:
             drift = clock_pred.drift
         elif self.last_fix is not None:
             self.last_fix, self._previous_fix, self.confirmed = None, None, False   # lock lost: re-acquire
+        reacquiring = not tracking and self.clock_aided_reacquisition and self._clock is not None
+        if reacquiring:
+            # Re-acquisition after a confirmed track: the clock filter's prediction is the prior
+            # (three beacons then suffice; see _acquire_with_clock), at the fix's time.
+            used = [d for d in detections if d.associated]
+            t_fix = frame_start_s + 0.5 * self.site.acoustic.frame_s
+            if used:
+                lag = self.range_lag_s or {}
+                t_fix = sum(d.arrival_s + lag.get(d.beacon_id, 0.0) for d in used) / len(used) \
+                    - self._clock.predict(t_fix).offset_s
+            clock_pred = self._clock.predict(t_fix)
+            prior = (clock_pred.offset_s, math.sqrt(max(clock_pred.p00, 0.0) + 1e-14))
+            drift = clock_pred.drift
         velocity = self._velocity() if tracking else None
         config = self._acquire_config if not tracking else (
             self._track_config if velocity is None else self._compensated_config)
@@ -418,8 +577,9 @@ class ClockPositionTracker:
             dt = max(0.0, frame_start_s + 0.5 * self.site.acoustic.frame_s - last.t_s)
             predicted = (last.east_m + velocity[0] * dt, last.north_m + velocity[1] * dt, math.sqrt(
                 last.covariance[0, 0] + last.covariance[1, 1] + (self.max_turn_speed_m_s * dt) ** 2 + 0.25))
-        fix = frame_fix(detections, self.site, self.c, bandwidth, config,
-                        self.last_fix if tracking else None, prior, velocity, predicted, self.range_lag_s, drift)
+        start = self.last_fix if tracking else (self._reacquired if reacquiring else None)
+        fix = frame_fix(detections, self.site, self.c, bandwidth, config, start, prior, velocity, predicted,
+                        self.range_lag_s, drift)
         if fix is None or not self._clock_plausible(fix):
             if tracking and not self.confirmed:
                 self.last_fix = None                         # a tentative lock not confirmed is dropped
@@ -428,10 +588,22 @@ class ClockPositionTracker:
             # Acquisition: a tentative lock on four or more beacons that passed the residual test,
             # reported only once the next frame confirms it. After an earlier confirmed lock the
             # clock offset is known up to drift, which a wrong association rarely matches.
-            if fix.n_beacons < self.acquisition_min_beacons or not self._clock_continues(fix):
+            least = self.reacquisition_min_beacons if reacquiring else self.acquisition_min_beacons
+            if fix.n_beacons < least or not self._clock_continues(fix):
                 return None
+            if reacquiring or fix.n_beacons <= 5:
+                used = [d for d in detections if d.associated and d.beacon_id in fix.used_ids]
+                ranges, _ = frame_ranges(used, self.site, self.c, bandwidth, config, None, self.range_lag_s, drift)
+                if not self.mirror_free(fix, (ranges, prior)):
+                    self.mirror_refused += 1
+                    return None
             self.last_fix, self.confirmed, self._tentative_ids = fix, False, set(fix.used_ids)
             self._tentative_detections = [d for d in detections if d.beacon_id in fix.used_ids]
+            self._tentative_clock_aided = reacquiring
+            if reacquiring:
+                # Solved with the filter's prior: the fix's δ is the filter's posterior (no double counting).
+                self._clock = clock_pred.conditioned(fix.clock_offset_s, float(fix.covariance[2, 2]))._replace(
+                    t_s=fix.t_s)
             return None
         last = self.last_fix
         if not self._continues(fix, last, velocity):
@@ -446,8 +618,15 @@ class ClockPositionTracker:
             # Confirmation: a second sane fix on four or more beacons continuing the first, and
             # five beacons or more between the two, so that a standing receiver repeating one
             # wrong association of the same four arrivals never confirms it.
-            if fix.n_beacons < 4 or (len(self._tentative_ids | set(fix.used_ids)) < 5
-                                     and not self._static_confirmation(detections, fix, bandwidth)):
+            if self._tentative_clock_aided:
+                # With the clock known to µs a chance alignment of wrong arrivals must fit ranges, not
+                # pseudoranges, twice: a second sane fix continuing it confirms, on four beacons or more
+                # between the two frames.
+                if len(self._tentative_ids | set(fix.used_ids)) < 4:
+                    self.last_fix = None
+                    return None
+            elif fix.n_beacons < 4 or (len(self._tentative_ids | set(fix.used_ids)) < 5
+                                       and not self._static_confirmation(detections, fix, bandwidth)):
                 self.last_fix = None
                 return None
             self.confirmed = True
@@ -526,6 +705,17 @@ class ClockPositionTracker:
         return abs(fix.clock_offset_s - d0) <= self.max_drift_ppm * 1e-6 * abs(fix.t_s - t0) + 1e-3
 
 
+TORSO_RADIUS_M = 0.13
+"""Radius of the cylinder a waist-worn receiver's torso is taken for, m (half the median adult waist
+depth, 0.22–0.25 m for women and men; ANSUR II anthropometric survey, Gordon et al. 2014): see :func:`frame_ranges`."""
+
+
+def _inside(x, site: Site, margin_m: float = 5.0) -> bool:
+    g = site.grid
+    return (g.east_min_m - margin_m <= x[0] <= g.east_max_m + margin_m
+            and g.north_min_m - margin_m <= x[1] <= g.north_max_m + margin_m)
+
+
 def _top_stable(values: np.ndarray, k: int) -> np.ndarray:
     """Indices of the ``k`` largest ``values``, largest first, ties in index order.
 
@@ -573,24 +763,13 @@ def frame_fix(detections: list[ChirpDetection], site: Site, c: float, bandwidth:
     offset at arrival i is δ + δ̇·(tᵢ − t̄), so each pseudorange loses c·δ̇·(tᵢ − t̄) and the fix's
     δ is the offset at t̄ (100 ppm over a 2 s frame is ±3.4 cm of range otherwise).
     """
-    by_id = site.beacon_by_id
     used = [d for d in detections if d.associated]
     if len(used) < 3:
         return None
-    lag = range_lag_s or {}
-    t_range = [d.arrival_s + lag.get(d.beacon_id, 0.0) for d in used]
-    t_mean = sum(t_range) / len(used)
-    ve, vn = (0.0, 0.0) if velocity_m_s is None else velocity_m_s
-    # Walking during the frame: σᵢ² += ½·(v·(tᵢ − t̄))² (see PositionConfig; v = 0 when standing).
-    v_motion = config.motion_speed_m_s if config.motion_speed_m_s > 0 else 0.0
-    ranges = []
-    for d, t_i in zip(used, t_range):
-        b, dt = by_id[d.beacon_id], t_i - t_mean
-        sigma_m = toa_range_sigma_m(d.snr_db, bandwidth[d.beacon_id], c)
-        if v_motion:
-            sigma_m = math.sqrt(sigma_m ** 2 + 0.5 * (v_motion * dt) ** 2)
-        ranges.append(BeaconRange(d.beacon_id, b.east_m - ve * dt, b.north_m - vn * dt, b.up_m,
-                                  c * (d.arrival_s - d.tx_s - clock_drift * dt), sigma_m, t_i))
+    ranges, t_mean = frame_ranges(used, site, c, bandwidth, config, velocity_m_s, range_lag_s, clock_drift,
+                                  position_prior)
+    if position_prior is not None and clock_prior is not None:
+        ranges = _innovation_gate(ranges, site.device_height_m, c, position_prior, clock_prior)
     # Start from the previous fix, moved to the track's prediction when there is one (fewer iterations).
     if start is None:
         x0 = None
@@ -600,6 +779,75 @@ def frame_fix(detections: list[ChirpDetection], site: Site, c: float, bandwidth:
         x0 = (start.east_m, start.north_m, start.clock_offset_s)
     return solve_position(ranges, site, c, config, x0, clock_prior, position_prior,
                           t_ref_s=t_mean if velocity_m_s is not None else None)
+
+
+def _innovation_gate(ranges: list[BeaconRange], h: float, c: float, position_prior, clock_prior,
+                     k: float = 3.0, nlos_m: float = 1.0) -> list[BeaconRange]:
+    """The ranges whose innovation at the track's prediction is within the gate (Bar-Shalom, Li &
+    Kirubarajan 2001, §2.4.3 validation gate), or all of them when fewer than three would remain.
+
+    ν = ρᵢ − ‖p̂ − sᵢ‖ − c·δ̂ must lie within −k·s … k·s + ``nlos_m`` (an NLOS first path is
+    late, never early), s² = σ_p² + σᵢ² + (c·σ_δ)² with σ_p the prediction's horizontal σ. A
+    coverage deployment's tracked frame holds 8–18 arrivals of which 2–4 are another beacon's
+    chirp or an echo, metres off: left to the exclusion they exhausted its budget and cost the
+    frame its fix.
+    """
+    pe, pn, ps = position_prior
+    d0, sd = clock_prior
+    kept = []
+    for r in ranges:
+        nu = r.pseudorange_m - math.sqrt((pe - r.east_m) ** 2 + (pn - r.north_m) ** 2 + (h - r.up_m) ** 2) - c * d0
+        gate = k * math.sqrt(ps * ps + r.sigma_m * r.sigma_m + (c * sd) ** 2)
+        if -gate <= nu <= gate + nlos_m:
+            kept.append(r)
+    return kept if len(kept) >= 3 else ranges
+
+
+def frame_ranges(used: list[ChirpDetection], site: Site, c: float, bandwidth: dict, config: PositionConfig,
+                 velocity_m_s=None, range_lag_s: dict | None = None, clock_drift: float = 0.0,
+                 position_en=None) -> tuple[list[BeaconRange], float]:
+    """The pseudoranges of :func:`frame_fix` (motion-, lag- and drift-compensated) and their mean time t̄.
+
+    The wearer's body. A waist-worn device hears a beacon behind the wearer only round the torso:
+    the creeping path round a cylinder of radius R is R·(θ − π/2) longer for a beacon θ off the
+    walking direction (θ > π/2; Keller 1962, geometrical theory of diffraction), 0.1–0.3 m for a
+    torso of 0.22–0.25 m waist depth (ANSUR II means, women and men: R ≈ :data:`TORSO_RADIUS_M`).
+    While walking (≥ 0.5 m/s, the direction from the track's velocity, the position from its
+    prediction ``position_en``) that excess is taken off the range and a third of it added as σ
+    (the radius and the device's place on the belt vary). Left uncorrected, beacons behind read
+    long and the fix leads the walker: on the coverage deployment's walks the fixes stood
+    0.14 m ahead (0.13 s of "time-tag lag" at walking pace).
+    """
+    by_id = site.beacon_by_id
+    lag = range_lag_s or {}
+    t_range = [d.arrival_s + lag.get(d.beacon_id, 0.0) for d in used]
+    t_mean = sum(t_range) / len(used)
+    ve, vn = (0.0, 0.0) if velocity_m_s is None else velocity_m_s
+    # Walking during the frame: σᵢ² += ½·(v·(tᵢ − t̄))² (see PositionConfig; v = 0 when standing).
+    v_motion = config.motion_speed_m_s if config.motion_speed_m_s > 0 else 0.0
+    ranges = []
+    speed = math.hypot(ve, vn)
+    body = position_en is not None and speed >= 0.5
+    for d, t_i in zip(used, t_range):
+        b, dt = by_id[d.beacon_id], t_i - t_mean
+        sigma_m = toa_range_sigma_m(d.snr_db, bandwidth[d.beacon_id], c)
+        rho = c * (d.arrival_s - d.tx_s - clock_drift * dt)
+        # The air's path-by-path error scales with the range (PositionConfig.path_rel_sigma).
+        var = sigma_m * sigma_m + (config.path_rel_sigma * rho) ** 2
+        if v_motion:
+            var += 0.5 * (v_motion * dt) ** 2
+        if body:
+            be, bn = b.east_m - position_en[0], b.north_m - position_en[1]
+            dist = math.hypot(be, bn)
+            if dist > 0:
+                theta = math.acos(max(-1.0, min(1.0, (be * ve + bn * vn) / (dist * speed))))
+                if theta > 0.5 * math.pi:
+                    excess = TORSO_RADIUS_M * (theta - 0.5 * math.pi)
+                    rho -= excess
+                    var += (excess / 3.0) ** 2
+        ranges.append(BeaconRange(d.beacon_id, b.east_m - ve * dt, b.north_m - vn * dt, b.up_m, rho,
+                                  math.sqrt(var), t_i))
+    return ranges, t_mean
 
 
 def acquisition_windows(windows: list[SearchWindow], candidates, tracker: ClockPositionTracker, timing: AudioTiming,

@@ -12,9 +12,10 @@ A yard of about 120 × 80 m with, from one long side to the other:
   narrow passage between them; small relay kiosks;
 * aisles (roads) between bays and round the yard.
 
-Beacons stand on 2.5–3 m poles placed as an installer would
-(:mod:`simulation.site.coverage`: greedy set cover until every walkable point,
-heavy zones included, hears four), alternating between two 2.9 kHz sub-bands
+Beacons stand on 2.5–3 m poles or are screwed to fire walls and building faces,
+placed as an installer would (:mod:`simulation.site.coverage`: greedy set cover
+until every walkable point, heavy zones included, hears four; at most 24 — the
+default since issue 10 item 7), alternating between two 2.9 kHz sub-bands
 (frequency division), with 80 ms TDMA slots assigned greedily per band so that
 slot-mates are at least ``reuse_distance_m`` apart: a frame of ≤ 12 slots,
 ≤ 0.96 s (docs/beacon_protocol.md). ``beacon_placement="grid"`` keeps the
@@ -52,7 +53,7 @@ class LayoutConfig:
     beacon_spacing_m: tuple[float, float] = (25.0, 35.0)
     beacon_height_m: tuple[float, float] = (2.5, 3.0)
     reuse_distance_m: float = 145.0  # ≥ 2 × the ≈ 70 m free-field detection range (tests/test_acoustic_sim.py)
-    beacon_placement: str = "grid"  # or "coverage": the installer's rule (simulation.site.coverage)
+    beacon_placement: str = "coverage"  # the installer's rule (simulation.site.coverage), or "grid"
     bands_hz: tuple[tuple[float, float], ...] = ((17_000.0, 19_900.0), (20_100.0, 23_000.0))
     slot_s: float = 0.08
     coverage: CoverageConfig = CoverageConfig()
