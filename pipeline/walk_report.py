@@ -16,7 +16,7 @@ import numpy as np
 
 from features.site import ENV_CLASSES
 from features.imu.pdr import dead_reckon
-from pipeline.walk_data import PdrStream, read_walk
+from pipeline.walk_data import PdrStream, pdr_start_from_gnss, read_walk
 
 __all__ = ["SourceTrack", "WalkSources", "walk_sources", "error_table", "plot_walk"]
 
@@ -42,12 +42,17 @@ class WalkSources:
     acoustic_features: list | None = None
 
 
-def _pdr_track(pdr: PdrStream, gnss: SourceTrack | None = None, quality=None, calibrate: bool = True) -> SourceTrack:
+def _pdr_track(pdr: PdrStream, gnss: SourceTrack | None = None, quality=None, calibrate: bool = True,
+               anchor: tuple[float, float, float] | None = None) -> SourceTrack:
     """PDR track; with RTK-fixed GNSS and no K given, K and the mounting yaw are calibrated on it first.
 
     Calibration uses only steps whose both ends fall between RTK-fixed epochs
     (quality 4, centimetre level): K = Σ GNSS step distance / Σ Weinberg units,
-    yaw offset = circular mean of (GNSS step heading − PDR heading).
+    yaw offset = circular mean of (GNSS step heading − PDR heading). The calibrated track is then
+    translated to pass through ``anchor`` (t_s, east_m, north_m: the GNSS fix the read anchored PDR on,
+    :func:`pipeline.walk_data.pdr_start_from_gnss`) at its time, as the uncalibrated one did — dead
+    reckoning it again from the start alone would carry the new K and yaw's difference over the steps
+    before the anchor into the whole track.
     """
     res, cfg, start_en = pdr.result, pdr.config, pdr.start_en_m
     info = {"steps": len(res), "distance_m": res.distance_m, "k": cfg.length.k, "yaw_offset_deg": 0.0}
@@ -69,6 +74,11 @@ def _pdr_track(pdr: PdrStream, gnss: SourceTrack | None = None, quality=None, ca
             offset = float(np.angle(np.sum(d[use] * np.exp(1j * (np.arctan2(de[use], dn[use])
                                                                   - res.heading_rad[1:][use])))))
             east, north = dead_reckon(units * k_cal, res.heading_rad + offset, start_en[0], start_en[1])
+            if anchor is not None:
+                t_a, e_a, n_a = anchor
+                i = int(np.searchsorted(res.t_s, t_a, side="right")) - 1
+                e_i, n_i = (start_en if i < 0 else (east[i], north[i]))
+                east, north = east + (e_a - e_i), north + (n_a - n_i)
             info.update(k=k_cal, yaw_offset_deg=float(np.degrees(offset)), calibrated_steps=int(use.sum()),
                         distance_m=float((units * k_cal).sum()))
     return SourceTrack("PDR", res.t_s, east, north, info)
@@ -88,7 +98,8 @@ def walk_sources(walk_dir: str | os.PathLike, pdr_k: float | None = None) -> Wal
                                          {"chirps": ac.analysis.n_detections, "fixes": len(ac.t_s)})
         acoustic_rows = ac.feature_rows
     if data.pdr is not None:
-        tracks["PDR"] = _pdr_track(data.pdr, tracks.get("GNSS"), quality, calibrate=pdr_k is None)
+        anchor = pdr_start_from_gnss(data.gnss.positions) if data.gnss is not None else None
+        tracks["PDR"] = _pdr_track(data.pdr, tracks.get("GNSS"), quality, calibrate=pdr_k is None, anchor=anchor)
     return WalkSources(site=data.site, tracks=tracks, truth=data.truth, gnss_features=feats, quality=quality,
                        acoustic_features=acoustic_rows)
 

@@ -21,24 +21,29 @@ def test_all_sources_present_on_the_walk_time_base(sources):
 
 def test_errors_per_source_are_sensor_like(sources):
     """Change detector: the bounds are about 3x either side of what this simulated walk (site 3, walk 11,
-    60 s) measured when they were set (issue 12 item 26; they were 7-70x wider), medians in m, re-pinned
-    after the realism and receiver changes (issues 10, 11; before them: GNSS 0.0069 / 0.0048 / 2.08,
-    acoustic 0.071 over 21 fixes, PDR mean 0.36): GNSS all 0.020, open 0.0055, heavy 0.68 (RTK decided from
-    observables, correlated NLOS, the 8 s navigation filter); acoustic 0.22 over 14 fixes (wind, the crew's
-    thermometer, beacon survey errors); PDR mean 0.32 over 65 m walked, K 0.424. The invariant heavy >> open is the physical check; the independent references (gpsd, Oxford
-    truth, closed forms) live in the reader and simulator tests."""
+    60 s) measured when they were set (issue 12 item 26; they were 7-70x wider), medians in m.
+
+    Re-pinned after issue 13's satellite-sky label redrew site 3 (the walk now visits open and light
+    only; before: GNSS all 0.020, open 0.0055, heavy 0.68; acoustic 0.22 over 14 fixes; PDR mean 0.32,
+    K 0.424) and the issue-10/11 receiver and RTK changes: GNSS all 0.0113, open 0.0115 (RTK fixed after
+    29 s of float: the 20 s convergence gate), light mean 0.65 against open mean 0.19; acoustic 0.21 over
+    58 fixes (coverage deployment, 0.96 s frames); PDR mean 0.56 over 62 m walked, K 0.418 — 3.48 m
+    before the calibrated PDR track was re-anchored on the GNSS fix its start came from (the anchor
+    is the first RTK-fixed epoch, 29 s in). The invariant light > open in mean is the physical check;
+    the independent references (gpsd, Oxford truth, closed forms) live in the reader and simulator
+    tests."""
     table = error_table(sources)
     gnss = table["GNSS"]
-    assert 0.020 / 3 < gnss["all"][2] < 0.020 * 3             # median: RTK most of the walk
-    assert 0.0055 / 3 < gnss["open"][2] < 0.0055 * 3
-    assert 0.68 / 3 < gnss["heavy"][2] < 0.68 * 3              # NLOS decimetres behind the transformers
-    assert gnss["heavy"][2] > 30 * gnss["open"][2]             # invariant: occlusion degrades GNSS
+    assert 0.0113 / 3 < gnss["all"][2] < 0.0113 * 3           # median: RTK most of the walk
+    assert 0.0115 / 3 < gnss["open"][2] < 0.0115 * 3
+    assert 0.65 / 3 < gnss["light"][1] < 0.65 * 3              # mean: float epochs behind the buildings
+    assert gnss["light"][1] > 2 * gnss["open"][1]              # invariant: occlusion degrades GNSS
     ac = table["acoustic"]["all"]
-    assert 14 / 3 <= ac[0] <= 14 * 3 and 0.22 / 3 < ac[2] < 0.22 * 3
+    assert 58 / 3 <= ac[0] <= 58 * 3 and 0.21 / 3 < ac[2] < 0.21 * 3
     pdr = sources.tracks["PDR"]
-    assert "calibrated_steps" in pdr.info and 0.424 * 0.9 < pdr.info["k"] < 0.424 * 1.1
+    assert "calibrated_steps" in pdr.info and 0.418 * 0.9 < pdr.info["k"] < 0.418 * 1.1
     walked = float(np.sum(np.hypot(np.diff(sources.truth.east_m), np.diff(sources.truth.north_m))))
-    assert 0.32 / 3 < table["PDR"]["all"][1] < 0.32 * 3        # mean PDR error, m (was < 5 % of 65 m)
+    assert 0.56 / 3 < table["PDR"]["all"][1] < 0.56 * 3        # mean PDR error, m
     assert table["PDR"]["all"][1] < 0.02 * walked
 
 
