@@ -102,7 +102,9 @@ def main() -> None:
     layout = build_split(split, args.out / "data", progress=lambda s: print("  simulated", s, flush=True),
                          walks=False, workers=args.workers)
     sp = layout.split
-    lib = args.out / "fingerprints.sqlite"
+    # its own library: it holds the test sites too, which the fusion study's and the benchmark's
+    # libraries (training sites only, fingerprints.sqlite beside it) must never see
+    lib = args.out / "fingerprints_env_study.sqlite"
     for site in sp.train_sites + sp.test_sites:
         build_library(layout.survey_dir(site), lib, progress=False)
     all_ts = training_set(lib)
