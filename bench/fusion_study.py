@@ -45,7 +45,9 @@ def run_seed(layout, library: Path, out: Path, seed: int, env_mode: str, workers
     from pipeline.fusion_train import train_fusion
     from training.env import fit_env_model, save_env_model, training_set
 
-    names = [f"sim-{s:04d}" for s in layout.split.train_sites]    # generated sites are named sim-<seed>
+    from features.site import load_site
+
+    names = [load_site(layout.site_dir(s) / "site.toml").name for s in layout.split.train_sites]
     clf, info = fit_env_model(training_set(library, sites=names), env_mode, random_state=seed)
     save_env_model(clf, out / "env_model", info, library=library, overwrite=True)
     model = train_fusion(layout.train_walks, clf, bp_config=BPConfig(seed=seed),

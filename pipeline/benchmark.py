@@ -48,7 +48,10 @@ def run_benchmark(split: str, out: str | os.PathLike, *, env_mode: str = "superv
     for site in sp.train_sites:
         report = build_library(layout.survey_dir(site), library, progress=False)
         stage(f"  library: {report.summary()}")
-    data = training_set(library)
+    from features.site import load_site
+
+    # the training sites only, by name, whatever else a reused library may hold
+    data = training_set(library, sites=[load_site(layout.site_dir(s) / "site.toml").name for s in sp.train_sites])
     clf, info = fit_env_model(data, env_mode, random_state=seed)
     save_env_model(clf, out / "env_model", info, library=library, overwrite=True)
     stage(f"environment model ({env_mode}): {info['n_windows']} windows of {info['n_cells']} cells, "
