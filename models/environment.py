@@ -91,8 +91,8 @@ class EnvironmentClassifier:
         class by the inverse of its share, so the rare heavy and light windows count as much as the open
         majority: the target is recall per class. Chosen on validation sites of the standard split's
         *training* sites (fitted on 101–103, scored on 104–106, satellite-sky label, cells ≥ 3 points from
-        a boundary; surveys simulated before the coverage deployment and the RTK convergence gate): recall open / light / heavy 92.3 / 53.1 / 85.7 → 88.4 / 60.2 / 90.5 %, macro-F1
-        76.2 → 77.6 %.
+        a boundary; surveys simulated before the coverage deployment and the RTK convergence gate):
+        recall open / light / heavy 92.3 / 53.1 / 85.7 → 88.4 / 60.2 / 90.5 %, macro-F1 76.2 → 77.6 %.
 
     Attributes
     ----------

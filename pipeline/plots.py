@@ -96,7 +96,8 @@ def plot_site(site: Site, path: str | os.PathLike, resolution_m: float = 0.5, ti
     bar = fig.colorbar(ScalarMappable(norm=norm, cmap=cmap), ax=ax, location="bottom", fraction=0.04, pad=0.08,
                        aspect=40, ticks=[0.0, OPEN_MAX, LIGHT_MAX, 1.0], spacing="proportional")
     bar.ax.set_xticklabels(["0 %", f"{100 * OPEN_MAX:.0f} %", f"{100 * LIGHT_MAX:.0f} %", "100 %"])
-    bar.set_label("blocked sky share above 10° elevation: open < 10 % <= light <= 40 % < heavy", fontsize=8)
+    bar.set_label("blocked sky share above 10° elevation, weighted by the satellites' passes over a day: "
+                  "open < 10 % <= light <= 40 % < heavy", fontsize=8)
     ax.set_xlabel("east (m)")
     ax.set_ylabel("north (m)")
     ax.set_aspect("equal")

@@ -25,7 +25,8 @@ def register_top(sub) -> None:
     p.add_argument("--split", choices=sorted(SPLITS), default="demo", help="which split (default demo)")
     p.add_argument("--out", type=Path, required=True, help="directory for data, models and report (resumable)")
     p.add_argument("--env-mode", choices=MODES, default="supervised", help="environment model mode")
-    p.add_argument("--workers", type=int, default=None, help="evaluation workers (default one per core)")
+    p.add_argument("--workers", type=int, default=None,
+                   help="simulation and evaluation workers (default one per core)")
     p.add_argument("--seed", type=seed, default=0, help="model seed (default 0)")
     p.set_defaults(func=_run)
 
