@@ -38,24 +38,12 @@ RIVALS = ("kf", "kf_map", "kf_quality", "aekf", "imm")
 
 
 def run_seed(layout, library: Path, out: Path, seed: int, env_mode: str, workers: int | None) -> dict:
-    """Fit both models with ``seed`` and evaluate the test walks; returns :func:`pipeline.evaluate.evaluate`'s dict."""
-    from models.bp import BPConfig
-    from models.fusion_model import save_fusion_model
-    from pipeline.evaluate import evaluate
-    from pipeline.fusion_train import train_fusion
-    from training.env import fit_env_model, save_env_model, training_set
+    """Fit both models with ``seed`` and evaluate the test walks (:func:`pipeline.benchmark.fit_and_evaluate`)."""
+    from pipeline.benchmark import fit_and_evaluate
 
-    from features.site import load_site
-
-    names = [load_site(layout.site_dir(s) / "site.toml").name for s in layout.split.train_sites]
-    clf, info = fit_env_model(training_set(library, sites=names), env_mode, random_state=seed)
-    save_env_model(clf, out / "env_model", info, library=library, overwrite=True)
-    model = train_fusion(layout.train_walks, clf, bp_config=BPConfig(seed=seed),
-                         meta={"split": layout.split.name, "env_mode": env_mode, "seed": seed})
-    model.meta["sites"] = []            # applied to the held-out sites: the point of the split
-    save_fusion_model(model, out / "fusion_model", overwrite=True)
-    return evaluate(layout.test_walks, out / "fusion_model", out / "report", workers=workers, progress=True,
-                    plots=seed == 0)
+    return fit_and_evaluate(layout, library, out, env_mode=env_mode, seed=seed, workers=workers,
+                            say=lambda line: print(f"  seed {seed}: {line}", flush=True), progress=True,
+                            plots=seed == 0, meta={"seed": seed})
 
 
 def _by(rows):

@@ -26,7 +26,31 @@ from pipeline.fusion_train import train_fusion
 from training.benchmark import build_split
 from training.env import fit_env_model, save_env_model, training_set
 
-__all__ = ["run_benchmark"]
+__all__ = ["run_benchmark", "fit_and_evaluate"]
+
+
+def fit_and_evaluate(layout, library: Path, out: Path, *, env_mode: str = "supervised", seed: int = 0,
+                     workers: int | None = None, bp_members: int = 5, say: Callable[[str], None] = print,
+                     progress: bool = False, plots: bool = True, meta: dict | None = None) -> dict:
+    """Steps 3–5 on a built split: the environment model on the training sites' windows of ``library``
+    (by name, whatever else a reused library may hold), the fusion model on the training walks, every
+    method on the test walks; models and report written under ``out``."""
+    from features.site import load_site
+
+    sp = layout.split
+    data = training_set(library, sites=[load_site(layout.site_dir(s) / "site.toml").name for s in sp.train_sites])
+    clf, info = fit_env_model(data, env_mode, random_state=seed)
+    save_env_model(clf, out / "env_model", info, library=library, overwrite=True)
+    say(f"environment model ({env_mode}): {info['n_windows']} windows of {info['n_cells']} cells, "
+        f"open/light/heavy = {'/'.join(map(str, info['class_counts']))}")
+    model = train_fusion(layout.train_walks, clf, bp_config=BPConfig(seed=seed, n_members=bp_members),
+                         meta={"split": sp.name, "env_mode": env_mode, **(meta or {})})
+    # The model may be applied to the held-out sites: that is the point of the split.
+    model.meta["sites"] = []
+    save_fusion_model(model, out / "fusion_model", overwrite=True)
+    say(f"fusion model: {len(layout.train_walks)} training walks on sites {list(sp.train_sites)}")
+    return evaluate(layout.test_walks, out / "fusion_model", out / "report", workers=workers, progress=progress,
+                    plots=plots)
 
 
 def run_benchmark(split: str, out: str | os.PathLike, *, env_mode: str = "supervised", workers: int | None = None,
@@ -48,21 +72,8 @@ def run_benchmark(split: str, out: str | os.PathLike, *, env_mode: str = "superv
     for site in sp.train_sites:
         report = build_library(layout.survey_dir(site), library, progress=False)
         stage(f"  library: {report.summary()}")
-    from features.site import load_site
-
-    # the training sites only, by name, whatever else a reused library may hold
-    data = training_set(library, sites=[load_site(layout.site_dir(s) / "site.toml").name for s in sp.train_sites])
-    clf, info = fit_env_model(data, env_mode, random_state=seed)
-    save_env_model(clf, out / "env_model", info, library=library, overwrite=True)
-    stage(f"environment model ({env_mode}): {info['n_windows']} windows of {info['n_cells']} cells, "
-          f"open/light/heavy = {'/'.join(map(str, info['class_counts']))}")
-    model = train_fusion(layout.train_walks, clf, bp_config=BPConfig(seed=seed, n_members=bp_members),
-                         meta={"split": sp.name, "env_mode": env_mode})
-    # The model may be applied to the held-out sites: that is the point of the split.
-    model.meta["sites"] = []
-    save_fusion_model(model, out / "fusion_model", overwrite=True)
-    stage(f"fusion model: {len(layout.train_walks)} training walks on sites {list(sp.train_sites)}")
-    result = evaluate(layout.test_walks, out / "fusion_model", out / "report", workers=workers, progress=False)
+    result = fit_and_evaluate(layout, library, out, env_mode=env_mode, seed=seed, workers=workers,
+                              bp_members=bp_members, say=stage)
     stage(f"evaluated {len(result['results'])} held-out walks on sites {list(sp.test_sites)}")
     say(summary_table(result["pooled"]))
     shares = [r["bp_disabled_share"] for r in result["results"] if r["bp_disabled_share"] is not None]
