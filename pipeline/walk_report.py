@@ -8,6 +8,7 @@ shows what each sensor gives on its own, per environment class.
 
 from __future__ import annotations
 
+import dataclasses
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -16,7 +17,7 @@ import numpy as np
 
 from features.site import ENV_CLASSES
 from features.imu.pdr import dead_reckon
-from pipeline.walk_data import PdrStream, pdr_start_from_gnss, read_walk
+from pipeline.walk_data import PdrStream, _pdr_position_at, pdr_start_from_gnss, read_walk
 
 __all__ = ["SourceTrack", "WalkSources", "walk_sources", "error_table", "plot_walk"]
 
@@ -76,8 +77,7 @@ def _pdr_track(pdr: PdrStream, gnss: SourceTrack | None = None, quality=None, ca
             east, north = dead_reckon(units * k_cal, res.heading_rad + offset, start_en[0], start_en[1])
             if anchor is not None:
                 t_a, e_a, n_a = anchor
-                i = int(np.searchsorted(res.t_s, t_a, side="right")) - 1
-                e_i, n_i = (start_en if i < 0 else (east[i], north[i]))
+                e_i, n_i = _pdr_position_at(dataclasses.replace(res, east_m=east, north_m=north), t_a, start_en)
                 east, north = east + (e_a - e_i), north + (n_a - n_i)
             info.update(k=k_cal, yaw_offset_deg=float(np.degrees(offset)), calibrated_steps=int(use.sum()),
                         distance_m=float((units * k_cal).sum()))
