@@ -137,7 +137,7 @@ def test_short_walk_fix_rate_and_error(short_walk):
 
 def test_top_stable_equals_a_stable_sort_of_all_votes():
     """The vote's top-k selection (a partition) must rank exactly as the stable full sort it replaced."""
-    from features.acoustic.tracking import _top_stable
+    from features.acoustic.acquisition import _top_stable
 
     rng = np.random.default_rng(0)
     for _ in range(200):

@@ -130,7 +130,7 @@ def test_cold_start_three_beacon_mirror_rate():
 
 
 def test_innovation_gate_drops_arrivals_metres_off_the_prediction_and_keeps_nlos_ones():
-    from features.acoustic.tracking import _innovation_gate
+    from features.acoustic.frame_fix import _innovation_gate
 
     rng = np.random.default_rng(2)
     ang = np.linspace(0, 2 * np.pi, 10, endpoint=False)

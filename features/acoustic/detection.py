@@ -253,7 +253,7 @@ def detect_frames(path: str | os.PathLike, site: Site, timing: AudioTiming,
     2. *detect* — noise scale per template, envelope maxima above the
        Neyman–Pearson threshold (:meth:`_FrameDetector.detect`);
     3. *acquire* — without a lock, candidate arrivals are voted into a position
-       and clock hypothesis (:func:`~features.acoustic.tracking.acquisition_windows`);
+       and clock hypothesis (:func:`~features.acoustic.acquisition.acquisition_windows`);
     4. *assign* — one physical arrival per window (:meth:`_FrameDetector.assign_arrivals`);
     5. *time* — first arrival of each chirp on its CIR (:meth:`_FrameDetector.time_arrivals`);
     6. *solve* — the tracker's fix from the timed arrivals;

@@ -93,7 +93,7 @@ class PositionConfig:
     the reading is off by ±1–2 K (0.17–0.35 % of c; c ∝ √T, Cramer 1993), humidity adds
     0.2–0.3 %, a wind w along the path c_eff = c + w·n̂ (Ostashev & Wilson 2015), and warm
     air over transformers differs path by path. ``path_rel_sigma`` is the per-path part (each
-    range's variance takes (ε·ρ)², :func:`features.acoustic.tracking.frame_ranges`);
+    range's variance takes (ε·ρ)², :func:`features.acoustic.frame_fix.frame_ranges`);
     ``air_rel_sigma`` (a common scale error of c) and ``wind_sigma_m_s`` (per horizontal axis)
     are common to every beacon of a fix, which a diagonal weight cannot describe: they enter the
     fix's covariance as *consider parameters* (Tapley, Schutz & Born, "Statistical Orbit
@@ -147,7 +147,7 @@ class PositionConfig:
 class BeaconRange(NamedTuple):
     """One pseudorange: beacon position (ENU m), ``pseudorange_m`` = c·(arrival − emission), σ in m;
     ``arrival_s`` the stated time the range refers to (the arrival plus the chirp's range–Doppler
-    lag, see :func:`features.acoustic.tracking.frame_fix`), used for the fix's time tag."""
+    lag, see :func:`features.acoustic.frame_fix.frame_fix`), used for the fix's time tag."""
 
     beacon_id: int
     east_m: float
@@ -341,7 +341,7 @@ def solve_position(ranges: list[BeaconRange], site: Site, speed_m_s: float,
     (smallest chi² + ‖p − p̂‖²/σ², the innovation's share): under poor geometry a subset
     keeping an NLOS-biased beacon can fit as well as the right one, but lies metres off.
     ``t_ref_s``: the stated time the ranges were motion-compensated to (see
-    :func:`features.acoustic.tracking.frame_fix`); the fix's ``t_s`` is then that time less
+    :func:`features.acoustic.frame_fix.frame_fix`); the fix's ``t_s`` is then that time less
     the clock offset, whichever beacons the exclusion keeps. Without it, ``t_s`` is the
     mean arrival of the kept beacons less the clock offset (the static model: the fix is
     where the receiver stood while they were heard).
