@@ -43,7 +43,6 @@ log-probabilities, renormalised).
 from __future__ import annotations
 
 import numpy as np
-from sklearn.linear_model import LogisticRegression, Ridge
 
 from features.schema import ENV_CLASSES, FEATURES, modality_columns
 
@@ -181,6 +180,10 @@ class EnvironmentClassifier:
         return y
 
     def _fit_one(self, X: np.ndarray, y: np.ndarray, share) -> dict:
+        # Imported here: prediction is numpy alone, and scikit-learn (with the scipy.stats it pulls in)
+        # costs every evaluate worker about 1 s of start-up.
+        from sklearn.linear_model import LogisticRegression, Ridge
+
         mean = X.mean(axis=0)
         scale = X.std(axis=0)
         constant = scale < 1e-12

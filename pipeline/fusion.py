@@ -341,13 +341,13 @@ def _closed_loop(model: FusionModel, inputs: WalkInputs) -> Track:
     law (2·window degrees of freedom, over window) the correction is off — the filter fed with it has
     stopped agreeing with its measurements.
     """
-    from scipy.stats import chi2
+    from scipy.special import chdtri
 
     from models.bp import GNSS_KIND, ACOUSTIC_KIND
 
     ev, bp = inputs.events, model.bp
     window = bp.config.guard_window
-    limit = float(chi2.ppf(0.99, 2 * window) / window)
+    limit = float(chdtri(2 * window, 0.01) / window)       # chi2.ppf(0.99, 2·window) / window
     proba = inputs.classes.at(ev.t_s)
     # Whether a fix of each source was available in the 2 s up to each event (causal).
     recent = {}

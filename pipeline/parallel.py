@@ -44,6 +44,15 @@ def default_workers() -> int:
         return max(1, os.cpu_count() or 1)
 
 
+_LOCAL_WORKER_CONFIG = {"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None}
+"""Dask's nanny starts each local worker with ``MALLOC_TRIM_THRESHOLD_=65536`` so that freed memory goes
+back to the OS. Setting any glibc trim threshold also switches off malloc's dynamic mmap threshold
+(mallopt(3), M_TRIM_THRESHOLD), so every numpy temporary of 128 KiB or more becomes a fresh ``mmap``
+that is page-faulted in and unmapped again: on four 300 s walks a worker took 184,000 minor page
+faults against 1,500 in a plain process, and 0.8 s of system time. ``None`` leaves the variable
+unset (the worker inherits this process's environment, so a user's own setting still holds)."""
+
+
 def _guarded(func: Callable, walk, *args):
     try:
         return func(walk, *args)
@@ -87,14 +96,16 @@ def map_walks(func: Callable, walks: Sequence, *args, workers: int | None = None
 def _map_dask(func, walks, args, workers, scheduler, bar) -> list:
     import logging
 
+    import dask
     from distributed import Client, LocalCluster, as_completed
 
     logging.getLogger("distributed").setLevel(logging.ERROR)
     cluster = None
     if scheduler is None:
         n = workers or default_workers()
-        cluster = LocalCluster(n_workers=min(n, len(walks)), threads_per_worker=1, processes=True,
-                               dashboard_address=None, silence_logs=logging.ERROR)
+        with dask.config.set(_LOCAL_WORKER_CONFIG):
+            cluster = LocalCluster(n_workers=min(n, len(walks)), threads_per_worker=1, processes=True,
+                                   dashboard_address=None, silence_logs=logging.ERROR)
         client = Client(cluster)
     else:
         try:
