@@ -18,12 +18,14 @@ Prints, in Markdown:
    the correction;
 5. consistency: the share of epochs whose NEES lies inside the two-sided 95 % χ²₂ bounds, per method.
 
-Usage: ``python bench/fusion_study.py --split standard --out /tmp/std --seeds 0 1 2``
+Usage: ``python bench/fusion_study.py --split standard --out /tmp/std --seeds 0 1 2``; a replicate on other
+layouts: ``--train-sites 111 112 113 114 115 116 --test-sites 211 212 213 214 215``.
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import sys
 import time
 from pathlib import Path
@@ -74,9 +76,18 @@ def main() -> None:
     ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
     ap.add_argument("--env-mode", default="supervised")
     ap.add_argument("--workers", type=int, default=None, help="simulation and evaluation workers (default: cores)")
+    ap.add_argument("--train-sites", type=int, nargs="+", default=None,
+                    help="site seeds to train on instead of the split's (a replicate with other layouts)")
+    ap.add_argument("--test-sites", type=int, nargs="+", default=None, help="site seeds to test on instead")
     args = ap.parse_args()
     t0 = time.perf_counter()
-    layout = build_split(args.split, args.out / "data", workers=args.workers or 2,
+    split = SPLITS[args.split]
+    if args.train_sites or args.test_sites:
+        train, test = tuple(args.train_sites or split.train_sites), tuple(args.test_sites or split.test_sites)
+        if set(train) & set(test):
+            ap.error(f"train and test sites overlap: {sorted(set(train) & set(test))}")
+        split = dataclasses.replace(split, name=f"{split.name}-sites", train_sites=train, test_sites=test)
+    layout = build_split(split, args.out / "data", workers=args.workers or 2,
                          progress=lambda s: print(f"[{time.perf_counter() - t0:6.0f} s] simulated {s}", flush=True))
     library = args.out / "fingerprints.sqlite"
     for site in layout.split.train_sites:
