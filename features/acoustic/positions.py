@@ -537,8 +537,8 @@ def _deletion_chi2(linear, removed: np.ndarray) -> np.ndarray:
     :func:`_gauss_newton` the problem is that fix's linearisation, so this is the subset's chi²
     to first order: exact for a linear model, off by the curvature of the ranges over the move
     the deletion makes (up to 2× for one beacon left out on held-out walks, more for three when
-    the all-range fix stands metres off; the screen's margin, ``PositionConfig.exclusion_screen``,
-    is set from that). Subsets with a singular I − H_SS get +inf.
+    the all-range fix stands metres off; what that costs a screen built on it:
+    ``PositionConfig.exclusion_screen``). Subsets with a singular I − H_SS get +inf.
     """
     _, b, _, hat, chi2 = linear
     k, m = removed.shape
