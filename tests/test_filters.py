@@ -601,3 +601,17 @@ def test_short_form_update_agrees_with_joseph(mixed):
     np.testing.assert_allclose(b.x, a.x, atol=1e-9)
     np.testing.assert_allclose(b.P, a.P, rtol=1e-7, atol=1e-12)
     assert min_eig(b.P) > 0
+
+
+def test_vb_akf_cap_bounds_the_learnt_r(inflated):
+    """max_ratio bounds the R the VB-AKF hands the filter: with a cap of 4× the initial R the tenfold GNSS
+    noise is learnt only up to that cap, and the default (25×) leaves the tenfold R free (test above)."""
+    capped = EventEKF(EkfConfig(outlier="none"), VBAdaptiveNoise(1.5, 0.3, max_ratio=4.0)).run(
+        inflated.stream, x0=inflated.x0, P0=inflated.P0)
+    g = capped.updated & (capped.kind == GNSS)
+    assert np.max(capped.R[g][:, 0, 0]) <= 4.0 * 1.5 ** 2 * (1 + 1e-12)
+    assert np.max(capped.R[g][:, 1, 1]) <= 4.0 * 1.5 ** 2 * (1 + 1e-12)
+    for learnt in _learnt_gnss_r(capped):
+        assert learnt > 0.95 * 4.0 * 1.5 ** 2                    # pinned at the cap
+    with pytest.raises(NoiseError, match="max_ratio"):
+        VBAdaptiveNoise(1.5, 0.3, max_ratio=0.5).fit()
