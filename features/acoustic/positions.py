@@ -559,6 +559,13 @@ def _deletion_chi2(linear, removed: np.ndarray) -> np.ndarray:
     return out
 
 
+def _prior_share(east, north, position_prior):
+    """‖p − p̂‖²/σ² of fixes (scalars or arrays) against the track's prediction ``(east_m, north_m, sigma_m)``:
+    the innovation's share of a subset's score in the exclusion search."""
+    pe, pn, ps = position_prior
+    return ((east - pe) ** 2 + (north - pn) ** 2) / ps ** 2
+
+
 def _exclude(ranges: list[BeaconRange], h: float, c: float, config: PositionConfig, start, clock_prior=None,
              position_prior=None):
     """Largest subset (of four or more) whose residuals pass the chi-square test; ties: smallest chi².
@@ -603,8 +610,7 @@ def _exclude(ranges: list[BeaconRange], h: float, c: float, config: PositionConf
                     continue
                 score = sol[4]
                 if position_prior is not None:
-                    pe, pn, ps = position_prior
-                    score += ((sol[0][0] - pe) ** 2 + (sol[0][1] - pn) ** 2) / ps ** 2
+                    score += _prior_share(sol[0][0], sol[0][1], position_prior)
                 if score < best_score:
                     best_score, best = score, (keep, sol)
             if best is not None:
@@ -617,8 +623,7 @@ def _exclude(ranges: list[BeaconRange], h: float, c: float, config: PositionConf
                                                           clock_prior)
             score = np.where(ok & (chi2 <= _chi2_limit(size + n_prior - 3, config.chi2_alpha)), chi2, np.inf)
             if position_prior is not None:
-                pe, pn, ps = position_prior
-                score = score + ((x[:, 0] - pe) ** 2 + (x[:, 1] - pn) ** 2) / ps ** 2
+                score = score + _prior_share(x[:, 0], x[:, 1], position_prior)
             best = int(np.argmin(score))
             if np.isfinite(score[best]):
                 keep = combos[best]
@@ -653,8 +658,7 @@ def _backward_elimination(ranges, h, c, config, start, clock_prior, position_pri
         x, cov, res, chi2, ok = _gauss_newton_subsets(ranges, masks, h, c, config.max_iterations, x0, clock_prior)
         score = np.where(ok, chi2, np.inf)
         if position_prior is not None:
-            pe, pn, ps = position_prior
-            score = score + ((x[:, 0] - pe) ** 2 + (x[:, 1] - pn) ** 2) / ps ** 2
+            score = score + _prior_share(x[:, 0], x[:, 1], position_prior)
         best = int(np.argmin(score))
         if not np.isfinite(score[best]):
             return None
