@@ -76,6 +76,7 @@ from features.acoustic.audio import CLIP_LEVEL, AudioBlock, audio_info, count_cl
 from features.acoustic.cir import CirFeatures, analyse_cirs, first_arrivals
 from features.constants import AUDIO_FS_HZ
 from features.errors import ConfigError
+from features.acoustic.impulses import ImpulseBlanker
 from features.acoustic.matched_filter import ChirpSpec, MatchedFilterBank, StreamingMatchedFilter
 from features.site import Beacon, Site
 
@@ -114,8 +115,14 @@ class DetectorConfig:
     max_lead_s: float = 0.0025
     block_s: float = 4.0
     fs_hz: int = AUDIO_FS_HZ
+    impulse_ratio: float = 8.0
+    impulse_hold_s: float = 0.0005
 
     def __post_init__(self):
+        if not (self.impulse_ratio == 0 or 3.0 <= self.impulse_ratio < 1e6):
+            raise ConfigError(f"impulse_ratio must be 0 (no blanking) or in [3, 1e6), got {self.impulse_ratio}")
+        if not 0 <= self.impulse_hold_s <= 0.01:
+            raise ConfigError(f"impulse_hold_s must lie in [0, 0.01] s, got {self.impulse_hold_s}")
         if not 0 < self.p_fa < 1:
             raise ConfigError(f"p_fa must lie in (0, 1), got {self.p_fa}")
         if self.max_range_m is not None and not self.max_range_m > 0:
@@ -203,28 +210,35 @@ class FrameResult:
 
 
 class _Stream:
-    """Decimated matched-filter envelopes of the recent past, read on demand."""
+    """Decimated matched-filter envelopes of the recent past, read on demand (impulses blanked first,
+    :mod:`features.acoustic.impulses`)."""
 
     def __init__(self, path, config: DetectorConfig, mf: StreamingMatchedFilter, stats: AudioStats | None):
         self.blocks = iter_audio_blocks(path, block_s=config.block_s, fs_out_hz=int(config.fs_hz))
         self.mf, self.stats, self.fs = mf, stats, float(config.fs_hz)
-        self.read_end = 0            # input samples read so far
+        self.blanker = ImpulseBlanker(self.fs, config.impulse_ratio, hold_s=config.impulse_hold_s)
+        self.read_end = 0            # input samples filtered so far (the blanker may hold a few back)
         self.env = np.zeros((mf.bank.n_templates, 0), dtype=np.float32)
         self.env_j0 = 0
         self.eof = False
 
     def ensure(self, upto: int) -> None:
-        """Read until input sample ``upto`` has been read (and its envelope exists) or the file ends."""
+        """Read until input sample ``upto`` has been filtered (and its envelope exists) or the file ends."""
         while not self.eof and self.read_end < upto:
             block = next(self.blocks, None)
             if block is None:
                 self.eof = True
-                _, e = self.mf.flush()
+                rest = self.blanker.flush()
+                _, e = self.mf.process(rest)
+                _, e2 = self.mf.flush()
+                e = np.concatenate([e, e2], axis=1)
+                self.read_end += len(rest)
             else:
                 if self.stats is not None:
                     self.stats.add(block, self.fs)
-                self.read_end = block.start_index + len(block.samples)
-                _, e = self.mf.process(block.samples)
+                x = self.blanker.process(block.samples)
+                self.read_end += len(x)
+                _, e = self.mf.process(x)
             self.env = np.concatenate([self.env, e], axis=1) if self.env.shape[1] else e
 
     def env_range(self, j_lo: int, j_hi: int) -> tuple[int, np.ndarray]:

@@ -11,6 +11,7 @@ import math
 
 from features.acoustic.positions import AcousticFix, BeaconRange, PositionConfig, solve_position, toa_range_sigma_m
 from features.acoustic.timing import ChirpDetection
+from features.acoustic.air import air_range_corrections_m
 from features.site import Site
 
 __all__ = ["frame_fix", "frame_ranges", "TORSO_RADIUS_M"]
@@ -26,7 +27,8 @@ def frame_fix(detections: list[ChirpDetection], site: Site, c: float, bandwidth:
               clock_prior: tuple[float, float] | None = None,
               velocity_m_s: tuple[float, float] | None = None,
               position_prior: tuple[float, float, float] | None = None,
-              range_lag_s: dict | None = None, clock_drift: float = 0.0) -> AcousticFix | None:
+              range_lag_s: dict | None = None, clock_drift: float = 0.0,
+              air: tuple | None = None) -> AcousticFix | None:
     """Position fix from one frame's detections (None when fewer than three beacons).
 
     ``start``: the previous fix (initial value); ``clock_prior``: (δ, σ_δ) of a tracked clock;
@@ -48,12 +50,20 @@ def frame_fix(detections: list[ChirpDetection], site: Site, c: float, bandwidth:
     ``clock_drift``: the receiver clock's drift δ̇ (s/s, from the tracker's clock filter). The
     offset at arrival i is δ + δ̇·(tᵢ − t̄), so each pseudorange loses c·δ̇·(tᵢ − t̄) and the fix's
     δ is the offset at t̄ (100 ppm over a 2 s frame is ±3.4 cm of range otherwise).
+
+    ``air``: ((w_east, w_north), k, (east, north)) — the tracker's estimate of the wind (m/s) and of the
+    sound-speed scale, and where the receiver is thought to be; each pseudorange gets back what the air
+    took off it (:func:`features.acoustic.air.air_range_corrections_m`).
     """
     used = [d for d in detections if d.associated]
     if len(used) < 3:
         return None
     ranges, t_mean = frame_ranges(used, site, c, bandwidth, config, velocity_m_s, range_lag_s, clock_drift,
                                   position_prior)
+    if air is not None:
+        dr = air_range_corrections_m(air[0], air[1], air[2], [(r.east_m, r.north_m, r.up_m) for r in ranges],
+                                     site.device_height_m, c).tolist()
+        ranges = [r._replace(pseudorange_m=r.pseudorange_m + d) for r, d in zip(ranges, dr)]
     if position_prior is not None and clock_prior is not None:
         ranges = _innovation_gate(ranges, site.device_height_m, c, position_prior, clock_prior)
     # Start from the previous fix, moved to the track's prediction when there is one (fewer iterations).

@@ -38,7 +38,7 @@ import functools
 import itertools
 import math
 import statistics
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import NamedTuple
 
 import numpy as np
@@ -103,6 +103,11 @@ class PositionConfig:
     (NEES 40–200 on the coverage deployment's walks). Set all three to 0 for an exactly known
     sound speed (Monte Carlo tests of the solver).
 
+    ``estimate_air``: the tracker estimates the wind and the sound-speed scale from its fixes
+    (:mod:`features.acoustic.air`), corrects each frame's ranges by them and takes the estimate's σ, not
+    ``wind_sigma_m_s`` / ``air_rel_sigma``, as the consider parameters (those are then the priors; either
+    at 0 switches the estimate off too).
+
     ``exclusion_screen``: when > 0, the exclusion search (:func:`_exclude`) first scores every subset
     of a size in closed form, by the deletion formula of linear least squares at the all-beacon fix
     (:func:`_deletion_chi2`), and solves only those whose linearised chi² is at most this multiple of
@@ -125,6 +130,7 @@ class PositionConfig:
     air_rel_sigma: float = 0.003
     wind_sigma_m_s: float = 2.0
     exclusion_screen: float = 0.0
+    estimate_air: bool = True
 
     def __post_init__(self):
         if not (math.isfinite(self.exclusion_screen) and self.exclusion_screen >= 0):
@@ -175,6 +181,8 @@ class AcousticFix:
     rms_residual_m: float
     used_ids: tuple[int, ...]
     rejected_ids: tuple[int, ...]
+    ranges: tuple = field(default=(), repr=False, compare=False)
+    """The :class:`BeaconRange` s the fix kept (for the air estimate, :mod:`features.acoustic.air`)."""
 
     def as_row(self) -> dict:
         """A row of the positions CSV (:data:`POSITION_COLUMNS`)."""
@@ -380,7 +388,8 @@ def solve_position(ranges: list[BeaconRange], site: Site, speed_m_s: float,
     return AcousticFix(t_s=t_true, east_m=east, north_m=north, clock_offset_s=clock,
                        n_beacons=len(ranges), covariance=cov,
                        rms_residual_m=math.sqrt(float(res @ res) / len(res)),
-                       used_ids=tuple(r.beacon_id for r in ranges), rejected_ids=tuple(rejected))
+                       used_ids=tuple(r.beacon_id for r in ranges), rejected_ids=tuple(rejected),
+                       ranges=tuple(ranges))
 
 
 def _consider_covariance(ranges: list[BeaconRange], x: np.ndarray, cov: np.ndarray, h: float, c: float,

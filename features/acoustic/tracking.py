@@ -21,7 +21,10 @@ from __future__ import annotations
 import dataclasses
 import math
 
+import numpy as np
+
 from features.acoustic.acquisition import HoughAcquisition, acquisition_windows
+from features.acoustic.air import AirState
 from features.acoustic.clock import ClockState
 from features.acoustic.frame_fix import frame_fix, frame_ranges
 from features.acoustic.positions import AcousticFix, PositionConfig
@@ -129,6 +132,7 @@ class ClockPositionTracker(HoughAcquisition):
         self._anchor_fix: AcousticFix | None = None
         self._reacquired: AcousticFix | None = None       # the clock-aided vote's fix (_acquire_with_clock)
         self._tentative_clock_aided = False
+        self._air: AirState | None = None                  # the air estimate (features.acoustic.air)
         self.mirror_refused = 0                            # re-acquisition fixes refused as ambiguous
 
     def tracking_at(self, t_s: float) -> bool:
@@ -249,8 +253,9 @@ class ClockPositionTracker(HoughAcquisition):
             predicted = (last.east_m + velocity[0] * dt, last.north_m + velocity[1] * dt, math.sqrt(
                 last.covariance[0, 0] + last.covariance[1, 1] + (self.max_turn_speed_m_s * dt) ** 2 + 0.25))
         start = self.last_fix if tracking else (self._reacquired if reacquiring else None)
+        air, config = self._air_for_frame(frame_start_s, config, predicted, start)
         fix = frame_fix(detections, self.site, self.c, bandwidth, config, start, prior, velocity, predicted,
-                        self.range_lag_s, drift)
+                        self.range_lag_s, drift, air)
         if fix is None or not self._clock_plausible(fix):
             if tracking and not self.confirmed:
                 self.last_fix = None                         # a tentative lock not confirmed is dropped
@@ -307,6 +312,7 @@ class ClockPositionTracker(HoughAcquisition):
             if self._sane(last) and math.hypot(fix.east_m - last.east_m, fix.north_m - last.north_m) <= (
                     1.5 * dt + 3.0 * math.sqrt(max(fix.covariance[0, 0] + fix.covariance[1, 1], 0.0)) + 0.5):
                 self._confirmed_tentative = last
+        fix = self._update_air(fix, prior)
         # With the drift-aware clock prior a three-beacon fix keeps a degree of freedom for the residual
         # test (issue 11, defect 7): it carries the track on, as four or more do.
         self._previous_fix, self.last_fix = self.last_fix, fix
@@ -314,6 +320,35 @@ class ClockPositionTracker(HoughAcquisition):
         self._anchor_fix = fix
         self._clock = clock_pred.conditioned(fix.clock_offset_s, float(fix.covariance[2, 2]))._replace(t_s=fix.t_s)
         return fix
+
+    def _air_for_frame(self, t_s: float, config: PositionConfig, predicted, start):
+        """((w_east, w_north), k, (east, north)) to correct this frame's ranges by (None before any position
+        is known), and ``config`` with the estimate's σ as the air's consider parameters
+        (:mod:`features.acoustic.air`)."""
+        pos = self.positions
+        if not (pos.estimate_air and pos.wind_sigma_m_s > 0 and pos.air_rel_sigma > 0):
+            return None, config
+        prior = AirState.prior(t_s, pos.wind_sigma_m_s, pos.air_rel_sigma)
+        self._air = (self._air or prior).predict(t_s, prior)
+        a = self._air
+        config = dataclasses.replace(config, wind_sigma_m_s=min(a.wind_sigma_m_s, pos.wind_sigma_m_s),
+                                     air_rel_sigma=min(a.scale_sigma, pos.air_rel_sigma))
+        where = predicted[:2] if predicted is not None else (
+            (start.east_m, start.north_m) if start is not None else None)
+        return (None if where is None else ((float(a.x[0]), float(a.x[1])), float(a.x[2]), where)), config
+
+    def _update_air(self, fix: AcousticFix, clock_prior) -> AcousticFix:
+        """The air after a track's fix, and the fix moved by the air it implies."""
+        if self._air is None:
+            return fix
+        self._air, (de, dn, dd) = self._air.update(fix.ranges, np.array([fix.east_m, fix.north_m,
+                                                                         fix.clock_offset_s]),
+                                                   self.site.device_height_m, self.c,
+                                                   None if clock_prior is None else clock_prior[1])
+        if de == 0.0 and dn == 0.0 and dd == 0.0:
+            return fix
+        return dataclasses.replace(fix, east_m=fix.east_m + de, north_m=fix.north_m + dn,
+                                   clock_offset_s=fix.clock_offset_s + dd)
 
     def _clock_base(self) -> ClockState:
         """The clock filter's state including the last fix (a new lock's first fix, solved without

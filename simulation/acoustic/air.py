@@ -41,9 +41,15 @@ __all__ = ["AirConfig", "Air", "moist_speed_of_sound_m_s"]
 
 @dataclass(frozen=True)
 class AirConfig:
-    """Parameters of the true air (K, m/s, s, m as named); ``enabled`` False gives the site's stated air."""
+    """Parameters of the true air (K, m/s, s, m as named); ``enabled`` False gives the site's stated air.
+
+    Each term is off when its size is 0 (``thermometer_*_k``, ``hot_air_*_k``, ``wind_max_m_s`` with
+    ``gust_floor_m_s``); ``humidity`` False makes the true air dry (the receiver's own assumption), so
+    that each error source can be switched off alone (``bench/acoustic_error_causes.py``).
+    """
 
     enabled: bool = True
+    humidity: bool = True
     thermometer_min_k: float = 1.0
     thermometer_max_k: float = 2.0
     hot_air_min_k: float = 2.0
@@ -56,7 +62,7 @@ class AirConfig:
 
     def __post_init__(self):
         for name, value in vars(self).items():
-            if name != "enabled" and not (math.isfinite(value) and value >= 0):
+            if name not in ("enabled", "humidity") and not (math.isfinite(value) and value >= 0):
                 raise ConfigError(f"AirConfig.{name} must be finite and non-negative, got {value!r}")
         if self.thermometer_max_k < self.thermometer_min_k or self.hot_air_max_k < self.hot_air_min_k:
             raise ConfigError("AirConfig needs thermometer_min_k <= thermometer_max_k, hot_air_min_k <= hot_air_max_k")
@@ -90,7 +96,7 @@ class Air:
                  cfg: AirConfig = AirConfig()):
         self.cfg = cfg
         atm = site.atmosphere
-        self.rh_pct = atm.relative_humidity_pct
+        self.rh_pct = atm.relative_humidity_pct if cfg.humidity else 0.0
         self.pressure_kpa = atm.pressure_kpa
         if not cfg.enabled:
             self.thermometer_error_k = 0.0

@@ -67,6 +67,9 @@ class ChannelConfig:
     ground_material : key of ``simulation.acoustic.atmosphere.ABSORPTION_COEFFICIENTS``.
     tail_offset_db : added to the diffuse tail's level of :func:`tail_model`
         (0 = the model; −100 ≈ no tail, for tests of the discrete paths).
+    ground_reflection, wall_reflections : keep the ground's image-source path and the first-order
+        reflections off vertical faces (both on; off only to measure what multipath costs a receiver,
+        ``bench/acoustic_error_causes.py``).
     """
 
     porous_loss_db: float = 1.5
@@ -74,6 +77,8 @@ class ChannelConfig:
     clutter_radius_m: float = 15.0
     ground_material: str = GROUND_MATERIAL
     tail_offset_db: float = 0.0
+    ground_reflection: bool = True
+    wall_reflections: bool = True
 
     def __post_init__(self):
         if not 0.0 <= self.porous_loss_db < 40.0:
@@ -382,10 +387,13 @@ def channel_paths(scene: Scene, src_xyz, rx_xyz) -> PathSet:
             first = int(scene.solid_index[np.flatnonzero(hit)[0]])
             kinds.append(3), lengths.append(path), gains.append(porous / max(d, 1e-3))
             detours.append(max(path - d, 0.0)), boxes.append(first)
-    if u > 0 and not (hits[1].any() or hits[2].any()):
+    if u > 0 and scene.config.ground_reflection and not (hits[1].any() or hits[2].any()):
         g = scene.ground_r / lg * porous3[1] * porous3[2]
         kinds.append(1), lengths.append(lg), gains.append(g), detours.append(0.0), boxes.append(-1)
-    rl, rg, rb = _reflections(scene, src, rx, d)
+    if scene.config.wall_reflections:
+        rl, rg, rb = _reflections(scene, src, rx, d)
+    else:
+        rl, rg, rb = np.zeros(0), np.zeros(0), np.zeros(0, int)
     kinds += [2] * len(rl)
     lengths += rl.tolist()
     gains += rg.tolist()

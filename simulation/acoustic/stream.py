@@ -25,7 +25,7 @@ import csv
 import heapq
 import io
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, fields, replace
 from typing import Iterator
 
 import numpy as np
@@ -348,18 +348,32 @@ def write_audio(ctx: StreamContext) -> dict:
 
     Options (all on by default): ``acoustic_air`` (wind, warm air, humidity and the crew's thermometer error,
     :mod:`simulation.acoustic.air`), ``acoustic_hardware`` (beacon survey errors, emission delays, codec;
-    :mod:`simulation.acoustic.hardware`). Receiver tests that check one equation switch them off.
+    :mod:`simulation.acoustic.hardware`): each true/false, or a table of
+    :class:`~simulation.acoustic.air.AirConfig` / :class:`~simulation.acoustic.hardware.HardwareConfig` fields
+    (e.g. ``{"wind_max_m_s": 0.0, "gust_floor_m_s": 0.0}``: every other term as default). Receiver tests that
+    check one equation switch them off; ``bench/acoustic_error_causes.py`` switches them one at a time.
     """
     cfg = AudioConfig.from_options(ctx.options)
-    air = ctx.options.get("acoustic_air", True)
-    hardware = ctx.options.get("acoustic_hardware", True)
-    for name, value in (("acoustic_air", air), ("acoustic_hardware", hardware)):
-        if not isinstance(value, bool):
-            raise ConfigError(f"option {name} must be true or false, got {value!r}")
+    air = _config_option(ctx.options, "acoustic_air", AirConfig)
+    hardware = _config_option(ctx.options, "acoustic_hardware", HardwareConfig)
     render_audio(ctx.site, ctx.trajectory, ctx.seed, ctx.out_dir / "audio.wav", cfg,
                  truth_path=ctx.out_dir / "audio_truth.csv",
                  progress=ctx.kind == "walk" and bool(ctx.options.get("progress", True)),
-                 air=AirConfig(enabled=air), hardware=HardwareConfig() if hardware else None,
+                 air=air if air is not None else AirConfig(enabled=False), hardware=hardware,
                  crew_seed=ctx.person_seed)
     return {"audio": {"file": "audio.wav", "fs_hz": cfg.fs_hz, "start_s": cfg.start_s,
                       "start_uncertainty_s": cfg.start_uncertainty_s}}
+
+
+def _config_option(options: dict, name: str, cls):
+    """``options[name]`` as a config: true (default) → ``cls()``, false → None, a table → ``cls(**table)``."""
+    value = options.get(name, True)
+    if isinstance(value, bool):
+        return cls() if value else None
+    if not isinstance(value, dict):
+        raise ConfigError(f"option {name} must be true, false or a table of {cls.__name__} fields, got {value!r}")
+    known = {f.name for f in fields(cls)}
+    unknown = sorted(set(value) - known)
+    if unknown:
+        raise ConfigError(f"option {name}: unknown key(s) {unknown}; known: {sorted(known)}")
+    return cls(**value)

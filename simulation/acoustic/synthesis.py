@@ -21,9 +21,8 @@ Ambient sound (:class:`AmbientNoise`), drawn per fixed chunk of samples:
 * transformer hum (100 Hz and harmonics for a 50 Hz grid, magnetostriction)
   falling 1/r from the nearest tank — far out of band, it only tests the
   receiver's band-pass;
-* corona clicks near HV equipment: a Poisson process whose rate decays with the
-  distance to the nearest transformer, gantry or apparatus; each click an
-  exponentially decaying broadband burst.
+* corona and partial-discharge pulses from the HV equipment's insulators and
+  bushings, in bursts phase-locked to the mains (:mod:`simulation.acoustic.discharge`).
 """
 
 from __future__ import annotations
@@ -40,13 +39,13 @@ from features.site import Site
 from simulation.acoustic.channel import ChannelConfig, PathSet, tail_model
 from simulation.acoustic.atmosphere import absorption_db_per_m, fresnel_number, maekawa_loss_db, speed_of_sound_m_s
 from simulation.acoustic.chirp import ChirpSpec, chirp_waveform
+from simulation.acoustic.discharge import DischargeConfig, DischargeSources
 from simulation.site.geometry import boxes_array
 from simulation.rng import stream_rng
 from simulation.streams import Trajectory
 
 __all__ = ["AudioConfig", "ChirpRenderer", "AmbientNoise", "detection_range_m", "CHUNK_SAMPLES"]
 
-_HV_KINDS = ("transformer", "gantry", "equipment")
 CHUNK_SAMPLES = 16384
 """Ambient noise is drawn per chunk of this many samples (block sizes must be multiples of it)."""
 _PRE_SAMPLES = 64          # segment margin before the first arrival (zero-phase filters smear both ways)
@@ -80,9 +79,12 @@ class AudioConfig:
         base and its uncertainty; the true start is uniform within ± it.
     clock_drift_ppm : the sample clock's error is uniform within ± this.
     hum_db_spl_1m : transformer hum at 1 m from the tank (100 Hz line), dB SPL.
-    corona_rate_hz : corona clicks per second next to HV equipment; the rate
-        falls as exp(−d/``corona_scale_m``).
-    corona_peak_db_spl : range of a click's peak level at 1 m, dB SPL.
+    corona_rate_hz : discharge pulses per second of an active source on HV equipment
+        (0: none); corona_active_share : share of candidate sources (bushings,
+        insulator strings) that discharge; corona_level_db_spl : (mean, sd) of a
+        pulse's 17–23 kHz peak level at 1 m, dB re 20 µPa; corona_phase_window_deg :
+        half-width of the phase window about each voltage peak
+        (:mod:`simulation.acoustic.discharge`, its sources and assumptions).
     doppler : render the chirp with the receiver's Doppler factor.
     max_excess_delay_s : paths later than this after the first one are dropped.
     skip_margin_db : emissions whose best free-field level stays this far below
@@ -101,9 +103,10 @@ class AudioConfig:
     clock_drift_ppm: float = 10.0
     hum_db_spl_1m: float = 75.0
     mains_hz: float = 50.0
-    corona_rate_hz: float = 1.0
-    corona_scale_m: float = 10.0
-    corona_peak_db_spl: tuple[float, float] = (60.0, 80.0)
+    corona_rate_hz: float = 10.0
+    corona_active_share: float = 0.5
+    corona_level_db_spl: tuple[float, float] = (60.0, 8.0)
+    corona_phase_window_deg: float = 30.0
     doppler: bool = True
     max_excess_delay_s: float = 0.12
     skip_margin_db: float = 25.0
@@ -122,6 +125,11 @@ class AudioConfig:
             raise ConfigError(f"audio noise_band_hz must lie within (0, fs/2), got {self.noise_band_hz}")
         if self.start_uncertainty_s < 0 or self.clock_drift_ppm < 0 or self.corona_rate_hz < 0:
             raise ConfigError("audio start_uncertainty_s, clock_drift_ppm and corona_rate_hz must be >= 0")
+        if not 0.0 <= self.corona_active_share <= 1.0 or not 0.0 < self.corona_phase_window_deg <= 90.0:
+            raise ConfigError(f"audio corona_active_share must lie in [0, 1] and corona_phase_window_deg in (0, 90], "
+                              f"got {self.corona_active_share}, {self.corona_phase_window_deg}")
+        if not self.corona_level_db_spl[1] >= 0:
+            raise ConfigError(f"audio corona_level_db_spl spread must be >= 0, got {self.corona_level_db_spl}")
         if abs(self.clock_drift_ppm) > 1000:
             raise ConfigError(f"audio clock_drift_ppm must be below 1000, got {self.clock_drift_ppm}")
         blk = self.block_samples
@@ -145,7 +153,7 @@ class AudioConfig:
         unknown = set(table) - known
         if unknown:
             raise ConfigError(f"options [audio]: unknown key(s) {sorted(unknown)}")
-        for key in ("noise_band_hz", "corona_peak_db_spl"):
+        for key in ("noise_band_hz", "corona_level_db_spl"):
             if key in table:
                 table[key] = tuple(table[key])
         if "channel" in table and isinstance(table["channel"], dict):
@@ -270,15 +278,22 @@ class AmbientNoise:
         band = cfg.noise_band_hz[1] - cfg.noise_band_hz[0]
         # white noise over 0..fs/2 whose share within the band has the stated level
         self.noise_rms = _db_to_digital_rms(cfg.inband_noise_db_spl, cfg) * math.sqrt((fs / 2.0) / band)
-        self.hv = boxes_array([b for b in site.layout if b.kind in _HV_KINDS])
         self.tanks = boxes_array([b for b in site.layout if b.kind == "transformer"])
         self.hum_phase = stream_rng(seed, "audio", "hum").uniform(0.0, 2.0 * np.pi, 4)
+        self.discharges = DischargeSources(
+            site, DischargeConfig(rate_hz=cfg.corona_rate_hz, active_share=cfg.corona_active_share,
+                                  level_db_spl=cfg.corona_level_db_spl, phase_window_deg=cfg.corona_phase_window_deg,
+                                  mains_hz=cfg.mains_hz),
+            fs, float(stream_rng(seed, "audio", "mains").uniform(0.0, 2.0 * np.pi)), speed_of_sound_m_s(
+                site.atmosphere.temperature_c))
+        # Pulses more than 10 dB below the in-band noise are not rendered (they are drawn all the same).
+        self.pulse_floor_db_spl = cfg.inband_noise_db_spl - 10.0
 
     def chunk(self, k: int, n: int) -> np.ndarray:
         """Ambient samples of chunk ``k`` (device samples k·CHUNK_SAMPLES …), length ``n`` plus click overhang."""
         cfg, fs = self.cfg, self.cfg.fs_hz
         rng = stream_rng(self.seed, "audio", "noise", k)
-        click_len = int(0.002 * fs)
+        click_len = self.discharges.template_len
         out = np.zeros(n + click_len)
         out[:n] = rng.standard_normal(n) * self.noise_rms
         b0 = k * CHUNK_SAMPLES
@@ -297,13 +312,10 @@ class AmbientNoise:
                 zh *= z
                 hum += 10.0 ** (-3.0 * h / 20.0) * (zh * np.exp(1j * self.hum_phase[h])).imag
             out[:n] += amp * hum
-        if self.hv.shape[0] and cfg.corona_rate_hz > 0:
-            d_mid = float(_distance_to_boxes(pos[1:2], self.hv)[0])
-            rate = cfg.corona_rate_hz * math.exp(-d_mid / cfg.corona_scale_m)
-            tt = np.arange(click_len) / fs
-            for s0 in np.sort(rng.integers(0, n, rng.poisson(rate * n / fs))):
-                peak_db = rng.uniform(*cfg.corona_peak_db_spl) - 20.0 * math.log10(max(d_mid, 1.0))
-                click = rng.standard_normal(click_len) * np.exp(-tt / 1.5e-4)
-                click *= 10.0 ** ((peak_db - cfg.full_scale_db_spl) / 20.0) * math.sqrt(2.0) / np.abs(click).max()
-                out[s0:s0 + click_len] += click
+        if cfg.corona_rate_hz > 0:
+            t0 = self.true_start + b0 / self.fs_true
+            up = float(np.interp(grid[1], self.traj.t_s, self.traj.up_m))
+            self.discharges.add_pulses(out, rng, t0, t0 + n / self.fs_true, self.fs_true,
+                                       np.array([pos[1, 0], pos[1, 1], up]), cfg.full_scale_db_spl,
+                                       self.pulse_floor_db_spl)
         return out
