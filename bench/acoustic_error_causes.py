@@ -14,8 +14,11 @@ Two measurements on held-out walks (sites of the standard split's test set, walk
    NLOS first paths, air, hardware), and
    (b) geometric pseudoranges — the true distance to the surveyed beacon at the time the
    receiver tags each range, at the receiver's own speed of sound and device height — which
-   a perfect receiver would solve exactly: whatever error remains is the receiver's own
-   (its motion model, the time tag), and (b′) the same at the walker's true device height.
+   a perfect receiver would solve exactly (without its air correction, as they hold no air):
+   whatever error remains is the receiver's own (its motion model, the time tag, its clock
+   prior), and (b′) the same at the walker's true device height. The first-path oracle keeps
+   the receiver's air correction of the frame but not the move of the fix the air update
+   makes after it.
    Beside them: HDOP of the used beacons at the true position and the LOS ranging error.
 
 Time tag: for walking fixes the along-track error over the speed (s; > 0: the fix is ahead
@@ -150,8 +153,11 @@ class _Oracle:
                 bound = sig.bind(*args, **kw)
                 lag = bound.arguments.get("range_lag_s")
                 variants = {}
+                air = bound.arguments.get("air")
                 for kind in ("first path", "geometric", "true height"):
                     bound.arguments["detections"] = self.substitute(args[0] if args else kw["detections"], lag, kind)
+                    # Geometric ranges hold no air: the receiver's air correction would only move them.
+                    bound.arguments["air"] = air if kind == "first path" else None
                     variants[kind] = frame_fix(*bound.args, **bound.kwargs)
                 self.by_fix[id(real)] = (real, variants)
             return real

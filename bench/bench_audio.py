@@ -169,8 +169,62 @@ def matched_filter_rates(path: Path) -> dict:
             "scipy correlate fft (real output only)": correlate}
 
 
-def walk_rate(tmp: Path) -> dict:
-    """Receiver speed and fix figures on a simulated walk (site seed 3, walk seed 7, 120 s)."""
+STAGES = {
+    "read + sample stats": ("features.acoustic.detection", "_Stream", "ensure"),
+    "impulse removal": ("features.acoustic.impulses", "ImpulseBlanker", ("process", "flush")),
+    "matched filter": ("features.acoustic.matched_filter", "StreamingMatchedFilter", ("process", "flush")),
+    "detection, association, timing": ("features.acoustic.detection", "_FrameDetector", "detect_frame"),
+    "acquisition vote": ("features.acoustic.detection", "_FrameDetector", "acquire"),
+    "fix: ranges, exclusion, lock, air": ("features.acoustic.tracking", "ClockPositionTracker", "frame_done"),
+    "CIR features": ("features.acoustic.detection", "_FrameDetector", "flush_features"),
+}
+"""Receiver stages timed by :func:`stage_breakdown` (module, class, method(s)); time is exclusive of the stages
+nested in them (``detect_frame`` reads audio through ``ensure``, which runs the blanker and the filter)."""
+
+
+def stage_breakdown(run) -> dict:
+    """CPU seconds per stage of one call of ``run()`` (exclusive, see :data:`STAGES`), plus ``other``."""
+    import importlib
+
+    spent: dict = {name: 0.0 for name in STAGES}
+    stack: list = []
+    saved = []
+
+    def wrap(name, fn):
+        def timed(*a, **k):
+            t0 = time.process_time()
+            stack.append(0.0)
+            try:
+                return fn(*a, **k)
+            finally:
+                inner = stack.pop()
+                dt = time.process_time() - t0
+                spent[name] += dt - inner
+                if stack:
+                    stack[-1] += dt
+        return timed
+
+    for name, (mod, cls, methods) in STAGES.items():
+        klass = getattr(importlib.import_module(mod), cls)
+        for m in (methods if isinstance(methods, tuple) else (methods,)):
+            saved.append((klass, m, getattr(klass, m)))
+            setattr(klass, m, wrap(name, getattr(klass, m)))
+    try:
+        t0 = time.process_time()
+        run()
+        total = time.process_time() - t0
+    finally:
+        for klass, m, fn in saved:
+            setattr(klass, m, fn)
+    spent["other (features, windows, Python glue)"] = total - sum(spent.values())
+    spent["total"] = total
+    return spent
+
+
+def walk_rate(tmp: Path, seconds: int = 300) -> dict:
+    """The receiver on a simulated walk (site seed 3, walk seed 7, ``seconds`` long, made with the CLI): best of 3
+    wall and × real time, scipy's ``oaconvolve`` with the same 10 ms kernel over the same audio (best of 3, timed
+    between the receiver's runs), the ratio of the two, the per-stage breakdown, fixes and their error."""
     from features.acoustic.positions import PositionConfig
     from features.site import load_site
     from pipeline.cli import main as cli_main
@@ -183,26 +237,37 @@ def walk_rate(tmp: Path) -> dict:
     sys.stdout = quiet
     try:
         cli_main(["simulate", "site", "--seed", "3", "--out", str(site_dir)])
-        cli_main(["simulate", "walk", str(site_dir), "--seed", "7", "--duration", "120", "--out", str(walk)])
+        cli_main(["simulate", "walk", str(site_dir), "--seed", "7", "--duration", str(seconds), "--out", str(walk)])
     finally:
         sys.stdout = old
         quiet.close()
     site = load_site(site_dir)
     timing = timing_from_walk(load_walk(walk), site)
     positions = PositionConfig(max_clock_offset_s=timing.start_uncertainty_s + 0.05, motion_speed_m_s=1.4)
-    walls = []
+
+    def run():
+        return analyse_audio(walk / "audio.wav", site, timing, DetectorConfig(), positions=positions)
+
+    res = run()                                            # first run: compiled kernels loaded, caches warm
+    walls, yard = [], []
+    x, _ = sf.read(str(walk / "audio.wav"), dtype="float32")
+    h = MatchedFilterBank([ChirpSpec(17_000.0, 23_000.0, 0.010, 0.2)], FS).kernels[0].astype(np.float32)
     for _ in range(3):
         t0 = time.perf_counter()
-        res = analyse_audio(walk / "audio.wav", site, timing, DetectorConfig(), positions=positions)
+        res = run()
         walls.append(time.perf_counter() - t0)
-    wall = min(walls)
+        t0 = time.perf_counter()
+        scipy.signal.oaconvolve(x, h)
+        yard.append(time.perf_counter() - t0)
+    stages = stage_breakdown(run)
     truth = np.genfromtxt(walk / "truth.csv", delimiter=",", names=True, dtype=None, encoding=None)
     t = np.array([f.t_s for f in res.fixes])
     err = np.hypot(np.array([f.east_m for f in res.fixes]) - np.interp(t, truth["t_s"], truth["east_m"]),
                    np.array([f.north_m for f in res.fixes]) - np.interp(t, truth["t_s"], truth["north_m"]))
     n_frames = int(round(res.duration_s / site.acoustic.frame_s))
-    return {"audio_s": res.duration_s, "wall_s": wall, "fixes": len(res.fixes), "frames": n_frames,
-            "median_m": float(np.median(err)), "p95_m": float(np.percentile(err, 95)), "max_m": float(err.max())}
+    return {"audio_s": res.duration_s, "wall_s": min(walls), "oaconvolve_s": min(yard), "stages": stages,
+            "fixes": len(res.fixes), "frames": n_frames, "median_m": float(np.median(err)),
+            "p95_m": float(np.percentile(err, 95)), "max_m": float(err.max())}
 
 
 def main() -> None:
@@ -222,9 +287,18 @@ def main() -> None:
         for name, rate in mf_rates.items():
             print(f"  {name:48s} {rate:8.0f}x")
         w = walk_rate(tmp)
+        rx, yard = w["audio_s"] / w["wall_s"], w["audio_s"] / w["oaconvolve_s"]
         print(f"\nsimulated walk (site 3, walk 7), best of 3: {w['audio_s']:.0f} s audio in {w['wall_s']:.2f} s = "
-              f"{w['audio_s'] / w['wall_s']:.0f}x real time; {w['fixes']} fixes of {w['frames']} frames, "
-              f"error median {w['median_m']:.2f} m, p95 {w['p95_m']:.2f} m, max {w['max_m']:.2f} m")
+              f"{rx:,.0f}x real time; oaconvolve with the same 10 ms kernel over the same audio, best of 3: "
+              f"{yard:,.0f}x; receiver / yardstick = {rx / yard:.3f}")
+        print(f"  {w['fixes']} fixes of {w['frames']} frames, error median {w['median_m']:.2f} m, p95 {w['p95_m']:.2f} m, "
+              f"max {w['max_m']:.2f} m")
+        st = w["stages"]
+        print(f"  per stage (CPU s of one run, exclusive; total {st['total']:.2f} s):")
+        for name, sec in st.items():
+            if name != "total":
+                print(f"    {name:40s} {sec:7.3f} s {100 * sec / st['total']:5.1f} %  "
+                      f"({w['audio_s'] / max(sec, 1e-9):,.0f}x real time)")
         print("\nfull receiver (read, matched filter, detection, CIR features, positions), one core, "
               "static receiver, 8 beacons;\neach file in a fresh process: the first run, then the best of 6:")
         print(f"  {'file':>8s} {'audio s':>8s} {'first x':>8s} {'best s':>8s} {'best x':>8s} {'windows':>8s} "

@@ -13,7 +13,12 @@ def library(site_dir, tmp_path_factory):
     from simulation.survey import simulate_survey
 
     d = tmp_path_factory.mktemp("envcli")
-    survey = simulate_survey(site_dir, d / "survey", seed=9, cell_size_m=20.0, capture_s=4.0, progress=False)
+    # Re-pinned seed 9 → 10 (issue 21 item 6): the survey mode clusters this 35-cell survey's 105 windows without
+    # labels and needs two classes among the clusters; removing the 33 discharge pulses of seed 9's audio before
+    # the matched filter moved 17 windows' CIR features by at most 0.03 ms / 0.9 dB, and its clustering from
+    # three clusters to one ("no sub-model could be fitted"). The test is about the CLI's plumbing in every
+    # mode, not clustering quality (bench/env_study.py measures that); seeds 10 and 11 pass in every mode.
+    survey = simulate_survey(site_dir, d / "survey", seed=10, cell_size_m=20.0, capture_s=4.0, progress=False)
     build_library(survey, d / "fp.sqlite", progress=False)
     return survey, d / "fp.sqlite"
 

@@ -67,7 +67,8 @@ _MAX_HOLD_S = 0.25
 (continuous discharge noise is noise, not impulses: its own level soon raises the reference)."""
 
 _AR_GAIN = 4.0
-"""Prediction-error power ratio (6 dB) from which the fitted model replaces the second difference."""
+"""Excess (6 dB) of the second difference's output over white noise through it from which the fitted model
+replaces it (module docstring)."""
 
 _MAX_LS_HOLE = 160
 """Holes longer than this many samples are filled by a straight line instead of the AR least squares."""
@@ -102,8 +103,9 @@ def _prediction_error_filter(x: np.ndarray, order: int) -> np.ndarray:
     """c = [1, −a₁, …, −a_p] of the AR(p) model of ``x`` (autocorrelation method over a Hann window, with a
     1e-9 white-noise correction so that a pure tone stays regular; Levinson–Durbin recursion, Makhoul 1975
     eqs. 38–40); shape (p + 1,). All zeros (use the second difference) when ``x`` is (nearly) silent or when
-    the model predicts less than :data:`_AR_GAIN` times better than the second difference, whose error
-    power is 6r₀ − 8r₁ + 2r₂: hum and noise alone, the common case, then cost 3 taps instead of p + 1."""
+    the second difference's output power, 6r₀ − 8r₁ + 2r₂, is within :data:`_AR_GAIN` of what it makes of
+    white noise at the model's prediction-error power (6·E): noise and hum alone, the common case, then cost
+    3 taps instead of p + 1."""
     n = x.shape[0]
     w = np.empty(n)
     for i in range(n):
@@ -134,7 +136,9 @@ def _prediction_error_filter(x: np.ndarray, order: int) -> np.ndarray:
         err *= 1.0 - km * km
         if not err > 0.0:
             break
-    if _AR_GAIN * err > 6.0 * r[0] - 8.0 * r[1] + 2.0 * r[2]:
+    # The second difference passes white noise of power E at 6E (|1 − 2z⁻¹ + z⁻²|² averages 6): it whitens as
+    # well as the model unless its output exceeds that by more than _AR_GAIN (a tone or hum it cannot remove).
+    if _AR_GAIN * 6.0 * err > 6.0 * r[0] - 8.0 * r[1] + 2.0 * r[2]:
         c[:] = 0.0
     return c
 

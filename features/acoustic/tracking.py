@@ -24,7 +24,7 @@ import math
 import numpy as np
 
 from features.acoustic.acquisition import HoughAcquisition, acquisition_windows
-from features.acoustic.air import AirState
+from features.acoustic.air import AIR_UPDATE_MIN_SPEED_M_S, AirState
 from features.acoustic.clock import ClockState
 from features.acoustic.frame_fix import frame_fix, frame_ranges
 from features.acoustic.positions import AcousticFix, PositionConfig
@@ -312,7 +312,10 @@ class ClockPositionTracker(HoughAcquisition):
             if self._sane(last) and math.hypot(fix.east_m - last.east_m, fix.north_m - last.north_m) <= (
                     1.5 * dt + 3.0 * math.sqrt(max(fix.covariance[0, 0] + fix.covariance[1, 1], 0.0)) + 0.5):
                 self._confirmed_tentative = last
-        fix = self._update_air(fix, prior)
+        if velocity is not None and math.hypot(*velocity) >= AIR_UPDATE_MIN_SPEED_M_S:
+            # The air is learnt from walking fixes: standing, the wearer's body shadows the beacons behind it
+            # by a one-sided excess from a direction the receiver does not know, which looks like a wind.
+            fix = self._update_air(fix, prior)
         # With the drift-aware clock prior a three-beacon fix keeps a degree of freedom for the residual
         # test (issue 11, defect 7): it carries the track on, as four or more do.
         self._previous_fix, self.last_fix = self.last_fix, fix
