@@ -270,14 +270,34 @@ def walk_rate(tmp: Path, seconds: int = 300) -> dict:
             "p95_m": float(np.percentile(err, 95)), "max_m": float(err.max())}
 
 
+def print_walk(w: dict) -> None:
+    """Print :func:`walk_rate`'s figures."""
+    rx, yard = w["audio_s"] / w["wall_s"], w["audio_s"] / w["oaconvolve_s"]
+    print(f"\nsimulated walk (site 3, walk 7), best of 3: {w['audio_s']:.0f} s audio in {w['wall_s']:.2f} s = "
+          f"{rx:,.0f}x real time; oaconvolve with the same 10 ms kernel over the same audio, best of 3: "
+          f"{yard:,.0f}x; receiver / yardstick = {rx / yard:.3f}")
+    print(f"  {w['fixes']} fixes of {w['frames']} frames, error median {w['median_m']:.2f} m, p95 {w['p95_m']:.2f} m, "
+          f"max {w['max_m']:.2f} m")
+    st = w["stages"]
+    print(f"  per stage (CPU s of one run, exclusive; total {st['total']:.2f} s):")
+    for name, sec in st.items():
+        if name != "total":
+            print(f"    {name:40s} {sec:7.3f} s {100 * sec / st['total']:5.1f} %  "
+                  f"({w['audio_s'] / max(sec, 1e-9):,.0f}x real time)")
+
+
 def main() -> None:
     if len(sys.argv) == 3 and sys.argv[1] == "--child":
         child(sys.argv[2])
         return
     print(f"machine check: 1,000 iterations of a Python float loop take {python_loop_us():.0f} us "
           "(63-86 us seen on the 2-core test machine; timings there vary by up to 40 % from minute to minute)\n")
+    walk_only = "--walk-only" in sys.argv[1:]         # the simulated walk's figures alone (issue 25 before/after)
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
+        if walk_only:
+            print_walk(walk_rate(tmp))
+            return
         files = {}
         for minutes in (1, 5, 10):
             files[minutes] = tmp / f"rec_{minutes}min.wav"
@@ -286,19 +306,7 @@ def main() -> None:
         mf_rates = matched_filter_rates(files[1])
         for name, rate in mf_rates.items():
             print(f"  {name:48s} {rate:8.0f}x")
-        w = walk_rate(tmp)
-        rx, yard = w["audio_s"] / w["wall_s"], w["audio_s"] / w["oaconvolve_s"]
-        print(f"\nsimulated walk (site 3, walk 7), best of 3: {w['audio_s']:.0f} s audio in {w['wall_s']:.2f} s = "
-              f"{rx:,.0f}x real time; oaconvolve with the same 10 ms kernel over the same audio, best of 3: "
-              f"{yard:,.0f}x; receiver / yardstick = {rx / yard:.3f}")
-        print(f"  {w['fixes']} fixes of {w['frames']} frames, error median {w['median_m']:.2f} m, p95 {w['p95_m']:.2f} m, "
-              f"max {w['max_m']:.2f} m")
-        st = w["stages"]
-        print(f"  per stage (CPU s of one run, exclusive; total {st['total']:.2f} s):")
-        for name, sec in st.items():
-            if name != "total":
-                print(f"    {name:40s} {sec:7.3f} s {100 * sec / st['total']:5.1f} %  "
-                      f"({w['audio_s'] / max(sec, 1e-9):,.0f}x real time)")
+        print_walk(walk_rate(tmp))
         print("\nfull receiver (read, matched filter, detection, CIR features, positions), one core, "
               "static receiver, 8 beacons;\neach file in a fresh process: the first run, then the best of 6:")
         print(f"  {'file':>8s} {'audio s':>8s} {'first x':>8s} {'best s':>8s} {'best x':>8s} {'windows':>8s} "

@@ -1,9 +1,9 @@
 """Issue 10 item 7 / issue 11 defect 7: the receiver on a coverage deployment (8–18 beacons heard).
 
-* Exclusion beyond the exhaustive search's budget (``positions._backward_elimination``): a frame
+* Exclusion beyond the exhaustive search's budget (``lsq._backward_elimination``): a frame
   of 14 beacons, 4 NLOS-biased by +1.5–3 m, got no fix before (C(14, 11) subsets exceed the
   budget of 256, and at most 3 could be excluded); now the four are excluded.
-* The air's common errors as consider parameters (``positions._consider_covariance``): a common
+* The air's common errors as consider parameters (``lsq.consider_covariance``): a common
   wind of N(0, 1.5 m/s) per axis and a 0.3 % sound-speed error on ten beacons gave NEES mean
   ~20 before; with the consider covariance it is near 2.
 * The mirror-solution check (``ClockPositionTracker.mirror_free``) and the cold-start mirror rate

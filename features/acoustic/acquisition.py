@@ -18,7 +18,7 @@ import statistics
 
 import numpy as np
 
-from features.acoustic.positions import AcousticFix, BeaconRange, _chi2_limit, _gauss_newton, solve_position
+from features.acoustic.positions import AcousticFix, BeaconRange, chi2_limit, least_squares_fix, solve_position
 from features.acoustic.timing import AudioTiming, SearchWindow
 from features.site import Site
 
@@ -240,10 +240,10 @@ class HoughAcquisition:
             (g.east_min_m + fe * (g.east_max_m - g.east_min_m), g.north_min_m + fn * (g.north_max_m - g.north_min_m))
             for fe in (0.25, 0.75) for fn in (0.25, 0.75)]
         dof = len(ranges) + (prior is not None) - 3
-        limit = _chi2_limit(dof, self._verify_config.chi2_alpha) if dof > 0 else math.inf
+        limit = chi2_limit(dof, self._verify_config.chi2_alpha) if dof > 0 else math.inf
         for e0, n0 in starts:
-            sol = _gauss_newton(ranges, h, c, self._verify_config.max_iterations,
-                                np.array([e0, n0, fix.clock_offset_s]), prior)
+            sol = least_squares_fix(ranges, h, c, self._verify_config.max_iterations,
+                                    np.array([e0, n0, fix.clock_offset_s]), prior)
             if sol is None:
                 continue
             x, _, _, _, chi2 = sol

@@ -15,7 +15,7 @@ To first order a range reads
     ρᵢ = rᵢ − (p − sᵢ)_h·w/c − k·rᵢ + c·δ                                (1)
 
 ((p − sᵢ)_h the horizontal vector from beacon i to the receiver), the model of the
-consider parameters in :func:`features.acoustic.positions._consider_covariance`. A
+consider parameters in :func:`features.acoustic.lsq.consider_covariance`. A
 steady wind biases every fix of a walk alike, by about the mean range times w/c: at
 2 m/s and 20 m, 0.12 m downwind — on held-out walks two thirds of the open-area error
 (``bench/acoustic_error_causes.py``). Within one fix these terms are hard to see (the

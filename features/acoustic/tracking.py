@@ -113,7 +113,7 @@ class ClockPositionTracker(HoughAcquisition):
         self._acquire_config = positions
         self._verify_config = dataclasses.replace(positions, motion_speed_m_s=0.0, max_excluded=1)
         # A tracked frame of a coverage deployment hears 8–18 beacons, several NLOS: up to
-        # ``track_excluded_share`` of them may be excluded (positions._backward_elimination).
+        # ``track_excluded_share`` of them may be excluded (lsq._backward_elimination).
         self._track_config = dataclasses.replace(
             positions, max_excluded_share=max(positions.max_excluded_share, self.track_excluded_share))
         self._strict_config = dataclasses.replace(positions, motion_speed_m_s=0.0, max_excluded=0)
