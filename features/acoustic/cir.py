@@ -4,7 +4,7 @@ One CIR is an envelope ``amplitude`` (n_taps,) sampled every ``tap_s``
 seconds: the matched-filter envelope around a beacon chirp (tap = 1/48 kHz),
 or a UWB accumulator (tap ≈ 1 ns). The same code serves both.
 
-Steps (DESIGN.md §5):
+Steps (docs/design.md §5):
 
 1. **Noise floor** ``noise_power`` (mean noise power per tap): given by the
    caller, or estimated robustly as ``median(|h|²)/ln 2`` (the median of an
@@ -71,7 +71,7 @@ __all__ = ["CirFeatures", "CirAnalysis", "CirBatch", "analyse_cir", "analyse_cir
            "noise_threshold_factor"]
 
 PEAK_DYNAMIC_RANGE_DB = 20.0
-"""Taps more than this far below the strongest are ignored (DESIGN.md §5)."""
+"""Taps more than this far below the strongest are ignored (docs/design.md §5)."""
 
 CIR_P_FA = 1e-2
 """False-alarm budget of the tap selection: expected noise taps selected per CIR (module docstring, step 2)."""
@@ -93,7 +93,7 @@ K_MAX_DB = 40.0
 
 
 class CirFeatures(NamedTuple):
-    """The nine acoustic channel features of DESIGN.md §5 (names as in feature tables).
+    """The nine acoustic channel features of docs/design.md §5 (names as in feature tables).
 
     A named tuple (immutable like a frozen dataclass, and three times cheaper to make:
     the receiver makes one per chirp heard).

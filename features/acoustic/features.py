@@ -1,6 +1,6 @@
 """Acoustic feature windows and positions from one recording, in one streaming pass.
 
-Each analysis window (default 2 s, hop 1 s, DESIGN.md §5) reports the nine
+Each analysis window (default 2 s, hop 1 s, docs/design.md §5) reports the nine
 CIR features of :mod:`features.acoustic.cir` averaged over the beacon chirps whose first
 arrival falls inside it (NaN-aware mean: a statistic undefined for one chirp
 does not void the others), the counts behind them, and flags:

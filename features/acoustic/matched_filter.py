@@ -9,12 +9,12 @@ about 1/B wide, so a 6 kHz chirp resolves paths about 170 µs (8 samples at
 Three linear operations are folded into one FIR kernel per template, because
 convolution is associative:
 
-* the 16.5–23.5 kHz band-pass of DESIGN.md §5 (a linear-phase windowed-sinc
+* the 16.5–23.5 kHz band-pass of docs/design.md §5 (a linear-phase windowed-sinc
   FIR from :func:`scipy.signal.firwin`),
 * the matched filter: the time-reversed chirp, weighted on receive by a
   Kaiser window (β = 6). Unweighted, a linear-FM chirp's compressed pulse has
   range sidelobes at −13.5 dB (here, with the Tukey 0.2 taper), above the
-  −20 dB tap threshold of DESIGN.md §5, so every path would bring false taps
+  −20 dB tap threshold of docs/design.md §5, so every path would bring false taps
   and a false "first arrival" ahead of it. Amplitude weighting of the
   reference (Richards, "Fundamentals of Radar Signal Processing", 2nd ed.,
   §4.7.3) lowers them to −34.6 dB for 1.2 dB of SNR and a 1.7× wider main
@@ -52,10 +52,10 @@ __all__ = [
 ]
 
 BANDPASS_LOW_HZ = 16_500.0
-"""Lower edge of the receiver band-pass, Hz (DESIGN.md §5)."""
+"""Lower edge of the receiver band-pass, Hz (docs/design.md §5)."""
 
 BANDPASS_HIGH_HZ = 23_500.0
-"""Upper edge of the receiver band-pass, Hz (DESIGN.md §5)."""
+"""Upper edge of the receiver band-pass, Hz (docs/design.md §5)."""
 
 RECEIVE_WINDOW = ("kaiser", 6.0)
 """Receive-side amplitude weighting of the reference chirp (:func:`scipy.signal.get_window` spec)."""
