@@ -28,10 +28,12 @@ def main(split_dir: str, model_dir: str) -> None:
     from features.schema import ENV_CLASSES
     from models.fusion.ekf import EventEKF
     from models.fusion.events import ClassTrack
-    from models.fusion_model import load_fusion_model
-    from pipeline.fusion import Track, adaptive_noise, track_errors, walk_inputs
-    from pipeline.walk_data import read_walk
-    from training.benchmark import split_layout
+    from models.fusion.model import load_fusion_model
+    from simulation.split import split_layout
+    from walks.inputs import walk_inputs
+    from walks.reader import read_walk
+    from walks.score import track_errors
+    from walks.track import Track
 
     lay = split_layout(split_dir)
     model = load_fusion_model(model_dir)
@@ -39,12 +41,12 @@ def main(split_dir: str, model_dir: str) -> None:
     pcs, tcs = [], []
     for w in lay.test_walks:
         data = read_walk(w)
-        inp = walk_inputs(data, model)
+        inp = walk_inputs(data, model.classifier)
         truth_cls = ClassTrack.from_labels(data.truth.t_s, data.truth.env_class, len(ENV_CLASSES))
         runs = {"kf_quality": EventEKF(model.ekf, model.quality, "kf_quality").run(inp.events),
-                "classifier": EventEKF(model.ekf, adaptive_noise(model), "classifier").run(inp.events,
+                "classifier": EventEKF(model.ekf, model.adaptive_policy(), "classifier").run(inp.events,
                                                                                           classes=inp.classes),
-                "oracle": EventEKF(model.ekf, adaptive_noise(model), "oracle").run(inp.events, classes=truth_cls)}
+                "oracle": EventEKF(model.ekf, model.adaptive_policy(), "oracle").run(inp.events, classes=truth_cls)}
         for k, r in runs.items():
             te = track_errors(Track(k, r.t_s, r.x[:, 0], r.x[:, 1], r.P[:, :2, :2]), data.truth)
             acc[k].append((te["err_m"], te["cls"]))

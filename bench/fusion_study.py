@@ -67,8 +67,8 @@ def _site_means(result) -> dict:
 
 def main() -> None:
     from fingerprints.survey import build_library
-    from pipeline.evaluate import _method_order
-    from training.benchmark import SPLITS, build_split
+    from pipeline.evaluate import method_order
+    from simulation.split import SPLITS, build_split
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--split", default="standard", choices=sorted(SPLITS))
@@ -98,7 +98,7 @@ def main() -> None:
         print(f"[{time.perf_counter() - t0:6.0f} s] seed {seed}: evaluated {len(results[seed]['results'])} walks",
               flush=True)
     pooled = {s: _by(r["pooled"]) for s, r in results.items()}
-    methods = _method_order(sorted({m for p in pooled.values() for (m, _) in p}))
+    methods = method_order({m for p in pooled.values() for (m, _) in p})
     sp = layout.split
     print(f"\n## {sp.name}: train sites {list(sp.train_sites)}, test sites {list(sp.test_sites)}, "
           f"{sp.walks_per_site} walks × {sp.walk_s:.0f} s per site; model seeds {args.seeds}; "

@@ -1,6 +1,6 @@
 """The fingerprint library: one SQLite file of sites, receivers, cells, samples and clustering runs.
 
-Schema and feature order: :mod:`fingerprints.schema`. Guarantees:
+Schema and feature order: :mod:`fingerprints.sql`. Guarantees:
 
 * **WAL mode, foreign keys on, synchronous=FULL**: a committed cell survives a
   killed process (and a power cut); readers never block the writer.
@@ -41,11 +41,11 @@ from features.fileio import atomic_path
 from features.gnss.features import Cn0Reference
 
 from fingerprints.records import (
-    CellCapture, IngestResult, LibraryError, ReceiverRecord, _now_utc, _num, _structured, _utc, capture_sha256,
-    feature_matrix,
+    CellCapture, IngestResult, LibraryError, ReceiverRecord, capture_sha256, feature_matrix, now_utc, parse_iso_utc,
+    sql_number, structured_rows,
 )
 from fingerprints.runs import ClusteringRunsMixin
-from fingerprints.schema import (
+from fingerprints.sql import (
     ACOUSTIC_COUNTS, APPLICATION_ID, DDL, FEATURES, GNSS_COUNTS, SAMPLE_COLUMNS, SCHEMA_VERSION,
 )
 
@@ -73,7 +73,7 @@ class FingerprintLibrary(ClusteringRunsMixin):
 
         Raises :class:`LibraryError` for a directory, a missing file when not
         ``create``, a file that is not an envfuse library, or a schema version
-        other than :data:`~fingerprints.schema.SCHEMA_VERSION`.
+        other than :data:`~fingerprints.sql.SCHEMA_VERSION`.
         """
         path = Path(path)
         if path.is_dir():
@@ -208,7 +208,7 @@ class FingerprintLibrary(ClusteringRunsMixin):
                 return int(row[0])
             cur = conn.execute("INSERT INTO sites (name, lat_deg, lon_deg, alt_m, site_toml_sha256, created_utc) "
                                "VALUES (?, ?, ?, ?, ?, ?)",
-                               (name, float(lat_deg), float(lon_deg), float(alt_m), site_toml_sha256, _now_utc()))
+                               (name, float(lat_deg), float(lon_deg), float(alt_m), site_toml_sha256, now_utc()))
             return int(cur.lastrowid)
 
     def add_receiver(self, site: str, name: str, cn0_reference: Mapping, *, calibrated: bool,
@@ -237,7 +237,7 @@ class FingerprintLibrary(ClusteringRunsMixin):
                 return int(row[0])
             cur = conn.execute("INSERT INTO receivers (site_id, name, description, cn0_reference_json, "
                                "cn0_calibrated, created_utc) VALUES (?, ?, ?, ?, ?, ?)",
-                               (site_id, name, description, text, int(bool(calibrated)), _now_utc()))
+                               (site_id, name, description, text, int(bool(calibrated)), now_utc()))
             return int(cur.lastrowid)
 
     def receiver(self, site: str, name: str) -> ReceiverRecord | None:
@@ -265,7 +265,7 @@ class FingerprintLibrary(ClusteringRunsMixin):
                     receiver: str | None = None, replace: bool = False) -> IngestResult:
         """Store one cell and its samples in one transaction.
 
-        ``rows`` maps column names of :data:`~fingerprints.schema.SAMPLE_COLUMNS`
+        ``rows`` maps column names of :data:`~fingerprints.sql.SAMPLE_COLUMNS`
         to sequences of one length (one entry per window); ``t_s`` is required;
         an absent feature column, or NaN/inf in it, is stored as NULL; absent
         flags and counts are 0, ``t_utc`` and the hashes are filled in from
@@ -307,9 +307,9 @@ class FingerprintLibrary(ClusteringRunsMixin):
                 "map_share, missing_streams, stream_notes, gnss_sha256, audio_sha256, capture_sha256, "
                 "feature_params_json, n_samples, ingested_utc) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
                 (site_id, receiver_id, cell.cell_id, float(cell.east_m), float(cell.north_m), cell.start_utc,
-                 _num(cell.duration_s), cell.map_label, _num(cell.map_share), "+".join(cell.missing_streams),
+                 sql_number(cell.duration_s), cell.map_label, sql_number(cell.map_share), "+".join(cell.missing_streams),
                  cell.stream_notes, cell.gnss_sha256, cell.audio_sha256, cell.capture_sha256,
-                 params, len(table), _now_utc()))
+                 params, len(table), now_utc()))
             self._insert_samples(conn, int(cur.lastrowid), table)
         return IngestResult(cell.cell_id, status, len(table))
 
@@ -328,14 +328,14 @@ class FingerprintLibrary(ClusteringRunsMixin):
                 raise LibraryError(f"cell {cell.cell_id}: column {k} has {len(v)} values, t_s has {n}")
         if not np.all(np.isfinite(t)) or len(np.unique(t)) != n:
             raise LibraryError(f"cell {cell.cell_id}: t_s must be finite and distinct")
-        start = _utc(cell.start_utc, f"cell {cell.cell_id} start_utc")
+        start = parse_iso_utc(cell.start_utc, f"cell {cell.cell_id} start_utc")
         out = []
         for i in range(n):
             def get(k, default=None):
                 return cols[k][i] if k in cols else default
             rec = [float(t[i]),
                    (start + timedelta(seconds=float(t[i]))).isoformat(timespec="milliseconds").replace("+00:00", "Z")]
-            rec += [_num(get(k)) for k in FEATURES]
+            rec += [sql_number(get(k)) for k in FEATURES]
             for k in ("gnss_available", "acoustic_available"):
                 v = int(get(k, 0))
                 if v not in (0, 1):
@@ -346,7 +346,7 @@ class FingerprintLibrary(ClusteringRunsMixin):
                 if v < 0:
                     raise LibraryError(f"cell {cell.cell_id}: {k} must be >= 0, got {v}")
                 rec.append(v)
-            rec += [_num(get("snr_db_mean")), str(get("acoustic_flags", "") or ""),
+            rec += [sql_number(get("snr_db_mean")), str(get("acoustic_flags", "") or ""),
                     get("gnss_sha256", cell.gnss_sha256), get("audio_sha256", cell.audio_sha256)]
             out.append(tuple(rec))
         return out
@@ -378,13 +378,13 @@ class FingerprintLibrary(ClusteringRunsMixin):
         names = ("site", "receiver", "cell_id", "east_m", "north_m", "start_utc", "duration_s", "map_label",
                  "map_share", "missing_streams", "n_samples")
         kinds = "UUUffUfUfUi"
-        return _structured(rows, names, kinds)
+        return structured_rows(rows, names, kinds)
 
     def samples(self, site: str | None = None) -> np.ndarray:
         """Stored samples as a structured array (n_samples,), ordered by site, cell id and t_s.
 
         Fields: ``sample_id`` (int), ``site, cell_id`` (str), ``t_s`` (float),
-        the 14 :data:`~fingerprints.schema.FEATURES` (float, NaN = missing),
+        the 14 :data:`~fingerprints.sql.FEATURES` (float, NaN = missing),
         ``gnss_available, acoustic_available`` (bool), the counts (int) and
         ``snr_db_mean`` (float). :func:`feature_matrix` gives the (n, 14) array.
         """
@@ -398,7 +398,7 @@ class FingerprintLibrary(ClusteringRunsMixin):
         names = ("sample_id", "site", "cell_id", "t_s") + FEATURES + ("gnss_available", "acoustic_available") \
             + counts + ("snr_db_mean",)
         kinds = "iUUf" + "f" * len(FEATURES) + "bb" + "i" * len(counts) + "f"
-        return _structured(rows, names, kinds)
+        return structured_rows(rows, names, kinds)
 
     # ---------------------------------------------------------------- export
     def export_csv(self, out, site: str | None = None) -> int:

@@ -68,7 +68,7 @@ from features.site import load_site
 from features.walk import WalkInfo, load_walk
 
 from fingerprints.library import CellCapture, FingerprintLibrary
-from fingerprints.schema import ACOUSTIC_FEATURES, GNSS_COUNTS, GNSS_FEATURES
+from fingerprints.sql import ACOUSTIC_FEATURES, GNSS_COUNTS, GNSS_FEATURES
 
 __all__ = ["SurveyConfig", "SurveyWarning", "BuildReport", "build_library", "calibrate_cn0_reference",
            "survey_cell_dirs"]

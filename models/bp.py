@@ -279,11 +279,13 @@ def _innovation_off(raw: np.ndarray, withheld: np.ndarray, prior_en: np.ndarray,
     # NIS = ν' S⁻¹ ν, uncorrected and corrected
     n0 = np.einsum("ni,nij,nj->n", v0, s_inv, v0)
     n1 = np.einsum("ni,nij,nj->n", v1, s_inv, v1)
-    c0, c1 = np.concatenate([[0.0], np.cumsum(n0)]), np.concatenate([[0.0], np.cumsum(n1)])
+    # equal window lengths: comparing the means is the sign of Σ (NIS₁ − NIS₀) over the window. Summed as
+    # differences, a window where no correction was applied sums to exactly 0 (enabled, as the loop's equal
+    # means say); differences of running sums of each would leave rounding residue there and flip the guard.
+    d = np.concatenate([np.zeros(window - 1), n1 - n0])
+    win = np.lib.stride_tricks.sliding_window_view(d, window).sum(axis=1)
     j = np.arange(1, k.size + 1)
-    lo = np.maximum(j - window, 0)
-    # equal window lengths: comparing the sums is comparing the means
-    disabled = ((c1[j] - c1[lo]) > (c0[j] - c0[lo])) & (np.minimum(j, window) >= 3)
+    disabled = (win > 0.0) & (np.minimum(j, window) >= 3)
     # hold the state of the latest fix at or before each event (enabled before the first)
     idx = np.searchsorted(k, np.arange(m), side="right") - 1
     off[idx >= 0] = disabled[idx[idx >= 0]]

@@ -2,7 +2,7 @@
 
 :func:`run_benchmark` is what ``envfuse benchmark`` and ``envfuse demo`` run:
 
-1. build the split (:mod:`training.benchmark`): training and test sites, a survey
+1. build the split (:mod:`simulation.split`): training and test sites, a survey
    of each, walks on each — resumable, what exists is kept; simulated in ``workers`` processes
    (default one per core), the same bytes as a serial build;
 2. ingest the *training* sites' surveys into one fingerprint library;
@@ -20,11 +20,11 @@ from pathlib import Path
 from typing import Callable
 
 from models.bp import BPConfig
-from models.fusion_model import save_fusion_model
+from models.fusion.model import save_fusion_model
 from pipeline.evaluate import evaluate, summary_table
-from pipeline.fusion_train import train_fusion
-from training.benchmark import build_split
+from simulation.split import build_split
 from training.env import fit_env_model, save_env_model, training_set
+from training.filters import train_fusion
 
 __all__ = ["run_benchmark", "fit_and_evaluate"]
 

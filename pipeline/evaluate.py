@@ -1,10 +1,13 @@
 """Batch evaluation: every method on every walk, metrics, summary, plots (``envfuse evaluate``).
 
-:func:`evaluate_walk` is the per-walk task — a pure function of the walk's
-files and the model bundle's path, so it runs the same serially or on a Dask
-worker (:mod:`pipeline.parallel`). :func:`evaluate` maps it over the walks,
-writes ``metrics.csv`` (:data:`pipeline.fusion.METRIC_COLUMNS`) and the PNGs,
-and returns the rows.
+:func:`evaluate_walk` is the per-walk task — :func:`walks.fuse.fuse_walk`, the
+path ``envfuse run`` takes, then the walk's metric rows and the per-epoch
+series the plots draw. It is a pure function of the walk's files and the model
+bundle's path, so it runs the same serially or on a Dask worker
+(:mod:`pipeline.parallel`); the model is loaded once per process
+(:func:`load_model`). :func:`evaluate` maps it over the walks, writes
+``metrics.csv`` (:data:`walks.score.METRIC_COLUMNS`) and the PNGs, and returns
+the rows.
 """
 
 from __future__ import annotations
@@ -18,29 +21,42 @@ import numpy as np
 
 from features.errors import ConfigError
 from features.fileio import atomic_write_text
-from pipeline.fusion import METHODS, METRIC_COLUMNS, metric_rows, run_methods, score, track_errors, walk_inputs
 from pipeline.parallel import TaskFailure, map_walks
-from pipeline.walk_data import read_walk
+from walks.methods import method_names
+from walks.score import METRIC_COLUMNS, metric_rows, score, track_errors
 
-__all__ = ["evaluate_walk", "evaluate", "summary_table", "pooled_rows"]
+__all__ = ["evaluate_walk", "evaluate", "summary_table", "pooled_rows", "load_model", "method_order"]
+
+_MODELS: dict = {}
+
+
+def load_model(model_dir: str | os.PathLike):
+    """The fusion model of ``model_dir``, loaded once per process (again only if its ``bundle.json`` changed):
+    a Dask worker keeps it across the walks it is given."""
+    from models.fusion.model import load_fusion_model
+
+    path = Path(model_dir).resolve()
+    try:
+        stamp = (path / "bundle.json").stat().st_mtime_ns
+    except OSError:
+        stamp = None
+    key = str(path)
+    hit = _MODELS.get(key)
+    if hit is None or hit[0] != stamp or stamp is None:
+        _MODELS.clear()
+        _MODELS[key] = (stamp, load_fusion_model(path))
+    return _MODELS[key][1]
 
 
 def evaluate_walk(walk, model_dir: str, methods: tuple, force: bool = False) -> dict:
-    """Run ``methods`` on one walk; returns {'walk', 'rows', 'skipped', 'series'} (series: per method the
+    """Run ``methods`` on one walk; returns {'walk', 'rows', 'skipped', 'series', ...} (series: per method the
     error over time, for plots; kept small: every event of a filter, every fix of a source)."""
-    from models.fusion_model import load_fusion_model
+    from pipeline.site_map import class_map_for
+    from walks.fuse import fuse_walk
 
-    model = load_fusion_model(model_dir)
-    data = read_walk(walk)
-    sites = model.meta.get("sites", [])
-    if sites and data.site.name not in sites and not force:
-        raise ConfigError(f"{walk}: site {data.site.name!r} is not one the model was trained on ({sites}); "
-                          "pass --force to evaluate anyway")
-    inputs = walk_inputs(data, model)
-    tracks, skipped = run_methods(model, inputs, methods)
-    resolved = Path(walk).resolve()
-    name = f"{resolved.parent.name}/{resolved.name}"
-    rows = score(tracks, data, name)
+    fused = fuse_walk(walk, load_model(model_dir), methods, class_map_for=class_map_for, force=force)
+    data, tracks = fused.data, fused.tracks
+    rows = score(tracks, data, fused.name)
     series = {}
     if data.truth is not None:
         for m, tr in tracks.items():
@@ -53,9 +69,8 @@ def evaluate_walk(walk, model_dir: str, methods: tuple, force: bool = False) -> 
                             "east_m": data.truth.east_m.astype(np.float32),
                             "north_m": data.truth.north_m.astype(np.float32)}
     bp_off = tracks["adaptive"].info.get("bp_disabled_share") if "adaptive" in tracks else None
-    return {"walk": name, "walk_dir": str(walk), "rows": rows, "skipped": skipped, "series": series,
-            "bp_disabled_share": bp_off,
-            "site": data.site.name}
+    return {"walk": fused.name, "walk_dir": str(walk), "rows": rows, "skipped": fused.skipped, "series": series,
+            "bp_disabled_share": bp_off, "site": data.site.name}
 
 
 def pooled_rows(results: list[dict]) -> list[dict]:
@@ -66,7 +81,7 @@ def pooled_rows(results: list[dict]) -> list[dict]:
             if not m.startswith("_"):
                 pools.setdefault(m, []).append(s)
     rows = []
-    for m in _method_order(sorted(pools)):
+    for m in method_order(pools):
         err = np.concatenate([s["err_m"] for s in pools[m]]).astype(float)
         cls = np.concatenate([s["cls"] for s in pools[m]])
         nees = np.concatenate([s["nees"] for s in pools[m]]).astype(float)
@@ -74,22 +89,18 @@ def pooled_rows(results: list[dict]) -> list[dict]:
     return rows
 
 
-def _method_order(names):
-    base = [m for m in METHODS for v in (m, m + "+rts") if v in names]
-    seen, out = set(), []
-    for m in METHODS:
-        for v in (m, m + "+rts"):
-            if v in names and v not in seen:
-                seen.add(v)
-                out.append(v)
-    return out + [n for n in names if n not in seen and n not in base]
+def method_order(names) -> list[str]:
+    """``names`` in report order: the registry's order, each filter's ``+rts`` after it, unknown names last."""
+    order = method_names(smoothed=True)
+    known = [m for m in order if m in names]
+    return known + sorted(n for n in names if n not in order)
 
 
 def summary_table(rows: list[dict]) -> str:
     """Plain-text table of pooled rows: method, then mean / median / p95 / max per class and NEES share."""
     classes = ("all", "open", "light", "heavy")
     by = {(r["method"], r["env_class"]): r for r in rows}
-    methods = _method_order(sorted({r["method"] for r in rows}))
+    methods = method_order({r["method"] for r in rows})
     head = f"{'method':18s} " + " ".join(f"{c + ' mean/med/p95':>21s}" for c in classes) + "  max_m  NEES95"
     lines = [head, "-" * len(head)]
     for m in methods:
@@ -113,13 +124,13 @@ def _csv_text(rows: list[dict]) -> str:
     return buf.getvalue()
 
 
-def evaluate(walks: list, model_dir: str | os.PathLike, report_dir: str | os.PathLike, methods=METHODS,
+def evaluate(walks: list, model_dir: str | os.PathLike, report_dir: str | os.PathLike, methods=None,
              workers: int | None = None, scheduler: str | None = None, force: bool = False,
              progress: bool = True, plots: bool = True) -> dict:
-    """Evaluate ``methods`` on ``walks``; writes ``metrics.csv`` and the plots into ``report_dir``."""
-    from models.fusion_model import load_fusion_model
-
-    load_fusion_model(model_dir)           # a damaged model fails here, once, before any worker starts
+    """Evaluate ``methods`` (default: every registered one) on ``walks``; writes ``metrics.csv`` and the plots
+    into ``report_dir``."""
+    methods = method_names() if methods is None else tuple(methods)
+    load_model(model_dir)                  # a damaged model fails here, once, before any worker starts
     report = Path(report_dir)
     if report.exists() and not report.is_dir():
         raise ConfigError(f"--report {report} exists and is not a directory")

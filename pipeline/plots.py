@@ -66,9 +66,10 @@ def plot_site(site: Site, path: str | os.PathLike, resolution_m: float = 0.5, ti
     from matplotlib.cm import ScalarMappable
     from matplotlib.colors import BoundaryNorm
 
-    from simulation.site.environment import LIGHT_MAX, OPEN_MAX, class_map, classify_share  # pipeline may import simulation
-    east, north, share = class_map(site, resolution_m=resolution_m, n_az=120)
-    cls = np.where(np.isfinite(share), classify_share(np.nan_to_num(share)), -1).astype(float)
+    from pipeline.site_map import classify, share_grid
+
+    east, north, share, open_max, light_max = share_grid(site, resolution_m=resolution_m, n_az=120)
+    cls = np.where(np.isfinite(share), classify(np.nan_to_num(share)), -1).astype(float)
     cls[cls < 0] = np.nan
     shares = [np.mean(cls[np.isfinite(cls)] == k) for k in range(3)]
     fig, ax = plt.subplots(figsize=(10, 10 * (north[-1] - north[0] + 1) / (east[-1] - east[0] + 1) + 0.8))
@@ -92,10 +93,10 @@ def plot_site(site: Site, path: str | os.PathLike, resolution_m: float = 0.5, ti
         handles += [plt.Line2D([], [], ls=":", color=EMI_COLOUR, lw=1.0, label="EMI zone (C/N0 loss)")]
     ax.legend(handles=handles, loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8)
     # colour bar of the blocked-sky share with the class thresholds (the map shows the class of each share)
-    norm = BoundaryNorm([0.0, OPEN_MAX, LIGHT_MAX, 1.0], cmap.N)
+    norm = BoundaryNorm([0.0, open_max, light_max, 1.0], cmap.N)
     bar = fig.colorbar(ScalarMappable(norm=norm, cmap=cmap), ax=ax, location="bottom", fraction=0.04, pad=0.08,
-                       aspect=40, ticks=[0.0, OPEN_MAX, LIGHT_MAX, 1.0], spacing="proportional")
-    bar.ax.set_xticklabels(["0 %", f"{100 * OPEN_MAX:.0f} %", f"{100 * LIGHT_MAX:.0f} %", "100 %"])
+                       aspect=40, ticks=[0.0, open_max, light_max, 1.0], spacing="proportional")
+    bar.ax.set_xticklabels(["0 %", f"{100 * open_max:.0f} %", f"{100 * light_max:.0f} %", "100 %"])
     bar.set_label("blocked sky share above 10° elevation, weighted by the satellites' passes over a day: "
                   "open < 10 % <= light <= 40 % < heavy", fontsize=8)
     ax.set_xlabel("east (m)")

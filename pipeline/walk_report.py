@@ -17,7 +17,7 @@ import numpy as np
 
 from features.site import ENV_CLASSES
 from features.imu.pdr import dead_reckon
-from pipeline.walk_data import PdrStream, _pdr_position_at, pdr_start_from_gnss, read_walk
+from walks.reader import PdrStream, pdr_position_at, pdr_start_from_gnss, read_walk
 
 __all__ = ["SourceTrack", "WalkSources", "walk_sources", "error_table", "plot_walk"]
 
@@ -51,7 +51,7 @@ def _pdr_track(pdr: PdrStream, gnss: SourceTrack | None = None, quality=None, ca
     (quality 4, centimetre level): K = Σ GNSS step distance / Σ Weinberg units,
     yaw offset = circular mean of (GNSS step heading − PDR heading). The calibrated track is then
     translated to pass through ``anchor`` (t_s, east_m, north_m: the GNSS fix the read anchored PDR on,
-    :func:`pipeline.walk_data.pdr_start_from_gnss`) at its time, as the uncalibrated one did — dead
+    :func:`walks.reader.pdr_start_from_gnss`) at its time, as the uncalibrated one did — dead
     reckoning it again from the start alone would carry the new K and yaw's difference over the steps
     before the anchor into the whole track.
     """
@@ -77,7 +77,7 @@ def _pdr_track(pdr: PdrStream, gnss: SourceTrack | None = None, quality=None, ca
             east, north = dead_reckon(units * k_cal, res.heading_rad + offset, start_en[0], start_en[1])
             if anchor is not None:
                 t_a, e_a, n_a = anchor
-                e_i, n_i = _pdr_position_at(dataclasses.replace(res, east_m=east, north_m=north), t_a, start_en)
+                e_i, n_i = pdr_position_at(dataclasses.replace(res, east_m=east, north_m=north), t_a, start_en)
                 east, north = east + (e_a - e_i), north + (n_a - n_i)
             info.update(k=k_cal, yaw_offset_deg=float(np.degrees(offset)), calibrated_steps=int(use.sum()),
                         distance_m=float((units * k_cal).sum()))

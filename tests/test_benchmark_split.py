@@ -4,7 +4,7 @@ import pytest
 
 from features.errors import ConfigError
 from features.walk import load_walk
-from training.benchmark import SPLITS, BenchmarkSplit, build_split, split_layout
+from simulation.split import SPLITS, BenchmarkSplit, build_split, split_layout
 
 TINY = BenchmarkSplit("tiny", train_sites=(101,), test_sites=(201,), walks_per_site=1, walk_s=12.0,
                       cell_size_m=40.0, capture_s=1.0)

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from fingerprints.library import EXPORT_COLUMNS, CellCapture, FingerprintLibrary, LibraryError, feature_matrix
-from fingerprints.schema import APPLICATION_ID, FEATURES, SCHEMA_VERSION
+from fingerprints.sql import APPLICATION_ID, FEATURES, SCHEMA_VERSION
 
 SHA_SITE = "a" * 64
 REF = {"intercept_dbhz": 37.0, "slope_dbhz": 13.0, "source": "test"}

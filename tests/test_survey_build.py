@@ -26,7 +26,7 @@ import pytest
 
 from features.gnss.features import Cn0Reference
 from fingerprints.library import FingerprintLibrary, feature_matrix
-from fingerprints.schema import ACOUSTIC_FEATURES, FEATURES, GNSS_FEATURES
+from fingerprints.sql import ACOUSTIC_FEATURES, FEATURES, GNSS_FEATURES
 from fingerprints.survey import SurveyConfig, SurveyWarning, build_library, calibrate_cn0_reference
 from pipeline.cli import main
 

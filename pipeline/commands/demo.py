@@ -1,10 +1,11 @@
-"""``envfuse demo``: the whole story on the small built-in split, in a few minutes on 2 cores.
+"""``envfuse demo`` and ``envfuse benchmark``: a seeded split end to end (:func:`pipeline.benchmark.run_benchmark`).
 
-Simulates two training substations and one held-out substation (surveys and
-walks), builds the fingerprint library from the training surveys, trains the
-environment and fusion models on the training sites only, evaluates every
-fusion method on the held-out walks, prints the table and writes the report;
-then puts the first held-out walk's raw sources against its truth.
+``benchmark`` builds a documented split (:data:`simulation.split.SPLITS`):
+training and held-out test sites with surveys and walks, the fingerprint
+library of the training surveys, the environment and fusion models fitted on
+the training sites only, every method evaluated on the test sites' walks.
+``demo`` is the small built-in split in a few minutes on 2 cores, then puts
+the first held-out walk's raw sources against its truth.
 """
 
 from __future__ import annotations
@@ -17,6 +18,26 @@ GROUP = None  # a top-level command, registered by register_top
 
 
 def register_top(sub) -> None:
+    from simulation.split import SPLITS
+    from training.env import MODES
+
+    p = sub.add_parser(
+        "benchmark", help="a seeded split end to end: train on training sites, evaluate on held-out ones",
+        description="Build a documented benchmark split (training sites and held-out test sites, each with a "
+                    "survey and walks; resumable), ingest the training surveys into a fingerprint library, fit the "
+                    "environment and fusion models on the training sites only and evaluate every method on the "
+                    "test sites' walks. Splits: " + "; ".join(
+                        f"{k}: train {list(v.train_sites)}, test {list(v.test_sites)}, {v.walks_per_site} walks of "
+                        f"{v.walk_s:g} s per site" for k, v in SPLITS.items()),
+        epilog="Example: envfuse benchmark --split standard --out bench_standard --workers 2")
+    p.add_argument("--split", choices=sorted(SPLITS), default="demo", help="which split (default demo)")
+    p.add_argument("--out", type=Path, required=True, help="directory for data, models and report (resumable)")
+    p.add_argument("--env-mode", choices=MODES, default="supervised", help="environment model mode")
+    p.add_argument("--workers", type=int, default=None,
+                   help="simulation and evaluation workers (default one per core)")
+    p.add_argument("--seed", type=seed, default=0, help="model seed (default 0)")
+    p.set_defaults(func=run_benchmark_command)
+
     p = sub.add_parser("demo", help="the whole story on a small built-in split (a few minutes)",
                        description="Simulate training and held-out substations, survey them, build the "
                                    "fingerprint library, train the environment and fusion models on the training "
@@ -33,7 +54,7 @@ def run_demo(args) -> int:
     from pipeline.benchmark import run_benchmark
     from pipeline.plots import plot_site
     from pipeline.walk_report import error_table, plot_walk, walk_sources
-    from training.benchmark import split_layout
+    from simulation.split import split_layout
 
     if args.workers is not None and args.workers < 1:
         raise ConfigError(f"--workers must be at least 1, got {args.workers}")
@@ -53,4 +74,14 @@ def run_demo(args) -> int:
     png = plot_walk(src, out / "report" / "test_walk_sources.png", title=f"site {test_site}, {walk.name}: sources")
     print(f"[plot] {png}")
     print(f"done: outputs in {out}")
+    return 0
+
+
+def run_benchmark_command(args) -> int:
+    from features.errors import ConfigError
+    from pipeline.benchmark import run_benchmark
+
+    if args.workers is not None and args.workers < 1:
+        raise ConfigError(f"--workers must be at least 1, got {args.workers}")
+    run_benchmark(args.split, args.out, env_mode=args.env_mode, workers=args.workers, seed=args.seed)
     return 0

@@ -2,21 +2,17 @@
 
 from __future__ import annotations
 
-import json
-import math
 import sys
 from pathlib import Path
 
 from features.errors import ConfigError
+from features.fileio import atomic_write_text
 
 GROUP = None  # top-level commands, registered by register_top
 
-TRACK_COLUMNS = ("t_s", "utc", "east_m", "north_m", "lat_deg", "lon_deg", "var_east_m2", "cov_en_m2",
-                 "var_north_m2", "env_class", "class_probability", "ood", "nis", "bp_correction_m")
-
 
 def register_top(sub) -> None:
-    from pipeline.fusion import METHODS
+    from walks.methods import method_names
 
     p = sub.add_parser(
         "run", help="fuse one walk into a track (CSV or GeoJSON)",
@@ -26,10 +22,11 @@ def register_top(sub) -> None:
     p.add_argument("walk", type=Path, help="walk directory")
     p.add_argument("--model", type=Path, required=True, help="fusion model directory (train fusion)")
     p.add_argument("--out", type=Path, required=True, help="track file to write (CSV, or GeoJSON with --format)")
-    p.add_argument("--method", choices=METHODS + tuple(m + "+rts" for m in METHODS[3:9]), default="adaptive",
-                   help="fusion method (default adaptive)")
+    p.add_argument("--method", choices=method_names(smoothed=True), default="adaptive",
+                   help="fusion method (default adaptive; a filter's +rts variant is its smoothed track)")
     p.add_argument("--format", choices=("csv", "geojson"), default=None,
                    help="output format (default: from the suffix, .geojson or .json → GeoJSON, else CSV)")
+    p.add_argument("--force", action="store_true", help="fuse a walk of a site the model was not trained on")
     p.set_defaults(func=_run)
 
     p = sub.add_parser(
@@ -43,7 +40,8 @@ def register_top(sub) -> None:
     p.add_argument("walks", type=Path, nargs="+", help="walk directories (with truth.csv for errors)")
     p.add_argument("--model", type=Path, required=True, help="fusion model directory")
     p.add_argument("--report", type=Path, required=True, help="directory for metrics.csv and the PNGs")
-    p.add_argument("--methods", nargs="+", choices=METHODS, default=list(METHODS), help="methods (default all)")
+    p.add_argument("--methods", nargs="+", choices=method_names(), default=list(method_names()),
+                   help="methods (default all)")
     p.add_argument("--workers", type=int, default=None, help="local worker processes (default one per core; "
                                                                 "1 = serial, no Dask)")
     p.add_argument("--scheduler", default=None, help="address of an existing Dask scheduler (tcp://host:8786)")
@@ -52,69 +50,22 @@ def register_top(sub) -> None:
     p.set_defaults(func=_evaluate)
 
 
-def _fmt(v) -> str:
-    if isinstance(v, float):
-        return "" if math.isnan(v) else f"{v:.10g}"
-    return str(v)
-
-
 def _run(args) -> int:
-    import numpy as np
-
-    from features.fileio import atomic_write_text
-    from features.geodesy import enu_to_geodetic
-    from features.site import ENV_CLASSES
-    from models.fusion_model import load_fusion_model
-    from pipeline.fusion import run_methods, walk_inputs
-    from pipeline.walk_data import read_walk
+    from pipeline.evaluate import load_model
+    from pipeline.site_map import class_map_for
+    from walks.fuse import fuse_walk
+    from walks.track import track_rows, track_text
 
     if not (args.walk / "walk.toml").is_file():
         raise ConfigError(f"{args.walk}: no walk.toml (expected a walk directory)")
-    model = load_fusion_model(args.model)
-    data = read_walk(args.walk)
-    inputs = walk_inputs(data, model)
     base = args.method.split("+")[0]
-    tracks, skipped = run_methods(model, inputs, (base,), smooth=args.method.endswith("+rts"))
-    if args.method not in tracks:
-        raise ConfigError(f"{args.walk}: method {args.method} cannot run: {skipped.get(base, 'no output')}")
-    tr = tracks[args.method]
-    o = data.site.origin
-    lat, lon, _ = enu_to_geodetic(tr.east_m, tr.north_m, np.zeros_like(tr.east_m), o.lat_deg, o.lon_deg, o.alt_m)
-    proba = inputs.classes.at(tr.t_s)
-    ood_t = np.concatenate([[False], inputs.window_ood])
-    rows_ood = ood_t[np.clip(np.searchsorted(inputs.classes.t_s, tr.t_s, side="right") - 1, 0, len(ood_t) - 1)]
-    start = data.walk.start_utc
-    from datetime import timedelta
-
-    cov = tr.cov_m2 if tr.cov_m2 is not None else np.full((len(tr.t_s), 2, 2), np.nan)
-    nis = tr.info.get("nis", np.full(len(tr.t_s), np.nan))
-    bp = tr.info.get("bp_delta_m")
-    bpn = np.hypot(bp[:, 0], bp[:, 1]) if bp is not None else np.zeros(len(tr.t_s))
-    rows = []
-    for i in range(len(tr.t_s)):
-        c = int(np.argmax(proba[i]))
-        rows.append({"t_s": float(tr.t_s[i]),
-                     "utc": (start + timedelta(seconds=float(tr.t_s[i]))).strftime("%Y-%m-%dT%H:%M:%S.%fZ"),
-                     "east_m": float(tr.east_m[i]), "north_m": float(tr.north_m[i]), "lat_deg": float(lat[i]),
-                     "lon_deg": float(lon[i]), "var_east_m2": float(cov[i, 0, 0]), "cov_en_m2": float(cov[i, 0, 1]),
-                     "var_north_m2": float(cov[i, 1, 1]), "env_class": ENV_CLASSES[c],
-                     "class_probability": float(proba[i, c]), "ood": bool(rows_ood[i]), "nis": float(nis[i]),
-                     "bp_correction_m": float(bpn[i])})
+    fused = fuse_walk(args.walk, load_model(args.model), (base,), smooth=args.method.endswith("+rts"),
+                      class_map_for=class_map_for, force=args.force)
+    if args.method not in fused.tracks:
+        raise ConfigError(f"{args.walk}: method {args.method} cannot run: {fused.skipped.get(base, 'no output')}")
+    rows = track_rows(fused.tracks[args.method], fused.inputs)
     fmt = args.format or ("geojson" if args.out.suffix.lower() in (".geojson", ".json") else "csv")
-    if fmt == "csv":
-        text = ",".join(TRACK_COLUMNS) + "\n" + "".join(",".join(_fmt(r[k]) for k in TRACK_COLUMNS) + "\n"
-                                                        for r in rows)
-    else:
-        feats = [{"type": "Feature", "geometry": {"type": "LineString",
-                                                  "coordinates": [[round(r["lon_deg"], 9), round(r["lat_deg"], 9)]
-                                                                  for r in rows]},
-                  "properties": {"walk": str(args.walk), "method": args.method, "start_utc": rows[0]["utc"] if rows
-                                 else None}}]
-        feats += [{"type": "Feature", "geometry": {"type": "Point", "coordinates": [round(r["lon_deg"], 9),
-                                                                                   round(r["lat_deg"], 9)]},
-                   "properties": {k: (None if isinstance(r[k], float) and math.isnan(r[k]) else r[k])
-                                  for k in TRACK_COLUMNS if k not in ("lat_deg", "lon_deg")}} for r in rows]
-        text = json.dumps({"type": "FeatureCollection", "features": feats}, allow_nan=False) + "\n"
+    text = track_text(rows, fmt, {"walk": str(args.walk), "method": args.method})
     atomic_write_text(args.out, text)
     print(f"{args.walk}: {args.method}, {len(rows)} positions -> {args.out}")
     return 0

@@ -92,8 +92,8 @@ def _env_plots(clf, diag: dict, out: Path) -> list:
 
 def _run_fusion(args) -> int:
     from models.bp import BPConfig
-    from models.fusion_model import save_fusion_model
-    from pipeline.fusion_train import train_fusion
+    from models.fusion.model import save_fusion_model
+    from training.filters import train_fusion
     from training.env import load_env_model
 
     _refuse_existing(args.out, args.overwrite)

@@ -1,8 +1,8 @@
-"""The spine: read a walk directory once, every source on the walk's time base.
+"""Read a walk directory once, every source on the walk's time base.
 
-:func:`read_walk` is what ``envfuse report walk``, the demo and the coming
-``run`` and ``evaluate`` commands stand on. It reads only the walk's files (as
-for a real device's log) and returns, per source:
+:func:`read_walk` is what every command that reads a walk stands on
+(``run``, ``evaluate``, ``train fusion``, ``report walk``, the demo). It reads
+only the walk's files (as for a real device's log) and returns, per source:
 
 - GNSS: the NMEA fixes in the site's ENU frame with their per-axis σ, fix
   quality and HDOP, and the five GNSS feature windows;
@@ -39,7 +39,7 @@ from features.site import Site
 from features.walk import Truth, WalkInfo, load_walk, read_truth
 
 __all__ = ["GnssStream", "AcousticStream", "PdrStream", "WalkData", "read_walk", "WALK_SPEED_PRIOR_M_S", "walk_has",
-           "pdr_start_from_gnss"]
+           "pdr_start_from_gnss", "pdr_position_at", "read_gnss_stream", "read_acoustic_stream", "read_pdr_stream"]
 
 WALK_SPEED_PRIOR_M_S = 1.4
 """Walking-speed prior of the acoustic solver on a walk, m/s (a survey cell is static: 0)."""
@@ -116,20 +116,20 @@ def read_walk(walk_dir: str | os.PathLike, *, site: Site | None = None, pdr_k: f
     walk = load_walk(walk_dir)
     site = walk.load_site() if site is None else site
     truth = read_truth(walk.directory) if (walk.directory / "truth.csv").is_file() else None
-    gnss = _read_gnss(walk, site) if walk.path("gnss") is not None else None
+    gnss = read_gnss_stream(walk, site) if walk.path("gnss") is not None else None
     acoustic = None
     if walk.path("audio") is not None and site.beacons:
-        acoustic = _read_acoustic(walk, site, audio_positions)
+        acoustic = read_acoustic_stream(walk, site, audio_positions)
     pdr = None
     if walk.path("imu") is not None:
-        pdr = _read_pdr(walk, (0.0, 0.0), pdr_k)
+        pdr = read_pdr_stream(walk, (0.0, 0.0), pdr_k)
         anchor = pdr_start_from_gnss(gnss.positions) if gnss is not None else None
         if anchor is not None:
             # Shift the track so that it passes through the fix at the fix's time. The dead-reckoned
             # track is start + Σ steps (features.imu.pdr.dead_reckon), so the shift is a translation of
             # the track computed once (the same numbers as rerunning PDR from the shifted start).
             t_fix, e_fix, n_fix = anchor
-            e_p, n_p = _pdr_position_at(pdr.result, t_fix, (0.0, 0.0))
+            e_p, n_p = pdr_position_at(pdr.result, t_fix, (0.0, 0.0))
             pdr = _shift_pdr(pdr, e_fix - e_p, n_fix - n_p)
     return WalkData(walk=walk, site=site, gnss=gnss, acoustic=acoustic, pdr=pdr, truth=truth)
 
@@ -157,7 +157,7 @@ def pdr_start_from_gnss(positions: GnssPositions, window_s: float = 60.0) -> tup
     return None
 
 
-def _pdr_position_at(res: PdrResult, t_s: float, start_en: tuple[float, float]) -> tuple[float, float]:
+def pdr_position_at(res: PdrResult, t_s: float, start_en: tuple[float, float]) -> tuple[float, float]:
     """Dead-reckoned position at ``t_s`` (the start before the first step, then the last step's end)."""
     if len(res.t_s) == 0 or not np.isfinite(res.east_m).any():
         return start_en
@@ -175,7 +175,8 @@ def _shift_pdr(pdr: PdrStream, d_east_m: float, d_north_m: float) -> PdrStream:
     return PdrStream(result=moved, config=pdr.config, start_en_m=start)
 
 
-def _read_gnss(walk: WalkInfo, site: Site) -> GnssStream:
+def read_gnss_stream(walk: WalkInfo, site: Site) -> GnssStream:
+    """The walk's NMEA: fixes in the site's ENU frame with σ, quality and HDOP, and the five GNSS windows."""
     epochs, stats = read_nmea(walk.path("gnss"))
     epochs = epochs_on_time_base(epochs, walk.start_utc)
     o = site.origin
@@ -184,7 +185,8 @@ def _read_gnss(walk: WalkInfo, site: Site) -> GnssStream:
     return GnssStream(positions=positions, features=gnss_features(sky), nmea_summary=stats.summary())
 
 
-def _read_acoustic(walk: WalkInfo, site: Site, positions: PositionConfig | None) -> AcousticStream:
+def read_acoustic_stream(walk: WalkInfo, site: Site, positions: PositionConfig | None) -> AcousticStream:
+    """The walk's audio through the acoustic receiver: fixes with covariance and the nine CIR windows."""
     timing = timing_from_walk(walk, site)
     if positions is None:
         positions = PositionConfig(max_clock_offset_s=timing.start_uncertainty_s + 0.05,
@@ -196,7 +198,8 @@ def _read_acoustic(walk: WalkInfo, site: Site, positions: PositionConfig | None)
                           analysis=res, timing=timing)
 
 
-def _read_pdr(walk: WalkInfo, start_en: tuple[float, float], k: float | None) -> PdrStream:
+def read_pdr_stream(walk: WalkInfo, start_en: tuple[float, float], k: float | None) -> PdrStream:
+    """The walk's IMU through PDR from ``start_en`` (m); ``k`` the Weinberg constant (None: the default)."""
     imu = read_imu_csv(walk.path("imu"))
     decl = float(walk.streams["imu"].get("declination_deg", 0.0))
     heading = HeadingConfig(declination_rad=np.radians(decl))

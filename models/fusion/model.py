@@ -1,4 +1,4 @@
-"""The fusion model: what ``envfuse train fusion`` learns and ``run`` / ``evaluate`` apply.
+"""The fitted fusion model: what ``envfuse train fusion`` learns and ``run`` / ``evaluate`` apply.
 
 A :class:`FusionModel` holds, for one substation family:
 
@@ -8,7 +8,7 @@ A :class:`FusionModel` holds, for one substation family:
   ``kf_map`` (R per class, classes from the site map at the truth position),
   ``imm`` (R per class, classes from the online classifier — what it will
   see when running), ``adaptive`` (UERE per class and GGA quality, acoustic
-  scale per class: :mod:`models.adaptive_noise`),
+  scale per class: :class:`~models.fusion.noise.ClassQualityNoise`),
 - the filter's process-noise settings (:class:`models.fusion.ekf.EkfConfig`),
 - the BP corrector (:class:`models.bp.BPCorrector`), or None,
 - metadata: the training walks and their hashes, the site names, versions.
@@ -23,12 +23,11 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
-from models.adaptive_noise import ClassQualityNoise
 from models.bp import BPCorrector
 from models.bundle import BundleError, load_bundle, save_bundle
 from models.environment import EnvironmentClassifier
 from models.fusion.ekf import EkfConfig
-from models.fusion.noise import FixedNoise, PerClassNoise, QualityNoise
+from models.fusion.noise import ClassQualityNoise, FixedNoise, PerClassNoise, QualityNoise
 
 __all__ = ["FusionModel", "save_fusion_model", "load_fusion_model"]
 
@@ -46,6 +45,10 @@ class FusionModel:
     ekf: EkfConfig = field(default_factory=EkfConfig)
     bp: BPCorrector | None = None
     meta: dict = field(default_factory=dict)
+
+    def adaptive_policy(self):
+        """The adaptive methods' noise policy: R per class and GGA quality when the model has it, else per class."""
+        return self.class_quality if self.class_quality is not None else self.per_class
 
 
 def _noise_arrays(model: FusionModel) -> dict:

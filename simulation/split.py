@@ -8,10 +8,9 @@ that nothing is fitted or tuned on. A split is data, not code paths: its
 seeds and sizes are listed in :data:`SPLITS` and written to ``split.toml``
 beside what it builds, so a run can always be traced to its inputs.
 
-This is the only module of ``training`` that imports ``simulation`` (the
-import-linter contract in ``pyproject.toml`` says so): everything else reads
-the files the split wrote, exactly as it would read a real survey and real
-walk logs.
+It lives in ``simulation`` because building a split is simulating; what
+fits and evaluates on it (``training``, ``walks``) reads the files the split
+wrote, exactly as it would read a real survey and real walk logs.
 """
 
 from __future__ import annotations

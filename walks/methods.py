@@ -1,0 +1,328 @@
+"""Every fusion method by name: a registry of name → builder, and the built-in methods.
+
+A method is a function of a :class:`MethodContext` (the fitted model, the
+walk's inputs, the site map if any) that returns a :class:`~walks.track.Track`
+or a filter run (:class:`~models.fusion.ekf.FilterRun`; a filter method is
+also reported RTS-smoothed as ``<name>+rts``), or raises :class:`MethodSkipped`
+with the reason it cannot run on this walk. :func:`register` adds one; the
+order of registration is the report order. Adding a method is one function
+and one ``register`` line (docs/architecture.md gives a worked example)::
+
+    def my_method(ctx):
+        return EventEKF(ctx.model.ekf, ctx.model.quality, "my_method").run(ctx.events())
+
+    register(Method("my_method", my_method, "kf_quality with my twist", filter=True))
+
+Built-in methods:
+
+==================  ==========================================================
+``gnss``            the GGA fixes alone
+``acoustic``        the acoustic fixes alone
+``pdr``             dead reckoning from the first GNSS fix (steps × length × heading)
+``kf``              event-driven EKF, one fitted R per source (the paper's method 2)
+``kf_quality``      R from what the devices report (UERE per quality refit on training walks,
+                    GST, the acoustic covariance scaled), Huber weights by default
+``kf_map``          R per class, the class looked up in a site map at the last estimate (method 1)
+``aekf``            variational-Bayes adaptive R, no classifier (Särkkä & Nummenmaa 2009)
+``imm``             one mode per class, the classifier's probabilities as mode evidence
+``adaptive_nobp``   R per class and GGA quality, the class from the online classifier
+``adaptive``        adaptive_nobp + the guarded BP correction added to the output
+``adaptive_closed`` the same correction fed back into the filter state after each update
+==================  ==========================================================
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+
+from models.bp import ACOUSTIC_KIND, GNSS_KIND, bp_inputs
+from models.fusion import ClassMap, EventEKF, FilterRun, IMMFilter, VBAdaptiveNoise, rts_smooth
+from models.fusion.model import FusionModel
+from walks.inputs import WalkInputs
+from walks.track import Track
+
+__all__ = ["Method", "MethodContext", "MethodSkipped", "register", "unregister", "method", "method_names",
+           "run_methods", "bp_features", "adaptive_run"]
+
+
+class MethodSkipped(Exception):
+    """A method cannot run on this walk (the message says why); the others go on."""
+
+
+@dataclass(frozen=True)
+class Method:
+    """A fusion method: its ``name``, the ``build`` function of a :class:`MethodContext`, a one-line
+    ``summary``, and whether it is a ``filter`` (its run is also smoothed as ``<name>+rts``)."""
+
+    name: str
+    build: Callable[["MethodContext"], "Track | FilterRun"]
+    summary: str
+    filter: bool = False
+
+
+@dataclass
+class MethodContext:
+    """What a method may use: the fitted ``model``, the walk's ``inputs``, the site map ``class_at``
+    (:class:`~models.fusion.events.ClassMap`, or None), and the results already computed on this walk."""
+
+    model: FusionModel
+    inputs: WalkInputs
+    class_at: ClassMap | None = None
+    results: dict = field(default_factory=dict)
+
+    def events(self):
+        """The walk's event stream; :class:`MethodSkipped` when no fix could start a filter."""
+        ev = self.inputs.events
+        if not np.any(ev.available):
+            raise MethodSkipped("no GNSS or acoustic fix to start the filter from")
+        return ev
+
+    def result(self, name: str):
+        """Another method's result on this walk, computed once (a method may build on another's run)."""
+        if name not in self.results:
+            self.results[name] = method(name).build(self)
+        return self.results[name]
+
+
+_REGISTRY: dict[str, Method] = {}
+
+
+def register(m: Method) -> Method:
+    """Add ``m`` to the registry (after the methods already there); a name may be registered once."""
+    if m.name in _REGISTRY:
+        raise ValueError(f"a method named {m.name!r} is already registered")
+    if "+" in m.name or not m.name:
+        raise ValueError(f"method names must be non-empty and without '+', got {m.name!r}")
+    _REGISTRY[m.name] = m
+    return m
+
+
+def unregister(name: str) -> None:
+    """Remove a registered method (tests that register a toy method clean up with this)."""
+    _REGISTRY.pop(name)
+
+
+def method(name: str) -> Method:
+    """The registered method ``name``."""
+    try:
+        return _REGISTRY[name]
+    except KeyError:
+        raise ValueError(f"unknown method {name!r}; choose from {list(_REGISTRY)}") from None
+
+
+def method_names(smoothed: bool = False) -> tuple[str, ...]:
+    """Registered method names in report order; with ``smoothed``, each filter's ``+rts`` variant after it."""
+    out = []
+    for m in _REGISTRY.values():
+        out.append(m.name)
+        if smoothed and m.filter:
+            out.append(m.name + "+rts")
+    return tuple(out)
+
+
+def _filter_track(run: FilterRun, name: str, inputs: WalkInputs) -> Track:
+    return Track(name, run.t_s, run.x[:, 0].copy(), run.x[:, 1].copy(), run.P[:, :2, :2].copy(),
+                 {"nis": run.nis, "class_proba": inputs.classes.at(run.t_s), "run": run})
+
+
+def run_methods(model: FusionModel, inputs: WalkInputs, methods=None, smooth: bool = True,
+                class_at: ClassMap | None = None) -> tuple[dict, dict]:
+    """Run ``methods`` (default: every registered one) on one walk: ({name: Track}, {name: reason skipped});
+    filter methods also give ``<name>+rts`` when ``smooth``."""
+    names = method_names() if methods is None else tuple(methods)
+    for n in names:
+        method(n)
+    ctx = MethodContext(model, inputs, class_at)
+    tracks, skipped = {}, {}
+    for n in names:
+        m = method(n)
+        try:
+            out = ctx.result(n)
+        except MethodSkipped as why:
+            skipped[n] = str(why)
+            continue
+        if isinstance(out, FilterRun):
+            tracks[n] = _filter_track(out, n, inputs)
+            if smooth and m.filter:
+                s = rts_smooth(out)
+                tracks[n + "+rts"] = Track(n + "+rts", s.t_s, s.x[:, 0].copy(), s.x[:, 1].copy(),
+                                           s.P[:, :2, :2].copy())
+        else:
+            tracks[n] = out
+    return tracks, skipped
+
+
+# -- single sources -------------------------------------------------------------------------------------------
+
+
+def _gnss(ctx: MethodContext) -> Track:
+    g = ctx.inputs.data.gnss
+    if g is None or not len(g.positions):
+        raise MethodSkipped("no GNSS fixes")
+    p = g.positions
+    return Track("gnss", p.t_s, p.east_m, p.north_m, np.eye(2)[None] * (p.sigma_en_m ** 2)[:, None, None])
+
+
+def _acoustic(ctx: MethodContext) -> Track:
+    a = ctx.inputs.data.acoustic
+    if a is None or not len(a.t_s):
+        raise MethodSkipped("no acoustic fixes")
+    return Track("acoustic", a.t_s, a.east_m, a.north_m, a.covariance_en_m2)
+
+
+def _pdr(ctx: MethodContext) -> Track:
+    from features.imu.pdr import dead_reckon
+
+    pdr, ev = ctx.inputs.data.pdr, ctx.inputs.events
+    if pdr is None or not len(pdr.result):
+        raise MethodSkipped("no steps")
+    if not np.any(ev.available):
+        raise MethodSkipped("no fix to start from")
+    r = pdr.result
+    start = ev.z_m[np.flatnonzero(ev.available)[0]]
+    e, n = dead_reckon(r.step_length_m, r.heading_rad, float(start[0]), float(start[1]))
+    return Track("pdr", r.t_s, e, n, None)
+
+
+# -- filters --------------------------------------------------------------------------------------------------
+
+
+def _kf(ctx: MethodContext) -> FilterRun:
+    return EventEKF(ctx.model.ekf, ctx.model.fixed, "kf").run(ctx.events())
+
+
+def _kf_quality(ctx: MethodContext) -> FilterRun:
+    return EventEKF(ctx.model.ekf, ctx.model.quality, "kf_quality").run(ctx.events())
+
+
+def _kf_map(ctx: MethodContext) -> FilterRun:
+    if ctx.class_at is None:
+        raise MethodSkipped("no map of the site (a simulated site's layout gives one)")
+    return EventEKF(ctx.model.ekf, ctx.model.per_class_map, "kf_map").run(ctx.events(), class_at=ctx.class_at)
+
+
+def _aekf(ctx: MethodContext) -> FilterRun:
+    rg, ra = ctx.model.fixed.R_gnss_, ctx.model.fixed.R_acoustic_
+    vb = VBAdaptiveNoise(gnss_sigma_m=float(np.sqrt(np.trace(rg) / 2)),
+                         acoustic_sigma_m=float(np.sqrt(np.trace(ra) / 2)))
+    return EventEKF(ctx.model.ekf, vb, "aekf").run(ctx.events())
+
+
+def _imm(ctx: MethodContext) -> FilterRun:
+    return IMMFilter(ctx.model.per_class, ctx.model.ekf).run(ctx.events(), classes=ctx.inputs.classes)
+
+
+def adaptive_run(model: FusionModel, inputs: WalkInputs, method_name: str = "adaptive_nobp", correct=None):
+    """The adaptive methods' filter run: R per class and GGA quality (per class when the model has no
+    quality table), the class from the online classifier."""
+    ev = inputs.events
+    if not np.any(ev.available):
+        raise MethodSkipped("no GNSS or acoustic fix to start the filter from")
+    return EventEKF(model.ekf, model.adaptive_policy(), method_name).run(ev, classes=inputs.classes, correct=correct)
+
+
+def _adaptive_nobp(ctx: MethodContext) -> FilterRun:
+    return adaptive_run(ctx.model, ctx.inputs)
+
+
+# -- the BP corrector ------------------------------------------------------------------------------------------
+
+
+def bp_features(run: FilterRun, inputs: WalkInputs) -> np.ndarray:
+    """The BP network's input rows for every event of a filter run (:func:`models.bp.bp_inputs`)."""
+    return bp_inputs(run.t_s, run.kind, run.updated, run.accepted, run.K, run.nu, run.dx, run.nis,
+                     inputs.classes.at(run.t_s))
+
+
+def _require_bp(ctx: MethodContext):
+    if ctx.model.bp is None:
+        raise MethodSkipped("the model has no BP network (trained with --no-bp)")
+    return ctx.model.bp
+
+
+def _adaptive(ctx: MethodContext) -> Track:
+    """adaptive_nobp's run with the guarded BP correction added to its output (open loop)."""
+    bp = _require_bp(ctx)
+    run = ctx.result("adaptive_nobp")
+    X = bp_features(run, ctx.inputs)
+    corr = bp.correct(X, run.x_prior[:, :2], ctx.inputs.events.z_m, run.S, run.updated)
+    east = run.x[:, 0] + corr.delta_m[:, 0]
+    north = run.x[:, 1] + corr.delta_m[:, 1]
+    # P + Var(correction)/2 per axis where a correction was applied
+    extra = np.where(np.any(corr.delta_m != 0, axis=1), corr.var_m2.sum(1) / 2, 0.0)
+    cov = run.P[:, :2, :2] + np.eye(2)[None] * extra[:, None, None]
+    return Track("adaptive", run.t_s, east, north, cov,
+                 {"nis": run.nis, "class_proba": ctx.inputs.classes.at(run.t_s), "bp_delta_m": corr.delta_m,
+                  "bp_disabled_share": corr.disabled_share, "run": run})
+
+
+def _adaptive_closed(ctx: MethodContext) -> Track:
+    """The guarded BP correction added to the filter state after every accepted update.
+
+    Guards as in :class:`models.bp.BPCorrector`: no correction out of distribution or below its own σ;
+    and while the mean NIS of the last ``guard_window`` updates lies above the 99 % point of its χ²
+    law (2·window degrees of freedom, over window) the correction is off — the filter fed with it has
+    stopped agreeing with its measurements.
+    """
+    from scipy.special import chdtri
+
+    bp = _require_bp(ctx)
+    ev = ctx.events()
+    window = bp.config.guard_window
+    limit = float(chdtri(2 * window, 0.01) / window)       # chi2.ppf(0.99, 2·window) / window
+    proba = ctx.inputs.classes.at(ev.t_s)
+    recent = {code: _recent_fix(ev, code) for code in (GNSS_KIND, ACOUSTIC_KIND)}
+    nis_hist: list = []
+    state = {"off": 0, "withheld": 0, "calls": 0}
+
+    def correct(k, x_prior, x, P, nu, S, K):
+        state["calls"] += 1
+        nis_hist.append(float(nu @ np.linalg.solve(S, nu)))
+        if len(nis_hist) > window:
+            nis_hist.pop(0)
+        # the input row of models.bp.bp_inputs for this update, built by the same function
+        row = bp_inputs(np.array([ev.t_s[k]]), np.array([ev.kind[k]]), np.array([True]), np.array([True]),
+                        K[None], nu[None], (x - x_prior)[None], np.array([nu @ np.linalg.solve(S, nu)]),
+                        proba[k][None])
+        row[0, -2] = recent[GNSS_KIND][k]
+        row[0, -1] = recent[ACOUSTIC_KIND][k]
+        if len(nis_hist) >= window and np.mean(nis_hist) > limit:
+            state["off"] += 1
+            return None
+        mu, var = bp.predict(row)
+        if bp.is_ood(row)[0] or float(np.sum(mu ** 2)) < float(np.sum(var)):
+            state["withheld"] += 1
+            return None
+        return mu[0]
+
+    run = adaptive_run(ctx.model, ctx.inputs, "adaptive_closed", correct=correct)
+    calls = max(state["calls"], 1)
+    return Track("adaptive_closed", run.t_s, run.x[:, 0].copy(), run.x[:, 1].copy(), run.P[:, :2, :2].copy(),
+                 {"nis": run.nis, "class_proba": proba, "bp_delta_m": run.correction,
+                  "bp_disabled_share": (state["off"] + state["withheld"]) / calls, "run": run})
+
+
+def _recent_fix(ev, code: int, within_s: float = 2.0) -> np.ndarray:
+    """Whether an available fix of kind ``code`` arrived in the ``within_s`` up to each event (causal), (m,)."""
+    tk = ev.t_s[ev.available & (ev.kind == code)]
+    idx = np.searchsorted(tk, ev.t_s, side="right") - 1
+    prev = np.where(idx >= 0, tk[np.maximum(idx, 0)] if tk.size else 0.0, -np.inf)
+    return (ev.t_s - prev) <= within_s
+
+
+for _m in (Method("gnss", _gnss, "the GGA fixes alone"),
+           Method("acoustic", _acoustic, "the acoustic fixes alone"),
+           Method("pdr", _pdr, "dead reckoning from the first fix"),
+           Method("kf", _kf, "one fitted R per source (the paper's method 2)", filter=True),
+           Method("kf_quality", _kf_quality, "R from what each device reports about itself", filter=True),
+           Method("kf_map", _kf_map, "R per class of the site map at the last estimate (method 1)", filter=True),
+           Method("aekf", _aekf, "variational-Bayes adaptive R, no classifier", filter=True),
+           Method("imm", _imm, "one mode per environment class", filter=True),
+           Method("adaptive_nobp", _adaptive_nobp, "R per class and quality, class from the classifier",
+                  filter=True),
+           Method("adaptive", _adaptive, "adaptive_nobp + the guarded BP correction"),
+           Method("adaptive_closed", _adaptive_closed, "the BP correction fed back into the filter")):
+    register(_m)
