@@ -91,6 +91,45 @@ def _mix(mu, xs, Ps, stay, leave):
 
 
 @njit(cache=True)
+def _mode_updates(xs, Ps, z, H, R_modes, cbar, xp, Pp, outlier, gate_nis, huber_k, joseph):
+    """Steps 2 (update) and 3 of the IMM cycle for a fix: each mode updated in place by its own R_j, then
+    μ_j ∝ Λ_j c̄_j. Returns (μ, and the records of the combined prior (xp, Pp): ν, S, R̄ = Σ c̄_j R_j, NIS,
+    K̄ = Σ μ_j K_j, w̄ = Σ μ_j w_j, accepted by any mode)."""
+    M, n = xs.shape
+    lp = np.empty(M)
+    Ks = np.zeros((M, n, 2))
+    ws = np.zeros(M)
+    Rbar = np.zeros((2, 2))
+    any_ok = False
+    for j in range(M):
+        Rbar += cbar[j] * R_modes[j]
+        # ln Λ_j = −½ (ν'S⁻¹ν + ln det S) − ln 2π, with the unweighted S = H P⁻ H' + R_j
+        _, det0 = inv2(mm(H, mmt(Ps[j], H)) + R_modes[j])
+        xn, Pn, nu, S, K, Ru, nis, w, ok = kalman_update(xs[j], Ps[j], z, R_modes[j], H, outlier, gate_nis,
+                                                         huber_k, joseph)
+        lp[j] = -0.5 * (nis + math.log(det0)) - _LN_2PI + math.log(max(cbar[j], 1e-300))
+        xs[j], Ps[j] = xn, Pn
+        Ks[j] = K
+        ws[j] = w
+        any_ok = any_ok or ok
+    # μ_j ∝ Λ_j c̄_j   (in logs)
+    lp -= lp.max()
+    mu = np.exp(lp)
+    mu /= mu.sum()
+    Kbar = np.zeros((n, 2))
+    wbar = 0.0
+    for j in range(M):
+        Kbar += mu[j] * Ks[j]
+        wbar += mu[j] * ws[j]
+    # the combined prior's innovation: ν = z − H x⁻,  S = H P⁻ H' + R̄
+    nu_c = z - mm(H, xp.reshape(n, 1))[:, 0]
+    S_c = mm(H, mmt(Pp, H)) + Rbar
+    Si, _ = inv2(S_c)
+    nis_c = nu_c[0] * (Si[0, 0] * nu_c[0] + Si[0, 1] * nu_c[1]) + nu_c[1] * (Si[1, 0] * nu_c[0] + Si[1, 1] * nu_c[1])
+    return mu, nu_c, S_c, Rbar, nis_c, Kbar, wbar, any_ok
+
+
+@njit(cache=True)
 def _imm_events(kind, avail, z, length_m, heading_rad, dt, phi, q, h_idx, H, x0, P0, sl2, sp2, outlier, gate_nis,
                 huber_k, joseph, r_table, mu0, switch_rate_hz, rows, proba_w, x_prior, P_prior, F_rec, x_post, P_post,
                 nu_rec, S_rec, K_rec, R_rec, nis_rec, w_rec, updated, accepted, mode_p):
@@ -129,46 +168,9 @@ def _imm_events(kind, avail, z, length_m, heading_rad, dt, phi, q, h_idx, H, x0,
         P_prior[k] = Pp
         mu = cbar.copy()
         if kind[k] != STEP_KIND and avail[k]:
-            Hk = H[h_idx[k]]
-            lp = np.empty(M)
-            Kbar = np.zeros((n, 2))
-            wbar = 0.0
-            any_ok = False
-            Rbar = np.zeros((2, 2))
-            Ks = np.zeros((M, n, 2))
-            ws = np.zeros(M)
-            for j in range(M):
-                Rj = r_table[kind[k], j]
-                Rbar += cbar[j] * Rj
-                # ln Λ_j = −½ (ν'S⁻¹ν + ln det S) − ln 2π, with the unweighted S = H P⁻ H' + R_j
-                _, det0 = inv2(mm(Hk, mmt(Ps[j], Hk)) + Rj)
-                xn, Pn, nu, S, K, Ru, nis, w, ok = kalman_update(xs[j], Ps[j], z[k], Rj, Hk, outlier, gate_nis,
-                                                                 huber_k, joseph)
-                lp[j] = -0.5 * (nis + math.log(det0)) - _LN_2PI + math.log(max(cbar[j], 1e-300))
-                xs[j], Ps[j] = xn, Pn
-                Ks[j] = K
-                ws[j] = w
-                any_ok = any_ok or ok
-            # 3. μ_j ∝ Λ_j c̄_j   (in logs)
-            lp -= lp.max()
-            mu = np.exp(lp)
-            mu /= mu.sum()
-            for j in range(M):
-                Kbar += mu[j] * Ks[j]
-                wbar += mu[j] * ws[j]
-            # the combined prior's innovation: ν = z − H x⁻,  S = H P⁻ H' + Σ c̄_j R_j
-            nu_c = z[k] - mm(Hk, xp.reshape(n, 1))[:, 0]
-            S_c = mm(Hk, mmt(Pp, Hk)) + Rbar
-            Si, _ = inv2(S_c)
-            nu_rec[k] = nu_c
-            S_rec[k] = S_c
-            R_rec[k] = Rbar
-            nis_rec[k] = nu_c[0] * (Si[0, 0] * nu_c[0] + Si[0, 1] * nu_c[1]) + nu_c[1] * (
-                Si[1, 0] * nu_c[0] + Si[1, 1] * nu_c[1])
-            K_rec[k] = Kbar
-            w_rec[k] = wbar
+            mu, nu_rec[k], S_rec[k], R_rec[k], nis_rec[k], K_rec[k], w_rec[k], accepted[k] = _mode_updates(
+                xs, Ps, z[k], H[h_idx[k]], r_table[kind[k]], cbar, xp, Pp, outlier, gate_nis, huber_k, joseph)
             updated[k] = True
-            accepted[k] = any_ok
         # 4. classifier evidence once per new window: μ_j ∝ μ_j p_j^w
         if rows[k] >= 0 and (k == 0 or rows[k] != rows[k - 1]):
             mu = mu * proba_w[rows[k]]
