@@ -247,3 +247,27 @@ def test_fix_table_is_the_nmea_paths_table(drive):
     assert pos.quality_text[0].startswith("SPS, WLS (rtklib), ") and "excluded" in pos.quality_text[0]
     assert np.all((pos.hdop > 0.5) & (pos.hdop < 10)) and np.all(pos.attenuation_db >= 0)
     assert np.all(pos.n_used == sol.n_used)
+
+
+def test_covariance_scaling_after_one_and_after_two_exclusions():
+    """One fault excluded: the kept subset's own variance factor (its σ like the clean fixes'). Two faults
+    excluded: the factor the epoch had before any exclusion (the subset's own is biased low by the selection)."""
+    rng = np.random.default_rng(77)
+    base = [_noisy_epoch(rng, n_gps=9, n_glo=5, t=0.2 * k) for k in range(10)]
+    one = [(t, [s[:5] + (s[5] + (100.0 if s[3] == 2 else 0.0),) for s in sats], c) for t, sats, c in base]
+    two = [(t, [s[:5] + (s[5] + (80.0 if s[3] in (2, 5) else 0.0),) for s in sats], c) for t, sats, c in base]
+    model = RtklibVariance()
+    for epochs, k_expected in ((one, 1), (two, 2)):
+        table, _ = _table(epochs)
+        scaled = solve_epochs(table, WlsConfig(weights=model))
+        raw = solve_epochs(table, WlsConfig(weights=model, scale_covariance=False))
+        before = solve_epochs(table, WlsConfig(weights=model, raim=False))
+        faulted = np.isin(table.svid, (2,) if k_expected == 1 else (2, 5))
+        right = np.array([not scaled.used[faulted & (table.t_s == t)].any() for t in scaled.t_s])
+        exact = (scaled.n_excluded == k_expected) & right
+        assert exact.sum() >= 9 and np.all(scaled.integrity == 0)   # (two faults once took 7 exclusions)
+        ratio = scaled.cov_ecef_m2[:, 0, 0] / raw.cov_ecef_m2[:, 0, 0]
+        after = np.maximum(scaled.variance_factor, 1.0)
+        want = np.where(scaled.n_excluded <= 1, after, np.maximum(after, before.variance_factor))
+        assert np.allclose(ratio, want, rtol=1e-9)
+        assert (k_expected == 1 and ratio.max() < 5.0) or (k_expected == 2 and ratio[exact].min() > 50.0)
