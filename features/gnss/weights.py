@@ -136,7 +136,8 @@ class RtklibVariance:
         # var = R²·(a² + b²/sin el + c²·10^(0.1·(SNR_max − SNR)))      (RTKLIB demo5 pntpos.c varerr)
         var = self.error_ratio ** 2 * (self.a_m ** 2 + self.b_m ** 2 / np.sin(el)
                                        + self.c_m ** 2 * 10.0 ** (0.1 * deficit))
-        fact = np.vectorize(lambda s: _RTKLIB_SYSTEM_FACTOR.get(s, 1.0), otypes=[float])(np.asarray(system))
+        letters, index = np.unique(np.asarray(system), return_inverse=True)
+        fact = np.array([_RTKLIB_SYSTEM_FACTOR.get(str(k), 1.0) for k in letters.ravel()])[index.reshape(np.shape(system))]
         return fact ** 2 * var
 
 

@@ -286,27 +286,30 @@ def _normalised_residuals(b: _Batch, resid, q, h) -> np.ndarray:
 
 
 def _raim(b: _Batch, x: np.ndarray, converged: np.ndarray, config: WlsConfig, sagnac: bool):
-    """Fault detection and exclusion over all epochs at once (module docstring); returns (x, converged, n_excl)."""
+    """Fault detection and exclusion over all epochs at once (module docstring); returns (x, converged, n_excl).
+
+    Each round tests only the epochs still open (those that just lost a satellite), so an epoch that
+    passes is never solved again.
+    """
     n_excl = np.zeros(len(x), dtype=int)
     cap = np.inf if config.max_exclusions is None else config.max_exclusions
-    while True:
-        resid, sse, dof, q, h, ok, _ = _statistics(b, x, sagnac)
+    open_ = np.flatnonzero(converged)
+    while open_.size:
+        sub = _subset(b, open_)
+        resid, sse, dof, q, h, ok, _ = _statistics(sub, x[open_], sagnac)
         with np.errstate(invalid="ignore"):
             limit = chi2.isf(config.p_false_alarm, np.maximum(dof, 1))
-        fail = converged & ok & (dof >= 2) & (sse > limit) & (n_excl < cap)
-        if not fail.any():
-            return x, converged, n_excl
-        e = np.flatnonzero(fail)
-        wn = _normalised_residuals(_subset(b, e), resid[e], q[e], h[e])
-        j = np.argmax(wn, axis=1)
-        testable = wn[np.arange(len(e)), j] > 0
-        e, j = e[testable], j[testable]
-        if len(e) == 0:
-            return x, converged, n_excl
+        fail = ok & (dof >= 2) & (sse > limit) & (n_excl[open_] < cap)
+        wn = _normalised_residuals(_subset(sub, np.flatnonzero(fail)), resid[fail], q[fail], h[fail])
+        j = np.argmax(wn, axis=1) if wn.size else np.zeros(0, dtype=int)
+        testable = wn[np.arange(len(j)), j] > 0 if wn.size else np.zeros(0, dtype=bool)
+        e, j = open_[fail][testable], j[testable]
         b.active[e, j] = False
         n_excl[e] += 1
-        x_e, conv_e = _gauss_newton(_subset(b, e), x[e], config, sagnac)
-        x[e], converged[e] = x_e, conv_e
+        if e.size:
+            x[e], converged[e] = _gauss_newton(_subset(b, e), x[e], config, sagnac)
+        open_ = e[converged[e]]
+    return x, converged, n_excl
 
 
 def _subset(b: _Batch, e: np.ndarray) -> _Batch:
