@@ -16,7 +16,8 @@ only builds the :class:`~features.gnss.features.SkyArrays` that NMEA's GSV/GSA g
   Its position at an untracked epoch is a cubic polynomial in time fitted to its tracked ECEF
   positions within ``horizon_s`` (default 300 s) on either side (≥ 4 of them, and one within
   ``horizon_s``): over 10 min of a GPS orbit a cubic's error is a few tens of metres, well under
-  0.01° of elevation at 20,000 km. Satellites never tracked in the log stay unknown, so ζ and λ
+  0.01° of elevation at 20,000 km (the fit uses tracked epochs after the gap too: offline, like the
+  windows' features). Satellites never tracked in the log stay unknown, so ζ and λ
   are **lower bounds** of the GSV figures (a receiver's GSV lists every satellite its almanac puts
   above the horizon). With broadcast ephemerides (RINEX navigation file,
   :mod:`features.gnss.pseudorange`) the positions of every satellite would be known and the

@@ -35,7 +35,9 @@ autocorrelation time τ (NLOS errors persist for tens of seconds, so n fixes are
 independent ones; Geyer 1992). The window starts at ``align_min_path_m`` of track (and at least
 ``align_window_s``) and grows by half until σ(ψ₀) ≤ ``target_sigma_deg`` or ``align_max_path_m``:
 in open sky a short stretch settles the heading, in a canyon it takes hundreds of metres (on the
-smartLoc drive, 340–510 m for |ψ₀ error| < 4°, where 30 s of fixes were 20–40° off).
+smartLoc drive, 340–510 m for |ψ₀ error| < 4°, where 30 s of fixes were 20–40° off). The fit
+looks ahead to the window's end, so it serves offline evaluation; a real-time filter would start
+with the heading unknown (a wide σ on its heading-offset state) and let the fixes settle it.
 """
 
 from __future__ import annotations
