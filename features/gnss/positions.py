@@ -271,6 +271,10 @@ class GnssPositions:
     satellites' mean attenuation and ``sigma_source`` how σ was found: ``gst``, ``cn0``
     (table × SIGMA-ε factor), ``table`` (RTK fixed) or ``fitted`` (:class:`UereTable`);
     ``invisible_ratio`` the epoch's in-view-but-untracked share above the mask (NaN without a sky).
+    Fixes solved from pseudoranges (:func:`features.gnss.wls.wls_positions`) also carry
+    ``cov_en_m2`` (n, 2, 2), the east/north covariance with its correlation, and ``quality_text``
+    (n,), e.g. "SPS, WLS (rtklib), 14 satellites, excluded 2"; both None from NMEA. Neither is in
+    :attr:`COLUMNS` (the per-fix scalar columns a table writer writes).
     """
 
     t_s: np.ndarray
@@ -288,6 +292,8 @@ class GnssPositions:
     attenuation_db: np.ndarray | None = None
     sigma_source: np.ndarray | None = None
     invisible_ratio: np.ndarray | None = None
+    cov_en_m2: np.ndarray | None = None
+    quality_text: np.ndarray | None = None
 
     COLUMNS = ("t_s", "east_m", "north_m", "up_m", "sigma_en_m", "sigma_up_m", "quality", "n_used", "hdop",
                "hdop_assumed", "sigma_east_m", "sigma_north_m", "attenuation_db", "sigma_source", "invisible_ratio")
