@@ -543,38 +543,6 @@ def test_imm_matches_an_independent_reference(mixed, outlier):
         np.testing.assert_allclose(run.P, Pr, rtol=1e-7, atol=1e-10)
 
 
-def test_closed_loop_correction_hook(walk):
-    ev = walk.stream
-    seen = []
-
-    def corrector(k, x_prior, x, P, nu, S, K):
-        seen.append(k)
-        np.testing.assert_allclose(x - x_prior, K @ nu, atol=1e-9)
-        return np.array([0.01, -0.02]) if k % 2 else None
-
-    open_loop = EventEKF(noise=FixedNoise(2.0, 0.3)).run(ev, x0_en=walk.x0[:2])
-    closed = EventEKF(noise=FixedNoise(2.0, 0.3)).run(ev, x0_en=walk.x0[:2], correct=corrector)
-    assert seen == np.flatnonzero(closed.accepted).tolist()
-    odd = closed.accepted & (np.arange(len(ev)) % 2 == 1)
-    np.testing.assert_allclose(closed.correction[odd], np.broadcast_to([0.01, -0.02], (odd.sum(), 2)))
-    assert not closed.correction[~odd].any()
-    # the correction is fed back: the next prior is predicted from the corrected posterior
-    k = int(np.flatnonzero(odd)[0])
-    if ev.kind[k + 1] == STEP:
-        expect, _, _ = step_predict(closed.x[k], np.eye(4), ev.step_length_m[k + 1], ev.heading_rad[k + 1],
-                                    EkfConfig())
-    else:
-        expect = closed.x[k]
-    np.testing.assert_allclose(closed.x_prior[k + 1], expect, atol=1e-12)
-    np.testing.assert_allclose(closed.x[k, :2] - (closed.x_prior[k] + closed.K[k] @ closed.nu[k])[:2], [0.01, -0.02],
-                               atol=1e-12)
-    assert not np.allclose(closed.x, open_loop.x)
-    zero = EventEKF(noise=FixedNoise(2.0, 0.3)).run(ev, x0_en=walk.x0[:2], correct=lambda *a: None)
-    np.testing.assert_allclose(zero.x, open_loop.x, atol=1e-9)
-    with pytest.raises(FilterError):
-        EventEKF(noise=FixedNoise(2.0, 0.3)).run(ev, x0_en=walk.x0[:2], correct=lambda *a: np.array([np.nan, 0.0]))
-
-
 def test_rts_matches_filterpy_on_a_linear_stream():
     from filterpy.kalman import KalmanFilter
 

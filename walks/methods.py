@@ -27,7 +27,6 @@ Built-in methods:
 ``imm``             one mode per class, the classifier's probabilities as mode evidence
 ``adaptive_nobp``   R per class and GGA quality, the class from the online classifier
 ``adaptive``        adaptive_nobp + the guarded BP correction added to the output
-``adaptive_closed`` the same correction fed back into the filter state after each update
 ==================  ==========================================================
 """
 
@@ -38,7 +37,7 @@ from typing import Callable
 
 import numpy as np
 
-from models.bp import ACOUSTIC_KIND, GNSS_KIND, bp_inputs
+from models.bp import bp_inputs
 from models.fusion import ClassMap, EventEKF, FilterRun, IMMFilter, VBAdaptiveNoise, rts_smooth
 from models.fusion.model import FusionModel
 from walks.inputs import WalkInputs
@@ -215,13 +214,13 @@ def _imm(ctx: MethodContext) -> FilterRun:
     return IMMFilter(ctx.model.per_class, ctx.model.ekf).run(ctx.events(), classes=ctx.inputs.classes)
 
 
-def adaptive_run(model: FusionModel, inputs: WalkInputs, method_name: str = "adaptive_nobp", correct=None):
+def adaptive_run(model: FusionModel, inputs: WalkInputs, method_name: str = "adaptive_nobp"):
     """The adaptive methods' filter run: R per class and GGA quality (per class when the model has no
     quality table), the class from the online classifier."""
     ev = inputs.events
     if not np.any(ev.available):
         raise MethodSkipped("no GNSS or acoustic fix to start the filter from")
-    return EventEKF(model.ekf, model.adaptive_policy(), method_name).run(ev, classes=inputs.classes, correct=correct)
+    return EventEKF(model.ekf, model.adaptive_policy(), method_name).run(ev, classes=inputs.classes)
 
 
 def _adaptive_nobp(ctx: MethodContext) -> FilterRun:
@@ -259,60 +258,6 @@ def _adaptive(ctx: MethodContext) -> Track:
                   "bp_disabled_share": corr.disabled_share, "run": run})
 
 
-def _adaptive_closed(ctx: MethodContext) -> Track:
-    """The guarded BP correction added to the filter state after every accepted update.
-
-    Guards as in :class:`models.bp.BPCorrector`: no correction out of distribution or below its own σ;
-    and while the mean NIS of the last ``guard_window`` updates lies above the 99 % point of its χ²
-    law (2·window degrees of freedom, over window) the correction is off — the filter fed with it has
-    stopped agreeing with its measurements.
-    """
-    from scipy.special import chdtri
-
-    bp = _require_bp(ctx)
-    ev = ctx.events()
-    window = bp.config.guard_window
-    limit = float(chdtri(2 * window, 0.01) / window)       # chi2.ppf(0.99, 2·window) / window
-    proba = ctx.inputs.classes.at(ev.t_s)
-    recent = {code: _recent_fix(ev, code) for code in (GNSS_KIND, ACOUSTIC_KIND)}
-    nis_hist: list = []
-    state = {"off": 0, "withheld": 0, "calls": 0}
-
-    def correct(k, x_prior, x, P, nu, S, K):
-        state["calls"] += 1
-        nis_hist.append(float(nu @ np.linalg.solve(S, nu)))
-        if len(nis_hist) > window:
-            nis_hist.pop(0)
-        # the input row of models.bp.bp_inputs for this update, built by the same function
-        row = bp_inputs(np.array([ev.t_s[k]]), np.array([ev.kind[k]]), np.array([True]), np.array([True]),
-                        K[None], nu[None], (x - x_prior)[None], np.array([nu @ np.linalg.solve(S, nu)]),
-                        proba[k][None])
-        row[0, -2] = recent[GNSS_KIND][k]
-        row[0, -1] = recent[ACOUSTIC_KIND][k]
-        if len(nis_hist) >= window and np.mean(nis_hist) > limit:
-            state["off"] += 1
-            return None
-        mu, var = bp.predict(row)
-        if bp.is_ood(row)[0] or float(np.sum(mu ** 2)) < float(np.sum(var)):
-            state["withheld"] += 1
-            return None
-        return mu[0]
-
-    run = adaptive_run(ctx.model, ctx.inputs, "adaptive_closed", correct=correct)
-    calls = max(state["calls"], 1)
-    return Track("adaptive_closed", run.t_s, run.x[:, 0].copy(), run.x[:, 1].copy(), run.P[:, :2, :2].copy(),
-                 {"nis": run.nis, "class_proba": proba, "bp_delta_m": run.correction,
-                  "bp_disabled_share": (state["off"] + state["withheld"]) / calls, "run": run})
-
-
-def _recent_fix(ev, code: int, within_s: float = 2.0) -> np.ndarray:
-    """Whether an available fix of kind ``code`` arrived in the ``within_s`` up to each event (causal), (m,)."""
-    tk = ev.t_s[ev.available & (ev.kind == code)]
-    idx = np.searchsorted(tk, ev.t_s, side="right") - 1
-    prev = np.where(idx >= 0, tk[np.maximum(idx, 0)] if tk.size else 0.0, -np.inf)
-    return (ev.t_s - prev) <= within_s
-
-
 for _m in (Method("gnss", _gnss, "the GGA fixes alone"),
            Method("acoustic", _acoustic, "the acoustic fixes alone"),
            Method("pdr", _pdr, "dead reckoning from the first fix"),
@@ -323,6 +268,5 @@ for _m in (Method("gnss", _gnss, "the GGA fixes alone"),
            Method("imm", _imm, "one mode per environment class", filter=True),
            Method("adaptive_nobp", _adaptive_nobp, "R per class and quality, class from the classifier",
                   filter=True),
-           Method("adaptive", _adaptive, "adaptive_nobp + the guarded BP correction"),
-           Method("adaptive_closed", _adaptive_closed, "the BP correction fed back into the filter")):
+           Method("adaptive", _adaptive, "adaptive_nobp + the guarded BP correction")):
     register(_m)

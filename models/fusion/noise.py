@@ -111,6 +111,10 @@ class NoiseSpec:
     (``r_table`` (3, n_classes, 2, 2) per event kind and class, the class from ``map_grid`` / ``map_geo``) or
     :data:`~models.fusion.core.R_VB` (``vb_alpha``, ``vb_beta``, ``vb_cap`` (3, 2) per event kind and axis,
     ``vb_rho``, ``vb_n_iter``). Unused fields hold empty placeholders of the right type.
+
+    Optional, per event (m,): ``eps_event``, ``kappa_event`` the contamination of each fix's noise (for the
+    filter's ``outlier="mixture"``); ``bias_shared`` which GNSS fixes see the GNSS bias state, with its
+    ``bias_phi``, ``bias_q`` (φ and per-axis Q of the time update; a reset is φ = 0). None: not given.
     """
 
     mode: int
@@ -123,6 +127,34 @@ class NoiseSpec:
     vb_cap: np.ndarray
     vb_rho: float = 1.0
     vb_n_iter: int = 1
+    eps_event: np.ndarray | None = None
+    kappa_event: np.ndarray | None = None
+    bias_shared: np.ndarray | None = None
+    bias_phi: np.ndarray | None = None
+    bias_q: np.ndarray | None = None
+
+    def with_fields(self, **kw) -> "NoiseSpec":
+        """A copy with the given fields replaced."""
+        from dataclasses import replace
+
+        return replace(self, **kw)
+
+    def scaled(self, kind: np.ndarray, gnss: float = 1.0, acoustic: float = 1.0, bias: float = 1.0) -> "NoiseSpec":
+        """A copy with every GNSS and acoustic R multiplied by ``gnss`` / ``acoustic`` (per event, by the
+        events' ``kind`` (m,); also the site map's table and the VB-AKF's starting R and cap) and the bias
+        variance by ``bias`` — the knobs a method's tuning on training walks sets."""
+        r_event = self.r_event
+        if r_event.shape[0]:
+            f = np.where(kind == GNSS, gnss, np.where(kind == ACOUSTIC, acoustic, 1.0))
+            r_event = r_event * f[:, None, None]
+        table = self.r_table.copy()
+        beta, cap = self.vb_beta.copy(), self.vb_cap.copy()
+        for code, f in ((GNSS, gnss), (ACOUSTIC, acoustic)):
+            table[code] *= f
+            beta[code] *= f
+            cap[code] *= f
+        q = None if self.bias_q is None else self.bias_q * bias
+        return self.with_fields(r_event=r_event, r_table=table, vb_beta=beta, vb_cap=cap, bias_q=q)
 
     @classmethod
     def _make(cls, mode, r_event=None, r_table=None, map_grid=None, map_geo=None, **vb):
