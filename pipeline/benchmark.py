@@ -43,8 +43,11 @@ def fit_and_evaluate(layout, library: Path, out: Path, *, env_mode: str = "super
     save_env_model(clf, out / "env_model", info, library=library, overwrite=True)
     say(f"environment model ({env_mode}): {info['n_windows']} windows of {info['n_cells']} cells, "
         f"open/light/heavy = {'/'.join(map(str, info['class_counts']))}")
+    from pipeline.site_map import class_map_for
+
     model = train_fusion(layout.train_walks, clf, bp_config=BPConfig(seed=seed, n_members=bp_members),
-                         meta={"split": sp.name, "env_mode": env_mode, **(meta or {})})
+                         meta={"split": sp.name, "env_mode": env_mode, **(meta or {})}, class_map_for=class_map_for,
+                         progress=lambda line: say(f"  {line}"))
     # The model may be applied to the held-out sites: that is the point of the split.
     model.meta["sites"] = []
     save_fusion_model(model, out / "fusion_model", overwrite=True)

@@ -101,7 +101,8 @@ def summary_table(rows: list[dict]) -> str:
     classes = ("all", "open", "light", "heavy")
     by = {(r["method"], r["env_class"]): r for r in rows}
     methods = method_order({r["method"] for r in rows})
-    head = f"{'method':18s} " + " ".join(f"{c + ' mean/med/p95':>21s}" for c in classes) + "  max_m  NEES95"
+    w = max([18] + [len(m) for m in methods])
+    head = f"{'method':{w}s} " + " ".join(f"{c + ' mean/med/p95':>21s}" for c in classes) + "  max_m  NEES95"
     lines = [head, "-" * len(head)]
     for m in methods:
         cells = []
@@ -110,7 +111,7 @@ def summary_table(rows: list[dict]) -> str:
             cells.append(f"{r['mean_m']:6.2f}/{r['median_m']:5.2f}/{r['p95_m']:5.2f}   " if r else " " * 21)
         a = by.get((m, "all"))
         nib = "" if a is None or not np.isfinite(a["nees_in_bounds"]) else f"{a['nees_in_bounds']:.2f}"
-        lines.append(f"{m:18s} " + " ".join(f"{x:>21s}" for x in cells) + f" {a['max_m'] if a else float('nan'):6.2f}"
+        lines.append(f"{m:{w}s} " + " ".join(f"{x:>21s}" for x in cells) + f" {a['max_m'] if a else float('nan'):6.2f}"
                      f"  {nib:>6s}")
     return "\n".join(lines)
 

@@ -27,7 +27,8 @@ def _gm_series(rng, n, dt, sigma_b, tau, sigma_w, quality=5):
         b[k] = phi * b[k - 1] + rng.normal(0, sigma_b * math.sqrt(1 - phi * phi), 2)
     e = b + rng.normal(0, sigma_w, (n, 2))
     t = np.arange(n) * dt
-    return ErrorSeries(t, e, np.full(n, sigma_w ** 2), np.full(n, quality), np.zeros(n, int))
+    return ErrorSeries(t, e, np.broadcast_to(np.eye(2) * sigma_w ** 2, (n, 2, 2)), np.full(n, quality),
+                       np.zeros(n, int))
 
 
 def test_gauss_markov_fit_recovers_sigma_and_tau():
@@ -40,12 +41,12 @@ def test_gauss_markov_fit_recovers_sigma_and_tau():
     assert abs(c0 / (0.4 ** 2 + 0.15 ** 2) - 1) < 0.1
     assert abs(sb2 / 0.16 - 1) < 0.15                         # measured 1.00
     assert abs(tau / 20.0 - 1) < 0.2
-    white = [ErrorSeries(s.t_s, rng.normal(0, 0.3, s.err_m.shape), s.var_m2, s.quality, s.cls) for s in series]
+    white = [ErrorSeries(s.t_s, rng.normal(0, 0.3, s.err_m.shape), s.cov_m2, s.quality, s.cls) for s in series]
     sb2w, _, c0w, _ = fit_gauss_markov(white, lambda s: np.ones(len(s.t_s), bool))
     assert sb2w < 0.01 * c0w
     # pairs never cross a quality change: two halves of a series of different qualities, each its own bias
     s = series[0]
-    halves = ErrorSeries(s.t_s, s.err_m, s.var_m2, np.where(np.arange(len(s.t_s)) < 3000, 5, 2), s.cls)
+    halves = ErrorSeries(s.t_s, s.err_m, s.cov_m2, np.where(np.arange(len(s.t_s)) < 3000, 5, 2), s.cls)
     assert fit_gauss_markov([halves], lambda x: x.quality == 2)[3] == 3000
 
 
@@ -111,10 +112,10 @@ def _context_fit(stream_synth, n_classes=1, **kw):
     s = stream_synth
     g = s.stream.kind == 1
     e = s.stream.z_m[g] - s.truth[g, :2]
-    series = [ErrorSeries(s.stream.t_s[g], e, s.stream.cov_m2[g, 0, 0], s.gnss.quality[s.stream.index[g]],
+    series = [ErrorSeries(s.stream.t_s[g], e, s.stream.cov_m2[g], s.gnss.quality[s.stream.index[g]],
                           np.zeros(g.sum(), int))]
     a = s.stream.kind == 2
-    ac = [ErrorSeries(s.stream.t_s[a], s.stream.z_m[a] - s.truth[a, :2], s.stream.cov_m2[a, 0, 0],
+    ac = [ErrorSeries(s.stream.t_s[a], s.stream.z_m[a] - s.truth[a, :2], s.stream.cov_m2[a],
                       np.zeros(a.sum(), int), np.zeros(a.sum(), int))]
     return ContextNoise(n_classes=n_classes, **kw).fit(series, ac)
 
@@ -187,7 +188,7 @@ def test_class_contamination_distrusts_fixes_where_the_class_says_so():
         for code, quality in ((1, 4), (2, 0)):
             sel = s.stream.kind == code
             out.append([ErrorSeries(s.stream.t_s[sel], s.stream.z_m[sel] - s.truth[sel, :2],
-                                    s.stream.cov_m2[sel, 0, 0], np.full(sel.sum(), quality),
+                                    s.stream.cov_m2[sel], np.full(sel.sum(), quality),
                                     track.at(s.stream.t_s[sel]).argmax(1))])
         return out
 

@@ -25,26 +25,29 @@ Built-in methods:
 ``kf_map``          R per class, the class looked up in a site map at the last estimate (method 1)
 ``aekf``            variational-Bayes adaptive R, no classifier (Särkkä & Nummenmaa 2009)
 ``imm``             one mode per class, the classifier's probabilities as mode evidence
-``adaptive_nobp``   R per class and GGA quality, the class from the online classifier
+``adaptive_nobp``   the error model in context: white scale, Gauss–Markov bias states and outlier prior
+                    per class and GGA quality, the class from the online classifier
+``adaptive_nobp_blind`` the same machinery fitted and run without the class (the twin that measures
+                    what the environment adds; the strongest environment-free baseline)
 ``adaptive``        adaptive_nobp + the guarded BP correction added to the output
 ==================  ==========================================================
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Callable
 
 import numpy as np
 
 from models.bp import bp_inputs
-from models.fusion import ClassMap, EventEKF, FilterRun, IMMFilter, VBAdaptiveNoise, rts_smooth
+from models.fusion import ClassMap, ContextNoise, EventEKF, FilterRun, IMMFilter, VBAdaptiveNoise, rts_smooth
 from models.fusion.model import FusionModel
 from walks.inputs import WalkInputs
 from walks.track import Track
 
 __all__ = ["Method", "MethodContext", "MethodSkipped", "register", "unregister", "method", "method_names",
-           "run_methods", "bp_features", "adaptive_run"]
+           "run_methods", "bp_features", "adaptive_run", "tuned"]
 
 
 class MethodSkipped(Exception):
@@ -189,42 +192,71 @@ def _pdr(ctx: MethodContext) -> Track:
 # -- filters --------------------------------------------------------------------------------------------------
 
 
+def tuned(model: FusionModel, name: str) -> tuple:
+    """(EkfConfig, scales) of method ``name``: the model's filter settings and noise with the knobs the method
+    was tuned to on the training walks (:mod:`training.tuning`; all 1 when untuned): ``q_walk`` multiplies the
+    walking random walk, ``gnss`` / ``acoustic`` the R of each source, ``bias`` the bias variance."""
+    knobs = dict(model.tuning.get(name, {})) if model.tuning else {}
+    cfg = model.ekf
+    if "q_walk" in knobs:
+        cfg = replace(cfg, q_walk_m2_s=cfg.q_walk_m2_s * float(knobs["q_walk"]))
+    return cfg, {k: float(v) for k, v in knobs.items() if k in ("gnss", "acoustic", "bias")}
+
+
 def _kf(ctx: MethodContext) -> FilterRun:
-    return EventEKF(ctx.model.ekf, ctx.model.fixed, "kf").run(ctx.events())
+    cfg, scales = tuned(ctx.model, "kf")
+    return EventEKF(cfg, ctx.model.fixed, "kf", scales).run(ctx.events())
 
 
 def _kf_quality(ctx: MethodContext) -> FilterRun:
-    return EventEKF(ctx.model.ekf, ctx.model.quality, "kf_quality").run(ctx.events())
+    cfg, scales = tuned(ctx.model, "kf_quality")
+    return EventEKF(cfg, ctx.model.quality, "kf_quality", scales).run(ctx.events())
 
 
 def _kf_map(ctx: MethodContext) -> FilterRun:
     if ctx.class_at is None:
         raise MethodSkipped("no map of the site (a simulated site's layout gives one)")
-    return EventEKF(ctx.model.ekf, ctx.model.per_class_map, "kf_map").run(ctx.events(), class_at=ctx.class_at)
+    cfg, scales = tuned(ctx.model, "kf_map")
+    return EventEKF(cfg, ctx.model.per_class_map, "kf_map", scales).run(ctx.events(), class_at=ctx.class_at)
 
 
 def _aekf(ctx: MethodContext) -> FilterRun:
     rg, ra = ctx.model.fixed.R_gnss_, ctx.model.fixed.R_acoustic_
     vb = VBAdaptiveNoise(gnss_sigma_m=float(np.sqrt(np.trace(rg) / 2)),
                          acoustic_sigma_m=float(np.sqrt(np.trace(ra) / 2)))
-    return EventEKF(ctx.model.ekf, vb, "aekf").run(ctx.events())
+    cfg, scales = tuned(ctx.model, "aekf")
+    return EventEKF(cfg, vb, "aekf", scales).run(ctx.events())
 
 
 def _imm(ctx: MethodContext) -> FilterRun:
-    return IMMFilter(ctx.model.per_class, ctx.model.ekf).run(ctx.events(), classes=ctx.inputs.classes)
+    cfg, scales = tuned(ctx.model, "imm")
+    return IMMFilter(ctx.model.per_class, cfg, scales=scales).run(ctx.events(), classes=ctx.inputs.classes)
 
 
-def adaptive_run(model: FusionModel, inputs: WalkInputs, method_name: str = "adaptive_nobp"):
-    """The adaptive methods' filter run: R per class and GGA quality (per class when the model has no
-    quality table), the class from the online classifier."""
+def adaptive_run(model: FusionModel, inputs: WalkInputs, method_name: str = "adaptive_nobp", blind: bool = False):
+    """The adaptive methods' filter run: the error model in context (white scale, Gauss–Markov bias and outlier
+    prior per class and GGA quality, :class:`~models.fusion.context.ContextNoise`) with the class from the
+    online classifier; ``blind``: the same machinery fitted and run without the class (its twin)."""
     ev = inputs.events
     if not np.any(ev.available):
         raise MethodSkipped("no GNSS or acoustic fix to start the filter from")
-    return EventEKF(model.ekf, model.adaptive_policy(), method_name).run(ev, classes=inputs.classes)
+    cfg, scales = tuned(model, method_name)
+    if blind:
+        if model.context_blind is None:
+            raise MethodSkipped("the model has no environment-blind context model (trained before it existed)")
+        return EventEKF(replace(cfg, outlier="mixture"), model.context_blind, method_name, scales).run(ev)
+    policy = model.adaptive_policy()
+    if isinstance(policy, ContextNoise):
+        cfg = replace(cfg, outlier="mixture")
+    return EventEKF(cfg, policy, method_name, scales).run(ev, classes=inputs.classes)
 
 
 def _adaptive_nobp(ctx: MethodContext) -> FilterRun:
     return adaptive_run(ctx.model, ctx.inputs)
+
+
+def _adaptive_nobp_blind(ctx: MethodContext) -> FilterRun:
+    return adaptive_run(ctx.model, ctx.inputs, "adaptive_nobp_blind", blind=True)
 
 
 # -- the BP corrector ------------------------------------------------------------------------------------------
@@ -266,7 +298,9 @@ for _m in (Method("gnss", _gnss, "the GGA fixes alone"),
            Method("kf_map", _kf_map, "R per class of the site map at the last estimate (method 1)", filter=True),
            Method("aekf", _aekf, "variational-Bayes adaptive R, no classifier", filter=True),
            Method("imm", _imm, "one mode per environment class", filter=True),
-           Method("adaptive_nobp", _adaptive_nobp, "R per class and quality, class from the classifier",
+           Method("adaptive_nobp", _adaptive_nobp, "bias states and outlier prior per class and quality",
+                  filter=True),
+           Method("adaptive_nobp_blind", _adaptive_nobp_blind, "adaptive_nobp without the class (its twin)",
                   filter=True),
            Method("adaptive", _adaptive, "adaptive_nobp + the guarded BP correction")):
     register(_m)

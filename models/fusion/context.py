@@ -8,7 +8,7 @@ reports as good is sometimes metres off — more often where the sky is blocked.
 
     e_k = b_k + w_k,   w_k ~ (1 − ε) N(0, R_k) + ε N(0, κ R_k)
 
-* R_k = s²·σ_rep,k² I: σ_rep the fix's own reported σ (the receiver's GST, else
+* R_k = s²·C_k: C_k the fix's own reported covariance (the receiver's GST, else
   the C/N0 or UERE·HDOP model of :mod:`features.gnss.positions`), s² fitted;
 * b_k a first-order Gauss–Markov bias (σ_b, τ) shared by consecutive fixes of
   one quality and reset when the quality changes or after a gap (lock lost, a
@@ -57,15 +57,22 @@ _MIN_SCALE2 = 1e-4
 
 @dataclass(frozen=True)
 class ErrorSeries:
-    """One training walk's fixes of one source against truth: ``t_s`` (n,), ``err_m`` (n, 2), ``var_m2`` (n,)
-    reported per-axis variance, ``quality`` (n,) (GNSS; 0 for acoustic), ``cls`` (n,) the class the
+    """One training walk's fixes of one source against truth: ``t_s`` (n,), ``err_m`` (n, 2), ``cov_m2``
+    (n, 2, 2) the reported covariance, ``quality`` (n,) (GNSS; 0 for acoustic), ``cls`` (n,) the class the
     classifier gave at the fix (−1 unknown)."""
 
     t_s: np.ndarray
     err_m: np.ndarray
-    var_m2: np.ndarray
+    cov_m2: np.ndarray
     quality: np.ndarray
     cls: np.ndarray
+
+
+def _mahalanobis2(e: np.ndarray, cov: np.ndarray) -> np.ndarray:
+    """e'C⁻¹e per row: e (n, 2), C (n, 2, 2)."""
+    det = cov[:, 0, 0] * cov[:, 1, 1] - cov[:, 0, 1] * cov[:, 1, 0]
+    return (cov[:, 1, 1] * e[:, 0] ** 2 - (cov[:, 0, 1] + cov[:, 1, 0]) * e[:, 0] * e[:, 1]
+            + cov[:, 0, 0] * e[:, 1] ** 2) / det
 
 
 def fit_gauss_markov(series: list[ErrorSeries], select, reset_gap_s: float = 5.0, max_lag_s: float = 60.0,
@@ -228,8 +235,8 @@ class ContextNoise:
             seg = np.concatenate([[0], np.cumsum((np.diff(s.t_s) > self.reset_gap_s) | (np.diff(s.quality) != 0))])
             pair = sel[1:] & sel[:-1] & (seg[1:] == seg[:-1])
             d = s.err_m[1:][pair] - s.err_m[:-1][pair]
-            # |Δe|² / (2 (σ²_k + σ²_{k−1})) ~ Exp(s²) under white noise of variance s²σ²
-            ud.append(np.sum(d * d, axis=1) / (2.0 * (s.var_m2[1:][pair] + s.var_m2[:-1][pair])))
+            # Δe'(C_k + C_{k−1})⁻¹Δe / 2 ~ Exp(s²) under white noise of covariance s²C
+            ud.append(_mahalanobis2(d, s.cov_m2[1:][pair] + s.cov_m2[:-1][pair]) / 2.0)
         ud = np.concatenate(ud) if ud else np.zeros(0)
         s2 = float(np.median(ud) / math.log(2.0)) if ud.size >= 10 else 1.0
         s2 = max(s2, _MIN_SCALE2)
@@ -239,8 +246,8 @@ class ContextNoise:
         for s in series:
             sel = select(s)
             if sel.any():
-                # d²/2 = e'(s² σ_rep² I + σ_b² I)⁻¹ e / 2
-                u_tot.append(np.sum(s.err_m[sel] ** 2, axis=1) / (2.0 * (s2 * s.var_m2[sel] + sb2)))
+                # d²/2 = e'(s² C + σ_b² I)⁻¹ e / 2
+                u_tot.append(_mahalanobis2(s.err_m[sel], s2 * s.cov_m2[sel] + sb2 * np.eye(2)) / 2.0)
         u_tot = np.concatenate(u_tot) if u_tot else np.zeros(0)
         eps, kappa = 0.0, 1.0
         if self.mixture:
@@ -253,7 +260,7 @@ class ContextNoise:
         for s in series:
             sel = select(s)
             if sel.any():
-                u.append(np.sum(s.err_m[sel] ** 2, axis=1) / (2.0 * s.var_m2[sel]))
+                u.append(_mahalanobis2(s.err_m[sel], s.cov_m2[sel]) / 2.0)
         u = np.concatenate(u) if u else np.zeros(0)
         if self.mixture:
             s2, eps, kappa = fit_contamination(u)

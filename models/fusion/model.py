@@ -7,9 +7,11 @@ A :class:`FusionModel` holds, for one substation family:
   source), ``kf_quality`` (UERE per GGA quality, GST and acoustic scales),
   ``kf_map`` (R per class, classes from the site map at the truth position),
   ``imm`` (R per class, classes from the online classifier — what it will
-  see when running), ``adaptive`` (UERE per class and GGA quality, acoustic
-  scale per class: :class:`~models.fusion.noise.ClassQualityNoise`),
-- the filter's process-noise settings (:class:`models.fusion.ekf.EkfConfig`),
+  see when running), ``adaptive_nobp`` and its environment-blind twin (the
+  error model in context, :class:`~models.fusion.context.ContextNoise`: white
+  scale, Gauss–Markov bias and outlier prior per class and GGA quality),
+- the filter's process-noise settings (:class:`models.fusion.ekf.EkfConfig`) and, per method, the knobs
+  it was tuned to on the training walks (``tuning``: scales of R, the walking noise, the bias variance),
 - the BP corrector (:class:`models.bp.BPCorrector`), or None,
 - metadata: the training walks and their hashes, the site names, versions.
 
@@ -19,6 +21,7 @@ and safetensors arrays, never pickle.
 
 from __future__ import annotations
 
+import math
 from dataclasses import asdict, dataclass, field
 
 import numpy as np
@@ -27,7 +30,8 @@ from models.bp import BPCorrector
 from models.bundle import BundleError, load_bundle, save_bundle
 from models.environment import EnvironmentClassifier
 from models.fusion.ekf import EkfConfig
-from models.fusion.noise import ClassQualityNoise, FixedNoise, PerClassNoise, QualityNoise
+from models.fusion.context import ContextNoise
+from models.fusion.noise import FixedNoise, PerClassNoise, QualityNoise
 
 __all__ = ["FusionModel", "save_fusion_model", "load_fusion_model"]
 
@@ -41,14 +45,16 @@ class FusionModel:
     quality: QualityNoise
     per_class_map: PerClassNoise
     per_class: PerClassNoise
-    class_quality: ClassQualityNoise | None = None
+    context: ContextNoise | None = None
+    context_blind: ContextNoise | None = None
     ekf: EkfConfig = field(default_factory=EkfConfig)
     bp: BPCorrector | None = None
     meta: dict = field(default_factory=dict)
+    tuning: dict = field(default_factory=dict)
 
     def adaptive_policy(self):
         """The adaptive methods' noise policy: R per class and GGA quality when the model has it, else per class."""
-        return self.class_quality if self.class_quality is not None else self.per_class
+        return self.context if self.context is not None else self.per_class
 
 
 def _noise_arrays(model: FusionModel) -> dict:
@@ -65,7 +71,9 @@ def save_fusion_model(model: FusionModel, path, overwrite: bool = False):
               "quality": {"uere_m": {str(k): v for k, v in model.quality.uere_m_.items()},
                           "gst_scale": model.quality.gst_scale_, "acoustic_scale": model.quality.acoustic_scale_},
               "per_class": {"combine": model.per_class.combine}, "per_class_map": {"combine": model.per_class_map.combine},
-              "bp": None, "class_quality": model.class_quality.get_state() if model.class_quality else None}
+              "bp": None, "context": model.context.get_state() if model.context else None,
+              "context_blind": model.context_blind.get_state() if model.context_blind else None,
+              "tuning": {m: {k: float(v) for k, v in kn.items()} for m, kn in model.tuning.items()}}
     arrays = {"classifier": cls_arrays, "noise": _noise_arrays(model)}
     if model.bp is not None:
         bp_params, bp_arrays = model.bp.get_state()
@@ -94,9 +102,14 @@ def load_fusion_model(path) -> FusionModel:
             if not (np.all(np.isfinite(r)) and r.shape[-2:] == (2, 2)):
                 raise ValueError(f"noise array {name} is not a finite set of 2×2 matrices")
         bp = BPCorrector.from_state(p["bp"], a["bp"]) if p.get("bp") else None
-        cq = ClassQualityNoise.from_state(p["class_quality"]) if p.get("class_quality") else None
+        ctx = ContextNoise.from_state(p["context"]) if p.get("context") else None
+        ctx_blind = ContextNoise.from_state(p["context_blind"]) if p.get("context_blind") else None
         ekf = EkfConfig(**p["ekf"])
+        tuning = {str(m): {str(k): float(v) for k, v in kn.items()} for m, kn in p.get("tuning", {}).items()}
+        for m, kn in tuning.items():
+            if not all(math.isfinite(v) and v > 0 for v in kn.values()):
+                raise ValueError(f"tuning of {m} holds a non-positive or non-finite knob {kn}")
     except (KeyError, TypeError, ValueError) as exc:
         raise BundleError(f"{path}: the fusion model is inconsistent ({exc})") from None
     return FusionModel(classifier=clf, fixed=fixed, quality=q, per_class_map=per_map, per_class=per,
-                       class_quality=cq, ekf=ekf, bp=bp, meta=b.meta)
+                       context=ctx, context_blind=ctx_blind, ekf=ekf, bp=bp, meta=b.meta, tuning=tuning)

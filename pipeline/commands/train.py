@@ -105,8 +105,10 @@ def _run_fusion(args) -> int:
     clf, env_meta = load_env_model(args.env_model)
     from models.fusion.ekf import EkfConfig
 
+    from pipeline.site_map import class_map_for
+
     model = train_fusion(args.walks, clf, bp=not args.no_bp, bp_config=BPConfig(hidden=args.hidden, seed=args.seed),
-                         ekf=EkfConfig(outlier=args.outlier),
+                         ekf=EkfConfig(outlier=args.outlier), class_map_for=class_map_for,
                          meta={"env_model": str(args.env_model), "env_meta": env_meta},
                          progress=lambda line: print(line, file=sys.stderr))
     save_fusion_model(model, args.out, overwrite=args.overwrite)
