@@ -543,6 +543,30 @@ def test_imm_matches_an_independent_reference(mixed, outlier):
         np.testing.assert_allclose(run.P, Pr, rtol=1e-7, atol=1e-10)
 
 
+def test_fixed_lag_is_the_rts_of_the_run_cut_at_the_lag(walk):
+    """The fixed-lag estimate at event k is the RTS estimate of the run truncated at the last event within
+    ``lag_s`` of k (checked at a few events by truncating and smoothing again); lag 0 is the filter, a lag
+    longer than the walk the RTS smoother."""
+    import dataclasses
+
+    from models.fusion import fixed_lag_smooth
+
+    run = EventEKF(noise=FixedNoise(2.0, 0.3)).run(walk.stream, x0_en=walk.x0[:2])
+    lag = fixed_lag_smooth(run, 3.0)
+    assert lag.method == "kf+lag"
+    for k in (0, 100, 777, len(run) - 5):
+        j = int(np.searchsorted(run.t_s, run.t_s[k] + 3.0, side="right")) - 1
+        cut = dataclasses.replace(run, **{f: getattr(run, f)[:j + 1] for f in ("t_s", "kind", "x", "P", "x_prior",
+                                                                                "P_prior", "F")})
+        ref = rts_smooth(cut)
+        np.testing.assert_allclose(lag.x[k], ref.x[k], atol=1e-10)
+        np.testing.assert_allclose(lag.P[k], ref.P[k], atol=1e-12)
+    np.testing.assert_allclose(fixed_lag_smooth(run, 0.0).x, run.x, atol=1e-12)
+    np.testing.assert_allclose(fixed_lag_smooth(run, 1e9).x, rts_smooth(run).x, atol=1e-10)
+    e = lambda x: float(np.sqrt(np.mean(np.sum((x[:, :2] - walk.truth[:, :2]) ** 2, axis=1))))   # noqa: E731
+    assert e(rts_smooth(run).x) < e(lag.x) < e(run.x)
+
+
 def test_rts_matches_filterpy_on_a_linear_stream():
     from filterpy.kalman import KalmanFilter
 

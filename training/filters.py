@@ -21,6 +21,7 @@ Nothing here sees a test site: the benchmark split (:mod:`simulation.split`) kee
 
 from __future__ import annotations
 
+import math
 import os
 from dataclasses import dataclass
 from typing import Callable
@@ -214,6 +215,9 @@ def train_fusion(walk_dirs: list, classifier: EnvironmentClassifier, *, bp: bool
         tw = [TuningWalk.of(i, class_map_for(d.site) if class_map_for else None) for _, d, i in walks]
         for name in KNOBS:
             knobs, before, after = tune_method(model, name, tw, tune_evals)
+            if not math.isfinite(before):
+                say(f"not tuned {name}: it runs on none of the training walks (no site map for kf_map?)")
+                continue
             model.tuning[name] = knobs
             model.meta.setdefault("tuning_report", {})[name] = {"error_before_m": before, "error_after_m": after}
             say(f"tuned {name}: training error {before:.3f} -> {after:.3f} m ("

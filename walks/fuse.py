@@ -17,7 +17,7 @@ from typing import Callable
 from features.errors import ConfigError
 from models.fusion.model import FusionModel
 from walks.inputs import WalkInputs, walk_inputs
-from walks.methods import run_methods
+from walks.methods import LAG_S, run_methods
 from walks.reader import WalkData, read_walk
 
 __all__ = ["FusedWalk", "fuse_walk", "check_site", "walk_name"]
@@ -51,11 +51,12 @@ def check_site(model: FusionModel, site_name: str, walk: str, force: bool = Fals
 
 
 def fuse_walk(walk_dir: str | os.PathLike, model: FusionModel, methods=None, *, smooth: bool = True,
-              class_map_for: Callable | None = None, force: bool = False) -> FusedWalk:
+              lag_s: float | None = LAG_S, class_map_for: Callable | None = None, force: bool = False) -> FusedWalk:
     """Read ``walk_dir`` and run ``methods`` (default: all) on it with ``model``.
 
     ``class_map_for``: callable site → :class:`~models.fusion.events.ClassMap` or None, the site map of the
-    map baseline (``kf_map``), called only when that method is asked for.
+    map baseline (``kf_map``), called only when that method is asked for. ``smooth``: the filters' RTS tracks
+    too; ``lag_s``: their fixed-lag tracks with that lag (None: none).
     """
     name = walk_name(walk_dir)
     data = read_walk(walk_dir)
@@ -65,5 +66,5 @@ def fuse_walk(walk_dir: str | os.PathLike, model: FusionModel, methods=None, *, 
     class_at = None
     if class_map_for is not None and (want is None or "kf_map" in want):
         class_at = class_map_for(data.site)
-    tracks, skipped = run_methods(model, inputs, want, smooth=smooth, class_at=class_at)
+    tracks, skipped = run_methods(model, inputs, want, smooth=smooth, class_at=class_at, lag_s=lag_s)
     return FusedWalk(name, data, inputs, tracks, skipped)

@@ -41,13 +41,14 @@ from typing import Callable
 import numpy as np
 
 from models.bp import bp_inputs
-from models.fusion import ClassMap, ContextNoise, EventEKF, FilterRun, IMMFilter, VBAdaptiveNoise, rts_smooth
+from models.fusion import (ClassMap, ContextNoise, EventEKF, FilterRun, IMMFilter, VBAdaptiveNoise, fixed_lag_smooth,
+                           rts_smooth)
 from models.fusion.model import FusionModel
 from walks.inputs import WalkInputs
 from walks.track import Track
 
 __all__ = ["Method", "MethodContext", "MethodSkipped", "register", "unregister", "method", "method_names",
-           "run_methods", "bp_features", "adaptive_run", "tuned"]
+           "run_methods", "bp_features", "adaptive_run", "tuned", "LAG_S"]
 
 
 class MethodSkipped(Exception):
@@ -115,13 +116,19 @@ def method(name: str) -> Method:
         raise ValueError(f"unknown method {name!r}; choose from {list(_REGISTRY)}") from None
 
 
+LAG_S = 3.0
+"""Default lag of the fixed-lag smoothed tracks (``<filter>+lag``), s: a patrol track is rarely needed with zero
+latency, and a few seconds carry most of what the RTS smoother gains from the future (issue 22)."""
+
+
 def method_names(smoothed: bool = False) -> tuple[str, ...]:
-    """Registered method names in report order; with ``smoothed``, each filter's ``+rts`` variant after it."""
+    """Registered method names in report order; with ``smoothed``, each filter's ``+rts`` and ``+lag`` variants
+    after it."""
     out = []
     for m in _REGISTRY.values():
         out.append(m.name)
         if smoothed and m.filter:
-            out.append(m.name + "+rts")
+            out += [m.name + "+rts", m.name + "+lag"]
     return tuple(out)
 
 
@@ -131,9 +138,10 @@ def _filter_track(run: FilterRun, name: str, inputs: WalkInputs) -> Track:
 
 
 def run_methods(model: FusionModel, inputs: WalkInputs, methods=None, smooth: bool = True,
-                class_at: ClassMap | None = None) -> tuple[dict, dict]:
+                class_at: ClassMap | None = None, lag_s: float | None = LAG_S) -> tuple[dict, dict]:
     """Run ``methods`` (default: every registered one) on one walk: ({name: Track}, {name: reason skipped});
-    filter methods also give ``<name>+rts`` when ``smooth``."""
+    filter methods also give ``<name>+rts`` when ``smooth`` and ``<name>+lag`` (fixed-lag, ``lag_s``) unless
+    ``lag_s`` is None."""
     names = method_names() if methods is None else tuple(methods)
     for n in names:
         method(n)
@@ -148,10 +156,14 @@ def run_methods(model: FusionModel, inputs: WalkInputs, methods=None, smooth: bo
             continue
         if isinstance(out, FilterRun):
             tracks[n] = _filter_track(out, n, inputs)
-            if smooth and m.filter:
-                s = rts_smooth(out)
-                tracks[n + "+rts"] = Track(n + "+rts", s.t_s, s.x[:, 0].copy(), s.x[:, 1].copy(),
-                                           s.P[:, :2, :2].copy())
+            smoothed = []
+            if m.filter and smooth:
+                smoothed.append(("+rts", rts_smooth(out)))
+            if m.filter and lag_s is not None:
+                smoothed.append(("+lag", fixed_lag_smooth(out, lag_s)))
+            for suffix, sm in smoothed:
+                tracks[n + suffix] = Track(n + suffix, sm.t_s, sm.x[:, 0].copy(), sm.x[:, 1].copy(),
+                                           sm.P[:, :2, :2].copy())
         else:
             tracks[n] = out
     return tracks, skipped

@@ -44,12 +44,12 @@ from models.fusion.events import (ACOUSTIC, GNSS, KIND_NAMES, STEP, AcousticEven
 from models.fusion.imm import IMMFilter
 from models.fusion.context import ContextNoise
 from models.fusion.noise import FixedNoise, NoiseError, PerClassNoise, QualityNoise, VBAdaptiveNoise, second_moment_m2
-from models.fusion.smoother import SmoothedTrack, rts_smooth
+from models.fusion.smoother import SmoothedTrack, fixed_lag_smooth, rts_smooth
 
 __all__ = [
     "STEP", "GNSS", "ACOUSTIC", "KIND_NAMES", "StepEvents", "GnssEvents", "AcousticEvents", "StandIntervals",
     "ClassTrack", "ClassMap", "EventStream", "merge_events", "EventError",
     "EkfConfig", "EventEKF", "FilterRun", "FilterError", "IMMFilter",
     "FixedNoise", "QualityNoise", "PerClassNoise", "ContextNoise", "VBAdaptiveNoise", "NoiseError",
-    "second_moment_m2", "SmoothedTrack", "rts_smooth", "nees", "chi2_bounds", "in_bounds_share", "nis_summary",
+    "second_moment_m2", "SmoothedTrack", "rts_smooth", "fixed_lag_smooth", "nees", "chi2_bounds", "in_bounds_share", "nis_summary",
 ]

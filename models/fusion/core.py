@@ -51,7 +51,8 @@ import numpy as np
 from numba import njit
 
 __all__ = ["GATE", "HUBER", "NO_OUTLIER", "MIXTURE", "R_PER_EVENT", "R_MAP", "R_VB", "STEP_KIND", "mm", "mmt", "mv",
-           "inv2", "time_update", "predict_step", "kalman_update", "mixture_update", "map_class", "run_ekf_events"]
+           "inv2", "time_update", "predict_step", "kalman_update", "mixture_update", "map_class", "run_ekf_events",
+           "rts_step", "rts_pass", "fixed_lag_pass"]
 
 GATE, HUBER, NO_OUTLIER, MIXTURE = 0, 1, 2, 3
 """Outlier handling codes: χ² gate, Huber weights, none, an ε-contaminated Gaussian likelihood
@@ -384,3 +385,51 @@ def run_ekf_events(kind, avail, z, length_m, heading_rad, phi, q, h_idx, H, x0, 
                 x, P = xn, Pn
         x_post[k] = x
         P_post[k] = P
+
+
+@njit(cache=True)
+def rts_step(x, P, xp_next, Pp_next, C, xs_next, Ps_next):
+    """One backward step of the RTS smoother (Rauch, Tung & Striebel 1965):
+    x^s = x + C (x^s_{k+1} − x⁻_{k+1}),  P^s = P + C (P^s_{k+1} − P⁻_{k+1}) C'."""
+    # x^s = x + C (x^s_{k+1} − x⁻_{k+1})
+    xs = x + mv(C, xs_next - xp_next)
+    # P^s = P + C (P^s_{k+1} − P⁻_{k+1}) C'
+    Ps = P + mmt(mm(C, Ps_next - Pp_next), C)
+    return xs, 0.5 * (Ps + Ps.T)
+
+
+@njit(cache=True)
+def fixed_lag_pass(t, x, P, xp, Pp, C, lag_s):
+    """The fixed-lag smoothed state of every event: the RTS recursion (:func:`rts_step`) from the last event at
+    most ``lag_s`` after it back to it. Shapes: t (m,), x, xp (m, n), P, Pp (m, n, n), C (m − 1, n, n)."""
+    m, n = x.shape
+    xs_out = np.empty((m, n))
+    Ps_out = np.empty((m, n, n))
+    j = 0
+    for k in range(m):
+        if j < k:
+            j = k
+        while j + 1 < m and t[j + 1] <= t[k] + lag_s:
+            j += 1
+        xs = x[j].copy()
+        Ps = P[j].copy()
+        for i in range(j - 1, k - 1, -1):
+            xs, Ps = rts_step(x[i], P[i], xp[i + 1], Pp[i + 1], C[i], xs, Ps)
+        xs_out[k] = xs
+        Ps_out[k] = Ps
+    return xs_out, Ps_out
+
+
+@njit(cache=True)
+def rts_pass(x, P, xp, Pp, C):
+    """The RTS smoothed state of every event (:func:`rts_step` from the last event back); shapes as
+    :func:`fixed_lag_pass`."""
+    m, n = x.shape
+    xs_out = np.empty((m, n))
+    Ps_out = np.empty((m, n, n))
+    xs_out[m - 1] = x[m - 1]
+    Ps_out[m - 1] = P[m - 1]
+    for k in range(m - 2, -1, -1):
+        xs_out[k], Ps_out[k] = rts_step(x[k], P[k], xp[k + 1], Pp[k + 1], C[k], xs_out[k + 1], Ps_out[k + 1])
+    return xs_out, Ps_out
+

@@ -23,7 +23,10 @@ def register_top(sub) -> None:
     p.add_argument("--model", type=Path, required=True, help="fusion model directory (train fusion)")
     p.add_argument("--out", type=Path, required=True, help="track file to write (CSV, or GeoJSON with --format)")
     p.add_argument("--method", choices=method_names(smoothed=True), default="adaptive",
-                   help="fusion method (default adaptive; a filter's +rts variant is its smoothed track)")
+                   help="fusion method (default adaptive; a filter's +rts variant is its RTS-smoothed track, +lag its "
+                        "fixed-lag track, --lag-s late)")
+    p.add_argument("--lag-s", type=float, default=None,
+                   help="lag of a +lag track, s (default 3: the track a few seconds late, most of the smoother's gain)")
     p.add_argument("--format", choices=("csv", "geojson"), default=None,
                    help="output format (default: from the suffix, .geojson or .json → GeoJSON, else CSV)")
     p.add_argument("--force", action="store_true", help="fuse a walk of a site the model was not trained on")
@@ -58,9 +61,15 @@ def _run(args) -> int:
 
     if not (args.walk / "walk.toml").is_file():
         raise ConfigError(f"{args.walk}: no walk.toml (expected a walk directory)")
+    from walks.methods import LAG_S
+
     base = args.method.split("+")[0]
+    lag = LAG_S if args.lag_s is None else args.lag_s
+    if not (lag >= 0 and lag < 3600):
+        raise ConfigError(f"--lag-s must lie in [0, 3600), got {args.lag_s}")
     fused = fuse_walk(args.walk, load_model(args.model), (base,), smooth=args.method.endswith("+rts"),
-                      class_map_for=class_map_for, force=args.force)
+                      lag_s=lag if args.method.endswith("+lag") else None, class_map_for=class_map_for,
+                      force=args.force)
     if args.method not in fused.tracks:
         raise ConfigError(f"{args.walk}: method {args.method} cannot run: {fused.skipped.get(base, 'no output')}")
     rows = track_rows(fused.tracks[args.method], fused.inputs)
