@@ -81,7 +81,8 @@ def run_benchmark(split: str, out: str | os.PathLike, *, env_mode: str = "superv
     say(summary_table(result["pooled"]))
     shares = [r["bp_disabled_share"] for r in result["results"] if r["bp_disabled_share"] is not None]
     if shares:
-        say(f"BP correction withheld by its guards on {100 * sum(shares) / len(shares):.1f} % of epochs")
+        say(f"BP position correction (adaptive_correction) withheld by its guards on "
+            f"{100 * sum(shares) / len(shares):.1f} % of epochs")
     say(f"report: {out / 'report'} (metrics.csv, {len(result['pngs'])} plots)")
     return result
 

@@ -68,9 +68,11 @@ def evaluate_walk(walk, model_dir: str, methods: tuple, force: bool = False) -> 
         series["_truth"] = {"t_s": data.truth.t_s.astype(np.float32), "cls": data.truth.env_class.astype(np.int8),
                             "east_m": data.truth.east_m.astype(np.float32),
                             "north_m": data.truth.north_m.astype(np.float32)}
-    bp_off = tracks["adaptive"].info.get("bp_disabled_share") if "adaptive" in tracks else None
+    bp_off = (tracks["adaptive_correction"].info.get("bp_disabled_share")
+              if "adaptive_correction" in tracks else None)
+    guard = tracks["adaptive"].info["run"].info.get("bp_guard_share") if "adaptive" in tracks else None
     return {"walk": fused.name, "walk_dir": str(walk), "rows": rows, "skipped": fused.skipped, "series": series,
-            "bp_disabled_share": bp_off, "site": data.site.name}
+            "bp_disabled_share": bp_off, "bp_guard_share": guard, "site": data.site.name}
 
 
 def pooled_rows(results: list[dict]) -> list[dict]:

@@ -12,9 +12,11 @@
    the context error model — white scale, Gauss–Markov bias and outlier
    prior per (predicted class, GGA quality) — and its environment-blind twin
    (``adaptive_nobp``, ``adaptive_nobp_blind``: :mod:`models.fusion.context`);
-5. the BP network, on the ``adaptive_nobp`` filter runs of the training walks
-   (inputs: the run's own records; target: truth − filter position), with
-   early stopping on a validation split of whole walks.
+5. the BP networks on the tuned ``adaptive_nobp`` runs of the training walks:
+   the parameter network that sets each fix's R (and its environment-blind
+   twin), trained through the filter's update (:mod:`models.bp_params`), and
+   the literal position corrector (target: truth − filter position,
+   :mod:`models.bp`), each with early stopping on whole validation walks.
 
 Nothing here sees a test site: the benchmark split (:mod:`simulation.split`) keeps them apart.
 """
@@ -30,17 +32,18 @@ import numpy as np
 
 from features.errors import DataError
 from models.bp import BPConfig, BPCorrector
+from models.bp_params import OneStep, ParamNet, ParamNetConfig
 from models.environment import EnvironmentClassifier
 from models.fusion import FixedNoise, PerClassNoise, QualityNoise
 from models.fusion.context import ContextNoise, ErrorSeries
 from models.fusion.ekf import EkfConfig
 from models.fusion.model import FusionModel
 from walks.inputs import WalkInputs, walk_inputs
-from walks.methods import adaptive_run, bp_features
+from walks.methods import adaptive_run, bp_features, parameter_rows, parameter_run, tuned
 from walks.reader import WalkData, read_walk
 
 __all__ = ["WalkTraining", "training_rows", "fit_noise", "fit_context", "fit_fusion_model", "train_fusion",
-           "DEFAULT_EKF"]
+           "fit_param_net", "DEFAULT_EKF"]
 
 
 @dataclass(frozen=True)
@@ -224,5 +227,53 @@ def train_fusion(walk_dirs: list, classifier: EnvironmentClassifier, *, bp: bool
                 + ", ".join(f"{k} x{v:.2f}" for k, v in knobs.items()) + ")")
     if bp:
         X, Y = bp_data(model)
-        model.bp = BPCorrector(bp_config).fit(X, Y, progress=lambda k, n: say(f"BP network {k}/{n}"))
+        model.bp = BPCorrector(bp_config).fit(X, Y, progress=lambda k, n: say(f"BP corrector {k}/{n}"))
+        pcfg = ParamNetConfig(hidden=bp_config.hidden, seed=bp_config.seed)
+        for blind in (False, True):
+            net = fit_param_net(model, [i for _, _, i in walks], blind, pcfg)
+            setattr(model, "bp_params_blind" if blind else "bp_params", net)
+            say(f"BP parameter network{' (blind)' if blind else ''}: one-step validation error "
+                f"{net.validation_error_m_:.3f} m")
     return model
+
+
+def _one_step(model: FusionModel, inputs: WalkInputs, first, second, blind: bool) -> OneStep:
+    """The fixes of a walk for training through the filter: inputs from the ``first`` pass, priors, H and the
+    nominal R of the pass being improved (``second``: the first pass itself in round 1)."""
+    from dataclasses import replace
+
+    from models.fusion.ekf import measurement_models
+
+    ev = inputs.events
+    policy = model.context_blind if blind else model.adaptive_policy()
+    cfg, scales = tuned(model, "adaptive_nobp_blind" if blind else "adaptive_nobp")
+    spec = policy.measurement_noise(ev, classes=None if blind else inputs.classes)
+    H, idx = measurement_models(ev, replace(cfg, outlier="mixture"), spec)
+    truth = inputs.data.truth
+    fix = np.flatnonzero(second.updated & (ev.t_s >= truth.t_s[0]) & (ev.t_s <= truth.t_s[-1]))
+    te, tn = truth.at(ev.t_s[fix])
+    X = parameter_rows(first, inputs, blind)[fix]
+    return OneStep(X, second.x_prior[fix], second.P_prior[fix], H[idx[fix]], first.R[fix], ev.z_m[fix],
+                   np.column_stack([te, tn]))
+
+
+def fit_param_net(model: FusionModel, walks: list[WalkInputs], blind: bool, config: ParamNetConfig) -> ParamNet:
+    """The BP parameter network (:mod:`models.bp_params`) of ``model`` on the training walks, trained through
+    the filter in ``config.rounds`` rounds (round r on the priors of a second pass run with round r − 1's net)."""
+    name = "adaptive_nobp_blind" if blind else "adaptive_nobp"
+    firsts = [adaptive_run(model, i, name, blind=blind) for i in walks]
+    net = ParamNet(config)
+    seconds = firsts
+    for r in range(config.rounds):
+        data = [_one_step(model, i, f, s, blind) for i, f, s in zip(walks, firsts, seconds)]
+        net.fit_round([d for d in data if len(d.X)], warm=r > 0)
+        trial = replace_nets(model, net, blind)
+        seconds = [parameter_run(trial, i, f, blind, "adaptive") for i, f in zip(walks, firsts)]
+    return net
+
+
+def replace_nets(model: FusionModel, net: ParamNet, blind: bool) -> FusionModel:
+    """A copy of ``model`` with ``net`` as its (blind) BP parameter network."""
+    from dataclasses import replace
+
+    return replace(model, **{"bp_params_blind" if blind else "bp_params": net})

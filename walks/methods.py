@@ -29,7 +29,12 @@ Built-in methods:
                     per class and GGA quality, the class from the online classifier
 ``adaptive_nobp_blind`` the same machinery fitted and run without the class (the twin that measures
                     what the environment adds; the strongest environment-free baseline)
-``adaptive``        adaptive_nobp + the guarded BP correction added to the output
+``adaptive``        adaptive_nobp with each fix's R multiplied by the BP network's output: the network
+                    maps the environment (class probabilities, window features), the fix and the filter's
+                    state at it (NIS, innovation, update step, gain) to the filter's R
+                    (:mod:`models.bp_params`)
+``adaptive_blind``  the same without the environment inputs (its twin)
+``adaptive_correction`` adaptive_nobp + the guarded BP position correction (the seed's section 2.2)
 ==================  ==========================================================
 """
 
@@ -48,7 +53,8 @@ from walks.inputs import WalkInputs
 from walks.track import Track
 
 __all__ = ["Method", "MethodContext", "MethodSkipped", "register", "unregister", "method", "method_names",
-           "run_methods", "bp_features", "adaptive_run", "tuned", "LAG_S"]
+           "run_methods", "bp_features", "adaptive_run", "tuned", "filter_track", "LAG_S", "parameter_rows",
+           "parameter_run", "window_at"]
 
 
 class MethodSkipped(Exception):
@@ -132,7 +138,8 @@ def method_names(smoothed: bool = False) -> tuple[str, ...]:
     return tuple(out)
 
 
-def _filter_track(run: FilterRun, name: str, inputs: WalkInputs) -> Track:
+def filter_track(run: FilterRun, name: str, inputs: WalkInputs) -> Track:
+    """A filter run as a :class:`~walks.track.Track` named ``name`` (position, its covariance, NIS, classes)."""
     return Track(name, run.t_s, run.x[:, 0].copy(), run.x[:, 1].copy(), run.P[:, :2, :2].copy(),
                  {"nis": run.nis, "class_proba": inputs.classes.at(run.t_s), "run": run})
 
@@ -155,7 +162,7 @@ def run_methods(model: FusionModel, inputs: WalkInputs, methods=None, smooth: bo
             skipped[n] = str(why)
             continue
         if isinstance(out, FilterRun):
-            tracks[n] = _filter_track(out, n, inputs)
+            tracks[n] = filter_track(out, n, inputs)
             smoothed = []
             if m.filter and smooth:
                 smoothed.append(("+rts", rts_smooth(out)))
@@ -271,24 +278,78 @@ def _adaptive_nobp_blind(ctx: MethodContext) -> FilterRun:
     return adaptive_run(ctx.model, ctx.inputs, "adaptive_nobp_blind", blind=True)
 
 
-# -- the BP corrector ------------------------------------------------------------------------------------------
+# -- the BP networks -------------------------------------------------------------------------------------------
 
 
 def bp_features(run: FilterRun, inputs: WalkInputs) -> np.ndarray:
-    """The BP network's input rows for every event of a filter run (:func:`models.bp.bp_inputs`)."""
+    """The BP corrector's input rows for every event of a filter run (:func:`models.bp.bp_inputs`)."""
     return bp_inputs(run.t_s, run.kind, run.updated, run.accepted, run.K, run.nu, run.dx, run.nis,
                      inputs.classes.at(run.t_s))
 
 
-def _require_bp(ctx: MethodContext):
+def window_at(inputs: WalkInputs, t_s: np.ndarray) -> np.ndarray:
+    """The window features in force at each of ``t_s`` (the last complete window) with the GNSS and acoustic
+    availability flags, (m, 16); zeros before the first window."""
+    from features.schema import modality_columns
+
+    rows = inputs.classes.row_at(t_s)
+    X = np.vstack([np.full((1, inputs.window_X.shape[1]), np.nan), inputs.window_X])[rows]
+    flags = [np.isfinite(X[:, list(modality_columns(m))]).any(axis=1) for m in ("gnss", "acoustic")]
+    return np.column_stack([np.nan_to_num(X)] + [f.astype(float) for f in flags])
+
+
+def parameter_rows(run: FilterRun, inputs: WalkInputs, blind: bool) -> np.ndarray:
+    """The BP parameter network's inputs (:func:`models.bp_params.parameter_inputs`) from a first-pass run;
+    ``blind``: without the class probabilities and the window features."""
+    from models.bp_params import parameter_inputs
+
+    ev = inputs.events
+    quality = np.zeros(len(ev), int)
+    g = ev.kind == 1
+    if ev.gnss is not None and g.any():
+        quality[g] = ev.gnss.quality[ev.index[g]]
+    return parameter_inputs(ev.kind, quality, ev.cov_m2, run.nis, run.nu, run.dx, run.K,
+                            None if blind else inputs.classes.at(ev.t_s), None if blind else window_at(inputs, ev.t_s))
+
+
+def parameter_run(model: FusionModel, inputs: WalkInputs, first: FilterRun, blind: bool, name: str):
+    """The second pass of the adaptive filter with each fix's R multiplied by the BP parameter network's s
+    (``first``: the first pass, ``adaptive_nobp`` or its twin). Returns (run, share of fixes guarded)."""
+    net = model.bp_params_blind if blind else model.bp_params
+    log_s, ood = net.log_scale(parameter_rows(first, inputs, blind))
+    fix = inputs.events.kind != 0
+    scale = np.where(fix, np.exp(log_s), 1.0)
+    base = "adaptive_nobp_blind" if blind else "adaptive_nobp"
+    cfg, scales = tuned(model, base)
+    policy = model.context_blind if blind else model.adaptive_policy()
+    if isinstance(policy, ContextNoise):
+        cfg = replace(cfg, outlier="mixture")
+    run = EventEKF(cfg, policy, name, scales).run(inputs.events, classes=None if blind else inputs.classes,
+                                                  r_scale_event=scale)
+    run.info["bp_log_scale"] = np.where(fix, log_s, np.nan)
+    run.info["bp_guard_share"] = float(ood[fix].mean()) if fix.any() else 0.0
+    return run
+
+
+def _adaptive(ctx: MethodContext) -> FilterRun:
+    if ctx.model.bp_params is None:
+        raise MethodSkipped("the model has no BP parameter network (trained with --no-bp)")
+    ctx.events()
+    return parameter_run(ctx.model, ctx.inputs, ctx.result("adaptive_nobp"), False, "adaptive")
+
+
+def _adaptive_blind(ctx: MethodContext) -> FilterRun:
+    if ctx.model.bp_params_blind is None:
+        raise MethodSkipped("the model has no environment-blind BP parameter network")
+    ctx.events()
+    return parameter_run(ctx.model, ctx.inputs, ctx.result("adaptive_nobp_blind"), True, "adaptive_blind")
+
+
+def _adaptive_correction(ctx: MethodContext) -> Track:
+    """adaptive_nobp's run with the guarded BP position correction added to its output (the seed's §2.2)."""
     if ctx.model.bp is None:
-        raise MethodSkipped("the model has no BP network (trained with --no-bp)")
-    return ctx.model.bp
-
-
-def _adaptive(ctx: MethodContext) -> Track:
-    """adaptive_nobp's run with the guarded BP correction added to its output (open loop)."""
-    bp = _require_bp(ctx)
+        raise MethodSkipped("the model has no BP corrector (trained with --no-bp)")
+    bp = ctx.model.bp
     run = ctx.result("adaptive_nobp")
     X = bp_features(run, ctx.inputs)
     corr = bp.correct(X, run.x_prior[:, :2], ctx.inputs.events.z_m, run.S, run.updated)
@@ -297,7 +358,7 @@ def _adaptive(ctx: MethodContext) -> Track:
     # P + Var(correction)/2 per axis where a correction was applied
     extra = np.where(np.any(corr.delta_m != 0, axis=1), corr.var_m2.sum(1) / 2, 0.0)
     cov = run.P[:, :2, :2] + np.eye(2)[None] * extra[:, None, None]
-    return Track("adaptive", run.t_s, east, north, cov,
+    return Track("adaptive_correction", run.t_s, east, north, cov,
                  {"nis": run.nis, "class_proba": ctx.inputs.classes.at(run.t_s), "bp_delta_m": corr.delta_m,
                   "bp_disabled_share": corr.disabled_share, "run": run})
 
@@ -314,5 +375,9 @@ for _m in (Method("gnss", _gnss, "the GGA fixes alone"),
                   filter=True),
            Method("adaptive_nobp_blind", _adaptive_nobp_blind, "adaptive_nobp without the class (its twin)",
                   filter=True),
-           Method("adaptive", _adaptive, "adaptive_nobp + the guarded BP correction")):
+           Method("adaptive", _adaptive, "adaptive_nobp with each fix's R set by the BP network", filter=True),
+           Method("adaptive_blind", _adaptive_blind, "adaptive without the class and window inputs (its twin)",
+                  filter=True),
+           Method("adaptive_correction", _adaptive_correction, "adaptive_nobp + the guarded BP position "
+                  "correction of the seed's section 2.2")):
     register(_m)

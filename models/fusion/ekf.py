@@ -278,13 +278,15 @@ class EventEKF:
         self.method = method
         self.scales = scales
 
-    def run(self, stream: EventStream, x0_en=None, classes=None, class_at=None, x0=None, P0=None) -> FilterRun:
+    def run(self, stream: EventStream, x0_en=None, classes=None, class_at=None, x0=None, P0=None,
+            r_scale_event: np.ndarray | None = None) -> FilterRun:
         """Filter the whole stream once.
 
         ``x0_en``: (2,) initial east/north (default: the first available fix); ``x0``/``P0``: full prior;
         ``classes``: :class:`~models.fusion.events.ClassTrack` and ``class_at``:
         :class:`~models.fusion.events.ClassMap`, for per-class noise. ``scales`` (at construction):
-        ``{"gnss", "acoustic", "bias"}`` multipliers of the policy's R and bias variance (a method's tuning).
+        ``{"gnss", "acoustic", "bias"}`` multipliers of the policy's R and bias variance (a method's tuning);
+        ``r_scale_event`` (m,): a further multiplier of each event's R (the BP parameter network's).
         """
         from models.fusion import core
         from models.fusion.noise import FixedNoise
@@ -295,6 +297,13 @@ class EventEKF:
         if self.scales:
             spec = spec.scaled(stream.kind, **{k: float(v) for k, v in self.scales.items()
                                                if k in ("gnss", "acoustic", "bias")})
+        if r_scale_event is not None:
+            f = np.asarray(r_scale_event, float)
+            if f.shape != (len(stream),) or not np.all(np.isfinite(f) & (f > 0)):
+                raise FilterError(f"r_scale_event must be {len(stream)} positive finite values")
+            if spec.r_event.shape[0] != len(stream):
+                raise FilterError("r_scale_event needs a noise policy that gives R per event")
+            spec = spec.with_fields(r_event=spec.r_event * f[:, None, None])
         if cfg.outlier == "mixture" and spec.eps_event is None:
             raise FilterError(f"outlier='mixture' needs a noise policy that gives each fix's contamination; "
                               f"{type(noise).__name__} does not")

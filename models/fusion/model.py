@@ -12,7 +12,9 @@ A :class:`FusionModel` holds, for one substation family:
   scale, Gauss–Markov bias and outlier prior per class and GGA quality),
 - the filter's process-noise settings (:class:`models.fusion.ekf.EkfConfig`) and, per method, the knobs
   it was tuned to on the training walks (``tuning``: scales of R, the walking noise, the bias variance),
-- the BP corrector (:class:`models.bp.BPCorrector`), or None,
+- the BP networks: the parameter network and its environment-blind twin (:class:`models.bp_params.ParamNet`,
+  ``adaptive`` / ``adaptive_blind``) and the literal position corrector (:class:`models.bp.BPCorrector`,
+  ``adaptive_correction``), each or None,
 - metadata: the training walks and their hashes, the site names, versions.
 
 Saved as one bundle (:mod:`models.bundle`, kind ``"fusion"``): JSON parameters
@@ -27,6 +29,7 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 
 from models.bp import BPCorrector
+from models.bp_params import ParamNet
 from models.bundle import BundleError, load_bundle, save_bundle
 from models.environment import EnvironmentClassifier
 from models.fusion.ekf import EkfConfig
@@ -51,6 +54,8 @@ class FusionModel:
     bp: BPCorrector | None = None
     meta: dict = field(default_factory=dict)
     tuning: dict = field(default_factory=dict)
+    bp_params: ParamNet | None = None
+    bp_params_blind: ParamNet | None = None
 
     def adaptive_policy(self):
         """The adaptive methods' noise policy: R per class and GGA quality when the model has it, else per class."""
@@ -79,6 +84,11 @@ def save_fusion_model(model: FusionModel, path, overwrite: bool = False):
         bp_params, bp_arrays = model.bp.get_state()
         params["bp"] = bp_params
         arrays["bp"] = bp_arrays
+    for key in ("bp_params", "bp_params_blind"):
+        net = getattr(model, key)
+        params[key] = None
+        if net is not None:
+            params[key], arrays[key] = net.get_state()
     return save_bundle(path, "fusion", params, arrays, meta=model.meta, overwrite=overwrite)
 
 
@@ -102,6 +112,7 @@ def load_fusion_model(path) -> FusionModel:
             if not (np.all(np.isfinite(r)) and r.shape[-2:] == (2, 2)):
                 raise ValueError(f"noise array {name} is not a finite set of 2×2 matrices")
         bp = BPCorrector.from_state(p["bp"], a["bp"]) if p.get("bp") else None
+        nets = {k: ParamNet.from_state(p[k], a[k]) if p.get(k) else None for k in ("bp_params", "bp_params_blind")}
         ctx = ContextNoise.from_state(p["context"]) if p.get("context") else None
         ctx_blind = ContextNoise.from_state(p["context_blind"]) if p.get("context_blind") else None
         ekf = EkfConfig(**p["ekf"])
@@ -112,4 +123,4 @@ def load_fusion_model(path) -> FusionModel:
     except (KeyError, TypeError, ValueError) as exc:
         raise BundleError(f"{path}: the fusion model is inconsistent ({exc})") from None
     return FusionModel(classifier=clf, fixed=fixed, quality=q, per_class_map=per_map, per_class=per,
-                       context=ctx, context_blind=ctx_blind, ekf=ekf, bp=bp, meta=b.meta, tuning=tuning)
+                       context=ctx, context_blind=ctx_blind, ekf=ekf, bp=bp, meta=b.meta, tuning=tuning, **nets)

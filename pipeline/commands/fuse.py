@@ -100,7 +100,8 @@ def _evaluate(args) -> int:
     print(summary_table(out["pooled"]))
     shares = [r["bp_disabled_share"] for r in out["results"] if r["bp_disabled_share"] is not None]
     if shares:
-        print(f"BP correction withheld by its guards on {100 * sum(shares) / len(shares):.1f} % of epochs")
+        print(f"BP position correction (adaptive_correction) withheld by its guards on "
+              f"{100 * sum(shares) / len(shares):.1f} % of epochs")
     print(f"{len(out['results'])} walks -> {args.report / 'metrics.csv'}"
           + (f", {len(out['pngs'])} plots" if out["pngs"] else ""))
     return 1 if out["failures"] else 0
