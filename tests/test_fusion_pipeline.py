@@ -90,7 +90,8 @@ def test_cli_train_run_evaluate(trained, walk_dir, tmp_path, capsys):
     out = capsys.readouterr().out
     assert "adaptive" in out and "kf" in out
     metrics = list(csv.DictReader(open(tmp_path / "rep" / "metrics.csv")))
-    assert {r["method"] for r in metrics} == {"gnss", "kf", "kf+rts", "kf+lag", "adaptive"}
+    assert {r["method"] for r in metrics} == {"gnss", "kf", "kf+rts", "kf+lag", "adaptive", "adaptive+rts",
+                                              "adaptive+lag"}
     assert {r["env_class"] for r in metrics} >= {"all"}
     assert {p.name for p in (tmp_path / "rep").glob("*.png")} >= {"error_cdf.png", "error_by_class.png"}
 
