@@ -25,6 +25,7 @@ validated); :mod:`features.gnss.quirks` interprets their fields.
 from __future__ import annotations
 
 import datetime as dt
+import functools
 import os
 from dataclasses import dataclass
 from pathlib import Path
@@ -36,6 +37,7 @@ from features.gnss.tokens import (  # noqa: F401 - ReadStats and parse_sentence 
 )
 from features.gnss.quirks import (
     FIX_QUALITY_FROM_MODE, gsa_fields, gsv_fields, parse_ddmmyy, parse_latlon, parse_time_of_day,
+    primary_signal_rank as _primary_rank,
 )
 
 __all__ = ["Satellite", "Fix", "Epoch", "ReadStats", "read_nmea", "iter_epochs", "epochs_from_bytes",
@@ -97,7 +99,8 @@ class Epoch:
     ``time_utc`` is the receiver's UTC time (None while no date was ever
     given); ``sky_reported`` is False for epochs without any GSV (receivers
     that report the sky every few fixes), whose ``satellites`` are then empty
-    but not "none in view".
+    but not "none in view". ``satellites`` holds one entry per satellite per
+    signal, in GSV order; :attr:`primary_satellites` one per satellite.
     """
 
     t_s: float
@@ -106,6 +109,28 @@ class Epoch:
     fix: Fix
     satellites: tuple[Satellite, ...]
     sky_reported: bool
+
+    @functools.cached_property
+    def primary_satellites(self) -> tuple[Satellite, ...]:
+        """One entry per satellite: the one on its primary signal (the L1/G1/E1/B1 one), in GSV order.
+
+        The entry of lowest :func:`~features.gnss.quirks.primary_signal_rank` (untagged and
+        "all signals" first, then e.g. GPS L1 C/A, Galileo E1-B/C, BeiDou B1I); a satellite
+        listed only on secondary signals (L2, L5, E5a, B2I, ...) is left out. What the
+        GNSS features and the C/N0 weighting of fixes read.
+        """
+        best: dict = {}
+        for sat in self.satellites:
+            rank = _primary_rank(sat.system, sat.signal)
+            if rank is None:
+                continue
+            key = (sat.system, sat.prn)
+            held = best.get(key)
+            if held is None or rank < held[0]:
+                best[key] = (rank, sat)
+        if len(best) == len(self.satellites):
+            return self.satellites
+        return tuple(v[1] for v in best.values())
 
     @property
     def n_in_view(self) -> int:
@@ -253,25 +278,33 @@ def _finish(b: _EpochBuilder, first_rel: float) -> Epoch:
 
 def _add_gsv(current: _EpochBuilder, talker: str, payload, gsv_parts: dict, gsv_open: dict,
              stats: ReadStats) -> None:
-    """One GSV part into the epoch: its satellites, and the bookkeeping of the talker's open group."""
+    """One GSV part into the epoch: its satellites, and the bookkeeping of the talker's open group.
+
+    Every entry is kept under its own signal id, (system, prn, signal): a second signal of a
+    satellite is a second entry, never a replacement of the first (gpsd keeps one entry per
+    satellite per signal too). Only the part numbering may span signal ids: dual-frequency
+    receivers (Quectel LC79D) number one group across their L1 entries (untagged) and the L5 /
+    E5a entries that follow (tagged ``8`` / ``1``) -- ``$GPGSV,3,1`` and ``3,2`` untagged, then
+    ``$GPGSV,3,3,10,06,,,40,09,,,27,30,,,39,8`` re-lists PRNs 6, 9 and 30 on L5. A part that
+    continues the talker's open group exactly (same part count, the next part number) under
+    another signal id therefore completes that group (``gsv_signal_continued``) instead of
+    counting as incomplete, while its entries stay on their own signal.
+    """
     current.sky = True
     key = (talker, payload.signal)
     expected = gsv_parts.get(key, 1)
-    signal = payload.signal
     if payload.msg_num != expected:
-        # Quectel LC79D sends a group's last part under another signal id: a part that continues the
-        # talker's open group exactly (same part count, the next part number) belongs to that group.
         open_group = gsv_open.get(talker)
         if (open_group is not None and payload.msg_num > 1
                 and (open_group[1], open_group[3]) == (payload.n_msgs, payload.msg_num)):
             key = open_group[0]
-            signal = key[1]
             stats.gsv_signal_continued += 1
         else:
             stats.gsv_incomplete += 1
     gsv_parts[key] = payload.msg_num % payload.n_msgs + 1
     gsv_open[talker] = (key, payload.n_msgs, payload.n_in_view, gsv_parts[key])
     sats = current.sats
+    signal = payload.signal
     for sat in payload.satellites:
         sats[(sat[0], sat[1], signal)] = sat
 
