@@ -449,7 +449,7 @@ def fit_cn0_reference(el_deg, cn0_dbhz, *, quantile: float = 0.8, bin_width_deg:
     quantile: the unobstructed line-of-sight level, robust to the multipath
     fades that open sky has too) at the bin's mean sin(el); then a
     count-weighted least-squares line through the bin points. Raises
-    DataError when fewer than two bins qualify.
+    DataError when fewer than two bins qualify or the line is implausible (zenith C/N0 outside 0-80 dB-Hz).
 
     el_deg, cn0_dbhz : array-like of the same shape (NaN C/N0 = untracked, ignored).
     """
@@ -477,5 +477,9 @@ def fit_cn0_reference(el_deg, cn0_dbhz, *, quantile: float = 0.8, bin_width_deg:
     # weighted least squares: minimise Σ w (y − a − b x)²
     design = np.stack([np.ones_like(x), x], axis=1) * np.sqrt(w)[:, None]
     (a, b), *_ = np.linalg.lstsq(design, y * np.sqrt(w), rcond=None)
-    return Cn0Reference(float(a), float(b), f"fit: q{quantile:g} per {bin_width_deg:g} deg bin, "
-                                            f"{el.size} samples, {len(xs)} bins")
+    try:
+        return Cn0Reference(float(a), float(b), f"fit: q{quantile:g} per {bin_width_deg:g} deg bin, "
+                                                f"{el.size} samples, {len(xs)} bins")
+    except ConfigError as exc:  # the data, not a setting, gave an impossible line: a data error
+        raise DataError(f"the C/N0 reference fitted from {el.size} samples is implausible ({exc}); "
+                        "these data cannot calibrate it") from None

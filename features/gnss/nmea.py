@@ -48,6 +48,8 @@ _TIMED = TIMED_TYPES
 _USED_TYPES = USED_TYPES
 _FIX_TYPES = frozenset(("GGA", "RMC", "GNS", "ZDA"))  # timed sentences that carry more than the time
 _EPOCH_GAP_DEFAULT_S = 1.0
+_FIRST_GNSS_YEAR = 1980
+"""GPS time began on 1980-01-06: an earlier ZDA year is garbage (RMC's two-digit years map to 1980-2079)."""
 _tuple_new = tuple.__new__  # builds a NamedTuple without its Python-level __new__ (hot loop)
 _SKY_CACHE_SIZE = 8192
 """Distinct GSV/GSA sentences remembered by one read (cleared when full)."""
@@ -194,7 +196,10 @@ class _Clock:
     def date_of(self, day: int) -> dt.date | None:
         if self.known is None:
             return None
-        return self.known[0] + dt.timedelta(days=day - self.known[1])
+        try:
+            return self.known[0] + dt.timedelta(days=day - self.known[1])
+        except OverflowError:  # past 9999-12-31 (a ZDA year 9999 before midnight): no calendar date
+            return None
 
 
 class _EpochBuilder:
@@ -227,12 +232,30 @@ def _fix_of(b: _EpochBuilder, used_count: int) -> Fix:
     return Fix(None, None, None, None, 0, used_count or None, hdop, pdop, vdop, mode)
 
 
-def _opt_int(text: str) -> int | None:
-    return int(text) if text else None
+def _opt_count(text: str) -> int | None:
+    """An optional count of satellites (GGA/GNS field 7): None when empty, ValueError outside 0-999."""
+    if not text:
+        return None
+    value = int(text)
+    if not 0 <= value <= 999:
+        raise ValueError(f"satellite count {text!r} out of range")
+    return value
+
+
+_MAX_ABS_NUMBER = 1.0e7
+"""Largest magnitude accepted for a GGA/GNS number (altitude and geoid separation in metres, HDOP): beyond
+any receiver's range; guards the sums downstream (altitude + separation) against overflow."""
 
 
 def _opt_num(text: str) -> float | None:
-    return float(text) if text else None
+    """An optional numeric field: None when empty; ValueError for ``nan``/``inf`` (Python's float()
+    accepts them, NMEA has no such values) and for magnitudes beyond :data:`_MAX_ABS_NUMBER`."""
+    if not text:
+        return None
+    value = float(text)
+    if not abs(value) <= _MAX_ABS_NUMBER:
+        raise ValueError(f"number {text!r} is not finite or out of range")
+    return value
 
 
 def _check_options(parser: str, resync_after: int) -> None:
@@ -324,8 +347,8 @@ def _assemble(sentences: Iterable[list[str]], stats: ReadStats, resync_after: in
 
     for fields in sentences:
         address = fields[0]
-        kind = address[2:] if len(address) == 5 else address[-3:]
-        if kind not in _USED_TYPES or address[0] == "P" and address[:2] != "PQ":
+        kind = address[2:]
+        if len(address) != 5 or kind not in _USED_TYPES or address[0] == "P" and address[:2] != "PQ":
             stats.other_types[address[:8]] += 1
             continue
         talker = address[:2]
@@ -347,6 +370,8 @@ def _assemble(sentences: Iterable[list[str]], stats: ReadStats, resync_after: in
                     date = parse_ddmmyy(data[8])
                 elif kind == "ZDA" and len(data) >= 4 and data[1] and data[2] and data[3]:
                     date = dt.date(int(data[3]), int(data[2]), int(data[1]))
+                    if date.year < _FIRST_GNSS_YEAR:
+                        raise ValueError(f"ZDA year {date.year} before GPS time began")
                 payload = _timed_payload(kind, data)
             else:
                 # GSV/GSA repeat verbatim from epoch to epoch (at 5 Hz half the GSV and nearly every GSA of
@@ -432,7 +457,7 @@ def _timed_payload(kind: str, data: list[str]):
             raise ValueError(f"GGA quality {quality}")
         hdop = _opt_num(data[7])
         return (lat, lon, _opt_num(data[8]), _opt_num(data[10]) if len(data) > 10 else None,
-                quality, _opt_int(data[6]), hdop if hdop is None or 0 < hdop < 99 else None)
+                quality, _opt_count(data[6]), hdop if hdop is None or 0 < hdop < 99 else None)
     if kind == "GNS":
         lat = parse_latlon(data[1], data[2], True)
         lon = parse_latlon(data[3], data[4], False)
@@ -442,7 +467,7 @@ def _timed_payload(kind: str, data: list[str]):
             quality = 6
         hdop = _opt_num(data[7])
         return (lat, lon, _opt_num(data[8]), _opt_num(data[9]) if len(data) > 9 else None,
-                quality, _opt_int(data[6]), hdop if hdop is None or 0 < hdop < 99 else None)
+                quality, _opt_count(data[6]), hdop if hdop is None or 0 < hdop < 99 else None)
     if kind == "RMC":
         lat = parse_latlon(data[2], data[3], True)
         lon = parse_latlon(data[4], data[5], False)
