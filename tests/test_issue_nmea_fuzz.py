@@ -103,3 +103,19 @@ def test_an_implausible_fitted_reference_is_a_data_error():
     cn0 = np.r_[np.full(30, 75.0), np.full(30, 1.0)]  # a + b·sin(el) through both: a ≈ 101 dB-Hz
     with pytest.raises(DataError, match="implausible"):
         fit_cn0_reference(el, cn0)
+
+
+@pytest.mark.parametrize("digits", [" 6", "+6", "6\t0", "06 "])
+def test_checksum_must_be_two_hex_digits(digits):
+    """The 10⁶-line run found ``...*␠6`` and ``...*0\\r\\t0`` accepted by the streaming path (Python's
+    int(" 6", 16) is 6) and refused by the whole-file path: only the last is a checksum (trailing
+    whitespace ends a line)."""
+    body = "GNGSA,A,3,13,12,22,19,08,21,,,,,,,1.19,0.71,0.96,4"
+    assert reduce(lambda a, c: a ^ c, body.encode(), 0) == int(digits[:2], 16) == 6
+    forged = f"${body}*{digits}"
+    stats = ReadStats()
+    list(iter_epochs([_s(GGA), forged], stats))
+    whole = ReadStats()
+    epochs_from_bytes(f"{_s(GGA)}\n{forged}\n".encode(), whole)
+    assert stats == whole
+    assert stats.bad_checksum == (0 if digits == "06 " else 1) and stats.used_sentences == (2 if digits == "06 " else 1)
