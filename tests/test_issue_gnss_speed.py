@@ -100,9 +100,10 @@ def test_sky_attenuation_equals_epoch_attenuation_and_counts_the_invisible(walk_
     assert np.nanmax(zeta) > 0.0
 
 
-# Primary signal per NMEA 0183 v4.11 signal ids, written out here as the reference (issue 20): an untagged
-# entry or id 0 first, then GPS/SBAS L1 C/A 1, QZSS L1 C/A 1 / L1C 2, 3, GLONASS G1 C/A 1, Galileo E1-BC 7 /
-# E1-A 6, BeiDou B1I 1 / B1C 3, NavIC L5-SPS 1 / L1-SPS 5; every other id is a secondary signal.
+# Primary signal per NMEA 0183 v4.11 signal ids, written out here as the reference (issue 20): GPS/SBAS
+# L1 C/A 1, QZSS L1 C/A 1 / L1C 2, 3, GLONASS G1 C/A 1, Galileo E1-BC 7 / E1-A 6, BeiDou B1I 1 / B1C 3,
+# NavIC L5-SPS 1 / L1-SPS 5 first, then an entry stating no signal (None, or 0 "all signals"); every
+# other id is a secondary signal.
 _PRIMARY_IDS = {"GPS": [1], "SBAS": [1], "QZSS": [1, 2, 3], "GLONASS": [1], "Galileo": [7, 6], "BeiDou": [1, 3],
                 "NavIC": [1, 5]}
 
@@ -112,9 +113,9 @@ def _primary(e):
     best = {}
     for s in e.satellites:
         if s.signal in (None, 0):
-            rank = 0
+            rank = 10
         elif s.signal in _PRIMARY_IDS[s.system]:
-            rank = 1 + _PRIMARY_IDS[s.system].index(s.signal)
+            rank = _PRIMARY_IDS[s.system].index(s.signal)
         else:
             continue
         if (s.system, s.prn) not in best or rank < best[(s.system, s.prn)][0]:

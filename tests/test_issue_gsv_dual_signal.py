@@ -23,7 +23,7 @@ import numpy as np
 import pytest
 
 from features.gnss.features import sky_arrays
-from features.gnss.nmea import ReadStats, epochs_from_bytes, iter_epochs
+from features.gnss.nmea import ReadStats, epochs_from_bytes, iter_epochs, read_nmea
 from features.gnss.positions import epoch_attenuation, sky_attenuation
 
 LINES = [
@@ -138,3 +138,25 @@ def test_invisible_ratio_and_attenuation_by_hand():
     assert att[0] == pytest.approx(sum(a) / len(a), abs=1e-9)
     assert g[0] == pytest.approx(math.sqrt(sum(10 ** (x / 10) for x in a) / len(a)), rel=1e-9)
     assert epoch_attenuation(e) == pytest.approx((att[0], g[0]), rel=1e-12)
+
+
+def test_an_empty_signal_id_does_not_outrank_a_stated_primary_signal():
+    """The u-blox ZED-F9P of gpsd's log writes its B2I BeiDou group with an empty signal-id field
+    (``$GBGSV,3,1,10,01,29,321,,...,*49``) after the B1I group tagged 1. An unstated signal ranks after a
+    stated primary one, so the features read B1I (tracked, 45 dB-Hz), not the untracked B2I listing."""
+    lines = LINES[:2] + ["$GNGSA,A,3,19,20,,,,,,,,,,,1.5,0.9,1.2,4*30", "$GBGSV,1,1,02,19,60,080,45,20,40,160,,1*72",
+                         "$GBGSV,1,1,02,19,60,080,,20,40,160,,*42", LINES[-1]]
+    for line in lines[2:5]:
+        body, given = line[1:].split("*")
+        assert reduce(lambda a, c: a ^ c, body.encode(), 0) == int(given, 16)
+    e = _epoch(lines)
+    assert _rows(e.satellites) == [("BeiDou", 19, 1, 60.0, 80.0, 45.0, True), ("BeiDou", 20, 1, 40.0, 160.0, None, False),
+                                   ("BeiDou", 19, None, 60.0, 80.0, None, False),
+                                   ("BeiDou", 20, None, 40.0, 160.0, None, False)]
+    assert _rows(e.primary_satellites) == _rows(e.satellites)[:2]
+    # on gpsd's real log: every BeiDou satellite read on B1I, none on the unstated group
+    from tests.conftest import shared_data
+
+    epochs, _ = read_nmea(shared_data("nmea", "gpsd", "ublox-zed-f9p-nmea.log"))
+    signals = {(s.system, s.signal) for ep in epochs for s in ep.primary_satellites}
+    assert signals == {("GPS", 1), ("GLONASS", 1), ("Galileo", 7), ("BeiDou", 1)}

@@ -43,9 +43,9 @@ open-sky line within 1.5 dB (tests).
 
 A satellite listed on several signals (NMEA 4.10+) is read on one stated
 signal, its primary one (:attr:`features.gnss.nmea.Epoch.primary_satellites`:
-untagged or "all signals" entries, else GPS/QZSS L1 C/A, GLONASS G1 C/A, Galileo
-E1-B/C, BeiDou B1I, by the NMEA 4.11 signal ids of
-:data:`features.gnss.quirks.PRIMARY_SIGNAL_IDS`): "tracked" means tracked on
+GPS/QZSS L1 C/A, GLONASS G1 C/A, Galileo E1-B/C, BeiDou B1I by the NMEA 4.11
+signal ids of :data:`features.gnss.quirks.PRIMARY_SIGNAL_IDS`, else an entry
+that states no signal, as pre-4.10 receivers write): "tracked" means tracked on
 that signal, and its C/N0 is compared with an L1-band reference. Mixing bands
 would not be: L5/E5a C/N0 sits several dB from L1's on the same satellite and
 the secondary entries of real receivers often carry no elevation or azimuth.

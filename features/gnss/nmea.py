@@ -116,10 +116,11 @@ class Epoch:
     def primary_satellites(self) -> tuple[Satellite, ...]:
         """One entry per satellite: the one on its primary signal (the L1/G1/E1/B1 one), in GSV order.
 
-        The entry of lowest :func:`~features.gnss.quirks.primary_signal_rank` (untagged and
-        "all signals" first, then e.g. GPS L1 C/A, Galileo E1-B/C, BeiDou B1I); a satellite
-        listed only on secondary signals (L2, L5, E5a, B2I, ...) is left out. What the
-        GNSS features and the C/N0 weighting of fixes read.
+        The entry of lowest :func:`~features.gnss.quirks.primary_signal_rank`: a stated primary
+        signal first (GPS L1 C/A, Galileo E1-B/C, BeiDou B1I, ...), then an entry whose signal
+        is not stated (no or an empty signal-id field, or "all signals"); a satellite listed
+        only on secondary signals (L2, L5, E5a, B2I, ...) is left out. What the GNSS features
+        and the C/N0 weighting of fixes read.
         """
         best: dict = {}
         for sat in self.satellites:

@@ -82,27 +82,30 @@ open-service signal of the L1 band (E1 for Galileo, B1 for BeiDou, G1 for GLONAS
 receiver tracks and that the open-sky C/N0 reference describes. Not primary: L2, L5 / E5a / E5b /
 B2 / B3, E6, L6 (secondary frequencies), and ids 4 and up where the table names no L1-band signal."""
 
-_PRIMARY_RANK = {(system, sig): k + 1 for system, ids in PRIMARY_SIGNAL_IDS.items() for k, sig in enumerate(ids)}
+_PRIMARY_RANK = {(system, sig): k for system, ids in PRIMARY_SIGNAL_IDS.items() for k, sig in enumerate(ids)}
+_UNSTATED_RANK = max(len(ids) for ids in PRIMARY_SIGNAL_IDS.values())
 
 
 def primary_signal_rank(system: str, signal: int | None) -> int | None:
     """How primary a satellite's listed signal is: 0 best, larger worse, ``None`` = never primary.
 
-    Rule (NMEA 0183 v4.10/4.11): a GSV sentence without the signal-id field (NMEA ≤ 4.00, one
-    signal per satellite, the L1-band one on every receiver gpsd documents) and signal id 0
-    ("all signals"; Quectel's ``$PQGSV``) rank 0; then the ids of :data:`PRIMARY_SIGNAL_IDS`
-    in their order (GPS 1 = L1 C/A, Galileo 7 = E1-B/C, BeiDou 1 = B1I, ...); any other id
-    (L5 = 7/8 for GPS, E5a = 1 for Galileo, B2I = 11 for BeiDou, ...) is not primary. The
-    features read, per satellite and epoch, the listed entry of lowest rank, and leave out a
-    satellite listed only on secondary signals.
+    Rule (NMEA 0183 v4.10/4.11 signal ids): a stated primary signal ranks first, in the order of
+    :data:`PRIMARY_SIGNAL_IDS` (GPS 1 = L1 C/A; Galileo 7 = E1-B/C, then 6; BeiDou 1 = B1I, then
+    3 = B1C; ...). An entry whose signal is not stated ranks after them: a GSV sentence without the
+    signal-id field (NMEA ≤ 4.00, one signal per satellite, the L1-band one on every receiver gpsd
+    documents), one whose field is empty (the u-blox ZED-F9P of gpsd's log writes its second, B2I,
+    BeiDou group so: it must not outrank the B1I entry tagged 1) and id 0 ("all signals"; Quectel's
+    ``$PQGSV``). Any other id (L5 = 7/8 for GPS, E5a = 1 for Galileo, B2I = 11 for BeiDou, ...) is
+    a secondary signal, never primary. The features read, per satellite and epoch, the listed
+    entry of lowest rank, and leave out a satellite listed only on secondary signals.
 
-    >>> primary_signal_rank("GPS", None), primary_signal_rank("GPS", 1), primary_signal_rank("GPS", 8)
-    (0, 1, None)
+    >>> primary_signal_rank("GPS", 1), primary_signal_rank("GPS", None), primary_signal_rank("GPS", 8)
+    (0, 3, None)
     >>> primary_signal_rank("Galileo", 7), primary_signal_rank("Galileo", 1), primary_signal_rank("BeiDou", 11)
-    (1, None, None)
+    (0, None, None)
     """
     if signal is None or signal == 0:
-        return 0
+        return _UNSTATED_RANK
     return _PRIMARY_RANK.get((system, signal))
 
 
