@@ -59,6 +59,16 @@ EXPORT_COLUMNS = (("site", "receiver", "cell_id", "east_m", "north_m", "map_labe
 _SQLITE_MAGIC = b"SQLite format 3\x00"
 
 
+def _same_params(stored_json: str, params: Mapping) -> bool:
+    """Whether the feature parameters stored as JSON are ``params``: compared as parsed JSON objects, so the
+    text's key order (an older writer, another tool, a hand edit) and spacing do not matter."""
+    try:
+        stored = json.loads(stored_json)
+    except (TypeError, ValueError):
+        return False
+    return stored == json.loads(json.dumps(dict(params)))
+
+
 class FingerprintLibrary(ClusteringRunsMixin):
     """A fingerprint library file. Open with :meth:`open` (a context manager); never construct directly."""
 
@@ -259,7 +269,7 @@ class FingerprintLibrary(ClusteringRunsMixin):
                                  (site, cell_id)).fetchone()
         if row is None or row[0] != capture_sha256:
             return False
-        return feature_params is None or row[1] == json.dumps(dict(feature_params), sort_keys=True)
+        return feature_params is None or _same_params(row[1], feature_params)
 
     def ingest_cell(self, site: str, cell: CellCapture, rows: Mapping[str, Sequence], *,
                     receiver: str | None = None, replace: bool = False) -> IngestResult:
@@ -288,7 +298,7 @@ class FingerprintLibrary(ClusteringRunsMixin):
             status = "added"
             params = json.dumps(cell.feature_params, sort_keys=True)
             if old is not None:
-                if old[1] == cell.capture_sha256 and old[2] == params:
+                if old[1] == cell.capture_sha256 and _same_params(old[2], cell.feature_params):
                     n_old = conn.execute("SELECT count(*) FROM samples WHERE cell_pk = ?", (old[0],)).fetchone()[0]
                     return IngestResult(cell.cell_id, "unchanged", int(n_old))
                 if not replace:

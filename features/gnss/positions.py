@@ -115,7 +115,8 @@ def epoch_attenuation(epoch, reference=None) -> tuple[float, float]:
     """(mean attenuation of the used satellites in dB, SIGMA-ε factor g) of one epoch (module docstring).
 
     Used = flagged used by GSA and tracked with an elevation; without any, (0, 1) — nothing
-    to say. A satellite listed on several signals counts once, with its best C/N0.
+    to say. A satellite listed on several signals is read on its primary one
+    (:attr:`~features.gnss.nmea.Epoch.primary_satellites`), as the features read it.
 
     >>> from features.gnss.nmea import Epoch, Fix, Satellite
     >>> sats = (Satellite("GP", 1, None, 90.0, 0.0, 50.0, True), Satellite("GP", 2, None, 90.0, 0.0, 40.0, True))
@@ -127,16 +128,12 @@ def epoch_attenuation(epoch, reference=None) -> tuple[float, float]:
         from features.gnss.features import Cn0Reference
 
         reference = _DEFAULT_REFERENCE or _default_reference()
-    best: dict = {}
-    for sat in epoch.satellites:
-        if sat.used and sat.cn0_dbhz is not None and sat.el_deg is not None:
-            key = (sat.system, sat.prn)
-            if key not in best or sat.cn0_dbhz > best[key][1]:
-                best[key] = (sat.el_deg, sat.cn0_dbhz)
+    best = [(sat.el_deg, sat.cn0_dbhz) for sat in epoch.primary_satellites
+            if sat.used and sat.cn0_dbhz is not None and sat.el_deg is not None]
     if not best:
         return 0.0, 1.0
-    el = np.array([v[0] for v in best.values()])
-    cn0 = np.array([v[1] for v in best.values()])
+    el = np.array([v[0] for v in best])
+    cn0 = np.array([v[1] for v in best])
     att = np.maximum(0.0, reference.cref_dbhz(el) - cn0)
     return float(att.mean()), float(math.sqrt(np.mean(10.0 ** (att / 10.0))))
 
