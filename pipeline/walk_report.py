@@ -85,7 +85,7 @@ def _pdr_track(pdr: PdrStream, gnss: SourceTrack | None = None, quality=None, ca
 
 
 def walk_sources(walk_dir: str | os.PathLike, pdr_k: float | None = None) -> WalkSources:
-    """Every available position source of a walk directory, read once by :func:`pipeline.walk_data.read_walk`."""
+    """Every available position source of a walk directory, read once by :func:`walks.reader.read_walk`."""
     data = read_walk(walk_dir, pdr_k=pdr_k)
     tracks, feats, quality, acoustic_rows = {}, None, None, None
     if data.gnss is not None:
