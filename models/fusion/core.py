@@ -82,17 +82,8 @@ def mm(A, B):
 
 @njit(cache=True)
 def mmt(A, B):
-    """A B' for small dense matrices."""
-    n, k = A.shape
-    m = B.shape[0]
-    C = np.zeros((n, m))
-    for i in range(n):
-        for j in range(m):
-            s = 0.0
-            for l in range(k):
-                s += A[i, l] * B[j, l]
-            C[i, j] = s
-    return C
+    """A B' for small dense matrices (:func:`mm` on the transposed view)."""
+    return mm(A, B.T)
 
 
 @njit(cache=True)
