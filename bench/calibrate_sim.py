@@ -77,7 +77,7 @@ from simulation.site.layout import generate_site  # noqa: E402
 from simulation.site.route import RouteConfig, plan_route, route_trajectory, static_trajectory  # noqa: E402
 from simulation.survey import survey_cells  # noqa: E402
 
-LAGS_S = (1.0, 5.0, 20.0)
+LAGS_S = (1.0, 5.0, 20.0, 60.0)
 WARM = FixConfig(rtk_cold_start=False)  # a survey crew keeps the receiver running between cells
 REAL = {
     "autocorr_target": "light/heavy: >= 0.5 at 5 s, >= 0.2 at 20 s (NLOS biases persist 10-30 s past a wall)",
@@ -98,13 +98,19 @@ def _class_runs(cls: np.ndarray) -> np.ndarray:
     return np.cumsum(np.r_[True, cls[1:] != cls[:-1]]) if cls.size else np.zeros(0, int)
 
 
-def autocorr_sums(t_s, err_en, cls, lags_s=LAGS_S) -> dict[int, np.ndarray]:
+def autocorr_sums(t_s, err_en, cls, lags_s=LAGS_S, per_visit: bool = False) -> dict[int, np.ndarray]:
     """Sums behind the error autocorrelation of one walk, per class: rows (Σa·b, Σ|a|², Σ|b|², n pairs) per lag.
 
-    The class mean is removed per walk and class (the bias an engineer would calibrate out for that class), and
-    a pair of epochs counts only if both hold a fix and lie in the same contiguous visit of the class — a walker
-    who leaves a heavy zone and comes back 20 s later is in a different zone. Pool over walks by adding the sums:
-    ρ(L) = Σ a·b / sqrt(Σ|a|² Σ|b|²) (:func:`autocorr_from_sums`).
+    The pooled estimator (issue 21 item 5, the default): the class mean is removed over the whole walk (the bias
+    an engineer would calibrate out for that class), and a pair of epochs (i, i + L) counts when both hold a fix
+    and both lie in the class, whether in one visit or two — the error process of a class is sampled wherever the
+    walker is in it. ``per_visit=True`` is the earlier figure, which kept only pairs inside one contiguous visit:
+    short visits leave few pairs at long lags, all from the visits' ends, and (tests/test_calibration.py) it reads
+    far below the truth. Pool over walks by adding the sums: ρ(L) = Σa·b / sqrt(Σ|a|² Σ|b|²)
+    (:func:`autocorr_from_sums`), the sample autocorrelation of the 2-D error (Box, Jenkins & Reinsel, *Time
+    Series Analysis*, 4th ed., eq. 2.1.12, with the pair sums normalised by the pairs' own variances). Removing
+    a mean estimated from the same record biases ρ down by about (1 − ρ)/N_eff; a walk of N_eff ≈ T_class/(2τ)
+    independent samples of a Gauss–Markov error of time constant τ, so report only classes with minutes of time.
     """
     dt = float(np.median(np.diff(t_s)))
     ok = np.isfinite(err_en).all(axis=1)
@@ -117,9 +123,11 @@ def autocorr_sums(t_s, err_en, cls, lags_s=LAGS_S) -> dict[int, np.ndarray]:
             e = np.where(m[:, None], err_en - err_en[m].mean(axis=0), 0.0)
             for j, lag_s in enumerate(lags_s):
                 lag = int(round(lag_s / dt))
-                if lag >= len(m):
+                if lag >= len(m) or lag < 1:
                     continue
-                pair = m[:-lag] & m[lag:] & (run[:-lag] == run[lag:])
+                pair = m[:-lag] & m[lag:]
+                if per_visit:
+                    pair &= run[:-lag] == run[lag:]
                 a, b = e[:-lag][pair], e[lag:][pair]
                 rows[j] = ((a * b).sum(), (a * a).sum(), (b * b).sum(), pair.sum())
         out[c] = rows
@@ -131,9 +139,9 @@ def autocorr_from_sums(rows: np.ndarray, min_pairs: int = 10) -> list[float]:
     return [float(r[0] / np.sqrt(r[1] * r[2])) if r[3] >= min_pairs and r[1] * r[2] > 0 else np.nan for r in rows]
 
 
-def autocorr_by_class(t_s, err_en, cls, lags_s=LAGS_S) -> dict[int, list[float]]:
+def autocorr_by_class(t_s, err_en, cls, lags_s=LAGS_S, per_visit: bool = False) -> dict[int, list[float]]:
     """Autocorrelation of the 2-D horizontal error at each lag, per class, for one walk (:func:`autocorr_sums`)."""
-    return {c: autocorr_from_sums(r) for c, r in autocorr_sums(t_s, err_en, cls, lags_s).items()}
+    return {c: autocorr_from_sums(r) for c, r in autocorr_sums(t_s, err_en, cls, lags_s, per_visit).items()}
 
 
 def refix_times_s(t_s, quality, cls=None) -> np.ndarray | dict[int, np.ndarray]:

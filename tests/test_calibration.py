@@ -62,29 +62,50 @@ def test_gnss_errors_are_correlated_in_time(figures):
         assert pairs[c][2] >= 500 and -0.35 <= ac[c][2] <= 0.7, (ac, pairs)
 
 
-def test_autocorrelation_metric_recovers_a_known_process_and_shows_the_short_visit_bias():
-    """The report's estimator on a Gauss–Markov error of τ = 30 s: on one long visit it gives exp(−L/τ); on visits
-    of 25 s with the mean removed per walk it falls far below (the negative bias of the sample autocorrelation of
-    short records, ≈ −1/N_eff) — why heavy's 20 s figure stays low on routes that cross heavy zones in ~10 s."""
-    cs = _bench()
-    rng = np.random.default_rng(5)
-    dt, tau, n = 0.2, 30.0, 20_000
+def _gauss_markov_2d(rng, n, dt, tau):
+    """A 2-D first-order Gauss–Markov (AR(1)) series, unit variance per axis: ρ(L) = exp(−L/τ) exactly."""
     phi = np.exp(-dt / tau)
     w = rng.standard_normal((n, 2)) * np.sqrt(1.0 - phi ** 2)
     x = np.empty((n, 2))
     x[0] = rng.standard_normal(2)
     for i in range(1, n):
         x[i] = phi * x[i - 1] + w[i]
+    return x
+
+
+def test_pooled_autocorrelation_recovers_a_known_correlation_time_on_short_visits():
+    """Issue 21 item 5: the pooled estimator on an AR(1) error of τ = 10 s, ρ(L) = exp(−L/τ) in closed form
+    (0.905 / 0.607 / 0.135 / 0.0025 at 1 / 5 / 20 / 60 s), on 600 s walks whose class alternates every 10 s:
+    pairs across visits reach every lag and the walk-mean removal costs ≈ (1 − ρ)/N_eff, N_eff = 300 s / 20 s.
+    The per-visit figure of the earlier report has no pair at 20 or 60 s there and, on 25 s visits of a τ = 30 s
+    error, reads far below exp(−20/30) = 0.51 — why it is reported beside the pooled one only once."""
+    cs = _bench()
+    rng = np.random.default_rng(5)
+    dt, tau, walk_s, n_walks = 0.2, 10.0, 600.0, 12
+    n = int(walk_s / dt)
     t = dt * np.arange(n)
-    long_visit = np.zeros(n, int)
-    rho = cs.autocorr_by_class(t, x, long_visit)[0]
-    assert rho == pytest.approx([np.exp(-1 / tau), np.exp(-5 / tau), np.exp(-20 / tau)], abs=0.08)
-    short = np.where((t % 200.0) < 25.0, 2, 0)                     # one 25 s heavy visit per 200 s
+    cls = np.where((t // 10.0) % 2 == 0, 2, 1)                   # heavy / light visits of 10 s
+    pooled = np.zeros((4, 4))
+    visit = np.zeros((4, 4))
+    for _ in range(n_walks):
+        x = _gauss_markov_2d(rng, n, dt, tau)
+        pooled += cs.autocorr_sums(t, x, cls, (1.0, 5.0, 20.0, 60.0))[2]
+        visit += cs.autocorr_sums(t, x, cls, (1.0, 5.0, 20.0, 60.0), per_visit=True)[2]
+    rho = cs.autocorr_from_sums(pooled)
+    truth = np.exp(-np.array([1.0, 5.0, 20.0, 60.0]) / tau)
+    assert rho == pytest.approx(truth.tolist(), abs=0.05), (rho, truth)
+    assert visit[2:, 3].sum() == 0 and np.isnan(cs.autocorr_from_sums(visit)[2:]).all()
+    # A sign or lag bug (pairs at 2L, a missing mean removal) moves ρ(5 s) by > 0.1 here.
+    assert abs(rho[1] - truth[1]) < 0.05
+    # The old figure on one 25 s heavy visit per 200 s walk of a τ = 30 s error (the bias the issue names).
+    dt, tau, n = 0.2, 30.0, 20_000
+    x = _gauss_markov_2d(rng, n, dt, tau)
+    t = dt * np.arange(n)
+    short = np.where((t % 200.0) < 25.0, 2, 0)
     tot = np.zeros((3, 4))
-    for k in range(0, n, 1000):                                    # walks of 200 s, mean removed per walk
-        tot += cs.autocorr_sums(t[k:k + 1000], x[k:k + 1000], short[k:k + 1000])[2]
-    rho_short = cs.autocorr_from_sums(tot)
-    assert rho_short[2] < np.exp(-20 / tau) - 0.3, rho_short
+    for k in range(0, n, 1000):
+        tot += cs.autocorr_sums(t[k:k + 1000], x[k:k + 1000], short[k:k + 1000], (1.0, 5.0, 20.0), per_visit=True)[2]
+    assert cs.autocorr_from_sums(tot)[2] < np.exp(-20 / tau) - 0.3
 
 
 def test_rmc_speed_error_comes_from_the_doppler_solution(figures):
