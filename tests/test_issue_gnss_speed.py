@@ -40,6 +40,10 @@ def _loop_fixes_to_enu(epochs, lat0, lon0, alt0, uere=None):
             u = UERE_BY_QUALITY_M[f.quality] * g
         s = u * hdop / math.sqrt(2.0)
         up = u * (f.vdop if f.vdop is not None else 1.5 * hdop)
+        g_st = e.gst   # issue 21: the receiver's own GST σ wins where the epoch carries it
+        if g_st is not None and g_st.sigma_lat_m is not None and g_st.sigma_lon_m is not None:
+            s = max(g_st.sigma_lat_m, g_st.sigma_lon_m)
+            up = g_st.sigma_alt_m if g_st.sigma_alt_m is not None else up
         alt = (f.alt_m or 0.0) + (f.geoid_sep_m or 0.0) if f.alt_m is not None else alt0
         rows.append((e.t_s, f.lat_deg, f.lon_deg, alt, s, up, att, hdop))
     c = np.array(rows, float).reshape(-1, 8)
