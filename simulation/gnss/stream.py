@@ -18,11 +18,13 @@ from datetime import timezone
 
 import numpy as np
 
+from features.constants import SPEED_OF_LIGHT_M_S
 from features.errors import ConfigError
 from features.fileio import atomic_write_text
 from features.geodesy import enu_to_geodetic
 from simulation.gnss import fix as gnss_fix
 from simulation.gnss import signal as gnss_signal
+from simulation.gnss.reflection import SURFACE_ROUGHNESS_M, material_key, relative_permittivity
 from simulation.site.geometry import boxes_array
 from simulation.gnss.nmea_writer import NMEA_SYSTEM_BDS, NMEA_SYSTEM_GPS, NmeaEpochs, format_nmea
 from simulation.gnss.orbits import SYSTEM_GPS, all_satellites, azel
@@ -51,6 +53,8 @@ class GnssSimulation:
     attenuation_db : (n, k) blockage + EMI loss (no fading), dB
     cn0_true_dbhz : (n, k) epoch-mean C/N0 with fading; cn0_reported_dbhz : (n, k) integer, NaN untracked
     receiver_offset_db, receiver_threshold_db : this receiver's C/N0 offset and tracking-threshold offset, dB
+    specular : (n, k) bool, NLOS by a specular reflection off a face (else diffuse scattering)
+    nlos_extra_m : (n, k) the reflected path's geometric extra length, m (0 where not NLOS)
     """
 
     t_s: np.ndarray
@@ -78,6 +82,8 @@ class GnssSimulation:
     cn0_reported_dbhz: np.ndarray
     receiver_offset_db: float = 0.0
     receiver_threshold_db: float = 0.0
+    specular: np.ndarray = None
+    nlos_extra_m: np.ndarray = None
 
     @property
     def horizontal_error_m(self) -> np.ndarray:
@@ -158,15 +164,19 @@ def simulate_gnss(site, traj: Trajectory, seed: int, corrections: bool = True, r
     offset, refl, por, excess = offset[rises], refl[rises], por[rises], excess[rises]
     k = len(sats)
 
-    key = _key_epochs(t, p_en, up)
-    blk = gnss_signal.blockage(p_en[key], up[key], az[key], el[key], boxes, porous, refl, por, excess, cfg)
-    fill = np.searchsorted(key, np.arange(n), side="right") - 1
-    blk = gnss_signal.Blockage(*(getattr(blk, f)[fill] for f in (
-        "loss_db", "nlos", "solid_blocked", "nlos_extra_m", "diffraction_db")))
-    emi = gnss_signal.emi_loss_db(p_en, site.emi_zones)
     clutter = gnss_signal.clutter_index(p_en, boxes, porous, cfg.clutter_scale_m)
-    rx_offset_db, rx_threshold_db = gnss_signal.receiver_draws(
+    k_db = cfg.k_open_db - cfg.k_clutter_drop_db * clutter
+    rx_offset_db, rx_threshold_db, xpr_db = gnss_signal.receiver_draws(
         stream_rng(seed if receiver_seed is None else receiver_seed, "gnss", "receiver"), cfg)
+    eta = np.array([relative_permittivity(b.material, SPEED_OF_LIGHT_M_S / cfg.wavelength_m) for b in site.layout],
+                   complex)
+    rough = np.array([SURFACE_ROUGHNESS_M.get(material_key(b.material), 0.01) for b in site.layout], float)
+    key = _key_epochs(t, p_en, up)
+    reflectors = gnss_signal.Reflectors(eta, rough, xpr_db, 10.0 ** (k_db[key] / 10.0))
+    blk = gnss_signal.blockage(p_en[key], up[key], az[key], el[key], boxes, porous, refl, por, excess, cfg,
+                               reflectors=reflectors)
+    blk = blk.take(np.searchsorted(key, np.arange(n), side="right") - 1)
+    emi = gnss_signal.emi_loss_db(p_en, site.emi_zones)
     cn0_open = gnss_signal.open_sky_cn0_dbhz(el, sats.a_m[None, :], cfg) + offset[None, :] + rx_offset_db
     attenuation = blk.loss_db + emi[:, None]
     if body:
@@ -174,10 +184,10 @@ def simulate_gnss(site, traj: Trajectory, seed: int, corrections: bool = True, r
         attenuation = attenuation + gnss_signal.body_loss_db(az, el, traj.heading_rad[idx], cfg)
     cn0_mean = cn0_open - attenuation
 
-    # Fading: K from clutter for direct/diffracted paths, Rayleigh for reflections; the receiver averages
-    # power over each epoch, sampled fast enough for the walker's Doppler spread.
-    k_db = cfg.k_open_db - cfg.k_clutter_drop_db * clutter
-    k_lin = np.where(blk.nlos, 0.0, 10.0 ** (k_db[:, None] / 10.0) * np.ones((1, k)))
+    # Fading: K from clutter for direct/diffracted paths, the specular reflection's own K (roughness) for
+    # specular NLOS, Rayleigh for diffuse scattering; the receiver averages power over each epoch, sampled fast
+    # enough for the walker's Doppler spread.
+    k_lin = np.where(blk.nlos, blk.nlos_k_lin, 10.0 ** (k_db[:, None] / 10.0) * np.ones((1, k)))
     f_max = float(np.max(speed, initial=0.0)) / cfg.wavelength_m + cfg.doppler_floor_hz
     n_sub = int(min(8, max(1, np.ceil(2.0 * f_max * dt))))
     sub = t[:, None] - dt + dt * (np.arange(n_sub) + 0.5)[None, :] / n_sub  # (n, n_sub) inside each epoch
@@ -211,7 +221,8 @@ def simulate_gnss(site, traj: Trajectory, seed: int, corrections: bool = True, r
         n_used=fix.n_used, hdop=fix.hdop, vdop=fix.vdop, pdop=fix.pdop, system=sats.system, prn=sats.prn,
         az_rad=az, el_rad=el, in_view=in_view, tracked=tracked, used=fix.used, los=in_view & ~blk.nlos,
         nlos=in_view & blk.nlos, blocked=in_view & blk.solid_blocked, cn0_open_dbhz=cn0_open, attenuation_db=attenuation, cn0_true_dbhz=cn0_true,
-        cn0_reported_dbhz=reported, receiver_offset_db=rx_offset_db, receiver_threshold_db=rx_threshold_db)
+        cn0_reported_dbhz=reported, receiver_offset_db=rx_offset_db, receiver_threshold_db=rx_threshold_db,
+        specular=in_view & blk.specular, nlos_extra_m=np.where(in_view, blk.nlos_extra_m, 0.0))
 
 
 def to_nmea_epochs(sim: GnssSimulation, site, seed: int, traj: Trajectory) -> NmeaEpochs:
