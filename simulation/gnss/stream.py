@@ -8,7 +8,9 @@ change in one part never shifts the draws of another.
 
 Options read from ``StreamContext.options``: ``gnss_corrections`` (bool,
 default True: DGNSS/RTK corrections available), ``gnss_rate_hz`` (default 5),
-``gnss_rtk_cold_start`` (default: True for a walk, False for a survey cell).
+``gnss_rtk_cold_start`` (default: True for a walk, False for a survey cell),
+``gnss_gst`` (the receiver model sends GST; default: when corrections are on,
+as RTK receivers do).
 """
 
 from __future__ import annotations
@@ -24,6 +26,7 @@ from features.fileio import atomic_write_text
 from features.geodesy import enu_to_geodetic
 from simulation.gnss import fix as gnss_fix
 from simulation.gnss import signal as gnss_signal
+from simulation.gnss.rtk import RtkConfig
 from simulation.gnss.reflection import SURFACE_ROUGHNESS_M, material_key, relative_permittivity
 from simulation.site.geometry import boxes_array
 from simulation.gnss.nmea_writer import NMEA_SYSTEM_BDS, NMEA_SYSTEM_GPS, NmeaEpochs, format_nmea
@@ -53,6 +56,7 @@ class GnssSimulation:
     attenuation_db : (n, k) blockage + EMI loss (no fading), dB
     cn0_true_dbhz : (n, k) epoch-mean C/N0 with fading; cn0_reported_dbhz : (n, k) integer, NaN untracked
     receiver_offset_db, receiver_threshold_db : this receiver's C/N0 offset and tracking-threshold offset, dB
+    gst : (n, 7) the receiver's GST fields (:func:`simulation.gnss.gst.gst_fields`), NaN without a fix
     specular : (n, k) bool, NLOS by a specular reflection off a face (else diffuse scattering)
     nlos_extra_m : (n, k) the reflected path's geometric extra length, m (0 where not NLOS)
     """
@@ -84,6 +88,7 @@ class GnssSimulation:
     receiver_threshold_db: float = 0.0
     specular: np.ndarray = None
     nlos_extra_m: np.ndarray = None
+    gst: np.ndarray = None
 
     @property
     def horizontal_error_m(self) -> np.ndarray:
@@ -120,7 +125,7 @@ def _key_epochs(t_s: np.ndarray, p_en: np.ndarray, up_m: np.ndarray, move_m: flo
 def simulate_gnss(site, traj: Trajectory, seed: int, corrections: bool = True, rate_hz: float = DEFAULT_RATE_HZ,
                   signal_cfg: gnss_signal.SignalConfig = gnss_signal.SignalConfig(),
                   fix_cfg: gnss_fix.FixConfig = gnss_fix.FixConfig(), receiver_seed: int | None = None,
-                  body: bool = True) -> GnssSimulation:
+                  body: bool = True, rtk_cfg: RtkConfig = RtkConfig()) -> GnssSimulation:
     """Simulate the receiver along ``traj`` at ``site`` (see the module docstrings of the parts).
 
     Parameters
@@ -211,10 +216,10 @@ def simulate_gnss(site, traj: Trajectory, seed: int, corrections: bool = True, r
     reset = slip | untracked | np.vstack([np.ones((1, k), bool), untracked[:-1]])
     errors = gnss_fix.pseudorange_errors(stream_rng(seed, "gnss", "errors"), el, np.where(tracked, est, np.nan),
                                          blk.nlos, blk.nlos_extra_m, clutter, speed, dt, cfg.wavelength_m, fix_cfg,
-                                         reset=reset)
+                                         reset=reset, specular=blk.specular)
     fix = gnss_fix.solve_fixes(stream_rng(seed, "gnss", "rtk"), az, el, sys_idx, tracked, reported, errors,
                                blk.nlos, dt, corrections, fix_cfg, slip=slip, wavelength_m=cfg.wavelength_m,
-                               receiver_offset_db=rx_offset_db)
+                               receiver_offset_db=rx_offset_db, rtk_cfg=rtk_cfg)
     truth = np.stack([east, north, up], axis=1)
     return GnssSimulation(
         t_s=t, unix_s=unix, truth_enu_m=truth, fix_enu_m=truth + fix.error_enu_m, quality=fix.quality,
@@ -222,11 +227,12 @@ def simulate_gnss(site, traj: Trajectory, seed: int, corrections: bool = True, r
         az_rad=az, el_rad=el, in_view=in_view, tracked=tracked, used=fix.used, los=in_view & ~blk.nlos,
         nlos=in_view & blk.nlos, blocked=in_view & blk.solid_blocked, cn0_open_dbhz=cn0_open, attenuation_db=attenuation, cn0_true_dbhz=cn0_true,
         cn0_reported_dbhz=reported, receiver_offset_db=rx_offset_db, receiver_threshold_db=rx_threshold_db,
-        specular=in_view & blk.specular, nlos_extra_m=np.where(in_view, blk.nlos_extra_m, 0.0))
+        specular=in_view & blk.specular, nlos_extra_m=np.where(in_view, blk.nlos_extra_m, 0.0), gst=fix.gst)
 
 
-def to_nmea_epochs(sim: GnssSimulation, site, seed: int, traj: Trajectory) -> NmeaEpochs:
-    """Receiver-reported quantities for the NMEA writer (geodetic fix, velocity from the Doppler solution).
+def to_nmea_epochs(sim: GnssSimulation, site, seed: int, traj: Trajectory, gst: bool = False) -> NmeaEpochs:
+    """Receiver-reported quantities for the NMEA writer (geodetic fix, velocity from the Doppler solution, and its
+    GST statistics when ``gst``).
 
     The site origin's ``alt_m`` is taken as the ground's height and written as
     GGA altitude with a geoid separation of 0.0 (no geoid model is simulated),
@@ -253,7 +259,8 @@ def to_nmea_epochs(sim: GnssSimulation, site, seed: int, traj: Trajectory) -> Nm
         unix_s=sim.unix_s, lat_deg=np.asarray(lat, float), lon_deg=np.asarray(lon, float), alt_m=np.asarray(alt, float),
         quality=sim.quality, hdop=sim.hdop, vdop=sim.vdop, pdop=sim.pdop, speed_m_s=spd, course_deg=course,
         sat_system=system, sat_prn=sim.prn, el_deg=np.degrees(sim.el_rad), az_deg=np.degrees(sim.az_rad),
-        in_view=sim.in_view, used=sim.used, snr_dbhz=sim.cn0_reported_dbhz)
+        in_view=sim.in_view, used=sim.used, snr_dbhz=sim.cn0_reported_dbhz,
+        gst=sim.gst if gst and sim.gst is not None else None)
 
 
 def write_gnss(ctx: StreamContext) -> dict:
@@ -272,9 +279,13 @@ def write_gnss(ctx: StreamContext) -> dict:
     cold = ctx.options.get("gnss_rtk_cold_start", ctx.kind == "walk")
     if not isinstance(cold, bool):
         raise ConfigError(f"option gnss_rtk_cold_start must be true or false, got {cold!r}")
+    # GST: RTK receivers (u-blox F9P, NEO-M8P, Unicore UM980) send it; a receiver model without it is one option away.
+    gst = ctx.options.get("gnss_gst", corrections)
+    if not isinstance(gst, bool):
+        raise ConfigError(f"option gnss_gst must be true or false, got {gst!r}")
     sim = simulate_gnss(ctx.site, ctx.trajectory, ctx.seed, corrections=corrections, rate_hz=float(rate_hz),
                         fix_cfg=replace(gnss_fix.FixConfig(), rtk_cold_start=cold), receiver_seed=ctx.person_seed,
                         body=ctx.kind == "walk")
-    text = format_nmea(to_nmea_epochs(sim, ctx.site, ctx.seed, ctx.trajectory))
+    text = format_nmea(to_nmea_epochs(sim, ctx.site, ctx.seed, ctx.trajectory, gst=gst))
     atomic_write_text(ctx.out_dir / GNSS_FILE, text)
-    return {"gnss": {"file": GNSS_FILE, "rate_hz": float(rate_hz)}}
+    return {"gnss": {"file": GNSS_FILE, "rate_hz": float(rate_hz), "gst": gst}}
