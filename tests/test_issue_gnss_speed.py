@@ -66,7 +66,13 @@ def _check(epochs, uere=None):
 
 
 def test_vectorised_positions_equal_the_loop_on_a_simulated_walk(walk_dir):
+    import dataclasses
+
     epochs, _ = read_nmea(walk_dir / "gnss.nmea")
+    # Issue 21: the simulated RTK receiver sends GST, so its fixes carry the receiver's own σ ...
+    assert (_check(epochs).sigma_source == "gst").mean() > 0.9
+    # ... and without GST (another receiver model) the C/N0 and fitted rules, as before.
+    epochs = [dataclasses.replace(e, gst=None) for e in epochs]
     pos = _check(epochs)
     assert len(pos) > 250 and (pos.sigma_source == "cn0").any()
     table = UereTable({5: (0.3, 0.5, 0.8, 1.5), 2: (None, 1.0, 2.0, 3.0)}, {})

@@ -297,6 +297,7 @@ class FixResult:
     hdop, vdop, pdop : (n,) from the used satellites (NaN without a fix)
     gst : (n, 7) the receiver's own error statistics of the solution it reports, NMEA GST fields 2–8
         (:func:`gst_fields`: rms, semi-major, semi-minor, orientation, σ lat, σ lon, σ alt), NaN without a fix
+    code_error_m : (n, k) pseudorange errors after the differential corrections (simulator truth, for reports)
     """
 
     error_enu_m: np.ndarray
@@ -306,6 +307,7 @@ class FixResult:
     vdop: np.ndarray
     pdop: np.ndarray
     gst: np.ndarray = None
+    code_error_m: np.ndarray = None
 
     @property
     def n_used(self) -> np.ndarray:
@@ -539,7 +541,7 @@ def solve_fixes(rng: np.random.Generator, az_rad: np.ndarray, el_rad: np.ndarray
     vdop = np.where(ok, vdop, np.nan)
     pdop = np.where(ok, pdop, np.nan)
     gst[~ok] = np.nan
-    return FixResult(err, quality, used, hdop, vdop, pdop, gst)
+    return FixResult(err, quality, used, hdop, vdop, pdop, gst, code_err)
 
 
 def _raim(g, used, ok, code_err, w_all, sys_idx, cfg):

@@ -56,6 +56,7 @@ class GnssSimulation:
     attenuation_db : (n, k) blockage + EMI loss (no fading), dB
     cn0_true_dbhz : (n, k) epoch-mean C/N0 with fading; cn0_reported_dbhz : (n, k) integer, NaN untracked
     receiver_offset_db, receiver_threshold_db : this receiver's C/N0 offset and tracking-threshold offset, dB
+    code_error_m : (n, k) each satellite's pseudorange error after the differential corrections, m
     gst : (n, 7) the receiver's GST fields (:func:`simulation.gnss.gst.gst_fields`), NaN without a fix
     specular : (n, k) bool, NLOS by a specular reflection off a face (else diffuse scattering)
     nlos_extra_m : (n, k) the reflected path's geometric extra length, m (0 where not NLOS)
@@ -89,6 +90,7 @@ class GnssSimulation:
     specular: np.ndarray = None
     nlos_extra_m: np.ndarray = None
     gst: np.ndarray = None
+    code_error_m: np.ndarray = None
 
     @property
     def horizontal_error_m(self) -> np.ndarray:
@@ -227,7 +229,8 @@ def simulate_gnss(site, traj: Trajectory, seed: int, corrections: bool = True, r
         az_rad=az, el_rad=el, in_view=in_view, tracked=tracked, used=fix.used, los=in_view & ~blk.nlos,
         nlos=in_view & blk.nlos, blocked=in_view & blk.solid_blocked, cn0_open_dbhz=cn0_open, attenuation_db=attenuation, cn0_true_dbhz=cn0_true,
         cn0_reported_dbhz=reported, receiver_offset_db=rx_offset_db, receiver_threshold_db=rx_threshold_db,
-        specular=in_view & blk.specular, nlos_extra_m=np.where(in_view, blk.nlos_extra_m, 0.0), gst=fix.gst)
+        specular=in_view & blk.specular, nlos_extra_m=np.where(in_view, blk.nlos_extra_m, 0.0), gst=fix.gst,
+        code_error_m=fix.code_error_m)
 
 
 def to_nmea_epochs(sim: GnssSimulation, site, seed: int, traj: Trajectory, gst: bool = False) -> NmeaEpochs:

@@ -202,35 +202,39 @@ def plan_route(site: Site, rng: np.random.Generator, duration_s: float, cfg: Rou
     cls = classify_share(blocked_share(site, east[fx], north[fy], n_az=72))
     speed = float(rng.uniform(*cfg.speed_m_s))
     # Walk only within the largest connected free region.
-    n_comp, comp = connected_components(graph, directed=False)
+    _, comp = connected_components(graph, directed=False)
     main_label = np.bincount(comp[flat]).argmax()
     main = comp[flat] == main_label
     pool = [np.flatnonzero(main & (cls == c)) for c in range(3)]
     pool = [p if len(p) else np.flatnonzero(main) for p in pool]
-    stands = _stand_pools(site, east, north, free, np.flatnonzero(comp == main_label), cfg, rng)
+    budget_m = duration_s * speed * 1.1 + 50.0
+    # Stand points are drawn only when inspections are on: with them off the draws are those of the transit-only
+    # routes before issue 21, so a walk of that kind is the same walk.
+    empty = np.zeros(0, int)
+    stands = (_stand_pools(site, east, north, free, np.flatnonzero(comp == main_label), cfg, rng)
+              if max(cfg.inspect_probability) > 0 else [empty, empty, empty])
     max_stop = cfg.max_stop_share * duration_s
     nodes = [flat[np.flatnonzero(main)[rng.integers(main.sum())]]]
-    node_stop = [0.0]
-    budget_s = 1.1 * duration_s + 30.0
-    time_s = 0.0
-    while time_s < budget_s and len(nodes) < 400:
+    inspect_stop: list = [None]
+    length = 0.0  # metres walked, plus the metres the walker would have covered while inspecting
+    while length < budget_m and len(nodes) < 400:
         for c in rng.permutation(3):
-            if rng.random() >= cfg.visit_probability[c]:
+            if cfg.visit_probability[c] < 1.0 and rng.random() >= cfg.visit_probability[c]:
                 continue
-            inspect = rng.random() < cfg.inspect_probability[c] and stands[c].size > 0
-            if inspect:
+            p_insp = cfg.inspect_probability[c]
+            if p_insp > 0.0 and stands[c].size > 0 and rng.random() < p_insp:
                 nodes.append(int(stands[c][rng.integers(stands[c].size)]))
-                stop = min(float(rng.uniform(*cfg.inspect_stop_s)), max_stop)
+                inspect_stop.append(min(float(rng.uniform(*cfg.inspect_stop_s)), max_stop))
+                length += speed * inspect_stop[-1]
             else:
                 nodes.append(flat[pool[c][rng.integers(len(pool[c]))]])
-                stop = float(rng.uniform(*cfg.stop_s)) if rng.random() < cfg.stop_probability else 0.0
-            node_stop.append(stop)
+                inspect_stop.append(None)
             ay, ax = np.divmod(nodes[-2], free.shape[1])
             by, bx = np.divmod(nodes[-1], free.shape[1])
-            time_s += 1.3 * r * float(np.hypot(bx - ax, by - ay)) / speed + stop  # detour factor of aisles
+            length += 1.3 * r * float(np.hypot(bx - ax, by - ay))  # detour factor of aisles
     pts_all = []
     stops = []
-    for a, b, stop in zip(nodes[:-1], nodes[1:], node_stop[1:]):
+    for a, b, insp in zip(nodes[:-1], nodes[1:], inspect_stop[1:]):
         _, pred = dijkstra(graph, indices=a, directed=False, return_predecessors=True)
         seq = [b]
         while seq[-1] != a and pred[seq[-1]] >= 0:
@@ -245,6 +249,8 @@ def plan_route(site: Site, rng: np.random.Generator, duration_s: float, cfg: Rou
             seg = seg[1:]
         stops.extend([0.0] * (len(seg) - 1))
         pts_all.append(seg)
+        stop = insp if insp is not None else (
+            float(rng.uniform(*cfg.stop_s)) if rng.random() < cfg.stop_probability else 0.0)
         stops.append(stop)
     poly = np.vstack(pts_all)
     stops = np.array(stops[:len(poly)])
