@@ -130,7 +130,10 @@ def test_cli_fit_uere_on_one_walk_makes_another_consistent(walk_dir, second_walk
     assert 0.5 < np.median(nees[fixed]) < 2.5
     assert np.mean(nees[fixed] > 20) < 0.2
     q0, nees0 = _nees(second_walk)
-    assert np.median(nees0[q0 == 4]) < 1.0                         # the built-in 3 cm is pessimistic here (median; was the mean)
+    # Without the table the fixes carry the receiver's own GST (issue 21): overconfident on this walk's light
+    # and heavy ground (median NEES 6.5 of its 262 fixed epochs, against 1.9 with the fitted table). Before GST
+    # was written the built-in 3 cm gave a median below 1.
+    assert np.median(nees0[q0 == 4]) > 2.0 * np.median(nees[fixed])
 
 
 def test_cli_fit_uere_without_truth_is_a_clean_error(tmp_path, capsys):

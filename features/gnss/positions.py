@@ -41,7 +41,8 @@ of preference, by:
    (:attr:`features.gnss.nmea.Epoch.gst`), so every reader of fixes gets it;
    a ``gst`` table from :func:`read_gst` (matched by UTC time of day) overrides
    it. GST is what the receiver believes: under NLOS it is too small (issue 21),
-   which is why the fusion's quality noise scales it;
+   which is why the fusion's quality noise scales it, and why a fitted table
+   (3.) wins over it where it holds the fix's cell;
 2. otherwise the **C/N0 of the used satellites**: the SIGMA-ε variance model
    (Hartinger & Brunner 1999, "Variances of GPS phase observations: the
    SIGMA-ε model", GPS Solutions 2(4); Wieser & Brunner 2000) gives each
@@ -52,7 +53,7 @@ of preference, by:
    g² = mean ᵢ 10^(aᵢ/10), and σ_axis = UERE·HDOP·g/√2 (not for RTK fixed,
    whose carrier-phase error the code's C/N0 does not describe: table only);
 3. a **fitted table** (:class:`UereTable`, :func:`fit_uere`, ``envfuse features
-   gnss --fit-uere``) replaces 1–2 for the fix modes it holds: UERE per fix
+   gnss --fit-uere``) replaces 1–2 for the fix modes (and attenuation bins) it holds: UERE per fix
    quality and per bin of the used satellites' mean attenuation, fitted from
    walks with truth as UERE² = mean(|e|²/HDOP²) (the maximum-likelihood
    estimate for a 2-D Gaussian error with per-axis σ = UERE·HDOP/√2, so the
@@ -394,9 +395,13 @@ def fixes_to_enu(epochs: Sequence, lat0_deg: float, lon0_deg: float, alt0_m: flo
     s_e = u * hdop / math.sqrt(2.0)
     s_n = s_e.copy()
     sigma_up = u * np.where(np.isnan(vdop), 1.5 * hdop, vdop)
+    # The receiver's own GST where the epoch has it — unless a fitted table (calibrated against truth) holds the
+    # fix's cell: GST is what the receiver believes, too small under NLOS.
+    fitted_row = source == "fitted"
     for i, e in enumerate(fixed):
         own = getattr(e, "gst", None)
-        if own is not None and own.sigma_lat_m is not None and own.sigma_lon_m is not None:
+        if (own is not None and own.sigma_lat_m is not None and own.sigma_lon_m is not None
+                and not fitted_row[i]):
             s_n[i], s_e[i] = own.sigma_lat_m, own.sigma_lon_m
             if own.sigma_alt_m is not None:
                 sigma_up[i] = own.sigma_alt_m
@@ -404,7 +409,7 @@ def fixes_to_enu(epochs: Sequence, lat0_deg: float, lon0_deg: float, alt0_m: flo
     if gst:
         for i, key in enumerate(np.round(tod, 3).tolist()):
             stats = gst.get(key)
-            if stats is not None:
+            if stats is not None and not fitted_row[i]:
                 s_n[i], s_e[i] = stats
                 source[i] = "gst"
     alt = np.where(np.isnan(alt_msl), alt0_m, alt_msl + sep)
