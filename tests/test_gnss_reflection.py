@@ -74,13 +74,22 @@ def test_image_method_on_one_wall():
                               np.array([np.radians(60.0)]), boxes, np.array([False]), np.array([4.0 + 0j]),
                               np.array([0.01]), 10.0, 0.1903, np.array([10.0]))
     assert r3.box[0] == -1
-    # a kiosk between the receiver and the wall blocks the first leg
-    kiosk = Box("building", "steel", False, 4.0, 6.0, -2.0, 2.0, 3.0)
-    r4 = specular_reflections(np.array([[0.0, 0.0]]), np.array([1.0]), np.array([np.radians(270.0)]),
-                              np.array([np.radians(10.0)]), boxes_array([wall, kiosk]), np.array([False, False]),
-                              np.array([4.0 + 0j, 4.0 + 0j]), np.array([0.01, 0.01]), 10.0, 0.1903,
-                              np.array([10.0]))
+    # a kiosk between the receiver and the wall blocks the first leg: the ray toward the wall's specular point
+    # (heading ENE) enters its south face at (2.75, 1.0), 2.4 m up, under its 5 m roof; its own faces reflect
+    # nothing toward the receiver (the west face's specular point, y = 0.73, misses the face y ∈ [1, 3]; the
+    # satellite does not light the south face)
+    kiosk = Box("building", "steel", False, 2.0, 8.0, 1.0, 3.0, 5.0)
+    both = boxes_array([wall, kiosk])
+    eta2 = np.array([relative_permittivity("concrete", L1_HZ), relative_permittivity("steel", L1_HZ)])
+    r4 = specular_reflections(np.array([[0.0, 0.0]]), np.array([1.0]), np.array([az]), np.array([el]), both,
+                              np.array([False, False]), eta2, np.array([0.01, 0.01]), 10.0, 0.1903, np.array([10.0]))
     assert r4.box[0] == -1
+    # moved 5 m north out of the way, the wall's reflection is back with the same extra path
+    kiosk_n = Box("building", "steel", False, 2.0, 8.0, 6.0, 8.0, 5.0)
+    r5 = specular_reflections(np.array([[0.0, 0.0]]), np.array([1.0]), np.array([az]), np.array([el]),
+                              boxes_array([wall, kiosk_n]), np.array([False, False]), eta2, np.array([0.01, 0.01]),
+                              10.0, 0.1903, np.array([10.0]))
+    assert r5.box[0] == 0 and r5.extra_m[0] == pytest.approx(r.extra_m[0])
 
 
 def test_blocked_satellite_arrives_by_the_strongest_of_diffraction_reflection_and_diffuse_scatter():
