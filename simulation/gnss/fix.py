@@ -41,7 +41,8 @@ receiver's observables only. Its fixes are wrong when the float ambiguities
 are biased beyond what the receiver's white-noise model allows: code multipath
 and NLOS delays held while a carrier stays locked, and NLOS carriers, which
 measure the reflected path (:func:`pseudorange_errors`). RTK float (5) needs
-≥ ``float_min_sats`` satellites in phase lock; the float filter runs beneath
+≥ ``float_min_sats`` satellites in phase lock, one more than the unknowns, with
+PDOP ≤ ``float_pdop_mask``; the float filter runs beneath
 the fixed output (not restarted when a fix is declared or lost). DGNSS (2)
 otherwise; autonomous (1) when corrections are off; no fix (0) when the
 geometry cannot be solved (fewer than 4 satellites, or fewer than 3 + the
@@ -108,6 +109,7 @@ class FixConfig:
     rx_floor_differential_m: float = 0.6
     rtk_cold_start: bool = True
     float_min_sats: int = 5
+    float_pdop_mask: float = 25.0
     float_filter_tau_s: float = 8.0
     warm_start_lock_s: float = 60.0
     slip_nlos_prob: float = 0.05
@@ -507,7 +509,13 @@ def solve_fixes(rng: np.random.Generator, az_rad: np.ndarray, el_rad: np.ndarray
             slip = cycle_slips(rng, cn0_reported_dbhz, nlos, cfg)
         lock = _lock_age_s(tracked, slip, dt_s, 0.0 if cfg.rtk_cold_start else cfg.warm_start_lock_s)
         locked = used & (lock >= rtk_cfg.phase_lock_s)
-        float_ok = ok & (locked.sum(axis=1) >= cfg.float_min_sats)
+        # The float solution needs a redundant, well-shaped set of locked carriers: one more than the unknowns and
+        # PDOP within the receiver's mask (u-blox's navigation PDOP mask defaults to 25, UBX-CFG-NAV5 pDop); five
+        # high satellites of two systems solve exactly and can throw the float position hundreds of metres.
+        lock_pdop = _dops(g, locked)[2]
+        lock_dof = locked.sum(axis=1) - 3 - _n_systems(locked, sys_idx)
+        float_ok = (ok & (locked.sum(axis=1) >= cfg.float_min_sats) & (lock_dof >= 1)
+                    & (lock_pdop <= cfg.float_pdop_mask))
         # Double-differenced carrier: the base a few km away leaves ≈ 1 ppm of the atmosphere (rtk_atm_fraction).
         carrier_err = errors["carrier"] + cfg.rtk_atm_fraction * errors["atmosphere"]
         # Float ambiguity prior λÑ = mean(Φ − P) since lock: its error a = mean(e_Φ − e_P); the receiver's variance

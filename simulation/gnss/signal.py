@@ -213,6 +213,8 @@ class Blockage:
     diffraction_db : J(ν) of the dominant roof edge, dB
     specular : the reflection is a specular one off a face (else diffuse); False where not NLOS
     nlos_k_lin : Rician K of the reflected signal (0 for diffuse scattering and where not NLOS)
+    path_id : int, which path arrives: −1 direct or diffracted, the reflecting box's index for a specular
+        reflection, −2 − (index of the dominant blocking box) for diffuse scattering
     """
 
     loss_db: np.ndarray
@@ -222,8 +224,10 @@ class Blockage:
     diffraction_db: np.ndarray
     specular: np.ndarray = None
     nlos_k_lin: np.ndarray = None
+    path_id: np.ndarray = None
 
-    FIELDS = ("loss_db", "nlos", "solid_blocked", "nlos_extra_m", "diffraction_db", "specular", "nlos_k_lin")
+    FIELDS = ("loss_db", "nlos", "solid_blocked", "nlos_extra_m", "diffraction_db", "specular", "nlos_k_lin",
+              "path_id")
 
     def take(self, rows: np.ndarray) -> "Blockage":
         """The same outcome at the epochs ``rows`` (an index array)."""
@@ -273,7 +277,7 @@ def blockage(p_en: np.ndarray, z0_m: np.ndarray, az_rad: np.ndarray, el_rad: np.
     if m == 0:
         z = np.zeros(shape)
         f = np.zeros(shape, bool)
-        return Blockage(z, f, f.copy(), z.copy(), z.copy(), f.copy(), z.copy())
+        return Blockage(z, f, f.copy(), z.copy(), z.copy(), f.copy(), z.copy(), np.full(shape, -1, int))
     loss = np.empty(shape)
     nlos = np.empty(shape, bool)
     solid_any = np.empty(shape, bool)
@@ -281,6 +285,7 @@ def blockage(p_en: np.ndarray, z0_m: np.ndarray, az_rad: np.ndarray, el_rad: np.
     diff = np.empty(shape)
     spec_out = np.zeros(shape, bool)
     k_out = np.zeros(shape)
+    path_out = np.full(shape, -1, int)
     solid = ~np.asarray(porous, bool)
     z0_all = np.asarray(z0_m, float)
     step = max(1, max_block // max(1, k * m))
@@ -309,13 +314,14 @@ def blockage(p_en: np.ndarray, z0_m: np.ndarray, az_rad: np.ndarray, el_rad: np.
         l_spec = np.full(any_sb.shape, np.inf)
         ex_spec = np.zeros(any_sb.shape)
         k_spec = np.zeros(any_sb.shape)
+        box_spec = np.full(any_sb.shape, -1, int)
         if reflectors is not None and any_sb.any():
             ei, si = np.nonzero(any_sb)
             rows = ei + i0
             r = specular_reflections(p_en[rows], z0_all[rows], az_rad[rows, si], el_rad[rows, si], boxes, porous,
                                      reflectors.eta, reflectors.roughness_m, reflectors.xpr_db, cfg.wavelength_m,
                                      np.asarray(reflectors.k_los_lin, float)[rows], cfg.nlos_extra_max_m)
-            l_spec[ei, si], ex_spec[ei, si], k_spec[ei, si] = r.loss_db, r.extra_m, r.k_lin
+            l_spec[ei, si], ex_spec[ei, si], k_spec[ei, si], box_spec[ei, si] = r.loss_db, r.extra_m, r.k_lin, r.box
         is_spec = any_sb & (l_spec <= l_diffuse) & (l_spec < j_max)
         is_diffuse = any_sb & ~is_spec & (l_diffuse < j_max)
         is_nlos = is_spec | is_diffuse
@@ -328,7 +334,8 @@ def blockage(p_en: np.ndarray, z0_m: np.ndarray, az_rad: np.ndarray, el_rad: np.
         diff[sl] = j_max
         spec_out[sl] = is_spec
         k_out[sl] = np.where(is_spec, k_spec, 0.0)
-    return Blockage(loss, nlos, solid_any, extra, diff, spec_out, k_out)
+        path_out[sl] = np.where(is_spec, box_spec, np.where(is_diffuse, -2 - jdom, -1))
+    return Blockage(loss, nlos, solid_any, extra, diff, spec_out, k_out, path_out)
 
 
 def body_loss_db(az_rad: np.ndarray, el_rad: np.ndarray, heading_rad: np.ndarray,

@@ -214,6 +214,11 @@ def simulate_gnss(site, traj: Trajectory, seed: int, corrections: bool = True, r
     sys_idx = np.where(sats.system == SYSTEM_GPS, 0, 1)
     # Cycle slips restart both the carrier smoothing of the code and the RTK engine's lock.
     slip = gnss_fix.cycle_slips(stream_rng(seed, "gnss", "slips"), reported, blk.nlos, fix_cfg)
+    # A change of the arriving path (direct ↔ reflected, one reflector for another) moves the carrier by metres
+    # between two epochs, which no tracking loop follows: a cycle slip (the receiver re-locks on the new path).
+    switch = np.zeros((n, k), bool)
+    switch[1:] = blk.path_id[1:] != blk.path_id[:-1]
+    slip |= switch & tracked
     untracked = ~tracked
     reset = slip | untracked | np.vstack([np.ones((1, k), bool), untracked[:-1]])
     errors = gnss_fix.pseudorange_errors(stream_rng(seed, "gnss", "errors"), el, np.where(tracked, est, np.nan),
