@@ -210,7 +210,7 @@ def _faces(boxes: np.ndarray, reflective: np.ndarray):
 def specular_reflections(p_en: np.ndarray, z0_m: np.ndarray, az_rad: np.ndarray, el_rad: np.ndarray,
                          boxes: np.ndarray, porous: np.ndarray, eta: np.ndarray, roughness_m: np.ndarray,
                          xpr_db: float, wavelength_m: float, k_cap_lin: np.ndarray,
-                         max_distance_m: float = 60.0, chunk: int = 20_000) -> Reflections:
+                         max_distance_m: float = 60.0, chunk: int = 2_000) -> Reflections:
     """Strongest clear specular reflection per pair (module docstring), all arrays of shape (P,) unless noted.
 
     Parameters
