@@ -424,10 +424,7 @@ def main(argv=None) -> None:
     g = gnss_walk_figures(args.sites, args.walks, args.walk_s, LAGS_S)
     sv = survey_figures(args.sites)
     wk = walk_figures(args.full_walk_site, args.full_walk_seed, args.full_walk_s) if args.full_walk_s > 0 else None
-    try:                                     # the split moved to simulation.split on main (house refactor)
-        from simulation.split import SPLITS
-    except ImportError:
-        from training.benchmark import SPLITS
+    from simulation.split import SPLITS
 
     demo, std = SPLITS["demo"], SPLITS["standard"]
     extra = {
