@@ -1,4 +1,4 @@
-"""Walk logs and survey cells on disk: ``walk.toml`` / ``cell.toml`` metadata (DESIGN.md §4).
+"""Walk logs and survey cells on disk: ``walk.toml`` / ``cell.toml`` metadata (docs/design.md §4).
 
 A walk directory holds ``walk.toml``, ``gnss.nmea``, ``audio.wav``, ``imu.csv``
 and optionally ``truth.csv``; each stream is described by its own table in

@@ -1,4 +1,4 @@
-"""Ingest a survey directory into a fingerprint library (DESIGN.md §4, §5).
+"""Ingest a survey directory into a fingerprint library (docs/design.md §4, §5).
 
 A survey is ``site.toml`` plus ``cells/<cell_id>/{gnss.nmea, audio.wav,
 cell.toml}``. :func:`build_library` computes, for every cell, the 14 features

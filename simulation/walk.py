@@ -1,4 +1,4 @@
-"""Simulated walk logs: ``walk.toml``, ``truth.csv`` and every sensor stream (DESIGN.md §4)."""
+"""Simulated walk logs: ``walk.toml``, ``truth.csv`` and every sensor stream (docs/design.md §4)."""
 
 from __future__ import annotations
 

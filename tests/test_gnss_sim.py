@@ -73,7 +73,7 @@ def test_open_sky_is_rtk_fixed_at_centimetre_level(open_and_foot):
 def test_open_sky_cn0_and_los_nlos_calibration():
     sim = simulate_gnss(CANYON, _static(-100.0, 0.0, dur=30.0), seed=4)
     los = sim.cn0_reported_dbhz[sim.tracked & sim.los & (sim.el_rad > np.radians(10))]
-    # smartLoc (DESIGN.md §6): LOS 43.8 ± 4.5 dB-Hz on a u-blox receiver; open sky sits at or above.
+    # smartLoc (docs/design.md §6): LOS 43.8 ± 4.5 dB-Hz on a u-blox receiver; open sky sits at or above.
     assert 42.0 < los.mean() < 48.0 and 2.5 < los.std() < 7.0
     foot = simulate_gnss(CANYON, _static(9.0, 0.0, dur=30.0), seed=4)
     nlos = foot.cn0_reported_dbhz[foot.tracked & foot.nlos]

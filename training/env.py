@@ -1,6 +1,6 @@
 """Fitting the environment model from a fingerprint library (``envfuse train env``).
 
-Modes (DESIGN.md §1, issue 13):
+Modes (docs/design.md §1, issue 13):
 
 ``supervised``
     the classifier learns the map labels of the training sites' cells — what

@@ -11,7 +11,7 @@ the classic error model σ_position = UERE · DOP (Kaplan & Hegarty,
 equally between east and north. The UERE per fix mode are order-of-magnitude
 values of typical error budgets and receiver datasheets, chosen here, not
 measured: they only seed the fusion filter, whose per-class measurement
-noise is learnt from training walks (DESIGN.md §7).
+noise is learnt from training walks (docs/design.md §7).
 
 =======  ==========================  ============  =========================================
 quality  mode (GGA field 6)          UERE (1σ)     reasoning

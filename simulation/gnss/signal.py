@@ -8,7 +8,7 @@ Per epoch and satellite (arrays of shape (n_epochs, k)):
    antenna's gain roll-off (a patch antenna loses roughly 8–10 dB from zenith to
    5°; Kaplan & Hegarty 2017, *Understanding GPS/GNSS*, 3rd ed., §§ on the
    link budget and antenna patterns). Calibrated to ≈ 38 dB-Hz at 5° and
-   ≈ 50 dB-Hz at zenith (DESIGN.md §6), plus a per-satellite offset (transmit
+   ≈ 50 dB-Hz at zenith (docs/design.md §6), plus a per-satellite offset (transmit
    power and antenna differences between satellites).
 2. **Blockage** (:func:`blockage`): rays from the receiver toward each satellite
    are tested against the layout boxes with :func:`simulation.site.geometry.ray_blockers`.
@@ -49,7 +49,7 @@ Per epoch and satellite (arrays of shape (n_epochs, k)):
    C/N0 is 21 dB-Hz. NLOS signals that clear the threshold are tracked and
    used like any other: the receiver cannot tell them apart.
 
-Calibration against DESIGN.md §6 "Real figures" is reported by
+Calibration against docs/design.md §6 "Real figures" is reported by
 ``bench/bench_gnss_sim.py`` and checked by ``tests/test_gnss_sim.py``.
 """
 
@@ -79,7 +79,7 @@ _GPS_RADIUS_M = 26_559_700.0
 
 @dataclass(frozen=True)
 class SignalConfig:
-    """Parameters of the signal model (defaults per DESIGN.md §6).
+    """Parameters of the signal model (defaults per docs/design.md §6).
 
     Attributes are in dB, dB-Hz, metres, seconds and hertz as named.
     """
