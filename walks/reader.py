@@ -13,7 +13,10 @@ only the walk's files (as for a real device's log) and returns, per source:
 - truth, when ``truth.csv`` is present (evaluation only: nothing above reads
   it; the PDR start comes from the first good GNSS fix, see :func:`pdr_start_from_gnss`).
 
-A stream the walk does not have is ``None``.
+A stream the walk does not have is ``None``; so is one whose file is named but absent, empty (0 bytes, a
+WAV without samples, an IMU header without rows) or unusable (its reader refuses it): the walk is read
+without it, exactly as without the file, and :attr:`WalkData.notes` says which and why, so ``run``,
+``evaluate`` and ``train fusion`` behave the same for all of these and say so.
 """
 
 from __future__ import annotations
@@ -36,6 +39,7 @@ from features.imu.pdr import PdrConfig, PdrResult, run_pdr
 from features.imu.reader import read_imu_csv
 from features.imu.steps import StepLengthModel
 from features.site import Site
+from features.errors import DataError
 from features.walk import Truth, WalkInfo, load_walk, read_truth
 
 __all__ = ["GnssStream", "AcousticStream", "PdrStream", "WalkData", "read_walk", "WALK_SPEED_PRIOR_M_S", "walk_has",
@@ -99,10 +103,12 @@ class WalkData:
     acoustic: AcousticStream | None
     pdr: PdrStream | None
     truth: Truth | None
+    notes: tuple = ()
+    """One line per stream the walk names but could not use (absent, empty or unusable file)."""
 
 
 def read_walk(walk_dir: str | os.PathLike, *, site: Site | None = None, pdr_k: float | None = None,
-              audio_positions: PositionConfig | None = None) -> WalkData:
+              audio_positions: PositionConfig | None = None, truth: bool = True) -> WalkData:
     """Read a walk directory once: GNSS, acoustic and PDR streams and the truth when present.
 
     ``site`` overrides the site named in ``walk.toml``; ``pdr_k`` the step-length
@@ -111,18 +117,21 @@ def read_walk(walk_dir: str | os.PathLike, *, site: Site | None = None, pdr_k: f
     walking-speed prior :data:`WALK_SPEED_PRIOR_M_S`).
 
     The PDR track is anchored on data, never on truth: at the first good GNSS
-    fix (:func:`pdr_start_from_gnss`), else at the origin.
+    fix (:func:`pdr_start_from_gnss`), else at the origin. ``truth=False`` leaves ``truth.csv`` unread
+    (``run`` needs none).
     """
     walk = load_walk(walk_dir)
     site = walk.load_site() if site is None else site
-    truth = read_truth(walk.directory) if (walk.directory / "truth.csv").is_file() else None
-    gnss = read_gnss_stream(walk, site) if walk.path("gnss") is not None else None
+    truth = read_truth(walk.directory) if truth and (walk.directory / "truth.csv").is_file() else None
+    notes: list[str] = []
+    gnss = _optional(walk, "gnss", lambda: read_gnss_stream(walk, site), notes)
     acoustic = None
-    if walk.path("audio") is not None and site.beacons:
-        acoustic = read_acoustic_stream(walk, site, audio_positions)
-    pdr = None
-    if walk.path("imu") is not None:
-        pdr = read_pdr_stream(walk, (0.0, 0.0), pdr_k)
+    if site.beacons:
+        acoustic = _optional(walk, "audio", lambda: read_acoustic_stream(walk, site, audio_positions), notes)
+    elif walk.path("audio") is not None:
+        notes.append("audio: the site has no beacons; the walk is read without acoustic positions")
+    pdr = _optional(walk, "imu", lambda: read_pdr_stream(walk, (0.0, 0.0), pdr_k), notes)
+    if pdr is not None:
         anchor = pdr_start_from_gnss(gnss.positions) if gnss is not None else None
         if anchor is not None:
             # Shift the track so that it passes through the fix at the fix's time. The dead-reckoned
@@ -131,7 +140,34 @@ def read_walk(walk_dir: str | os.PathLike, *, site: Site | None = None, pdr_k: f
             t_fix, e_fix, n_fix = anchor
             e_p, n_p = pdr_position_at(pdr.result, t_fix, (0.0, 0.0))
             pdr = _shift_pdr(pdr, e_fix - e_p, n_fix - n_p)
-    return WalkData(walk=walk, site=site, gnss=gnss, acoustic=acoustic, pdr=pdr, truth=truth)
+    return WalkData(walk=walk, site=site, gnss=gnss, acoustic=acoustic, pdr=pdr, truth=truth, notes=tuple(notes))
+
+
+_WHAT = {"gnss": "GNSS", "audio": "acoustic positions", "imu": "PDR"}
+
+
+def _optional(walk: WalkInfo, stream: str, read, notes: list):
+    """``read()`` of a stream the walk names, or None with a note when its file is absent, empty or refused."""
+    table = walk.streams.get(stream)
+    if not table:
+        return None
+    name = str(table.get("file", ""))
+    path = walk.directory / name
+    without = f"the walk is read without {_WHAT[stream]}"
+    if not path.is_file():
+        notes.append(f"{stream}: walk.toml names {name}, which is absent; {without}")
+        return None
+    if path.stat().st_size == 0:
+        notes.append(f"{stream}: {name} is empty (0 bytes); {without}")
+        return None
+    try:
+        return read()
+    except DataError as exc:
+        text = str(exc)
+        prefix = f"{path}: "
+        notes.append(f"{stream}: {name} is unusable ({text[len(prefix):] if text.startswith(prefix) else text}); "
+                     f"{without}")
+        return None
 
 
 def pdr_start_from_gnss(positions: GnssPositions, window_s: float = 60.0) -> tuple[float, float, float] | None:

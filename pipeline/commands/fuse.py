@@ -7,6 +7,7 @@ from pathlib import Path
 
 from features.errors import ConfigError
 from features.fileio import atomic_write_text
+from pipeline.args import UsageError
 
 GROUP = None  # top-level commands, registered by register_top
 
@@ -51,31 +52,68 @@ def register_top(sub) -> None:
 
 
 def _run(args) -> int:
+    import numpy as np
+
     from pipeline.evaluate import load_model
+    from pipeline.outputs import check_outputs, model_inputs, walk_files
     from pipeline.site_map import class_map_for
     from walks.fuse import fuse_walk
     from walks.track import track_rows, track_text
 
+    check_outputs(walk_files(args.walk), {"--out": args.out}, sealed=model_inputs(args.model, "--model"))
     if not (args.walk / "walk.toml").is_file():
         raise ConfigError(f"{args.walk}: no walk.toml (expected a walk directory)")
     base = args.method.split("+")[0]
     fused = fuse_walk(args.walk, load_model(args.model), (base,), smooth=args.method.endswith("+rts"),
-                      class_map_for=class_map_for, force=args.force)
+                      class_map_for=class_map_for, force=args.force, truth=False)
+    for note in fused.data.notes:
+        print(f"envfuse: note: {args.walk}: {note}", file=sys.stderr)
     if args.method not in fused.tracks:
         raise ConfigError(f"{args.walk}: method {args.method} cannot run: {fused.skipped.get(base, 'no output')}")
-    rows = track_rows(fused.tracks[args.method], fused.inputs)
+    track = fused.tracks[args.method]
+    rows = track_rows(track, fused.inputs)
     fmt = args.format or ("geojson" if args.out.suffix.lower() in (".geojson", ".json") else "csv")
     text = track_text(rows, fmt, {"walk": str(args.walk), "method": args.method})
     atomic_write_text(args.out, text)
-    print(f"{args.walk}: {args.method}, {len(rows)} positions -> {args.out}")
+    n = len(rows)
+    placed = int(np.sum(np.isfinite(track.east_m) & np.isfinite(track.north_m)))
+    ood = sum(r["ood"] for r in rows)
+    parts = [f"{n} epochs"]
+    if placed < n:
+        parts.append(f"{n - placed} without a position")
+    parts.append(f"{100 * ood / max(n, 1):.0f} % out of the environment model's training distribution"
+                 + (" (their class is a guess)" if ood else ""))
+    print(f"{args.walk}: {args.method}, {', '.join(parts)} -> {args.out}")
+    if n and ood / n > 0.5:
+        print(f"envfuse: warning: {args.walk}: {100 * ood / n:.0f} % of the track's epochs fall outside what the "
+              "environment model was trained on (column ood): its classes, and the noise they set, are unreliable "
+              "here; train on surveys of this kind of site", file=sys.stderr)
+    if placed == 0:
+        raise ConfigError(f"{args.walk}: {args.method} gave no position at any of its {n} epochs")
     return 0
 
 
 def _evaluate(args) -> int:
-    from pipeline.evaluate import evaluate, summary_table
+    from pipeline.evaluate import bp_guard_line, evaluate, summary_table
+    from pipeline.outputs import check_outputs, directory_kind, model_inputs, refuse_repeated, walk_files
 
     if args.workers is not None and args.workers < 1:
-        raise ConfigError(f"--workers must be at least 1, got {args.workers}")
+        raise UsageError(f"--workers must be at least 1, got {args.workers}")
+    refuse_repeated(args.walks, "WALKS")
+    inputs = {}
+    for w in args.walks:
+        inputs.update(walk_files(w, f"walk {w}"))
+    check_outputs(inputs, {}, {"--report": args.report}, model_inputs(args.model, "--model"))
+    if args.report.exists():
+        if not args.report.is_dir():
+            raise UsageError(f"--report {args.report} exists and is not a directory")
+        if directory_kind(args.report) not in ("empty", "report"):
+            raise UsageError(f"--report {args.report} holds other files than a report (metrics.csv and PNGs): "
+                             "its plots are replaced, so name a new or empty directory")
+    if args.scheduler is not None:
+        from pipeline.parallel import check_scheduler
+
+        check_scheduler(args.scheduler)
     for w in args.walks:
         if not (w / "walk.toml").is_file():
             raise ConfigError(f"{w}: no walk.toml (expected a walk directory)")
@@ -84,14 +122,18 @@ def _evaluate(args) -> int:
     for f in out["failures"]:
         print(f"envfuse: warning: {f.walk}: {f.message} (walk skipped)", file=sys.stderr)
     for r in out["results"]:
+        for note in r.get("notes", []):
+            print(f"envfuse: note: {r['walk_dir']}: {note}", file=sys.stderr)
         for m, why in r["skipped"].items():
-            print(f"envfuse: note: {r['walk']}: {m} skipped: {why}", file=sys.stderr)
+            print(f"envfuse: note: {r['walk_dir']}: {m} skipped: {why}", file=sys.stderr)
     if not out["results"]:
-        raise ConfigError("no walk could be evaluated")
+        raise ConfigError(f"no walk could be evaluated ({len(out['failures'])} failed, named above)")
     print(summary_table(out["pooled"]))
     shares = [r["bp_disabled_share"] for r in out["results"] if r["bp_disabled_share"] is not None]
     if shares:
-        print(f"BP correction withheld by its guards on {100 * sum(shares) / len(shares):.1f} % of epochs")
-    print(f"{len(out['results'])} walks -> {args.report / 'metrics.csv'}"
-          + (f", {len(out['pngs'])} plots" if out["pngs"] else ""))
+        print(bp_guard_line(sum(shares) / len(shares)))
+    n = len(out["results"])
+    print(f"{n} walk{'s' if n != 1 else ''} -> {args.report / 'metrics.csv'}"
+          + (f", {len(out['pngs'])} plots" if out["pngs"] else "")
+          + (f"; {len(out['failures'])} skipped (named above)" if out["failures"] else ""))
     return 1 if out["failures"] else 0
