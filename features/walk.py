@@ -121,7 +121,7 @@ def read_truth(path: str | os.PathLike) -> Truth:
     """Read ``truth.csv`` (t_s, east_m, north_m, env_class; optional blocked_sky_share).
 
     Refused with one :class:`~features.errors.DataError` naming the file and, for a bad row, its line: a
-    file that is not UTF-8 text, without the columns, without rows, with a non-finite number (NaN, inf) or
+    file that is not UTF-8 text, without the columns, with fewer than two rows, a non-finite number (NaN, inf) or
     an unknown class, or whose times do not increase (truth is interpolated in time).
     """
     path = Path(path)
@@ -141,8 +141,9 @@ def read_truth(path: str | os.PathLike) -> Truth:
     need = {"t_s", "east_m", "north_m", "env_class"}
     if not need <= set(header):
         raise DataError(f"{path}: needs columns {sorted(need)}, found {sorted(h for h in header if h)[:8]}")
-    if not rows:
-        raise DataError(f"{path}: has the columns but no rows")
+    if len(rows) < 2:
+        raise DataError(f"{path}: has the columns but {'no rows' if not rows else 'one row'}; truth is "
+                        "interpolated in time and needs at least two")
     has_share = "blocked_sky_share" in header
     t, e, n, share = (np.empty(len(rows)) for _ in range(4))
     c = np.empty(len(rows), int)

@@ -75,6 +75,10 @@ __all__ = ["SurveyConfig", "SurveyWarning", "BuildReport", "build_library", "cal
 
 _DEFAULT_FILES = {"gnss": "gnss.nmea", "audio": "audio.wav"}
 
+MIN_GNSS_EPOCHS = 2
+"""Fewest NMEA epochs in a window for its GNSS features to count as available: one epoch has no C/N0 series,
+so no fluctuation rate β and no time spread (a capture of one epoch is recorded as a missing GNSS stream)."""
+
 
 class SurveyWarning(UserWarning):
     """Something a survey build did that the user should know: a missing stream, an uncalibrated C/N0 reference."""
@@ -289,12 +293,16 @@ def _gnss_table(plan: _CellPlan, reference: Cn0Reference, config: SurveyConfig):
 
 
 def _audio_rows(plan: _CellPlan, site, config: SurveyConfig) -> list[dict]:
-    from features.acoustic.audio import audio_info
+    from features.acoustic.audio import audio_info, require_beacon_band
     from features.acoustic.detection import DetectorConfig
     from features.acoustic.positions import PositionConfig
 
-    if audio_info(plan.paths["audio"]).n_frames == 0:
-        raise DataError("holds no audio samples")
+    if not site.beacons:
+        if audio_info(plan.paths["audio"]).n_frames == 0:
+            raise DataError("holds no audio samples")
+    else:
+        require_beacon_band(plan.paths["audio"], min(b.f0_hz if b.f0_hz is not None else site.acoustic.f0_hz
+                                                     for b in site.beacons))
     timing = timing_from_walk(plan.walk, site, where=plan.walk.directory / "cell.toml")
     # a survey capture is static: no walking-speed prior (as the CLI does for a cell.toml)
     positions = PositionConfig(max_clock_offset_s=timing.start_uncertainty_s + 0.05, motion_speed_m_s=0.0)
@@ -329,7 +337,8 @@ def _merge(gnss: dict | None, audio: list[dict] | None, config: SurveyConfig, du
             cols[k].append(float(gnss[k][i]) if i >= 0 else math.nan)
         for k in GNSS_COUNTS:
             cols[k].append(int(gnss[k][i]) if i >= 0 else 0)
-        cols["gnss_available"].append(int(i >= 0 and gnss["n_pairs_in_view"][i] > 0))
+        cols["gnss_available"].append(int(i >= 0 and gnss["n_pairs_in_view"][i] > 0
+                                          and gnss["n_epochs"][i] >= MIN_GNSS_EPOCHS))
         row = audio[j] if j >= 0 else None
         for k in ACOUSTIC_FEATURES:
             cols[k].append(row[k] if row else math.nan)

@@ -64,6 +64,9 @@ def evaluate_walk(walk, model_dir: str, methods: tuple, force: bool = False) -> 
         raise DataError(f"{walk}: no truth.csv, so no error to measure (evaluate scores tracks against truth; "
                         "'envfuse run' writes a walk's track without one)")
     rows = score(tracks, data, fused.name)
+    if not rows:
+        why = "; ".join(f"{m}: {r}" for m, r in fused.skipped.items()) or "no track overlaps the truth in time"
+        raise DataError(f"{walk}: no method gave a track to score ({why})")
     series = {}
     if data.truth is not None:
         for m, tr in tracks.items():

@@ -181,6 +181,8 @@ def check_outputs(inputs: dict, outputs: dict, directory_outputs: dict | None = 
         for ki, i in ins.items():
             if _same(o, i):
                 raise UsageError(f"{ko} {o} is the input {ki}: an output never overwrites an input")
+        if o.is_dir():
+            raise UsageError(f"{ko} {o} is a directory; name a file")
         for ks, s in seal.items():
             if _inside(o, s):
                 raise UsageError(f"{ko} {o} lies inside the input {ks} ({s}): nothing is ever written there")

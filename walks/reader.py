@@ -28,6 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
+from features.acoustic.audio import require_beacon_band
 from features.acoustic.features import AudioAnalysis, analyse_audio
 from features.acoustic.positions import PositionConfig
 from features.acoustic.timing import AudioTiming, timing_from_walk
@@ -45,6 +46,9 @@ from features.walk import Truth, WalkInfo, load_walk, read_truth
 __all__ = ["GnssStream", "AcousticStream", "PdrStream", "WalkData", "read_walk", "WALK_SPEED_PRIOR_M_S", "walk_has",
            "pdr_start_from_gnss", "pdr_position_at", "read_gnss_stream", "read_acoustic_stream", "read_pdr_stream"]
 
+SKIPPED_NOTE_SHARE = 0.05
+"""A walk's note names the NMEA reader's skips when they exceed this share of the file's sentences."""
+
 WALK_SPEED_PRIOR_M_S = 1.4
 """Walking-speed prior of the acoustic solver on a walk, m/s (a survey cell is static: 0)."""
 
@@ -58,6 +62,8 @@ class GnssStream:
     positions: GnssPositions
     features: dict
     nmea_summary: dict
+    skipped_share: float = 0.0
+    """Share of the file's sentences the NMEA reader skipped (bad checksum, truncated, ...)."""
 
 
 @dataclass(frozen=True)
@@ -91,6 +97,8 @@ class PdrStream:
     result: PdrResult
     config: PdrConfig
     start_en_m: tuple[float, float]
+    repaired: str = ""
+    """What the IMU reader repaired (its :meth:`~features.imu.reader.ImuRepairReport.summary`), empty if nothing."""
 
 
 @dataclass(frozen=True)
@@ -131,6 +139,11 @@ def read_walk(walk_dir: str | os.PathLike, *, site: Site | None = None, pdr_k: f
     elif walk.path("audio") is not None:
         notes.append("audio: the site has no beacons; the walk is read without acoustic positions")
     pdr = _optional(walk, "imu", lambda: read_pdr_stream(walk, (0.0, 0.0), pdr_k), notes)
+    if gnss is not None and gnss.skipped_share > SKIPPED_NOTE_SHARE:
+        notes.append(f"gnss: {walk.streams['gnss']['file']}: {100 * gnss.skipped_share:.0f} % of the sentences "
+                     f"skipped ({gnss.nmea_summary})")
+    if pdr is not None and pdr.repaired:
+        notes.append(f"imu: {walk.streams['imu']['file']} repaired by the reader ({pdr.repaired})")
     if pdr is not None:
         anchor = pdr_start_from_gnss(gnss.positions) if gnss is not None else None
         if anchor is not None:
@@ -208,7 +221,7 @@ def _shift_pdr(pdr: PdrStream, d_east_m: float, d_north_m: float) -> PdrStream:
     r = pdr.result
     moved = dataclasses.replace(r, east_m=d_east_m + r.east_m, north_m=d_north_m + r.north_m)
     start = (pdr.start_en_m[0] + d_east_m, pdr.start_en_m[1] + d_north_m)
-    return PdrStream(result=moved, config=pdr.config, start_en_m=start)
+    return PdrStream(result=moved, config=pdr.config, start_en_m=start, repaired=pdr.repaired)
 
 
 def read_gnss_stream(walk: WalkInfo, site: Site) -> GnssStream:
@@ -218,11 +231,15 @@ def read_gnss_stream(walk: WalkInfo, site: Site) -> GnssStream:
     o = site.origin
     sky = sky_arrays(epochs)  # once, for both the positions' sigma and the features
     positions = fixes_to_enu(epochs, o.lat_deg, o.lon_deg, o.alt_m, sky=sky)
-    return GnssStream(positions=positions, features=gnss_features(sky), nmea_summary=stats.summary())
+    share = stats.skipped / max(stats.sentences + stats.non_nmea_lines, 1)
+    return GnssStream(positions=positions, features=gnss_features(sky), nmea_summary=stats.summary(),
+                      skipped_share=float(share))
 
 
 def read_acoustic_stream(walk: WalkInfo, site: Site, positions: PositionConfig | None) -> AcousticStream:
     """The walk's audio through the acoustic receiver: fixes with covariance and the nine CIR windows."""
+    require_beacon_band(walk.path("audio"), min(b.f0_hz if b.f0_hz is not None else site.acoustic.f0_hz
+                                                for b in site.beacons))
     timing = timing_from_walk(walk, site)
     if positions is None:
         positions = PositionConfig(max_clock_offset_s=timing.start_uncertainty_s + 0.05,
@@ -240,7 +257,8 @@ def read_pdr_stream(walk: WalkInfo, start_en: tuple[float, float], k: float | No
     decl = float(walk.streams["imu"].get("declination_deg", 0.0))
     heading = HeadingConfig(declination_rad=np.radians(decl))
     cfg = PdrConfig(heading=heading) if k is None else PdrConfig(length=StepLengthModel(k=k), heading=heading)
-    return PdrStream(result=run_pdr(imu, start_en[0], start_en[1], cfg), config=cfg, start_en_m=start_en)
+    return PdrStream(result=run_pdr(imu, start_en[0], start_en[1], cfg), config=cfg, start_en_m=start_en,
+                     repaired=imu.report.summary() if imu.report.n_defects else "")
 
 
 def walk_has(walk_dir: str | os.PathLike) -> dict:

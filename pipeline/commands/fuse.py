@@ -120,7 +120,8 @@ def _evaluate(args) -> int:
     out = evaluate(args.walks, args.model, args.report, methods=tuple(args.methods), workers=args.workers,
                    scheduler=args.scheduler, force=args.force, progress=True, plots=not args.no_plots)
     for f in out["failures"]:
-        print(f"envfuse: warning: {f.walk}: {f.message} (walk skipped)", file=sys.stderr)
+        text = f.message if f.message.startswith(f.walk) else f"{f.walk}: {f.message}"
+        print(f"envfuse: warning: {text} (walk skipped)", file=sys.stderr)
     for r in out["results"]:
         for note in r.get("notes", []):
             print(f"envfuse: note: {r['walk_dir']}: {note}", file=sys.stderr)

@@ -105,8 +105,10 @@ def _env_plots(clf, diag: dict, out: Path) -> list:
 
 
 def _run_fusion(args) -> int:
+    from features.errors import DataError, EnvfuseError
     from models.bp import BPConfig
     from models.fusion.model import save_fusion_model
+    from models.fusion.noise import NoiseError
     from pipeline.outputs import model_inputs, refuse_repeated, walk_files
     from training.env import load_env_model
     from training.filters import train_fusion
@@ -127,10 +129,17 @@ def _run_fusion(args) -> int:
     check_windows(env_meta, f"--env-model {args.env_model}")
     from models.fusion.ekf import EkfConfig
 
-    model = train_fusion(args.walks, clf, bp=not args.no_bp, bp_config=BPConfig(hidden=args.hidden, seed=args.seed),
-                         ekf=EkfConfig(outlier=args.outlier),
-                         meta={"env_model": str(args.env_model), "env_meta": env_meta},
-                         progress=lambda line: print(line, file=sys.stderr))
+    try:
+        model = train_fusion(args.walks, clf, bp=not args.no_bp,
+                             bp_config=BPConfig(hidden=args.hidden, seed=args.seed), ekf=EkfConfig(outlier=args.outlier),
+                             meta={"env_model": str(args.env_model), "env_meta": env_meta},
+                             progress=lambda line: print(f"train fusion: {line}", file=sys.stderr))
+    except (NoiseError, ValueError) as exc:
+        if isinstance(exc, EnvfuseError) and not isinstance(exc, NoiseError):
+            raise
+        # the fits raise ValueError / NoiseError on data they cannot use (no fix with truth, too few events)
+        walks = ", ".join(str(w) for w in args.walks)
+        raise DataError(f"the fusion model cannot be fitted on --walks {walks}: {exc}") from None
     for text in default_noise_warnings(model):
         print(f"envfuse: warning: {text}", file=sys.stderr)
     save_fusion_model(model, args.out, overwrite=args.overwrite)
