@@ -85,8 +85,10 @@ def main() -> int:
         try:
             W, argv, before = B.prepare(case, world, d)
             o = B.judge(case, W, d, before, _run(argv, d, args.tree, case.timeout_s))
-            if o.status is None and o.kind == "clean":
-                o.kind, o.why = "silent wrong", "still running at the timeout"
+            if o.status is None and o.kind != "data lost":
+                # stopped at the timeout: the input was accepted and the command ran on (a benchmark that
+                # started simulating into a folder it should have refused)
+                o.kind, o.why = "silent wrong", f"accepted: still running after {case.timeout_s:g} s"
         finally:
             shutil.rmtree(d, ignore_errors=True)
         counts[case.group][o.kind] += 1
