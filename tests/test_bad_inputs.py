@@ -15,12 +15,6 @@ from tests import bad_inputs as B
 CASES = B.cases()
 
 
-@pytest.fixture(scope="session")
-def bad_input_world(site_dir, walk_dir, tmp_path_factory):
-    """The corpus's world, built once per test process from the session's simulated site and walk."""
-    return B.build_world(tmp_path_factory.mktemp("bad_inputs") / "world", site_dir, walk_dir)
-
-
 def test_the_corpus_is_large_and_covers_every_command():
     assert len(CASES) >= 250
     commands = {" ".join(c.name.split(",")[0].split()[:2]) for c in CASES}
