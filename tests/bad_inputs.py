@@ -541,6 +541,13 @@ def _truth_cases() -> list[Case]:
     C.append(Case("evaluate two walks, one with a NaN truth row", "truth.csv", mixed, 1, ("walks/w2", "skipped"),
                   ("rep",), mixed_check))
 
+    def mixed_dask(W, d):
+        put(W.w2 / "truth.csv", _truth_variant("random bytes", (W.w2 / "truth.csv").read_text()))
+        argv = _eval(("w", "w2"))(W, d)
+        return [a if a != "1" or argv[i - 1] != "--workers" else "2" for i, a in enumerate(argv)]
+    C.append(Case("evaluate --workers 2, one walk with truth.csv of random bytes", "truth.csv", mixed_dask, 1,
+                  ("walks/w2", "skipped"), ("rep",), mixed_check, timeout_s=180))
+
     def no_truth(W, d):
         (W.w2 / "truth.csv").unlink()
         return _eval(("w", "w2"))(W, d)
