@@ -119,7 +119,7 @@ def walk_files(walk_dir: str | os.PathLike, label: str = "WALK") -> dict:
     walk_dir = Path(walk_dir)
     out = {}
     for name in ("walk.toml", "cell.toml", "truth.csv", "gnss.nmea", "audio.wav", "imu.csv"):
-        out[f"{label} file {walk_dir / name}"] = walk_dir / name
+        out[f"{label}'s {name}"] = walk_dir / name
     try:
         from features.fileio import read_toml
 
@@ -129,19 +129,18 @@ def walk_files(walk_dir: str | os.PathLike, label: str = "WALK") -> dict:
     for stream in ("gnss", "audio", "imu"):
         table = doc.get(stream)
         if isinstance(table, dict) and isinstance(table.get("file"), str):
-            p = walk_dir / table["file"]
-            out[f"{label} file {p}"] = p
+            out[f"{label}'s {stream} file {table['file']}"] = walk_dir / table["file"]
     if isinstance(doc.get("site"), str):
         site = walk_dir / doc["site"]
         site = site / "site.toml" if site.is_dir() else site
-        out[f"{label}'s site {site}"] = site
+        out[f"{label}'s site"] = site
     return out
 
 
 def survey_inputs(survey_dir: str | os.PathLike, label: str = "SURVEY_DIR") -> tuple[dict, dict]:
     """(files, sealed directories) of a survey: its ``site.toml`` and its ``cells/`` folder."""
     survey_dir = Path(survey_dir)
-    return {f"{label} file site.toml": survey_dir / "site.toml"}, {f"{label} cells": survey_dir / "cells"}
+    return {f"{label}'s site.toml": survey_dir / "site.toml"}, {f"{label}'s cells/": survey_dir / "cells"}
 
 
 def model_inputs(model_dir: str | os.PathLike, label: str) -> dict:

@@ -34,13 +34,17 @@ def register_top(sub) -> None:
         "evaluate", help="every fusion method on many walks: metrics.csv, summary, plots",
         description="Run every method on every walk (one task per walk, on Dask: a LocalCluster with one worker "
                     "per core by default), write metrics.csv (walk, method, env_class, n, mean_m, median_m, "
-                    "p95_m, max_m, nees_in_bounds), print a summary and draw trajectories, error over time, "
-                    "error CDFs and error by class.",
+                    "p95_m, max_m, nees_in_bounds: the share of epochs whose normalised error lies inside the 95 %% "
+                    "chi-square interval, about 0.95 for a consistent filter), print a summary and draw, for every "
+                    "walk, its trajectories and error over time, and the error CDFs and error by class. Each walk "
+                    "needs truth.csv; a walk that fails is named and skipped (exit 1).",
         epilog="Example: envfuse evaluate split/walks/201/w0 split/walks/201/w1 --model fusion_model "
                "--report report --workers 2")
     p.add_argument("walks", type=Path, nargs="+", help="walk directories (with truth.csv for errors)")
     p.add_argument("--model", type=Path, required=True, help="fusion model directory")
-    p.add_argument("--report", type=Path, required=True, help="directory for metrics.csv and the PNGs")
+    p.add_argument("--report", type=Path, required=True,
+                   help="directory for metrics.csv and the PNGs: new, empty or an earlier report (its plots of "
+                        "walks no longer evaluated are removed)")
     p.add_argument("--methods", nargs="+", choices=method_names(), default=list(method_names()),
                    help="methods (default all)")
     p.add_argument("--workers", type=int, default=None, help="local worker processes (default one per core; "
@@ -102,7 +106,7 @@ def _evaluate(args) -> int:
     refuse_repeated(args.walks, "WALKS")
     inputs = {}
     for w in args.walks:
-        inputs.update(walk_files(w, f"walk {w}"))
+        inputs.update(walk_files(w, f"walk {Path(w).name}"))
     check_outputs(inputs, {}, {"--report": args.report}, model_inputs(args.model, "--model"))
     if args.report.exists():
         if not args.report.is_dir():

@@ -119,7 +119,7 @@ def _run_fusion(args) -> int:
     refuse_repeated(args.walks, "--walks")
     inputs = {}
     for w in args.walks:
-        inputs.update(walk_files(w, f"--walks {w}"))
+        inputs.update(walk_files(w, f"training walk {w.name}"))
     check_outputs(inputs, {}, {"--out": args.out}, model_inputs(args.env_model, "--env-model"))
     _refuse_existing(args.out, args.overwrite, "fusion model")
     for w in args.walks:
