@@ -24,6 +24,7 @@ finished walk (``evaluate: 3/10 walks (30 %)``), never carriage-return frames.
 from __future__ import annotations
 
 import os
+import sys
 from dataclasses import dataclass
 from typing import Callable, Sequence
 
@@ -85,11 +86,33 @@ def _guarded(func: Callable, walk, *args):
         return _failure(walk, exc)
 
 
-def _progress_bar(total: int, desc: str, enabled: bool):
-    from simulation.progress import Progress
+class _Progress:
+    """A tqdm bar on a terminal; in a log (stderr not a TTY) one plain line per finished walk,
+    ``evaluate: 2/5 walks (40 %)``, never carriage-return frames."""
 
-    # A bar on a terminal; in a log one line per finished walk (no carriage-return frames).
-    return Progress(total, desc, unit="walks", enabled=enabled, every_fraction=1e-9).__enter__()
+    def __init__(self, total: int, desc: str, enabled: bool):
+        self.total, self.desc, self.enabled, self.n = total, desc, enabled, 0
+        self.bar = None
+        if enabled and sys.stderr.isatty():
+            from tqdm import tqdm
+
+            self.bar = tqdm(total=total, desc=desc, unit="walk", file=sys.stderr, leave=False)
+
+    def update(self, k: int = 1) -> None:
+        self.n += k
+        if self.bar is not None:
+            self.bar.update(k)
+        elif self.enabled:
+            print(f"{self.desc}: {self.n}/{self.total} walks ({100 * self.n / max(self.total, 1):.0f} %)",
+                  file=sys.stderr, flush=True)
+
+    def close(self) -> None:
+        if self.bar is not None:
+            self.bar.close()
+
+
+def _progress_bar(total: int, desc: str, enabled: bool) -> _Progress:
+    return _Progress(total, desc, enabled)
 
 
 def map_walks(func: Callable, walks: Sequence, *args, workers: int | None = None, scheduler: str | None = None,
@@ -114,7 +137,7 @@ def map_walks(func: Callable, walks: Sequence, *args, workers: int | None = None
             return out
         return _map_dask(func, walks, args, workers, client_address, bar)
     finally:
-        bar.__exit__(None, None, None)
+        bar.close()
 
 
 def check_scheduler(address: str, timeout_s: float = 3.0) -> str:

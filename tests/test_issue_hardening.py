@@ -126,9 +126,16 @@ def test_the_summary_explains_its_words():
     assert "withheld on 100.0 %" in line and "adaptive is adaptive_nobp" in line and "guards (" in line
 
 
-def test_walk_simulation_progress_names_the_walk_once(site_dir, tmp_path, capsys):
+def test_walk_simulation_progress_names_the_walk_once_and_force_replaces_a_walk(site_dir, tmp_path, capsys):
+    from pipeline.cli import main
     from simulation.walk import simulate_walk
 
     simulate_walk(site_dir, tmp_path / "walk", seed=2, duration_s=2.0, progress=True)
     err = capsys.readouterr().err
     assert "walk walk" not in err and "simulate walk 'walk': streams written" in err
+    # --force replaces what simulate walk wrote (truth_steps.csv, audio_truth.csv included), nothing else
+    argv = ["simulate", "walk", str(site_dir), "--seed", "3", "--duration-s", "2", "--out", str(tmp_path / "walk")]
+    assert main(argv + ["--force"]) == 0
+    (tmp_path / "walk" / "notes.txt").write_text("mine\n")
+    assert main(argv + ["--force"]) == 2
+    assert "holds other files" in capsys.readouterr().err and (tmp_path / "walk" / "notes.txt").is_file()

@@ -71,6 +71,10 @@ def _run_env(args) -> int:
     _refuse_existing(args.out, args.overwrite, "environment model")
     if args.plots is not None and args.plots.exists() and not args.plots.is_dir():
         raise UsageError(f"--plots {args.plots} exists and is not a directory")
+    if args.plots is not None and (args.plots.resolve() == args.out.resolve() or args.out.resolve() in
+                                   args.plots.resolve().parents):
+        raise UsageError(f"--plots {args.plots} lies inside the model folder --out {args.out}: a model folder holds "
+                         "the model only; name another directory")
     if not args.library.is_file():
         raise ConfigError(f"--library {args.library}: no such file")
     data = training_set(args.library, args.site)
