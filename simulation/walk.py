@@ -99,7 +99,7 @@ def simulate_walk(site_path: str | os.PathLike, out_dir: str | os.PathLike, seed
         ctx = StreamContext(site=site, trajectory=traj, out_dir=tmp, seed=seed, kind="walk", person_seed=person,
                             options=opts)
         meta = {}
-        with Progress(len(writers), f"walk {out_dir.name} streams", enabled=bool(opts["progress"]),
+        with Progress(len(writers), f"simulate walk {out_dir.name!r}: streams written", enabled=bool(opts["progress"]),
                       every_fraction=1e-9) as bar:
             for spec in writers:
                 meta.update(run_stream_writers(ctx, (spec,)))
