@@ -3,7 +3,7 @@
 - The training target of :func:`training.filters.train_fusion` is truth − filter position (the correction
   that moves the filter onto the truth), NaN outside the truth's time span. The filter run is replaced by
   one whose positions are the truth moved 1 m east and 2 m south, so every target is (−1, +2) by hand.
-- The guard of the open-loop ``adaptive`` method compares each fix against the filter's *prior* (what the
+- The guard of the open-loop ``adaptive_correction`` method compares each fix against the filter's *prior* (what the
   next fix is independent evidence about); a stub network records what the method hands it.
 """
 
@@ -58,6 +58,7 @@ def test_bp_targets_are_truth_minus_the_filter(short_walk, monkeypatch):
     monkeypatch.setattr(tf, "adaptive_run", lambda model, inputs, *a, **k: fake_run)
     monkeypatch.setattr(tf, "bp_features", lambda run, inputs: np.zeros((len(run.t_s), N_INPUTS)))
     monkeypatch.setattr(tf, "BPCorrector", Recorder)
+    monkeypatch.setattr(tf, "fit_param_net", lambda *a, **k: types.SimpleNamespace(validation_error_m_=0.0))   # the parameter nets train on other targets
     rng = np.random.default_rng(0)
     clf = EnvironmentClassifier(min_samples=5).fit(rng.normal(size=(60, 14)), np.repeat([0, 1, 2], 20))
     tf.train_fusion([short_walk], clf)
@@ -80,8 +81,8 @@ def test_the_adaptive_guard_is_fed_the_prior(trained_small):
             return Correction(zeros, zeros, zeros, off, off, off)
 
     model.bp = StubBP()
-    tracks, _ = run_methods(model, inputs, ("adaptive",), smooth=False)
-    run = tracks["adaptive"].info["run"]
+    tracks, _ = run_methods(model, inputs, ("adaptive_correction",), smooth=False)
+    run = tracks["adaptive_correction"].info["run"]
     upd = seen["updated"]
     # the fixes moved the state: prior and posterior differ where the filter updated
     assert np.max(np.abs(run.x[upd, :2] - run.x_prior[upd, :2])) > 1e-3

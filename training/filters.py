@@ -88,7 +88,7 @@ def fit_noise(rows: list[WalkTraining], n_classes: int = 3, estimator: str = "me
     """(fixed, quality, per-class by map, per-class by classifier) noise policies from training walks."""
     g_err, a_err = _cat(rows, "g_err", (2,)), _cat(rows, "a_err", (2,))
     if len(g_err) + len(a_err) == 0:
-        raise ValueError("the training walks hold no GNSS or acoustic fix with truth")
+        raise DataError("the training walks hold no GNSS or acoustic fix with truth")
     g = g_err if len(g_err) else None
     a = a_err if len(a_err) else None
     fixed = FixedNoise().fit(gnss_errors_m=g, acoustic_errors_m=a)

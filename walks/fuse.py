@@ -16,11 +16,11 @@ from typing import Callable
 
 from features.errors import ConfigError, DataError, EnvfuseError
 from models.fusion.model import FusionModel
-from walks.inputs import WINDOW_S, WalkInputs, walk_inputs
+from walks.inputs import HOP_S, WINDOW_S, WalkInputs, walk_inputs
 from walks.methods import LAG_S, run_methods
 from walks.reader import WalkData, read_walk
 
-__all__ = ["FusedWalk", "fuse_walk", "check_site", "check_windows", "walk_name", "WALK_HOP_S"]
+__all__ = ["FusedWalk", "fuse_walk", "check_site", "check_windows", "walk_name"]
 
 
 @dataclass
@@ -52,20 +52,17 @@ def check_site(model: FusionModel, site_name: str, walk: str, force: bool = Fals
 
 def check_windows(env_meta: dict, where: str) -> None:
     """Refuse (:class:`~features.errors.ConfigError`) an environment model fitted on feature windows other
-    than those a walk is classified on (:data:`walks.inputs.WINDOW_S`, hop :data:`WALK_HOP_S`): its class
+    than those a walk is classified on (:data:`walks.inputs.WINDOW_S`, hop :data:`walks.inputs.HOP_S`): its class
     probabilities would describe another statistic. A model that states no window predates the check and was
     fitted on the only windows there were then (2 s, hop 1 s)."""
     window, hop = env_meta.get("window_s"), env_meta.get("hop_s")
     if window is None and hop is None:
         return
-    if abs(float(window) - WINDOW_S) > 1e-9 or abs(float(hop) - WALK_HOP_S) > 1e-9:
+    if abs(float(window) - WINDOW_S) > 1e-9 or abs(float(hop) - HOP_S) > 1e-9:
         raise ConfigError(f"{where} was fitted on {float(window):g} s windows (hop {float(hop):g} s) but walks are "
-                          f"classified on {WINDOW_S:g} s windows (hop {WALK_HOP_S:g} s): rebuild the library with "
-                          f"'survey build --window-s {WINDOW_S:g} --hop-s {WALK_HOP_S:g} --replace' and refit")
+                          f"classified on {WINDOW_S:g} s windows (hop {HOP_S:g} s): rebuild the library with "
+                          f"'survey build --window-s {WINDOW_S:g} --hop-s {HOP_S:g} --replace' and refit")
 
-
-WALK_HOP_S = 1.0
-"""Hop of the feature windows a walk is classified on, s (the readers' default, as :data:`walks.inputs.WINDOW_S`)."""
 
 
 def fuse_walk(walk_dir: str | os.PathLike, model: FusionModel, methods=None, *, smooth: bool = True,

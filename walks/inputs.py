@@ -21,7 +21,7 @@ from models.fusion.events import EventStream
 from walks.reader import WalkData
 
 __all__ = ["WalkInputs", "walk_inputs", "window_features", "split_steps", "gnss_events", "STAND_GAP_S",
-           "TYPICAL_STEP_S", "WINDOW_S"]
+           "TYPICAL_STEP_S", "WINDOW_S", "HOP_S"]
 
 STAND_GAP_S = 1.5
 """A gap between steps longer than this is standing (from 0.5 s after the last step to 0.5 s before the next)."""
@@ -31,6 +31,9 @@ TYPICAL_STEP_S = 0.55
 
 WINDOW_S = 2.0
 """Feature window length, s (the readers' default): a window centred at t is complete at t + 1 s."""
+
+HOP_S = 1.0
+"""Hop between the walk's feature windows, s (the readers' default)."""
 
 
 @dataclass(frozen=True)
