@@ -54,11 +54,11 @@ def oaconvolve_rate(wav: Path) -> tuple[float, float]:
 def build(tmp: Path, walk_s: float, n_walks: int):
     from features.site import save_site
     from models.bp import BPConfig
-    from models.fusion_model import save_fusion_model
-    from pipeline.fusion import window_features
-    from pipeline.fusion_train import train_fusion
-    from pipeline.walk_data import read_walk
+    from models.fusion.model import save_fusion_model
     from models.environment import EnvironmentClassifier
+    from training.filters import train_fusion
+    from walks.inputs import window_features
+    from walks.reader import read_walk
     from simulation.site.layout import generate_site
     from simulation.walk import simulate_walk
 
@@ -80,16 +80,17 @@ def build(tmp: Path, walk_s: float, n_walks: int):
 
 
 def pipeline_rate(walk: Path, model_dir: Path) -> tuple[float, float, dict]:
-    from models.fusion_model import load_fusion_model
-    from pipeline.fusion import METHODS, run_methods, walk_inputs
-    from pipeline.walk_data import read_walk
+    from models.fusion.model import load_fusion_model
+    from walks.inputs import walk_inputs
+    from walks.methods import method, method_names, run_methods
+    from walks.reader import read_walk
 
     model = load_fusion_model(model_dir)
     best = np.inf
     for _ in range(3):
         t0 = time.perf_counter()
         data = read_walk(walk)
-        inputs = walk_inputs(data, model)
+        inputs = walk_inputs(data, model.classifier)
         tracks, _ = run_methods(model, inputs, ("adaptive",), smooth=False)
         best = min(best, time.perf_counter() - t0)
     duration = float(data.walk.duration_s)
@@ -97,7 +98,7 @@ def pipeline_rate(walk: Path, model_dir: Path) -> tuple[float, float, dict]:
     n_events = len(inputs.events)
     r = data.pdr.result
     n_steps = int(np.sum(np.isfinite(r.heading_rad) & np.isfinite(r.step_length_m)))     # heel strikes
-    for m in METHODS[3:]:
+    for m in [n for n in method_names() if method(n).filter or n.startswith("adaptive")]:
         wall = np.inf
         for _ in range(3):
             t0 = time.perf_counter()
@@ -110,7 +111,7 @@ def pipeline_rate(walk: Path, model_dir: Path) -> tuple[float, float, dict]:
 def stage_breakdown(walk: Path, model_dir: Path, repeat: int = 5) -> dict:
     """CPU seconds (best of ``repeat``, process time) of each stage of raw files -> adaptive track.
 
-    The stages :func:`pipeline.walk_data.read_walk` and the fusion run one after another:
+    The stages :func:`walks.reader.read_walk` and the fusion run one after another:
     NMEA reading (and the walk's time base), GNSS sky arrays and positions (ENU, sigma), GNSS
     features, the acoustic receiver, IMU reading and PDR, the fusion inputs from the read walk
     (events, the 14 window features, the classifier) and the ``adaptive`` filter.
@@ -119,9 +120,10 @@ def stage_breakdown(walk: Path, model_dir: Path, repeat: int = 5) -> dict:
     from features.gnss.nmea import epochs_on_time_base, read_nmea
     from features.gnss.positions import fixes_to_enu
     from features.walk import load_walk
-    from models.fusion_model import load_fusion_model
-    from pipeline import walk_data as wd
-    from pipeline.fusion import run_methods, walk_inputs
+    from models.fusion.model import load_fusion_model
+    from walks import reader as wd
+    from walks.inputs import walk_inputs
+    from walks.methods import run_methods
 
     model = load_fusion_model(model_dir)
     info = load_walk(walk)
@@ -140,15 +142,15 @@ def stage_breakdown(walk: Path, model_dir: Path, repeat: int = 5) -> dict:
         gnss_features(state["sky"])
 
     def audio():
-        wd._read_acoustic(info, site, None)
+        wd.read_acoustic_stream(info, site, None)
 
     def imu():
-        wd._read_pdr(info, (0.0, 0.0), None)
+        wd.read_pdr_stream(info, (0.0, 0.0), None)
 
     state["data"] = wd.read_walk(walk)
 
     def inputs():
-        state["inputs"] = walk_inputs(state["data"], model)
+        state["inputs"] = walk_inputs(state["data"], model.classifier)
 
     def fusion():
         run_methods(model, state["inputs"], ("adaptive",), smooth=False)
@@ -218,13 +220,13 @@ def machine_ceiling(walks, model_dir: Path) -> float:
 def _ceiling_worker(args) -> float:
     walks, model_dir, barrier = args
     from pipeline.evaluate import evaluate_walk
-    from pipeline.fusion import METHODS
+    from walks.methods import method_names
 
-    evaluate_walk(walks[0], model_dir, tuple(METHODS), False)      # warm: imports, caches
+    evaluate_walk(walks[0], model_dir, method_names(), False)      # warm: imports, caches
     barrier.wait()
     t0 = time.perf_counter()
     for w in walks:
-        evaluate_walk(w, model_dir, tuple(METHODS), False)
+        evaluate_walk(w, model_dir, method_names(), False)
     return time.perf_counter() - t0
 
 
@@ -264,10 +266,10 @@ def main() -> None:
         times = evaluate_scaling(walks, model_dir, tmp)
         eff = times[1] / (2 * times[2])
         ceiling = machine_ceiling(walks, model_dir)
-        from pipeline.fusion import METHODS
         from pipeline.parallel import map_walks
+        from walks.methods import method_names
 
-        rss = map_walks(_peak_rss_task, [str(w) for w in walks], str(model_dir), tuple(METHODS), False,
+        rss = map_walks(_peak_rss_task, [str(w) for w in walks], str(model_dir), method_names(), False,
                         workers=2, progress=False)
         print(f"evaluate {n_walks} walks (best of 2, interleaved): 1 worker {times[1]:.1f} s, 2 workers "
               f"{times[2]:.1f} s, parallel efficiency {eff:.2f} (target 0.8); the same work in two warmed-up "

@@ -80,7 +80,7 @@ def _far(share, margin):
 def main() -> None:
     from fingerprints.survey import build_library
     from models.environment import EnvironmentClassifier
-    from training.benchmark import SPLITS, build_split
+    from simulation.split import SPLITS, build_split
     from training.clustering import cluster_windows
     from training.env import training_set
 

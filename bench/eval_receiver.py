@@ -1,7 +1,7 @@
 """Receiver consistency on simulated walks: acoustic NEES, errors and fix shares per class; GNSS NEES.
 
 For each walk directory given (``envfuse simulate walk`` output, with truth.csv),
-runs the receiver exactly as ``envfuse report walk`` does (:func:`pipeline.walk_data.read_walk`)
+runs the receiver exactly as ``envfuse report walk`` does (:func:`walks.reader.read_walk`)
 and prints, per environment class of the truth at each fix:
 
 * acoustic: number of fixes, NEES mean and median (2 degrees of freedom: expected
@@ -42,7 +42,7 @@ def evaluate(walk_dirs: list[Path], uere_json: Path | None = None, acoustic: boo
     from features.walk import load_walk, read_truth
     from features.gnss.nmea import epochs_on_time_base, read_nmea
     from features.gnss.positions import fixes_to_enu
-    from pipeline.walk_data import WALK_SPEED_PRIOR_M_S
+    from walks.reader import WALK_SPEED_PRIOR_M_S
 
     uere = None
     if uere_json is not None:

@@ -1,6 +1,6 @@
 """Typed exceptions. The CLI maps every :class:`EnvfuseError` to one line on stderr."""
 
-__all__ = ["EnvfuseError", "ConfigError", "NmeaError", "AudioError", "ImuError", "DataError"]
+__all__ = ["EnvfuseError", "ConfigError", "NmeaError", "AudioError", "ImuError", "DataError", "PseudorangeError"]
 
 
 class EnvfuseError(Exception):
@@ -25,3 +25,8 @@ class AudioError(DataError):
 
 class ImuError(DataError):
     """An IMU file lacks required columns or usable samples."""
+
+
+class PseudorangeError(DataError):
+    """A pseudorange / odometry / reference text file has a malformed line (named by file and line) or
+    holds no usable record."""

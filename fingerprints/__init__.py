@@ -1,4 +1,4 @@
-"""The fingerprint library and survey ingestion (DESIGN.md §2, §4). Imports only :mod:`features`.
+"""The fingerprint library and survey ingestion (docs/design.md §2, §4). Imports only :mod:`features`.
 
 Which module to open for what:
 
@@ -6,8 +6,8 @@ Which module to open for what:
   library file (``with FingerprintLibrary.open(path) as lib``), add sites and
   receivers, ``ingest_cell``, read ``samples()`` / ``cells()`` as numpy
   structured arrays, ``export_csv``.
-* :mod:`fingerprints.schema` — the SQLite tables, the fixed order of the 14
-  features (:data:`~fingerprints.schema.FEATURES`) and the schema version.
+* :mod:`fingerprints.sql` — the SQLite tables, the fixed order of the 14
+  features (:data:`~fingerprints.sql.FEATURES`) and the schema version.
 * :mod:`fingerprints.survey` — :func:`~fingerprints.survey.build_library`: a survey
   directory into a library (features per window, per-receiver C/N0 calibration,
   missing streams, resume); what ``envfuse survey build`` runs.

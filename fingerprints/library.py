@@ -1,6 +1,6 @@
 """The fingerprint library: one SQLite file of sites, receivers, cells, samples and clustering runs.
 
-Schema and feature order: :mod:`fingerprints.schema`. Guarantees:
+Schema and feature order: :mod:`fingerprints.sql`. Guarantees:
 
 * **WAL mode, foreign keys on, synchronous=FULL**: a committed cell survives a
   killed process (and a power cut); readers never block the writer.
@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import contextlib
 import csv
+import functools
 import json
 import os
 import sqlite3
@@ -41,11 +42,11 @@ from features.fileio import atomic_path
 from features.gnss.features import Cn0Reference
 
 from fingerprints.records import (
-    CellCapture, IngestResult, LibraryError, ReceiverRecord, _now_utc, _num, _structured, _utc, capture_sha256,
-    feature_matrix,
+    CellCapture, IngestResult, LibraryError, ReceiverRecord, capture_sha256, feature_matrix, now_utc, parse_iso_utc,
+    sql_number, structured_rows,
 )
 from fingerprints.runs import ClusteringRunsMixin
-from fingerprints.schema import (
+from fingerprints.sql import (
     ACOUSTIC_COUNTS, APPLICATION_ID, DDL, FEATURES, GNSS_COUNTS, SAMPLE_COLUMNS, SCHEMA_VERSION,
 )
 
@@ -57,6 +58,27 @@ EXPORT_COLUMNS = (("site", "receiver", "cell_id", "east_m", "north_m", "map_labe
 """Columns of :meth:`FingerprintLibrary.export_csv`, in order (one row per sample)."""
 
 _SQLITE_MAGIC = b"SQLite format 3\x00"
+
+
+def _same_params(stored_json: str, params: Mapping) -> bool:
+    """Whether the feature parameters stored as JSON are ``params``: compared as parsed JSON objects, so the
+    text's key order (an older writer, another tool, a hand edit) and spacing do not matter."""
+    try:
+        stored = json.loads(stored_json)
+    except (TypeError, ValueError):
+        return False
+    return stored == json.loads(json.dumps(dict(params)))
+
+
+def _reads(method):
+    """A read of the library: an SQLite error (a damaged file) becomes one :class:`LibraryError` naming it."""
+    @functools.wraps(method)
+    def wrapper(self, *args, **kwargs):
+        try:
+            return method(self, *args, **kwargs)
+        except sqlite3.DatabaseError as exc:
+            raise LibraryError(f"{self.path}: cannot read the library ({exc}); the file is damaged") from None
+    return wrapper
 
 
 class FingerprintLibrary(ClusteringRunsMixin):
@@ -73,7 +95,7 @@ class FingerprintLibrary(ClusteringRunsMixin):
 
         Raises :class:`LibraryError` for a directory, a missing file when not
         ``create``, a file that is not an envfuse library, or a schema version
-        other than :data:`~fingerprints.schema.SCHEMA_VERSION`.
+        other than :data:`~fingerprints.sql.SCHEMA_VERSION`.
         """
         path = Path(path)
         if path.is_dir():
@@ -182,6 +204,7 @@ class FingerprintLibrary(ClusteringRunsMixin):
     def schema_version(self) -> int:
         return int(self._conn.execute("PRAGMA user_version").fetchone()[0])
 
+    @_reads
     def sites(self) -> list[str]:
         """Names of the sites in the library, sorted."""
         return [r[0] for r in self._conn.execute("SELECT name FROM sites ORDER BY name")]
@@ -208,7 +231,7 @@ class FingerprintLibrary(ClusteringRunsMixin):
                 return int(row[0])
             cur = conn.execute("INSERT INTO sites (name, lat_deg, lon_deg, alt_m, site_toml_sha256, created_utc) "
                                "VALUES (?, ?, ?, ?, ?, ?)",
-                               (name, float(lat_deg), float(lon_deg), float(alt_m), site_toml_sha256, _now_utc()))
+                               (name, float(lat_deg), float(lon_deg), float(alt_m), site_toml_sha256, now_utc()))
             return int(cur.lastrowid)
 
     def add_receiver(self, site: str, name: str, cn0_reference: Mapping, *, calibrated: bool,
@@ -237,9 +260,31 @@ class FingerprintLibrary(ClusteringRunsMixin):
                 return int(row[0])
             cur = conn.execute("INSERT INTO receivers (site_id, name, description, cn0_reference_json, "
                                "cn0_calibrated, created_utc) VALUES (?, ?, ?, ?, ?, ?)",
-                               (site_id, name, description, text, int(bool(calibrated)), _now_utc()))
+                               (site_id, name, description, text, int(bool(calibrated)), now_utc()))
             return int(cur.lastrowid)
 
+    def recalibrate_receiver(self, site: str, name: str, cn0_reference: Mapping) -> None:
+        """Store a calibrated C/N0 reference for receiver ``name`` of ``site``, stored until now with the
+        uncalibrated default (a calibrated one is never changed: its cells were computed with it). The
+        cells computed with the old reference keep it in their feature parameters, so the next build sees
+        them as stale and recomputes them (``--replace``)."""
+        Cn0Reference.from_dict(dict(cn0_reference))
+        try:
+            text = json.dumps(dict(cn0_reference), sort_keys=True, allow_nan=False)
+        except (TypeError, ValueError) as exc:
+            raise LibraryError(f"receiver {name!r}: C/N0 reference is not plain JSON ({exc})") from None
+        with self._transaction() as conn:
+            site_id = self._site_id(site)
+            row = conn.execute("SELECT receiver_id, cn0_calibrated FROM receivers WHERE site_id = ? AND name = ?",
+                               (site_id, name)).fetchone()
+            if row is None:
+                raise LibraryError(f"{self.path}: site {site!r} has no receiver {name!r}")
+            if row[1]:
+                raise LibraryError(f"{self.path}: receiver {name!r} of site {site!r} is already calibrated")
+            conn.execute("UPDATE receivers SET cn0_reference_json = ?, cn0_calibrated = 1 WHERE receiver_id = ?",
+                         (text, int(row[0])))
+
+    @_reads
     def receiver(self, site: str, name: str) -> ReceiverRecord | None:
         """The stored receiver ``name`` of ``site``, or None."""
         row = self._conn.execute(
@@ -259,13 +304,13 @@ class FingerprintLibrary(ClusteringRunsMixin):
                                  (site, cell_id)).fetchone()
         if row is None or row[0] != capture_sha256:
             return False
-        return feature_params is None or row[1] == json.dumps(dict(feature_params), sort_keys=True)
+        return feature_params is None or _same_params(row[1], feature_params)
 
     def ingest_cell(self, site: str, cell: CellCapture, rows: Mapping[str, Sequence], *,
                     receiver: str | None = None, replace: bool = False) -> IngestResult:
         """Store one cell and its samples in one transaction.
 
-        ``rows`` maps column names of :data:`~fingerprints.schema.SAMPLE_COLUMNS`
+        ``rows`` maps column names of :data:`~fingerprints.sql.SAMPLE_COLUMNS`
         to sequences of one length (one entry per window); ``t_s`` is required;
         an absent feature column, or NaN/inf in it, is stored as NULL; absent
         flags and counts are 0, ``t_utc`` and the hashes are filled in from
@@ -288,7 +333,7 @@ class FingerprintLibrary(ClusteringRunsMixin):
             status = "added"
             params = json.dumps(cell.feature_params, sort_keys=True)
             if old is not None:
-                if old[1] == cell.capture_sha256 and old[2] == params:
+                if old[1] == cell.capture_sha256 and _same_params(old[2], cell.feature_params):
                     n_old = conn.execute("SELECT count(*) FROM samples WHERE cell_pk = ?", (old[0],)).fetchone()[0]
                     return IngestResult(cell.cell_id, "unchanged", int(n_old))
                 if not replace:
@@ -307,9 +352,9 @@ class FingerprintLibrary(ClusteringRunsMixin):
                 "map_share, missing_streams, stream_notes, gnss_sha256, audio_sha256, capture_sha256, "
                 "feature_params_json, n_samples, ingested_utc) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
                 (site_id, receiver_id, cell.cell_id, float(cell.east_m), float(cell.north_m), cell.start_utc,
-                 _num(cell.duration_s), cell.map_label, _num(cell.map_share), "+".join(cell.missing_streams),
+                 sql_number(cell.duration_s), cell.map_label, sql_number(cell.map_share), "+".join(cell.missing_streams),
                  cell.stream_notes, cell.gnss_sha256, cell.audio_sha256, cell.capture_sha256,
-                 params, len(table), _now_utc()))
+                 params, len(table), now_utc()))
             self._insert_samples(conn, int(cur.lastrowid), table)
         return IngestResult(cell.cell_id, status, len(table))
 
@@ -328,14 +373,14 @@ class FingerprintLibrary(ClusteringRunsMixin):
                 raise LibraryError(f"cell {cell.cell_id}: column {k} has {len(v)} values, t_s has {n}")
         if not np.all(np.isfinite(t)) or len(np.unique(t)) != n:
             raise LibraryError(f"cell {cell.cell_id}: t_s must be finite and distinct")
-        start = _utc(cell.start_utc, f"cell {cell.cell_id} start_utc")
+        start = parse_iso_utc(cell.start_utc, f"cell {cell.cell_id} start_utc")
         out = []
         for i in range(n):
             def get(k, default=None):
                 return cols[k][i] if k in cols else default
             rec = [float(t[i]),
                    (start + timedelta(seconds=float(t[i]))).isoformat(timespec="milliseconds").replace("+00:00", "Z")]
-            rec += [_num(get(k)) for k in FEATURES]
+            rec += [sql_number(get(k)) for k in FEATURES]
             for k in ("gnss_available", "acoustic_available"):
                 v = int(get(k, 0))
                 if v not in (0, 1):
@@ -346,7 +391,7 @@ class FingerprintLibrary(ClusteringRunsMixin):
                 if v < 0:
                     raise LibraryError(f"cell {cell.cell_id}: {k} must be >= 0, got {v}")
                 rec.append(v)
-            rec += [_num(get("snr_db_mean")), str(get("acoustic_flags", "") or ""),
+            rec += [sql_number(get("snr_db_mean")), str(get("acoustic_flags", "") or ""),
                     get("gnss_sha256", cell.gnss_sha256), get("audio_sha256", cell.audio_sha256)]
             out.append(tuple(rec))
         return out
@@ -362,6 +407,7 @@ class FingerprintLibrary(ClusteringRunsMixin):
         self._site_id(site)
         return f" WHERE {alias}.name = ?", (site,)
 
+    @_reads
     def cells(self, site: str | None = None) -> np.ndarray:
         """Stored cells as a structured array, ordered by site and cell id.
 
@@ -378,13 +424,29 @@ class FingerprintLibrary(ClusteringRunsMixin):
         names = ("site", "receiver", "cell_id", "east_m", "north_m", "start_utc", "duration_s", "map_label",
                  "map_share", "missing_streams", "n_samples")
         kinds = "UUUffUfUfUi"
-        return _structured(rows, names, kinds)
+        return structured_rows(rows, names, kinds)
 
+    @_reads
+    def cell_feature_params(self, site: str | None = None) -> dict:
+        """The feature parameters each stored cell was computed with (window, hop, receiver, C/N0 reference),
+        keyed by (site, cell_id)."""
+        where, args = self._where_site(site)
+        rows = self._conn.execute("SELECT s.name, c.cell_id, c.feature_params_json FROM cells c JOIN sites s "
+                                  "USING (site_id)" + where, args).fetchall()
+        out = {}
+        for name, cell_id, text in rows:
+            try:
+                out[(str(name), str(cell_id))] = json.loads(text) if text else {}
+            except ValueError:
+                out[(str(name), str(cell_id))] = {}
+        return out
+
+    @_reads
     def samples(self, site: str | None = None) -> np.ndarray:
         """Stored samples as a structured array (n_samples,), ordered by site, cell id and t_s.
 
         Fields: ``sample_id`` (int), ``site, cell_id`` (str), ``t_s`` (float),
-        the 14 :data:`~fingerprints.schema.FEATURES` (float, NaN = missing),
+        the 14 :data:`~fingerprints.sql.FEATURES` (float, NaN = missing),
         ``gnss_available, acoustic_available`` (bool), the counts (int) and
         ``snr_db_mean`` (float). :func:`feature_matrix` gives the (n, 14) array.
         """
@@ -398,9 +460,10 @@ class FingerprintLibrary(ClusteringRunsMixin):
         names = ("sample_id", "site", "cell_id", "t_s") + FEATURES + ("gnss_available", "acoustic_available") \
             + counts + ("snr_db_mean",)
         kinds = "iUUf" + "f" * len(FEATURES) + "bb" + "i" * len(counts) + "f"
-        return _structured(rows, names, kinds)
+        return structured_rows(rows, names, kinds)
 
     # ---------------------------------------------------------------- export
+    @_reads
     def export_csv(self, out, site: str | None = None) -> int:
         """Write every sample (of ``site``) as CSV with :data:`EXPORT_COLUMNS`; returns the number of rows.
 

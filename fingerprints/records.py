@@ -18,16 +18,18 @@ from features.errors import EnvfuseError
 from features.gnss.features import Cn0Reference
 from features.site import ENV_CLASSES
 
-from fingerprints.schema import FEATURES
+from fingerprints.sql import FEATURES
 
-__all__ = ["LibraryError", "CellCapture", "IngestResult", "ReceiverRecord", "capture_sha256", "feature_matrix"]
+__all__ = ["LibraryError", "CellCapture", "IngestResult", "ReceiverRecord", "capture_sha256", "feature_matrix", "now_utc",
+           "parse_iso_utc", "sql_number", "structured_rows"]
 
 
 class LibraryError(EnvfuseError):
     """A fingerprint library cannot be opened or an operation on it is refused."""
 
 
-def _now_utc() -> str:
+def now_utc() -> str:
+    """The current UTC time, ISO 8601 to the second: 2026-12-02T02:08:07Z."""
     return datetime.now(timezone.utc).isoformat(timespec="seconds").replace("+00:00", "Z")
 
 
@@ -74,7 +76,7 @@ class CellCapture:
         bad = set(self.missing_streams) - {"gnss", "audio"}
         if bad:
             raise LibraryError(f"cell {self.cell_id}: unknown stream names in missing_streams: {sorted(bad)}")
-        _utc(self.start_utc, f"cell {self.cell_id} start_utc")
+        parse_iso_utc(self.start_utc, f"cell {self.cell_id} start_utc")
 
     @property
     def capture_sha256(self) -> str:
@@ -101,7 +103,8 @@ class ReceiverRecord:
     calibrated: bool
 
 
-def _utc(text: str, where: str) -> datetime:
+def parse_iso_utc(text: str, where: str) -> datetime:
+    """An ISO 8601 time (``Z`` or an offset) as an aware UTC datetime; LibraryError naming ``where`` if not one."""
     try:
         t = datetime.fromisoformat(str(text).replace("Z", "+00:00"))
     except ValueError:
@@ -109,7 +112,7 @@ def _utc(text: str, where: str) -> datetime:
     return t if t.tzinfo else t.replace(tzinfo=timezone.utc)
 
 
-def _num(v) -> float | None:
+def sql_number(v) -> float | None:
     """A float for SQLite: NaN and ±inf become NULL (a missing feature)."""
     if v is None:
         return None
@@ -124,7 +127,7 @@ def feature_matrix(samples: np.ndarray) -> np.ndarray:
     return np.column_stack([np.asarray(samples[name], dtype=float) for name in FEATURES])
 
 
-def _structured(rows: list[tuple], names: Sequence[str], kinds: str) -> np.ndarray:
+def structured_rows(rows: list[tuple], names: Sequence[str], kinds: str) -> np.ndarray:
     """A structured array from SQL rows; kinds per field: i int64, f float64 (NULL → NaN), b bool, U str (NULL → '')."""
     cols = list(zip(*rows)) if rows else [()] * len(names)
     fields, data = [], []

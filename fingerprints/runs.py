@@ -12,7 +12,7 @@ from typing import Mapping
 
 import numpy as np
 
-from fingerprints.records import LibraryError, _now_utc, _num, _structured
+from fingerprints.records import LibraryError, now_utc, sql_number, structured_rows
 
 __all__ = ["ClusteringRunsMixin"]
 
@@ -57,10 +57,10 @@ class ClusteringRunsMixin:
             site_id = None if site is None else self._site_id(site)
             cur = conn.execute("INSERT INTO clustering_runs (site_id, created_utc, model_version, parameters_json, "
                                "n_clusters, cluster_names_json, note) VALUES (?, ?, ?, ?, ?, ?, ?)",
-                               (site_id, _now_utc(), str(model_version), params, n_clusters, names, note))
+                               (site_id, now_utc(), str(model_version), params, n_clusters, names, note))
             run_id = int(cur.lastrowid)
-            xs = [None] * n if emb is None else [_num(v) for v in emb[:, 0]]
-            ys = [None] * n if emb is None else [_num(v) for v in emb[:, 1]]
+            xs = [None] * n if emb is None else [sql_number(v) for v in emb[:, 0]]
+            ys = [None] * n if emb is None else [sql_number(v) for v in emb[:, 1]]
             try:
                 conn.executemany(
                     "INSERT INTO run_samples (run_id, sample_id, x, y, rho, delta, cluster, is_center, is_halo) "
@@ -84,5 +84,5 @@ class ClusteringRunsMixin:
                 "cluster_names": None if meta[4] is None else json.loads(meta[4]), "note": meta[5]}
         rows = self._conn.execute("SELECT sample_id, x, y, rho, delta, cluster, is_center, is_halo FROM run_samples "
                                   "WHERE run_id = ? ORDER BY sample_id", (int(run_id),)).fetchall()
-        return info, _structured(rows, ("sample_id", "x", "y", "rho", "delta", "cluster", "is_center", "is_halo"),
+        return info, structured_rows(rows, ("sample_id", "x", "y", "rho", "delta", "cluster", "is_center", "is_halo"),
                                  "iffffibb")

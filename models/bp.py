@@ -44,6 +44,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from features.errors import DataError
+
 __all__ = ["BPConfig", "BPCorrector", "bp_inputs", "N_INPUTS", "Correction"]
 
 N_CLASSES = 3
@@ -169,7 +171,7 @@ class BPCorrector:
         okv = np.isfinite(Y_va).all(axis=1)
         X_va, Y_va = X_va[okv], Y_va[okv]
         if len(X_tr) < 20:
-            raise ValueError(f"too few training events for the BP network ({len(X_tr)}; need at least 20)")
+            raise DataError(f"too few training events for the BP network ({len(X_tr)}; need at least 20)")
         self.x_mean_ = X_tr.mean(axis=0)
         self.x_scale_ = np.where(X_tr.std(axis=0) > 1e-9, X_tr.std(axis=0), 1.0)
         self.y_scale_ = float(max(np.sqrt(np.mean(Y_tr ** 2)), 1e-3))
@@ -279,11 +281,13 @@ def _innovation_off(raw: np.ndarray, withheld: np.ndarray, prior_en: np.ndarray,
     # NIS = ν' S⁻¹ ν, uncorrected and corrected
     n0 = np.einsum("ni,nij,nj->n", v0, s_inv, v0)
     n1 = np.einsum("ni,nij,nj->n", v1, s_inv, v1)
-    c0, c1 = np.concatenate([[0.0], np.cumsum(n0)]), np.concatenate([[0.0], np.cumsum(n1)])
+    # equal window lengths: comparing the means is the sign of Σ (NIS₁ − NIS₀) over the window. Summed as
+    # differences, a window where no correction was applied sums to exactly 0 (enabled, as the loop's equal
+    # means say); differences of running sums of each would leave rounding residue there and flip the guard.
+    d = np.concatenate([np.zeros(window - 1), n1 - n0])
+    win = np.lib.stride_tricks.sliding_window_view(d, window).sum(axis=1)
     j = np.arange(1, k.size + 1)
-    lo = np.maximum(j - window, 0)
-    # equal window lengths: comparing the sums is comparing the means
-    disabled = ((c1[j] - c1[lo]) > (c0[j] - c0[lo])) & (np.minimum(j, window) >= 3)
+    disabled = (win > 0.0) & (np.minimum(j, window) >= 3)
     # hold the state of the latest fix at or before each event (enabled before the first)
     idx = np.searchsorted(k, np.arange(m), side="right") - 1
     off[idx >= 0] = disabled[idx[idx >= 0]]

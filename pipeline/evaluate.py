@@ -1,14 +1,18 @@
 """Batch evaluation: every method on every walk, metrics, summary, plots (``envfuse evaluate``).
 
-:func:`evaluate_walk` is the per-walk task — a pure function of the walk's
-files and the model bundle's path, so it runs the same serially or on a Dask
-worker (:mod:`pipeline.parallel`). :func:`evaluate` maps it over the walks,
-writes ``metrics.csv`` (:data:`pipeline.fusion.METRIC_COLUMNS`) and the PNGs,
-and returns the rows.
+:func:`evaluate_walk` is the per-walk task — :func:`walks.fuse.fuse_walk`, the
+path ``envfuse run`` takes, then the walk's metric rows and the per-epoch
+series the plots draw. It is a pure function of the walk's files and the model
+bundle's path, so it runs the same serially or on a Dask worker
+(:mod:`pipeline.parallel`); the model is loaded once per process
+(:func:`load_model`). :func:`evaluate` maps it over the walks, writes
+``metrics.csv`` (:data:`walks.score.METRIC_COLUMNS`) and the PNGs, and returns
+the rows.
 """
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import io
 import os
@@ -18,29 +22,51 @@ import numpy as np
 
 from features.errors import ConfigError
 from features.fileio import atomic_write_text
-from pipeline.fusion import METHODS, METRIC_COLUMNS, metric_rows, run_methods, score, track_errors, walk_inputs
 from pipeline.parallel import TaskFailure, map_walks
-from pipeline.walk_data import read_walk
+from walks.methods import method_names
+from walks.score import METRIC_COLUMNS, metric_rows, score, track_errors
 
-__all__ = ["evaluate_walk", "evaluate", "summary_table", "pooled_rows"]
+__all__ = ["evaluate_walk", "evaluate", "summary_table", "pooled_rows", "load_model", "method_order", "NEES_NOTE",
+           "bp_guard_line", "REPORT_PLOT_PREFIXES"]
+
+_MODELS: dict = {}
+
+
+def load_model(model_dir: str | os.PathLike):
+    """The fusion model of ``model_dir``, loaded once per process (again only if its ``bundle.json`` changed):
+    a Dask worker keeps it across the walks it is given."""
+    from models.fusion.model import load_fusion_model
+
+    path = Path(model_dir).resolve()
+    try:
+        stamp = (path / "bundle.json").stat().st_mtime_ns
+    except OSError:
+        stamp = None
+    key = str(path)
+    hit = _MODELS.get(key)
+    if hit is None or hit[0] != stamp or stamp is None:
+        _MODELS.clear()
+        _MODELS[key] = (stamp, load_fusion_model(path))
+    return _MODELS[key][1]
 
 
 def evaluate_walk(walk, model_dir: str, methods: tuple, force: bool = False) -> dict:
-    """Run ``methods`` on one walk; returns {'walk', 'rows', 'skipped', 'series'} (series: per method the
+    """Run ``methods`` on one walk; returns {'walk', 'rows', 'skipped', 'series', ...} (series: per method the
     error over time, for plots; kept small: every event of a filter, every fix of a source)."""
-    from models.fusion_model import load_fusion_model
+    from pipeline.site_map import class_map_for
+    from walks.fuse import fuse_walk
 
-    model = load_fusion_model(model_dir)
-    data = read_walk(walk)
-    sites = model.meta.get("sites", [])
-    if sites and data.site.name not in sites and not force:
-        raise ConfigError(f"{walk}: site {data.site.name!r} is not one the model was trained on ({sites}); "
-                          "pass --force to evaluate anyway")
-    inputs = walk_inputs(data, model)
-    tracks, skipped = run_methods(model, inputs, methods)
-    resolved = Path(walk).resolve()
-    name = f"{resolved.parent.name}/{resolved.name}"
-    rows = score(tracks, data, name)
+    from features.errors import DataError
+
+    fused = fuse_walk(walk, load_model(model_dir), methods, class_map_for=class_map_for, force=force)
+    data, tracks = fused.data, fused.tracks
+    if data.truth is None:
+        raise DataError(f"{walk}: no truth.csv, so no error to measure (evaluate scores tracks against truth; "
+                        "'envfuse run' writes a walk's track without one)")
+    rows = score(tracks, data, fused.name)
+    if not rows:
+        why = "; ".join(f"{m}: {r}" for m, r in fused.skipped.items()) or "no track overlaps the truth in time"
+        raise DataError(f"{walk}: no method gave a track to score ({why})")
     series = {}
     if data.truth is not None:
         for m, tr in tracks.items():
@@ -52,10 +78,12 @@ def evaluate_walk(walk, model_dir: str, methods: tuple, force: bool = False) -> 
         series["_truth"] = {"t_s": data.truth.t_s.astype(np.float32), "cls": data.truth.env_class.astype(np.int8),
                             "east_m": data.truth.east_m.astype(np.float32),
                             "north_m": data.truth.north_m.astype(np.float32)}
-    bp_off = tracks["adaptive"].info.get("bp_disabled_share") if "adaptive" in tracks else None
-    return {"walk": name, "walk_dir": str(walk), "rows": rows, "skipped": skipped, "series": series,
-            "bp_disabled_share": bp_off,
-            "site": data.site.name}
+    bp_off = (tracks["adaptive_correction"].info.get("bp_disabled_share")
+              if "adaptive_correction" in tracks else None)
+    guard = tracks["adaptive"].info["run"].info.get("bp_guard_share") if "adaptive" in tracks else None
+    return {"walk": fused.name, "walk_dir": str(walk), "rows": rows, "skipped": fused.skipped, "series": series,
+            "bp_disabled_share": bp_off, "bp_guard_share": guard, "site": data.site.name,
+            "notes": list(data.notes)}
 
 
 def pooled_rows(results: list[dict]) -> list[dict]:
@@ -66,7 +94,7 @@ def pooled_rows(results: list[dict]) -> list[dict]:
             if not m.startswith("_"):
                 pools.setdefault(m, []).append(s)
     rows = []
-    for m in _method_order(sorted(pools)):
+    for m in method_order(pools):
         err = np.concatenate([s["err_m"] for s in pools[m]]).astype(float)
         cls = np.concatenate([s["cls"] for s in pools[m]])
         nees = np.concatenate([s["nees"] for s in pools[m]]).astype(float)
@@ -74,23 +102,28 @@ def pooled_rows(results: list[dict]) -> list[dict]:
     return rows
 
 
-def _method_order(names):
-    base = [m for m in METHODS for v in (m, m + "+rts") if v in names]
-    seen, out = set(), []
-    for m in METHODS:
-        for v in (m, m + "+rts"):
-            if v in names and v not in seen:
-                seen.add(v)
-                out.append(v)
-    return out + [n for n in names if n not in seen and n not in base]
+def method_order(names) -> list[str]:
+    """``names`` in report order: the registry's order, each filter's ``+rts`` after it, unknown names last."""
+    order = method_names(smoothed=True)
+    known = [m for m in order if m in names]
+    return known + sorted(n for n in names if n not in order)
+
+
+NEES_NOTE = ("NEES ok: share of epochs whose normalised error e'P^-1e (e: error, P: the track's own covariance) "
+             "lies inside the two-sided 95 % chi-square(2) interval [0.05, 7.38]; a filter whose covariance "
+             "matches its errors scores about 0.95, lower means it is over- or under-confident "
+             "(metrics.csv: nees_in_bounds; empty for a source without a covariance)")
+"""The footnote printed under :func:`summary_table`."""
 
 
 def summary_table(rows: list[dict]) -> str:
-    """Plain-text table of pooled rows: method, then mean / median / p95 / max per class and NEES share."""
+    """Plain-text table of pooled rows: method, then mean / median / p95 / max per class and the NEES share
+    (:data:`NEES_NOTE` says what it is)."""
     classes = ("all", "open", "light", "heavy")
     by = {(r["method"], r["env_class"]): r for r in rows}
-    methods = _method_order(sorted({r["method"] for r in rows}))
-    head = f"{'method':18s} " + " ".join(f"{c + ' mean/med/p95':>21s}" for c in classes) + "  max_m  NEES95"
+    methods = method_order({r["method"] for r in rows})
+    w = max([18] + [len(m) for m in methods])
+    head = f"{'method':{w}s} " + " ".join(f"{c + ' mean/med/p95 m':>21s}" for c in classes) + "  max_m NEES ok"
     lines = [head, "-" * len(head)]
     for m in methods:
         cells = []
@@ -99,9 +132,9 @@ def summary_table(rows: list[dict]) -> str:
             cells.append(f"{r['mean_m']:6.2f}/{r['median_m']:5.2f}/{r['p95_m']:5.2f}   " if r else " " * 21)
         a = by.get((m, "all"))
         nib = "" if a is None or not np.isfinite(a["nees_in_bounds"]) else f"{a['nees_in_bounds']:.2f}"
-        lines.append(f"{m:18s} " + " ".join(f"{x:>21s}" for x in cells) + f" {a['max_m'] if a else float('nan'):6.2f}"
+        lines.append(f"{m:{w}s} " + " ".join(f"{x:>21s}" for x in cells) + f" {a['max_m'] if a else float('nan'):6.2f}"
                      f"  {nib:>6s}")
-    return "\n".join(lines)
+    return "\n".join(lines + [NEES_NOTE])
 
 
 def _csv_text(rows: list[dict]) -> str:
@@ -113,13 +146,19 @@ def _csv_text(rows: list[dict]) -> str:
     return buf.getvalue()
 
 
-def evaluate(walks: list, model_dir: str | os.PathLike, report_dir: str | os.PathLike, methods=METHODS,
+def evaluate(walks: list, model_dir: str | os.PathLike, report_dir: str | os.PathLike, methods=None,
              workers: int | None = None, scheduler: str | None = None, force: bool = False,
              progress: bool = True, plots: bool = True) -> dict:
-    """Evaluate ``methods`` on ``walks``; writes ``metrics.csv`` and the plots into ``report_dir``."""
-    from models.fusion_model import load_fusion_model
+    """Evaluate ``methods`` (default: every registered one) on ``walks``; writes ``metrics.csv`` and the plots
+    into ``report_dir``.
 
-    load_fusion_model(model_dir)           # a damaged model fails here, once, before any worker starts
+    A walk whose task fails (any error, here or on a worker) is named in ``failures`` and left out; the
+    others' report is written. An existing report is replaced consistently: its ``metrics.csv`` is removed
+    first, the plots written, plots of walks no longer in the report removed, and the new ``metrics.csv``
+    written last (atomically) — so a report with a ``metrics.csv`` is always a complete one.
+    """
+    methods = method_names() if methods is None else tuple(methods)
+    load_model(model_dir)                  # a damaged model fails here, once, before any worker starts
     report = Path(report_dir)
     if report.exists() and not report.is_dir():
         raise ConfigError(f"--report {report} exists and is not a directory")
@@ -130,10 +169,30 @@ def evaluate(walks: list, model_dir: str | os.PathLike, report_dir: str | os.Pat
     report.mkdir(parents=True, exist_ok=True)
     per_walk = [row for r in ok for row in r["rows"]]
     pooled = pooled_rows(ok) if ok else []
-    atomic_write_text(report / "metrics.csv", _csv_text(per_walk + pooled))
+    with contextlib.suppress(FileNotFoundError):
+        (report / "metrics.csv").unlink()       # from here until the new one lands, the report is incomplete
     pngs = []
     if plots and ok:
         from pipeline.evaluate_plots import plot_report
 
         pngs = plot_report(ok, pooled, report)
+    keep = {Path(p).name for p in pngs}
+    for old in report.glob("*.png"):
+        if old.name not in keep and old.name.startswith(REPORT_PLOT_PREFIXES):
+            old.unlink()
+    atomic_write_text(report / "metrics.csv", _csv_text(per_walk + pooled))
     return {"results": ok, "failures": failures, "pooled": pooled, "pngs": pngs}
+
+
+REPORT_PLOT_PREFIXES = ("trajectory_", "error_time_", "error_cdf", "error_by_class")
+"""Names of the plots an evaluation writes; older ones not written again are removed from the report."""
+
+
+def bp_guard_line(share: float) -> str:
+    """What the BP guards did, in words a reader of the summary can use."""
+    text = (f"BP correction (method adaptive): applied on {100 * (1 - share):.1f} % of epochs; withheld on "
+            f"{100 * share:.1f} % by its guards (input outside the network's training range, correction smaller "
+            "than its own uncertainty, or the next fixes fitting worse with it), where adaptive equals adaptive_nobp")
+    if share >= 0.999:
+        text += "; here the network never acted, so adaptive is adaptive_nobp"
+    return text

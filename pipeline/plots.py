@@ -17,7 +17,8 @@ from features.errors import ConfigError  # noqa: E402
 from features.fileio import atomic_path  # noqa: E402
 from features.site import ENV_CLASSES, Site  # noqa: E402
 
-__all__ = ["CLASS_COLOURS", "PLOT_FORMATS", "plot_format", "plot_site", "save_figure", "EMI_COLOUR"]
+__all__ = ["CLASS_COLOURS", "PLOT_FORMATS", "plot_format", "plot_site", "save_figure", "EMI_COLOUR", "KIND_COLOURS",
+           "draw_structures"]
 
 PLOT_FORMATS = ("png", "pdf", "svg")
 """Figure formats written, chosen by the output's suffix (``-``, standard output, is PNG)."""
@@ -42,7 +43,36 @@ _KIND_COLOURS = {"transformer": "#151515", "firewall": "#8b8b8b", "building": "#
                  "equipment": "#2f7f8f"}
 """Structure colours, distinct from each other and from the class colours (transformers near-black,
 switchyard equipment teal)."""
+KIND_COLOURS = _KIND_COLOURS
+"""Public name of the structure colours: every plot that draws a site's layout uses them."""
 EMI_COLOUR = "purple"
+
+
+def draw_structures(ax, site: Site, alpha: float = 1.0, zorder: float = 1, extent=None) -> list:
+    """Draw ``site``'s layout as every plot does: solid structures filled in their kind's colour
+    (:data:`KIND_COLOURS`), porous ones (lattice gantries) hatched in it; ``alpha`` < 1 fades them under data.
+    Returns legend handles for the kinds drawn (porous ones marked "hatched: porous, attenuates only"); with
+    ``extent`` (east0, east1, north0, north1) only for the kinds seen inside it."""
+    kinds = {}
+    for b in site.layout:
+        if extent is not None and (b.east_max_m < extent[0] or b.east_min_m > extent[1]
+                                   or b.north_max_m < extent[2] or b.north_min_m > extent[3]):
+            continue
+        colour = _KIND_COLOURS.get(b.kind, "#777777")
+        ax.add_patch(Rectangle((b.east_min_m, b.north_min_m), b.east_max_m - b.east_min_m,
+                               b.north_max_m - b.north_min_m, facecolor="none" if b.porous else colour,
+                               edgecolor=colour, hatch="////" if b.porous else None, lw=1.0, alpha=alpha,
+                               zorder=zorder))
+        kinds[b.kind] = kinds.get(b.kind, False) or b.porous
+    handles = []
+    for kind, porous in kinds.items():
+        colour = _KIND_COLOURS.get(kind, "#777777")
+        if porous:
+            handles.append(Patch(facecolor="none", edgecolor=colour, hatch="////", alpha=alpha,
+                                 label=f"{kind} (hatched: porous lattice, attenuates only)"))
+        else:
+            handles.append(Patch(facecolor=colour, edgecolor=colour, alpha=alpha, label=kind))
+    return handles
 
 
 def save_figure(fig, path: str | os.PathLike, dpi: int = 130) -> Path:
@@ -66,9 +96,10 @@ def plot_site(site: Site, path: str | os.PathLike, resolution_m: float = 0.5, ti
     from matplotlib.cm import ScalarMappable
     from matplotlib.colors import BoundaryNorm
 
-    from simulation.site.environment import LIGHT_MAX, OPEN_MAX, class_map, classify_share  # pipeline may import simulation
-    east, north, share = class_map(site, resolution_m=resolution_m, n_az=120)
-    cls = np.where(np.isfinite(share), classify_share(np.nan_to_num(share)), -1).astype(float)
+    from pipeline.site_map import classify, share_grid
+
+    east, north, share, open_max, light_max = share_grid(site, resolution_m=resolution_m, n_az=120)
+    cls = np.where(np.isfinite(share), classify(np.nan_to_num(share)), -1).astype(float)
     cls[cls < 0] = np.nan
     shares = [np.mean(cls[np.isfinite(cls)] == k) for k in range(3)]
     fig, ax = plt.subplots(figsize=(10, 10 * (north[-1] - north[0] + 1) / (east[-1] - east[0] + 1) + 0.8))
@@ -92,10 +123,10 @@ def plot_site(site: Site, path: str | os.PathLike, resolution_m: float = 0.5, ti
         handles += [plt.Line2D([], [], ls=":", color=EMI_COLOUR, lw=1.0, label="EMI zone (C/N0 loss)")]
     ax.legend(handles=handles, loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8)
     # colour bar of the blocked-sky share with the class thresholds (the map shows the class of each share)
-    norm = BoundaryNorm([0.0, OPEN_MAX, LIGHT_MAX, 1.0], cmap.N)
+    norm = BoundaryNorm([0.0, open_max, light_max, 1.0], cmap.N)
     bar = fig.colorbar(ScalarMappable(norm=norm, cmap=cmap), ax=ax, location="bottom", fraction=0.04, pad=0.08,
-                       aspect=40, ticks=[0.0, OPEN_MAX, LIGHT_MAX, 1.0], spacing="proportional")
-    bar.ax.set_xticklabels(["0 %", f"{100 * OPEN_MAX:.0f} %", f"{100 * LIGHT_MAX:.0f} %", "100 %"])
+                       aspect=40, ticks=[0.0, open_max, light_max, 1.0], spacing="proportional")
+    bar.ax.set_xticklabels(["0 %", f"{100 * open_max:.0f} %", f"{100 * light_max:.0f} %", "100 %"])
     bar.set_label("blocked sky share above 10° elevation, weighted by the satellites' passes over a day: "
                   "open < 10 % <= light <= 40 % < heavy", fontsize=8)
     ax.set_xlabel("east (m)")

@@ -141,3 +141,25 @@ def test_vectorised_innovation_guard_equals_its_loop():
         window = int(rng.integers(1, 15))
         assert np.array_equal(_innovation_off(raw, withheld, prior, z, S, updated, window),
                               _guard_loop(raw, withheld, prior, z, S, updated, window))
+
+
+def test_innovation_guard_is_on_in_a_window_without_corrections():
+    """Where no correction reached the last ``window`` fixes, corrected and uncorrected NIS are the same numbers:
+    the guard must read that as a tie (on), after any history — the running-sum form once left rounding residue
+    of ~1e-14 there and switched the correction off on a held-out walk."""
+    from models.bp import _innovation_off
+
+    rng = np.random.default_rng(3)
+    m, window = 400, 10
+    raw = rng.normal(0, 0.5, (m, 2))
+    withheld = np.zeros(m, bool)
+    withheld[300:] = True                                  # no correction applied from event 300 on
+    prior = rng.normal(0, 1, (m, 2)) * 37.3
+    z = prior + rng.normal(0, 0.5, (m, 2))
+    S = np.tile(np.eye(2) * 0.3, (m, 1, 1)) * rng.uniform(0.5, 2, (m, 1, 1))
+    updated = np.ones(m, bool)
+    off = _innovation_off(raw, withheld, prior, z, S, updated, window)
+    assert off[:300].any()                                 # the guard does act while corrections are applied
+    assert not off[302 + window:].any()
+    assert np.array_equal(off, _guard_loop(raw, withheld, prior, z, S, updated, window))
+

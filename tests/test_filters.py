@@ -11,12 +11,22 @@ import math
 import numpy as np
 import pytest
 
-from models.fusion import (ACOUSTIC, GNSS, STEP, AcousticEvents, ClassTrack, EkfConfig, EventEKF, EventError,
-                           FilterError, FixedNoise, GnssEvents, IMMFilter, NoiseError, PerClassNoise, QualityNoise,
-                           SageHusaNoise, StandIntervals, StepEvents, VBAdaptiveNoise, chi2_bounds, in_bounds_share,
+from models.fusion import (ACOUSTIC, GNSS, STEP, AcousticEvents, ClassMap, ClassTrack, EkfConfig, EventEKF,
+                           EventError, FilterError, FixedNoise, GnssEvents, IMMFilter, NoiseError, PerClassNoise,
+                           QualityNoise, StandIntervals, StepEvents, VBAdaptiveNoise, chi2_bounds, in_bounds_share,
                            merge_events, nees, nis_summary, rts_smooth)
-from models.fusion.ekf import _step_predict
+from models.fusion.core import kalman_update, predict_step
 from tests.fusion_synth import synth_walk
+from tests.kf_reference import reference_ekf, reference_imm, reference_vb
+
+EAST_SPLIT = ClassMap.from_axes(np.array([-1000.0, 1000.0]), np.array([0.0]), np.array([[2, 0]]))
+"""A site map: class 0 from east = 0 eastwards, class 2 west of it (the nearest of two cells 2 km apart)."""
+
+
+def step_predict(x, P, L, psi, cfg):
+    """The core's PDR step with the config's step noise: (x⁻, P⁻, F)."""
+    return predict_step(np.asarray(x, float), np.asarray(P, float), L, psi, cfg.sigma_step_length_m ** 2,
+                        cfg.sigma_heading_rad ** 2)
 
 
 def rms(a, b):
@@ -49,10 +59,9 @@ def all_methods(stream):
     pc = PerClassNoise(3, 1.5, 0.3).fit()
     out = [("kf", EventEKF(noise=FixedNoise(1.5, 0.3)).run(stream)),
            ("kf_quality", EventEKF(noise=QualityNoise()).run(stream)),
-           ("kf_map", EventEKF(noise=pc).run(stream, class_at=lambda e, n: 0 if e > 0 else 2)),
+           ("kf_map", EventEKF(noise=pc).run(stream, class_at=EAST_SPLIT)),
            ("adaptive_nobp", EventEKF(noise=pc).run(stream, classes=classes)),
            ("aekf", EventEKF(noise=VBAdaptiveNoise(1.5, 0.3)).run(stream)),
-           ("sage_husa", EventEKF(noise=SageHusaNoise(1.5, 0.3)).run(stream)),
            ("huber", EventEKF(EkfConfig(outlier="huber"), FixedNoise(1.5, 0.3)).run(stream)),
            ("bias", EventEKF(EkfConfig(gnss_bias=True), FixedNoise(1.5, 0.3)).run(stream)),
            ("imm", IMMFilter(pc).run(stream, classes=classes))]
@@ -127,15 +136,37 @@ def test_update_matches_filterpy_joseph_form():
 def test_step_jacobian_matches_finite_differences():
     cfg = EkfConfig()
     x = np.array([3.0, -1.0, 0.2, 0.05])
-    F = np.eye(4)
-    _step_predict(x, np.eye(4), 0.72, 1.1, cfg, F)
+    _, _, F = step_predict(x, np.eye(4), 0.72, 1.1, cfg)
     h = 1e-6
     for j in (2, 3):
         d = np.zeros(4)
         d[j] = h
-        xp, _ = _step_predict(x + d, np.eye(4), 0.72, 1.1, cfg, np.eye(4))
-        xm, _ = _step_predict(x - d, np.eye(4), 0.72, 1.1, cfg, np.eye(4))
+        xp, _, _ = step_predict(x + d, np.eye(4), 0.72, 1.1, cfg)
+        xm, _, _ = step_predict(x - d, np.eye(4), 0.72, 1.1, cfg)
         np.testing.assert_allclose((xp - xm)[:2] / (2 * h), F[:2, j], rtol=1e-6)
+
+
+def test_update_matches_filterpy_with_an_ill_conditioned_prior():
+    """The core's update against filterpy's (Joseph form) where the short form P = (I − KH)P loses accuracy:
+    a prior of condition number ~1e12 whose tight direction the fix barely touches."""
+    from filterpy.kalman import KalmanFilter
+
+    rng = np.random.default_rng(9)
+    Q, _ = np.linalg.qr(rng.normal(size=(4, 4)))
+    P = Q @ np.diag([1e4, 1e2, 1.0, 1e-8]) @ Q.T
+    x = rng.normal(size=4)
+    R = np.array([[1e-6, 0.0], [0.0, 4e-6]])
+    H = np.hstack([np.eye(2), np.zeros((2, 2))])
+    z = np.array([0.3, -0.2])
+    kf = KalmanFilter(dim_x=4, dim_z=2)
+    kf.x, kf.P, kf.R, kf.H = x.reshape(-1, 1).copy(), P.copy(), R.copy(), H
+    kf.update(z.reshape(-1, 1))
+    xn, Pn, nu, S, K, Ru, nis, w, ok = kalman_update(x, P, z, R, H, 2, 0.0, 1.0, True)
+    np.testing.assert_allclose(xn, kf.x.ravel(), rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(Pn, kf.P, rtol=0, atol=1e-9 * np.abs(kf.P).max())
+    assert np.min(np.linalg.eigvalsh(Pn)) > 0
+    _, Ps, *_ = kalman_update(x, P, z, R, H, 2, 0.0, 1.0, False)           # the short form, for contrast
+    assert np.abs(Ps - kf.P).max() > 10 * np.abs(Pn - kf.P).max()
 
 
 # --- accuracy ---------------------------------------------------------------------------------------------
@@ -285,15 +316,6 @@ def test_vb_akf_learns_tenfold_r(inflated):
     assert nis_summary(run)[GNSS]["mean"] < 0.5 * nis_summary(fixed)[GNSS]["mean"]
 
 
-def test_sage_husa_learns_tenfold_r_and_stays_positive(inflated):
-    run = EventEKF(EkfConfig(outlier="none"), SageHusaNoise(1.5, 0.3)).run(inflated.stream, x0=inflated.x0,
-                                                                          P0=inflated.P0)
-    for learnt in _learnt_gnss_r(run):
-        assert 0.7 < learnt / 22.5 < 1.3
-    g = run.updated
-    assert min_eig(run.R[g]) > 0
-
-
 def test_imm_mode_probabilities_follow_regime_switch():
     s = synth_walk(2, duration_s=300, gnss_sigma_m=lambda t: np.where(t < 150, 0.5, 5.0), gnss_hz=2.0)
     pc = PerClassNoise(2)
@@ -357,7 +379,7 @@ def test_per_class_noise_map_and_probabilities():
     np.testing.assert_allclose(np.diag(pc.R_gnss_[2]), [36.0, 36.0], rtol=0.08)
     s = synth_walk(1, duration_s=30)
     ev = s.stream
-    mapped = EventEKF(noise=pc).run(ev, class_at=lambda e, n: 1)
+    mapped = EventEKF(noise=pc).run(ev, class_at=ClassMap(0.0, 0.0, 1.0, 1.0, np.array([[1]])))
     g = mapped.updated
     np.testing.assert_allclose(mapped.R[g], np.broadcast_to(pc.R_gnss_[1], mapped.R[g].shape))
     p = np.array([[0.2, 0.3, 0.5]])
@@ -365,6 +387,8 @@ def test_per_class_noise_map_and_probabilities():
     np.testing.assert_allclose(prob.R[prob.updated][0], np.tensordot(p[0], pc.R_gnss_, axes=1))
     with pytest.raises(NoiseError):
         EventEKF(noise=pc).run(ev)
+    with pytest.raises(NoiseError, match="ClassMap"):
+        EventEKF(noise=pc).run(ev, class_at=lambda e, n: 1)
 
 
 # --- events, config and determinism ---------------------------------------------------------------------
@@ -412,30 +436,49 @@ def test_same_seed_same_run_and_seed_reaches_the_draws(mixed):
         np.testing.assert_array_equal(r1.P, r2.P)
 
 
-def test_scalar_loop_matches_matrix_form(mixed):
+def test_core_matches_an_independent_reference(mixed):
+    """Every outlier mode, both covariance forms, per-event, per-class and map-looked-up R and the bias state
+    against tests/kf_reference.py (full matrices, filterpy's update), event by event."""
     ev = mixed[0]
+    x0, P0 = np.array([0.0, 0.0, 0.05, 0.0]), np.diag([4.0, 4.0, 0.09, 0.01])
     pc = PerClassNoise(3, 1.5, 0.3).fit()
-    cases = [(EkfConfig(), FixedNoise(1.5, 0.3), {}),
-             (EkfConfig(outlier="huber"), QualityNoise(), {}),
-             (EkfConfig(outlier="none"), pc, {"class_at": lambda e, n: 0 if e > 0 else 2}),
-             (EkfConfig(gate_prob=0.9), pc, {"classes": ClassTrack(np.array([0.0]), np.array([[0.2, 0.3, 0.5]]))}),
-             (EkfConfig(), VBAdaptiveNoise(1.0, 0.2), {}),
-             (EkfConfig(outlier="huber"), VBAdaptiveNoise(1.0, 0.2, n_iter=1), {}),
-             (EkfConfig(outlier="none"), VBAdaptiveNoise(1.0, 0.2, n_iter=4, rho=0.9), {}),
-             (EkfConfig(), SageHusaNoise(1.0, 0.2), {}),
-             (EkfConfig(outlier="huber"), SageHusaNoise(1.0, 0.2, b=0.9, n_prior=2), {}),
-             (EkfConfig(joseph=False), FixedNoise(1.5, 0.3), {}),
-             (EkfConfig(joseph=False, outlier="huber"), VBAdaptiveNoise(1.0, 0.2), {})]
-    for cfg, noise, kw in cases:
-        a = EventEKF(cfg, noise, fast=True).run(ev, **kw)
-        b = EventEKF(cfg, noise, fast=False).run(ev, **kw)
-        assert a.info["fast"] and not b.info["fast"]
-        assert a.info["n_guarded"] == b.info["n_guarded"]
-        if "r_history" in b.info:
-            np.testing.assert_allclose(a.info["r_history"], b.info["r_history"], rtol=1e-9)
-        np.testing.assert_array_equal(a.accepted, b.accepted)
-        for f in ("x", "P", "x_prior", "P_prior", "F", "nu", "S", "K", "R", "nis", "weight"):
-            np.testing.assert_allclose(getattr(a, f), getattr(b, f), rtol=1e-9, atol=1e-10, err_msg=f)
+    pc.R_gnss_ = np.array([np.eye(2) * 0.5, np.eye(2) * 2.25, np.eye(2) * 30.0])
+    track = ClassTrack(np.array([0.0]), np.array([[0.2, 0.3, 0.5]]))
+    fixed = FixedNoise(1.5, 0.3).fit()
+    table = {GNSS: fixed.R_gnss_, ACOUSTIC: fixed.R_acoustic_}
+    by_class = {GNSS: np.tensordot([0.2, 0.3, 0.5], pc.R_gnss_, axes=1),
+                ACOUSTIC: np.tensordot([0.2, 0.3, 0.5], pc.R_acoustic_, axes=1)}
+    cases = [(EkfConfig(), fixed, {}, lambda k, x: table[ev.kind[k]]),
+             (EkfConfig(gate_prob=0.9), fixed, {}, lambda k, x: table[ev.kind[k]]),
+             (EkfConfig(outlier="huber", huber_k=1.0), fixed, {}, lambda k, x: table[ev.kind[k]]),
+             (EkfConfig(outlier="none", joseph=False), fixed, {}, lambda k, x: table[ev.kind[k]]),
+             (EkfConfig(gate_prob=0.9), pc, {"classes": track}, lambda k, x: by_class[ev.kind[k]]),
+             (EkfConfig(outlier="huber"), pc, {"class_at": EAST_SPLIT},
+              lambda k, x: (pc.R_gnss_ if ev.kind[k] == GNSS else pc.R_acoustic_)[0 if x[0] >= 0 else 2])]
+    for cfg, noise, kw, r_of in cases:
+        run = EventEKF(cfg, noise).run(ev, x0=x0, P0=P0, **kw)
+        xr, Pr = reference_ekf(ev, cfg, r_of, x0, P0)
+        np.testing.assert_allclose(run.x, xr, rtol=0, atol=1e-8, err_msg=str(cfg))
+        np.testing.assert_allclose(run.P, Pr, rtol=1e-7, atol=1e-10, err_msg=str(cfg))
+    cfg = EkfConfig(gnss_bias=True, outlier="huber")
+    x6, P6 = np.zeros(6), np.diag([4.0, 4.0, 0.09, 0.01, 2.25, 2.25])
+    run = EventEKF(cfg, fixed).run(ev, x0=x6, P0=P6)
+    xr, Pr = reference_ekf(ev, cfg, lambda k, x: table[ev.kind[k]], x6, P6)
+    np.testing.assert_allclose(run.x, xr, rtol=0, atol=1e-8)
+    np.testing.assert_allclose(run.P, Pr, rtol=1e-7, atol=1e-10)
+
+
+@pytest.mark.parametrize("outlier, n_iter, rho", [("gate", 3, 0.98), ("huber", 1, 0.98), ("none", 4, 0.9)])
+def test_vb_akf_matches_an_independent_reference(mixed, outlier, n_iter, rho):
+    ev = mixed[0]
+    x0, P0 = np.array([0.0, 0.0, 0.05, 0.0]), np.diag([4.0, 4.0, 0.09, 0.01])
+    vb = VBAdaptiveNoise(1.0, 0.2, rho=rho, n_iter=n_iter, max_ratio=25.0).fit()
+    cfg = EkfConfig(outlier=outlier)
+    run = EventEKF(cfg, vb).run(ev, x0=x0, P0=P0)
+    xr, Rr = reference_vb(ev, cfg, {GNSS: vb.R0_gnss_, ACOUSTIC: vb.R0_acoustic_}, rho, n_iter, 2.0, 25.0, x0, P0)
+    np.testing.assert_allclose(run.x, xr, rtol=0, atol=1e-8)
+    used = run.updated & run.accepted
+    np.testing.assert_allclose(run.R[used], Rr[used], rtol=1e-8)
 
 
 def test_gate_quantile_closed_form_matches_scipy():
@@ -483,52 +526,45 @@ def test_gate_locks_out_under_a_wrong_r_and_huber_does_not(inflated):
 
 
 @pytest.mark.parametrize("outlier", ["gate", "huber"])
-def test_imm_batched_matches_mode_by_mode(mixed, outlier):
+def test_imm_matches_an_independent_reference(mixed, outlier):
     ev = mixed[0]
     pc = PerClassNoise(3, 1.5, 0.3).fit()
     pc.R_gnss_ = np.array([np.eye(2) * 0.5, np.eye(2) * 2.25, np.eye(2) * 30.0])
     classes = ClassTrack.from_labels(np.array([0.0, 60.0]), np.array([0, 1]), 3)
-    for cfg in (EkfConfig(outlier=outlier), EkfConfig(outlier=outlier, gnss_bias=True),
-                EkfConfig(outlier=outlier, joseph=False)):
-        ref = IMMFilter(pc, cfg, batched=False, fast=False).run(ev, classes=classes)
-        for other in (IMMFilter(pc, cfg, fast=False), IMMFilter(pc, cfg, fast=True)):   # batched; scalar (4 states)
-            a = other.run(ev, classes=classes)
-            for f in ("x", "P", "x_prior", "P_prior", "F", "nu", "S", "R", "K", "nis", "weight", "mode_proba"):
-                np.testing.assert_allclose(getattr(a, f), getattr(ref, f), rtol=1e-8, atol=1e-10, err_msg=f)
-            np.testing.assert_array_equal(a.accepted, ref.accepted)
-            np.testing.assert_array_equal(a.updated, ref.updated)
+    for cfg in (EkfConfig(outlier=outlier), EkfConfig(outlier=outlier, gnss_bias=True)):
+        n = cfg.n_state
+        x0, P0 = np.zeros(n), np.diag([4.0, 4.0, 0.09, 0.01, 2.25, 2.25][:n])
+        run = IMMFilter(pc, cfg, switch_rate_hz=0.05, evidence_weight=0.7).run(ev, classes=classes, x0=x0, P0=P0)
+        rows = classes.row_at(ev.t_s)
+        xr, Pr, mur = reference_imm(ev, cfg, {GNSS: pc.R_gnss_, ACOUSTIC: pc.R_acoustic_}, np.full(3, 1 / 3), 0.05,
+                                    x0, P0, evidence=(rows, classes.proba, 0.7))
+        np.testing.assert_allclose(run.mode_proba, mur, rtol=0, atol=1e-8)
+        np.testing.assert_allclose(run.x, xr, rtol=0, atol=1e-8)
+        np.testing.assert_allclose(run.P, Pr, rtol=1e-7, atol=1e-10)
 
 
-def test_closed_loop_correction_hook(walk):
-    ev = walk.stream
-    seen = []
+def test_fixed_lag_is_the_rts_of_the_run_cut_at_the_lag(walk):
+    """The fixed-lag estimate at event k is the RTS estimate of the run truncated at the last event within
+    ``lag_s`` of k (checked at a few events by truncating and smoothing again); lag 0 is the filter, a lag
+    longer than the walk the RTS smoother."""
+    import dataclasses
 
-    def corrector(k, x_prior, x, P, nu, S, K):
-        seen.append(k)
-        np.testing.assert_allclose(x - x_prior, K @ nu, atol=1e-9)
-        return np.array([0.01, -0.02]) if k % 2 else None
+    from models.fusion import fixed_lag_smooth
 
-    open_loop = EventEKF(noise=FixedNoise(2.0, 0.3)).run(ev, x0_en=walk.x0[:2])
-    closed = EventEKF(noise=FixedNoise(2.0, 0.3)).run(ev, x0_en=walk.x0[:2], correct=corrector)
-    assert seen == np.flatnonzero(closed.accepted).tolist()
-    odd = closed.accepted & (np.arange(len(ev)) % 2 == 1)
-    np.testing.assert_allclose(closed.correction[odd], np.broadcast_to([0.01, -0.02], (odd.sum(), 2)))
-    assert not closed.correction[~odd].any()
-    # the correction is fed back: the next prior is predicted from the corrected posterior
-    k = int(np.flatnonzero(odd)[0])
-    if ev.kind[k + 1] == STEP:
-        expect, _ = _step_predict(closed.x[k], np.eye(4), ev.step_length_m[k + 1], ev.heading_rad[k + 1],
-                                  EkfConfig(), np.eye(4))
-    else:
-        expect = closed.x[k]
-    np.testing.assert_allclose(closed.x_prior[k + 1], expect, atol=1e-12)
-    np.testing.assert_allclose(closed.x[k, :2] - (closed.x_prior[k] + closed.K[k] @ closed.nu[k])[:2], [0.01, -0.02],
-                               atol=1e-12)
-    assert not np.allclose(closed.x, open_loop.x)
-    zero = EventEKF(noise=FixedNoise(2.0, 0.3)).run(ev, x0_en=walk.x0[:2], correct=lambda *a: None)
-    np.testing.assert_allclose(zero.x, open_loop.x, atol=1e-9)
-    with pytest.raises(FilterError):
-        EventEKF(noise=FixedNoise(2.0, 0.3)).run(ev, x0_en=walk.x0[:2], correct=lambda *a: np.array([np.nan, 0.0]))
+    run = EventEKF(noise=FixedNoise(2.0, 0.3)).run(walk.stream, x0_en=walk.x0[:2])
+    lag = fixed_lag_smooth(run, 3.0)
+    assert lag.method == "kf+lag"
+    for k in (0, 100, 777, len(run) - 5):
+        j = int(np.searchsorted(run.t_s, run.t_s[k] + 3.0, side="right")) - 1
+        cut = dataclasses.replace(run, **{f: getattr(run, f)[:j + 1] for f in ("t_s", "kind", "x", "P", "x_prior",
+                                                                                "P_prior", "F")})
+        ref = rts_smooth(cut)
+        np.testing.assert_allclose(lag.x[k], ref.x[k], atol=1e-10)
+        np.testing.assert_allclose(lag.P[k], ref.P[k], atol=1e-12)
+    np.testing.assert_allclose(fixed_lag_smooth(run, 0.0).x, run.x, atol=1e-12)
+    np.testing.assert_allclose(fixed_lag_smooth(run, 1e9).x, rts_smooth(run).x, atol=1e-10)
+    e = lambda x: float(np.sqrt(np.mean(np.sum((x[:, :2] - walk.truth[:, :2]) ** 2, axis=1))))   # noqa: E731
+    assert e(rts_smooth(run).x) < e(lag.x) < e(run.x)
 
 
 def test_rts_matches_filterpy_on_a_linear_stream():
@@ -586,7 +622,8 @@ def test_quality_and_class_policies_beat_one_fixed_r():
     m = synth_walk(6, duration_s=300, gnss_sigma_at=lambda e, n: 0.5 if e < 0 else 3.0, gnss_reported_sigma_m=2.0)
     pc.R_gnss_ = np.array([np.eye(2) * 0.25, np.eye(2) * 9.0])
     late = m.stream.t_s > 30
-    mapped = EventEKF(noise=pc).run(m.stream, class_at=lambda e, n: 0 if e < 0 else 1, x0=m.x0, P0=m.P0)
+    west = ClassMap.from_axes(np.array([-1000.0, 1000.0]), np.array([0.0]), np.array([[0, 1]]))
+    mapped = EventEKF(noise=pc).run(m.stream, class_at=west, x0=m.x0, P0=m.P0)
     plain = EventEKF(noise=FixedNoise(2.0, 0.3)).run(m.stream, x0=m.x0, P0=m.P0)
     ratio_m = rms(mapped.x[late], m.truth[late]) / rms(plain.x[late], m.truth[late])
     # measured: 0.78 (quality vs fixed) and 0.87 (map vs fixed)

@@ -7,11 +7,13 @@ import numpy as np
 import pytest
 
 from models.environment import EnvironmentClassifier
-from models.fusion_model import load_fusion_model, save_fusion_model
+from models.fusion.model import load_fusion_model, save_fusion_model
 from pipeline.cli import main
-from pipeline.fusion import METHODS, run_methods, score, split_steps, walk_inputs, window_features
-from pipeline.fusion_train import train_fusion
-from pipeline.walk_data import read_walk
+from training.filters import train_fusion
+from walks.inputs import split_steps, walk_inputs, window_features
+from walks.methods import method_names, run_methods
+from walks.reader import read_walk
+from walks.score import score
 
 
 def test_split_steps_keeps_each_step_and_cuts_at_fixes():
@@ -43,11 +45,11 @@ def trained(walk_dir):
 
 def test_every_method_runs_and_the_device_aware_filter_follows_rtk(trained):
     data, model = trained
-    inputs = walk_inputs(data, model)
+    inputs = walk_inputs(data, model.classifier)
     tracks, skipped = run_methods(model, inputs)
-    assert skipped == {}
-    assert set(METHODS) <= set(tracks)
-    assert {m + "+rts" for m in ("kf", "kf_quality", "kf_map", "aekf", "imm", "adaptive_nobp")} <= set(tracks)
+    assert set(skipped) == {"kf_map"}                  # no site map given here
+    assert set(method_names()) - {"kf_map"} <= set(tracks)
+    assert {m + "+rts" for m in ("kf", "kf_quality", "aekf", "imm", "adaptive_nobp")} <= set(tracks)
     rows = {(r["method"], r["env_class"]): r for r in score(tracks, data, "w")}
     gnss, kfq, pdr = rows[("gnss", "all")], rows[("kf_quality", "all")], rows[("pdr", "all")]
     # Fused with what the receiver reports (mostly RTK fixed on this site), the filter stays at the
@@ -65,8 +67,8 @@ def test_bundle_round_trip_gives_the_same_track(trained, tmp_path):
     data, model = trained
     save_fusion_model(model, tmp_path / "m")
     again = load_fusion_model(tmp_path / "m")
-    a, _ = run_methods(model, walk_inputs(data, model), ("adaptive", "kf_quality"), smooth=False)
-    b, _ = run_methods(again, walk_inputs(data, again), ("adaptive", "kf_quality"), smooth=False)
+    a, _ = run_methods(model, walk_inputs(data, model.classifier), ("adaptive", "kf_quality"), smooth=False)
+    b, _ = run_methods(again, walk_inputs(data, again.classifier), ("adaptive", "kf_quality"), smooth=False)
     for m in ("adaptive", "kf_quality"):
         assert np.array_equal(a[m].east_m, b[m].east_m) and np.array_equal(a[m].north_m, b[m].north_m)
 
@@ -76,7 +78,7 @@ def test_cli_train_run_evaluate(trained, walk_dir, tmp_path, capsys):
     save_fusion_model(model, tmp_path / "fm")
     assert main(["run", str(walk_dir), "--model", str(tmp_path / "fm"), "--out", str(tmp_path / "t.csv")]) == 0
     rows = list(csv.DictReader(open(tmp_path / "t.csv")))
-    assert len(rows) > 100 and rows[0]["utc"].endswith("Z") and rows[0]["env_class"] in ("open", "light", "heavy")
+    assert len(rows) > 100 and rows[0]["time_utc"].endswith("Z") and rows[0]["env_class"] in ("open", "light", "heavy")
     assert abs(float(rows[0]["lat_deg"])) > 1 and float(rows[10]["var_east_m2"]) > 0
     assert main(["run", str(walk_dir), "--model", str(tmp_path / "fm"), "--out", str(tmp_path / "t.geojson"),
                  "--method", "kf+rts"]) == 0
@@ -88,7 +90,8 @@ def test_cli_train_run_evaluate(trained, walk_dir, tmp_path, capsys):
     out = capsys.readouterr().out
     assert "adaptive" in out and "kf" in out
     metrics = list(csv.DictReader(open(tmp_path / "rep" / "metrics.csv")))
-    assert {r["method"] for r in metrics} == {"gnss", "kf", "kf+rts", "adaptive"}
+    assert {r["method"] for r in metrics} == {"gnss", "kf", "kf+rts", "kf+lag", "adaptive", "adaptive+rts",
+                                              "adaptive+lag"}
     assert {r["env_class"] for r in metrics} >= {"all"}
     assert {p.name for p in (tmp_path / "rep").glob("*.png")} >= {"error_cdf.png", "error_by_class.png"}
 
@@ -102,16 +105,24 @@ def test_cli_refuses_bad_models_and_walks(walk_dir, tmp_path, capsys):
     assert not (tmp_path / "t.csv").exists()
 
 
-def test_evaluate_on_dask_equals_serial(trained, walk_dir, tmp_path):
-    """Each walk is a pure task of its files and the bundle: two local workers give the serial metrics."""
+def test_evaluate_on_dask_equals_serial(trained, walk_dir, site_dir, tmp_path):
+    """Each walk is a pure task of its files and the bundle: two local workers give the serial metrics, in the
+    input order — on distinct walks (the whole walk, then its first 20 s without audio, which finishes first),
+    so that results put in completion order would show."""
     from pipeline.evaluate import evaluate
+    from tests.bad_inputs import _trim_walk
 
     _, model = trained
     save_fusion_model(model, tmp_path / "fm")
-    walks = [walk_dir, walk_dir]
+    (tmp_path / "site").mkdir()
+    (tmp_path / "site" / "site.toml").write_bytes((site_dir / "site.toml").read_bytes())
+    _trim_walk(walk_dir, tmp_path / "walks" / "short", 20.0, "../../site/site.toml", audio=False)
+    walks = [walk_dir, tmp_path / "walks" / "short"]
     a = evaluate(walks, tmp_path / "fm", tmp_path / "r1", methods=("kf", "adaptive"), workers=1, progress=False,
                  plots=False)
     b = evaluate(walks, tmp_path / "fm", tmp_path / "r2", methods=("kf", "adaptive"), workers=2, progress=False,
                  plots=False)
+    assert [r["walk_dir"] for r in b["results"]] == [str(w) for w in walks]
+    assert a["results"][0]["rows"] != a["results"][1]["rows"]           # distinct walks, distinct metrics
     assert (tmp_path / "r1" / "metrics.csv").read_text() == (tmp_path / "r2" / "metrics.csv").read_text()
     assert [r["rows"] for r in a["results"]] == [r["rows"] for r in b["results"]]

@@ -8,7 +8,7 @@ import pytest
 
 from features.gnss.positions import GnssPositions
 from features.site import Box, Origin, Site
-from pipeline.walk_data import pdr_start_from_gnss
+from walks.reader import pdr_start_from_gnss
 from simulation.imu.stream import stated_declination_error_deg
 from simulation.imu.walker import SensorErrors, mains_field_ned_ut, warmup_kelvin
 

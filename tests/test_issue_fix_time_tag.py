@@ -106,7 +106,7 @@ def test_walk_fixes_are_not_ahead_of_their_tags(ideal_air_walk):
     behind (``tracking.frame_ranges``, 0.1–0.2 m), and this walk is simulated without hardware
     (no torso), so its fixes trail slightly: measured −51 ms (coverage deployment, 0.96 s frames).
     On the held-out walks, which have the torso, the lag fell from 0.086 to 0.054 s."""
-    from pipeline.walk_data import read_walk
+    from walks.reader import read_walk
 
     wd = read_walk(ideal_air_walk)
     a, tr = wd.acoustic, wd.truth

@@ -1,4 +1,4 @@
-"""The spine (pipeline.walk_data.read_walk): one read of a walk, every source on its time base."""
+"""The spine (walks.reader.read_walk): one read of a walk, every source on its time base."""
 
 import shutil
 
@@ -7,7 +7,7 @@ import pytest
 
 from features.acoustic.timing import timing_from_walk
 from features.walk import load_walk
-from pipeline.walk_data import read_walk, walk_has
+from walks.reader import read_walk, walk_has
 
 
 @pytest.fixture(scope="module")
@@ -49,10 +49,10 @@ def test_a_missing_stream_is_none(walk_dir, tmp_path):
 def test_pdr_is_run_once_and_translated_to_the_gnss_anchor(walk_dir):
     """Issue 14 (speed): read_walk ran PDR twice (from the origin, then from the anchor); the track
     is start + Σ steps, so translating the first run gives exactly the rerun's numbers."""
-    from pipeline import walk_data as wd
+    from walks import reader as wd
 
     data = wd.read_walk(walk_dir)
-    rerun = wd._read_pdr(data.walk, data.pdr.start_en_m, None)
+    rerun = wd.read_pdr_stream(data.walk, data.pdr.start_en_m, None)
     np.testing.assert_array_equal(data.pdr.result.east_m, rerun.result.east_m)
     np.testing.assert_array_equal(data.pdr.result.north_m, rerun.result.north_m)
     assert data.pdr.start_en_m != (0.0, 0.0)

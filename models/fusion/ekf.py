@@ -1,4 +1,4 @@
-"""Event-driven extended Kalman filter: PDR steps predict, GNSS and acoustic fixes update.
+"""The event-driven extended Kalman filter: PDR steps predict, GNSS and acoustic fixes update.
 
 State (n = 4, or 6 with ``gnss_bias``)::
 
@@ -12,43 +12,38 @@ Var w = σ_b²(1 − φ²) (Gelb 1974, *Applied Optimal Estimation*, ch. 3). The
 acoustic fixes and PDR do not share it; with GNSS alone it trades with the
 position, which the prior σ_b bounds.
 
-Prediction per event (Δt since the previous one, of which Δt_stand standing):
+Per event (Δt since the previous one, of which Δt_stand standing) the
+stationary model adds a position random walk
+(q_walk·(Δt − Δt_stand) + q_stand·Δt_stand), random walks on δψ and s and
+the bias decay, so events of any rate fuse without resampling; a step then
+moves the state, a fix updates it. The equations, the Joseph form and the
+outlier handling (``outlier``: ``"gate"`` — the χ² validation gate of
+Bar-Shalom, Li & Kirubarajan 2001, ch. 5; ``"huber"`` — Huber (1964) weights
+applied as R/w; ``"mixture"`` — each fix's ε-contaminated likelihood from the
+noise policy, :func:`models.fusion.core.mixture_update`; ``"none"``) are those of
+the one compiled filter core,
+:mod:`models.fusion.core`; this module builds its inputs (Q, Φ, H per event,
+R from the noise policy) and its records.
 
-* all events: the stationary model, a position random walk
-  (q_walk·(Δt − Δt_stand) + q_stand·Δt_stand), random walks on δψ and s,
-  the bias decay — so events of any rate fuse without resampling;
-* a step of length L and heading ψ, θ = ψ + δψ, g = 1 + s:
-  e += g·L·sin θ, n += g·L·cos θ, with the Jacobian F (∂e/∂δψ = g·L·cos θ,
-  ∂e/∂s = L·sin θ, ∂n/∂δψ = −g·L·sin θ, ∂n/∂s = L·cos θ) and step noise
-  G·diag(σ_L², σ_ψ²)·G' (G = ∂(e, n)/∂(L, ψ)).
+``joseph=False`` switches to the short form P = (I − KH)P, symmetrised: equal
+for the optimal gain up to rounding, but without the Joseph form's guarantee
+of a PD P when the gain is perturbed. ``consider_bias`` makes the bias states
+Schmidt consider states (Schmidt 1966; Petovello et al. 2009): their
+uncertainty is carried into every update, their value never estimated.
 
-Updates by position fixes, H = [I₂ 0 (I₂ for GNSS with a bias state)]. The
-covariance update is the Joseph form, P = (I − KH)P(I − KH)' + KRK', which
-stays symmetric PD for any gain (Bucy & Joseph 1968; Bar-Shalom, Li &
-Kirubarajan 2001, ch. 5). Outliers (``outlier``):
+The GNSS bias block follows the noise policy's process when it models one
+(:class:`~models.fusion.context.ContextNoise`: σ_b and τ per quality and
+class, shared only by the fixes of biased qualities, reset on a quality
+change or a gap), else the config's single process shared by every GNSS fix
+(``gnss_bias``).
 
-* ``"gate"``: reject a fix whose NIS = ν'S⁻¹ν exceeds the χ²₂ quantile of
-  ``gate_prob`` (the validation gate of Bar-Shalom, Li & Kirubarajan 2001, ch. 5);
-* ``"huber"``: Huber (1964) weights on the Mahalanobis norm of the
-  innovation, w = min(1, k/√NIS), applied as R/w — a bounded influence
-  instead of a hard cut (the robust KF of Masreliez & Martin 1977 in its
-  usual covariance-inflation form);
-* ``"none"``.
-
-``joseph=False`` switches to the short form P = (I − KH)P, symmetrised:
-equal for the optimal gain up to rounding, half the arithmetic of the
-scalar loop's update, but without the Joseph form's guarantee of a PD P
-when the gain is perturbed (Huber-weighted R stays optimal for its own R,
-so both apply; the default is Joseph).
-
-Written by hand rather than on ``filterpy.kalman.ExtendedKalmanFilter``: the
-predict is a control-driven step whose Jacobian and Q change per event, H
+Written on its own core rather than ``filterpy.kalman.ExtendedKalmanFilter``:
+the predict is a control-driven step whose Jacobian and Q change per event, H
 and R change per event, every update must be recorded (K, ν, S, NIS,
-posterior − prior, acceptance), and filterpy's ``KalmanFilter`` takes
-~36 µs per predict + update on the project machine, about five times the
-scalar loop of :mod:`models.fusion.fast`. The update agrees with
-``filterpy.kalman.KalmanFilter.update`` (also Joseph form) to rounding
-(tests/test_filters.py).
+posterior − prior, acceptance), and filterpy's ``KalmanFilter`` takes ~36 µs
+per predict + update on the project machine (bench/bench_fusion.py gives the
+core's figure). The update agrees with ``filterpy.kalman.KalmanFilter.update``
+(also Joseph form) to rounding (tests/test_filters.py).
 """
 
 from __future__ import annotations
@@ -61,7 +56,13 @@ import numpy as np
 from features.errors import EnvfuseError
 from models.fusion.events import GNSS, STEP, EventStream
 
-__all__ = ["EkfConfig", "FilterRun", "EventEKF", "run_ekf", "FilterError"]
+__all__ = ["EkfConfig", "FilterRun", "EventEKF", "FilterError", "empty_records", "initial_state", "time_noise",
+           "measurement_models", "OUTLIER_CODES"]
+
+
+OUTLIER_CODES = {"gate": 0, "huber": 1, "none": 2, "mixture": 3}
+"""Codes of :attr:`EkfConfig.outlier` in the compiled core (:data:`models.fusion.core.GATE` ...); ``mixture``
+needs a noise policy that gives each fix's contamination (:class:`models.fusion.context.ContextNoise`)."""
 
 
 class FilterError(EnvfuseError, ValueError):
@@ -88,6 +89,7 @@ class EkfConfig:
     gnss_bias: bool = False
     bias_sigma_m: float = 1.5
     bias_tau_s: float = 30.0
+    consider_bias: bool = False
 
     def __post_init__(self):
         for name in ("sigma_step_length_m", "sigma_heading_rad", "q_heading_rad2_s", "q_scale_1_s", "q_walk_m2_s",
@@ -99,8 +101,8 @@ class EkfConfig:
             v = getattr(self, name)
             if not (math.isfinite(v) and v > 0):
                 raise FilterError(f"{name} must be finite and > 0, got {v}")
-        if self.outlier not in ("gate", "huber", "none"):
-            raise FilterError(f"outlier must be 'gate', 'huber' or 'none', got {self.outlier!r}")
+        if self.outlier not in OUTLIER_CODES:
+            raise FilterError(f"outlier must be one of {sorted(OUTLIER_CODES)}, got {self.outlier!r}")
         if not 0 < self.gate_prob < 1:
             raise FilterError(f"gate_prob must lie in (0, 1), got {self.gate_prob}")
 
@@ -124,7 +126,6 @@ class FilterRun:
     per update (NaN elsewhere): ``nu`` (m, 2) innovation, ``S`` (m, 2, 2), ``K`` (m, n, 2) gain,
     ``R`` (m, 2, 2) noise used, ``nis`` (m,), ``weight`` (m,) Huber weight (1 full, 0 rejected);
     ``updated`` (m,) bool: an available fix was processed; ``accepted`` (m,) bool: it changed the state;
-    ``correction`` (m, 2): a closed-loop corrector's east/north shift added to ``x`` (zeros without one);
     ``mode_proba`` (m, n_modes) for multiple-model runs, else None.
     """
 
@@ -146,7 +147,6 @@ class FilterRun:
     weight: np.ndarray
     updated: np.ndarray
     accepted: np.ndarray
-    correction: np.ndarray
     available: np.ndarray
     mode_proba: np.ndarray | None = None
     info: dict = field(default_factory=dict)
@@ -172,17 +172,22 @@ class FilterRun:
         return self.P[:, :2, :2]
 
 
-def _records(m: int, n: int) -> dict:
+def empty_records(m: int, n: int) -> dict:
+    """The record arrays of a :class:`FilterRun` for m events and n states (F the identity, NaN where no
+    update)."""
     eye = np.broadcast_to(np.eye(n), (m, n, n)).copy()
     nan = np.nan
     return dict(x_prior=np.empty((m, n)), P_prior=np.empty((m, n, n)), F=eye, x=np.empty((m, n)),
                 P=np.empty((m, n, n)), nu=np.full((m, 2), nan), S=np.full((m, 2, 2), nan),
                 K=np.full((m, n, 2), nan), R=np.full((m, 2, 2), nan), nis=np.full(m, nan), weight=np.full(m, nan),
-                updated=np.zeros(m, bool), accepted=np.zeros(m, bool), correction=np.zeros((m, 2)))
+                updated=np.zeros(m, bool), accepted=np.zeros(m, bool))
 
 
-def _initial(stream: EventStream, cfg: EkfConfig, x0_en, x0=None, P0=None):
-    n = cfg.n_state
+def initial_state(stream: EventStream, cfg: EkfConfig, x0_en=None, x0=None, P0=None,
+                  n_state: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Prior (x0 (n,), P0 (n, n)): ``x0``/``P0`` as given, else the position ``x0_en`` (default: the first
+    available fix) with the configured σ0 of each state (bias states: ``bias_sigma_m``)."""
+    n = cfg.n_state if n_state is None else n_state
     if x0 is not None:
         x0 = np.asarray(x0, float).copy()
         if x0.shape != (n,):
@@ -201,127 +206,61 @@ def _initial(stream: EventStream, cfg: EkfConfig, x0_en, x0=None, P0=None):
             raise FilterError(f"P0 must have shape ({n}, {n}), got {P0.shape}")
     else:
         d = [cfg.sigma0_pos_m ** 2] * 2 + [cfg.sigma0_heading_rad ** 2, cfg.sigma0_scale ** 2]
-        if cfg.gnss_bias:
-            d += [cfg.bias_sigma_m ** 2] * 2
+        d += [cfg.bias_sigma_m ** 2] * (n - 4)
         P0 = np.diag(d)
     return x0, P0
 
 
-def _time_noise(stream: EventStream, cfg: EkfConfig) -> tuple[np.ndarray, np.ndarray]:
-    """Per-event diagonal of the stationary-model Q, (m, n), and the bias decay φ, (m,)."""
+def has_bias(cfg: EkfConfig, spec=None) -> bool:
+    """Whether the state carries the GNSS bias block: asked for by the config, or modelled by the noise policy."""
+    return bool(cfg.gnss_bias or (spec is not None and spec.bias_shared is not None))
+
+
+def time_noise(stream: EventStream, cfg: EkfConfig, spec=None) -> tuple[np.ndarray, np.ndarray]:
+    """Per event the diagonals of the time update's Q and Φ, both (m, n) (see :func:`models.fusion.core.time_update`).
+
+    The GNSS bias block follows the noise policy's process when it gives one (``spec.bias_phi``,
+    ``bias_q``: per quality and class, with resets), else the config's one Gauss–Markov process."""
     dt = stream.dt_s
     st = stream.dt_stand_s
-    m, n = dt.shape[0], cfg.n_state
+    m, n = dt.shape[0], 4 + 2 * has_bias(cfg, spec)
     q = np.zeros((m, n))
+    phi = np.ones((m, n))
     # Q_pos = q_walk·(Δt − Δt_stand) + q_stand·Δt_stand
     q[:, 0] = q[:, 1] = cfg.q_walk_m2_s * (dt - st) + cfg.q_stand_m2_s * st
     # Q_δψ = q_ψ·Δt,  Q_s = q_s·Δt   (random walks)
     q[:, 2] = cfg.q_heading_rad2_s * dt
     q[:, 3] = cfg.q_scale_1_s * dt
-    phi = np.exp(-dt / cfg.bias_tau_s)
-    if cfg.gnss_bias:
-        # Q_b = σ_b²·(1 − φ²)   (first-order Gauss–Markov)
-        q[:, 4] = q[:, 5] = cfg.bias_sigma_m ** 2 * (1.0 - phi * phi)
+    if n > 4 and spec is not None and spec.bias_phi is not None:
+        phi[:, 4] = phi[:, 5] = spec.bias_phi
+        q[:, 4] = q[:, 5] = spec.bias_q
+    elif n > 4:
+        # φ = e^(−Δt/τ);  Q_b = σ_b²·(1 − φ²)   (first-order Gauss–Markov)
+        decay = np.exp(-dt / cfg.bias_tau_s)
+        phi[:, 4] = phi[:, 5] = decay
+        q[:, 4] = q[:, 5] = cfg.bias_sigma_m ** 2 * (1.0 - decay * decay)
     return q, phi
 
 
-def _step_predict(x, P, L, psi, cfg, F):
-    """Predict one PDR step in place of F (n, n); returns (x⁻, P⁻)."""
-    g = 1.0 + x[3]
-    th = psi + x[2]
-    sn, cs = math.sin(th), math.cos(th)
-    gl = g * L
-    x = x.copy()
-    # e += (1+s)·L·sin(ψ+δψ),  n += (1+s)·L·cos(ψ+δψ)
-    x[0] += gl * sn
-    x[1] += gl * cs
-    # F = ∂f/∂x: ∂e/∂δψ = gL cos θ, ∂e/∂s = L sin θ, ∂n/∂δψ = −gL sin θ, ∂n/∂s = L cos θ
-    F[0, 2] = gl * cs
-    F[0, 3] = L * sn
-    F[1, 2] = -gl * sn
-    F[1, 3] = L * cs
-    # P⁻ = F P F'
-    P = F @ P @ F.T
-    # Q_step = G diag(σ_L², σ_ψ²) G',  G = [[g sin θ, gL cos θ], [g cos θ, −gL sin θ]]
-    vl = (g * cfg.sigma_step_length_m) ** 2
-    vp = (gl * cfg.sigma_heading_rad) ** 2
-    P[0, 0] += vl * sn * sn + vp * cs * cs
-    P[1, 1] += vl * cs * cs + vp * sn * sn
-    c = (vl - vp) * sn * cs
-    P[0, 1] += c
-    P[1, 0] += c
-    return x, P
-
-
-def _update(x, P, z, R, H, cfg, runner, k, gate_nis):
-    """One position update. Returns (x, P, ν, S, K, R_used, nis, weight, accepted)."""
-    n = x.shape[0]
-    # ν = z − H x⁻
-    nu = z - H @ x
-    PHt = P @ H.T
-    HPH = H @ PHt
-    # S = H P⁻ H' + R
-    S = HPH + R
-    det = S[0, 0] * S[1, 1] - S[0, 1] * S[1, 0]
-    Si = np.array([[S[1, 1], -S[0, 1]], [-S[1, 0], S[0, 0]]]) / det
-    # NIS = ν' S⁻¹ ν
-    nis = float(nu @ Si @ nu)
-    w = 1.0
-    if cfg.outlier == "gate" and nis > gate_nis:
-        runner.feedback(k, nu, HPH, False)
-        return x, P, nu, S, None, R, nis, 0.0, False
-    if cfg.outlier == "huber":
-        d = math.sqrt(nis)
-        if d > cfg.huber_k:
-            # w = k / √NIS,  R ← R / w   (Huber weight on the Mahalanobis norm)
-            w = cfg.huber_k / d
-            R = R / w
-            S = HPH + R
-            det = S[0, 0] * S[1, 1] - S[0, 1] * S[1, 0]
-            Si = np.array([[S[1, 1], -S[0, 1]], [-S[1, 0], S[0, 0]]]) / det
-    x_prior, P_prior = x, P
-    for it in range(runner.n_iter):
-        # K = P⁻ H' S⁻¹
-        K = PHt @ Si
-        # x = x⁻ + K ν
-        x = x_prior + K @ nu
-        # P = (I − KH) P⁻ (I − KH)' + K R K'   (Joseph form: symmetric PD for any K)
-        A = np.eye(n) - K @ H
-        if cfg.joseph:
-            P = A @ P_prior @ A.T + K @ R @ K.T
-        else:
-            # P = (I − KH) P⁻   (short form: exact for the optimal K only)
-            P = A @ P_prior
-        P = 0.5 * (P + P.T)
-        if it + 1 < runner.n_iter:
-            # variational step: R from the residual of this iterate
-            res = z - H @ x
-            R = runner.refine(k, res, H @ P @ H.T)
-            S = HPH + R
-            det = S[0, 0] * S[1, 1] - S[0, 1] * S[1, 0]
-            Si = np.array([[S[1, 1], -S[0, 1]], [-S[1, 0], S[0, 0]]]) / det
-    if hasattr(runner, "refine"):
-        # variational policies: the posterior residual sets this update's β
-        runner.refine(k, z - H @ x, H @ P @ H.T)
-    runner.feedback(k, nu, HPH, True)
-    return x, P, nu, S, K, R, nis, w, True
-
-
-def _h_matrices(cfg: EkfConfig) -> dict:
-    n = cfg.n_state
+def measurement_models(stream: EventStream, cfg: EkfConfig, spec=None) -> tuple[np.ndarray, np.ndarray]:
+    """(H (n_models, 2, n), model index per event (m,)): the position rows for every fix, plus the bias block
+    for the GNSS fixes that share the bias (the policy's ``bias_shared``, else every GNSS fix when the config
+    asks for ``gnss_bias``); acoustic fixes never share it."""
+    n = 4 + 2 * has_bias(cfg, spec)
     h = np.zeros((2, n))
     h[0, 0] = h[1, 1] = 1.0
     hg = h.copy()
-    if cfg.gnss_bias:
+    if n > 4:
         hg[0, 4] = hg[1, 5] = 1.0
-    return {GNSS: hg, "other": h}
+    if spec is not None and spec.bias_shared is not None:
+        shares = np.asarray(spec.bias_shared, bool)
+    else:
+        shares = (stream.kind == GNSS) & (n > 4)
+    return np.stack([h, hg]), shares.astype(np.int64)
 
 
 class EventEKF:
-    """The event-driven EKF with one noise policy (:mod:`models.fusion.noise`).
-
-    ``fast``: run the 4-state model through the scalar loop of :mod:`models.fusion.fast` (same results
-    to rounding; ``False`` forces the matrix form, which the bias states and ``correct`` always use).
+    """The event-driven EKF with one noise policy (:mod:`models.fusion.noise`, :mod:`models.fusion.adaptive`).
 
     >>> import numpy as np
     >>> from models.fusion.events import GnssEvents, StepEvents, merge_events
@@ -333,102 +272,59 @@ class EventEKF:
     (7, True)
     """
 
-    def __init__(self, config: EkfConfig | None = None, noise=None, method: str = "kf", fast: bool = True):
+    def __init__(self, config: EkfConfig | None = None, noise=None, method: str = "kf", scales: dict | None = None):
         self.config = config
         self.noise = noise
         self.method = method
-        self.fast = fast
+        self.scales = scales
 
     def run(self, stream: EventStream, x0_en=None, classes=None, class_at=None, x0=None, P0=None,
-            correct=None) -> FilterRun:
+            r_scale_event: np.ndarray | None = None) -> FilterRun:
         """Filter the whole stream once.
 
         ``x0_en``: (2,) initial east/north (default: the first available fix); ``x0``/``P0``: full prior;
-        ``classes``: :class:`~models.fusion.events.ClassTrack` and ``class_at``: callable (east_m, north_m) →
-        class index or probabilities, for per-class noise.
-
-        ``correct``: closed-loop corrector (``adaptive_closed``), called after every accepted update as
-        ``correct(k, x_prior, x, P, nu, S, K)`` (shapes (n,), (n,), (n, n), (2,), (2, 2), (n, 2)); a
-        returned (2,) east/north correction is added to the posterior, which the next prediction then
-        starts from, and is recorded in ``run.correction`` (m, 2) (``None`` or zeros: no change). The
-        covariance is left as the filter computed it. Runs the matrix form.
+        ``classes``: :class:`~models.fusion.events.ClassTrack` and ``class_at``:
+        :class:`~models.fusion.events.ClassMap`, for per-class noise. ``scales`` (at construction):
+        ``{"gnss", "acoustic", "bias"}`` multipliers of the policy's R and bias variance (a method's tuning);
+        ``r_scale_event`` (m,): a further multiplier of each event's R (the BP parameter network's).
         """
+        from models.fusion import core
         from models.fusion.noise import FixedNoise
 
         cfg = self.config or EkfConfig()
         noise = self.noise if self.noise is not None else FixedNoise()
-        runner = noise._start(stream, classes=classes, class_at=class_at)
-        x, P = _initial(stream, cfg, x0_en, x0, P0)
-        x0, P0 = x.copy(), P.copy()
-        m, n = len(stream), cfg.n_state
-        q, phi = _time_noise(stream, cfg)
-        info = {"n_guarded": 0, "fast": False}
-        if self.fast and n == 4 and getattr(runner, "fast", False) and correct is None:
-            from models.fusion.fast import run_fast4
-
-            rec = run_fast4(stream, cfg, runner, x, P, q)
-            info["fast"] = True
-            info["n_guarded"] = getattr(runner, "n_guarded", 0)
-            if hasattr(runner, "history"):
-                info["r_history"] = np.array(runner.history).reshape(-1, 4)   # event, kind, R_ee, R_nn
-            return FilterRun(self.method, stream.t_s, stream.kind, x0, P0, available=stream.available, info=info,
-                             **rec)
-        rec = _records(m, n)
-        if cfg.gnss_bias:
-            rec["F"][:, 4, 4] = rec["F"][:, 5, 5] = phi
-        H = _h_matrices(cfg)
-        gate = cfg.gate_nis
-        kind, avail, z = stream.kind, stream.available, stream.z_m
-        length, heading = stream.step_length_m, stream.heading_rad
-        Fr, xpr, Ppr, xr, Pr = rec["F"], rec["x_prior"], rec["P_prior"], rec["x"], rec["P"]
-        idx = np.arange(n)
-        for k in range(m):
-            if cfg.gnss_bias:
-                x = x.copy()
-                # b = φ b
-                x[4:6] *= phi[k]
-                # P = Φ P Φ'  (bias rows and columns)
-                P = P.copy()
-                P[4:6, :] *= phi[k]
-                P[:, 4:6] *= phi[k]
-            else:
-                P = P.copy()
-            # P += Q_Δt
-            P[idx, idx] += q[k]
-            c = kind[k]
-            if c == STEP:
-                Fs = np.eye(n)
-                x, P = _step_predict(x, P, length[k], heading[k], cfg, Fs)
-                # F = F_step Φ   (bias decay first, then the step)
-                Fr[k] = Fs @ Fr[k]
-            xpr[k] = x
-            Ppr[k] = P
-            if c != STEP and avail[k]:
-                Hk = H[GNSS] if c == GNSS else H["other"]
-                R = runner.r(k, x)
-                x, P, nu, S, K, Ru, nis, w, ok = _update(x, P, z[k], R, Hk, cfg, runner, k, gate)
-                rec["nu"][k], rec["S"][k], rec["R"][k], rec["nis"][k], rec["weight"][k] = nu, S, Ru, nis, w
-                rec["updated"][k] = True
-                rec["accepted"][k] = ok
-                if ok:
-                    rec["K"][k] = K
-                    if correct is not None:
-                        dc = correct(k, xpr[k], x, P, nu, S, K)
-                        if dc is not None:
-                            dc = np.asarray(dc, float)
-                            if dc.shape != (2,) or not np.all(np.isfinite(dc)):
-                                raise FilterError(f"correct must return a finite (2,) correction, got {dc!r}")
-                            x = x.copy()
-                            x[:2] += dc
-                            rec["correction"][k] = dc
-            xr[k] = x
-            Pr[k] = P
-        info["n_guarded"] = getattr(runner, "n_guarded", 0)
-        if hasattr(runner, "history"):
-            info["r_history"] = np.array(runner.history).reshape(-1, 4)   # event, kind, R_ee, R_nn
-        return FilterRun(self.method, stream.t_s, stream.kind, x0, P0, available=stream.available, info=info, **rec)
-
-
-def run_ekf(stream: EventStream, noise=None, config: EkfConfig | None = None, method: str = "kf", **kw) -> FilterRun:
-    """Thin function over :class:`EventEKF`: ``EventEKF(config, noise, method).run(stream, **kw)``."""
-    return EventEKF(config, noise, method).run(stream, **kw)
+        spec = noise.measurement_noise(stream, classes=classes, class_at=class_at)
+        if self.scales:
+            spec = spec.scaled(stream.kind, **{k: float(v) for k, v in self.scales.items()
+                                               if k in ("gnss", "acoustic", "bias")})
+        if r_scale_event is not None:
+            f = np.asarray(r_scale_event, float)
+            if f.shape != (len(stream),) or not np.all(np.isfinite(f) & (f > 0)):
+                raise FilterError(f"r_scale_event must be {len(stream)} positive finite values")
+            if spec.r_event.shape[0] != len(stream):
+                raise FilterError("r_scale_event needs a noise policy that gives R per event")
+            spec = spec.with_fields(r_event=spec.r_event * f[:, None, None])
+        if cfg.outlier == "mixture" and spec.eps_event is None:
+            raise FilterError(f"outlier='mixture' needs a noise policy that gives each fix's contamination; "
+                              f"{type(noise).__name__} does not")
+        m = len(stream)
+        n = 4 + 2 * has_bias(cfg, spec)
+        x, P = initial_state(stream, cfg, x0_en, x0, P0, n_state=n)
+        q, phi = time_noise(stream, cfg, spec)
+        H, h_idx = measurement_models(stream, cfg, spec)
+        consider = np.zeros(n, bool)
+        consider[4:] = cfg.consider_bias
+        eps = spec.eps_event if spec.eps_event is not None else np.zeros(m)
+        kappa = spec.kappa_event if spec.kappa_event is not None else np.ones(m)
+        rec = empty_records(m, n)
+        core.run_ekf_events(stream.kind.astype(np.int64), stream.available, stream.z_m, stream.step_length_m,
+                            stream.heading_rad, phi, q, h_idx, H, x, P, cfg.sigma_step_length_m ** 2,
+                            cfg.sigma_heading_rad ** 2, OUTLIER_CODES[cfg.outlier], cfg.gate_nis, cfg.huber_k,
+                            cfg.joseph, consider, spec.mode, spec.r_event, np.asarray(eps, float),
+                            np.asarray(kappa, float), spec.r_table, spec.map_grid, spec.map_geo, spec.vb_alpha,
+                            spec.vb_beta, spec.vb_cap, spec.vb_rho, spec.vb_n_iter, rec["x_prior"], rec["P_prior"],
+                            rec["F"], rec["x"], rec["P"], rec["nu"], rec["S"], rec["K"], rec["R"], rec["nis"],
+                            rec["weight"], rec["updated"], rec["accepted"])
+        # a gated fix leaves no gain
+        rec["K"][rec["updated"] & ~rec["accepted"]] = np.nan
+        return FilterRun(self.method, stream.t_s, stream.kind, x.copy(), P.copy(), available=stream.available, **rec)

@@ -6,7 +6,7 @@ ENU metres, heading from north, clockwise) and merges them with
 :func:`merge_events` into one time-ordered :class:`EventStream`. The filter
 walks that stream once: a step predicts, a fix updates, and the time between
 events feeds a stationary random-walk model, so sources of any rate fuse
-without resampling (DESIGN.md §7).
+without resampling (docs/design.md §7).
 
 Ties in time are broken by kind — step, then GNSS, then acoustic — and then by
 the order within each source, so a merge is deterministic.
@@ -21,6 +21,7 @@ the order within each source, so a merge is deterministic.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -28,7 +29,7 @@ import numpy as np
 from features.errors import DataError
 
 __all__ = ["STEP", "GNSS", "ACOUSTIC", "KIND_NAMES", "StepEvents", "GnssEvents", "AcousticEvents",
-           "StandIntervals", "ClassTrack", "EventStream", "merge_events", "EventError"]
+           "StandIntervals", "ClassTrack", "ClassMap", "EventStream", "merge_events", "EventError"]
 
 STEP, GNSS, ACOUSTIC = 0, 1, 2
 """Event kind codes of :attr:`EventStream.kind`."""
@@ -267,6 +268,49 @@ class ClassTrack:
     def at(self, t_s: np.ndarray) -> np.ndarray:
         """Probabilities in force at each of ``t_s`` (m,) → (m, n_classes)."""
         return self.proba[self.row_at(t_s)]
+
+
+@dataclass(frozen=True)
+class ClassMap:
+    """Environment class over a site on a regular grid — the map baseline's ``class_at(east_m, north_m)``.
+
+    ``classes`` (n_north, n_east) int class codes; ``east0_m`` / ``north0_m`` the centre of cell (0, 0);
+    ``de_m`` / ``dn_m`` the spacing. A query takes the nearest cell (half-way between two centres: the east /
+    north one), clipped at the map's edge; the filter core (:func:`models.fusion.core.map_class`) does the
+    same lookup in compiled code.
+
+    >>> m = ClassMap.from_axes(np.array([0.0, 2.0, 4.0]), np.array([10.0, 12.0]), np.array([[0, 1, 2], [2, 2, 2]]))
+    >>> m(3.1, 10.4), m(-50.0, 10.4), m(0.0, 99.0), m(1.0, 10.0)
+    (2, 0, 2, 1)
+    """
+
+    east0_m: float
+    north0_m: float
+    de_m: float
+    dn_m: float
+    classes: np.ndarray
+
+    def __post_init__(self):
+        c = np.asarray(self.classes)
+        if c.ndim != 2 or c.size == 0 or not np.issubdtype(c.dtype, np.integer):
+            raise EventError(f"ClassMap.classes must be a non-empty 2-D integer grid, got {c.dtype} {c.shape}")
+        if not (self.de_m > 0 and self.dn_m > 0):
+            raise EventError(f"ClassMap spacing must be positive, got {self.de_m}, {self.dn_m}")
+        object.__setattr__(self, "classes", np.ascontiguousarray(c, np.int64))
+
+    @classmethod
+    def from_axes(cls, east_m: np.ndarray, north_m: np.ndarray, classes: np.ndarray) -> "ClassMap":
+        """From the grid's cell centres ``east_m`` (n_east,), ``north_m`` (n_north,) (evenly spaced)."""
+        e, n = np.asarray(east_m, float), np.asarray(north_m, float)
+        de = float(e[1] - e[0]) if e.size > 1 else 1.0
+        dn = float(n[1] - n[0]) if n.size > 1 else 1.0
+        return cls(float(e[0]), float(n[0]), de, dn, np.asarray(classes))
+
+    def __call__(self, east_m: float, north_m: float) -> int:
+        ni, nj = self.classes.shape
+        i = min(max(math.floor((north_m - self.north0_m) / self.dn_m + 0.5), 0), ni - 1)
+        j = min(max(math.floor((east_m - self.east0_m) / self.de_m + 0.5), 0), nj - 1)
+        return int(self.classes[i, j])
 
 
 @dataclass(frozen=True)

@@ -2,28 +2,35 @@
 
 Blom & Bar-Shalom (1988), IEEE TAC 33(8); Bar-Shalom, Li & Kirubarajan
 (2001), ch. 11. All modes share the event-driven model of
-:mod:`models.fusion.ekf`; they differ in the measurement noise R_j of each
-source, the per-class R a :class:`~models.fusion.noise.PerClassNoise` learnt.
-Each event is one IMM cycle:
+:mod:`models.fusion.ekf` and run the same compiled kernels of
+:mod:`models.fusion.core` (time update, PDR step, Kalman update with its gate
+or Huber weights); they differ in the measurement noise R_j of each source,
+the per-class R a :class:`~models.fusion.noise.PerClassNoise` learnt. Each
+event is one IMM cycle:
 
 1. mixing with the transition matrix of the elapsed time,
    π_ii = e^(−λΔt), π_ij = (1 − e^(−λΔt))/(M − 1) (a continuous-time chain of
    switch rate λ, so irregular event rates need no resampling);
-2. mode-matched predict (step or stationary) and update (Joseph form, the
-   same gate or Huber weights as the EKF, per mode);
-3. mode probabilities from the Gaussian innovation likelihoods, in logs;
+2. mode-matched predict (step or stationary) and update;
+3. mode probabilities from the Gaussian innovation likelihoods (of the
+   unweighted S), in logs;
 4. optional classifier evidence: when the class track moves to a new window,
    μ_j ∝ μ_j · p_j^w (``evidence_weight`` w; 0 ignores the classifier);
 5. the moment-matched combination, recorded like an EKF run (the combined
    prior, posterior and the probability-weighted Jacobian), so
    :func:`~models.fusion.smoother.rts_smooth` smooths it too.
 
-Hand-written rather than ``filterpy.kalman.IMMEstimator``: that class mixes
-filterpy filters whose ``predict()`` takes a fixed F and Q and whose
-``update(z)`` a fixed R, whereas here each event brings its own step
-Jacobian, H, R per mode and elapsed time; the mixing and combination
-equations are the same as filterpy's (its ``_compute_mixing_probabilities``
-and ``_compute_state_estimate``).
+Moments are taken about mode 0 (x = Σ w_i x_i, P = Σ w_i (P_i + e_i e_i') −
+f f' with e_i = x_i − x_0, f = x − x_0), which keeps the products small
+while the modes stay close.
+
+Written on the project's core rather than ``filterpy.kalman.IMMEstimator``:
+that class mixes filterpy filters whose ``predict()`` takes a fixed F and Q and
+whose ``update(z)`` a fixed R, whereas here each event brings its own step
+Jacobian, H, R per mode and elapsed time; the mixing and combination equations
+are filterpy's (its ``_compute_mixing_probabilities`` and
+``_compute_state_estimate``), and tests/test_filters.py checks a run against
+filterpy's IMMEstimator on a linear stream.
 """
 
 from __future__ import annotations
@@ -31,134 +38,146 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from numba import njit
 
-from models.fusion.ekf import (EkfConfig, FilterError, FilterRun, _h_matrices, _initial, _records, _step_predict,
-                               _time_noise, _update)
-from models.fusion.events import ACOUSTIC, GNSS, STEP, ClassTrack, EventStream
+from models.fusion.core import STEP_KIND, inv2, kalman_update, mm, mmt, predict_step, time_update
+from models.fusion.ekf import (OUTLIER_CODES, EkfConfig, FilterError, FilterRun, empty_records, initial_state,
+                               measurement_models, time_noise)
+from models.fusion.events import ACOUSTIC, GNSS, ClassTrack, EventStream
 
 __all__ = ["IMMFilter"]
 
-
-class _Fixed:
-    """The per-mode 'runner' the shared update wants: a fixed R, no adaptation."""
-
-    n_iter = 1
-
-    def feedback(self, k, nu, hph, accepted):
-        pass
+_LN_2PI = math.log(2.0 * math.pi)
 
 
-def _combine(mu, xs, Ps):
-    """Moment matching of modes with weights mu (M,), means xs (M, n), covariances Ps (M, n, n)."""
+@njit(cache=True)
+def _moments(w, xs, Ps):
+    """Moment matching of modes with weights w (M,), means xs (M, n), covariances Ps (M, n, n), about mode 0."""
     M, n = xs.shape
-    # x = Σ μ_j x_j
-    x = mu @ xs
-    d = xs - x
-    # P = Σ μ_j (P_j + (x_j − x)(x_j − x)')
-    P = (mu @ (Ps + d[:, :, None] * d[:, None, :]).reshape(M, n * n)).reshape(n, n)
-    return x, 0.5 * (P + P.T)
+    x = np.zeros(n)
+    P = np.zeros((n, n))
+    for i in range(M):
+        # x = Σ w_i x_i;  P = Σ w_i (P_i + e_i e_i'),  e_i = x_i − x_0
+        e = xs[i] - xs[0]
+        x += w[i] * xs[i]
+        for a in range(n):
+            for b in range(n):
+                P[a, b] += w[i] * (Ps[i, a, b] + e[a] * e[b])
+    # P −= f f',  f = x − x_0
+    f = x - xs[0]
+    for a in range(n):
+        for b in range(n):
+            P[a, b] -= f[a] * f[b]
+    return x, P
 
 
-def _mix(mix, xs, Ps):
-    """Mixed initial conditions per mode j: weights mix (M_i, M_j), returns (M, n) and (M, n, n)."""
+@njit(cache=True)
+def _mix(mu, xs, Ps, stay, leave):
+    """Mixing step: c̄_j = Σ_i π_ij μ_i, μ_{i|j} = π_ij μ_i / c̄_j, and each mode's mixed (x0_j, P0_j)."""
     M, n = xs.shape
-    # x0_j = Σ_i μ_{i|j} x_i
-    xm = mix.T @ xs
-    # P0_j = Σ_i μ_{i|j} (P_i + (x_i − x0_j)(x_i − x0_j)'), as Σ_i μ_{i|j} (P_i + e_i e_i') − f_j f_j'
-    # with e, f measured from a reference mode (no cancellation: modes stay close)
-    e = xs - xs[0]
-    f = xm - xs[0]
-    Pm = (mix.T @ (Ps + e[:, :, None] * e[:, None, :]).reshape(M, n * n)).reshape(M, n, n)
-    Pm -= f[:, :, None] * f[:, None, :]
-    return xm, 0.5 * (Pm + np.swapaxes(Pm, 1, 2))
+    cbar = np.empty(M)
+    for j in range(M):
+        # c̄_j = μ_j π_jj + (1 − μ_j) π_ij   (Σ μ = 1, every off-diagonal π equal)
+        cbar[j] = mu[j] * stay + (1.0 - mu[j]) * leave
+    xm = np.empty((M, n))
+    Pm = np.empty((M, n, n))
+    w = np.empty(M)
+    for j in range(M):
+        for i in range(M):
+            # μ_{i|j} = π_ij μ_i / c̄_j
+            w[i] = (stay if i == j else leave) * mu[i] / cbar[j]
+        xm[j], Pm[j] = _moments(w, xs, Ps)
+    return cbar, xm, Pm
 
 
-def _nis(nu, S) -> tuple[float, float]:
-    """(ν'S⁻¹ν, det S) of a 2-vector innovation and its 2×2 covariance."""
-    det = S[0, 0] * S[1, 1] - S[0, 1] * S[1, 0]
-    return (S[1, 1] * nu[0] * nu[0] - (S[0, 1] + S[1, 0]) * nu[0] * nu[1] + S[0, 0] * nu[1] * nu[1]) / det, det
-
-
-def _loglik(nu, S) -> float:
-    """ln N(ν; 0, S) for a 2-vector: −½ (ν'S⁻¹ν + ln det S) − ln 2π."""
-    q, det = _nis(nu, S)
-    return -0.5 * (q + math.log(det)) - math.log(2.0 * math.pi)
-
-
-def _batch_step(xs, Ps, L, psi, cfg):
-    """Step predict of all modes at once: xs (M, n), Ps (M, n, n) → (xs, Ps, F (M, n, n))."""
+@njit(cache=True)
+def _mode_updates(xs, Ps, z, H, R_modes, cbar, xp, Pp, outlier, gate_nis, huber_k, joseph):
+    """Steps 2 (update) and 3 of the IMM cycle for a fix: each mode updated in place by its own R_j, then
+    μ_j ∝ Λ_j c̄_j. Returns (μ, and the records of the combined prior (xp, Pp): ν, S, R̄ = Σ c̄_j R_j, NIS,
+    K̄ = Σ μ_j K_j, w̄ = Σ μ_j w_j, accepted by any mode)."""
     M, n = xs.shape
-    g = 1.0 + xs[:, 3]
-    th = psi + xs[:, 2]
-    sn, cs = np.sin(th), np.cos(th)
-    gl = g * L
-    xs = xs.copy()
-    # e += (1+s)·L·sin(ψ+δψ),  n += (1+s)·L·cos(ψ+δψ)
-    xs[:, 0] += gl * sn
-    xs[:, 1] += gl * cs
-    F = np.broadcast_to(np.eye(n), (M, n, n)).copy()
-    F[:, 0, 2], F[:, 0, 3], F[:, 1, 2], F[:, 1, 3] = gl * cs, L * sn, -gl * sn, L * cs
-    # P⁻ = F P F'
-    Ps = F @ Ps @ np.swapaxes(F, 1, 2)
-    # + G diag(σ_L², σ_ψ²) G'
-    vl = (g * cfg.sigma_step_length_m) ** 2
-    vp = (gl * cfg.sigma_heading_rad) ** 2
-    Ps[:, 0, 0] += vl * sn * sn + vp * cs * cs
-    Ps[:, 1, 1] += vl * cs * cs + vp * sn * sn
-    c = (vl - vp) * sn * cs
-    Ps[:, 0, 1] += c
-    Ps[:, 1, 0] += c
-    return xs, Ps, F
+    lp = np.empty(M)
+    Ks = np.zeros((M, n, 2))
+    ws = np.zeros(M)
+    Rbar = np.zeros((2, 2))
+    any_ok = False
+    for j in range(M):
+        Rbar += cbar[j] * R_modes[j]
+        # ln Λ_j = −½ (ν'S⁻¹ν + ln det S) − ln 2π, with the unweighted S = H P⁻ H' + R_j
+        _, det0 = inv2(mm(H, mmt(Ps[j], H)) + R_modes[j])
+        xn, Pn, nu, S, K, Ru, nis, w, ok = kalman_update(xs[j], Ps[j], z, R_modes[j], H, outlier, gate_nis,
+                                                         huber_k, joseph)
+        lp[j] = -0.5 * (nis + math.log(det0)) - _LN_2PI + math.log(max(cbar[j], 1e-300))
+        xs[j], Ps[j] = xn, Pn
+        Ks[j] = K
+        ws[j] = w
+        any_ok = any_ok or ok
+    # μ_j ∝ Λ_j c̄_j   (in logs)
+    lp -= lp.max()
+    mu = np.exp(lp)
+    mu /= mu.sum()
+    Kbar = np.zeros((n, 2))
+    wbar = 0.0
+    for j in range(M):
+        Kbar += mu[j] * Ks[j]
+        wbar += mu[j] * ws[j]
+    # the combined prior's innovation: ν = z − H x⁻,  S = H P⁻ H' + R̄
+    nu_c = z - mm(H, xp.reshape(n, 1))[:, 0]
+    S_c = mm(H, mmt(Pp, H)) + Rbar
+    Si, _ = inv2(S_c)
+    nis_c = nu_c[0] * (Si[0, 0] * nu_c[0] + Si[0, 1] * nu_c[1]) + nu_c[1] * (Si[1, 0] * nu_c[0] + Si[1, 1] * nu_c[1])
+    return mu, nu_c, S_c, Rbar, nis_c, Kbar, wbar, any_ok
 
 
-def _inv2(S):
-    """Inverse and determinant of a stack of 2×2 matrices (M, 2, 2)."""
-    det = S[:, 0, 0] * S[:, 1, 1] - S[:, 0, 1] * S[:, 1, 0]
-    Si = np.empty_like(S)
-    Si[:, 0, 0], Si[:, 1, 1] = S[:, 1, 1] / det, S[:, 0, 0] / det
-    Si[:, 0, 1], Si[:, 1, 0] = -S[:, 0, 1] / det, -S[:, 1, 0] / det
-    return Si, det
-
-
-def _batch_update(xs, Ps, z, R, H, cfg, gate):
-    """Mode-matched updates of all modes by one fix; R (M, 2, 2). Returns (xs, Ps, K, w, ok, ln Λ)."""
-    M, n = xs.shape
-    # ν = z − H x⁻
-    nu = z - xs @ H.T
-    PHt = Ps @ H.T
-    HPH = H @ PHt
-    # S = H P⁻ H' + R
-    S = HPH + R
-    Si, det = _inv2(S)
-    # NIS = ν' S⁻¹ ν
-    nis = (nu[:, None, :] @ Si @ nu[:, :, None])[:, 0, 0]
-    # ln Λ_j = −½ (ν'S⁻¹ν + ln det S) − ln 2π, with the unweighted S
-    loglik = -0.5 * (nis + np.log(det)) - math.log(2.0 * math.pi)
-    w = np.ones(M)
-    ok = np.ones(M, bool)
-    if cfg.outlier == "gate":
-        ok = nis <= gate
-    elif cfg.outlier == "huber":
-        # w = min(1, k / √NIS),  R ← R / w
-        w = np.minimum(1.0, cfg.huber_k / np.sqrt(np.maximum(nis, 1e-300)))
-        R = R / w[:, None, None]
-        Si, _ = _inv2(HPH + R)
-    # K = P⁻ H' S⁻¹
-    K = PHt @ Si
-    # x = x⁻ + K ν
-    xn = xs + (K @ nu[:, :, None])[:, :, 0]
-    # P = (I − KH) P⁻ (I − KH)' + K R K'   (Joseph form)
-    A = np.eye(n) - K @ H
-    if cfg.joseph:
-        Pn = A @ Ps @ np.swapaxes(A, 1, 2) + K @ R @ np.swapaxes(K, 1, 2)
-    else:
-        # P = (I − KH) P⁻   (short form)
-        Pn = A @ Ps
-    Pn = 0.5 * (Pn + np.swapaxes(Pn, 1, 2))
-    if not ok.all():
-        xn[~ok], Pn[~ok], K[~ok] = xs[~ok], Ps[~ok], 0.0
-        w = np.where(ok, w, 0.0)
-    return xn, Pn, K, w, ok, loglik
+@njit(cache=True)
+def _imm_events(kind, avail, z, length_m, heading_rad, dt, phi, q, h_idx, H, x0, P0, sl2, sp2, outlier, gate_nis,
+                huber_k, joseph, r_table, mu0, switch_rate_hz, rows, proba_w, x_prior, P_prior, F_rec, x_post, P_post,
+                nu_rec, S_rec, K_rec, R_rec, nis_rec, w_rec, updated, accepted, mode_p):
+    """The IMM over m events, records written in place; ``r_table`` (3, M, 2, 2) per event kind and mode,
+    ``rows`` (m,) the class-track row in force (−1: no evidence), ``proba_w`` (n_rows, M) = p^w."""
+    m = kind.shape[0]
+    M = mu0.shape[0]
+    n = x0.shape[0]
+    xs = np.empty((M, n))
+    Ps = np.empty((M, n, n))
+    for j in range(M):
+        xs[j] = x0
+        Ps[j] = P0
+    mu = mu0.copy()
+    off_share = 1.0 / max(M - 1, 1)
+    for k in range(m):
+        # 1. mixing over the elapsed time (identity when Δt = 0)
+        stay = math.exp(-switch_rate_hz * dt[k])
+        if stay < 1.0:
+            cbar, xs, Ps = _mix(mu, xs, Ps, stay, (1.0 - stay) * off_share)
+        else:
+            cbar = mu.copy()
+        # 2. mode-matched predict; F = Σ_j c̄_j F_j (F_j = F_step,j Φ)
+        Fk = np.zeros((n, n))
+        for j in range(M):
+            time_update(xs[j], Ps[j], phi[k], q[k])
+            if kind[k] == STEP_KIND:
+                xs[j], Ps[j], Fs = predict_step(xs[j], Ps[j], length_m[k], heading_rad[k], sl2, sp2)
+                Fk += cbar[j] * (Fs * phi[k])
+            else:
+                for i in range(n):
+                    Fk[i, i] += cbar[j] * phi[k, i]
+        F_rec[k] = Fk
+        xp, Pp = _moments(cbar, xs, Ps)
+        x_prior[k] = xp
+        P_prior[k] = Pp
+        mu = cbar.copy()
+        if kind[k] != STEP_KIND and avail[k]:
+            mu, nu_rec[k], S_rec[k], R_rec[k], nis_rec[k], K_rec[k], w_rec[k], accepted[k] = _mode_updates(
+                xs, Ps, z[k], H[h_idx[k]], r_table[kind[k]], cbar, xp, Pp, outlier, gate_nis, huber_k, joseph)
+            updated[k] = True
+        # 4. classifier evidence once per new window: μ_j ∝ μ_j p_j^w
+        if rows[k] >= 0 and (k == 0 or rows[k] != rows[k - 1]):
+            mu = mu * proba_w[rows[k]]
+            mu /= mu.sum()
+        # 5. combination
+        x_post[k], P_post[k] = _moments(mu, xs, Ps)
+        mode_p[k] = mu
 
 
 class IMMFilter:
@@ -166,138 +185,51 @@ class IMMFilter:
 
     ``noise``: a :class:`~models.fusion.noise.PerClassNoise` (fitted; its classes are the modes);
     ``switch_rate_hz`` λ; ``evidence_weight`` w; ``mu0`` (M,) initial mode probabilities (uniform);
-    ``fast``: the 4-state model runs in the scalar loop of :mod:`models.fusion.fast_imm` (default);
-    otherwise, or with the bias states, ``batched``: all modes in one stack of matrices per operation,
-    or mode by mode through the EKF's own update (the reference the tests compare against).
+    ``scales``: ``{"gnss", "acoustic"}`` multipliers of every mode's R (a method's tuning).
     """
 
     def __init__(self, noise, config: EkfConfig | None = None, switch_rate_hz: float = 0.05,
-                 evidence_weight: float = 1.0, mu0=None, method: str = "imm", batched: bool = True,
-                 fast: bool = True):
+                 evidence_weight: float = 1.0, mu0=None, method: str = "imm", scales: dict | None = None):
         self.noise = noise
         self.config = config
         self.switch_rate_hz = switch_rate_hz
         self.evidence_weight = evidence_weight
         self.mu0 = mu0
         self.method = method
-        self.batched = batched
-        self.fast = fast
+        self.scales = scales
 
     def run(self, stream: EventStream, x0_en=None, classes: ClassTrack | None = None, x0=None, P0=None) -> FilterRun:
         """Filter the stream; the result's ``mode_proba`` (m, M) holds the posterior mode probabilities."""
         cfg = self.config or EkfConfig()
         if not hasattr(self.noise, "R_gnss_"):
             self.noise.fit()
-        table = {GNSS: self.noise.R_gnss_, ACOUSTIC: self.noise.R_acoustic_}
-        M = table[GNSS].shape[0]
+        M = self.noise.R_gnss_.shape[0]
+        table = np.zeros((3, M, 2, 2))
+        sc = self.scales or {}
+        table[GNSS] = self.noise.R_gnss_ * float(sc.get("gnss", 1.0))
+        table[ACOUSTIC] = self.noise.R_acoustic_ * float(sc.get("acoustic", 1.0))
         if not (math.isfinite(self.switch_rate_hz) and self.switch_rate_hz >= 0):
             raise FilterError(f"switch_rate_hz must be finite and >= 0, got {self.switch_rate_hz}")
         if classes is not None and classes.n_classes != M:
             raise FilterError(f"classes has {classes.n_classes} classes, the IMM {M} modes")
         mu = np.full(M, 1.0 / M) if self.mu0 is None else np.asarray(self.mu0, float) / np.sum(self.mu0)
-        x, P = _initial(stream, cfg, x0_en, x0, P0)
-        x0c, P0c = x.copy(), P.copy()
+        x, P = initial_state(stream, cfg, x0_en, x0, P0)
         m, n = len(stream), cfg.n_state
-        xs = np.repeat(x[None], M, axis=0)
-        Ps = np.repeat(P[None], M, axis=0)
-        rec = _records(m, n)
-        mode_p = np.empty((m, M))
-        q, phi = _time_noise(stream, cfg)
-        H = _h_matrices(cfg)
-        gate = cfg.gate_nis
-        fixed = _Fixed()
-        rows = classes.row_at(stream.t_s) if classes is not None else None
+        q, phi = time_noise(stream, cfg)
+        H, h_idx = measurement_models(stream, cfg)
         w_ev = float(self.evidence_weight)
-        idx = np.arange(n)
-        off = ~np.eye(M, dtype=bool)
-        eye = np.eye(n)
-        if self.fast and n == 4:
-            from models.fusion.fast_imm import run_imm4
-
-            rec, mode_p = run_imm4(stream, cfg, table, mu, x, P, q, self.switch_rate_hz, rows,
-                                   None if classes is None else classes.proba, w_ev)
-            return FilterRun(self.method, stream.t_s, stream.kind, x0c, P0c, available=stream.available,
-                             mode_proba=mode_p, info={"fast": True}, **rec)
-        kinds, dts, avail = stream.kind.tolist(), stream.dt_s.tolist(), stream.available.tolist()
-        for k in range(m):
-            # 1. mixing: π(Δt);  c̄_j = Σ_i π_ij μ_i;  μ_{i|j} = π_ij μ_i / c̄_j   (identity when Δt = 0)
-            stay = math.exp(-self.switch_rate_hz * dts[k])
-            if stay < 1.0:
-                pi = np.where(off, (1.0 - stay) / max(M - 1, 1), stay)
-                cbar = mu @ pi
-                mix = pi * mu[:, None] / cbar[None, :]
-                xs, Ps = _mix(mix, xs, Ps)
-            else:
-                cbar = mu
-            # 2. mode-matched predict
-            c = kinds[k]
-            xs, Ps = xs.copy(), Ps.copy()
-            if cfg.gnss_bias:
-                # b = φ b;  P = Φ P Φ'
-                xs[:, 4:6] *= phi[k]
-                Ps[:, 4:6, :] *= phi[k]
-                Ps[:, :, 4:6] *= phi[k]
-            Ps[:, idx, idx] += q[k]
-            if c == STEP:
-                if self.batched:
-                    xs, Ps, Fb = _batch_step(xs, Ps, stream.step_length_m[k], stream.heading_rad[k], cfg)
-                else:
-                    Fb = np.empty((M, n, n))
-                    for j in range(M):
-                        Fb[j] = eye
-                        xs[j], Ps[j] = _step_predict(xs[j], Ps[j], stream.step_length_m[k], stream.heading_rad[k],
-                                                     cfg, Fb[j])
-                Fk = (cbar @ Fb.reshape(M, -1)).reshape(n, n)
-            else:
-                Fk = eye.copy()
-            if cfg.gnss_bias:
-                # F = F_step Φ   (bias decay first, then the step)
-                Fk[:, 4:6] *= phi[k]
-            rec["F"][k] = Fk
-            rec["x_prior"][k], rec["P_prior"][k] = xp, Pp = _combine(cbar, xs, Ps)
-            mu = cbar
-            if c != STEP and avail[k]:
-                Hk = H[GNSS] if c == GNSS else H["other"]
-                z = stream.z_m[k]
-                if self.batched:
-                    xs, Ps, Ks, ws, oks, loglik = _batch_update(xs, Ps, z, table[c], Hk, cfg, gate)
-                else:
-                    xs, Ps, Ks, ws, oks, loglik = self._mode_updates(xs, Ps, z, table[c], Hk, cfg, fixed, k, gate)
-                # 3. μ_j ∝ Λ_j c̄_j
-                lp = loglik + np.log(np.maximum(cbar, 1e-300))
-                lp -= lp.max()
-                mu = np.exp(lp)
-                mu /= mu.sum()
-                Rbar = (cbar @ table[c].reshape(M, 4)).reshape(2, 2)
-                Sc = Hk @ Pp @ Hk.T + Rbar
-                nu_c = z - Hk @ xp
-                rec["nu"][k], rec["S"][k], rec["R"][k] = nu_c, Sc, Rbar
-                rec["nis"][k] = _nis(nu_c, Sc)[0]
-                rec["K"][k] = (mu @ Ks.reshape(M, -1)).reshape(n, 2)
-                rec["weight"][k] = float(mu @ ws)
-                rec["updated"][k] = True
-                rec["accepted"][k] = bool(oks.any())
-            # 4. classifier evidence once per new window: μ_j ∝ μ_j p_j^w
-            if rows is not None and w_ev > 0 and (k == 0 or rows[k] != rows[k - 1]):
-                p = np.maximum(classes.proba[rows[k]], 1e-12)
-                mu = mu * p ** w_ev
-                mu /= mu.sum()
-            # 5. combination
-            rec["x"][k], rec["P"][k] = _combine(mu, xs, Ps)
-            mode_p[k] = mu
-        return FilterRun(self.method, stream.t_s, stream.kind, x0c, P0c, available=stream.available,
+        if classes is not None and w_ev > 0:
+            rows = classes.row_at(stream.t_s).astype(np.int64)
+            proba_w = np.maximum(classes.proba, 1e-12) ** w_ev
+        else:
+            rows, proba_w = np.full(m, -1, np.int64), np.ones((1, M))
+        rec = empty_records(m, n)
+        mode_p = np.empty((m, M))
+        _imm_events(stream.kind.astype(np.int64), stream.available, stream.z_m, stream.step_length_m,
+                    stream.heading_rad, stream.dt_s, phi, q, h_idx, H, x, P, cfg.sigma_step_length_m ** 2,
+                    cfg.sigma_heading_rad ** 2, OUTLIER_CODES[cfg.outlier], cfg.gate_nis, cfg.huber_k, cfg.joseph,
+                    table, mu, float(self.switch_rate_hz), rows, proba_w, rec["x_prior"], rec["P_prior"], rec["F"],
+                    rec["x"], rec["P"], rec["nu"], rec["S"], rec["K"], rec["R"], rec["nis"], rec["weight"],
+                    rec["updated"], rec["accepted"], mode_p)
+        return FilterRun(self.method, stream.t_s, stream.kind, x.copy(), P.copy(), available=stream.available,
                          mode_proba=mode_p, **rec)
-
-    @staticmethod
-    def _mode_updates(xs, Ps, z, R, H, cfg, fixed, k, gate):
-        """Reference path: each mode through the EKF's own :func:`~models.fusion.ekf._update`."""
-        M, n = xs.shape
-        xs, Ps = xs.copy(), Ps.copy()
-        loglik, ws, oks, Ks = np.empty(M), np.empty(M), np.zeros(M, bool), np.zeros((M, n, 2))
-        for j in range(M):
-            # ln Λ_j with the unweighted S = H P⁻ H' + R_j
-            loglik[j] = _loglik(z - H @ xs[j], H @ Ps[j] @ H.T + R[j])
-            xs[j], Ps[j], _, _, K, _, _, ws[j], oks[j] = _update(xs[j], Ps[j], z, R[j], H, cfg, fixed, k, gate)
-            if oks[j]:
-                Ks[j] = K
-        return xs, Ps, Ks, ws, oks, loglik

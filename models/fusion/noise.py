@@ -2,19 +2,14 @@
 
 Every policy is an estimator in the scikit-learn manner (``__init__`` stores
 parameters, ``fit`` returns ``self``, learnt attributes end in ``_``) and,
-when a filter run starts, hands the filter a private per-run object with
+when a filter run starts, hands the compiled filter core
+(:mod:`models.fusion.core`) a :class:`NoiseSpec` through
+``measurement_noise(stream, classes=..., class_at=...)``: R for every event
+computed at once (every policy that needs nothing from the filter), R per
+class with the site map the core looks the class up in at the prior position,
+or the state of an innovation-adaptive R the core updates itself.
 
-* ``r(k, x)`` — R (2, 2) of event ``k`` given the prior state ``x``;
-* ``refine(k, res, hph)`` — variational iterations only (``n_iter > 1``);
-* ``feedback(k, nu, hph_prior, accepted)`` — after the update (innovation-adaptive policies);
-
-and the innovation-adaptive ones the same in floats (``r_s``, ``refine_s``,
-``feedback_s``) for the scalar loop of :mod:`models.fusion.fast`.
-
-R of the policies that need nothing from the filter is computed for the whole
-stream at once, so the filter loop only indexes an array.
-
-Policies and the method names of issue 14 they serve:
+Policies and the methods they serve (``walks.methods``):
 
 ``FixedNoise`` (``kf``)
     one R per source, the second moment of training errors (fix − truth), or
@@ -25,30 +20,30 @@ Policies and the method names of issue 14 they serve:
     UERE table refit on training walks, UERE² = E[(e² + n²)/HDOP²] (maximum
     likelihood under σ_pos = UERE·HDOP, Kaplan & Hegarty 2006 ch. 7);
     acoustic: the solver's own covariance times a fitted scale.
-``PerClassNoise`` (``kf_map``, ``adaptive_nobp``)
-    R per environment class and source; the class from a map callable at
-    the last estimate or from per-event class probabilities (expected R).
+``PerClassNoise`` (``kf_map``, ``imm``)
+    R per environment class and source; the class from a site map
+    (:class:`~models.fusion.events.ClassMap`) at the last estimate, or from
+    per-event class probabilities (expected R).
+``ContextNoise`` (``adaptive_nobp`` and its blind twin; :mod:`models.fusion.context`)
+    a white part, a Gauss–Markov bias and an outlier prior per (class, GGA quality).
 ``VBAdaptiveNoise`` (``aekf``)
     variational-Bayes adaptive KF, diagonal R with inverse-gamma posteriors
     (Särkkä & Nummenmaa 2009, IEEE TAC 54(3), 596–600).
-``SageHusaNoise`` (``aekf``, variant)
-    Sage & Husa (1969) covariance matching with fading memory, guarded
-    against a non-positive R.
 """
 
 from __future__ import annotations
 
 import math
-from typing import Callable
+from dataclasses import dataclass
 
 import numpy as np
 
 from features.errors import EnvfuseError
 from features.gnss.positions import ASSUMED_HDOP, UERE_BY_QUALITY_M
-from models.fusion.events import ACOUSTIC, GNSS, ClassTrack, EventStream
+from models.fusion.events import ACOUSTIC, GNSS, ClassMap, ClassTrack, EventStream
 
-__all__ = ["FixedNoise", "QualityNoise", "PerClassNoise", "VBAdaptiveNoise", "SageHusaNoise", "NoiseError",
-           "second_moment_m2"]
+__all__ = ["FixedNoise", "QualityNoise", "PerClassNoise", "VBAdaptiveNoise", "NoiseError",
+           "NoiseSpec", "second_moment_m2", "chi2_2_mean", "SCALE_ESTIMATORS"]
 
 
 SCALE_ESTIMATORS = ("mean", "median")
@@ -108,20 +103,85 @@ def second_moment_m2(errors_m: np.ndarray, hph_m2: np.ndarray | None = None) -> 
     return _floor_pd(r)
 
 
-class _Static:
-    """Per-run R that was computed for the whole stream beforehand."""
+@dataclass(frozen=True)
+class NoiseSpec:
+    """What the compiled filter core needs to set R at each fix (see :func:`models.fusion.core.run_ekf_events`).
 
-    n_iter = 1
-    fast = True          # no feedback: the scalar 4-state loop of models.fusion.fast may run it
+    ``mode``: :data:`~models.fusion.core.R_PER_EVENT` (``r_event`` (m, 2, 2)), :data:`~models.fusion.core.R_MAP`
+    (``r_table`` (3, n_classes, 2, 2) per event kind and class, the class from ``map_grid`` / ``map_geo``) or
+    :data:`~models.fusion.core.R_VB` (``vb_alpha``, ``vb_beta``, ``vb_cap`` (3, 2) per event kind and axis,
+    ``vb_rho``, ``vb_n_iter``). Unused fields hold empty placeholders of the right type.
 
-    def __init__(self, r_m2: np.ndarray):
-        self.R = r_m2
+    Optional, per event (m,): ``eps_event``, ``kappa_event`` the contamination of each fix's noise (for the
+    filter's ``outlier="mixture"``); ``bias_shared`` which GNSS fixes see the GNSS bias state, with its
+    ``bias_phi``, ``bias_q`` (φ and per-axis Q of the time update; a reset is φ = 0). None: not given.
+    """
 
-    def r(self, k, x):
-        return self.R[k]
+    mode: int
+    r_event: np.ndarray
+    r_table: np.ndarray
+    map_grid: np.ndarray
+    map_geo: np.ndarray
+    vb_alpha: np.ndarray
+    vb_beta: np.ndarray
+    vb_cap: np.ndarray
+    vb_rho: float = 1.0
+    vb_n_iter: int = 1
+    eps_event: np.ndarray | None = None
+    kappa_event: np.ndarray | None = None
+    bias_shared: np.ndarray | None = None
+    bias_phi: np.ndarray | None = None
+    bias_q: np.ndarray | None = None
 
-    def feedback(self, k, nu, hph, accepted):
-        pass
+    def with_fields(self, **kw) -> "NoiseSpec":
+        """A copy with the given fields replaced."""
+        from dataclasses import replace
+
+        return replace(self, **kw)
+
+    def scaled(self, kind: np.ndarray, gnss: float = 1.0, acoustic: float = 1.0, bias: float = 1.0) -> "NoiseSpec":
+        """A copy with every GNSS and acoustic R multiplied by ``gnss`` / ``acoustic`` (per event, by the
+        events' ``kind`` (m,); also the site map's table and the VB-AKF's starting R and cap) and the bias
+        variance by ``bias`` — the knobs a method's tuning on training walks sets."""
+        r_event = self.r_event
+        if r_event.shape[0]:
+            f = np.where(kind == GNSS, gnss, np.where(kind == ACOUSTIC, acoustic, 1.0))
+            r_event = r_event * f[:, None, None]
+        table = self.r_table.copy()
+        beta, cap = self.vb_beta.copy(), self.vb_cap.copy()
+        for code, f in ((GNSS, gnss), (ACOUSTIC, acoustic)):
+            table[code] *= f
+            beta[code] *= f
+            cap[code] *= f
+        q = None if self.bias_q is None else self.bias_q * bias
+        return self.with_fields(r_event=r_event, r_table=table, vb_beta=beta, vb_cap=cap, bias_q=q)
+
+    @classmethod
+    def _make(cls, mode, r_event=None, r_table=None, map_grid=None, map_geo=None, **vb):
+        z32 = np.zeros((3, 2))
+        return cls(mode, np.zeros((0, 2, 2)) if r_event is None else np.ascontiguousarray(r_event, float),
+                   np.zeros((3, 1, 2, 2)) if r_table is None else np.ascontiguousarray(r_table, float),
+                   np.zeros((1, 1), np.int64) if map_grid is None else np.ascontiguousarray(map_grid, np.int64),
+                   np.array([0.0, 0.0, 1.0, 1.0]) if map_geo is None else np.asarray(map_geo, float),
+                   vb.get("vb_alpha", z32), vb.get("vb_beta", z32), vb.get("vb_cap", z32),
+                   float(vb.get("vb_rho", 1.0)), int(vb.get("vb_n_iter", 1)))
+
+    @classmethod
+    def per_event(cls, r_m2: np.ndarray) -> "NoiseSpec":
+        """R of every event given, (m, 2, 2) (NaN on steps)."""
+        from models.fusion.core import R_PER_EVENT
+
+        return cls._make(R_PER_EVENT, r_event=r_m2)
+
+    @classmethod
+    def by_map(cls, r_gnss: np.ndarray, r_acoustic: np.ndarray, class_map: ClassMap) -> "NoiseSpec":
+        """R per class (n_classes, 2, 2) of each source, the class from ``class_map`` at the prior position."""
+        from models.fusion.core import R_MAP
+
+        table = np.zeros((3,) + np.shape(r_gnss))
+        table[GNSS], table[ACOUSTIC] = r_gnss, r_acoustic
+        geo = [class_map.east0_m, class_map.north0_m, class_map.de_m, class_map.dn_m]
+        return cls._make(R_MAP, r_table=table, map_grid=class_map.classes, map_geo=geo)
 
 
 class FixedNoise:
@@ -144,12 +204,13 @@ class FixedNoise:
             self.fit()
         return self.R_gnss_, self.R_acoustic_
 
-    def _start(self, stream: EventStream, classes=None, class_at=None):
+    def measurement_noise(self, stream: EventStream, classes=None, class_at=None) -> NoiseSpec:
+        """R of each fix of ``stream``: the source's R."""
         rg, ra = self._source_r()
         r = np.full((len(stream), 2, 2), np.nan)
         r[stream.kind == GNSS] = rg
         r[stream.kind == ACOUSTIC] = ra
-        return _Static(r)
+        return NoiseSpec.per_event(r)
 
 
 class QualityNoise:
@@ -226,7 +287,8 @@ class QualityNoise:
         r[has_gst, 1, 1] = (self.gst_scale_ * g[has_gst, 1]) ** 2
         return r
 
-    def _start(self, stream: EventStream, classes=None, class_at=None):
+    def measurement_noise(self, stream: EventStream, classes=None, class_at=None) -> NoiseSpec:
+        """R of each fix of ``stream`` from its quality, HDOP, GST and reported covariance."""
         if not hasattr(self, "uere_m_"):
             self.fit()
         r = np.array(stream.cov_m2, copy=True)
@@ -236,36 +298,12 @@ class QualityNoise:
             r[sel] = self.gnss_r(g.quality[i], g.hdop[i], g.gst_sigma_m[i], g.cov_m2[i])
         sel = stream.kind == ACOUSTIC
         r[sel] *= self.acoustic_scale_ ** 2
-        return _Static(r)
-
-
-class _MapLookup:
-    """Per-run R from the class at the last estimate (``kf_map``)."""
-
-    n_iter = 1
-    fast = True
-
-    def __init__(self, kind, r_gnss, r_acoustic, class_at, combine):
-        self.kind, self.rg, self.ra, self.class_at, self.combine = kind, r_gnss, r_acoustic, class_at, combine
-
-    def r(self, k, x):
-        c = self.class_at(float(x[0]), float(x[1]))
-        table = self.rg if self.kind[k] == GNSS else self.ra
-        if np.ndim(c) == 0:
-            return table[int(c)]
-        p = np.asarray(c, float)
-        if self.combine == "argmax":
-            return table[int(np.argmax(p))]
-        # R = Σ_c p_c R_c
-        return np.tensordot(p / p.sum(), table, axes=1)
-
-    def feedback(self, k, nu, hph, accepted):
-        pass
+        return NoiseSpec.per_event(r)
 
 
 class PerClassNoise:
-    """R per environment class and source (``kf_map`` with a map callable, ``adaptive_nobp`` with class
-    probabilities). ``combine``: ``"mean"`` (expected R under the class probabilities) or ``"argmax"``."""
+    """R per environment class and source (``kf_map`` with a site map, ``imm`` with class probabilities).
+    ``combine``: ``"mean"`` (expected R under the class probabilities) or ``"argmax"``."""
 
     def __init__(self, n_classes: int = 3, gnss_sigma_m: float = 3.0, acoustic_sigma_m: float = 0.5,
                  combine: str = "mean", min_samples: int = 10):
@@ -297,80 +335,35 @@ class PerClassNoise:
             out[c] = second_moment_m2(err[sel]) if np.sum(sel) >= self.min_samples else pooled
         return out
 
-    def _start(self, stream: EventStream, classes: ClassTrack | None = None, class_at: Callable | None = None):
+    def measurement_noise(self, stream: EventStream, classes: ClassTrack | None = None,
+                          class_at: ClassMap | None = None) -> NoiseSpec:
+        """R per class: looked up in ``class_at`` at the prior position by the core, or the expectation under
+        the probabilities of ``classes`` in force at each event, R = Σ_c p_c R_c (exactly one of the two)."""
         if not hasattr(self, "R_gnss_"):
             self.fit()
         if (classes is None) == (class_at is None):
-            raise NoiseError("PerClassNoise needs exactly one of classes (a ClassTrack) or class_at (a callable)")
+            raise NoiseError("PerClassNoise needs exactly one of classes (a ClassTrack) or class_at (a ClassMap)")
         if class_at is not None:
-            return _MapLookup(stream.kind, self.R_gnss_, self.R_acoustic_, class_at, self.combine)
+            if not isinstance(class_at, ClassMap):
+                raise NoiseError(f"class_at must be a ClassMap (a gridded site map), got {type(class_at).__name__}")
+            return NoiseSpec.by_map(self.R_gnss_, self.R_acoustic_, class_at)
         if classes.n_classes != self.n_classes:
             raise NoiseError(f"classes has {classes.n_classes} classes, the policy {self.n_classes}")
-        p = classes.at(stream.t_s)
-        if self.combine == "argmax":
-            p = np.eye(self.n_classes)[np.argmax(p, axis=1)]
-        p = p / np.maximum(p.sum(axis=1, keepdims=True), 1e-300)
+        p = _class_weights(classes, stream, self.combine, self.n_classes)
         r = np.full((len(stream), 2, 2), np.nan)
         for code, table in ((GNSS, self.R_gnss_), (ACOUSTIC, self.R_acoustic_)):
             sel = stream.kind == code
             # R = Σ_c p_c R_c
             r[sel] = np.einsum("mc,cij->mij", p[sel], table)
-        return _Static(r)
+        return NoiseSpec.per_event(r)
 
 
-class _VB:
-    """Per-run state of the VB-AKF: inverse-gamma (α, β) per source and axis.
-
-    Two equal interfaces: arrays (``r``, ``refine``, ``feedback``) for the matrix form, floats
-    (``r_s``, ``refine_s``, ``feedback_s``) for the scalar loop of :mod:`models.fusion.fast`.
-    """
-
-    fast = True
-
-    def __init__(self, kind, r0, rho, n_iter, dof0, max_ratio=math.inf):
-        self.kind, self.rho, self.n_iter = kind, rho, n_iter
-        self.alpha = {GNSS: (dof0, dof0), ACOUSTIC: (dof0, dof0)}
-        self.beta = {s: (dof0 * float(r0[s][0, 0]), dof0 * float(r0[s][1, 1])) for s in (GNSS, ACOUSTIC)}
-        # Upper bound of the R handed to the filter (the posterior itself is not clipped).
-        self.cap = {s: (max_ratio * float(r0[s][0, 0]), max_ratio * float(r0[s][1, 1])) for s in (GNSS, ACOUSTIC)}
-        self.history = []
-
-    def r_s(self, k, x0, x1):
-        s = self.kind[k]
-        rho = self.rho
-        # α⁻ = ρ·α,  β⁻ = ρ·β   (the heuristic forgetting dynamics of Särkkä & Nummenmaa 2009)
-        ae, an = self.alpha[s]
-        be, bn = self.beta[s]
-        self._bp = (rho * be, rho * bn)
-        # α = α⁻ + 1/2   (one measurement per axis)
-        self._a = (rho * ae + 0.5, rho * an + 0.5)
-        self._b = self._bp
-        self._cap = self.cap[s]
-        # first iterate: R = diag(β⁻ / α), at most the cap
-        return min(self._bp[0] / self._a[0], self._cap[0]), 0.0, min(self._bp[1] / self._a[1], self._cap[1])
-
-    def refine_s(self, k, res0, res1, hp00, hp11):
-        # β = β⁻ + ½ (z − Hx)² + ½ diag(H P H')
-        self._b = (self._bp[0] + 0.5 * (res0 * res0 + hp00), self._bp[1] + 0.5 * (res1 * res1 + hp11))
-        # R = diag(β / α), at most the cap
-        return min(self._b[0] / self._a[0], self._cap[0]), 0.0, min(self._b[1] / self._a[1], self._cap[1])
-
-    def feedback_s(self, k, v0, v1, h00, h01, h11, accepted):
-        if accepted:
-            s = self.kind[k]
-            self.alpha[s], self.beta[s] = self._a, self._b
-            self.history.append((k, int(s), self._b[0] / self._a[0], self._b[1] / self._a[1]))
-
-    def r(self, k, x):
-        r00, _, r11 = self.r_s(k, x[0], x[1])
-        return np.diag([r00, r11])
-
-    def refine(self, k, res, hph):
-        r00, _, r11 = self.refine_s(k, res[0], res[1], hph[0, 0], hph[1, 1])
-        return np.diag([r00, r11])
-
-    def feedback(self, k, nu, hph, accepted):
-        self.feedback_s(k, nu[0], nu[1], hph[0, 0], hph[0, 1], hph[1, 1], accepted)
+def _class_weights(classes: ClassTrack, stream: EventStream, combine: str, n_classes: int) -> np.ndarray:
+    """Class probabilities in force at each event, (m, n_classes), normalised; one-hot with ``"argmax"``."""
+    p = classes.at(stream.t_s)
+    if combine == "argmax":
+        p = np.eye(n_classes)[np.argmax(p, axis=1)]
+    return p / np.maximum(p.sum(axis=1, keepdims=True), 1e-300)
 
 
 class VBAdaptiveNoise:
@@ -411,87 +404,19 @@ class VBAdaptiveNoise:
         self.R0_gnss_, self.R0_acoustic_ = f.R_gnss_, f.R_acoustic_
         return self
 
-    def _start(self, stream: EventStream, classes=None, class_at=None):
+    def measurement_noise(self, stream: EventStream, classes=None, class_at=None) -> NoiseSpec:
+        """The VB-AKF's starting state for the core: α = dof0 and β = dof0·R0 per source and axis (so the first
+        R is R0), the cap ``max_ratio``·R0 (:func:`models.fusion.core.run_ekf_events` updates them in place)."""
+        from models.fusion.core import R_VB
+
         if not hasattr(self, "R0_gnss_"):
             self.fit()
-        return _VB(stream.kind, {GNSS: self.R0_gnss_, ACOUSTIC: self.R0_acoustic_}, self.rho, int(self.n_iter),
-                   self.dof0, float(self.max_ratio))
-
-
-class _SageHusa:
-    """Per-run state of the Sage–Husa estimator (array and float interfaces, as :class:`_VB`)."""
-
-    n_iter = 1
-    fast = True
-
-    def __init__(self, kind, r0, b, floor_m2, n_prior):
-        self.kind, self.b, self.floor = kind, b, floor_m2
-        self.R = {s: (float(r0[s][0, 0]), float(r0[s][0, 1]), float(r0[s][1, 1])) for s in (GNSS, ACOUSTIC)}
-        self.count = {GNSS: n_prior, ACOUSTIC: n_prior}
-        self.n_guarded = 0
-
-    def r_s(self, k, x0, x1):
-        return self.R[self.kind[k]]
-
-    def feedback_s(self, k, v0, v1, h00, h01, h11, accepted):
-        if not accepted:
-            return
-        s = self.kind[k]
-        c = self.count[s]
-        # d_k = (1 − b) / (1 − b^(k+1))   (fading memory weight)
-        d = (1.0 - self.b) / (1.0 - self.b ** (c + 1))
-        o00, o01, o11 = self.R[s]
-        e = 1.0 - d
-        # R_k = (1 − d)·R_{k−1} + d·(νν' − H P⁻ H')
-        r00, r01, r11 = e * o00 + d * (v0 * v0 - h00), e * o01 + d * (v0 * v1 - h01), e * o11 + d * (v1 * v1 - h11)
-        fl = self.floor
-        if r00 <= fl or r11 <= fl or r00 * r11 - r01 * r01 <= fl * fl:
-            # guard: νν' − HP⁻H' indefinite; the biased form R = (1 − d)·R + d·νν' stays PD
-            r00, r01, r11 = e * o00 + d * v0 * v0, e * o01 + d * v0 * v1, e * o11 + d * v1 * v1
-            self.n_guarded += 1
-        # smallest eigenvalue, λ = tr/2 − √((tr/2)² − det); clip at the floor only when below it
-        h = 0.5 * (r00 + r11)
-        if h - math.sqrt(max(h * h - (r00 * r11 - r01 * r01), 0.0)) < fl:
-            r = _floor_pd(np.array([[r00, r01], [r01, r11]]), fl)
-            r00, r01, r11 = float(r[0, 0]), float(r[0, 1]), float(r[1, 1])
-        self.R[s] = (r00, r01, r11)
-        self.count[s] = c + 1
-
-    def r(self, k, x):
-        r00, r01, r11 = self.R[self.kind[k]]
-        return np.array([[r00, r01], [r01, r11]])
-
-    def feedback(self, k, nu, hph, accepted):
-        self.feedback_s(k, nu[0], nu[1], hph[0, 0], hph[0, 1], hph[1, 1], accepted)
-
-
-class SageHusaNoise:
-    """Sage–Husa (1969) adaptive R with forgetting factor ``b`` in (0, 1), per source.
-
-    ``n_prior``: the initial R counts as this many past updates (the fading weight
-    starts at d = (1 − b)/(1 − b^(n_prior+1)) instead of 1, so the first innovations,
-    still dominated by the prior's P, cannot set R alone); ``floor_m2``: smallest
-    eigenvalue of R.
-    """
-
-    def __init__(self, gnss_sigma_m: float = 3.0, acoustic_sigma_m: float = 0.5, b: float = 0.97,
-                 floor_m2: float = 1e-4, n_prior: int = 20):
-        self.gnss_sigma_m = gnss_sigma_m
-        self.acoustic_sigma_m = acoustic_sigma_m
-        self.b = b
-        self.floor_m2 = floor_m2
-        self.n_prior = n_prior
-
-    def fit(self, gnss_errors_m=None, acoustic_errors_m=None):
-        """Initial R per source from training errors (as :class:`FixedNoise`)."""
-        if not 0 < self.b < 1:
-            raise NoiseError(f"b must lie in (0, 1), got {self.b}")
-        f = FixedNoise(self.gnss_sigma_m, self.acoustic_sigma_m).fit(gnss_errors_m, acoustic_errors_m)
-        self.R0_gnss_, self.R0_acoustic_ = f.R_gnss_, f.R_acoustic_
-        return self
-
-    def _start(self, stream: EventStream, classes=None, class_at=None):
-        if not hasattr(self, "R0_gnss_"):
-            self.fit()
-        return _SageHusa(stream.kind, {GNSS: self.R0_gnss_, ACOUSTIC: self.R0_acoustic_}, self.b, self.floor_m2,
-                          int(self.n_prior))
+        alpha = np.full((3, 2), float(self.dof0))
+        beta = np.zeros((3, 2))
+        cap = np.zeros((3, 2))
+        for code, r0 in ((GNSS, self.R0_gnss_), (ACOUSTIC, self.R0_acoustic_)):
+            d = np.diag(r0)
+            beta[code] = self.dof0 * d
+            cap[code] = float(self.max_ratio) * d
+        return NoiseSpec._make(R_VB, vb_alpha=alpha, vb_beta=beta, vb_cap=cap, vb_rho=self.rho,
+                               vb_n_iter=int(self.n_iter))

@@ -2,21 +2,18 @@
 
 from __future__ import annotations
 
-import json
-import math
 import sys
 from pathlib import Path
 
 from features.errors import ConfigError
+from features.fileio import atomic_write_text
+from pipeline.args import UsageError
 
 GROUP = None  # top-level commands, registered by register_top
 
-TRACK_COLUMNS = ("t_s", "utc", "east_m", "north_m", "lat_deg", "lon_deg", "var_east_m2", "cov_en_m2",
-                 "var_north_m2", "env_class", "class_probability", "ood", "nis", "bp_correction_m")
-
 
 def register_top(sub) -> None:
-    from pipeline.fusion import METHODS
+    from walks.methods import method_names
 
     p = sub.add_parser(
         "run", help="fuse one walk into a track (CSV or GeoJSON)",
@@ -26,24 +23,33 @@ def register_top(sub) -> None:
     p.add_argument("walk", type=Path, help="walk directory")
     p.add_argument("--model", type=Path, required=True, help="fusion model directory (train fusion)")
     p.add_argument("--out", type=Path, required=True, help="track file to write (CSV, or GeoJSON with --format)")
-    p.add_argument("--method", choices=METHODS + tuple(m + "+rts" for m in METHODS[3:9]), default="adaptive",
-                   help="fusion method (default adaptive)")
+    p.add_argument("--method", choices=method_names(smoothed=True), default="adaptive",
+                   help="fusion method (default adaptive; a filter's +rts variant is its RTS-smoothed track, +lag its "
+                        "fixed-lag track, --lag-s late)")
+    p.add_argument("--lag-s", type=float, default=None,
+                   help="lag of a +lag track, s (default 3: the track a few seconds late, most of the smoother's gain)")
     p.add_argument("--format", choices=("csv", "geojson"), default=None,
                    help="output format (default: from the suffix, .geojson or .json → GeoJSON, else CSV)")
+    p.add_argument("--force", action="store_true", help="fuse a walk of a site the model was not trained on")
     p.set_defaults(func=_run)
 
     p = sub.add_parser(
         "evaluate", help="every fusion method on many walks: metrics.csv, summary, plots",
         description="Run every method on every walk (one task per walk, on Dask: a LocalCluster with one worker "
                     "per core by default), write metrics.csv (walk, method, env_class, n, mean_m, median_m, "
-                    "p95_m, max_m, nees_in_bounds), print a summary and draw trajectories, error over time, "
-                    "error CDFs and error by class.",
+                    "p95_m, max_m, nees_in_bounds: the share of epochs whose normalised error lies inside the 95 %% "
+                    "chi-square interval, about 0.95 for a consistent filter), print a summary and draw, for every "
+                    "walk, its trajectories and error over time, and the error CDFs and error by class. Each walk "
+                    "needs truth.csv; a walk that fails is named and skipped (exit 1).",
         epilog="Example: envfuse evaluate split/walks/201/w0 split/walks/201/w1 --model fusion_model "
                "--report report --workers 2")
     p.add_argument("walks", type=Path, nargs="+", help="walk directories (with truth.csv for errors)")
     p.add_argument("--model", type=Path, required=True, help="fusion model directory")
-    p.add_argument("--report", type=Path, required=True, help="directory for metrics.csv and the PNGs")
-    p.add_argument("--methods", nargs="+", choices=METHODS, default=list(METHODS), help="methods (default all)")
+    p.add_argument("--report", type=Path, required=True,
+                   help="directory for metrics.csv and the PNGs: new, empty or an earlier report (its plots of "
+                        "walks no longer evaluated are removed)")
+    p.add_argument("--methods", nargs="+", choices=method_names(), default=list(method_names()),
+                   help="methods (default all)")
     p.add_argument("--workers", type=int, default=None, help="local worker processes (default one per core; "
                                                                 "1 = serial, no Dask)")
     p.add_argument("--scheduler", default=None, help="address of an existing Dask scheduler (tcp://host:8786)")
@@ -52,95 +58,96 @@ def register_top(sub) -> None:
     p.set_defaults(func=_evaluate)
 
 
-def _fmt(v) -> str:
-    if isinstance(v, float):
-        return "" if math.isnan(v) else f"{v:.10g}"
-    return str(v)
-
-
 def _run(args) -> int:
     import numpy as np
 
-    from features.fileio import atomic_write_text
-    from features.geodesy import enu_to_geodetic
-    from features.site import ENV_CLASSES
-    from models.fusion_model import load_fusion_model
-    from pipeline.fusion import run_methods, walk_inputs
-    from pipeline.walk_data import read_walk
+    from pipeline.evaluate import load_model
+    from pipeline.outputs import check_outputs, model_inputs, walk_files
+    from pipeline.site_map import class_map_for
+    from walks.fuse import fuse_walk
+    from walks.track import track_rows, track_text
 
+    check_outputs(walk_files(args.walk), {"--out": args.out}, sealed=model_inputs(args.model, "--model"))
     if not (args.walk / "walk.toml").is_file():
         raise ConfigError(f"{args.walk}: no walk.toml (expected a walk directory)")
-    model = load_fusion_model(args.model)
-    data = read_walk(args.walk)
-    inputs = walk_inputs(data, model)
-    base = args.method.split("+")[0]
-    tracks, skipped = run_methods(model, inputs, (base,), smooth=args.method.endswith("+rts"))
-    if args.method not in tracks:
-        raise ConfigError(f"{args.walk}: method {args.method} cannot run: {skipped.get(base, 'no output')}")
-    tr = tracks[args.method]
-    o = data.site.origin
-    lat, lon, _ = enu_to_geodetic(tr.east_m, tr.north_m, np.zeros_like(tr.east_m), o.lat_deg, o.lon_deg, o.alt_m)
-    proba = inputs.classes.at(tr.t_s)
-    ood_t = np.concatenate([[False], inputs.window_ood])
-    rows_ood = ood_t[np.clip(np.searchsorted(inputs.classes.t_s, tr.t_s, side="right") - 1, 0, len(ood_t) - 1)]
-    start = data.walk.start_utc
-    from datetime import timedelta
+    from walks.methods import LAG_S
 
-    cov = tr.cov_m2 if tr.cov_m2 is not None else np.full((len(tr.t_s), 2, 2), np.nan)
-    nis = tr.info.get("nis", np.full(len(tr.t_s), np.nan))
-    bp = tr.info.get("bp_delta_m")
-    bpn = np.hypot(bp[:, 0], bp[:, 1]) if bp is not None else np.zeros(len(tr.t_s))
-    rows = []
-    for i in range(len(tr.t_s)):
-        c = int(np.argmax(proba[i]))
-        rows.append({"t_s": float(tr.t_s[i]),
-                     "utc": (start + timedelta(seconds=float(tr.t_s[i]))).strftime("%Y-%m-%dT%H:%M:%S.%fZ"),
-                     "east_m": float(tr.east_m[i]), "north_m": float(tr.north_m[i]), "lat_deg": float(lat[i]),
-                     "lon_deg": float(lon[i]), "var_east_m2": float(cov[i, 0, 0]), "cov_en_m2": float(cov[i, 0, 1]),
-                     "var_north_m2": float(cov[i, 1, 1]), "env_class": ENV_CLASSES[c],
-                     "class_probability": float(proba[i, c]), "ood": bool(rows_ood[i]), "nis": float(nis[i]),
-                     "bp_correction_m": float(bpn[i])})
+    base = args.method.split("+")[0]
+    lag = LAG_S if args.lag_s is None else args.lag_s
+    if not (lag >= 0 and lag < 3600):
+        raise ConfigError(f"--lag-s must lie in [0, 3600), got {args.lag_s}")
+    fused = fuse_walk(args.walk, load_model(args.model), (base,), smooth=args.method.endswith("+rts"),
+                      lag_s=lag if args.method.endswith("+lag") else None, class_map_for=class_map_for,
+                      force=args.force, truth=False)
+    for note in fused.data.notes:
+        print(f"envfuse: note: {args.walk}: {note}", file=sys.stderr)
+    if args.method not in fused.tracks:
+        raise ConfigError(f"{args.walk}: method {args.method} cannot run: {fused.skipped.get(base, 'no output')}")
+    track = fused.tracks[args.method]
+    rows = track_rows(track, fused.inputs)
     fmt = args.format or ("geojson" if args.out.suffix.lower() in (".geojson", ".json") else "csv")
-    if fmt == "csv":
-        text = ",".join(TRACK_COLUMNS) + "\n" + "".join(",".join(_fmt(r[k]) for k in TRACK_COLUMNS) + "\n"
-                                                        for r in rows)
-    else:
-        feats = [{"type": "Feature", "geometry": {"type": "LineString",
-                                                  "coordinates": [[round(r["lon_deg"], 9), round(r["lat_deg"], 9)]
-                                                                  for r in rows]},
-                  "properties": {"walk": str(args.walk), "method": args.method, "start_utc": rows[0]["utc"] if rows
-                                 else None}}]
-        feats += [{"type": "Feature", "geometry": {"type": "Point", "coordinates": [round(r["lon_deg"], 9),
-                                                                                   round(r["lat_deg"], 9)]},
-                   "properties": {k: (None if isinstance(r[k], float) and math.isnan(r[k]) else r[k])
-                                  for k in TRACK_COLUMNS if k not in ("lat_deg", "lon_deg")}} for r in rows]
-        text = json.dumps({"type": "FeatureCollection", "features": feats}, allow_nan=False) + "\n"
+    text = track_text(rows, fmt, {"walk": str(args.walk), "method": args.method})
     atomic_write_text(args.out, text)
-    print(f"{args.walk}: {args.method}, {len(rows)} positions -> {args.out}")
+    n = len(rows)
+    placed = int(np.sum(np.isfinite(track.east_m) & np.isfinite(track.north_m)))
+    ood = sum(r["ood"] for r in rows)
+    parts = [f"{n} epochs"]
+    if placed < n:
+        parts.append(f"{n - placed} without a position")
+    parts.append(f"{100 * ood / max(n, 1):.0f} % out of the environment model's training distribution"
+                 + (" (their class is a guess)" if ood else ""))
+    print(f"{args.walk}: {args.method}, {', '.join(parts)} -> {args.out}")
+    if n and ood / n > 0.5:
+        print(f"envfuse: warning: {args.walk}: {100 * ood / n:.0f} % of the track's epochs fall outside what the "
+              "environment model was trained on (column ood): its classes, and the noise they set, are unreliable "
+              "here; train on surveys of this kind of site", file=sys.stderr)
+    if placed == 0:
+        raise ConfigError(f"{args.walk}: {args.method} gave no position at any of its {n} epochs")
     return 0
 
 
 def _evaluate(args) -> int:
-    from pipeline.evaluate import evaluate, summary_table
+    from pipeline.evaluate import bp_guard_line, evaluate, summary_table
+    from pipeline.outputs import check_outputs, directory_kind, model_inputs, refuse_repeated, walk_files
 
     if args.workers is not None and args.workers < 1:
-        raise ConfigError(f"--workers must be at least 1, got {args.workers}")
+        raise UsageError(f"--workers must be at least 1, got {args.workers}")
+    refuse_repeated(args.walks, "WALKS")
+    inputs = {}
+    for w in args.walks:
+        inputs.update(walk_files(w, f"walk {Path(w).name}"))
+    check_outputs(inputs, {}, {"--report": args.report}, model_inputs(args.model, "--model"))
+    if args.report.exists():
+        if not args.report.is_dir():
+            raise UsageError(f"--report {args.report} exists and is not a directory")
+        if directory_kind(args.report) not in ("empty", "report"):
+            raise UsageError(f"--report {args.report} holds other files than a report (metrics.csv and PNGs): "
+                             "its plots are replaced, so name a new or empty directory")
+    if args.scheduler is not None:
+        from pipeline.parallel import check_scheduler
+
+        check_scheduler(args.scheduler)
     for w in args.walks:
         if not (w / "walk.toml").is_file():
             raise ConfigError(f"{w}: no walk.toml (expected a walk directory)")
     out = evaluate(args.walks, args.model, args.report, methods=tuple(args.methods), workers=args.workers,
                    scheduler=args.scheduler, force=args.force, progress=True, plots=not args.no_plots)
     for f in out["failures"]:
-        print(f"envfuse: warning: {f.walk}: {f.message} (walk skipped)", file=sys.stderr)
+        text = f.message if f.message.startswith(f.walk) else f"{f.walk}: {f.message}"
+        print(f"envfuse: warning: {text} (walk skipped)", file=sys.stderr)
     for r in out["results"]:
+        for note in r.get("notes", []):
+            print(f"envfuse: note: {r['walk_dir']}: {note}", file=sys.stderr)
         for m, why in r["skipped"].items():
-            print(f"envfuse: note: {r['walk']}: {m} skipped: {why}", file=sys.stderr)
+            print(f"envfuse: note: {r['walk_dir']}: {m} skipped: {why}", file=sys.stderr)
     if not out["results"]:
-        raise ConfigError("no walk could be evaluated")
+        raise ConfigError(f"no walk could be evaluated ({len(out['failures'])} failed, named above)")
     print(summary_table(out["pooled"]))
     shares = [r["bp_disabled_share"] for r in out["results"] if r["bp_disabled_share"] is not None]
     if shares:
-        print(f"BP correction withheld by its guards on {100 * sum(shares) / len(shares):.1f} % of epochs")
-    print(f"{len(out['results'])} walks -> {args.report / 'metrics.csv'}"
-          + (f", {len(out['pngs'])} plots" if out["pngs"] else ""))
+        print(bp_guard_line(sum(shares) / len(shares)))
+    n = len(out["results"])
+    print(f"{n} walk{'s' if n != 1 else ''} -> {args.report / 'metrics.csv'}"
+          + (f", {len(out['pngs'])} plots" if out["pngs"] else "")
+          + (f"; {len(out['failures'])} skipped (named above)" if out["failures"] else ""))
     return 1 if out["failures"] else 0

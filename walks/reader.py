@@ -1,8 +1,8 @@
-"""The spine: read a walk directory once, every source on the walk's time base.
+"""Read a walk directory once, every source on the walk's time base.
 
-:func:`read_walk` is what ``envfuse report walk``, the demo and the coming
-``run`` and ``evaluate`` commands stand on. It reads only the walk's files (as
-for a real device's log) and returns, per source:
+:func:`read_walk` is what every command that reads a walk stands on
+(``run``, ``evaluate``, ``train fusion``, ``report walk``, the demo). It reads
+only the walk's files (as for a real device's log) and returns, per source:
 
 - GNSS: the NMEA fixes in the site's ENU frame with their per-axis σ, fix
   quality and HDOP, and the five GNSS feature windows;
@@ -13,7 +13,10 @@ for a real device's log) and returns, per source:
 - truth, when ``truth.csv`` is present (evaluation only: nothing above reads
   it; the PDR start comes from the first good GNSS fix, see :func:`pdr_start_from_gnss`).
 
-A stream the walk does not have is ``None``.
+A stream the walk does not have is ``None``; so is one whose file is named but absent, empty (0 bytes, a
+WAV without samples, an IMU header without rows) or unusable (its reader refuses it): the walk is read
+without it, exactly as without the file, and :attr:`WalkData.notes` says which and why, so ``run``,
+``evaluate`` and ``train fusion`` behave the same for all of these and say so.
 """
 
 from __future__ import annotations
@@ -25,6 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
+from features.acoustic.audio import require_beacon_band
 from features.acoustic.features import AudioAnalysis, analyse_audio
 from features.acoustic.positions import PositionConfig
 from features.acoustic.timing import AudioTiming, timing_from_walk
@@ -36,10 +40,14 @@ from features.imu.pdr import PdrConfig, PdrResult, run_pdr
 from features.imu.reader import read_imu_csv
 from features.imu.steps import StepLengthModel
 from features.site import Site
+from features.errors import DataError
 from features.walk import Truth, WalkInfo, load_walk, read_truth
 
 __all__ = ["GnssStream", "AcousticStream", "PdrStream", "WalkData", "read_walk", "WALK_SPEED_PRIOR_M_S", "walk_has",
-           "pdr_start_from_gnss"]
+           "pdr_start_from_gnss", "pdr_position_at", "read_gnss_stream", "read_acoustic_stream", "read_pdr_stream"]
+
+SKIPPED_NOTE_SHARE = 0.05
+"""A walk's note names the NMEA reader's skips when they exceed this share of the file's sentences."""
 
 WALK_SPEED_PRIOR_M_S = 1.4
 """Walking-speed prior of the acoustic solver on a walk, m/s (a survey cell is static: 0)."""
@@ -54,6 +62,8 @@ class GnssStream:
     positions: GnssPositions
     features: dict
     nmea_summary: dict
+    skipped_share: float = 0.0
+    """Share of the file's sentences the NMEA reader skipped (bad checksum, truncated, ...)."""
 
 
 @dataclass(frozen=True)
@@ -87,6 +97,8 @@ class PdrStream:
     result: PdrResult
     config: PdrConfig
     start_en_m: tuple[float, float]
+    repaired: str = ""
+    """What the IMU reader repaired (its :meth:`~features.imu.reader.ImuRepairReport.summary`), empty if nothing."""
 
 
 @dataclass(frozen=True)
@@ -99,10 +111,12 @@ class WalkData:
     acoustic: AcousticStream | None
     pdr: PdrStream | None
     truth: Truth | None
+    notes: tuple = ()
+    """One line per stream the walk names but could not use (absent, empty or unusable file)."""
 
 
 def read_walk(walk_dir: str | os.PathLike, *, site: Site | None = None, pdr_k: float | None = None,
-              audio_positions: PositionConfig | None = None) -> WalkData:
+              audio_positions: PositionConfig | None = None, truth: bool = True) -> WalkData:
     """Read a walk directory once: GNSS, acoustic and PDR streams and the truth when present.
 
     ``site`` overrides the site named in ``walk.toml``; ``pdr_k`` the step-length
@@ -111,27 +125,62 @@ def read_walk(walk_dir: str | os.PathLike, *, site: Site | None = None, pdr_k: f
     walking-speed prior :data:`WALK_SPEED_PRIOR_M_S`).
 
     The PDR track is anchored on data, never on truth: at the first good GNSS
-    fix (:func:`pdr_start_from_gnss`), else at the origin.
+    fix (:func:`pdr_start_from_gnss`), else at the origin. ``truth=False`` leaves ``truth.csv`` unread
+    (``run`` needs none).
     """
     walk = load_walk(walk_dir)
     site = walk.load_site() if site is None else site
-    truth = read_truth(walk.directory) if (walk.directory / "truth.csv").is_file() else None
-    gnss = _read_gnss(walk, site) if walk.path("gnss") is not None else None
+    truth = read_truth(walk.directory) if truth and (walk.directory / "truth.csv").is_file() else None
+    notes: list[str] = []
+    gnss = _optional(walk, "gnss", lambda: read_gnss_stream(walk, site), notes)
     acoustic = None
-    if walk.path("audio") is not None and site.beacons:
-        acoustic = _read_acoustic(walk, site, audio_positions)
-    pdr = None
-    if walk.path("imu") is not None:
-        pdr = _read_pdr(walk, (0.0, 0.0), pdr_k)
+    if site.beacons:
+        acoustic = _optional(walk, "audio", lambda: read_acoustic_stream(walk, site, audio_positions), notes)
+    elif walk.path("audio") is not None:
+        notes.append("audio: the site has no beacons; the walk is read without acoustic positions")
+    pdr = _optional(walk, "imu", lambda: read_pdr_stream(walk, (0.0, 0.0), pdr_k), notes)
+    if gnss is not None and gnss.skipped_share > SKIPPED_NOTE_SHARE:
+        notes.append(f"gnss: {walk.streams['gnss']['file']}: {100 * gnss.skipped_share:.0f} % of the sentences "
+                     f"skipped ({gnss.nmea_summary})")
+    if pdr is not None and pdr.repaired:
+        notes.append(f"imu: {walk.streams['imu']['file']} repaired by the reader ({pdr.repaired})")
+    if pdr is not None:
         anchor = pdr_start_from_gnss(gnss.positions) if gnss is not None else None
         if anchor is not None:
             # Shift the track so that it passes through the fix at the fix's time. The dead-reckoned
             # track is start + Σ steps (features.imu.pdr.dead_reckon), so the shift is a translation of
             # the track computed once (the same numbers as rerunning PDR from the shifted start).
             t_fix, e_fix, n_fix = anchor
-            e_p, n_p = _pdr_position_at(pdr.result, t_fix, (0.0, 0.0))
+            e_p, n_p = pdr_position_at(pdr.result, t_fix, (0.0, 0.0))
             pdr = _shift_pdr(pdr, e_fix - e_p, n_fix - n_p)
-    return WalkData(walk=walk, site=site, gnss=gnss, acoustic=acoustic, pdr=pdr, truth=truth)
+    return WalkData(walk=walk, site=site, gnss=gnss, acoustic=acoustic, pdr=pdr, truth=truth, notes=tuple(notes))
+
+
+_WHAT = {"gnss": "GNSS", "audio": "acoustic positions", "imu": "PDR"}
+
+
+def _optional(walk: WalkInfo, stream: str, read, notes: list):
+    """``read()`` of a stream the walk names, or None with a note when its file is absent, empty or refused."""
+    table = walk.streams.get(stream)
+    if not table:
+        return None
+    name = str(table.get("file", ""))
+    path = walk.directory / name
+    without = f"the walk is read without {_WHAT[stream]}"
+    if not path.is_file():
+        notes.append(f"{stream}: walk.toml names {name}, which is absent; {without}")
+        return None
+    if path.stat().st_size == 0:
+        notes.append(f"{stream}: {name} is empty (0 bytes); {without}")
+        return None
+    try:
+        return read()
+    except DataError as exc:
+        text = str(exc)
+        prefix = f"{path}: "
+        notes.append(f"{stream}: {name} is unusable ({text[len(prefix):] if text.startswith(prefix) else text}); "
+                     f"{without}")
+        return None
 
 
 def pdr_start_from_gnss(positions: GnssPositions, window_s: float = 60.0) -> tuple[float, float, float] | None:
@@ -157,7 +206,7 @@ def pdr_start_from_gnss(positions: GnssPositions, window_s: float = 60.0) -> tup
     return None
 
 
-def _pdr_position_at(res: PdrResult, t_s: float, start_en: tuple[float, float]) -> tuple[float, float]:
+def pdr_position_at(res: PdrResult, t_s: float, start_en: tuple[float, float]) -> tuple[float, float]:
     """Dead-reckoned position at ``t_s`` (the start before the first step, then the last step's end)."""
     if len(res.t_s) == 0 or not np.isfinite(res.east_m).any():
         return start_en
@@ -172,19 +221,25 @@ def _shift_pdr(pdr: PdrStream, d_east_m: float, d_north_m: float) -> PdrStream:
     r = pdr.result
     moved = dataclasses.replace(r, east_m=d_east_m + r.east_m, north_m=d_north_m + r.north_m)
     start = (pdr.start_en_m[0] + d_east_m, pdr.start_en_m[1] + d_north_m)
-    return PdrStream(result=moved, config=pdr.config, start_en_m=start)
+    return PdrStream(result=moved, config=pdr.config, start_en_m=start, repaired=pdr.repaired)
 
 
-def _read_gnss(walk: WalkInfo, site: Site) -> GnssStream:
+def read_gnss_stream(walk: WalkInfo, site: Site) -> GnssStream:
+    """The walk's NMEA: fixes in the site's ENU frame with σ, quality and HDOP, and the five GNSS windows."""
     epochs, stats = read_nmea(walk.path("gnss"))
     epochs = epochs_on_time_base(epochs, walk.start_utc)
     o = site.origin
     sky = sky_arrays(epochs)  # once, for both the positions' sigma and the features
     positions = fixes_to_enu(epochs, o.lat_deg, o.lon_deg, o.alt_m, sky=sky)
-    return GnssStream(positions=positions, features=gnss_features(sky), nmea_summary=stats.summary())
+    share = stats.skipped / max(stats.sentences + stats.non_nmea_lines, 1)
+    return GnssStream(positions=positions, features=gnss_features(sky), nmea_summary=stats.summary(),
+                      skipped_share=float(share))
 
 
-def _read_acoustic(walk: WalkInfo, site: Site, positions: PositionConfig | None) -> AcousticStream:
+def read_acoustic_stream(walk: WalkInfo, site: Site, positions: PositionConfig | None) -> AcousticStream:
+    """The walk's audio through the acoustic receiver: fixes with covariance and the nine CIR windows."""
+    require_beacon_band(walk.path("audio"), min(b.f0_hz if b.f0_hz is not None else site.acoustic.f0_hz
+                                                for b in site.beacons))
     timing = timing_from_walk(walk, site)
     if positions is None:
         positions = PositionConfig(max_clock_offset_s=timing.start_uncertainty_s + 0.05,
@@ -196,12 +251,14 @@ def _read_acoustic(walk: WalkInfo, site: Site, positions: PositionConfig | None)
                           analysis=res, timing=timing)
 
 
-def _read_pdr(walk: WalkInfo, start_en: tuple[float, float], k: float | None) -> PdrStream:
+def read_pdr_stream(walk: WalkInfo, start_en: tuple[float, float], k: float | None) -> PdrStream:
+    """The walk's IMU through PDR from ``start_en`` (m); ``k`` the Weinberg constant (None: the default)."""
     imu = read_imu_csv(walk.path("imu"))
     decl = float(walk.streams["imu"].get("declination_deg", 0.0))
     heading = HeadingConfig(declination_rad=np.radians(decl))
     cfg = PdrConfig(heading=heading) if k is None else PdrConfig(length=StepLengthModel(k=k), heading=heading)
-    return PdrStream(result=run_pdr(imu, start_en[0], start_en[1], cfg), config=cfg, start_en_m=start_en)
+    return PdrStream(result=run_pdr(imu, start_en[0], start_en[1], cfg), config=cfg, start_en_m=start_en,
+                     repaired=imu.report.summary() if imu.report.n_defects else "")
 
 
 def walk_has(walk_dir: str | os.PathLike) -> dict:

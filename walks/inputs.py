@@ -1,0 +1,180 @@
+"""A read walk turned into what the filters take: one event stream and the environment evidence over time.
+
+:func:`walk_inputs` builds, from a :class:`~walks.reader.WalkData`, the event
+stream of :mod:`models.fusion.events` — PDR steps (each spread over the time
+it took, :func:`split_steps`), GNSS fixes with their reported σ, quality and
+HDOP, acoustic fixes with their covariance, standing intervals from the gaps
+between steps — and the online environment classifier's evidence over time.
+The classifier answers on each 2 s feature window only once the window is
+complete (its end time), so a filter never uses a class from the future.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from features.schema import ACOUSTIC_FEATURES, FEATURES, GNSS_FEATURES
+from models.fusion import AcousticEvents, ClassTrack, GnssEvents, StandIntervals, StepEvents, merge_events
+from models.fusion.events import EventStream
+from walks.reader import WalkData
+
+__all__ = ["WalkInputs", "walk_inputs", "window_features", "split_steps", "gnss_events", "STAND_GAP_S",
+           "TYPICAL_STEP_S", "WINDOW_S", "HOP_S"]
+
+STAND_GAP_S = 1.5
+"""A gap between steps longer than this is standing (from 0.5 s after the last step to 0.5 s before the next)."""
+
+TYPICAL_STEP_S = 0.55
+"""Duration given to a step that follows a stop (no previous step within :data:`STAND_GAP_S`), s."""
+
+WINDOW_S = 2.0
+"""Feature window length, s (the readers' default): a window centred at t is complete at t + 1 s."""
+
+HOP_S = 1.0
+"""Hop between the walk's feature windows, s (the readers' default)."""
+
+
+@dataclass(frozen=True)
+class WalkInputs:
+    """A walk ready for the filters: ``events``; the classifier's evidence ``classes`` at window ends
+    ``window_t_s`` (n,), with the window features ``window_X`` (n, 14) and ``window_ood`` (n,)."""
+
+    data: WalkData
+    events: EventStream
+    window_t_s: np.ndarray
+    window_X: np.ndarray
+    classes: ClassTrack
+    window_ood: np.ndarray
+
+    def ood_at(self, t_s: np.ndarray) -> np.ndarray:
+        """Whether the window in force at each of ``t_s`` (m,) was out of the classifier's distribution (m,);
+        False before the first complete window (the prior is in force then)."""
+        flags = np.concatenate([[False], np.asarray(self.window_ood, bool)])
+        return flags[np.clip(self.classes.row_at(t_s), 0, len(flags) - 1)]
+
+
+def window_features(data: WalkData) -> tuple[np.ndarray, np.ndarray]:
+    """The 14 features per window on one grid: (window end times (n,), X (n, 14)); NaN where missing.
+
+    GNSS and acoustic windows are joined by their centre time (both hop 1 s on the walk's time base);
+    a window one source lacks keeps NaN for its features.
+    """
+    rows: dict[float, np.ndarray] = {}
+
+    def row(t):
+        key = round(float(t), 1)
+        if key not in rows:
+            rows[key] = np.full(len(FEATURES), np.nan)
+        return rows[key]
+
+    if data.gnss is not None:
+        f = data.gnss.features
+        for i, t in enumerate(np.asarray(f["t_s"], float)):
+            r = row(t)
+            r[: len(GNSS_FEATURES)] = [f[name][i] for name in GNSS_FEATURES]
+    if data.acoustic is not None:
+        for rec in data.acoustic.feature_rows:
+            if rec.get("acoustic_available"):
+                row(rec["t_s"])[len(GNSS_FEATURES):] = [rec[name] for name in ACOUSTIC_FEATURES]
+    if not rows:
+        return np.zeros(0), np.zeros((0, len(FEATURES)))
+    keys = sorted(rows)
+    return np.array(keys) + WINDOW_S / 2.0, np.vstack([rows[k] for k in keys])
+
+
+def split_steps(t_s: np.ndarray, length_m: np.ndarray, heading_rad: np.ndarray,
+                fix_t_s: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Each step spread over the time it took, cut at the fixes that fall inside it.
+
+    A step is detected at its heel strike, but the walker covered it during the
+    preceding step period, while GNSS (5 Hz) kept measuring. Predicting the
+    whole step at the heel strike would hold the state still between steps and
+    then jump a full step past fixes that already saw the motion. So step k
+    (from the previous heel strike, or :data:`TYPICAL_STEP_S` before it after a
+    stop, to ``t_k``) becomes sub-steps ending at each fix time inside it and at
+    ``t_k``, of lengths proportional to their durations, same heading. The cost
+    is a fixed lag of one step (≤ ~0.6 s): a fix is fused once the step it falls
+    in has ended.
+
+    Returns (t_s, step_length_m, heading_rad) of the sub-steps, in time order.
+    """
+    t_s, length_m, heading_rad = (np.asarray(a, float) for a in (t_s, length_m, heading_rad))
+    if t_s.size == 0:
+        return t_s, length_m, heading_rad
+    fix = np.sort(np.asarray(fix_t_s, float))
+    prev = np.concatenate([[-np.inf], t_s[:-1]])
+    start = np.where(t_s - prev > STAND_GAP_S, t_s - TYPICAL_STEP_S, prev)
+    lo = np.searchsorted(fix, start, side="right")
+    hi = np.searchsorted(fix, t_s, side="left")
+    out_t, out_l, out_h = [], [], []
+    for k in range(t_s.size):
+        cuts = fix[lo[k]:hi[k]]
+        bounds = np.concatenate([[start[k]], cuts, [t_s[k]]])
+        frac = np.diff(bounds) / (t_s[k] - start[k])
+        out_t.append(bounds[1:])
+        out_l.append(length_m[k] * frac)
+        out_h.append(np.full(frac.size, heading_rad[k]))
+    return np.concatenate(out_t), np.concatenate(out_l), np.concatenate(out_h)
+
+
+def gnss_events(p) -> GnssEvents:
+    """The reader's fixes (:class:`features.gnss.positions.GnssPositions`) as filter events: the covariance the
+    reader reports (its full east/north covariance when it has one, else σ per axis: GST's east and north σ
+    when the receiver sent GST, else the C/N0 or table model), the GGA quality, the HDOP the receiver gave
+    (NaN where the reader only assumed one) and the GST σ (NaN where there was none), so a quality-aware
+    policy can tell a receiver's own belief from the reader's model."""
+    n = len(p.t_s)
+    if p.cov_en_m2 is not None:
+        cov = np.asarray(p.cov_en_m2, float)
+    else:
+        se = p.sigma_east_m if p.sigma_east_m is not None else p.sigma_en_m
+        sn = p.sigma_north_m if p.sigma_north_m is not None else p.sigma_en_m
+        se, sn = np.where(np.isfinite(se), se, p.sigma_en_m), np.where(np.isfinite(sn), sn, p.sigma_en_m)
+        cov = np.zeros((n, 2, 2))
+        cov[:, 0, 0], cov[:, 1, 1] = se ** 2, sn ** 2
+    gst = np.full((n, 2), np.nan)
+    if p.sigma_source is not None and p.sigma_east_m is not None and p.sigma_north_m is not None:
+        g = np.asarray(p.sigma_source) == "gst"
+        gst[g, 0], gst[g, 1] = p.sigma_east_m[g], p.sigma_north_m[g]
+    return GnssEvents(p.t_s, p.east_m, p.north_m, cov, quality=p.quality,
+                      hdop=np.where(p.hdop_assumed, np.nan, p.hdop), gst_sigma_m=gst)
+
+
+def _stands(step_t: np.ndarray) -> StandIntervals:
+    if step_t.size < 2:
+        return StandIntervals(np.zeros(0), np.zeros(0))
+    gaps = np.flatnonzero(np.diff(step_t) > STAND_GAP_S)
+    return StandIntervals(step_t[gaps] + 0.5, step_t[gaps + 1] - 0.5)
+
+
+def walk_inputs(data: WalkData, classifier) -> WalkInputs:
+    """Events and class evidence of one walk (see the module docstring); ``classifier``: the online
+    :class:`~models.environment.EnvironmentClassifier`."""
+    steps = gnss = acoustic = stands = None
+    fix_t = np.concatenate([data.gnss.positions.t_s if data.gnss is not None else np.zeros(0),
+                            data.acoustic.t_s if data.acoustic is not None else np.zeros(0)])
+    if data.pdr is not None and len(data.pdr.result):
+        r = data.pdr.result
+        ok = np.isfinite(r.heading_rad) & np.isfinite(r.step_length_m)
+        stands = _stands(r.t_s[ok])
+        steps = StepEvents(*split_steps(r.t_s[ok], r.step_length_m[ok], r.heading_rad[ok], fix_t))
+    if data.gnss is not None and len(data.gnss.positions):
+        gnss = gnss_events(data.gnss.positions)
+    if data.acoustic is not None and len(data.acoustic.t_s):
+        a = data.acoustic
+        acoustic = AcousticEvents(a.t_s, a.east_m, a.north_m, a.covariance_en_m2)
+    events = merge_events(steps=steps, gnss=gnss, acoustic=acoustic, stands=stands)
+    t_end, X = window_features(data)
+    if len(t_end):
+        proba = classifier.predict_proba(X)
+        ood = classifier.is_ood(X)
+    else:
+        proba, ood = np.tile(classifier.prior_, (1, 1)), np.ones(1, bool)
+        t_end = np.array([events.t_s[0]])
+    # Before the first complete window the filter knows nothing of the environment: the prior.
+    t_cls = np.concatenate([[min(events.t_s[0], t_end[0]) - 1.0], t_end])
+    proba = np.vstack([classifier.prior_, proba])
+    return WalkInputs(data=data, events=events, window_t_s=t_end, window_X=X,
+                      classes=ClassTrack(t_cls, proba), window_ood=ood)

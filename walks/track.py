@@ -1,0 +1,107 @@
+"""A fused track: one method's positions over a walk, and how it is written (CSV or GeoJSON).
+
+The track file has one row per filter event (or fix, for a single source),
+columns :data:`TRACK_COLUMNS`: walk time ``t_s``, ``time_utc`` (ISO 8601,
+milliseconds), site ENU, WGS-84 latitude / longitude and ellipsoidal height,
+the position covariance, the environment class the classifier gave and its
+probability, whether that window was out of the classifier's distribution,
+the NIS of the fix and the BP correction applied. GeoJSON carries the same as
+a LineString of the whole track plus one Point per row.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, field
+from datetime import timedelta
+
+import numpy as np
+
+from features.geodesy import enu_to_geodetic
+from features.schema import ENV_CLASSES
+
+__all__ = ["Track", "TRACK_COLUMNS", "track_rows", "track_text"]
+
+TRACK_COLUMNS = ("t_s", "time_utc", "east_m", "north_m", "lat_deg", "lon_deg", "h_ell_m", "var_east_m2",
+                 "cov_en_m2", "var_north_m2", "env_class", "class_probability", "ood", "nis", "bp_correction_m")
+"""Columns of a written track, in order."""
+
+
+@dataclass
+class Track:
+    """One method's output: positions at ``t_s`` (m,), covariance ``cov_m2`` (m, 2, 2) or None, and per-epoch
+    extras in ``info`` (``nis``, ``bp_delta_m``, ``class_proba``, ``run``, ...)."""
+
+    method: str
+    t_s: np.ndarray
+    east_m: np.ndarray
+    north_m: np.ndarray
+    cov_m2: np.ndarray | None
+    info: dict = field(default_factory=dict)
+
+    def __len__(self) -> int:
+        return int(self.t_s.shape[0])
+
+
+def track_rows(track: Track, inputs, up_m: float = 0.0) -> list[dict]:
+    """Rows of :data:`TRACK_COLUMNS` for ``track`` of the walk behind ``inputs`` (:class:`walks.inputs.WalkInputs`).
+
+    Heights: the track is horizontal; ``h_ell_m`` is the site origin's height plus ``up_m`` (the device
+    height above the origin is not estimated).
+    """
+    data = inputs.data
+    o = data.site.origin
+    n = len(track.t_s)
+    up = np.full(n, float(up_m))
+    lat, lon, h = enu_to_geodetic(track.east_m, track.north_m, up, o.lat_deg, o.lon_deg, o.alt_m)
+    proba = inputs.classes.at(track.t_s)
+    ood = inputs.ood_at(track.t_s)
+    cov = track.cov_m2 if track.cov_m2 is not None else np.full((n, 2, 2), np.nan)
+    nis = track.info.get("nis", np.full(n, np.nan))
+    bp = track.info.get("bp_delta_m")
+    bpn = np.hypot(bp[:, 0], bp[:, 1]) if bp is not None else np.zeros(n)
+    start = data.walk.start_utc
+    rows = []
+    for i in range(n):
+        c = int(np.argmax(proba[i]))
+        utc = "" if start is None else _iso_ms(start + timedelta(seconds=float(track.t_s[i])))
+        rows.append({"t_s": float(track.t_s[i]), "time_utc": utc, "east_m": float(track.east_m[i]),
+                     "north_m": float(track.north_m[i]), "lat_deg": float(lat[i]), "lon_deg": float(lon[i]),
+                     "h_ell_m": float(h[i]), "var_east_m2": float(cov[i, 0, 0]), "cov_en_m2": float(cov[i, 0, 1]),
+                     "var_north_m2": float(cov[i, 1, 1]), "env_class": ENV_CLASSES[c],
+                     "class_probability": float(proba[i, c]), "ood": bool(ood[i]), "nis": float(nis[i]),
+                     "bp_correction_m": float(bpn[i])})
+    return rows
+
+
+def _iso_ms(t) -> str:
+    """ISO 8601 UTC with milliseconds: 2024-05-01T08:00:00.200Z."""
+    return t.strftime("%Y-%m-%dT%H:%M:%S.") + f"{t.microsecond // 1000:03d}Z"
+
+
+def _fmt(v) -> str:
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, float):
+        return "" if math.isnan(v) else f"{v:.10g}"
+    return str(v)
+
+
+def track_text(rows: list[dict], fmt: str, properties: dict | None = None) -> str:
+    """The track as ``"csv"`` (header + one line per row; booleans ``true``/``false``, NaN empty) or
+    ``"geojson"`` (a FeatureCollection: the LineString with ``properties``, then one Point per row)."""
+    if fmt == "csv":
+        return ",".join(TRACK_COLUMNS) + "\n" + "".join(",".join(_fmt(r[k]) for k in TRACK_COLUMNS) + "\n"
+                                                        for r in rows)
+    if fmt != "geojson":
+        raise ValueError(f"track format must be 'csv' or 'geojson', got {fmt!r}")
+    line = {"type": "Feature",
+            "geometry": {"type": "LineString",
+                         "coordinates": [[round(r["lon_deg"], 9), round(r["lat_deg"], 9)] for r in rows]},
+            "properties": dict(properties or {}, start_utc=rows[0]["time_utc"] if rows else None)}
+    points = [{"type": "Feature",
+               "geometry": {"type": "Point", "coordinates": [round(r["lon_deg"], 9), round(r["lat_deg"], 9)]},
+               "properties": {k: (None if isinstance(r[k], float) and math.isnan(r[k]) else r[k])
+                              for k in TRACK_COLUMNS if k not in ("lat_deg", "lon_deg")}} for r in rows]
+    return json.dumps({"type": "FeatureCollection", "features": [line] + points}, allow_nan=False) + "\n"
