@@ -1,6 +1,6 @@
 """The compiled receiver core gives the fixes the Python one gave: record them once, compare after (issue 25 item 1).
 
-``--record FILE.npz`` runs the acoustic receiver (as ``pipeline.walk_data.read_walk`` does: walking-speed prior
+``--record FILE.npz`` runs the acoustic receiver (as ``walks.reader.read_walk`` does: walking-speed prior
 1.4 m/s) over held-out simulated walks and stores every fix (time, east, north, clock offset, covariance, beacons
 used and rejected, rms residual) and every detection (beacon, emission, arrival, SNR); ``--compare FILE.npz``
 runs it again and reports, per walk, whether the fixes are the same ones (same count, same beacons kept) and
