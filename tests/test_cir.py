@@ -111,7 +111,7 @@ def test_batch_equals_single():
 
 
 def test_scalar_first_arrivals_equal_the_batch_row_for_row():
-    """The receiver's per-frame scalar timing and the batched features time the same arrival:
+    """The receiver's per-frame compiled timing and the batched features time the same arrival:
     Rayleigh noise with one to three paths (some below the thresholds, some weak and early),
     random search starts, noise power given; validity, τ₀ and peak SNR agree exactly."""
     rng = np.random.default_rng(12)
@@ -126,12 +126,11 @@ def test_scalar_first_arrivals_equal_the_batch_row_for_row():
     starts = rng.integers(0, 40, n)
     batch = analyse_cirs(amp, 1e-3, noise_power=2.0, max_lead_s=lead * 1e-3, search_start=starts,
                          search_stop=stop, with_features=False)
-    scalar = first_arrivals(amp.tolist(), starts.tolist(), stop, lead, 2.0)
-    assert [r is not None for r in scalar] == batch.valid.tolist()
+    valid, tau, snr_db = first_arrivals(amp, starts, stop, lead, 2.0)
+    assert valid.tolist() == batch.valid.tolist()
     assert 50 < batch.valid.sum() < n                     # both outcomes occur
-    got = np.array([r for r in scalar if r is not None])
-    np.testing.assert_allclose(got[:, 0], batch.first_arrival_tap[batch.valid], rtol=0, atol=1e-12)
-    np.testing.assert_allclose(got[:, 1], batch.peak_snr_db[batch.valid], rtol=0, atol=1e-9)
+    np.testing.assert_allclose(tau[valid], batch.first_arrival_tap[batch.valid], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(snr_db[valid], batch.peak_snr_db[batch.valid], rtol=0, atol=1e-9)
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2])

@@ -63,6 +63,7 @@ from dataclasses import dataclass
 from typing import NamedTuple
 
 import numpy as np
+from numba import njit
 
 from features.errors import DataError
 
@@ -250,61 +251,76 @@ def _first_arrivals(a: np.ndarray, power: np.ndarray, idx: np.ndarray, noise: np
     return valid, peak, p_peak, threshold, edge, first + delta, np.exp(y0 - 0.25 * (ym - yp) * delta)
 
 
-def first_arrivals(rows: list, search_start: list, search_stop: int, lead: int, noise_power: float,
-                   n_taps: int | None = None) -> list:
-    """Steps 2–3 of the module docstring for a few CIRs, in scalar Python: per row,
-    ``(τ₀ in fractional taps, peak SNR in dB)``, or None when no tap clears the threshold.
+def first_arrivals(amplitude: np.ndarray, search_start: np.ndarray, search_stop: int, lead: int, noise_power: float,
+                   n_taps: int | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Steps 2–3 of the module docstring for the few CIRs of a frame (the receiver's timing), compiled:
+    per row whether a tap clears the threshold (k,) bool, τ₀ in fractional taps (k,) and the peak SNR
+    in dB (k,) (zeros where none does).
 
-    ``rows``: amplitude envelopes as lists of floats (all of one length L);
-    ``search_start`` (one per row) and ``search_stop``: the strongest tap is sought in
-    ``[start, stop)``; ``lead``: how many taps before it the leading edge may lie;
+    ``amplitude`` (k, L): envelopes; ``search_start`` (k,) and ``search_stop``: the strongest tap is
+    sought in ``[start, stop)``; ``lead``: how many taps before it the leading edge may lie;
     ``n_taps``: the length of the whole CIR the noise threshold is budgeted over
-    (:func:`noise_threshold_factor`; default L, give the full length when ``rows``
-    are the first columns of longer CIRs). The same arithmetic as :func:`analyse_cirs` (``with_features=False``), which a
-    test checks row for row; written out because the receiver times a handful of
-    chirps per TDMA frame, where numpy's per-call overhead costs several times the
-    arithmetic (on a 2-core test machine ~60 µs here against ~150 µs for eight CIRs).
+    (:func:`noise_threshold_factor`; default L, give the full length when ``amplitude`` holds the
+    first columns of longer CIRs). The same arithmetic as :func:`analyse_cirs` (``with_features=False``),
+    which a test checks row for row; a loop over taps compiled with numba (issue 25), because the
+    receiver times a handful of chirps per TDMA frame, where numpy's per-call overhead costs several
+    times the arithmetic.
     """
-    out = []
-    if not rows:
-        return out
-    length = len(rows[0])
+    a = np.ascontiguousarray(amplitude, dtype=np.float64)
+    if a.ndim != 2:
+        raise DataError(f"first_arrivals needs amplitudes of shape (k, L), got {a.shape}")
+    length = a.shape[1]
     noise_floor = noise_power * noise_threshold_factor(length if n_taps is None else n_taps)
-    dynamic_range = 10 ** (-PEAK_DYNAMIC_RANGE_DB / 10)
-    snr_ref = max(noise_power, 1e-300)
+    return _first_arrivals_rows(a, np.asarray(search_start, dtype=np.int64).reshape(-1), int(search_stop), int(lead),
+                                float(noise_floor), 10 ** (-PEAK_DYNAMIC_RANGE_DB / 10), max(float(noise_power), 1e-300))
+
+
+@njit(cache=True)
+def _first_arrivals_rows(a, search_start, search_stop, lead, noise_floor, dynamic_range, snr_ref):
+    """The loop of :func:`first_arrivals` (its arguments resolved: the noise floor, the dynamic range as
+    a power ratio, the SNR's reference power)."""
+    k, length = a.shape
+    valid = np.zeros(k, dtype=np.bool_)
+    tau = np.zeros(k)
+    snr_db = np.zeros(k)
+    if length == 0:
+        return valid, tau, snr_db
     stop = min(max(search_stop, 1), length)
-    log, isfinite = math.log, math.isfinite
-    for a, start in zip(rows, search_start):
+    for r in range(k):
+        start = search_start[r]
         start = 0 if start < 0 else (stop - 1 if start > stop - 1 else start)
-        seg = a[start:stop]
-        m = max(seg)
-        peak = start + seg.index(m)
+        peak = start
+        m = a[r, start]
+        for i in range(start + 1, stop):                   # the first of the largest
+            if a[r, i] > m:
+                m, peak = a[r, i], i
         p_peak = m * m
         threshold = p_peak * dynamic_range
         if threshold < noise_floor:
             threshold = noise_floor
-        if not (isfinite(p_peak) and p_peak > threshold):
-            out.append(None)
+        if not (math.isfinite(p_peak) and p_peak > threshold):
             continue
         first = peak
         for i in range(peak - lead if peak - lead > start else start, peak):          # leading edge
-            if a[i] * a[i] >= threshold:
+            if a[r, i] * a[r, i] >= threshold:
                 first = i
                 break
-        while first < peak and not a[first + 1] < a[first]:    # first local maximum at or after it
+        while first < peak and not a[r, first + 1] < a[r, first]:    # first local maximum at or after it
             first += 1
         delta = 0.0
         if 0 < first < length - 1:
-            am, a0, ap = a[first - 1], a[first], a[first + 1]
-            ym = log(am if am > 1e-300 else 1e-300)
-            y0 = log(a0 if a0 > 1e-300 else 1e-300)
-            yp = log(ap if ap > 1e-300 else 1e-300)
+            am, a0, ap = a[r, first - 1], a[r, first], a[r, first + 1]
+            ym = math.log(am if am > 1e-300 else 1e-300)
+            y0 = math.log(a0 if a0 > 1e-300 else 1e-300)
+            yp = math.log(ap if ap > 1e-300 else 1e-300)
             denom = ym - 2.0 * y0 + yp
             if denom < 0:
                 delta = 0.5 * (ym - yp) / denom
                 delta = -0.5 if delta < -0.5 else (0.5 if delta > 0.5 else delta)
-        out.append((first + delta, 10.0 * math.log10(max(p_peak, 1e-300) / snr_ref)))
-    return out
+        valid[r] = True
+        tau[r] = first + delta
+        snr_db[r] = 10.0 * math.log10(max(p_peak, 1e-300) / snr_ref)
+    return valid, tau, snr_db
 
 
 @dataclass(frozen=True)

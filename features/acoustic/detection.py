@@ -65,11 +65,11 @@ import bisect
 import dataclasses
 import math
 import os
-from operator import mul
 from dataclasses import dataclass
 from typing import Iterator
 
 import numpy as np
+from numba import njit
 
 from features.acoustic.positions import AcousticFix, PositionConfig
 from features.acoustic.timing import AudioTiming, ChirpDetection, SearchWindow, frame_phase_s, speed_of_sound_m_s
@@ -295,40 +295,56 @@ def detect_frames(path: str | os.PathLike, site: Site, timing: AudioTiming,
     yield from det.frames()
 
 
-def _compressed(row: list, centre: int, main_taps: int, max_width_taps: int, noise_power: float) -> bool:
-    """Whether the envelope ``row`` (a CIR's first taps, decimated) around tap ``centre`` is a
+@njit(cache=True)
+def _compressed(rows: np.ndarray, centre: int, main_taps: int, max_width_taps: int, noise_power: float) -> np.ndarray:
+    """Whether each envelope row of ``rows`` (k, L) (a CIR's first taps, decimated) around tap ``centre`` is a
     compressed chirp: the −6 dB width of its peak at most ``max_width_taps``, and at least
     :data:`_MIN_COMPRESSED_SHARE` of the row's signal energy (noise power subtracted) within
-    ``main_taps`` of the peak (see the module docstring, "Pulse compression").
+    ``main_taps`` of the peak (see the module docstring, "Pulse compression"); (k,) bool.
 
     >>> lobe = [0.0] * 20 + [0.3, 1.0, 0.3] + [0.0] * 20
-    >>> _compressed(lobe, 21, 2, 12, 1e-6), _compressed([0.0] * 10 + [1.0] * 30 + [0.0] * 3, 21, 2, 12, 1e-6)
-    (True, False)
+    >>> _compressed(np.array([lobe, [0.0] * 10 + [1.0] * 30 + [0.0] * 3]), 21, 2, 12, 1e-6).tolist()
+    [True, False]
     """
-    n = len(row)
+    k, n = rows.shape
+    out = np.zeros(k, dtype=np.bool_)
     lo = centre - 2 if centre > 2 else 0
     hi = centre + 3 if centre + 3 < n else n
     if lo >= hi:
-        return False
-    v = max(row[lo:hi])
-    p = row.index(v, lo, hi)
-    half = 0.5 * v
-    left = p
-    while left > 0 and row[left - 1] >= half:
-        left -= 1
-        if p - left >= max_width_taps:
-            return False
-    right = p
-    while right < n - 1 and row[right + 1] >= half:
-        right += 1
-        if right - left >= max_width_taps:
-            return False
-    a = p - main_taps if p > main_taps else 0
-    b = p + main_taps + 1
-    seg = row[a:b]
-    e_main = sum(map(mul, seg, seg)) - len(seg) * noise_power       # map(mul): C-level, 4× a generator
-    e_all = sum(map(mul, row, row)) - n * noise_power
-    return e_all > 0 and e_main >= _MIN_COMPRESSED_SHARE * e_all
+        return out
+    for r in range(k):
+        row = rows[r]
+        p = lo
+        for i in range(lo + 1, hi):                        # the first of the largest
+            if row[i] > row[p]:
+                p = i
+        half = 0.5 * row[p]
+        left = p
+        wide = False
+        while left > 0 and row[left - 1] >= half:
+            left -= 1
+            if p - left >= max_width_taps:
+                wide = True
+                break
+        right = p
+        while not wide and right < n - 1 and row[right + 1] >= half:
+            right += 1
+            if right - left >= max_width_taps:
+                wide = True
+        if wide:
+            continue
+        a = p - main_taps if p > main_taps else 0
+        b = min(p + main_taps + 1, n)
+        e_main = 0.0
+        for i in range(a, b):
+            e_main += row[i] * row[i]
+        e_main -= (b - a) * noise_power
+        e_all = 0.0
+        for i in range(n):
+            e_all += row[i] * row[i]
+        e_all -= n * noise_power
+        out[r] = e_all > 0 and e_main >= _MIN_COMPRESSED_SHARE * e_all
+    return out
 
 
 def _frame_safe_timing(site: Site, timing: AudioTiming, config: DetectorConfig) -> AudioTiming:
@@ -652,14 +668,16 @@ class _FrameDetector:
             cir_lo = [min(max(-(-(w.lo + delay) // dec), g) - j, first_tap) for (w, _), g, j in zip(group, j_got, j_a)]
             noise_power = 2.0 * sigmas[t] ** 2   # Rayleigh envelope of scale σ: E[env²] = 2σ²
             # One tap beyond the search range, for the parabola of an arrival at its last tap (as the features see it).
-            rows = cirs[:, :toa_taps + 1].tolist()
-            toa = first_arrivals(rows, cir_lo, toa_taps, self.lead_taps, noise_power, self.cir_taps)
-            main_taps = self.main_taps[t]
-            for (w, _), found_r, j, row, lo, row_l in zip(group, toa, j_a, cirs, cir_lo, rows):
-                if found_r is not None and _compressed(row_l, first_tap, main_taps, self.max_width_taps[t], noise_power):
+            rows = np.ascontiguousarray(cirs[:, :toa_taps + 1], dtype=np.float64)
+            valid, tau, snr_db = first_arrivals(rows, np.array(cir_lo, dtype=np.int64), toa_taps, self.lead_taps,
+                                                noise_power, self.cir_taps)
+            keep = (valid & _compressed(rows, first_tap, self.main_taps[t], self.max_width_taps[t], noise_power)).tolist()
+            tau, snr_db = tau.tolist(), snr_db.tolist()
+            for r, ((w, _), j, row, lo) in enumerate(zip(group, j_a, cirs, cir_lo)):
+                if keep[r]:
                     self.pending_cirs.append((slot, len(out), t, row, lo, noise_power))
                     out.append(ChirpDetection(frame, beacon_ids[w.beacon_index], w.tx_s,
-                                              self.timing.start_s + (dec * (j + found_r[0]) - delay) / fs, found_r[1],
+                                              self.timing.start_s + (dec * (j + tau[r]) - delay) / fs, snr_db[r],
                                               _NO_FEATURES, w.associated))
         return out
 
