@@ -296,6 +296,59 @@ def detect_frames(path: str | os.PathLike, site: Site, timing: AudioTiming,
 
 
 @njit(cache=True)
+def _envelope_maxima(seg: np.ndarray, gamma: float, strong_level: float, dec: int, template_len: int) -> np.ndarray:
+    """Indices (ascending) of the local maxima of the envelope ``seg`` (float32, length ≥ 3) above ``gamma``,
+    less the sidelobes (see :meth:`_FrameDetector.prepare_maxima`).
+
+    Interior maxima rise above the left neighbour and are not below the right one; the ends count when above
+    the neighbour inside (as if padded with zeros). A maximum within one chirp length (``template_len``
+    samples, taps ``dec`` apart) of one more than :data:`_SIDELOBE_GUARD` stronger is dropped; only a maximum
+    above ``strong_level`` (γ·guard) can be one. Levels and products are float32, as numpy forms them for the
+    float32 envelope and a Python float (NEP 50).
+
+    Maxima above 1.5 at 0, 2, 4 and 6; 3 and 5 lie within 3 samples of 900 and more than 25 dB below it:
+
+    >>> _envelope_maxima(np.array([2, 1, 3, 1, 900, 2, 5, 4], np.float32), 1.5, 1.5 * _SIDELOBE_GUARD, 1, 3).tolist()
+    [0, 4]
+    """
+    n = seg.shape[0]
+    g, gs, guard = np.float32(gamma), np.float32(strong_level), np.float32(_SIDELOBE_GUARD)
+    idx = np.empty(n, dtype=np.int64)
+    m = 0
+    if seg[0] > g and seg[0] >= seg[1]:
+        idx[m] = 0
+        m += 1
+    for i in range(1, n - 1):
+        if seg[i] > g and seg[i] > seg[i - 1] and seg[i] >= seg[i + 1]:
+            idx[m] = i
+            m += 1
+    if seg[n - 1] > g and seg[n - 1] > seg[n - 2]:
+        idx[m] = n - 1
+        m += 1
+    strong = np.empty(m, dtype=np.int64)
+    n_strong = 0
+    for a in range(m):
+        if seg[idx[a]] > gs:
+            strong[n_strong] = idx[a]
+            n_strong += 1
+    if n_strong == 0 or m < 2:
+        return idx[:m].copy()
+    out = np.empty(m, dtype=np.int64)
+    k = 0
+    for a in range(m):
+        level = seg[idx[a]] * guard
+        sidelobe = False
+        for b in range(n_strong):
+            if abs(idx[a] - strong[b]) * dec <= template_len and seg[strong[b]] > level:
+                sidelobe = True
+                break
+        if not sidelobe:
+            out[k] = idx[a]
+            k += 1
+    return out[:k].copy()
+
+
+@njit(cache=True)
 def _compressed(rows: np.ndarray, centre: int, main_taps: int, max_width_taps: int, noise_power: float) -> np.ndarray:
     """Whether each envelope row of ``rows`` (k, L) (a CIR's first taps, decimated) around tap ``centre`` is a
     compressed chirp: the −6 dB width of its peak at most ``max_width_taps``, and at least
@@ -539,22 +592,8 @@ class _FrameDetector:
             if len(seg) < 3:
                 maxima[t] = ([], [])
                 continue
-            # Interior local maxima above γ, tested only where the envelope exceeds γ (few samples).
-            idx = 1 + np.flatnonzero(seg[1:-1] > gamma)
-            idx = idx[(seg[idx] > seg[idx - 1]) & (seg[idx] >= seg[idx + 1])]
-            # The ends count when above the neighbour inside (as if padded with zeros).
-            ends = [i for i, ok in ((0, seg[0] > gamma and seg[0] >= seg[1]),
-                                    (len(seg) - 1, seg[-1] > gamma and seg[-1] > seg[-2])) if ok]
-            if ends:
-                idx = np.sort(np.concatenate([idx, np.array(ends, dtype=idx.dtype)]))
-            h = seg[idx]
-            # Only a maximum above γ·guard can be 25 dB stronger than another above γ.
-            strong = idx[h > gamma * _SIDELOBE_GUARD]
-            if len(strong) and len(idx) > 1:
-                near = np.abs(idx[:, None] - strong[None, :]) * dec <= bank.template_len
-                keep = ~np.any(near & (seg[strong][None, :] > h[:, None] * _SIDELOBE_GUARD), axis=1)
-                idx, h = idx[keep], h[keep]
-            maxima[t] = ((j_first + idx).tolist(), h.tolist())
+            idx = _envelope_maxima(seg, gamma, gamma * _SIDELOBE_GUARD, dec, bank.template_len)
+            maxima[t] = ((j_first + idx).tolist(), seg[idx].tolist())
 
     def peaks(self, w: SearchWindow, sigma: float) -> tuple[list, list]:
         """Chirp-start indices (ascending) and heights of envelope maxima in ``w`` above its threshold γ.
