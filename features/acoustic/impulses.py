@@ -74,21 +74,33 @@ _MAX_LS_HOLE = 160
 """Holes longer than this many samples are filled by a straight line instead of the AR least squares."""
 
 
+@njit(cache=True, inline="always")
+def _quantised(x: float) -> int:
+    """|x| in units of 2^-24, rounded: integers, so that the sliding sums of :func:`_decide` are exact."""
+    return np.int64(abs(x) * 16777216.0 + 0.5)
+
+
 @njit(cache=True)
 def _decide(e: np.ndarray, start: int, stop: int, wh: int, g: int, ratio: float, hold: int, hold_left: int):
     """Impulse mask of ``e[start:stop]`` (the prediction error; ``g + wh`` samples of ``e`` exist on either
-    side of the range), the hold carried over, and the number of holes opened."""
-    n = e.shape[0]
-    prefix = np.zeros(n + 1, dtype=np.int64)          # prefix[i] = Σ q[:i], q = |e| in units of 2^-24
-    q = np.empty(n, dtype=np.int64)
-    for i in range(n):
-        q[i] = np.int64(abs(e[i]) * 16777216.0 + 0.5)
-        prefix[i + 1] = prefix[i] + q[i]
+    side of the range), the hold carried over, and the number of holes opened.
+
+    The reference of sample i is Σ|e| over the ``wh`` samples before i − g and after i + g, kept as two
+    sliding sums of integers (exact, whatever the order they are formed in)."""
+    left = np.int64(0)
+    right = np.int64(0)
+    for j in range(start - g - wh, start - g):
+        left += _quantised(e[j])
+    for j in range(start + g + 1, start + g + 1 + wh):
+        right += _quantised(e[j])
     mask = np.zeros(stop - start, dtype=np.bool_)
     opened = 0
     for i in range(start, stop):
-        ref = prefix[i - g] - prefix[i - g - wh] + prefix[i + g + 1 + wh] - prefix[i + g + 1]
-        if q[i] > 0 and float(q[i] * 2 * wh) > ratio * float(ref):
+        if i > start:
+            left += _quantised(e[i - g - 1]) - _quantised(e[i - g - wh - 1])
+            right += _quantised(e[i + g + wh]) - _quantised(e[i + g])
+        q = _quantised(e[i])
+        if q > 0 and float(q * 2 * wh) > ratio * float(left + right):
             if hold_left == 0:
                 opened += 1
             hold_left = hold + 1
