@@ -33,10 +33,12 @@ from features.gnss.nmea import epochs_on_time_base, read_nmea
 from features.gnss.positions import GnssPositions, fixes_to_enu
 from features.imu.heading import HeadingConfig
 from features.imu.pdr import PdrConfig, PdrResult, run_pdr
-from features.imu.reader import read_imu_csv
+from features.imu.reader import ImuData, read_imu_csv
 from features.imu.steps import StepLengthModel
 from features.site import Site
 from features.walk import Truth, WalkInfo, load_walk, read_truth
+from models.graph.tight import RangeRows
+from walks.acoustic_ranges import range_rows
 
 __all__ = ["GnssStream", "AcousticStream", "PdrStream", "WalkData", "read_walk", "WALK_SPEED_PRIOR_M_S", "walk_has",
            "pdr_start_from_gnss", "pdr_position_at", "read_gnss_stream", "read_acoustic_stream", "read_pdr_stream"]
@@ -63,7 +65,9 @@ class AcousticStream:
     ``t_s``, ``east_m``, ``north_m`` : ndarray of shape (n_fixes,);
     ``covariance_en_m2`` : ndarray of shape (n_fixes, 2, 2), the fixes' horizontal covariance;
     ``analysis`` : the receiver's full output (feature rows, fixes with clock offsets, counts);
-    ``timing`` : the audio time base used.
+    ``timing`` : the audio time base used;
+    ``ranges`` : every associated beacon range of every frame (:func:`walks.acoustic_ranges.range_rows`),
+    for tightly coupled fusion.
     """
 
     t_s: np.ndarray
@@ -72,6 +76,7 @@ class AcousticStream:
     covariance_en_m2: np.ndarray
     analysis: AudioAnalysis
     timing: AudioTiming
+    ranges: RangeRows | None = None
 
     @property
     def feature_rows(self) -> list:
@@ -82,11 +87,15 @@ class AcousticStream:
 @dataclass(frozen=True)
 class PdrStream:
     """PDR of a walk: ``result`` holds the steps (``t_s``, ``step_length_m``, ``heading_rad``) and
-    the track dead-reckoned from ``start_en_m``; ``config`` the settings used."""
+    the track dead-reckoned from ``start_en_m``; ``config`` the settings used; ``imu`` the repaired
+    100 Hz samples PDR ran on (accelerometer, gyro, magnetometer: for the methods that integrate the
+    IMU themselves, the seed's complementary heading and IMU preintegration; 72 bytes per sample,
+    26 MB per hour at 100 Hz)."""
 
     result: PdrResult
     config: PdrConfig
     start_en_m: tuple[float, float]
+    imu: ImuData | None = None
 
 
 @dataclass(frozen=True)
@@ -172,7 +181,7 @@ def _shift_pdr(pdr: PdrStream, d_east_m: float, d_north_m: float) -> PdrStream:
     r = pdr.result
     moved = dataclasses.replace(r, east_m=d_east_m + r.east_m, north_m=d_north_m + r.north_m)
     start = (pdr.start_en_m[0] + d_east_m, pdr.start_en_m[1] + d_north_m)
-    return PdrStream(result=moved, config=pdr.config, start_en_m=start)
+    return PdrStream(result=moved, config=pdr.config, start_en_m=start, imu=pdr.imu)
 
 
 def read_gnss_stream(walk: WalkInfo, site: Site) -> GnssStream:
@@ -191,11 +200,14 @@ def read_acoustic_stream(walk: WalkInfo, site: Site, positions: PositionConfig |
     if positions is None:
         positions = PositionConfig(max_clock_offset_s=timing.start_uncertainty_s + 0.05,
                                    motion_speed_m_s=WALK_SPEED_PRIOR_M_S)
-    res = analyse_audio(walk.path("audio"), site, timing, positions=positions)
+    res = analyse_audio(walk.path("audio"), site, timing, positions=positions, keep_frames=True)
+    # the frames' ranges kept compactly (56 bytes per range), the frames themselves dropped
+    ranges = range_rows(res.frames, res.fixes, site, positions)
+    res = dataclasses.replace(res, frames=None)
     arr = np.array([[f.t_s, f.east_m, f.north_m] for f in res.fixes]).reshape(-1, 3)
     cov = np.array([f.covariance[:2, :2] for f in res.fixes]).reshape(-1, 2, 2)
     return AcousticStream(t_s=arr[:, 0], east_m=arr[:, 1], north_m=arr[:, 2], covariance_en_m2=cov,
-                          analysis=res, timing=timing)
+                          analysis=res, timing=timing, ranges=ranges)
 
 
 def read_pdr_stream(walk: WalkInfo, start_en: tuple[float, float], k: float | None) -> PdrStream:
@@ -204,7 +216,7 @@ def read_pdr_stream(walk: WalkInfo, start_en: tuple[float, float], k: float | No
     decl = float(walk.streams["imu"].get("declination_deg", 0.0))
     heading = HeadingConfig(declination_rad=np.radians(decl))
     cfg = PdrConfig(heading=heading) if k is None else PdrConfig(length=StepLengthModel(k=k), heading=heading)
-    return PdrStream(result=run_pdr(imu, start_en[0], start_en[1], cfg), config=cfg, start_en_m=start_en)
+    return PdrStream(result=run_pdr(imu, start_en[0], start_en[1], cfg), config=cfg, start_en_m=start_en, imu=imu)
 
 
 def walk_has(walk_dir: str | os.PathLike) -> dict:
