@@ -40,8 +40,8 @@ from models.fusion.events import STEP, EventStream
 from models.graph.config import GraphConfig, GraphError
 from models.graph.robust import noise_model
 
-__all__ = ["FixNoise", "GraphPlan", "plan_nodes", "step_covariance", "step_matrix", "graph_factors", "X", "C",
-           "GraphPart"]
+__all__ = ["FixNoise", "GraphPlan", "plan_nodes", "step_covariance", "step_matrix", "graph_factors", "iter_parts",
+           "X", "C", "GraphPart"]
 
 
 def X(i: int) -> int:
@@ -154,75 +154,85 @@ def _whitened_linear(keys_mats: list, cov: np.ndarray):
 def graph_factors(stream: EventStream, noise: FixNoise, cfg: GraphConfig, x0_en) -> tuple[GraphPlan, list]:
     """Every factor of the walk's graph, grouped by the node at which it completes (time order).
 
-    Returns (plan, parts): parts[i] is the :class:`GraphPart` of node i; initial values dead-reckon the PDR
-    from ``x0_en`` (2,) with c = (1, 0).
+    Returns (plan, parts): parts[i] is the :class:`GraphPart` of node i (:func:`iter_parts`, materialised).
     """
+    plan = plan_nodes(stream, cfg)
+    return plan, list(iter_parts(stream, noise, cfg, x0_en, plan))
+
+
+def _calibration_factors(part: GraphPart, j: int, last_block: int | None, cfg: GraphConfig) -> None:
+    """Create block j's calibration variable in ``part``: the prior on the first, else the random walk from
+    the last block with steps."""
     import gtsam
 
-    plan = plan_nodes(stream, cfg)
+    calib0 = np.array([1.0, 0.0])
+    part.values[C(j)] = calib0.copy()
+    if last_block is None:
+        part.factors.append(gtsam.PriorFactorVector(C(j), calib0, gtsam.noiseModel.Diagonal.Sigmas(
+            np.array([cfg.sigma0_scale, cfg.sigma0_heading_rad]))))
+        return
+    span = (j - last_block) * cfg.calib_block_s
+    sig = np.sqrt(np.array([cfg.q_scale_1_s, cfg.q_heading_rad2_s]) * span) + 1e-12
+    part.factors.append(gtsam.BetweenFactorVector(C(last_block), C(j), np.zeros(2),
+                                                  gtsam.noiseModel.Diagonal.Sigmas(sig)))
+    part.keys.append(C(last_block))
+
+
+def iter_parts(stream: EventStream, noise: FixNoise, cfg: GraphConfig, x0_en, plan: GraphPlan | None = None):
+    """Yield the :class:`GraphPart` of each node in time order, each once complete (its transition from the
+    previous node and its fixes): a generator, so a fixed-lag solver holds only its window, never the
+    whole walk's factors. Initial values dead-reckon the PDR from ``x0_en`` (2,) with c = (1, 0)."""
+    import gtsam
+
+    plan = plan_nodes(stream, cfg) if plan is None else plan
     x0 = np.asarray(x0_en, float)
     if x0.shape != (2,) or not np.all(np.isfinite(x0)):
         raise GraphError(f"the initial position must be a finite (2,) east/north, got {x0_en!r}")
     sl2, sp2 = cfg.sigma_step_length_m ** 2, cfg.sigma_heading_rad ** 2
-    parts = [GraphPart(0, float(plan.t_s[0]), [gtsam.PriorFactorPoint2(
-        X(0), x0, gtsam.noiseModel.Isotropic.Sigma(2, cfg.sigma0_pos_m))], {X(0): x0.copy()}, [X(0)], [])]
+    current = GraphPart(0, float(plan.t_s[0]), [gtsam.PriorFactorPoint2(
+        X(0), x0, gtsam.noiseModel.Isotropic.Sigma(2, cfg.sigma0_pos_m))], {X(0): x0.copy()}, [X(0)], [])
     pos = x0.copy()
     last_block = None
-    calib0 = np.array([1.0, 0.0])
     kinds = {1: (cfg.gnss_kernel, cfg.gnss_width), 2: (cfg.acoustic_kernel, cfg.acoustic_width)}
-    dt_pending = 0.0
-    stand_pending = 0.0
-    step_u = None
+    dt_pending = stand_pending = 0.0
     for k in range(len(stream)):
         i = int(plan.event_node[k])
         dt_pending += float(stream.dt_s[k])
         stand_pending += float(stream.dt_stand_s[k])
-        if i != parts[-1].node:
-            # the transition from node i−1 to node i
-            q = cfg.q_walk_m2_s * (dt_pending - stand_pending) + cfg.q_stand_m2_s * stand_pending
-            q = max(q, 0.0)
-            part = GraphPart(i, float(plan.t_s[i]), [], {}, [X(i - 1), X(i)], [])
+        if i != current.node:
+            yield current
+            # the transition from node i−1 to node i: Q_walk over the time since, plus the step if one
+            q = max(cfg.q_walk_m2_s * (dt_pending - stand_pending) + cfg.q_stand_m2_s * stand_pending, 0.0)
+            current = GraphPart(i, float(plan.t_s[i]), [], {}, [X(i - 1), X(i)], [])
             if stream.kind[k] == STEP:
                 L, psi = float(stream.step_length_m[k]), float(stream.heading_rad[k])
                 cov = step_covariance(L, psi, sl2, sp2) + np.eye(2) * q
                 cov += np.eye(2) * max(cfg.min_var_m2 - np.linalg.eigvalsh(cov)[0], 0.0)
+                Mu = step_matrix(L, psi)
                 if cfg.calibration:
                     j = int(plan.block[k])
-                    if last_block is None:
-                        part.values[C(j)] = calib0.copy()
-                        part.factors.append(gtsam.PriorFactorVector(C(j), calib0, gtsam.noiseModel.Diagonal.Sigmas(
-                            np.array([cfg.sigma0_scale, cfg.sigma0_heading_rad]))))
-                    elif j != last_block:
-                        span = (j - last_block) * cfg.calib_block_s
-                        part.values[C(j)] = calib0.copy()
-                        part.factors.append(gtsam.BetweenFactorVector(C(last_block), C(j), np.zeros(2),
-                                            gtsam.noiseModel.Diagonal.Sigmas(np.sqrt(np.array(
-                                                [cfg.q_scale_1_s, cfg.q_heading_rad2_s]) * span) + 1e-12)))
-                        part.keys.append(C(last_block))
-                    last_block = j
-                    Mu = step_matrix(L, psi)
-                    part.factors.append(_whitened_linear([(X(i - 1), -np.eye(2)), (X(i), np.eye(2)), (C(j), -Mu)],
-                                                         cov))
-                    part.keys.append(C(j))
-                    step_u = Mu @ calib0
+                    if j != last_block:
+                        _calibration_factors(current, j, last_block, cfg)
+                        last_block = j
+                    # x_i − x_{i−1} − M(u)·c_j = w,  w ~ N(0, Q_step + Q_walk Δt)
+                    current.factors.append(_whitened_linear([(X(i - 1), -np.eye(2)), (X(i), np.eye(2)),
+                                                             (C(j), -Mu)], cov))
                 else:
-                    step_u = step_matrix(L, psi) @ calib0
-                    part.factors.append(gtsam.BetweenFactorPoint2(X(i - 1), X(i), step_u,
-                                                                  gtsam.noiseModel.Gaussian.Covariance(cov)))
-                pos = pos + step_u
+                    current.factors.append(gtsam.BetweenFactorPoint2(X(i - 1), X(i), Mu @ np.array([1.0, 0.0]),
+                                                                     gtsam.noiseModel.Gaussian.Covariance(cov)))
+                pos = pos + Mu @ np.array([1.0, 0.0])
             else:
-                part.factors.append(gtsam.BetweenFactorPoint2(X(i - 1), X(i), np.zeros(2),
-                                                              gtsam.noiseModel.Isotropic.Variance(
-                                                                  2, max(q, cfg.min_var_m2))))
-            part.values[X(i)] = pos.copy()
-            if last_block is not None and C(last_block) not in part.keys:
-                part.keys.append(C(last_block))      # keeps the calibration in a fixed-lag window while standing
-            parts.append(part)
+                current.factors.append(gtsam.BetweenFactorPoint2(X(i - 1), X(i), np.zeros(2),
+                                                                 gtsam.noiseModel.Isotropic.Variance(
+                                                                     2, max(q, cfg.min_var_m2))))
+            current.values[X(i)] = pos.copy()
+            if last_block is not None and C(last_block) not in current.keys:
+                current.keys.append(C(last_block))      # keeps the calibration in a fixed-lag window
             dt_pending = stand_pending = 0.0
         if noise.use[k]:
             kernel, width = kinds[int(stream.kind[k])]
             w = width if not np.isfinite(noise.width[k]) else float(noise.width[k])
-            z = stream.z_m[k]
-            parts[-1].factors.append(gtsam.PriorFactorPoint2(X(i), z, noise_model(noise.cov_m2[k], kernel, w)))
-            parts[-1].fix_events.append(k)
-    return plan, parts
+            current.factors.append(gtsam.PriorFactorPoint2(X(i), stream.z_m[k],
+                                                           noise_model(noise.cov_m2[k], kernel, w)))
+            current.fix_events.append(k)
+    yield current

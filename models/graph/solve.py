@@ -25,7 +25,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from models.fusion.events import EventStream
-from models.graph.build import FixNoise, GraphPart, X, graph_factors
+from models.graph.build import FixNoise, GraphPart, X, graph_factors, iter_parts, plan_nodes
 from models.graph.config import GraphConfig, GraphError
 
 __all__ = ["GraphRun", "solve_batch", "solve_isam2", "solve_fixed_lag", "initial_position"]
@@ -170,15 +170,19 @@ def solve_isam2(stream: EventStream, noise: FixNoise, cfg: GraphConfig, method: 
 
 
 def solve_fixed_lag(stream: EventStream, noise: FixNoise, cfg: GraphConfig, method: str = "fg_lag",
-                    x0_en=None, covariance: bool = True, parts: list | None = None, plan=None) -> GraphRun:
+                    x0_en=None, covariance: bool = True, parts=None, plan=None, causal: bool = False) -> GraphRun:
     """Fixed-lag smoothing over ``cfg.lag_s``: each node's estimate at the last update before it leaves the
-    window (see the module docstring). ``parts``/``plan``: prebuilt factors (e.g. with range factors)."""
+    window (see the module docstring); ``causal``: each node's estimate right after the update that added it
+    instead (the filtered track, no lag). ``parts``/``plan``: an iterable of prebuilt parts (e.g. with range
+    factors) and their plan; by default the parts of :func:`models.graph.build.iter_parts`, generated as
+    the smoother consumes them, so nothing but the window and the output rows is held."""
     import gtsam
 
     t0 = time.perf_counter()
     if parts is None:
         x0 = initial_position(stream) if x0_en is None else x0_en
-        plan, parts = graph_factors(stream, noise, cfg, x0)
+        plan = plan_nodes(stream, cfg)
+        parts = iter_parts(stream, noise, cfg, x0, plan)
     smoother = gtsam.IncrementalFixedLagSmoother(cfg.lag_s, _isam2_params(cfg))
     pos = np.full((plan.n_nodes, 2), np.nan)
     covs = np.full((plan.n_nodes, 2, 2), np.nan)
@@ -196,9 +200,11 @@ def solve_fixed_lag(stream: EventStream, noise: FixNoise, cfg: GraphConfig, meth
         # nodes the update at p.t_s marginalises (last stamped before p.t_s − lag): written out first
         while window and stamp[window[0]] < p.t_s - cfg.lag_s:
             i = window.pop(0)
-            pos[i] = smoother.calculateEstimatePoint2(X(i))
-            if covariance:
-                covs[i] = smoother.marginalCovariance(X(i))
+            del stamp[i]
+            if not causal:
+                pos[i] = smoother.calculateEstimatePoint2(X(i))
+                if covariance:
+                    covs[i] = smoother.marginalCovariance(X(i))
         stamps = gtsam.FixedLagSmootherKeyTimestampMap()
         for key in set(p.keys) | set(p.values):
             stamps.insert((key, p.t_s))
@@ -206,16 +212,19 @@ def solve_fixed_lag(stream: EventStream, noise: FixNoise, cfg: GraphConfig, meth
             if i in stamp or i == p.node:
                 stamp[i] = p.t_s
         smoother.update(g, v, stamps)
-        if not window or window[-1] != p.node:
-            window.append(p.node)
-        peak = max(peak, smoother.getFactors().size())
+        window.append(p.node)
+        peak = max(peak, smoother.getLinearizationPoint().size())
         prev_est, prev_dr = smoother.calculateEstimatePoint2(X(p.node)), p.values[X(p.node)]
-    for i in window:
+        if causal:
+            pos[p.node] = prev_est
+            if covariance:
+                covs[p.node] = smoother.marginalCovariance(X(p.node))
+    for i in ([] if causal else window):
         pos[i] = smoother.calculateEstimatePoint2(X(i))
         if covariance:
             covs[i] = smoother.marginalCovariance(X(i))
     ev = plan.event_node
-    info = {"seconds": time.perf_counter() - t0, "nodes": plan.n_nodes, "updates": len(parts),
-            "peak_factors": peak, "final_factors": smoother.getFactors().size(),
+    info = {"seconds": time.perf_counter() - t0, "nodes": plan.n_nodes, "updates": plan.n_nodes,
+            "peak_variables": peak, "final_factors": smoother.getFactors().nrFactors(),
             "final_variables": smoother.getLinearizationPoint().size()}
     return GraphRun(method, stream.t_s, stream.kind, pos[ev, 0], pos[ev, 1], covs[ev], info)

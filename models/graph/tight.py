@@ -28,7 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from models.fusion.events import ACOUSTIC, EventStream
-from models.graph.build import FixNoise, X, graph_factors
+from models.graph.build import FixNoise, X, iter_parts, plan_nodes
 from models.graph.config import GraphConfig, GraphError
 from models.graph.solve import GraphRun, initial_position, solve_fixed_lag
 
@@ -116,78 +116,77 @@ def _range_factor(noise, key_a: int, key_b: int, key_k: int, alpha: float, beaco
 
 
 def _range_noise(sigma_m: float, cfg: GraphConfig):
+    """N(0, σ² + σ_extra²) under the range kernel (:attr:`GraphConfig.range_kernel`)."""
     import gtsam
 
-    gauss = gtsam.noiseModel.Isotropic.Sigma(1, float(sigma_m))
+    gauss = gtsam.noiseModel.Isotropic.Sigma(1, math.hypot(float(sigma_m), cfg.range_extra_sigma_m))
     m = gtsam.noiseModel.mEstimator
-    if cfg.acoustic_kernel == "gauss":
+    if cfg.range_kernel == "gauss":
         return gauss
     est = {"huber": lambda w: m.Huber.Create(w), "cauchy": lambda w: m.Cauchy.Create(w),
-           "dcs": lambda w: m.DCS.Create(w * w)}[cfg.acoustic_kernel](float(cfg.acoustic_width))
+           "dcs": lambda w: m.DCS.Create(w * w)}[cfg.range_kernel](float(cfg.range_width))
     return gtsam.noiseModel.Robust.Create(est, gauss)
 
 
-def tight_parts(stream: EventStream, noise: FixNoise, ranges: RangeRows, cfg: GraphConfig, x0_en,
-                clock_sigma0_m: float = 50.0, speed_of_sound_m_s: float = 343.0):
-    """The loosely coupled graph without its acoustic fixes, plus a range factor per range and a clock per
-    frame, each in the part of the node after it (see the module docstring). Returns (plan, parts,
-    n_ranges_used)."""
+def tight_parts(stream: EventStream, noise: FixNoise, ranges: RangeRows, cfg: GraphConfig, x0_en, plan,
+                clock_sigma0_m: float = 50.0, speed_of_sound_m_s: float = 343.0, counter: dict | None = None):
+    """Yield the loosely coupled graph's parts (:func:`models.graph.build.iter_parts`) without the acoustic
+    fixes, each with the range factors of the ranges since the previous node and a clock per new frame (see
+    the module docstring). ``counter['ranges']`` receives the number of ranges used."""
     import gtsam
 
     use = noise.use & (stream.kind != ACOUSTIC)
-    plan, parts = graph_factors(stream, FixNoise(noise.cov_m2, noise.width, use), cfg, x0_en)
     t_nodes = plan.t_s
     order = np.argsort(ranges.t_s, kind="stable")
-    prev_frame = None
-    prev_t = None
+    order = order[(ranges.t_s[order] >= t_nodes[0]) & (ranges.t_s[order] <= t_nodes[-1])]
+    drift = CLOCK_DRIFT_PPM * 1e-6 * speed_of_sound_m_s
+    r = 0
+    last = None               # (frame, key time) of the newest clock
     created: set = set()
     used = 0
-    drift = CLOCK_DRIFT_PPM * 1e-6 * speed_of_sound_m_s
-    for i in order:
-        t = float(ranges.t_s[i])
-        if not (t_nodes[0] <= t <= t_nodes[-1]):
-            continue
-        b = int(np.searchsorted(t_nodes, t, side="left"))
-        a = max(b - 1, 0)
-        span = t_nodes[b] - t_nodes[a]
-        alpha = 1.0 if span <= 0 else (t - t_nodes[a]) / span
-        part = parts[b]
-        f = int(ranges.frame[i])
-        if f not in created:
-            created.add(f)
-            hint = float(ranges.clock_hint_m[i])
-            part.values[K(f)] = np.array([hint if math.isfinite(hint) else 0.0])
-            if prev_frame is None:
-                part.factors.append(gtsam.PriorFactorVector(K(f), part.values[K(f)],
-                                                            gtsam.noiseModel.Isotropic.Sigma(1, clock_sigma0_m)))
-            else:
-                sd = math.hypot(drift * max(t - prev_t, 0.0), 1e-3)
-                part.factors.append(gtsam.BetweenFactorVector(K(prev_frame), K(f), np.zeros(1),
-                                                              gtsam.noiseModel.Isotropic.Sigma(1, sd)))
-                part.keys.append(K(prev_frame))
-            prev_frame = f
-        prev_t = t
-        part.factors.append(_range_factor(_range_noise(ranges.sigma_m[i], cfg), X(a), X(b), K(f), alpha,
-                                          np.asarray(ranges.beacon_enu_m[i], float), ranges.receiver_up_m,
-                                          float(ranges.pseudorange_m[i])))
-        part.keys += [X(a), X(b), K(f)]
-        used += 1
-    # keep the latest clock in a fixed-lag window while no frame arrives (a gap longer than the lag)
-    current = None
-    for p in parts:
-        new = [key for key in p.values if gtsam.Symbol(key).chr() == ord("k")]
-        if current is not None and current not in p.keys:
-            p.keys.append(current)
-        if new:
-            current = new[-1]
-    return plan, parts, used
+    for part in iter_parts(stream, FixNoise(noise.cov_m2, noise.width, use), cfg, x0_en, plan):
+        b = part.node
+        while r < order.size and ranges.t_s[order[r]] <= part.t_s:
+            i = order[r]
+            r += 1
+            t = float(ranges.t_s[i])
+            a = max(b - 1, 0)
+            span = t_nodes[b] - t_nodes[a]
+            alpha = 1.0 if span <= 0 else (t - t_nodes[a]) / span
+            f = int(ranges.frame[i])
+            if f not in created:
+                created.add(f)
+                hint = float(ranges.clock_hint_m[i])
+                part.values[K(f)] = np.array([hint if math.isfinite(hint) else 0.0])
+                if last is None:
+                    part.factors.append(gtsam.PriorFactorVector(K(f), part.values[K(f)],
+                                                                gtsam.noiseModel.Isotropic.Sigma(1, clock_sigma0_m)))
+                else:
+                    # k_f − k_prev ~ N(0, (c·drift·Δt)² + (1 mm)²)
+                    sd = math.hypot(drift * max(t - last[1], 0.0), 1e-3)
+                    part.factors.append(gtsam.BetweenFactorVector(K(last[0]), K(f), np.zeros(1),
+                                                                  gtsam.noiseModel.Isotropic.Sigma(1, sd)))
+                    part.keys.append(K(last[0]))
+                last = (f, t)
+            part.factors.append(_range_factor(_range_noise(ranges.sigma_m[i], cfg), X(a), X(b), K(f), alpha,
+                                              np.asarray(ranges.beacon_enu_m[i], float), ranges.receiver_up_m,
+                                              float(ranges.pseudorange_m[i])))
+            part.keys += [X(a), X(b), K(f)]
+            used += 1
+        if last is not None and K(last[0]) not in part.keys:
+            part.keys.append(K(last[0]))      # the newest clock stays in a fixed-lag window between frames
+        if counter is not None:
+            counter["ranges"] = used
+        yield part
 
 
 def solve_tight(stream: EventStream, noise: FixNoise, ranges: RangeRows, cfg: GraphConfig,
                 method: str = "fg_tight", x0_en=None, covariance: bool = True) -> GraphRun:
     """Fixed-lag smoothing of the tightly coupled graph (:func:`tight_parts`)."""
     x0 = initial_position(stream) if x0_en is None else x0_en
-    plan, parts, used = tight_parts(stream, noise, ranges, cfg, x0)
-    run = solve_fixed_lag(stream, noise, cfg, method, covariance=covariance, parts=parts, plan=plan)
-    run.info["ranges_used"] = used
+    plan = plan_nodes(stream, cfg)
+    counter = {"ranges": 0}
+    run = solve_fixed_lag(stream, noise, cfg, method, covariance=covariance, plan=plan,
+                          parts=tight_parts(stream, noise, ranges, cfg, x0, plan, counter=counter))
+    run.info["ranges_used"] = counter["ranges"]
     return run
