@@ -13,6 +13,10 @@ Which module to open for what:
   standing), the EKF with heading-offset and step-scale states (optional GNSS Gauss–Markov
   bias), noise policies (fixed, quality, per class, VB-AKF, Sage–Husa), the IMM over
   environment classes, the RTS smoother and NEES/NIS consistency.
+* ``models.graph`` — factor-graph fusion on GTSAM: the walk as a graph of PDR, GNSS and acoustic
+  factors (batch Levenberg–Marquardt, iSAM2, fixed-lag), robust and class-aware kernels, tightly
+  coupled acoustic ranges, IMU preintegration; ``models.rtkpdr`` — the RTK/PDR EKF of Zhang et al.
+  2023 on the fusion core's kernels.
 * ``models.adaptive_noise`` — the adaptive method's R per (class, GGA quality).
 * ``models.bp`` — the BP corrector (ensemble with variance heads) and its guards.
 * ``models.fusion_model`` / ``models.bundle`` — the fusion model and pickle-free bundles

@@ -11,9 +11,9 @@ import pytest
 from features.constants import GRAVITY_M_S2
 from features.imu.reader import ImuData
 from models.fusion.ekf import EkfConfig
-from models.fusion.events import ACOUSTIC, GNSS, STEP, GnssEvents, StepEvents, merge_events
+from models.fusion.events import GNSS, GnssEvents, StepEvents, merge_events
 from models.graph import FixNoise, GraphConfig, GraphError, solve_fixed_lag
-from models.graph.ins import InsConfig, attitude_from_down_heading, solve_ins
+from models.graph.ins import attitude_from_down_heading, solve_ins
 from models.graph.model import GraphModel, attach_graph_model, graph_model_of
 from models.graph.tight import RangeRows, range_error, solve_tight
 from tests.fusion_synth import synth_walk
@@ -48,7 +48,7 @@ def _synthetic_ranges(s, beacons, per_frame=2, frame_s=1.2, sigma=0.05, seed=0):
             e, n = np.interp(t, st.t_s, s.truth[:, 0]), np.interp(t, st.t_s, s.truth[:, 1])
             b = beacons[i]
             rho = math.dist((e, n, 1.0), b) + clock + rng.normal(0, sigma)
-            rows.append((j, t, *b, rho, sigma, np.nan))
+            rows.append((j - 3, t, *b, rho, sigma, np.nan))     # frame numbers start below 0, as a receiver's can
     a = np.array(rows)
     return RangeRows(a[:, 0].astype(int), a[:, 1], a[:, 2:5], a[:, 5], a[:, 6], a[:, 7], 1.0)
 

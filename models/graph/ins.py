@@ -117,19 +117,13 @@ def _preintegrate(pim_params, imu, t_a: float, t_b: float, bias):
     return pim
 
 
-def solve_ins(imu, stream: EventStream, noise: FixNoise, start_track: tuple, step_t_s: np.ndarray,
-              step_heading_rad: np.ndarray, cfg: InsConfig = InsConfig(), method: str = "fg_ins",
-              height_m: float = 0.0) -> GraphRun:
-    """Batch Levenberg–Marquardt of the INS graph (module docstring). ``imu``: ImuData with gyro;
-    ``start_track``: (t_s, east_m, north_m) initial positions; ``step_*``: PDR step times and headings
-    (initial yaw). Returns one row per keyframe (its marginal covariance included)."""
+def _ins_graph(imu, stream: EventStream, noise: FixNoise, start_track: tuple, step_t_s, step_heading_rad,
+               cfg: InsConfig, height_m: float):
+    """The INS graph and its initial values (module docstring): (graph, values, keyframe times (n,))."""
     import gtsam
     from gtsam.symbol_shorthand import B, V
     from gtsam.symbol_shorthand import X as XP
 
-    t0 = time.perf_counter()
-    if imu.gyro_rad_s is None:
-        raise GraphError("IMU preintegration needs the gyro")
     fixes = np.flatnonzero(noise.use)
     kt = keyframe_times(stream.t_s[fixes], float(imu.t_s[0]), float(imu.t_s[-1]), cfg.max_gap_s)
     if kt.size < 2:
@@ -155,18 +149,18 @@ def solve_ins(imu, stream: EventStream, noise: FixNoise, start_track: tuple, ste
         v.insert(XP(i), gtsam.Pose3(R, np.array([pe[i], pn[i], height_m])))
         v.insert(V(i), vel[i])
         v.insert(B(i), bias0)
-    x0 = v.atPose3(XP(0))
-    g.add(gtsam.PriorFactorPose3(XP(0), x0, gtsam.noiseModel.Diagonal.Sigmas(np.array(
+    g.add(gtsam.PriorFactorPose3(XP(0), v.atPose3(XP(0)), gtsam.noiseModel.Diagonal.Sigmas(np.array(
         [cfg.sigma0_tilt_rad, cfg.sigma0_tilt_rad, cfg.sigma0_yaw_rad] + [cfg.sigma0_pos_m] * 3))))
     g.add(gtsam.PriorFactorVector(V(0), vel[0], gtsam.noiseModel.Isotropic.Sigma(3, cfg.sigma0_vel_m_s)))
     g.add(gtsam.PriorFactorConstantBias(B(0), bias0, gtsam.noiseModel.Diagonal.Sigmas(np.array(
         [cfg.sigma0_accel_bias_m_s2] * 3 + [cfg.sigma0_gyro_bias_rad_s] * 3))))
+    rw = np.array([cfg.accel_bias_rw_m_s3_sqrt_hz] * 3 + [cfg.gyro_bias_rw_rad_s2_sqrt_hz] * 3)
     for i in range(1, kt.size):
-        pim = _preintegrate(params, imu, kt[i - 1], kt[i], bias0)
-        g.add(gtsam.ImuFactor(XP(i - 1), V(i - 1), XP(i), V(i), B(i - 1), pim))
-        span = kt[i] - kt[i - 1]
+        g.add(gtsam.ImuFactor(XP(i - 1), V(i - 1), XP(i), V(i), B(i - 1),
+                              _preintegrate(params, imu, kt[i - 1], kt[i], bias0)))
+        # bias random walk: b_i − b_{i−1} ~ N(0, q·Δt)
         g.add(gtsam.BetweenFactorConstantBias(B(i - 1), B(i), bias0, gtsam.noiseModel.Diagonal.Sigmas(
-            np.sqrt(span) * np.array([cfg.accel_bias_rw_m_s3_sqrt_hz] * 3 + [cfg.gyro_bias_rw_rad_s2_sqrt_hz] * 3))))
+            np.sqrt(kt[i] - kt[i - 1]) * rw)))
     node = np.searchsorted(kt, np.round(stream.t_s[fixes], 6))
     for k, i in zip(fixes, node):
         if i >= kt.size or abs(kt[i] - stream.t_s[k]) > 1e-5:
@@ -177,6 +171,24 @@ def solve_ins(imu, stream: EventStream, noise: FixNoise, start_track: tuple, ste
         width = cfg.gnss_width if stream.kind[k] == 1 else cfg.acoustic_width
         z3 = np.array([stream.z_m[k, 0], stream.z_m[k, 1], height_m])
         g.add(gtsam.GPSFactor(XP(int(i)), z3, noise_model(cov, "huber", width)))
+    return g, v, kt
+
+
+def solve_ins(imu, stream: EventStream, noise: FixNoise, start_track: tuple, step_t_s: np.ndarray,
+              step_heading_rad: np.ndarray, cfg: InsConfig = InsConfig(), method: str = "fg_ins",
+              height_m: float = 0.0) -> GraphRun:
+    """Batch Levenberg–Marquardt of the INS graph (module docstring). ``imu``: ImuData with gyro;
+    ``start_track``: (t_s, east_m, north_m) initial positions; ``step_*``: PDR step times and headings
+    (initial yaw). Returns one row per keyframe (its marginal covariance included)."""
+    import gtsam
+    from gtsam.symbol_shorthand import B
+    from gtsam.symbol_shorthand import X as XP
+
+    t0 = time.perf_counter()
+    if imu.gyro_rad_s is None:
+        raise GraphError("IMU preintegration needs the gyro")
+    g, v, kt = _ins_graph(imu, stream, noise, start_track, np.asarray(step_t_s, float),
+                          np.asarray(step_heading_rad, float), cfg, height_m)
     lm = gtsam.LevenbergMarquardtParams()
     lm.setMaxIterations(cfg.lm_max_iterations)
     opt = gtsam.LevenbergMarquardtOptimizer(g, v, lm)

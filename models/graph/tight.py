@@ -39,7 +39,7 @@ CLOCK_DRIFT_PPM = 100.0
 
 
 def K(j: int) -> int:
-    """Key of the clock (metres) of acoustic frame j."""
+    """Key of the clock (metres) of the j-th acoustic frame heard (j ≥ 0)."""
     import gtsam
 
     return gtsam.symbol("k", int(j))
@@ -142,7 +142,7 @@ def tight_parts(stream: EventStream, noise: FixNoise, ranges: RangeRows, cfg: Gr
     drift = CLOCK_DRIFT_PPM * 1e-6 * speed_of_sound_m_s
     r = 0
     last = None               # (frame, key time) of the newest clock
-    created: set = set()
+    created: dict = {}
     used = 0
     for part in iter_parts(stream, FixNoise(noise.cov_m2, noise.width, use), cfg, x0_en, plan):
         b = part.node
@@ -153,9 +153,10 @@ def tight_parts(stream: EventStream, noise: FixNoise, ranges: RangeRows, cfg: Gr
             a = max(b - 1, 0)
             span = t_nodes[b] - t_nodes[a]
             alpha = 1.0 if span <= 0 else (t - t_nodes[a]) / span
-            f = int(ranges.frame[i])
-            if f not in created:
-                created.add(f)
+            frame = int(ranges.frame[i])
+            if frame not in created:
+                # clocks keyed in order of appearance (frame numbers may be negative)
+                f = created[frame] = len(created)
                 hint = float(ranges.clock_hint_m[i])
                 part.values[K(f)] = np.array([hint if math.isfinite(hint) else 0.0])
                 if last is None:
@@ -168,6 +169,7 @@ def tight_parts(stream: EventStream, noise: FixNoise, ranges: RangeRows, cfg: Gr
                                                                   gtsam.noiseModel.Isotropic.Sigma(1, sd)))
                     part.keys.append(K(last[0]))
                 last = (f, t)
+            f = created[frame]
             part.factors.append(_range_factor(_range_noise(ranges.sigma_m[i], cfg), X(a), X(b), K(f), alpha,
                                               np.asarray(ranges.beacon_enu_m[i], float), ranges.receiver_up_m,
                                               float(ranges.pseudorange_m[i])))
