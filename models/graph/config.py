@@ -38,6 +38,10 @@ class GraphConfig:
     ``calibration``: estimate (δψ, s) as variables (one per ``calib_block_s`` of walk time, a random walk
     between blocks); False fixes them at zero (the graph is then linear-Gaussian in the positions).
 
+    ``gnss_bias``: a GNSS bias variable at every GNSS fix, first-order Gauss–Markov between fixes with
+    ``bias_sigma_m``, ``bias_tau_s`` (the EKF's bias states, :class:`models.fusion.ekf.EkfConfig`); the
+    acoustic fixes do not share it.
+
     Measurements: ``gnss_kernel`` / ``acoustic_kernel`` one of :data:`KERNELS` with width ``*_width`` in
     units of the whitened residual (Huber's k, Cauchy's c, DCS's Φ as √Φ).
 
@@ -70,6 +74,9 @@ class GraphConfig:
     gnss_width: float = 2.5
     acoustic_kernel: str = "huber"
     acoustic_width: float = 2.5
+    gnss_bias: bool = False
+    bias_sigma_m: float = 1.5
+    bias_tau_s: float = 30.0
     range_kernel: str = "cauchy"
     range_width: float = 2.5
     range_extra_sigma_m: float = 0.0
@@ -87,7 +94,7 @@ class GraphConfig:
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
                 raise GraphError(f"{name} must be finite and >= 0, got {v!r}")
         for name in ("sigma0_pos_m", "sigma0_heading_rad", "sigma0_scale", "calib_block_s", "gnss_width",
-                     "acoustic_width", "range_width", "lm_rel_tol", "isam_relin_threshold", "lag_s", "min_var_m2"):
+                     "acoustic_width", "range_width", "bias_sigma_m", "bias_tau_s", "lm_rel_tol", "isam_relin_threshold", "lag_s", "min_var_m2"):
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
                 raise GraphError(f"{name} must be finite and > 0, got {v!r}")
