@@ -28,9 +28,9 @@ from __future__ import annotations
 
 import argparse
 import json
-import resource
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -197,27 +197,58 @@ def table(results: list, names: list) -> str:
     return "\n".join(lines)
 
 
-def long_child(hours: float, lag_s: float) -> None:
+def long_child(hours: float, lag_s: float, full_isam2: bool = False, smoother: str = "incremental") -> None:
     """One fixed-lag run over a synthetic walk of ``hours`` (GNSS 5 Hz, acoustic 0.7 Hz, steps 1.8 Hz)."""
     from tests.fusion_synth import synth_walk
     from models.fusion.ekf import EkfConfig
     from models.graph.build import FixNoise
     from models.graph.config import GraphConfig
-    from models.graph.solve import solve_fixed_lag
+    from models.graph.solve import solve_fixed_lag, solve_isam2
 
     s = synth_walk(1, duration_s=hours * 3600.0, cfg=EkfConfig(), acoustic_hz=0.7)
     st = s.stream
     r = np.full((len(st), 2, 2), np.nan)
     r[st.kind == 1] = np.eye(2) * 1.5 ** 2
     r[st.kind == 2] = np.eye(2) * 0.3 ** 2
-    rss0 = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
-    run = solve_fixed_lag(st, FixNoise.from_cov(st, r), GraphConfig(lag_s=lag_s), covariance=False)
-    rss1 = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    noise = FixNoise.from_cov(st, r)
+    samples = []
+    done = threading.Event()
+
+    def sample():                      # the resident set every 0.5 s while the smoother runs
+        while not done.wait(0.5):
+            samples.append(_rss_mb())
+
+    rss0 = _rss_mb()
+    th = threading.Thread(target=sample, daemon=True)
+    th.start()
+    if full_isam2:
+        run = solve_isam2(st, noise, GraphConfig(), covariance=False)
+        run.info.update(peak_variables=run.info["nodes"], final_variables=run.info["nodes"])
+    else:
+        run = solve_fixed_lag(st, noise, GraphConfig(lag_s=lag_s, lag_smoother=smoother), covariance=False)
+    done.set()
+    th.join()
+    rss1 = max(samples + [_rss_mb()])
     err = np.hypot(run.east_m - s.truth[:, 0], run.north_m - s.truth[:, 1])
-    print(json.dumps({"hours": hours, "events": len(st), "nodes": run.info["nodes"],
+    print(json.dumps({"hours": hours, "solver": "isam2 (full)" if full_isam2 else f"fixed lag ({smoother})", "events": len(st), "nodes": run.info["nodes"],
                       "seconds": run.info["seconds"], "ms_per_update": 1e3 * run.info["seconds"] / run.info["nodes"],
                       "peak_variables": run.info["peak_variables"], "final_variables": run.info["final_variables"],
-                      "rss_before_mb": rss0 / 1024, "rss_peak_mb": rss1 / 1024, "mean_err_m": float(err.mean())}))
+                      "rss_before_mb": rss0, "rss_peak_mb": rss1, "rss_growth_mb": rss1 - rss0,
+                      "input_mb": _stream_mb(st), "mean_err_m": float(err.mean())}))
+
+
+def _rss_mb() -> float:
+    """The process's current resident set, MB (/proc/self/status VmRSS)."""
+    with open("/proc/self/status") as f:
+        for line in f:
+            if line.startswith("VmRSS:"):
+                return int(line.split()[1]) / 1024.0
+    return float("nan")
+
+
+def _stream_mb(st) -> float:
+    """Size of an event stream's arrays, MB (the input, held for the whole run)."""
+    return sum(v.nbytes for v in st.__dict__.values() if isinstance(v, np.ndarray)) / 2 ** 20
 
 
 def main() -> None:
@@ -228,12 +259,20 @@ def main() -> None:
     ap.add_argument("--long-hours", type=float, default=0.0, help="also the fixed-lag memory run (hours)")
     ap.add_argument("--lag-s", type=float, default=5.0)
     ap.add_argument("--max-walks", type=int, default=0, help="test walks at most (0: all)")
+    ap.add_argument("--only-long", action="store_true", help="only the fixed-lag memory runs")
     ap.add_argument("--long-child", type=float, default=None, help=argparse.SUPPRESS)
+    ap.add_argument("--full-isam2", action="store_true", help=argparse.SUPPRESS)
+    ap.add_argument("--smoother", default="incremental", help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.long_child is not None:
-        long_child(args.long_child, args.lag_s)
+        long_child(args.long_child, args.lag_s, args.full_isam2, args.smoother)
         return
-    import walks  # noqa: F401 - registers the graph methods
+    if args.only_long:
+        long_runs(args, {})
+        return
+    import importlib
+
+    importlib.import_module("walks")          # registers the graph methods
     from features.site import load_site
     from simulation.split import split_layout
 
@@ -314,18 +353,27 @@ def report(results, fits, args, yard) -> None:
         print(f"| {n} | {per10:.2f} | {1e3 * sec / ev:.3f} | {sec / kf_s:.1f} | {per10 / np.mean(yard):.0f} |")
     figures.update(acoustic_share={"loose": loose, "tight": tight}, yardstick_s=list(yard))
     if args.long_hours:
-        print("\n## Fixed-lag memory over a long synthetic walk (each length in its own process)\n")
-        for h in (1.0, args.long_hours):
-            out = subprocess.run([sys.executable, __file__, "--split-dir", str(args.split_dir), "--long-child",
-                                  str(h), "--lag-s", str(args.lag_s)], capture_output=True, text=True, check=True)
-            fig = json.loads(out.stdout.strip().splitlines()[-1])
-            figures[f"long_{h:g}h"] = fig
-            print(f"- {h:g} h: {fig['events']} events, {fig['ms_per_update']:.2f} ms per update, smoother window "
-                  f"≤ {fig['peak_variables']} variables (end: {fig['final_variables']}), peak RSS "
-                  f"{fig['rss_peak_mb']:.0f} MB (before the run {fig['rss_before_mb']:.0f} MB), "
-                  f"mean error {fig['mean_err_m']:.3f} m")
+        long_runs(args, figures)
     if args.out:
         args.out.write_text(json.dumps(figures, indent=1))
+
+
+def long_runs(args, figures: dict) -> None:
+    """The fixed-lag memory runs, 1 h and ``--long-hours``, each in its own process."""
+    if args.long_hours:
+        print("\n## Fixed-lag memory over a long synthetic walk (each length in its own process)\n")
+        for h, full, kind in ((1.0, False, "incremental"), (args.long_hours, False, "incremental"),
+                              (1.0, False, "batch"), (args.long_hours, False, "batch"), (1.0, True, "")):
+            out = subprocess.run([sys.executable, __file__, "--split-dir", str(args.split_dir), "--long-child",
+                                  str(h), "--lag-s", str(args.lag_s), "--smoother", kind or "incremental"]
+                                 + (["--full-isam2"] if full else []), capture_output=True, text=True, check=True)
+            fig = json.loads(out.stdout.strip().splitlines()[-1])
+            figures[f"long_{h:g}h_{fig['solver']}"] = fig
+            print(f"- {fig['solver']}, {h:g} h: {fig['events']} events, {fig['ms_per_update']:.2f} ms per update, smoother window "
+                  f"≤ {fig['peak_variables']} variables (end: {fig['final_variables']}); resident set "
+                  f"{fig['rss_before_mb']:.0f} MB before the run (input stream {fig['input_mb']:.0f} MB), "
+                  f"peak {fig['rss_peak_mb']:.0f} MB during it (+{fig['rss_growth_mb']:.0f} MB: the output "
+                  f"rows, 48 B per node, and the window); mean error {fig['mean_err_m']:.3f} m")
 
 
 if __name__ == "__main__":

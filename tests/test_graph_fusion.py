@@ -272,6 +272,18 @@ def test_fixed_lag_memory_is_bounded_and_long_lag_is_the_batch(linear_walk):
     assert np.max(np.abs(lag.east_m - batch.east_m)) < 5e-3
 
 
+def test_batch_and_incremental_fixed_lag_smoothers_agree():
+    """gtsam's BatchFixedLagSmoother (LM over the window each update, flat cost) and the incremental one give
+    the same track to a few mm, covariances included."""
+    cfg = EkfConfig()
+    st = synth_walk(6, duration_s=40.0, cfg=cfg, acoustic_hz=0.7).stream
+    n = FixNoise.from_cov(st, _r(st))
+    a = solve_fixed_lag(st, n, GraphConfig.from_ekf(cfg, lag_s=3.0))
+    b = solve_fixed_lag(st, n, GraphConfig.from_ekf(cfg, lag_s=3.0, lag_smoother="batch"))
+    assert np.mean(np.hypot(a.east_m - b.east_m, a.north_m - b.north_m)) < 5e-3
+    assert np.nanmax(np.abs(a.cov_m2 - b.cov_m2)) < 0.05 * np.nanmax(a.cov_m2)
+
+
 def test_fixed_lag_smoothing_beats_its_own_causal_estimate():
     """The lagged output (each node smoothed over the next lag) is closer to the truth than the same run's
     causal output; both come from the one smoother."""
@@ -308,7 +320,7 @@ def test_nodes_are_shared_by_events_of_one_time_and_non_equidistant():
 
 @pytest.mark.parametrize("field,value", [("lag_s", 0.0), ("gnss_kernel", "tukey"), ("sigma0_pos_m", -1.0),
                                          ("q_walk_m2_s", float("nan")), ("isam_relin_skip", 0),
-                                         ("range_extra_sigma_m", -0.1)])
+                                         ("range_extra_sigma_m", -0.1), ("lag_smoother", "sliding")])
 def test_bad_settings_name_the_parameter(field, value):
     with pytest.raises(GraphError, match=field):
         GraphConfig(**{field: value})

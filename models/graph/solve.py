@@ -118,6 +118,25 @@ def solve_batch(stream: EventStream, noise: FixNoise, cfg: GraphConfig, method: 
     return GraphRun(method, stream.t_s, stream.kind, e, n, cov, info)
 
 
+def _marginal_of(smoother):
+    """The marginal covariance of a key in a fixed-lag smoother: iSAM2's own, or (batch smoother) from
+    ``gtsam.Marginals`` over the window's factors at its estimate."""
+    import gtsam
+
+    if hasattr(smoother, "marginalCovariance"):
+        return smoother.marginalCovariance
+
+    def marginal(key):
+        graph = gtsam.NonlinearFactorGraph()
+        factors = smoother.getFactors()
+        for i in range(factors.size()):
+            if factors.exists(i):
+                graph.add(factors.at(i))
+        return gtsam.Marginals(graph, smoother.calculateEstimate()).marginalCovariance(key)
+
+    return marginal
+
+
 def _isam2_params(cfg: GraphConfig):
     import gtsam
 
@@ -183,7 +202,13 @@ def solve_fixed_lag(stream: EventStream, noise: FixNoise, cfg: GraphConfig, meth
         x0 = initial_position(stream) if x0_en is None else x0_en
         plan = plan_nodes(stream, cfg)
         parts = iter_parts(stream, noise, cfg, x0, plan)
-    smoother = gtsam.IncrementalFixedLagSmoother(cfg.lag_s, _isam2_params(cfg))
+    if cfg.lag_smoother == "batch":
+        lm = gtsam.LevenbergMarquardtParams()
+        lm.setMaxIterations(cfg.lm_max_iterations)
+        smoother = gtsam.BatchFixedLagSmoother(cfg.lag_s, lm)
+    else:
+        smoother = gtsam.IncrementalFixedLagSmoother(cfg.lag_s, _isam2_params(cfg))
+    marginal = _marginal_of(smoother)
     pos = np.full((plan.n_nodes, 2), np.nan)
     covs = np.full((plan.n_nodes, 2, 2), np.nan)
     window: list[int] = []            # nodes in the smoother not yet written out, oldest first
@@ -204,7 +229,7 @@ def solve_fixed_lag(stream: EventStream, noise: FixNoise, cfg: GraphConfig, meth
             if not causal:
                 pos[i] = smoother.calculateEstimatePoint2(X(i))
                 if covariance:
-                    covs[i] = smoother.marginalCovariance(X(i))
+                    covs[i] = marginal(X(i))
         stamps = gtsam.FixedLagSmootherKeyTimestampMap()
         for key in set(p.keys) | set(p.values):
             stamps.insert((key, p.t_s))
@@ -218,11 +243,11 @@ def solve_fixed_lag(stream: EventStream, noise: FixNoise, cfg: GraphConfig, meth
         if causal:
             pos[p.node] = prev_est
             if covariance:
-                covs[p.node] = smoother.marginalCovariance(X(p.node))
+                covs[p.node] = marginal(X(p.node))
     for i in ([] if causal else window):
         pos[i] = smoother.calculateEstimatePoint2(X(i))
         if covariance:
-            covs[i] = smoother.marginalCovariance(X(i))
+            covs[i] = marginal(X(i))
     ev = plan.event_node
     info = {"seconds": time.perf_counter() - t0, "nodes": plan.n_nodes, "updates": plan.n_nodes,
             "peak_variables": peak, "final_factors": smoother.getFactors().nrFactors(),
