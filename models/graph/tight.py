@@ -80,8 +80,8 @@ def range_error(a: np.ndarray, b: np.ndarray, k: float, alpha: float, beacon: np
     """Residual e = ‖((1−α)a + αb, h) − s‖ + k − ρ and its Jacobians (∂e/∂a (2,), ∂e/∂b (2,), ∂e/∂k).
 
     >>> e, Ja, Jb, Jk = range_error(np.zeros(2), np.array([2.0, 0.0]), 0.5, 0.5, np.array([4.0, 0.0, 1.0]), 1.0, 3.0)
-    >>> round(e, 6), Ja.tolist(), Jb.tolist(), Jk                      # p = (1, 0): 3 + 0.5 − 3
-    (0.5, [-0.5, -0.0], [-0.5, -0.0], 1.0)
+    >>> round(e, 6), Ja.round(6).tolist(), Jb.round(6).tolist(), Jk    # p = (1, 0): 3 + 0.5 − 3
+    (0.5, [-0.5, 0.0], [-0.5, 0.0], 1.0)
     """
     p = (1.0 - alpha) * a + alpha * b
     d = np.array([p[0] - beacon[0], p[1] - beacon[1], up_m - beacon[2]])
