@@ -8,11 +8,14 @@
 * :func:`solve_isam2` — causal: the graph grows node by node in ``gtsam.ISAM2`` (Kaess et al. 2012,
   IJRR 31(2)), and each event's position is the estimate of its node right after the update that
   added it (what ``run`` could show live); the marginal covariance of that node from the same
-  Bayes tree.
-* :func:`solve_fixed_lag` — ``gtsam.IncrementalFixedLagSmoother``: variables older than ``lag_s`` are
-  marginalised out of iSAM2 (their information kept as a linear prior on the window), so the solver's
-  memory is bounded however long the walk; each node's position is its estimate at the last update
-  before it leaves the window (a fixed-lag smoothed track, ``lag_s`` late).
+  Bayes tree. Its memory grows with the walk (measured: 134 MB and 3.3 ms per update after a
+  synthetic hour): for long walks the fixed lag below.
+* :func:`solve_fixed_lag` — ``gtsam.IncrementalFixedLagSmoother`` (or ``BatchFixedLagSmoother``,
+  :attr:`GraphConfig.lag_smoother`): variables older than ``lag_s`` are marginalised out (their
+  information kept as a linear prior on the window), so the solver holds the window only, however long
+  the walk (≤ 43 variables over a synthetic 8 h); each node's position is its estimate at the last
+  update before it leaves the window (a fixed-lag smoothed track, ``lag_s`` late), or with ``causal``
+  its estimate right after the update that added it.
 
 Each returns a :class:`GraphRun`: one row per event of the stream, like a filter run.
 """
