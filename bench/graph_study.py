@@ -183,8 +183,11 @@ def _covered_share(times, inputs) -> float:
 
 
 def table(results: list, names: list) -> str:
-    lines = ["| method | " + " | ".join(f"{c} mean / med / p95 / max" for c in CLASSES) + " |",
-             "|---" * (len(CLASSES) + 1) + "|"]
+    from models.fusion.consistency import chi2_bounds
+
+    lo, hi = chi2_bounds(2)
+    lines = ["| method | " + " | ".join(f"{c} mean / med / p95 / max" for c in CLASSES) + " | NEES in 95 % |",
+             "|---" * (len(CLASSES) + 2) + "|"]
     for n in names:
         cells = []
         for c in CLASSES:
@@ -193,7 +196,10 @@ def table(results: list, names: list) -> str:
             e = np.concatenate(errs) if errs else np.zeros(0)
             cells.append(f"{e.mean():.3f} / {np.median(e):.3f} / {np.percentile(e, 95):.2f} / {e.max():.2f}"
                          if e.size else "—")
-        lines.append(f"| {n} | " + " | ".join(cells) + " |")
+        nees = np.concatenate([r["methods"][n]["nees"] for r in results if n in r["methods"]])
+        nees = nees[np.isfinite(nees)]
+        share = f"{np.mean((nees >= lo) & (nees <= hi)):.2f}" if nees.size else "—"
+        lines.append(f"| {n} | " + " | ".join(cells) + f" | {share} |")
     return "\n".join(lines)
 
 
