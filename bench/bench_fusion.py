@@ -1,7 +1,7 @@
 """Fusion filter speed: PDR steps (and events) per wall second for each method on a 10-minute walk, one core.
 
 The walk is synthetic (``tests/fusion_synth.py``, seed 1: 1.8 steps/s, GNSS
-at 5 Hz, acoustic fixes every 0.8 s frame — the device rates of DESIGN.md §4
+at 5 Hz, acoustic fixes every 0.8 s frame — the device rates of docs/design.md §4
 — so about 3.5 fixes per step: 1,080 steps and ~4,800 events in all), and the
 same walk again with GNSS at 1 Hz to show how the rate of fixes, not of
 steps, sets the cost. Each method is timed best-of-``REPEATS`` because this
@@ -39,8 +39,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 import numpy as np
 import scipy.signal
 
-from models.fusion import (ClassMap, ClassTrack, EkfConfig, EventEKF, FixedNoise, IMMFilter, PerClassNoise,
-                           QualityNoise, VBAdaptiveNoise, rts_smooth)
+from models.fusion import (ClassMap, ClassTrack, ContextNoise, EkfConfig, EventEKF, FixedNoise, IMMFilter,
+                           PerClassNoise, QualityNoise, VBAdaptiveNoise, fixed_lag_smooth, rts_smooth)
+from models.fusion.context import ErrorSeries
 from tests.fusion_synth import synth_walk
 
 REPEATS = 9
@@ -70,6 +71,20 @@ def yardstick_s() -> float:
     return time.perf_counter() - t0
 
 
+def context_model(n_classes: int) -> ContextNoise:
+    """A context error model fitted on another synthetic walk (float fixes with a correlated bias)."""
+    s = synth_walk(2, duration_s=600.0, gnss_hz=5.0, acoustic_hz=1.25, bias_sigma_m=0.4, bias_tau_s=30.0,
+                   gnss_quality=lambda t: np.where((np.asarray(t) // 60) % 2 == 0, 5, 4))
+    ev = s.stream
+    out = []
+    for code in (1, 2):
+        sel = ev.kind == code
+        q = s.gnss.quality[ev.index[sel]] if code == 1 else np.zeros(sel.sum(), int)
+        out.append([ErrorSeries(ev.t_s[sel], ev.z_m[sel] - s.truth[sel, :2], ev.cov_m2[sel], q,
+                                (ev.t_s[sel] // 100).astype(int) % n_classes)])
+    return ContextNoise(n_classes=n_classes, min_samples=50).fit(*out)
+
+
 def methods(stream):
     pc = PerClassNoise(3, 1.5, 0.3).fit()
     pc.R_gnss_ = np.array([np.eye(2) * 1.5 ** 2, np.eye(2) * 3.0 ** 2, np.eye(2) * 6.0 ** 2])
@@ -79,6 +94,7 @@ def methods(stream):
     # a site map: class 1 west of east = 0, class 0 east of it, on a 2 m grid
     east = np.arange(-400.0, 400.0, 2.0)
     class_at = ClassMap.from_axes(east, np.arange(-400.0, 400.0, 2.0), np.tile((east > 0).astype(int) ^ 1, (400, 1)))
+    ctx3, ctx1 = CONTEXT[3], CONTEXT[1]
     return [
         ("kf", lambda: EventEKF(noise=FixedNoise(1.5, 0.3)).run(stream)),
         ("kf_quality", lambda: EventEKF(noise=QualityNoise()).run(stream)),
@@ -89,6 +105,8 @@ def methods(stream):
         ("aekf VB-AKF", lambda: EventEKF(noise=VBAdaptiveNoise(1.5, 0.3)).run(stream)),
         ("kf + GNSS bias (6 states)", lambda: EventEKF(EkfConfig(gnss_bias=True), FixedNoise(1.5, 0.3)).run(stream)),
         ("imm (3 modes)", lambda: IMMFilter(pc).run(stream, classes=classes)),
+        ("adaptive_nobp (context)", lambda: EventEKF(EkfConfig(outlier="mixture"), ctx3).run(stream, classes=classes)),
+        ("adaptive_nobp_blind", lambda: EventEKF(EkfConfig(outlier="mixture"), ctx1).run(stream)),
     ]
 
 
@@ -119,12 +137,18 @@ def bench(label: str, gnss_hz: float) -> None:
             kf_run = time_best.last
         print(f"{name:<28}{wall * 1e3:9.1f}{n_steps / wall:10.0f}{n_ev / wall:10.0f}{ev.t_s[-1] / wall:12.0f}"
               f"{wall / yard:12.2f}")
-    wall, yard = time_best(lambda: rts_smooth(kf_run), REPEATS)
-    print(f"{'rts_smooth (of kf)':<28}{wall * 1e3:9.1f}{n_steps / wall:10.0f}{n_ev / wall:10.0f}"
-          f"{ev.t_s[-1] / wall:12.0f}{wall / yard:12.2f}")
+    for label2, fn in (("rts_smooth (of kf)", lambda: rts_smooth(kf_run)),
+                       ("fixed-lag 3 s (of kf)", lambda: fixed_lag_smooth(kf_run, 3.0))):
+        wall, yard = time_best(fn, REPEATS)
+        print(f"{label2:<28}{wall * 1e3:9.1f}{n_steps / wall:10.0f}{n_ev / wall:10.0f}"
+              f"{ev.t_s[-1] / wall:12.0f}{wall / yard:12.2f}")
+
+
+CONTEXT: dict = {}
 
 
 def main() -> None:
+    CONTEXT.update({3: context_model(3), 1: context_model(1)})
     print(f"python float loop: {python_loop_us():.1f} µs per 1,000 iterations (machine gauge)")
     best_ms = min(yardstick_s() for _ in range(5)) * 1e3
     print(f"yardstick: scipy.signal.oaconvolve 480,000 x 480 float32, best {best_ms:.2f} ms")

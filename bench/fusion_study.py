@@ -1,22 +1,25 @@
-"""Fusion study (issue 14): every method on the held-out sites of a split, over several model seeds.
+"""Fusion study (issue 22): every method on held-out walks, over model seeds, with site-level intervals.
 
-For each model seed: the environment model (``--env-mode``, default supervised: the best held-out mode of
-``bench/env_study.py``) is fitted on the *training* sites' fingerprint library, the fusion model (noise
-per class, BP ensemble) on the training walks, and every method is evaluated on the *test* sites' walks,
-which nothing was fitted or tuned on. The split's data (sites, surveys, walks) is built once and shared
-by the seeds (``envfuse benchmark`` on the same ``--out`` reuses it too).
+For each model seed: the environment model (``--env-mode``, default supervised) is fitted on the training
+sites' fingerprint library, the fusion model on the training walks (noise policies, the context error model
+and its blind twin, every filter method's knobs tuned by its own training error, the BP network), and every
+method is evaluated on the test walks, which nothing was fitted or tuned on; the oracle ceilings
+(``bench/fusion_oracle.py``) run on the same walks. The split's data is built once and shared by the seeds.
 
-Prints, in Markdown:
+Two honest splits (``--split``): ``standard`` (leave-site-out: six training sites, five held-out sites × 3
+walks) and ``later_days`` (five sites, three training walks each, three test walks four weeks later).
 
-1. per method and class: mean / median / p95 / max horizontal error (every epoch of every test walk pooled),
-   mean ± SD over the seeds;
-2. per method: the mean error per test site (spread over sites, seed 0), so a gain can be told from one
-   lucky site;
-3. the claim: ``adaptive`` mean error relative to ``kf``, ``kf_map``, ``kf_quality``, ``aekf``, ``imm``
-   per seed, and its p95;
-4. BP: ``adaptive`` vs ``adaptive_nobp`` vs ``adaptive_closed``, and the share of epochs the guards withheld
-   the correction;
-5. consistency: the share of epochs whose NEES lies inside the two-sided 95 % χ²₂ bounds, per method.
+Prints, in Markdown, and writes ``<out>/study.json``:
+
+1. per method and class: mean / median / p95 / max horizontal error and the share of epochs whose NEES lies
+   inside the two-sided 95 % χ²₂ bounds (every epoch of every test walk pooled; mean over seeds);
+2. the claim as intervals: Δ = ratio of pooled mean errors − 1 of the environment-aware methods against
+   ``kf``, ``kf_quality``, their own environment-blind twin and the best single input, per class, with a
+   95 % interval from a bootstrap over test sites (:mod:`pipeline.compare`), per-walk means first averaged
+   over the seeds;
+3. sanity: the default method (``adaptive``) against the best single input (gnss or acoustic), per class;
+4. BP: ``adaptive`` vs ``adaptive_nobp`` vs ``adaptive_correction``, and the guards' share;
+5. the oracle ceilings against ``adaptive_nobp``; 6. what tuning did on the training walks (seed 0).
 
 Usage: ``python bench/fusion_study.py --split standard --out /tmp/std --seeds 0 1 2``; a replicate on other
 layouts: ``--train-sites 111 112 113 114 115 116 --test-sites 211 212 213 214 215``.
@@ -26,6 +29,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import json
 import sys
 import time
 from pathlib import Path
@@ -34,39 +38,69 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "bench"))
 
 CLASSES = ("all", "open", "light", "heavy")
-RIVALS = ("kf", "kf_map", "kf_quality", "aekf", "imm")
+AWARE = ("adaptive_nobp", "adaptive", "adaptive_nobp+lag", "adaptive_nobp+rts")
+TWIN = {"adaptive_nobp": "adaptive_nobp_blind", "adaptive": "adaptive_blind",
+        "adaptive_nobp+lag": "adaptive_nobp_blind+lag", "adaptive_nobp+rts": "adaptive_nobp_blind+rts"}
+RIVALS = ("kf", "kf_quality", "best input")
 
 
 def run_seed(layout, library: Path, out: Path, seed: int, env_mode: str, workers: int | None) -> dict:
-    """Fit both models with ``seed`` and evaluate the test walks (:func:`pipeline.benchmark.fit_and_evaluate`)."""
+    """Fit both models with ``seed``, evaluate the test walks and add the oracles' rows per walk."""
+    from fusion_oracle import oracle_results
+
     from pipeline.benchmark import fit_and_evaluate
+    from pipeline.evaluate import load_model
 
-    return fit_and_evaluate(layout, library, out, env_mode=env_mode, seed=seed, workers=workers,
-                            say=lambda line: print(f"  seed {seed}: {line}", flush=True), progress=True,
-                            plots=seed == 0, meta={"seed": seed})
+    res = fit_and_evaluate(layout, library, out, env_mode=env_mode, seed=seed, workers=workers,
+                           say=lambda line: print(f"  seed {seed}: {line}", flush=True), progress=True,
+                           plots=seed == 0, meta={"seed": seed})
+    model = load_model(out / "fusion_model")
+    oracles = {o["walk"]: o for o in oracle_results(model, layout.train_walks, layout.test_walks)}
+    for r in res["results"]:
+        r["rows"] = r["rows"] + oracles[r["walk"]]["rows"]
+    res["tuning_report"] = model.meta.get("tuning_report", {})
+    return res
 
 
-def _by(rows):
-    return {(r["method"], r["env_class"]): r for r in rows}
-
-
-def _site_means(result) -> dict:
-    """{method: {site: mean error over the site's walks' epochs}} from the per-walk rows (n-weighted)."""
+def _pooled(results: list[dict]) -> dict:
+    """{(method, class): {mean, median, p95, max, nees}} pooled over walks by epochs (medians, p95 and max:
+    the epoch-weighted mean of the walks' values, max the largest)."""
     acc: dict = {}
-    for res in result["results"]:
+    for res in results:
         for r in res["rows"]:
-            if r["env_class"] != "all":
-                continue
-            d = acc.setdefault(r["method"], {}).setdefault(res["site"], [0.0, 0])
-            d[0] += r["mean_m"] * r["n"]
-            d[1] += r["n"]
-    return {m: {s: v[0] / v[1] for s, v in sites.items()} for m, sites in acc.items()}
+            acc.setdefault((r["method"], r["env_class"]), []).append(r)
+    out = {}
+    for key, rows in acc.items():
+        n = np.array([r["n"] for r in rows], float)
+        w = n / n.sum()
+        nees = np.array([r["nees_in_bounds"] for r in rows], float)
+        ok = np.isfinite(nees)
+        out[key] = {"mean_m": float(w @ [r["mean_m"] for r in rows]), "median_m": float(w @ [r["median_m"] for r in rows]),
+                    "p95_m": float(w @ [r["p95_m"] for r in rows]), "max_m": float(max(r["max_m"] for r in rows)),
+                    "nees_in_bounds": float(n[ok] @ nees[ok] / n[ok].sum()) if ok.any() else float("nan"),
+                    "n": int(n.sum())}
+    return out
+
+
+def _best_input(scores, env_class: str) -> str:
+    """gnss or acoustic, whichever has the lower pooled mean error on ``env_class``."""
+    best, name = np.inf, "acoustic"
+    for m in ("gnss", "acoustic"):
+        k = (m, env_class)
+        if k in scores.mean_m:
+            v, n = scores.mean_m[k], scores.n[k]
+            ok = np.isfinite(v)
+            if ok.any() and float(np.sum(v[ok] * n[ok]) / n[ok].sum()) < best:
+                best, name = float(np.sum(v[ok] * n[ok]) / n[ok].sum()), m
+    return name
 
 
 def main() -> None:
     from fingerprints.survey import build_library
+    from pipeline.compare import compare, walk_scores
     from pipeline.evaluate import method_order
     from simulation.split import SPLITS, build_split
 
@@ -84,9 +118,8 @@ def main() -> None:
     split = SPLITS[args.split]
     if args.train_sites or args.test_sites:
         train, test = tuple(args.train_sites or split.train_sites), tuple(args.test_sites or split.test_sites)
-        if set(train) & set(test):
-            ap.error(f"train and test sites overlap: {sorted(set(train) & set(test))}")
-        split = dataclasses.replace(split, name=f"{split.name}-sites", train_sites=train, test_sites=test)
+        split = dataclasses.replace(split, name=f"{split.name}-sites", train_sites=train,
+                                    test_sites=train if split.later_days else test)
     layout = build_split(split, args.out / "data", workers=args.workers or 2,
                          progress=lambda s: print(f"[{time.perf_counter() - t0:6.0f} s] simulated {s}", flush=True))
     library = args.out / "fingerprints.sqlite"
@@ -97,57 +130,75 @@ def main() -> None:
         results[seed] = run_seed(layout, library, args.out / f"seed{seed}", seed, args.env_mode, args.workers)
         print(f"[{time.perf_counter() - t0:6.0f} s] seed {seed}: evaluated {len(results[seed]['results'])} walks",
               flush=True)
-    pooled = {s: _by(r["pooled"]) for s, r in results.items()}
+    pooled = {s: _pooled(r["results"]) for s, r in results.items()}
+    scores = walk_scores([results[s]["results"] for s in args.seeds])
     methods = method_order({m for p in pooled.values() for (m, _) in p})
     sp = layout.split
-    print(f"\n## {sp.name}: train sites {list(sp.train_sites)}, test sites {list(sp.test_sites)}, "
-          f"{sp.walks_per_site} walks × {sp.walk_s:.0f} s per site; model seeds {args.seeds}; "
-          f"env mode {args.env_mode}\n")
-    print("Horizontal error, m: mean / median / p95 / max, each mean ± SD over seeds\n")
-    print("| method | class | mean | median | p95 | max | NEES in 95 % bounds |")
-    print("|---|---|---|---|---|---|---|")
+    doc = {"split": sp.name, "train_sites": list(sp.train_sites), "test_sites": list(sp.test_sites),
+           "walks_per_site": sp.walks_per_site, "walk_s": sp.walk_s, "seeds": args.seeds, "table": [],
+           "claims": [], "sanity": [], "bp": {}, "tuning": results[args.seeds[0]]["tuning_report"]}
+    print(f"\n## {sp.name}: train sites {list(sp.train_sites)}, test sites {list(sp.test_sites)}"
+          f"{' (test walks four weeks later)' if sp.later_days else ''}, {sp.walks_per_site} walks × "
+          f"{sp.walk_s:.0f} s per site; model seeds {args.seeds}; env mode {args.env_mode}\n")
+    print("Horizontal error, m: mean / median / p95 / max (mean over seeds), NEES share in the 95 % bounds\n")
+    print("| method | class | n | mean | median | p95 | max | NEES in bounds |")
+    print("|---|---|---|---|---|---|---|---|")
     for m in methods:
         for c in CLASSES:
             rs = [pooled[s].get((m, c)) for s in args.seeds]
             if any(r is None for r in rs):
                 continue
-
-            def ms(key, rs=rs):
-                v = np.array([r[key] for r in rs], float)
-                return f"{v.mean():.3f} ± {v.std():.3f}"
-            print(f"| {m} | {c} | {ms('mean_m')} | {ms('median_m')} | {ms('p95_m')} | {ms('max_m')} | "
-                  f"{ms('nees_in_bounds')} |")
-    first = args.seeds[0]
-    sites = _site_means(results[first])
-    names = sorted({s for v in sites.values() for s in v})
-    print(f"\nMean error per test site, m (seed {first}):\n")
-    print("| method | " + " | ".join(names) + " | mean ± SD over sites |")
-    print("|---|" + "---|" * (len(names) + 1))
-    for m in methods:
-        v = [sites.get(m, {}).get(n, np.nan) for n in names]
-        print(f"| {m} | " + " | ".join(f"{x:.3f}" for x in v) + f" | {np.nanmean(v):.3f} ± {np.nanstd(v):.3f} |")
-    print("\nThe claim: adaptive's mean error relative to each rival (negative = adaptive better), per seed\n")
-    print("| rival | " + " | ".join(f"seed {s}" for s in args.seeds) + " |")
-    print("|---|" + "---|" * len(args.seeds))
-    for rival in RIVALS:
-        cells = []
-        for s in args.seeds:
-            a, b = pooled[s].get(("adaptive", "all")), pooled[s].get((rival, "all"))
-            cells.append(f"{100 * (a['mean_m'] / b['mean_m'] - 1):+.0f} %" if a and b else "–")
-        print(f"| {rival} | " + " | ".join(cells) + " |")
-    for c in CLASSES[1:]:
-        cells = []
-        for s in args.seeds:
-            a, b = pooled[s].get(("adaptive", c)), pooled[s].get(("kf_quality", c))
-            cells.append(f"{100 * (a['mean_m'] / b['mean_m'] - 1):+.0f} %" if a and b else "–")
-        print(f"| kf_quality, {c} only | " + " | ".join(cells) + " |")
-    p95 = [pooled[s][("adaptive", "all")]["p95_m"] for s in args.seeds if ("adaptive", "all") in pooled[s]]
-    print(f"\nadaptive p95: {', '.join(f'{v:.2f}' for v in p95)} m (target < 1.0 m)")
+            row = {k: float(np.mean([r[k] for r in rs])) for k in ("mean_m", "median_m", "p95_m", "max_m",
+                                                                  "nees_in_bounds")}
+            doc["table"].append({"method": m, "env_class": c, "n": rs[0]["n"], **row})
+            print(f"| {m} | {c} | {rs[0]['n']} | {row['mean_m']:.3f} | {row['median_m']:.3f} | {row['p95_m']:.3f} | "
+                  f"{row['max_m']:.2f} | {row['nees_in_bounds']:.2f} |")
+    print("\nThe claim: Δ = pooled mean error ratio − 1 (negative: the first method better), 95 % interval over "
+          "test sites (bootstrap)\n")
+    print("| method | against | class | Δ | 95 % interval | means (m) | walks / sites |")
+    print("|---|---|---|---|---|---|---|")
+    for a in AWARE:
+        for rival in RIVALS + (TWIN[a],):
+            for c in CLASSES:
+                b = _best_input(scores, c) if rival == "best input" else rival
+                cmp = compare(scores, a, b, c)
+                if cmp is None:
+                    continue
+                doc["claims"].append({"a": a, "b": b, "env_class": c, "delta": cmp.delta, "lo": cmp.lo, "hi": cmp.hi,
+                                      "mean_a_m": cmp.mean_a_m, "mean_b_m": cmp.mean_b_m})
+                print(f"| {a} | {b} | {c} | {100 * cmp.delta:+.1f} % | [{100 * cmp.lo:+.1f}, {100 * cmp.hi:+.1f}] | "
+                      f"{cmp.mean_a_m:.3f} / {cmp.mean_b_m:.3f} | {cmp.n_walks} / {cmp.n_sites} |")
+    print("\nSanity: the default method against its best single input (must not be worse)\n")
+    for c in CLASSES:
+        b = _best_input(scores, c)
+        cmp = compare(scores, "adaptive", b, c) or compare(scores, "adaptive_nobp", b, c)
+        if cmp is not None:
+            doc["sanity"].append({"env_class": c, "input": b, "delta": cmp.delta, "lo": cmp.lo, "hi": cmp.hi})
+            print(f"- {cmp}")
+    print("\nOracle ceilings against adaptive_nobp\n")
+    for o in ("oracle_class", "oracle_variance", "oracle_debias"):
+        cmp = compare(scores, o, "adaptive_nobp")
+        if cmp is not None:
+            doc["claims"].append({"a": o, "b": "adaptive_nobp", "env_class": "all", "delta": cmp.delta, "lo": cmp.lo,
+                                  "hi": cmp.hi, "mean_a_m": cmp.mean_a_m, "mean_b_m": cmp.mean_b_m})
+            print(f"- {cmp}")
+    print("\nBP\n")
+    for a, b in (("adaptive", "adaptive_nobp"), ("adaptive", "adaptive_blind"),
+                 ("adaptive", "adaptive_correction"), ("adaptive_correction", "adaptive_nobp")):
+        cmp = compare(scores, a, b)
+        if cmp is not None:
+            print(f"- {cmp}")
     for s in args.seeds:
-        shares = [r["bp_disabled_share"] for r in results[s]["results"] if r["bp_disabled_share"] is not None]
-        if shares:
-            print(f"seed {s}: BP correction withheld by its guards on {100 * np.mean(shares):.1f} % of epochs")
-    print(f"\nwall time {time.perf_counter() - t0:.0f} s")
+        for key in ("bp_disabled_share", "bp_guard_share"):
+            shares = [r.get(key) for r in results[s]["results"] if r.get(key) is not None]
+            if shares:
+                doc["bp"][f"seed{s}.{key}"] = float(np.mean(shares))
+                print(f"seed {s}: {key} {100 * np.mean(shares):.1f} % of epochs")
+    print("\nTuning on the training walks (seed 0): mean error before -> after\n")
+    for m, r in doc["tuning"].items():
+        print(f"- {m}: {r['error_before_m']:.3f} -> {r['error_after_m']:.3f} m")
+    (args.out / "study.json").write_text(json.dumps(doc, indent=1, allow_nan=True))
+    print(f"\nwall time {time.perf_counter() - t0:.0f} s; tables in {args.out / 'study.json'}")
 
 
 if __name__ == "__main__":

@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import contextlib
 import csv
+import functools
 import json
 import os
 import sqlite3
@@ -57,6 +58,27 @@ EXPORT_COLUMNS = (("site", "receiver", "cell_id", "east_m", "north_m", "map_labe
 """Columns of :meth:`FingerprintLibrary.export_csv`, in order (one row per sample)."""
 
 _SQLITE_MAGIC = b"SQLite format 3\x00"
+
+
+def _same_params(stored_json: str, params: Mapping) -> bool:
+    """Whether the feature parameters stored as JSON are ``params``: compared as parsed JSON objects, so the
+    text's key order (an older writer, another tool, a hand edit) and spacing do not matter."""
+    try:
+        stored = json.loads(stored_json)
+    except (TypeError, ValueError):
+        return False
+    return stored == json.loads(json.dumps(dict(params)))
+
+
+def _reads(method):
+    """A read of the library: an SQLite error (a damaged file) becomes one :class:`LibraryError` naming it."""
+    @functools.wraps(method)
+    def wrapper(self, *args, **kwargs):
+        try:
+            return method(self, *args, **kwargs)
+        except sqlite3.DatabaseError as exc:
+            raise LibraryError(f"{self.path}: cannot read the library ({exc}); the file is damaged") from None
+    return wrapper
 
 
 class FingerprintLibrary(ClusteringRunsMixin):
@@ -182,6 +204,7 @@ class FingerprintLibrary(ClusteringRunsMixin):
     def schema_version(self) -> int:
         return int(self._conn.execute("PRAGMA user_version").fetchone()[0])
 
+    @_reads
     def sites(self) -> list[str]:
         """Names of the sites in the library, sorted."""
         return [r[0] for r in self._conn.execute("SELECT name FROM sites ORDER BY name")]
@@ -240,6 +263,28 @@ class FingerprintLibrary(ClusteringRunsMixin):
                                (site_id, name, description, text, int(bool(calibrated)), now_utc()))
             return int(cur.lastrowid)
 
+    def recalibrate_receiver(self, site: str, name: str, cn0_reference: Mapping) -> None:
+        """Store a calibrated C/N0 reference for receiver ``name`` of ``site``, stored until now with the
+        uncalibrated default (a calibrated one is never changed: its cells were computed with it). The
+        cells computed with the old reference keep it in their feature parameters, so the next build sees
+        them as stale and recomputes them (``--replace``)."""
+        Cn0Reference.from_dict(dict(cn0_reference))
+        try:
+            text = json.dumps(dict(cn0_reference), sort_keys=True, allow_nan=False)
+        except (TypeError, ValueError) as exc:
+            raise LibraryError(f"receiver {name!r}: C/N0 reference is not plain JSON ({exc})") from None
+        with self._transaction() as conn:
+            site_id = self._site_id(site)
+            row = conn.execute("SELECT receiver_id, cn0_calibrated FROM receivers WHERE site_id = ? AND name = ?",
+                               (site_id, name)).fetchone()
+            if row is None:
+                raise LibraryError(f"{self.path}: site {site!r} has no receiver {name!r}")
+            if row[1]:
+                raise LibraryError(f"{self.path}: receiver {name!r} of site {site!r} is already calibrated")
+            conn.execute("UPDATE receivers SET cn0_reference_json = ?, cn0_calibrated = 1 WHERE receiver_id = ?",
+                         (text, int(row[0])))
+
+    @_reads
     def receiver(self, site: str, name: str) -> ReceiverRecord | None:
         """The stored receiver ``name`` of ``site``, or None."""
         row = self._conn.execute(
@@ -259,7 +304,7 @@ class FingerprintLibrary(ClusteringRunsMixin):
                                  (site, cell_id)).fetchone()
         if row is None or row[0] != capture_sha256:
             return False
-        return feature_params is None or row[1] == json.dumps(dict(feature_params), sort_keys=True)
+        return feature_params is None or _same_params(row[1], feature_params)
 
     def ingest_cell(self, site: str, cell: CellCapture, rows: Mapping[str, Sequence], *,
                     receiver: str | None = None, replace: bool = False) -> IngestResult:
@@ -288,7 +333,7 @@ class FingerprintLibrary(ClusteringRunsMixin):
             status = "added"
             params = json.dumps(cell.feature_params, sort_keys=True)
             if old is not None:
-                if old[1] == cell.capture_sha256 and old[2] == params:
+                if old[1] == cell.capture_sha256 and _same_params(old[2], cell.feature_params):
                     n_old = conn.execute("SELECT count(*) FROM samples WHERE cell_pk = ?", (old[0],)).fetchone()[0]
                     return IngestResult(cell.cell_id, "unchanged", int(n_old))
                 if not replace:
@@ -362,6 +407,7 @@ class FingerprintLibrary(ClusteringRunsMixin):
         self._site_id(site)
         return f" WHERE {alias}.name = ?", (site,)
 
+    @_reads
     def cells(self, site: str | None = None) -> np.ndarray:
         """Stored cells as a structured array, ordered by site and cell id.
 
@@ -380,6 +426,22 @@ class FingerprintLibrary(ClusteringRunsMixin):
         kinds = "UUUffUfUfUi"
         return structured_rows(rows, names, kinds)
 
+    @_reads
+    def cell_feature_params(self, site: str | None = None) -> dict:
+        """The feature parameters each stored cell was computed with (window, hop, receiver, C/N0 reference),
+        keyed by (site, cell_id)."""
+        where, args = self._where_site(site)
+        rows = self._conn.execute("SELECT s.name, c.cell_id, c.feature_params_json FROM cells c JOIN sites s "
+                                  "USING (site_id)" + where, args).fetchall()
+        out = {}
+        for name, cell_id, text in rows:
+            try:
+                out[(str(name), str(cell_id))] = json.loads(text) if text else {}
+            except ValueError:
+                out[(str(name), str(cell_id))] = {}
+        return out
+
+    @_reads
     def samples(self, site: str | None = None) -> np.ndarray:
         """Stored samples as a structured array (n_samples,), ordered by site, cell id and t_s.
 
@@ -401,6 +463,7 @@ class FingerprintLibrary(ClusteringRunsMixin):
         return structured_rows(rows, names, kinds)
 
     # ---------------------------------------------------------------- export
+    @_reads
     def export_csv(self, out, site: str | None = None) -> int:
         """Write every sample (of ``site``) as CSV with :data:`EXPORT_COLUMNS`; returns the number of rows.
 

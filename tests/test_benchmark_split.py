@@ -12,8 +12,10 @@ TINY = BenchmarkSplit("tiny", train_sites=(101,), test_sites=(201,), walks_per_s
 
 def test_documented_splits_are_disjoint_and_valid():
     for s in SPLITS.values():
-        assert not set(s.train_sites) & set(s.test_sites)
-    assert len(SPLITS["standard"].test_sites) >= 5
+        assert s.later_days or not set(s.train_sites) & set(s.test_sites)
+    assert len(SPLITS["standard"].test_sites) >= 5 and len(SPLITS["later_days"].test_sites) >= 5
+    with pytest.raises(ConfigError, match="same sites"):
+        BenchmarkSplit("bad", train_sites=(1, 2), test_sites=(2,), later_days=True)
     with pytest.raises(ConfigError, match="both training and test"):
         BenchmarkSplit("bad", train_sites=(1, 2), test_sites=(2,))
     with pytest.raises(ConfigError, match="walks_per_site"):
@@ -56,3 +58,20 @@ def test_parallel_build_writes_the_same_bytes(tmp_path):
     assert len(a) > 10 and a == b
     with pytest.raises(ConfigError, match="workers"):
         build_split(TINY, tmp_path / "three", workers=0)
+
+
+def test_later_days_split_tests_the_same_sites_weeks_later(tmp_path):
+    """Issue 22 item 5: the same substation patrolled daily — training walks on consecutive days, test walks
+    four weeks later with other seeds, walkers and hours: another sky over the same yard."""
+    later = BenchmarkSplit("later", train_sites=(301,), test_sites=(301,), walks_per_site=2, walk_s=12.0,
+                           cell_size_m=40.0, capture_s=1.0, later_days=True, day_gap_days=28)
+    layout = build_split(later, tmp_path / "l", workers=1)
+    train = [load_walk(w) for w in layout.train_walks]
+    test = [load_walk(w) for w in layout.test_walks]
+    assert [w.directory.name for w in train + test] == ["w0", "w1", "later0", "later1"]
+    assert [(w.start_utc.date() - train[0].start_utc.date()).days for w in train + test] == [0, 1, 28, 29]
+    assert len({w.start_utc.hour * 3600 + w.start_utc.minute * 60 for w in train + test}) == 4
+    assert later.walk_seed(301, 0, test=True) != later.walk_seed(301, 0) and \
+        later.person(301, 0, test=True) != later.person(301, 1)
+    assert split_layout(tmp_path / "l").split == later
+

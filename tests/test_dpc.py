@@ -164,3 +164,38 @@ def test_sklearn_clone_and_params():
     c = clone(m)
     assert c.get_params() == m.get_params()
     assert not hasattr(c, "labels_")
+
+
+def test_centre_rule_is_rho_times_delta_where_rho_plus_delta_disagrees():
+    """Issue 20: a case worked by hand where the paper's γ = ρ·δ and a mistaken ρ + δ pick other centres.
+
+    1-D points, cutoff kernel, d_c = 0.1 (no distance lies near it): A = 0.00 … 0.05 (6 points, 0.01
+    apart: ρ = 5 each), B = 0.30 … 0.34 (5 points: ρ = 4), C = 2.00, 2.01 (ρ = 1). Ties in ρ go to
+    the lower index, so the order is A, B, C in index order. δ: the densest point (index 0) takes
+    its largest distance, 2.01; each other point of A, B, C is 0.01 from the one before it; B's
+    first point is 0.30 − 0.05 = 0.25 from A, C's first 2.00 − 0.34 = 1.66 from B.
+    γ = ρ·δ: 10.05 (index 0), 1.66 (index 11, C), 1.00 (index 6, B), then 0.05, 0.04, 0.01.
+    ρ + δ would rank A's other points (5.01) and B's first (4.25) above C's first (2.66).
+    """
+    X = np.r_[0.00, 0.01, 0.02, 0.03, 0.04, 0.05, 0.30, 0.31, 0.32, 0.33, 0.34, 2.00, 2.01][:, None]
+    rho = [5.0] * 6 + [4.0] * 5 + [1.0] * 2
+    delta = [2.01] + [0.01] * 5 + [0.25] + [0.01] * 4 + [1.66, 0.01]
+    m = DensityPeakClustering(kernel="cutoff", dc=0.1, n_clusters=2).fit(X)
+    np.testing.assert_array_equal(m.rho_, rho)
+    np.testing.assert_allclose(m.delta_, delta, rtol=1e-9)
+    np.testing.assert_allclose(m.gamma_, np.multiply(rho, delta), rtol=1e-9)
+    np.testing.assert_array_equal(m.centers_, [0, 11])                 # ρ + δ: [0, 1]
+    np.testing.assert_array_equal(m.labels_, [0] * 11 + [1] * 2)       # B follows its upslope into A
+    # automatic: the knee. δ of the densest point replaced by the largest other (1.66): γ = 8.3, 1.66,
+    # 1.0, 0.05 …; ratios 5.0, 1.66, 20 -> cut after the third: A, C, B
+    auto = DensityPeakClustering(kernel="cutoff", dc=0.1).fit(X)
+    np.testing.assert_array_equal(auto.centers_, [0, 11, 6])
+    np.testing.assert_array_equal(auto.labels_, [0] * 6 + [2] * 5 + [1] * 2)
+    # the decision-graph function alone, on the hand values
+    order = np.arange(13)
+    np.testing.assert_array_equal(select_centers(np.array(rho), np.array(delta), order, n_clusters=2), [0, 11])
+    np.testing.assert_array_equal(select_centers(np.array(rho), np.array(delta), order), [0, 11, 6])
+    # and the dense oracle, which now imports nothing from models.dpc, says the same
+    ref = dense_dpc(X, kernel="cutoff", dc=0.1, n_clusters=2)
+    np.testing.assert_array_equal(ref["centers"], [0, 11])
+    _assert_same(m, ref)

@@ -134,3 +134,33 @@ def test_nan_rows_are_refused():
     X[3, 2] = np.nan
     with pytest.raises(ValueError, match="NaN"):
         EnvironmentEmbedding(random_state=0).fit(X)
+
+
+# Which way each feature moves when the sky and the beacons are blocked, from the physics (docs/design.md §5),
+# written here, not read from SEVERITY_WEIGHTS: attenuation, invisible ratio, DOP growth and the delay
+# spread grow; the Rician K (first path over the rest) falls; the others do not enter the score.
+_DIRECTION = {"att_mean_db": 1, "invisible_ratio": 1, "dop_growth": 1, "rms_delay_ms": 1, "rician_k_db": -1}
+
+
+@pytest.mark.parametrize("name", ENV_FEATURES)
+def test_severity_direction_is_hard_coded_per_feature(name):
+    """Issue 20: two clusters of two windows, one feature 0, 0 | 2, 2 (z = −1, −1 | +1, +1), every other
+    feature constant (z = 0): cluster 1's severity is +2, −2 or 0 relative to cluster 0 by hand."""
+    X = np.ones((4, len(ENV_FEATURES)))
+    X[:, ENV_FEATURES.index(name)] = [0.0, 0.0, 2.0, 2.0]
+    s = severity_scores(X, np.array([0, 0, 1, 1]))
+    d = _DIRECTION.get(name, 0)
+    np.testing.assert_allclose(s, [-d, d], atol=1e-12)
+
+
+def test_severity_of_a_blocked_cluster_by_hand():
+    """Attenuation 2 → 8 dB, invisible ratio 0 → 0.5, Rician K 12 → 4 dB between two clusters of two windows:
+    z = ∓1 on each, so severity = (−1 − 1 − (+1)) = −3 for the open cluster and +3 for the blocked one,
+    which is named heavy (the other open) — whatever the cluster index."""
+    X = np.zeros((4, len(ENV_FEATURES)))
+    X[:, ENV_FEATURES.index("att_mean_db")] = [8.0, 8.0, 2.0, 2.0]
+    X[:, ENV_FEATURES.index("invisible_ratio")] = [0.5, 0.5, 0.0, 0.0]
+    X[:, ENV_FEATURES.index("rician_k_db")] = [4.0, 4.0, 12.0, 12.0]
+    s = severity_scores(X, np.array([0, 0, 1, 1]))
+    np.testing.assert_allclose(s, [3.0, -3.0], atol=1e-12)
+    assert name_clusters(s) == ["heavy", "open"]

@@ -109,3 +109,50 @@ def test_combine_windows_prefers_the_consistent_class():
     p = combine_windows(np.array([[0.4, 0.35, 0.25]] * 5))
     assert p[0] > 0.55 and abs(p.sum() - 1) < 1e-12
 
+
+
+def _imbalanced(rng, n_open, n_heavy):
+    """One informative feature (att_mean_db, column 0): open ~ N(0, 1), heavy ~ N(2, 1); the other 13 constant."""
+    X = np.zeros((n_open + n_heavy, len(FEATURES)))
+    X[:n_open, 0] = rng.normal(0.0, 1.0, n_open)
+    X[n_open:, 0] = rng.normal(2.0, 1.0, n_heavy)
+    return X, np.r_[np.zeros(n_open, int), np.full(n_heavy, 2)]
+
+
+def test_class_weights_balance_an_imbalanced_library():
+    """Issue 20: 900 open windows, 100 heavy, equal-variance Gaussians 2 σ apart. The log-odds are linear in
+    x (Bishop 2006 §4.2.1): ln p(heavy|x)/p(open|x) = 2x − 2 + ln(π_heavy/π_open). Weighted to equal class
+    totals ("balanced", the default) the prior term vanishes: boundary at x = 1, heavy recall
+    P(N(2,1) > 1) = 84.1 %, open recall 84.1 %. Unweighted, ln(1/9) moves it to x = 1 + ln 9 / 2 = 2.10 and
+    heavy recall falls to P(N(2,1) > 2.10) = 46 %."""
+    X, y = _imbalanced(np.random.default_rng(5), 900, 100)
+    clf = EnvironmentClassifier().fit(X, y)
+    grid = np.zeros((3, len(FEATURES)))
+    grid[:, 0] = [0.5, 1.0, 1.5]
+    p_heavy = clf.predict_proba(grid)[:, 2]
+    assert p_heavy[1] == pytest.approx(0.5, abs=0.1)           # the boundary at the midpoint
+    assert p_heavy[0] < 0.35 and p_heavy[2] > 0.65
+    Xt, yt = _imbalanced(np.random.default_rng(6), 9000, 1000)
+    pred = clf.predict(Xt)
+    recall_heavy, recall_open = np.mean(pred[yt == 2] == 2), np.mean(pred[yt == 0] == 0)
+    assert recall_heavy == pytest.approx(0.841, abs=0.04) and recall_open == pytest.approx(0.841, abs=0.04)
+    # unweighted, for contrast (the same model with class_weight=None): the boundary near 2.1
+    plain = EnvironmentClassifier(class_weight=None).fit(X, y)
+    assert np.mean(plain.predict(Xt)[yt == 2] == 2) == pytest.approx(0.46, abs=0.06)
+
+
+def test_class_weights_equal_hand_computed_sample_weights():
+    """The balanced weights are n / (k · n_c) per sample (King & Zeng 2001; scikit-learn's definition), so the
+    classifier's probabilities equal a logistic regression fitted with those weights written out by hand on
+    the same inputs (standardised x and x², the degree-2 expansion of the one informative feature)."""
+    from sklearn.linear_model import LogisticRegression
+
+    X, y = _imbalanced(np.random.default_rng(7), 300, 60)
+    clf = EnvironmentClassifier().fit(X, y)
+    z = (X[:, 0] - X[:, 0].mean()) / X[:, 0].std()
+    w = np.where(y == 0, 360 / (2 * 300), 360 / (2 * 60))     # 0.6 and 3.0
+    ref = LogisticRegression(C=1.0, max_iter=5000, tol=1e-10).fit(np.c_[z, z * z], y, sample_weight=w)
+    zt = np.linspace(-2.5, 2.5, 11)
+    grid = np.zeros((11, len(FEATURES)))
+    grid[:, 0] = zt * X[:, 0].std() + X[:, 0].mean()
+    np.testing.assert_allclose(clf.predict_proba(grid)[:, 2], ref.predict_proba(np.c_[zt, zt * zt])[:, 1], atol=2e-3)

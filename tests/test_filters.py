@@ -543,36 +543,28 @@ def test_imm_matches_an_independent_reference(mixed, outlier):
         np.testing.assert_allclose(run.P, Pr, rtol=1e-7, atol=1e-10)
 
 
-def test_closed_loop_correction_hook(walk):
-    ev = walk.stream
-    seen = []
+def test_fixed_lag_is_the_rts_of_the_run_cut_at_the_lag(walk):
+    """The fixed-lag estimate at event k is the RTS estimate of the run truncated at the last event within
+    ``lag_s`` of k (checked at a few events by truncating and smoothing again); lag 0 is the filter, a lag
+    longer than the walk the RTS smoother."""
+    import dataclasses
 
-    def corrector(k, x_prior, x, P, nu, S, K):
-        seen.append(k)
-        np.testing.assert_allclose(x - x_prior, K @ nu, atol=1e-9)
-        return np.array([0.01, -0.02]) if k % 2 else None
+    from models.fusion import fixed_lag_smooth
 
-    open_loop = EventEKF(noise=FixedNoise(2.0, 0.3)).run(ev, x0_en=walk.x0[:2])
-    closed = EventEKF(noise=FixedNoise(2.0, 0.3)).run(ev, x0_en=walk.x0[:2], correct=corrector)
-    assert seen == np.flatnonzero(closed.accepted).tolist()
-    odd = closed.accepted & (np.arange(len(ev)) % 2 == 1)
-    np.testing.assert_allclose(closed.correction[odd], np.broadcast_to([0.01, -0.02], (odd.sum(), 2)))
-    assert not closed.correction[~odd].any()
-    # the correction is fed back: the next prior is predicted from the corrected posterior
-    k = int(np.flatnonzero(odd)[0])
-    if ev.kind[k + 1] == STEP:
-        expect, _, _ = step_predict(closed.x[k], np.eye(4), ev.step_length_m[k + 1], ev.heading_rad[k + 1],
-                                    EkfConfig())
-    else:
-        expect = closed.x[k]
-    np.testing.assert_allclose(closed.x_prior[k + 1], expect, atol=1e-12)
-    np.testing.assert_allclose(closed.x[k, :2] - (closed.x_prior[k] + closed.K[k] @ closed.nu[k])[:2], [0.01, -0.02],
-                               atol=1e-12)
-    assert not np.allclose(closed.x, open_loop.x)
-    zero = EventEKF(noise=FixedNoise(2.0, 0.3)).run(ev, x0_en=walk.x0[:2], correct=lambda *a: None)
-    np.testing.assert_allclose(zero.x, open_loop.x, atol=1e-9)
-    with pytest.raises(FilterError):
-        EventEKF(noise=FixedNoise(2.0, 0.3)).run(ev, x0_en=walk.x0[:2], correct=lambda *a: np.array([np.nan, 0.0]))
+    run = EventEKF(noise=FixedNoise(2.0, 0.3)).run(walk.stream, x0_en=walk.x0[:2])
+    lag = fixed_lag_smooth(run, 3.0)
+    assert lag.method == "kf+lag"
+    for k in (0, 100, 777, len(run) - 5):
+        j = int(np.searchsorted(run.t_s, run.t_s[k] + 3.0, side="right")) - 1
+        cut = dataclasses.replace(run, **{f: getattr(run, f)[:j + 1] for f in ("t_s", "kind", "x", "P", "x_prior",
+                                                                                "P_prior", "F")})
+        ref = rts_smooth(cut)
+        np.testing.assert_allclose(lag.x[k], ref.x[k], atol=1e-10)
+        np.testing.assert_allclose(lag.P[k], ref.P[k], atol=1e-12)
+    np.testing.assert_allclose(fixed_lag_smooth(run, 0.0).x, run.x, atol=1e-12)
+    np.testing.assert_allclose(fixed_lag_smooth(run, 1e9).x, rts_smooth(run).x, atol=1e-10)
+    e = lambda x: float(np.sqrt(np.mean(np.sum((x[:, :2] - walk.truth[:, :2]) ** 2, axis=1))))   # noqa: E731
+    assert e(rts_smooth(run).x) < e(lag.x) < e(run.x)
 
 
 def test_rts_matches_filterpy_on_a_linear_stream():

@@ -264,7 +264,7 @@ def test_plain_sqlite_users_can_query(lib):
 
 
 def test_fingerprints_imports_only_features():
-    """Layering (DESIGN.md §2): fingerprints imports features and third-party libraries, nothing else of ours."""
+    """Layering (docs/design.md §2): fingerprints imports features and third-party libraries, nothing else of ours."""
     import ast
     from pathlib import Path
 
@@ -277,3 +277,25 @@ def test_fingerprints_imports_only_features():
                 [node.module] if isinstance(node, ast.ImportFrom) and node.module and node.level == 0 else []
             seen |= {n.split(".")[0] for n in names if n.split(".")[0] in ours}
     assert seen == {"features", "fingerprints"}
+
+
+def test_feature_parameters_compare_as_json_objects_not_text(lib):
+    """Issue 20: the resume test must not depend on key order. Parameters given in another insertion order
+    (nested too) are the same parameters; so is a stored JSON text whose keys are not sorted (written by an
+    older version or by hand); a changed value is not."""
+    params = {"window_s": 2.0, "hop_s": 1.0, "receiver": "rx", "cn0_reference": {"slope_dbhz": 12.5,
+                                                                                   "intercept_dbhz": 36.9}}
+    lib.ingest_cell("s1", _cell(feature_params=params), _rows(3))
+    reordered = {"cn0_reference": {"intercept_dbhz": 36.9, "slope_dbhz": 12.5}, "receiver": "rx", "hop_s": 1.0,
+                 "window_s": 2.0}
+    sha = _cell().capture_sha256
+    assert lib.has_capture("s1", "E000N000", sha, reordered)
+    assert lib.ingest_cell("s1", _cell(feature_params=reordered), _rows(3)).status == "unchanged"
+    lib._conn.execute("UPDATE cells SET feature_params_json = ?",
+                      ('{"window_s": 2.0, "receiver": "rx", "hop_s": 1.0, '
+                       '"cn0_reference": {"slope_dbhz": 12.5, "intercept_dbhz": 36.9}}',))
+    lib._conn.commit()
+    assert lib.has_capture("s1", "E000N000", sha, params) and lib.has_capture("s1", "E000N000", sha, reordered)
+    assert lib.ingest_cell("s1", _cell(feature_params=params), _rows(3)).status == "unchanged"
+    assert not lib.has_capture("s1", "E000N000", sha, {**params, "hop_s": 0.5})
+    assert not lib.has_capture("s1", "E000N000", sha, {k: v for k, v in params.items() if k != "receiver"})

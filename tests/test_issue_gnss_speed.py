@@ -40,6 +40,10 @@ def _loop_fixes_to_enu(epochs, lat0, lon0, alt0, uere=None):
             u = UERE_BY_QUALITY_M[f.quality] * g
         s = u * hdop / math.sqrt(2.0)
         up = u * (f.vdop if f.vdop is not None else 1.5 * hdop)
+        g_st = e.gst   # issue 21: the receiver's own GST σ wins where the epoch carries it, a fitted cell over it
+        if g_st is not None and g_st.sigma_lat_m is not None and g_st.sigma_lon_m is not None and fitted is None:
+            s = max(g_st.sigma_lat_m, g_st.sigma_lon_m)
+            up = g_st.sigma_alt_m if g_st.sigma_alt_m is not None else up
         alt = (f.alt_m or 0.0) + (f.geoid_sep_m or 0.0) if f.alt_m is not None else alt0
         rows.append((e.t_s, f.lat_deg, f.lon_deg, alt, s, up, att, hdop))
     c = np.array(rows, float).reshape(-1, 8)
@@ -62,7 +66,17 @@ def _check(epochs, uere=None):
 
 
 def test_vectorised_positions_equal_the_loop_on_a_simulated_walk(walk_dir):
+    import dataclasses
+
     epochs, _ = read_nmea(walk_dir / "gnss.nmea")
+    # Issue 21: the simulated RTK receiver sends GST, so its fixes carry the receiver's own σ, a fitted table's
+    # cells over it ...
+    assert (_check(epochs).sigma_source == "gst").mean() > 0.9
+    table = UereTable({4: (0.02, 0.02, 0.02, 0.02)}, {})
+    both = _check(epochs, table)
+    assert ((both.sigma_source == "fitted") == (both.quality == 4)).all()
+    # ... and without GST (another receiver model) the C/N0 and fitted rules, as before.
+    epochs = [dataclasses.replace(e, gst=None) for e in epochs]
     pos = _check(epochs)
     assert len(pos) > 250 and (pos.sigma_source == "cn0").any()
     table = UereTable({5: (0.3, 0.5, 0.8, 1.5), 2: (None, 1.0, 2.0, 3.0)}, {})
@@ -93,25 +107,49 @@ def test_sky_attenuation_equals_epoch_attenuation_and_counts_the_invisible(walk_
     # ζ of one epoch by hand: satellites at or above 10° in view, share without C/N0
     e = next(e for e in epochs if e.sky_reported)
     best = {}
-    for s in e.satellites:
+    for s in _primary(e):
         if s.el_deg is not None and s.el_deg >= 10.0:
             best[(s.system, s.prn)] = best.get((s.system, s.prn), False) or s.cn0_dbhz is not None
     assert zeta[0] == pytest.approx(1.0 - sum(best.values()) / len(best))
     assert np.nanmax(zeta) > 0.0
 
 
+# Primary signal per NMEA 0183 v4.11 signal ids, written out here as the reference (issue 20): GPS/SBAS
+# L1 C/A 1, QZSS L1 C/A 1 / L1C 2, 3, GLONASS G1 C/A 1, Galileo E1-BC 7 / E1-A 6, BeiDou B1I 1 / B1C 3,
+# NavIC L5-SPS 1 / L1-SPS 5 first, then an entry stating no signal (None, or 0 "all signals"); every
+# other id is a secondary signal.
+_PRIMARY_IDS = {"GPS": [1], "SBAS": [1], "QZSS": [1, 2, 3], "GLONASS": [1], "Galileo": [7, 6], "BeiDou": [1, 3],
+                "NavIC": [1, 5]}
+
+
+def _primary(e):
+    """Per (system, prn) the listed entry on the most primary signal (secondary-only satellites left out)."""
+    best = {}
+    for s in e.satellites:
+        if s.signal in (None, 0):
+            rank = 10
+        elif s.signal in _PRIMARY_IDS[s.system]:
+            rank = _PRIMARY_IDS[s.system].index(s.signal)
+        else:
+            continue
+        if (s.system, s.prn) not in best or rank < best[(s.system, s.prn)][0]:
+            best[(s.system, s.prn)] = (rank, s)
+    return [v[1] for v in best.values()]
+
+
 def _loop_sky(epochs):
-    """sky_arrays as it was, one satellite at a time (the reference of the vectorised form)."""
+    """sky_arrays as it was, one satellite at a time (the reference of the vectorised form), reading each
+    satellite on its primary signal."""
     sky = [e for e in epochs if e.sky_reported]
     index: dict = {}
     for e in sky:
-        for s in e.satellites:
+        for s in _primary(e):
             index.setdefault((s.system, s.prn), len(index))
     shape = (len(sky), len(index))
     el, az, cn0 = np.full(shape, np.nan), np.full(shape, np.nan), np.full(shape, np.nan)
     view, used = np.zeros(shape, bool), np.zeros(shape, bool)
     for i, e in enumerate(sky):
-        for s in e.satellites:
+        for s in _primary(e):
             j = index[(s.system, s.prn)]
             if s.cn0_dbhz is not None:
                 cn0[i, j] = np.fmax(cn0[i, j], s.cn0_dbhz)

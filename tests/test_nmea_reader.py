@@ -6,8 +6,6 @@ Real logs: ../shared/data/nmea/gpsd (ntpsec/gpsd test/daemon, BSD-2-Clause) and
 
 from __future__ import annotations
 
-import collections
-import json
 import random
 from functools import reduce
 from pathlib import Path
@@ -21,11 +19,11 @@ from features.errors import NmeaError
 from features.gnss.nmea import ReadStats, epochs_from_bytes, iter_epochs, parse_sentence, read_nmea
 from features.gnss.quirks import gsa_fields, gsv_fields, parse_time_of_day, satellite_id
 from tests.conftest import SHARED_DATA
+from tests.gpsd_reference import compare_with_gpsd, gpsd_cycles
 
 DATA = Path(__file__).resolve().parent / "data"
 SHARED = SHARED_DATA / "nmea"
 GPSD = SHARED / "gpsd"
-GNSSID = {"GPS": 0, "SBAS": 1, "Galileo": 2, "BeiDou": 3, "QZSS": 5, "GLONASS": 6, "NavIC": 7}
 
 
 def _s(body: str) -> str:
@@ -283,75 +281,41 @@ def test_whole_file_path_equals_streaming_path_on_hand_made_files(name):
     assert s_fast == stats
 
 
-def _gpsd_cycles(chk: Path):
-    """gpsd's last SKY report (with satellites) per fix time, the time read from the raw lines the .chk echoes."""
-    out, tod = [], None
-    for line in chk.read_text(encoding="latin-1").splitlines():
-        if line.startswith("$") and line[3:6] in ("GGA", "RMC", "GNS", "ZDA", "GST", "GBS"):
-            try:
-                t = parse_time_of_day(line.split(",")[1])
-            except (ValueError, IndexError):
-                t = None
-            tod = t if t is not None else tod
-        elif line.startswith("{") and '"satellites"' in line and tod is not None:
-            sats = json.loads(line)["satellites"]
-            if out and out[-1][0] == tod:
-                out[-1] = (tod, sats)
-            else:
-                out.append((tod, sats))
-    return out
+# gpsd's entries per log (its .log.chk) and how many the reader decodes identically (el, az, C/N0, used).
+# Measured before and after the issue-20 fix (per-signal entries): identical on these logs, none of which
+# numbers a GSV group across signal ids. telit-he910's 6 are the entries of a cycle the reader drops (below).
+GPSD_AGREEMENT = {
+    "beidou-bd.log": (64, 64), "beidou-gb.log": (139, 139), "furuno_gl_ga.log": (288, 288),
+    "gp-320fw-2019-04-07-coldboot.log": (84, 84), "quectel-eg25-g.log": (1598, 1598),
+    "quectel-l76k-nmea.log": (3848, 3848), "sirfstarv-nmea.log": (264, 264), "skytraq-dgps.log": (512, 512),
+    "telit-he910.log": (1135, 1129), "ublox-8.log": (1800, 1800), "ublox-neo-m9n-nmea.log": (2623, 2623),
+    "ublox-zed-f9p-nmea.log": (2378, 2378), "unicore-um621.log": (1593, 1593),
+}
 
 
-def test_satellites_agree_with_gpsd_decode():
-    """Per-satellite (constellation, PRN, el, az, C/N0, used) against gpsd's .log.chk.
+@pytest.mark.parametrize("name", sorted(GPSD_AGREEMENT))
+def test_satellites_agree_with_gpsd_decode(name):
+    """Per-satellite (constellation, PRN, el, az, C/N0, used) against gpsd's .log.chk (tests/gpsd_reference.py).
 
-    gpsd keys a satellite's signals by its own sigid translation; we pair the
-    k-th listing of a (gnssid, svid) in gpsd with our k-th (same GSV order).
-    The only disagreement: telit-he910 steps its clock back from 10:51:53.71
-    to 10:51:53.408 (the receiver re-phased its measurement epoch). We skip
-    the backwards-dated cycle with its GSA/GSV (it would otherwise overwrite
-    the earlier epoch's sky); gpsd keeps it as an epoch of its own, so its 6
-    satellite entries have no epoch of ours.
+    gpsd lists one entry per satellite per signal; the k-th listing of a (gnssid, svid) in gpsd is paired
+    with our k-th (same GSV order). The only disagreement: telit-he910 steps its clock back from
+    10:51:53.71 to 10:51:53.408 (the receiver re-phased its measurement epoch). We skip the
+    backwards-dated cycle with its GSA/GSV (it would otherwise overwrite the earlier epoch's sky); gpsd
+    keeps it as an epoch of its own, so its 6 satellite entries have no epoch of ours.
     """
     _need_gpsd()
-    totals = collections.Counter()
-    missing = []
-    extras = []
-    for log in sorted(GPSD.glob("*.log")):
-        epochs, _ = read_nmea(log)
-        j = 0
-        for tod, sats in _gpsd_cycles(Path(str(log) + ".chk")):
-            k = j
-            while k < len(epochs) and epochs[k].time_of_day_s != tod:
-                k += 1
-            if k == len(epochs):
-                missing.append((log.name, tod, len(sats)))
-                totals["no_epoch"] += len(sats)
-                continue
-            j = k
-            ours = collections.defaultdict(list)
-            for s in epochs[k].satellites:
-                ours[(GNSSID[s.system], s.prn)].append(s)
-            rank = collections.Counter()
-            for g in sats:
-                key = (g["gnssid"], g["svid"])
-                r = rank[key]
-                rank[key] += 1
-                if r >= len(ours[key]):
-                    totals["missing"] += 1
-                    continue
-                s = ours[key][r]
-                same = (s.el_deg, s.az_deg, s.cn0_dbhz, s.used) == (g.get("el"), g.get("az"), g.get("ss"), g["used"])
-                totals["agree" if same else "differ"] += 1
-            # satellites we decoded that gpsd did not list in that cycle (an invented satellite)
-            extra = sum(len(v) - rank[key] for key, v in ours.items() if len(v) > rank[key])
-            extras.append(extra)
-    assert sum(extras) == 0
-    n = sum(totals.values())
-    assert n == 16326
-    assert totals["agree"] / n >= 0.98
-    assert totals["agree"] == 16320 and totals["differ"] == 0 and totals["missing"] == 0
-    assert missing == [("telit-he910.log", 39113.408, 6)]
+    epochs, _ = read_nmea(GPSD / name)
+    a = compare_with_gpsd(epochs, gpsd_cycles(GPSD / (name + ".chk")))
+    assert (a.gpsd_entries, a.agree) == GPSD_AGREEMENT[name]
+    assert a.differ == 0 and a.missing == 0 and a.extra == 0
+    assert a.cycles_without_epoch == ([(39113.408, 6)] if name == "telit-he910.log" else [])
+
+
+def test_every_gpsd_log_with_satellites_is_compared():
+    _need_gpsd()
+    with_sats = {p.name for p in GPSD.glob("*.log") if gpsd_cycles(GPSD / (p.name + ".chk"))}
+    assert with_sats == set(GPSD_AGREEMENT)
+    assert sum(v[0] for v in GPSD_AGREEMENT.values()) == 16326
 
 
 # ---------------------------------------------------------------- fuzzing

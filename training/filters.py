@@ -9,17 +9,21 @@
 4. R per class and source twice: with the class of the map at the true
    position (``kf_map``), and with the class the online classifier predicts
    at the fix time (``imm``), because that is what it will see running; and
-   the UERE per (predicted class, GGA quality) with the acoustic scale per
-   predicted class (``adaptive``, :class:`models.fusion.noise.ClassQualityNoise`);
-5. the BP network, on the ``adaptive_nobp`` filter runs of the training walks
-   (inputs: the run's own records; target: truth − filter position), with
-   early stopping on a validation split of whole walks.
+   the context error model — white scale, Gauss–Markov bias and outlier
+   prior per (predicted class, GGA quality) — and its environment-blind twin
+   (``adaptive_nobp``, ``adaptive_nobp_blind``: :mod:`models.fusion.context`);
+5. the BP networks on the tuned ``adaptive_nobp`` runs of the training walks:
+   the parameter network that sets each fix's R (and its environment-blind
+   twin), trained through the filter's update (:mod:`models.bp_params`), and
+   the literal position corrector (target: truth − filter position,
+   :mod:`models.bp`), each with early stopping on whole validation walks.
 
 Nothing here sees a test site: the benchmark split (:mod:`simulation.split`) keeps them apart.
 """
 
 from __future__ import annotations
 
+import math
 import os
 from dataclasses import dataclass
 from typing import Callable
@@ -28,25 +32,28 @@ import numpy as np
 
 from features.errors import DataError
 from models.bp import BPConfig, BPCorrector
+from models.bp_params import OneStep, ParamNet, ParamNetConfig
 from models.environment import EnvironmentClassifier
-from models.fusion import ClassQualityNoise, FixedNoise, PerClassNoise, QualityNoise
+from models.fusion import FixedNoise, PerClassNoise, QualityNoise
+from models.fusion.context import ContextNoise, ErrorSeries
 from models.fusion.ekf import EkfConfig
 from models.fusion.model import FusionModel
 from walks.inputs import WalkInputs, walk_inputs
-from walks.methods import adaptive_run, bp_features
+from walks.methods import adaptive_run, bp_features, parameter_rows, parameter_run, tuned
 from walks.reader import WalkData, read_walk
 
-__all__ = ["WalkTraining", "training_rows", "fit_noise", "fit_class_quality", "fit_fusion_model", "train_fusion",
-           "DEFAULT_EKF"]
+__all__ = ["WalkTraining", "training_rows", "fit_noise", "fit_context", "fit_fusion_model", "train_fusion",
+           "fit_param_net", "DEFAULT_EKF"]
 
 
 @dataclass(frozen=True)
 class WalkTraining:
     """One training walk's fixes against truth.
 
-    GNSS: ``g_err`` (n, 2) fix − truth, ``g_quality`` (n,), ``g_hdop`` (n,), ``g_map_class`` (n,) truth class,
-    ``g_pred_class`` (n,) classifier's class; acoustic likewise ``a_err`` (k, 2), ``a_cov`` (k, 2, 2),
-    ``a_map_class``, ``a_pred_class``.
+    GNSS: ``g_t`` (n,) fix times, ``g_err`` (n, 2) fix − truth, ``g_cov`` (n, 2, 2) the reader's reported
+    covariance, ``g_quality`` (n,), ``g_hdop`` (n,), ``g_map_class`` (n,) truth class, ``g_pred_class`` (n,)
+    classifier's class; acoustic likewise ``a_t``, ``a_err`` (k, 2), ``a_cov`` (k, 2, 2), ``a_map_class``,
+    ``a_pred_class``.
     """
 
     name: str
@@ -59,6 +66,16 @@ class WalkTraining:
     a_cov: np.ndarray
     a_map_class: np.ndarray
     a_pred_class: np.ndarray
+    g_t: np.ndarray = None
+    g_cov: np.ndarray = None
+    a_t: np.ndarray = None
+    g_gst: np.ndarray = None
+
+    def error_series(self) -> tuple[ErrorSeries, ErrorSeries]:
+        """The walk's GNSS and acoustic fixes as :class:`~models.fusion.context.ErrorSeries` (classes as predicted)."""
+        g = ErrorSeries(self.g_t, self.g_err, self.g_cov, self.g_quality, self.g_pred_class)
+        a = ErrorSeries(self.a_t, self.a_err, self.a_cov, np.zeros(len(self.a_t), int), self.a_pred_class)
+        return g, a
 
 
 def _cat(rows, name, shape_tail):
@@ -71,12 +88,17 @@ def fit_noise(rows: list[WalkTraining], n_classes: int = 3, estimator: str = "me
     """(fixed, quality, per-class by map, per-class by classifier) noise policies from training walks."""
     g_err, a_err = _cat(rows, "g_err", (2,)), _cat(rows, "a_err", (2,))
     if len(g_err) + len(a_err) == 0:
-        raise ValueError("the training walks hold no GNSS or acoustic fix with truth")
+        raise DataError("the training walks hold no GNSS or acoustic fix with truth")
     g = g_err if len(g_err) else None
     a = a_err if len(a_err) else None
     fixed = FixedNoise().fit(gnss_errors_m=g, acoustic_errors_m=a)
+    gst = None
+    if g is not None:
+        gst = np.concatenate([r.g_gst if r.g_gst is not None else np.full((len(r.g_err), 2), np.nan)
+                              for r in rows if len(r.g_err)])
     quality = QualityNoise().fit(quality=_cat(rows, "g_quality", ()), hdop=_cat(rows, "g_hdop", ()),
-                                 gnss_errors_m=g, acoustic_cov_m2=_cat(rows, "a_cov", (2, 2)) if a is not None else None,
+                                 gnss_errors_m=g, gst_sigma_m=gst if gst is not None and len(gst) == len(g) else None,
+                                 acoustic_cov_m2=_cat(rows, "a_cov", (2, 2)) if a is not None else None,
                                  acoustic_errors_m=a, estimator=estimator)
     per_map = PerClassNoise(n_classes=n_classes).fit(
         gnss_class=_cat(rows, "g_map_class", ()) if g is not None else None, gnss_errors_m=g,
@@ -87,15 +109,13 @@ def fit_noise(rows: list[WalkTraining], n_classes: int = 3, estimator: str = "me
     return fixed, quality, per_map, per_cls
 
 
-def fit_class_quality(rows: list[WalkTraining], quality: QualityNoise, n_classes: int = 3,
-                      estimator: str = "mean") -> ClassQualityNoise:
-    """UERE per (predicted class, GGA quality) and acoustic scale per predicted class (the adaptive method)."""
-    has_a = sum(len(r.a_err) for r in rows) > 0
-    return ClassQualityNoise(n_classes=n_classes).fit(
-        _cat(rows, "g_pred_class", ()), _cat(rows, "g_quality", ()), _cat(rows, "g_hdop", ()),
-        _cat(rows, "g_err", (2,)), _cat(rows, "a_pred_class", ()) if has_a else None,
-        _cat(rows, "a_cov", (2, 2)) if has_a else None, _cat(rows, "a_err", (2,)) if has_a else None,
-        prior=quality, estimator=estimator)
+def fit_context(rows: list[WalkTraining], n_classes: int) -> ContextNoise:
+    """The context error model (:class:`~models.fusion.context.ContextNoise`) of the training walks: per
+    predicted class and GGA quality with ``n_classes`` > 1, pooled over classes (the environment-blind twin)
+    with ``n_classes`` = 1."""
+    pairs = [r.error_series() for r in rows]
+    return ContextNoise(n_classes=n_classes).fit([g for g, _ in pairs if len(g.t_s)],
+                                                 [a for _, a in pairs if len(a.t_s)])
 
 
 def fit_fusion_model(rows: list[WalkTraining], classifier: EnvironmentClassifier,
@@ -113,8 +133,7 @@ def fit_fusion_model(rows: list[WalkTraining], classifier: EnvironmentClassifier
     """
     fixed, quality, per_map, per_cls = fit_noise(rows, classifier.n_classes_, estimator=noise_estimator)
     model = FusionModel(classifier=classifier, fixed=fixed, quality=quality, per_class_map=per_map, per_class=per_cls,
-                        class_quality=fit_class_quality(rows, quality, classifier.n_classes_,
-                                                        estimator=noise_estimator),
+                        context=fit_context(rows, classifier.n_classes_), context_blind=fit_context(rows, 1),
                         ekf=ekf, bp=None, meta=dict(meta or {}))
     model.meta["noise_estimator"] = noise_estimator
     if bp_data is not None:
@@ -139,16 +158,22 @@ def training_rows(data: WalkData, inputs: WalkInputs, name: str) -> WalkTraining
 
     g_err, g_q, g_h, g_mc, g_pc = (np.zeros((0, 2)), np.zeros(0, int), np.zeros(0), np.zeros(0, int),
                                    np.zeros(0, int))
+    g_t, g_cov, g_gst = np.zeros(0), np.zeros((0, 2, 2)), np.zeros((0, 2))
+    ev = inputs.events
     if data.gnss is not None and len(data.gnss.positions):
         p = data.gnss.positions
         ok, g_err, g_mc, g_pc = against(p.t_s, p.east_m, p.north_m)
         g_q, g_h = p.quality[ok], np.where(p.hdop_assumed, np.nan, p.hdop)[ok]
+        g_t = p.t_s[ok]
+        g_cov = ev.gnss.cov_m2[ok] if ev.gnss is not None else np.eye(2) * (p.sigma_en_m[ok] ** 2)[:, None, None]
+        g_gst = ev.gnss.gst_sigma_m[ok] if ev.gnss is not None else np.full((int(ok.sum()), 2), np.nan)
     a_err, a_cov, a_mc, a_pc = np.zeros((0, 2)), np.zeros((0, 2, 2)), np.zeros(0, int), np.zeros(0, int)
+    a_t = np.zeros(0)
     if data.acoustic is not None and len(data.acoustic.t_s):
         a = data.acoustic
         ok, a_err, a_mc, a_pc = against(a.t_s, a.east_m, a.north_m)
-        a_cov = a.covariance_en_m2[ok]
-    return WalkTraining(name, g_err, g_q, g_h, g_mc, g_pc, a_err, a_cov, a_mc, a_pc)
+        a_cov, a_t = a.covariance_en_m2[ok], a.t_s[ok]
+    return WalkTraining(name, g_err, g_q, g_h, g_mc, g_pc, a_err, a_cov, a_mc, a_pc, g_t, g_cov, a_t, g_gst)
 
 
 DEFAULT_EKF = EkfConfig(outlier="huber")
@@ -159,9 +184,14 @@ DEFAULT_EKF = EkfConfig(outlier="huber")
 
 def train_fusion(walk_dirs: list, classifier: EnvironmentClassifier, *, bp: bool = True,
                  bp_config: BPConfig = BPConfig(), ekf: EkfConfig = DEFAULT_EKF, meta: dict | None = None,
-                 progress: Callable[[str], None] | None = None, noise_estimator: str = "mean") -> FusionModel:
-    """Fit a :class:`~models.fusion.model.FusionModel` on ``walk_dirs`` (each with truth.csv);
-    ``noise_estimator``: :func:`models.fusion.noise.chi2_2_mean`."""
+                 progress: Callable[[str], None] | None = None, noise_estimator: str = "median",
+                 tune: bool = True, tune_evals: int = 60, class_map_for: Callable | None = None) -> FusionModel:
+    """Fit a :class:`~models.fusion.model.FusionModel` on ``walk_dirs`` (each with truth.csv): the noise
+    policies, then (``tune``) every filter method's knobs by its own error on the same walks
+    (:mod:`training.tuning`, at most ``tune_evals`` passes each), then the BP network on the tuned
+    ``adaptive_nobp``. ``noise_estimator``: :func:`models.fusion.noise.chi2_2_mean` (the median form by
+    default: a few wrong RTK-fixed epochs would otherwise set the fixed UERE). ``class_map_for``: site →
+    :class:`~models.fusion.events.ClassMap`, so the map baseline can be tuned too (None: it keeps its fit)."""
     say = progress or (lambda line: None)
     walks = []
     for w in walk_dirs:
@@ -188,5 +218,69 @@ def train_fusion(walk_dirs: list, classifier: EnvironmentClassifier, *, bp: bool
     meta = dict(meta or {})
     meta["training_walks"] = [n for n, _, _ in walks]
     meta["sites"] = sorted({d.site.name for _, d, _ in walks})
-    return fit_fusion_model(rows, classifier, bp_data if bp else None, bp_config=bp_config, ekf=ekf, meta=meta,
-                            progress=(lambda k, n: say(f"BP network {k}/{n}")), noise_estimator=noise_estimator)
+    model = fit_fusion_model(rows, classifier, None, ekf=ekf, meta=meta, noise_estimator=noise_estimator)
+    if tune:
+        from training.tuning import KNOBS, TuningWalk, tune_method
+
+        tw = [TuningWalk.of(i, class_map_for(d.site) if class_map_for else None) for _, d, i in walks]
+        for name in KNOBS:
+            knobs, before, after = tune_method(model, name, tw, tune_evals)
+            if not math.isfinite(before):
+                say(f"not tuned {name}: it runs on none of the training walks (no site map for kf_map?)")
+                continue
+            model.tuning[name] = knobs
+            model.meta.setdefault("tuning_report", {})[name] = {"error_before_m": before, "error_after_m": after}
+            say(f"tuned {name}: training error {before:.3f} -> {after:.3f} m ("
+                + ", ".join(f"{k} x{v:.2f}" for k, v in knobs.items()) + ")")
+    if bp:
+        X, Y = bp_data(model)
+        model.bp = BPCorrector(bp_config).fit(X, Y, progress=lambda k, n: say(f"BP corrector {k}/{n}"))
+        pcfg = ParamNetConfig(hidden=bp_config.hidden, seed=bp_config.seed)
+        for blind in (False, True):
+            net = fit_param_net(model, [i for _, _, i in walks], blind, pcfg)
+            setattr(model, "bp_params_blind" if blind else "bp_params", net)
+            say(f"BP parameter network{' (blind)' if blind else ''}: one-step validation error "
+                f"{net.validation_error_m_:.3f} m")
+    return model
+
+
+def _one_step(model: FusionModel, inputs: WalkInputs, first, second, blind: bool) -> OneStep:
+    """The fixes of a walk for training through the filter: inputs from the ``first`` pass, priors, H and the
+    nominal R of the pass being improved (``second``: the first pass itself in round 1)."""
+    from dataclasses import replace
+
+    from models.fusion.ekf import measurement_models
+
+    ev = inputs.events
+    policy = model.context_blind if blind else model.adaptive_policy()
+    cfg, scales = tuned(model, "adaptive_nobp_blind" if blind else "adaptive_nobp")
+    spec = policy.measurement_noise(ev, classes=None if blind else inputs.classes)
+    H, idx = measurement_models(ev, replace(cfg, outlier="mixture"), spec)
+    truth = inputs.data.truth
+    fix = np.flatnonzero(second.updated & (ev.t_s >= truth.t_s[0]) & (ev.t_s <= truth.t_s[-1]))
+    te, tn = truth.at(ev.t_s[fix])
+    X = parameter_rows(first, inputs, blind)[fix]
+    return OneStep(X, second.x_prior[fix], second.P_prior[fix], H[idx[fix]], first.R[fix], ev.z_m[fix],
+                   np.column_stack([te, tn]))
+
+
+def fit_param_net(model: FusionModel, walks: list[WalkInputs], blind: bool, config: ParamNetConfig) -> ParamNet:
+    """The BP parameter network (:mod:`models.bp_params`) of ``model`` on the training walks, trained through
+    the filter in ``config.rounds`` rounds (round r on the priors of a second pass run with round r − 1's net)."""
+    name = "adaptive_nobp_blind" if blind else "adaptive_nobp"
+    firsts = [adaptive_run(model, i, name, blind=blind) for i in walks]
+    net = ParamNet(config)
+    seconds = firsts
+    for r in range(config.rounds):
+        data = [_one_step(model, i, f, s, blind) for i, f, s in zip(walks, firsts, seconds)]
+        net.fit_round([d for d in data if len(d.X)], warm=r > 0)
+        trial = replace_nets(model, net, blind)
+        seconds = [parameter_run(trial, i, f, blind, "adaptive") for i, f in zip(walks, firsts)]
+    return net
+
+
+def replace_nets(model: FusionModel, net: ParamNet, blind: bool) -> FusionModel:
+    """A copy of ``model`` with ``net`` as its (blind) BP parameter network."""
+    from dataclasses import replace
+
+    return replace(model, **{"bp_params_blind" if blind else "bp_params": net})

@@ -25,27 +25,36 @@ Built-in methods:
 ``kf_map``          R per class, the class looked up in a site map at the last estimate (method 1)
 ``aekf``            variational-Bayes adaptive R, no classifier (Särkkä & Nummenmaa 2009)
 ``imm``             one mode per class, the classifier's probabilities as mode evidence
-``adaptive_nobp``   R per class and GGA quality, the class from the online classifier
-``adaptive``        adaptive_nobp + the guarded BP correction added to the output
-``adaptive_closed`` the same correction fed back into the filter state after each update
+``adaptive_nobp``   the error model in context: white scale, Gauss–Markov bias states and outlier prior
+                    per class and GGA quality, the class from the online classifier
+``adaptive_nobp_blind`` the same machinery fitted and run without the class (the twin that measures
+                    what the environment adds; the strongest environment-free baseline)
+``adaptive``        adaptive_nobp with each fix's R multiplied by the BP network's output: the network
+                    maps the environment (class probabilities, window features), the fix and the filter's
+                    state at it (NIS, innovation, update step, gain) to the filter's R
+                    (:mod:`models.bp_params`)
+``adaptive_blind``  the same without the environment inputs (its twin)
+``adaptive_correction`` adaptive_nobp + the guarded BP position correction (the seed's section 2.2)
 ==================  ==========================================================
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Callable
 
 import numpy as np
 
-from models.bp import ACOUSTIC_KIND, GNSS_KIND, bp_inputs
-from models.fusion import ClassMap, EventEKF, FilterRun, IMMFilter, VBAdaptiveNoise, rts_smooth
+from models.bp import bp_inputs
+from models.fusion import (ClassMap, ContextNoise, EventEKF, FilterRun, IMMFilter, VBAdaptiveNoise, fixed_lag_smooth,
+                           rts_smooth)
 from models.fusion.model import FusionModel
 from walks.inputs import WalkInputs
 from walks.track import Track
 
 __all__ = ["Method", "MethodContext", "MethodSkipped", "register", "unregister", "method", "method_names",
-           "run_methods", "bp_features", "adaptive_run"]
+           "run_methods", "bp_features", "adaptive_run", "tuned", "filter_track", "LAG_S", "parameter_rows",
+           "parameter_run", "window_at"]
 
 
 class MethodSkipped(Exception):
@@ -113,25 +122,33 @@ def method(name: str) -> Method:
         raise ValueError(f"unknown method {name!r}; choose from {list(_REGISTRY)}") from None
 
 
+LAG_S = 3.0
+"""Default lag of the fixed-lag smoothed tracks (``<filter>+lag``), s: a patrol track is rarely needed with zero
+latency, and a few seconds carry most of what the RTS smoother gains from the future (issue 22)."""
+
+
 def method_names(smoothed: bool = False) -> tuple[str, ...]:
-    """Registered method names in report order; with ``smoothed``, each filter's ``+rts`` variant after it."""
+    """Registered method names in report order; with ``smoothed``, each filter's ``+rts`` and ``+lag`` variants
+    after it."""
     out = []
     for m in _REGISTRY.values():
         out.append(m.name)
         if smoothed and m.filter:
-            out.append(m.name + "+rts")
+            out += [m.name + "+rts", m.name + "+lag"]
     return tuple(out)
 
 
-def _filter_track(run: FilterRun, name: str, inputs: WalkInputs) -> Track:
+def filter_track(run: FilterRun, name: str, inputs: WalkInputs) -> Track:
+    """A filter run as a :class:`~walks.track.Track` named ``name`` (position, its covariance, NIS, classes)."""
     return Track(name, run.t_s, run.x[:, 0].copy(), run.x[:, 1].copy(), run.P[:, :2, :2].copy(),
                  {"nis": run.nis, "class_proba": inputs.classes.at(run.t_s), "run": run})
 
 
 def run_methods(model: FusionModel, inputs: WalkInputs, methods=None, smooth: bool = True,
-                class_at: ClassMap | None = None) -> tuple[dict, dict]:
+                class_at: ClassMap | None = None, lag_s: float | None = LAG_S) -> tuple[dict, dict]:
     """Run ``methods`` (default: every registered one) on one walk: ({name: Track}, {name: reason skipped});
-    filter methods also give ``<name>+rts`` when ``smooth``."""
+    filter methods also give ``<name>+rts`` when ``smooth`` and ``<name>+lag`` (fixed-lag, ``lag_s``) unless
+    ``lag_s`` is None."""
     names = method_names() if methods is None else tuple(methods)
     for n in names:
         method(n)
@@ -145,11 +162,15 @@ def run_methods(model: FusionModel, inputs: WalkInputs, methods=None, smooth: bo
             skipped[n] = str(why)
             continue
         if isinstance(out, FilterRun):
-            tracks[n] = _filter_track(out, n, inputs)
-            if smooth and m.filter:
-                s = rts_smooth(out)
-                tracks[n + "+rts"] = Track(n + "+rts", s.t_s, s.x[:, 0].copy(), s.x[:, 1].copy(),
-                                           s.P[:, :2, :2].copy())
+            tracks[n] = filter_track(out, n, inputs)
+            smoothed = []
+            if m.filter and smooth:
+                smoothed.append(("+rts", rts_smooth(out)))
+            if m.filter and lag_s is not None:
+                smoothed.append(("+lag", fixed_lag_smooth(out, lag_s)))
+            for suffix, sm in smoothed:
+                tracks[n + suffix] = Track(n + suffix, sm.t_s, sm.x[:, 0].copy(), sm.x[:, 1].copy(),
+                                           sm.P[:, :2, :2].copy())
         else:
             tracks[n] = out
     return tracks, skipped
@@ -190,62 +211,145 @@ def _pdr(ctx: MethodContext) -> Track:
 # -- filters --------------------------------------------------------------------------------------------------
 
 
+def tuned(model: FusionModel, name: str) -> tuple:
+    """(EkfConfig, scales) of method ``name``: the model's filter settings and noise with the knobs the method
+    was tuned to on the training walks (:mod:`training.tuning`; all 1 when untuned): ``q_walk`` multiplies the
+    walking random walk, ``gnss`` / ``acoustic`` the R of each source, ``bias`` the bias variance."""
+    knobs = dict(model.tuning.get(name, {})) if model.tuning else {}
+    cfg = model.ekf
+    if "q_walk" in knobs:
+        cfg = replace(cfg, q_walk_m2_s=cfg.q_walk_m2_s * float(knobs["q_walk"]))
+    return cfg, {k: float(v) for k, v in knobs.items() if k in ("gnss", "acoustic", "bias")}
+
+
 def _kf(ctx: MethodContext) -> FilterRun:
-    return EventEKF(ctx.model.ekf, ctx.model.fixed, "kf").run(ctx.events())
+    cfg, scales = tuned(ctx.model, "kf")
+    return EventEKF(cfg, ctx.model.fixed, "kf", scales).run(ctx.events())
 
 
 def _kf_quality(ctx: MethodContext) -> FilterRun:
-    return EventEKF(ctx.model.ekf, ctx.model.quality, "kf_quality").run(ctx.events())
+    cfg, scales = tuned(ctx.model, "kf_quality")
+    return EventEKF(cfg, ctx.model.quality, "kf_quality", scales).run(ctx.events())
 
 
 def _kf_map(ctx: MethodContext) -> FilterRun:
     if ctx.class_at is None:
         raise MethodSkipped("no map of the site (a simulated site's layout gives one)")
-    return EventEKF(ctx.model.ekf, ctx.model.per_class_map, "kf_map").run(ctx.events(), class_at=ctx.class_at)
+    cfg, scales = tuned(ctx.model, "kf_map")
+    return EventEKF(cfg, ctx.model.per_class_map, "kf_map", scales).run(ctx.events(), class_at=ctx.class_at)
 
 
 def _aekf(ctx: MethodContext) -> FilterRun:
     rg, ra = ctx.model.fixed.R_gnss_, ctx.model.fixed.R_acoustic_
     vb = VBAdaptiveNoise(gnss_sigma_m=float(np.sqrt(np.trace(rg) / 2)),
                          acoustic_sigma_m=float(np.sqrt(np.trace(ra) / 2)))
-    return EventEKF(ctx.model.ekf, vb, "aekf").run(ctx.events())
+    cfg, scales = tuned(ctx.model, "aekf")
+    return EventEKF(cfg, vb, "aekf", scales).run(ctx.events())
 
 
 def _imm(ctx: MethodContext) -> FilterRun:
-    return IMMFilter(ctx.model.per_class, ctx.model.ekf).run(ctx.events(), classes=ctx.inputs.classes)
+    cfg, scales = tuned(ctx.model, "imm")
+    return IMMFilter(ctx.model.per_class, cfg, scales=scales).run(ctx.events(), classes=ctx.inputs.classes)
 
 
-def adaptive_run(model: FusionModel, inputs: WalkInputs, method_name: str = "adaptive_nobp", correct=None):
-    """The adaptive methods' filter run: R per class and GGA quality (per class when the model has no
-    quality table), the class from the online classifier."""
+def adaptive_run(model: FusionModel, inputs: WalkInputs, method_name: str = "adaptive_nobp", blind: bool = False):
+    """The adaptive methods' filter run: the error model in context (white scale, Gauss–Markov bias and outlier
+    prior per class and GGA quality, :class:`~models.fusion.context.ContextNoise`) with the class from the
+    online classifier; ``blind``: the same machinery fitted and run without the class (its twin)."""
     ev = inputs.events
     if not np.any(ev.available):
         raise MethodSkipped("no GNSS or acoustic fix to start the filter from")
-    return EventEKF(model.ekf, model.adaptive_policy(), method_name).run(ev, classes=inputs.classes, correct=correct)
+    cfg, scales = tuned(model, method_name)
+    if blind:
+        if model.context_blind is None:
+            raise MethodSkipped("the model has no environment-blind context model (trained before it existed)")
+        return EventEKF(replace(cfg, outlier="mixture"), model.context_blind, method_name, scales).run(ev)
+    policy = model.adaptive_policy()
+    if isinstance(policy, ContextNoise):
+        cfg = replace(cfg, outlier="mixture")
+    return EventEKF(cfg, policy, method_name, scales).run(ev, classes=inputs.classes)
 
 
 def _adaptive_nobp(ctx: MethodContext) -> FilterRun:
     return adaptive_run(ctx.model, ctx.inputs)
 
 
-# -- the BP corrector ------------------------------------------------------------------------------------------
+def _adaptive_nobp_blind(ctx: MethodContext) -> FilterRun:
+    return adaptive_run(ctx.model, ctx.inputs, "adaptive_nobp_blind", blind=True)
+
+
+# -- the BP networks -------------------------------------------------------------------------------------------
 
 
 def bp_features(run: FilterRun, inputs: WalkInputs) -> np.ndarray:
-    """The BP network's input rows for every event of a filter run (:func:`models.bp.bp_inputs`)."""
+    """The BP corrector's input rows for every event of a filter run (:func:`models.bp.bp_inputs`)."""
     return bp_inputs(run.t_s, run.kind, run.updated, run.accepted, run.K, run.nu, run.dx, run.nis,
                      inputs.classes.at(run.t_s))
 
 
-def _require_bp(ctx: MethodContext):
+def window_at(inputs: WalkInputs, t_s: np.ndarray) -> np.ndarray:
+    """The window features in force at each of ``t_s`` (the last complete window) with the GNSS and acoustic
+    availability flags, (m, 16); zeros before the first window."""
+    from features.schema import modality_columns
+
+    rows = inputs.classes.row_at(t_s)
+    X = np.vstack([np.full((1, inputs.window_X.shape[1]), np.nan), inputs.window_X])[rows]
+    flags = [np.isfinite(X[:, list(modality_columns(m))]).any(axis=1) for m in ("gnss", "acoustic")]
+    return np.column_stack([np.nan_to_num(X)] + [f.astype(float) for f in flags])
+
+
+def parameter_rows(run: FilterRun, inputs: WalkInputs, blind: bool) -> np.ndarray:
+    """The BP parameter network's inputs (:func:`models.bp_params.parameter_inputs`) from a first-pass run;
+    ``blind``: without the class probabilities and the window features."""
+    from models.bp_params import parameter_inputs
+
+    ev = inputs.events
+    quality = np.zeros(len(ev), int)
+    g = ev.kind == 1
+    if ev.gnss is not None and g.any():
+        quality[g] = ev.gnss.quality[ev.index[g]]
+    return parameter_inputs(ev.kind, quality, ev.cov_m2, run.nis, run.nu, run.dx, run.K,
+                            None if blind else inputs.classes.at(ev.t_s), None if blind else window_at(inputs, ev.t_s))
+
+
+def parameter_run(model: FusionModel, inputs: WalkInputs, first: FilterRun, blind: bool, name: str):
+    """The second pass of the adaptive filter with each fix's R multiplied by the BP parameter network's s
+    (``first``: the first pass, ``adaptive_nobp`` or its twin). Returns (run, share of fixes guarded)."""
+    net = model.bp_params_blind if blind else model.bp_params
+    log_s, ood = net.log_scale(parameter_rows(first, inputs, blind))
+    fix = inputs.events.kind != 0
+    scale = np.where(fix, np.exp(log_s), 1.0)
+    base = "adaptive_nobp_blind" if blind else "adaptive_nobp"
+    cfg, scales = tuned(model, base)
+    policy = model.context_blind if blind else model.adaptive_policy()
+    if isinstance(policy, ContextNoise):
+        cfg = replace(cfg, outlier="mixture")
+    run = EventEKF(cfg, policy, name, scales).run(inputs.events, classes=None if blind else inputs.classes,
+                                                  r_scale_event=scale)
+    run.info["bp_log_scale"] = np.where(fix, log_s, np.nan)
+    run.info["bp_guard_share"] = float(ood[fix].mean()) if fix.any() else 0.0
+    return run
+
+
+def _adaptive(ctx: MethodContext) -> FilterRun:
+    if ctx.model.bp_params is None:
+        raise MethodSkipped("the model has no BP parameter network (trained with --no-bp)")
+    ctx.events()
+    return parameter_run(ctx.model, ctx.inputs, ctx.result("adaptive_nobp"), False, "adaptive")
+
+
+def _adaptive_blind(ctx: MethodContext) -> FilterRun:
+    if ctx.model.bp_params_blind is None:
+        raise MethodSkipped("the model has no environment-blind BP parameter network")
+    ctx.events()
+    return parameter_run(ctx.model, ctx.inputs, ctx.result("adaptive_nobp_blind"), True, "adaptive_blind")
+
+
+def _adaptive_correction(ctx: MethodContext) -> Track:
+    """adaptive_nobp's run with the guarded BP position correction added to its output (the seed's §2.2)."""
     if ctx.model.bp is None:
-        raise MethodSkipped("the model has no BP network (trained with --no-bp)")
-    return ctx.model.bp
-
-
-def _adaptive(ctx: MethodContext) -> Track:
-    """adaptive_nobp's run with the guarded BP correction added to its output (open loop)."""
-    bp = _require_bp(ctx)
+        raise MethodSkipped("the model has no BP corrector (trained with --no-bp)")
+    bp = ctx.model.bp
     run = ctx.result("adaptive_nobp")
     X = bp_features(run, ctx.inputs)
     corr = bp.correct(X, run.x_prior[:, :2], ctx.inputs.events.z_m, run.S, run.updated)
@@ -254,63 +358,9 @@ def _adaptive(ctx: MethodContext) -> Track:
     # P + Var(correction)/2 per axis where a correction was applied
     extra = np.where(np.any(corr.delta_m != 0, axis=1), corr.var_m2.sum(1) / 2, 0.0)
     cov = run.P[:, :2, :2] + np.eye(2)[None] * extra[:, None, None]
-    return Track("adaptive", run.t_s, east, north, cov,
+    return Track("adaptive_correction", run.t_s, east, north, cov,
                  {"nis": run.nis, "class_proba": ctx.inputs.classes.at(run.t_s), "bp_delta_m": corr.delta_m,
                   "bp_disabled_share": corr.disabled_share, "run": run})
-
-
-def _adaptive_closed(ctx: MethodContext) -> Track:
-    """The guarded BP correction added to the filter state after every accepted update.
-
-    Guards as in :class:`models.bp.BPCorrector`: no correction out of distribution or below its own σ;
-    and while the mean NIS of the last ``guard_window`` updates lies above the 99 % point of its χ²
-    law (2·window degrees of freedom, over window) the correction is off — the filter fed with it has
-    stopped agreeing with its measurements.
-    """
-    from scipy.special import chdtri
-
-    bp = _require_bp(ctx)
-    ev = ctx.events()
-    window = bp.config.guard_window
-    limit = float(chdtri(2 * window, 0.01) / window)       # chi2.ppf(0.99, 2·window) / window
-    proba = ctx.inputs.classes.at(ev.t_s)
-    recent = {code: _recent_fix(ev, code) for code in (GNSS_KIND, ACOUSTIC_KIND)}
-    nis_hist: list = []
-    state = {"off": 0, "withheld": 0, "calls": 0}
-
-    def correct(k, x_prior, x, P, nu, S, K):
-        state["calls"] += 1
-        nis_hist.append(float(nu @ np.linalg.solve(S, nu)))
-        if len(nis_hist) > window:
-            nis_hist.pop(0)
-        # the input row of models.bp.bp_inputs for this update, built by the same function
-        row = bp_inputs(np.array([ev.t_s[k]]), np.array([ev.kind[k]]), np.array([True]), np.array([True]),
-                        K[None], nu[None], (x - x_prior)[None], np.array([nu @ np.linalg.solve(S, nu)]),
-                        proba[k][None])
-        row[0, -2] = recent[GNSS_KIND][k]
-        row[0, -1] = recent[ACOUSTIC_KIND][k]
-        if len(nis_hist) >= window and np.mean(nis_hist) > limit:
-            state["off"] += 1
-            return None
-        mu, var = bp.predict(row)
-        if bp.is_ood(row)[0] or float(np.sum(mu ** 2)) < float(np.sum(var)):
-            state["withheld"] += 1
-            return None
-        return mu[0]
-
-    run = adaptive_run(ctx.model, ctx.inputs, "adaptive_closed", correct=correct)
-    calls = max(state["calls"], 1)
-    return Track("adaptive_closed", run.t_s, run.x[:, 0].copy(), run.x[:, 1].copy(), run.P[:, :2, :2].copy(),
-                 {"nis": run.nis, "class_proba": proba, "bp_delta_m": run.correction,
-                  "bp_disabled_share": (state["off"] + state["withheld"]) / calls, "run": run})
-
-
-def _recent_fix(ev, code: int, within_s: float = 2.0) -> np.ndarray:
-    """Whether an available fix of kind ``code`` arrived in the ``within_s`` up to each event (causal), (m,)."""
-    tk = ev.t_s[ev.available & (ev.kind == code)]
-    idx = np.searchsorted(tk, ev.t_s, side="right") - 1
-    prev = np.where(idx >= 0, tk[np.maximum(idx, 0)] if tk.size else 0.0, -np.inf)
-    return (ev.t_s - prev) <= within_s
 
 
 for _m in (Method("gnss", _gnss, "the GGA fixes alone"),
@@ -321,8 +371,13 @@ for _m in (Method("gnss", _gnss, "the GGA fixes alone"),
            Method("kf_map", _kf_map, "R per class of the site map at the last estimate (method 1)", filter=True),
            Method("aekf", _aekf, "variational-Bayes adaptive R, no classifier", filter=True),
            Method("imm", _imm, "one mode per environment class", filter=True),
-           Method("adaptive_nobp", _adaptive_nobp, "R per class and quality, class from the classifier",
+           Method("adaptive_nobp", _adaptive_nobp, "bias states and outlier prior per class and quality",
                   filter=True),
-           Method("adaptive", _adaptive, "adaptive_nobp + the guarded BP correction"),
-           Method("adaptive_closed", _adaptive_closed, "the BP correction fed back into the filter")):
+           Method("adaptive_nobp_blind", _adaptive_nobp_blind, "adaptive_nobp without the class (its twin)",
+                  filter=True),
+           Method("adaptive", _adaptive, "adaptive_nobp with each fix's R set by the BP network", filter=True),
+           Method("adaptive_blind", _adaptive_blind, "adaptive without the class and window inputs (its twin)",
+                  filter=True),
+           Method("adaptive_correction", _adaptive_correction, "adaptive_nobp + the guarded BP position "
+                  "correction of the seed's section 2.2")):
     register(_m)

@@ -1,4 +1,4 @@
-"""The five GNSS environment features of DESIGN.md §5, vectorised over epochs.
+"""The five GNSS environment features of docs/design.md §5, vectorised over epochs.
 
 Per analysis window (default 2 s, hop 1 s), over satellites at or above the
 elevation mask (default 10°):
@@ -10,7 +10,7 @@ elevation mask (default 10°):
    whose swing from the previous extremum is ≥ 2 dB-Hz, per second of
    tracking: the extrema of all satellites over their tracked satellite-seconds
    in the window (the per-satellite rates weighted by tracked time; equal to
-   their plain mean when every satellite is tracked throughout). DESIGN.md says 1 dB-Hz, but NMEA
+   their plain mean when every satellite is tracked throughout). docs/design.md says 1 dB-Hz, but NMEA
    reports C/N0 in whole dB-Hz, so a 1 dB-Hz swing is a single quantisation
    step: it counts the estimator flicker of strong line-of-sight signals and
    the feature then orders the classes backwards (open > heavy on simulated
@@ -32,17 +32,24 @@ azimuth or elevation has no line of sight and stays out of G (it was read as
 north before).
 
 The open-sky reference C_ref(el) = a + b·sin(el) defaults to ≈ 38 dB-Hz at 5°
-and 50 dB-Hz at zenith (DESIGN.md §6). The linear form in sin(el) is an
+and 50 dB-Hz at zenith (docs/design.md §6). The linear form in sin(el) is an
 engineering choice, not a published model: it follows the monotone rise of
 C/N0 with elevation seen in real data (smartLoc bins 29.9 / 35.8 / 38.8 /
-46.6 dB-Hz for 0-15 / 15-30 / 30-60 / 60-90°, DESIGN.md §6) with two
+46.6 dB-Hz for 0-15 / 15-30 / 30-60 / 60-90°, docs/design.md §6) with two
 parameters that :func:`fit_cn0_reference` can fit to open-sky epochs (an
 upper quantile per elevation bin, then a count-weighted least-squares line in
 sin(el)); a median fit on simulated open cells recovers the simulator's
 open-sky line within 1.5 dB (tests).
 
-A satellite listed on several signals (NMEA 4.10+) counts once, with the
-highest C/N0 of its signals: "tracked" means tracked on any signal.
+A satellite listed on several signals (NMEA 4.10+) is read on one stated
+signal, its primary one (:attr:`features.gnss.nmea.Epoch.primary_satellites`:
+GPS/QZSS L1 C/A, GLONASS G1 C/A, Galileo E1-B/C, BeiDou B1I by the NMEA 4.11
+signal ids of :data:`features.gnss.quirks.PRIMARY_SIGNAL_IDS`, else an entry
+that states no signal, as pre-4.10 receivers write): "tracked" means tracked on
+that signal, and its C/N0 is compared with an L1-band reference. Mixing bands
+would not be: L5/E5a C/N0 sits several dB from L1's on the same satellite and
+the secondary entries of real receivers often carry no elevation or azimuth.
+A satellite listed only on secondary signals is left out.
 """
 
 from __future__ import annotations
@@ -63,7 +70,7 @@ __all__ = [
 ]
 
 FEATURE_COLUMNS = ("att_mean_db", "att_std_db", "fluct_per_s", "invisible_ratio", "dop_growth")
-"""The five GNSS feature names, in DESIGN.md §5 order."""
+"""The five GNSS feature names, in docs/design.md §5 order."""
 
 COUNT_COLUMNS = ("n_epochs", "n_in_view", "n_tracked", "n_pairs_in_view", "n_pairs_tracked")
 """Counts behind each window: epochs with a reported sky; distinct satellites above the mask in
@@ -76,7 +83,7 @@ MAX_WINDOWS = 20_000_000
 
 @dataclass(frozen=True)
 class GnssFeatureConfig:
-    """Window and feature parameters (DESIGN.md §5 defaults)."""
+    """Window and feature parameters (docs/design.md §5 defaults)."""
 
     window_s: float = 2.0
     hop_s: float = 1.0
@@ -107,7 +114,7 @@ class Cn0Reference:
 
     intercept_dbhz: float = 38.0 - 12.0 * math.sin(math.radians(5.0)) / (1.0 - math.sin(math.radians(5.0)))
     slope_dbhz: float = 12.0 / (1.0 - math.sin(math.radians(5.0)))
-    source: str = "default: 38 dB-Hz at 5 deg, 50 dB-Hz at zenith (DESIGN.md 6)"
+    source: str = "default: 38 dB-Hz at 5 deg, 50 dB-Hz at zenith (docs/design.md 6)"
 
     def __post_init__(self):
         for name in ("intercept_dbhz", "slope_dbhz"):
@@ -176,10 +183,11 @@ def _median_step(t_s) -> float:
 
 def sky_arrays(epochs: Sequence) -> SkyArrays:
     """Stack the epochs that reported a sky into :class:`SkyArrays` (one column per satellite, in order
-    of first appearance)."""
+    of first appearance), each satellite read on its primary signal (module docstring)."""
     sky = [e for e in epochs if e.sky_reported]
-    counts = np.fromiter((len(e.satellites) for e in sky), dtype=np.intp, count=len(sky))
-    flat = [s for e in sky for s in e.satellites]
+    primary = [e.primary_satellites for e in sky]
+    counts = np.fromiter((len(p) for p in primary), dtype=np.intp, count=len(sky))
+    flat = [s for p in primary for s in p]
     n = len(sky)
     if flat:
         # Satellite fields: (system, prn, signal, el_deg, az_deg, cn0_dbhz, used); None → NaN
@@ -208,8 +216,8 @@ def sky_arrays(epochs: Sequence) -> SkyArrays:
         az_v = np.array(az_l, dtype=float)
         cn0_v = np.array(cn0_l, dtype=float)
         used_v = np.array(used_l, dtype=bool)
-        # Several signals of one satellite: C/N0 = max over signals (fmax ignores NaN),
-        # el/az from any listing that has them.
+        # One entry per (epoch, satellite): its primary signal's (a repeated GSV within one epoch
+        # was already merged by the reader).
         np.fmax.at(cn0, (r, c), cn0_v)
         has_el = ~np.isnan(el_v)
         el[r[has_el], c[has_el]] = el_v[has_el]
@@ -441,7 +449,7 @@ def fit_cn0_reference(el_deg, cn0_dbhz, *, quantile: float = 0.8, bin_width_deg:
     quantile: the unobstructed line-of-sight level, robust to the multipath
     fades that open sky has too) at the bin's mean sin(el); then a
     count-weighted least-squares line through the bin points. Raises
-    DataError when fewer than two bins qualify.
+    DataError when fewer than two bins qualify or the line is implausible (zenith C/N0 outside 0-80 dB-Hz).
 
     el_deg, cn0_dbhz : array-like of the same shape (NaN C/N0 = untracked, ignored).
     """
@@ -469,5 +477,9 @@ def fit_cn0_reference(el_deg, cn0_dbhz, *, quantile: float = 0.8, bin_width_deg:
     # weighted least squares: minimise Σ w (y − a − b x)²
     design = np.stack([np.ones_like(x), x], axis=1) * np.sqrt(w)[:, None]
     (a, b), *_ = np.linalg.lstsq(design, y * np.sqrt(w), rcond=None)
-    return Cn0Reference(float(a), float(b), f"fit: q{quantile:g} per {bin_width_deg:g} deg bin, "
-                                            f"{el.size} samples, {len(xs)} bins")
+    try:
+        return Cn0Reference(float(a), float(b), f"fit: q{quantile:g} per {bin_width_deg:g} deg bin, "
+                                                f"{el.size} samples, {len(xs)} bins")
+    except ConfigError as exc:  # the data, not a setting, gave an impossible line: a data error
+        raise DataError(f"the C/N0 reference fitted from {el.size} samples is implausible ({exc}); "
+                        "these data cannot calibrate it") from None

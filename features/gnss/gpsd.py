@@ -32,7 +32,7 @@ def iso_utc_ms(when) -> str | None:
     """
     if when is None:
         return None
-    return when.strftime("%Y-%m-%dT%H:%M:%S.") + f"{when.microsecond // 1000:03d}Z"
+    return f"{when.year:04d}-" + when.strftime("%m-%dT%H:%M:%S.") + f"{when.microsecond // 1000:03d}Z"
 
 
 def gpsd_prn(system: str, svid: int) -> int:

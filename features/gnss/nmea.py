@@ -25,6 +25,7 @@ validated); :mod:`features.gnss.quirks` interprets their fields.
 from __future__ import annotations
 
 import datetime as dt
+import functools
 import os
 from dataclasses import dataclass
 from pathlib import Path
@@ -36,16 +37,19 @@ from features.gnss.tokens import (  # noqa: F401 - ReadStats and parse_sentence 
 )
 from features.gnss.quirks import (
     FIX_QUALITY_FROM_MODE, gsa_fields, gsv_fields, parse_ddmmyy, parse_latlon, parse_time_of_day,
+    primary_signal_rank as _primary_rank,
 )
 
-__all__ = ["Satellite", "Fix", "Epoch", "ReadStats", "read_nmea", "iter_epochs", "epochs_from_bytes",
+__all__ = ["Satellite", "Fix", "Gst", "Epoch", "ReadStats", "read_nmea", "iter_epochs", "epochs_from_bytes",
            "epochs_on_time_base",
            "parse_sentence"]
 
 _TIMED = TIMED_TYPES
 _USED_TYPES = USED_TYPES
-_FIX_TYPES = frozenset(("GGA", "RMC", "GNS", "ZDA"))  # timed sentences that carry more than the time
+_FIX_TYPES = frozenset(("GGA", "RMC", "GNS", "ZDA", "GST"))  # timed sentences that carry more than the time
 _EPOCH_GAP_DEFAULT_S = 1.0
+_FIRST_GNSS_YEAR = 1980
+"""GPS time began on 1980-01-06: an earlier ZDA year is garbage (RMC's two-digit years map to 1980-2079)."""
 _tuple_new = tuple.__new__  # builds a NamedTuple without its Python-level __new__ (hot loop)
 _SKY_CACHE_SIZE = 8192
 """Distinct GSV/GSA sentences remembered by one read (cleared when full)."""
@@ -61,6 +65,19 @@ class Satellite(NamedTuple):
     az_deg: float | None
     cn0_dbhz: float | None
     used: bool
+
+
+class Gst(NamedTuple):
+    """The receiver's own error statistics of an epoch's fix (NMEA 0183 GST), metres, 1σ; None when empty.
+
+    ``rms_m`` is the RMS of the pseudorange residuals (field 2), ``sigma_lat_m`` / ``sigma_lon_m`` /
+    ``sigma_alt_m`` the standard deviations of latitude, longitude and altitude (fields 6–8).
+    """
+
+    rms_m: float | None
+    sigma_lat_m: float | None
+    sigma_lon_m: float | None
+    sigma_alt_m: float | None
 
 
 @dataclass(frozen=True)
@@ -97,7 +114,10 @@ class Epoch:
     ``time_utc`` is the receiver's UTC time (None while no date was ever
     given); ``sky_reported`` is False for epochs without any GSV (receivers
     that report the sky every few fixes), whose ``satellites`` are then empty
-    but not "none in view".
+    but not "none in view". ``satellites`` holds one entry per satellite per
+    signal, in GSV order; :attr:`primary_satellites` one per satellite;
+    ``gst`` the epoch's GST statistics when the receiver sent them (None
+    otherwise).
     """
 
     t_s: float
@@ -106,6 +126,30 @@ class Epoch:
     fix: Fix
     satellites: tuple[Satellite, ...]
     sky_reported: bool
+    gst: Gst | None = None
+
+    @functools.cached_property
+    def primary_satellites(self) -> tuple[Satellite, ...]:
+        """One entry per satellite: the one on its primary signal (the L1/G1/E1/B1 one), in GSV order.
+
+        The entry of lowest :func:`~features.gnss.quirks.primary_signal_rank`: a stated primary
+        signal first (GPS L1 C/A, Galileo E1-B/C, BeiDou B1I, ...), then an entry whose signal
+        is not stated (no or an empty signal-id field, or "all signals"); a satellite listed
+        only on secondary signals (L2, L5, E5a, B2I, ...) is left out. What the GNSS features
+        and the C/N0 weighting of fixes read.
+        """
+        best: dict = {}
+        for sat in self.satellites:
+            rank = _primary_rank(sat.system, sat.signal)
+            if rank is None:
+                continue
+            key = (sat.system, sat.prn)
+            held = best.get(key)
+            if held is None or rank < held[0]:
+                best[key] = (rank, sat)
+        if len(best) == len(self.satellites):
+            return self.satellites
+        return tuple(v[1] for v in best.values())
 
     @property
     def n_in_view(self) -> int:
@@ -132,6 +176,7 @@ class Epoch:
                     "quality": f.quality, "n_used": f.n_used, "hdop": f.hdop, "pdop": f.pdop, "vdop": f.vdop,
                     "mode": f.mode},
             "sky_reported": self.sky_reported,
+            "gst": None if self.gst is None else self.gst._asdict(),
             "satellites": [{"system": s.system, "prn": s.prn, "signal": s.signal, "el_deg": s.el_deg,
                             "az_deg": s.az_deg, "cn0_dbhz": s.cn0_dbhz, "used": s.used} for s in self.satellites],
         }
@@ -169,15 +214,18 @@ class _Clock:
     def date_of(self, day: int) -> dt.date | None:
         if self.known is None:
             return None
-        return self.known[0] + dt.timedelta(days=day - self.known[1])
+        try:
+            return self.known[0] + dt.timedelta(days=day - self.known[1])
+        except OverflowError:  # past 9999-12-31 (a ZDA year 9999 before midnight): no calendar date
+            return None
 
 
 class _EpochBuilder:
-    __slots__ = ("rel_s", "tod", "day", "date", "gga", "gns", "rmc", "gsa", "sats", "sky")
+    __slots__ = ("rel_s", "tod", "day", "date", "gga", "gns", "rmc", "gst", "gsa", "sats", "sky")
 
     def __init__(self, rel_s: float, tod: float, day: int, date: dt.date | None):
         self.rel_s, self.tod, self.day, self.date = rel_s, tod, day, date
-        self.gga = self.gns = self.rmc = None
+        self.gga = self.gns = self.rmc = self.gst = None
         self.gsa: list = []
         self.sats: dict = {}
         self.sky = False
@@ -202,12 +250,30 @@ def _fix_of(b: _EpochBuilder, used_count: int) -> Fix:
     return Fix(None, None, None, None, 0, used_count or None, hdop, pdop, vdop, mode)
 
 
-def _opt_int(text: str) -> int | None:
-    return int(text) if text else None
+def _opt_count(text: str) -> int | None:
+    """An optional count of satellites (GGA/GNS field 7): None when empty, ValueError outside 0-999."""
+    if not text:
+        return None
+    value = int(text)
+    if not 0 <= value <= 999:
+        raise ValueError(f"satellite count {text!r} out of range")
+    return value
+
+
+_MAX_ABS_NUMBER = 1.0e7
+"""Largest magnitude accepted for a GGA/GNS number (altitude and geoid separation in metres, HDOP): beyond
+any receiver's range; guards the sums downstream (altitude + separation) against overflow."""
 
 
 def _opt_num(text: str) -> float | None:
-    return float(text) if text else None
+    """An optional numeric field: None when empty; ValueError for ``nan``/``inf`` (Python's float()
+    accepts them, NMEA has no such values) and for magnitudes beyond :data:`_MAX_ABS_NUMBER`."""
+    if not text:
+        return None
+    value = float(text)
+    if not abs(value) <= _MAX_ABS_NUMBER:
+        raise ValueError(f"number {text!r} is not finite or out of range")
+    return value
 
 
 def _check_options(parser: str, resync_after: int) -> None:
@@ -248,30 +314,38 @@ def _finish(b: _EpochBuilder, first_rel: float) -> Epoch:
     if b.date is not None:
         when = (dt.datetime(b.date.year, b.date.month, b.date.day, tzinfo=dt.timezone.utc)
                 + dt.timedelta(seconds=b.tod))
-    return Epoch(b.rel_s - first_rel, when, b.tod, _fix_of(b, len(used)), sats, b.sky)
+    return Epoch(b.rel_s - first_rel, when, b.tod, _fix_of(b, len(used)), sats, b.sky, b.gst)
 
 
 def _add_gsv(current: _EpochBuilder, talker: str, payload, gsv_parts: dict, gsv_open: dict,
              stats: ReadStats) -> None:
-    """One GSV part into the epoch: its satellites, and the bookkeeping of the talker's open group."""
+    """One GSV part into the epoch: its satellites, and the bookkeeping of the talker's open group.
+
+    Every entry is kept under its own signal id, (system, prn, signal): a second signal of a
+    satellite is a second entry, never a replacement of the first (gpsd keeps one entry per
+    satellite per signal too). Only the part numbering may span signal ids: dual-frequency
+    receivers (Quectel LC79D) number one group across their L1 entries (untagged) and the L5 /
+    E5a entries that follow (tagged ``8`` / ``1``) -- ``$GPGSV,3,1`` and ``3,2`` untagged, then
+    ``$GPGSV,3,3,10,06,,,40,09,,,27,30,,,39,8`` re-lists PRNs 6, 9 and 30 on L5. A part that
+    continues the talker's open group exactly (same part count, the next part number) under
+    another signal id therefore completes that group (``gsv_signal_continued``) instead of
+    counting as incomplete, while its entries stay on their own signal.
+    """
     current.sky = True
     key = (talker, payload.signal)
     expected = gsv_parts.get(key, 1)
-    signal = payload.signal
     if payload.msg_num != expected:
-        # Quectel LC79D sends a group's last part under another signal id: a part that continues the
-        # talker's open group exactly (same part count, the next part number) belongs to that group.
         open_group = gsv_open.get(talker)
         if (open_group is not None and payload.msg_num > 1
                 and (open_group[1], open_group[3]) == (payload.n_msgs, payload.msg_num)):
             key = open_group[0]
-            signal = key[1]
             stats.gsv_signal_continued += 1
         else:
             stats.gsv_incomplete += 1
     gsv_parts[key] = payload.msg_num % payload.n_msgs + 1
     gsv_open[talker] = (key, payload.n_msgs, payload.n_in_view, gsv_parts[key])
     sats = current.sats
+    signal = payload.signal
     for sat in payload.satellites:
         sats[(sat[0], sat[1], signal)] = sat
 
@@ -291,8 +365,8 @@ def _assemble(sentences: Iterable[list[str]], stats: ReadStats, resync_after: in
 
     for fields in sentences:
         address = fields[0]
-        kind = address[2:] if len(address) == 5 else address[-3:]
-        if kind not in _USED_TYPES or address[0] == "P" and address[:2] != "PQ":
+        kind = address[2:]
+        if len(address) != 5 or kind not in _USED_TYPES or address[0] == "P" and address[:2] != "PQ":
             stats.other_types[address[:8]] += 1
             continue
         talker = address[:2]
@@ -314,6 +388,8 @@ def _assemble(sentences: Iterable[list[str]], stats: ReadStats, resync_after: in
                     date = parse_ddmmyy(data[8])
                 elif kind == "ZDA" and len(data) >= 4 and data[1] and data[2] and data[3]:
                     date = dt.date(int(data[3]), int(data[2]), int(data[1]))
+                    if date.year < _FIRST_GNSS_YEAR:
+                        raise ValueError(f"ZDA year {date.year} before GPS time began")
                 payload = _timed_payload(kind, data)
             else:
                 # GSV/GSA repeat verbatim from epoch to epoch (at 5 Hz half the GSV and nearly every GSA of
@@ -369,6 +445,8 @@ def _assemble(sentences: Iterable[list[str]], stats: ReadStats, resync_after: in
                 current.gns = payload
             elif kind == "RMC":
                 current.rmc = payload
+            elif kind == "GST" and payload is not None:
+                current.gst = payload
             continue
         if current is None:
             if kind == "GSV":
@@ -389,8 +467,14 @@ def _assemble(sentences: Iterable[list[str]], stats: ReadStats, resync_after: in
 def _timed_payload(kind: str, data: list[str]):
     """Fix content of a timed sentence.
 
-    GGA/GNS → (lat, lon, alt, sep, quality, n_used, hdop); RMC → (lat, lon, quality); others None.
+    GGA/GNS → (lat, lon, alt, sep, quality, n_used, hdop); RMC → (lat, lon, quality); GST → :class:`Gst`
+    (None when it states neither σ_lat nor σ_lon); others None. A GST σ that is not a positive finite
+    number (empty, 0, negative) is None.
     """
+    if kind == "GST":
+        vals = [_opt_num(data[i]) if len(data) > i else None for i in (1, 5, 6, 7)]
+        vals = [v if v is not None and 0.0 < v < 1e6 else None for v in vals]
+        return None if vals[1] is None and vals[2] is None else _tuple_new(Gst, vals)
     if kind == "GGA":
         lat = parse_latlon(data[1], data[2], True)
         lon = parse_latlon(data[3], data[4], False)
@@ -399,7 +483,7 @@ def _timed_payload(kind: str, data: list[str]):
             raise ValueError(f"GGA quality {quality}")
         hdop = _opt_num(data[7])
         return (lat, lon, _opt_num(data[8]), _opt_num(data[10]) if len(data) > 10 else None,
-                quality, _opt_int(data[6]), hdop if hdop is None or 0 < hdop < 99 else None)
+                quality, _opt_count(data[6]), hdop if hdop is None or 0 < hdop < 99 else None)
     if kind == "GNS":
         lat = parse_latlon(data[1], data[2], True)
         lon = parse_latlon(data[3], data[4], False)
@@ -409,7 +493,7 @@ def _timed_payload(kind: str, data: list[str]):
             quality = 6
         hdop = _opt_num(data[7])
         return (lat, lon, _opt_num(data[8]), _opt_num(data[9]) if len(data) > 9 else None,
-                quality, _opt_int(data[6]), hdop if hdop is None or 0 < hdop < 99 else None)
+                quality, _opt_count(data[6]), hdop if hdop is None or 0 < hdop < 99 else None)
     if kind == "RMC":
         lat = parse_latlon(data[2], data[3], True)
         lon = parse_latlon(data[4], data[5], False)

@@ -30,6 +30,11 @@ Where pynmea2 1.19 is wrong or silent, the correction lives here:
   301-336 Galileo, the ranges of NMEA 4.11 and of the receivers gpsd documents
   in ``driver_nmea0183.c: nmeaid_to_prn``), ``GQ``/``QZ`` QZSS, ``GI`` NavIC.
 
+* **Several signals of one satellite (NMEA 4.10+).** Dual-frequency receivers
+  list a satellite once per signal, each GSV sentence tagged with its signal
+  id; the reader keeps every entry. Which one the features read is decided
+  by :func:`primary_signal_rank` (the L1/G1/E1/B1 open-service signal).
+
 Satellite numbers are returned system-local (GPS 1-32, SBAS 120-158, GLONASS
 slot 1-32, Galileo 1-36, BeiDou 1-63, QZSS 1-10, NavIC 1-14), the numbering
 of RINEX and of gpsd's ``svid``.
@@ -44,7 +49,7 @@ from typing import NamedTuple
 __all__ = [
     "SYSTEMS", "NMEA_SYSTEM_IDS", "GsvSatellite", "GsvFields", "GsaFields",
     "satellite_id", "gsv_fields", "gsa_fields", "parse_time_of_day", "parse_latlon",
-    "parse_ddmmyy", "decode_pynmea2", "FIX_QUALITY_FROM_MODE",
+    "parse_ddmmyy", "decode_pynmea2", "FIX_QUALITY_FROM_MODE", "PRIMARY_SIGNAL_IDS", "primary_signal_rank",
 ]
 
 SYSTEMS = ("GPS", "SBAS", "GLONASS", "Galileo", "BeiDou", "QZSS", "NavIC")
@@ -60,6 +65,48 @@ _TALKER_SYSTEM = {
 
 FIX_QUALITY_FROM_MODE = {"N": 0, "A": 1, "D": 2, "P": 3, "R": 4, "F": 5, "E": 6, "M": 7, "S": 8}
 """GNS/RMC mode indicator → GGA quality code (NMEA 0183 v4.11, GNS field 6 and GGA field 6)."""
+
+
+PRIMARY_SIGNAL_IDS = {
+    "GPS": (1,),          # L1 C/A (2 L1 P(Y) and 3 L1 M are military)
+    "SBAS": (1,),         # L1 C/A (listed under GP, GPS's signal ids)
+    "QZSS": (1, 2, 3),    # L1 C/A, then L1C (D), L1C (P)
+    "GLONASS": (1,),      # G1 C/A ("L1 C/A")
+    "Galileo": (7, 6),    # E1-B/C ("L1-BC"), then E1-A ("L1-A", the id Quectel's LC79D gives E1)
+    "BeiDou": (1, 3),     # B1I, then B1C
+    "NavIC": (1, 5),      # L5-SPS (NavIC's open service has no legacy L1 signal), then L1-SPS
+}
+"""Signal ids (NMEA 0183 v4.11, GSV/GRS signal-id table, as reproduced in gpsd's ``www/NMEA.adoc``,
+"NMEA 4.11 System ID and Signal ID") of each system's primary signal, most preferred first: the
+open-service signal of the L1 band (E1 for Galileo, B1 for BeiDou, G1 for GLONASS) that every
+receiver tracks and that the open-sky C/N0 reference describes. Not primary: L2, L5 / E5a / E5b /
+B2 / B3, E6, L6 (secondary frequencies), and ids 4 and up where the table names no L1-band signal."""
+
+_PRIMARY_RANK = {(system, sig): k for system, ids in PRIMARY_SIGNAL_IDS.items() for k, sig in enumerate(ids)}
+_UNSTATED_RANK = max(len(ids) for ids in PRIMARY_SIGNAL_IDS.values())
+
+
+def primary_signal_rank(system: str, signal: int | None) -> int | None:
+    """How primary a satellite's listed signal is: 0 best, larger worse, ``None`` = never primary.
+
+    Rule (NMEA 0183 v4.10/4.11 signal ids): a stated primary signal ranks first, in the order of
+    :data:`PRIMARY_SIGNAL_IDS` (GPS 1 = L1 C/A; Galileo 7 = E1-B/C, then 6; BeiDou 1 = B1I, then
+    3 = B1C; ...). An entry whose signal is not stated ranks after them: a GSV sentence without the
+    signal-id field (NMEA ≤ 4.00, one signal per satellite, the L1-band one on every receiver gpsd
+    documents), one whose field is empty (the u-blox ZED-F9P of gpsd's log writes its second, B2I,
+    BeiDou group so: it must not outrank the B1I entry tagged 1) and id 0 ("all signals"; Quectel's
+    ``$PQGSV``). Any other id (L5 = 7/8 for GPS, E5a = 1 for Galileo, B2I = 11 for BeiDou, ...) is
+    a secondary signal, never primary. The features read, per satellite and epoch, the listed
+    entry of lowest rank, and leave out a satellite listed only on secondary signals.
+
+    >>> primary_signal_rank("GPS", 1), primary_signal_rank("GPS", None), primary_signal_rank("GPS", 8)
+    (0, 3, None)
+    >>> primary_signal_rank("Galileo", 7), primary_signal_rank("Galileo", 1), primary_signal_rank("BeiDou", 11)
+    (0, None, None)
+    """
+    if signal is None or signal == 0:
+        return _UNSTATED_RANK
+    return _PRIMARY_RANK.get((system, signal))
 
 
 class GsvSatellite(NamedTuple):

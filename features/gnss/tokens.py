@@ -89,13 +89,23 @@ class ReadStats:
 def _checksum_ok(body: str, given: str) -> bool:
     """XOR of the body's bytes against the two hex digits given (a plain loop: measured faster
     here than folding one big integer or a numpy reduction on 80-byte sentences)."""
+    if len(given) != 2 or given[0] not in _HEX_DIGITS or given[1] not in _HEX_DIGITS:
+        return False  # int(" 6", 16), int("+6", 16) and int("0\r", 16) would all read as numbers
     c = 0
     for byte in body.encode("latin-1", "replace"):
         c ^= byte
-    try:
-        return c == int(given, 16)
-    except ValueError:
-        return False
+    return c == int(given, 16)
+
+
+_HEX_DIGITS = frozenset("0123456789ABCDEFabcdef")
+
+
+def _address_ok(address: str) -> bool:
+    """An address field as NMEA 0183 writes it: three or more upper-case letters and digits (``GPGSV``).
+
+    ``GbGSV`` (one flipped bit) is garbage, not BeiDou's ``GB`` talker: pynmea2 would upper-case it.
+    """
+    return len(address) >= 3 and address.isalnum() and address == address.upper()
 
 
 def parse_sentence(fragment: str, stats: ReadStats, require_checksum: bool = True) -> list[str] | None:
@@ -121,9 +131,12 @@ def parse_sentence(fragment: str, stats: ReadStats, require_checksum: bool = Tru
         if not _checksum_ok(body, given):
             stats.bad_checksum += 1
             return None
+        if "*" in body:  # '*' is NMEA 0183's reserved checksum delimiter, never data: a field holding one
+            stats.malformed += 1  # is garbled (pynmea2 rejects it too), whatever its checksum says
+            return None
     fields = body.split(",")
     address = fields[0]
-    if len(address) < 3 or not address.isalnum():
+    if not _address_ok(address):
         stats.truncated += 1
         return None
     return fields
@@ -157,13 +170,20 @@ def pynmea2_fields(fragment: str, stats: ReadStats, require_checksum: bool = Tru
         return fields
     if isinstance(msg, pynmea2.ProprietarySentence) or not hasattr(msg, "talker"):
         return fragment[:star].split(",") if star >= 0 else fragment.split(",")
+    if not _address_ok(fragment.split(",", 1)[0]):  # pynmea2 upper-cases a garbled "GbGSV"; the fast path refuses it
+        stats.truncated += 1
+        return None
     return [msg.talker + msg.sentence_type, *msg.data]
 
 
 def _is_unused(head: str) -> bool:
-    """True for addresses of sentence types the reader does not use (VTG, TXT, vendor messages)."""
-    kind = head[2:] if len(head) == 5 else head[-3:]
-    return kind not in USED_TYPES or (head[:1] == "P" and head[:2] != "PQ")
+    """True for addresses of sentence types the reader does not use (VTG, TXT, vendor messages).
+
+    A used type has a five-character address, talker and type (``GPGSV``; Quectel's ``PQGSV``):
+    a longer one ending in a used type (``GabcdefLGSV``, garbage that pynmea2 rejects too; no
+    receiver of gpsd's 199 regression logs sends one) is not read as that type.
+    """
+    return len(head) != 5 or head[2:] not in USED_TYPES or (head[:1] == "P" and head[:2] != "PQ")
 
 
 def fields_from_lines(lines: Iterable[bytes | str], stats: ReadStats, tokenise, require_checksum: bool):
@@ -205,8 +225,8 @@ for _i, _ch in enumerate(b"abcdef"):
     _HEX[_ch] = 10 + _i
 _SPACE = np.array([chr(_i).isspace() for _i in range(256)])
 """Bytes that ``str.strip`` removes from Latin-1 text (includes \\x85 and \\xa0)."""
-_ALNUM = np.array([chr(_i).isalnum() for _i in range(256)])
-"""Bytes that ``str.isalnum`` accepts in Latin-1 text."""
+_ADDRESS_BYTE = np.array([chr(_i).isalnum() and chr(_i).upper() == chr(_i) for _i in range(256)])
+"""Bytes an address may hold (:func:`_address_ok`): ``str.isalnum`` in Latin-1 text and their own upper case."""
 _USED_KIND_CODES = np.array(sorted((ord(k[0]) << 16) | (ord(k[1]) << 8) | ord(k[2]) for k in USED_TYPES))
 """The used sentence types as three-byte codes."""
 
@@ -252,6 +272,8 @@ def fields_from_buffer(buf: bytes, stats: ReadStats, require_checksum: bool):
     k = np.searchsorted(stars, end, side="left") - 1  # last '*' before the fragment's end
     star = np.where(k >= 0, stars[np.maximum(k, 0)], -1) if stars.size else np.full(dollars.size, -1)
     has_star = star > dollars
+    # a second '*' inside the fragment (before the checksum's): malformed, decided in the loop below
+    inner_star = has_star & (k >= 1) & (stars[np.maximum(k - 1, 0)] > dollars) if stars.size else has_star
     g1 = _HEX[data[np.clip(star + 1, 0, n - 1)]]
     g2 = _HEX[data[np.clip(star + 2, 0, n - 1)]]
     given = np.where(has_star & (g1 >= 0) & (g2 >= 0), g1 * 16 + g2, -1)
@@ -263,7 +285,7 @@ def fields_from_buffer(buf: bytes, stats: ReadStats, require_checksum: bool):
     at = dollars[:, None] + np.arange(1, 7)[None, :]
     head = data[np.minimum(at, n - 1)] * (at < end[:, None])
     kind = (head[:, 2].astype(np.int64) << 16) | (head[:, 3].astype(np.int64) << 8) | head[:, 4]
-    fast = (ok & (star + 2 < end) & (head[:, 5] == 44) & _ALNUM[head[:, :5]].all(axis=1)
+    fast = (ok & ~inner_star & (star + 2 < end) & (head[:, 5] == 44) & _ADDRESS_BYTE[head[:, :5]].all(axis=1)
             & np.isin(kind, _USED_KIND_CODES) & ((head[:, 0] != 80) | (head[:, 1] == 81)))
     for d, e, st_, has, good, quick in zip(dollars.tolist(), end.tolist(), star.tolist(), has_star.tolist(),
                                            ok.tolist(), fast.tolist()):
@@ -291,9 +313,12 @@ def fields_from_buffer(buf: bytes, stats: ReadStats, require_checksum: bool):
         elif not good:
             stats.bad_checksum += 1
             continue
+        elif "*" in text[d + 1:st_]:
+            stats.malformed += 1
+            continue
         else:
             fields = text[d + 1:st_].split(",")
-        if len(fields[0]) < 3 or not fields[0].isalnum():
+        if not _address_ok(fields[0]):
             stats.truncated += 1
             continue
         yield fields

@@ -9,7 +9,8 @@ from a walk's readers. Modules:
   Huber, the VB-AKF's R): every filter below runs it;
 * ``ekf`` — ``EventEKF``, its settings (``EkfConfig``) and records (``FilterRun``);
 * ``imm`` — the interacting multiple model filter over environment classes;
-* ``noise`` — the measurement-noise policies (fixed, quality, per class, per class and quality, VB-AKF);
+* ``noise`` — the measurement-noise policies (fixed, quality, per class, VB-AKF); ``context`` — the error
+  model in context: white part, Gauss–Markov bias and outlier prior per (class, GGA quality);
 * ``smoother`` — RTS smoothing of any run; ``consistency`` — NEES / NIS and their χ² bounds;
 * ``model`` — the fitted fusion model (``FusionModel``) and its pickle-free bundle.
 
@@ -30,7 +31,7 @@ Which filter and policy each method of :mod:`walks.methods` builds:
 ``kf``             ``EventEKF(noise=FixedNoise().fit(...))``
 ``kf_quality``     ``EventEKF(noise=QualityNoise().fit(...))``
 ``kf_map``         ``EventEKF(noise=PerClassNoise().fit(...)).run(ev, class_at=ClassMap(...))``
-``adaptive_nobp``  ``EventEKF(noise=ClassQualityNoise().fit(...)).run(ev, classes=ClassTrack(...))``
+``adaptive_nobp``  ``EventEKF(EkfConfig(outlier="mixture"), ContextNoise().fit(...)).run(ev, classes=...)``
 ``aekf``           ``EventEKF(noise=VBAdaptiveNoise().fit(...))``
 ``imm``            ``IMMFilter(PerClassNoise().fit(...)).run(ev, classes=...)``
 =================  ===========================================================
@@ -41,14 +42,14 @@ from models.fusion.ekf import EkfConfig, EventEKF, FilterError, FilterRun
 from models.fusion.events import (ACOUSTIC, GNSS, KIND_NAMES, STEP, AcousticEvents, ClassMap, ClassTrack, EventError,
                                   EventStream, GnssEvents, StandIntervals, StepEvents, merge_events)
 from models.fusion.imm import IMMFilter
-from models.fusion.noise import (ClassQualityNoise, FixedNoise, NoiseError, PerClassNoise, QualityNoise,
-                                 VBAdaptiveNoise, second_moment_m2)
-from models.fusion.smoother import SmoothedTrack, rts_smooth
+from models.fusion.context import ContextNoise
+from models.fusion.noise import FixedNoise, NoiseError, PerClassNoise, QualityNoise, VBAdaptiveNoise, second_moment_m2
+from models.fusion.smoother import SmoothedTrack, fixed_lag_smooth, rts_smooth
 
 __all__ = [
     "STEP", "GNSS", "ACOUSTIC", "KIND_NAMES", "StepEvents", "GnssEvents", "AcousticEvents", "StandIntervals",
     "ClassTrack", "ClassMap", "EventStream", "merge_events", "EventError",
     "EkfConfig", "EventEKF", "FilterRun", "FilterError", "IMMFilter",
-    "FixedNoise", "QualityNoise", "PerClassNoise", "ClassQualityNoise", "VBAdaptiveNoise", "NoiseError",
-    "second_moment_m2", "SmoothedTrack", "rts_smooth", "nees", "chi2_bounds", "in_bounds_share", "nis_summary",
+    "FixedNoise", "QualityNoise", "PerClassNoise", "ContextNoise", "VBAdaptiveNoise", "NoiseError",
+    "second_moment_m2", "SmoothedTrack", "rts_smooth", "fixed_lag_smooth", "nees", "chi2_bounds", "in_bounds_share", "nis_summary",
 ]

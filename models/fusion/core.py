@@ -38,9 +38,9 @@ policy of :mod:`models.fusion.noise`), R per class looked up in a site map at
 the prior position (``kf_map``), or the variational-Bayes adaptive R of
 Särkkä & Nummenmaa (2009) (:mod:`models.fusion.adaptive`).
 
-A closed-loop corrector (a Python callable) cannot run inside compiled code:
-:func:`run_ekf_events` then runs as the same Python text (``py_func``), calling
-the same compiled kernels.
+Bias states are first-order Gauss–Markov processes whose φ and Q the caller
+sets per event (a reset is φ = 0, Q = the prior variance); they may be
+Schmidt consider states (estimated never, accounted for always).
 """
 
 from __future__ import annotations
@@ -50,11 +50,17 @@ import math
 import numpy as np
 from numba import njit
 
-__all__ = ["GATE", "HUBER", "NO_OUTLIER", "R_PER_EVENT", "R_MAP", "R_VB", "STEP_KIND", "mm", "mmt", "mv", "inv2",
-           "time_update", "predict_step", "kalman_update", "map_class", "run_ekf_events"]
+__all__ = ["GATE", "HUBER", "NO_OUTLIER", "MIXTURE", "R_PER_EVENT", "R_MAP", "R_VB", "STEP_KIND", "mm", "mmt", "mv",
+           "inv2", "time_update", "predict_step", "kalman_update", "mixture_update", "map_class", "run_ekf_events",
+           "rts_step", "rts_pass", "fixed_lag_pass"]
 
-GATE, HUBER, NO_OUTLIER = 0, 1, 2
-"""Outlier handling codes: χ² gate, Huber weights, none."""
+GATE, HUBER, NO_OUTLIER, MIXTURE = 0, 1, 2, 3
+"""Outlier handling codes: χ² gate, Huber weights, none, an ε-contaminated Gaussian likelihood
+(:func:`mixture_update`, ε and κ given per fix)."""
+
+MIXTURE_DROP = 1e-6
+"""Weight below which :func:`mixture_update` drops a component of the Gaussian sum (most fixes are plainly
+inliers: their outlier weight is far below this)."""
 
 R_PER_EVENT, R_MAP, R_VB = 0, 1, 2
 """Noise modes of :func:`run_ekf_events`."""
@@ -80,17 +86,8 @@ def mm(A, B):
 
 @njit(cache=True)
 def mmt(A, B):
-    """A B' for small dense matrices."""
-    n, k = A.shape
-    m = B.shape[0]
-    C = np.zeros((n, m))
-    for i in range(n):
-        for j in range(m):
-            s = 0.0
-            for l in range(k):
-                s += A[i, l] * B[j, l]
-            C[i, j] = s
-    return C
+    """A B' for small dense matrices (:func:`mm` on the transposed view)."""
+    return mm(A, B.T)
 
 
 @njit(cache=True)
@@ -168,12 +165,14 @@ def predict_step(x, P, L, psi, sl2, sp2):
 
 
 @njit(cache=True)
-def kalman_update(x, P, z, R, H, outlier, gate_nis, huber_k, joseph):
+def kalman_update(x, P, z, R, H, outlier, gate_nis, huber_k, joseph, consider=None):
     """One position update of the prior (x⁻ (n,), P⁻ (n, n)) by the fix z (2,) with noise R (2, 2), H (2, n).
 
     Returns (x, P, ν, S, K, R_used, NIS, weight, accepted). The NIS is that of the unweighted S; with Huber
     weights ``S``, ``K`` and ``R_used`` are those of R/w; a gated fix returns the prior unchanged, weight 0
-    and K = 0.
+    and K = 0. ``consider`` (n,) bool marks Schmidt consider states (Schmidt 1966): their rows of K are
+    zero, so they are never estimated but their uncertainty still enters every other state's update (the
+    Joseph form keeps P exact for that suboptimal gain).
     """
     n = x.shape[0]
     # ν = z − H x⁻
@@ -199,19 +198,82 @@ def kalman_update(x, P, z, R, H, outlier, gate_nis, huber_k, joseph):
             Si, det = inv2(S)
     # K = P⁻ H' S⁻¹
     K = mm(PHt, Si)
+    if consider is not None:
+        for i in range(n):
+            if consider[i]:
+                # K_i = 0 for a consider state (Schmidt–Kalman)
+                K[i, 0] = 0.0
+                K[i, 1] = 0.0
     # x = x⁻ + K ν
     xn = x + mv(K, nu)
-    # A = I − K H
-    A = np.eye(n) - mm(K, H)
+    # K H P⁻ = K (P⁻H')'   (n × n from n × 2 products: P⁻ is symmetric)
+    KHP = mmt(K, PHt)
     if joseph:
-        # P = (I − KH) P⁻ (I − KH)' + K R K'   (Joseph form: symmetric PD for any K)
-        Pn = mmt(mm(A, P), A) + mmt(mm(K, R), K)
+        # P = (I − KH) P⁻ (I − KH)' + K R K'   (Joseph form: symmetric PD for any K), expanded as
+        # P = P⁻ − K H P⁻ − (K H P⁻)' + K (H P⁻ H' + R) K' = P⁻ − KHP⁻ − (KHP⁻)' + K S K'
+        Pn = P - KHP - KHP.T + mmt(mm(K, S), K)
     else:
         # P = (I − KH) P⁻   (short form: exact for the optimal K only)
-        Pn = mm(A, P)
+        Pn = P - KHP
     # P = (P + P') / 2
     Pn = 0.5 * (Pn + Pn.T)
     return xn, Pn, nu, S, K, R, nis, w, True
+
+
+@njit(cache=True)
+def mixture_update(x, P, z, R, H, eps, kappa, joseph, consider=None):
+    """A fix whose noise is an ε-contaminated Gaussian: N(0, R) with probability 1 − ε, N(0, κR) with ε.
+
+    The exact posterior is a two-component Gaussian sum (Sorenson & Alspach 1971); it is collapsed to its
+    mean and covariance (the moment matching of the IMM, Bar-Shalom, Li & Kirubarajan 2001, §11.6):
+    with ν = z − Hx⁻, S₁ = HP⁻H' + R, S₂ = HP⁻H' + κR,
+
+        β = ε N(ν; 0, S₂) / ((1 − ε) N(ν; 0, S₁) + ε N(ν; 0, S₂))      (the fix's outlier probability)
+        x = (1 − β) x₁ + β x₂,  P = Σ_i w_i (P_i + (x_i − x)(x_i − x)')
+
+    with (x_i, P_i) the Kalman updates under R and κR. Returns what :func:`kalman_update` returns, with the
+    inlier model's ν, S, R and NIS, the mixed gain K = (1 − β)K₁ + βK₂ and weight 1 − β.
+    """
+    # ν = z − Hx⁻;  S₁ = HP⁻H' + R;  S₂ = HP⁻H' + κR
+    nu = z - mv(H, x)
+    HPH = mm(H, mmt(P, H))
+    Rk = kappa * R
+    Si1, det1 = inv2(HPH + R)
+    Si2, det2 = inv2(HPH + Rk)
+    nis = nu[0] * (Si1[0, 0] * nu[0] + Si1[0, 1] * nu[1]) + nu[1] * (Si1[1, 0] * nu[0] + Si1[1, 1] * nu[1])
+    nis2 = nu[0] * (Si2[0, 0] * nu[0] + Si2[0, 1] * nu[1]) + nu[1] * (Si2[1, 0] * nu[0] + Si2[1, 1] * nu[1])
+    # ln of (1 − ε) N(ν; S₁) and ε N(ν; S₂), the common −ln 2π dropped
+    l1 = math.log(max(1.0 - eps, 1e-300)) - 0.5 * (nis + math.log(det1))
+    l2 = math.log(max(eps, 1e-300)) - 0.5 * (nis2 + math.log(det2))
+    top = max(l1, l2)
+    # β = ε N₂ / ((1 − ε) N₁ + ε N₂)
+    beta = math.exp(l2 - top) / (math.exp(l1 - top) + math.exp(l2 - top))
+    if beta < MIXTURE_DROP:
+        # a component of weight below MIXTURE_DROP is dropped (and its update not computed): it would move
+        # the mean by less than that fraction of the two updates' difference
+        beta = 0.0
+    elif beta > 1.0 - MIXTURE_DROP:
+        beta = 1.0
+    if beta < 1.0:
+        x1, P1, _, S1, K1, _, _, _, _ = kalman_update(x, P, z, R, H, NO_OUTLIER, 0.0, 1.0, joseph, consider)
+    if beta > 0.0:
+        x2, P2, _, S2, K2, _, _, _, _ = kalman_update(x, P, z, Rk, H, NO_OUTLIER, 0.0, 1.0, joseph, consider)
+    if beta == 0.0:
+        return x1, P1, nu, S1, K1, R, nis, 1.0, True
+    if beta == 1.0:
+        return x2, P2, nu, HPH + R, K2, R, nis, 0.0, True
+    # x = (1 − β) x₁ + β x₂
+    xn = (1.0 - beta) * x1 + beta * x2
+    d1 = x1 - xn
+    d2 = x2 - xn
+    n = x.shape[0]
+    Pn = np.empty((n, n))
+    for i in range(n):
+        for j in range(n):
+            # P = (1 − β)(P₁ + d₁d₁') + β (P₂ + d₂d₂')
+            Pn[i, j] = (1.0 - beta) * (P1[i, j] + d1[i] * d1[j]) + beta * (P2[i, j] + d2[i] * d2[j])
+    K = (1.0 - beta) * K1 + beta * K2
+    return xn, 0.5 * (Pn + Pn.T), nu, S1, K, R, nis, 1.0 - beta, True
 
 
 @njit(cache=True)
@@ -279,18 +341,19 @@ def _vb_update(x, P, z, H, s, alpha, beta, cap, rho, n_iter, outlier, gate_nis, 
 
 @njit(cache=True)
 def run_ekf_events(kind, avail, z, length_m, heading_rad, phi, q, h_idx, H, x0, P0, sl2, sp2, outlier, gate_nis,
-                   huber_k, joseph, noise_mode, r_event, r_table, map_grid, map_geo, vb_alpha, vb_beta, vb_cap,
-                   vb_rho, vb_n_iter, x_prior, P_prior, F_rec, x_post, P_post, nu_rec, S_rec, K_rec, R_rec,
-                   nis_rec, w_rec, updated, accepted, correction, correct=None):
+                   huber_k, joseph, consider, noise_mode, r_event, eps_event, kappa_event, r_table, map_grid, map_geo,
+                   vb_alpha, vb_beta, vb_cap, vb_rho, vb_n_iter, x_prior, P_prior, F_rec, x_post, P_post, nu_rec,
+                   S_rec, K_rec, R_rec, nis_rec, w_rec, updated, accepted):
     """Filter m events once, writing the records in place (shapes: see :class:`~models.fusion.ekf.FilterRun`).
 
     Per event: ``kind`` (m,) step/GNSS/acoustic code, ``avail`` (m,) a fix may update, ``z`` (m, 2),
     ``length_m``, ``heading_rad`` (m,) of steps, ``phi``, ``q`` (m, n) the time update's Φ diagonal and Q
-    diagonal, ``h_idx`` (m,) the row of ``H`` (n_models, 2, n) a fix uses. Noise (``noise_mode``):
+    diagonal (a reset of a bias state is φ = 0, q = its prior variance), ``h_idx`` (m,) the row of ``H``
+    (n_models, 2, n) a fix uses; ``consider`` (n,) the Schmidt consider states. Noise (``noise_mode``):
     ``r_event`` (m, 2, 2); or ``r_table`` (3, n_classes, 2, 2) per kind and class with the map ``map_grid``,
-    ``map_geo``; or the VB-AKF state ``vb_alpha``, ``vb_beta``, ``vb_cap`` (3, 2), updated in place.
-    ``correct``: None, or (as Python, ``run_ekf_events.py_func``) a callable
-    ``correct(k, x⁻, x, P, ν, S, K)`` returning an east/north shift (2,) or None.
+    ``map_geo``; or the VB-AKF state ``vb_alpha``, ``vb_beta``, ``vb_cap`` (3, 2), updated in place. With
+    ``outlier`` = :data:`MIXTURE`, ``eps_event`` and ``kappa_event`` (m,) give each fix's outlier prior and
+    variance ratio.
     """
     m = kind.shape[0]
     x = x0.copy()
@@ -317,7 +380,10 @@ def run_ekf_events(kind, avail, z, length_m, heading_rad, phi, q, h_idx, H, x0, 
                     Rk = r_table[kind[k], map_class(map_grid, map_geo, x[0], x[1])]
                 else:
                     Rk = r_event[k]
-                out = kalman_update(x, P, z[k], Rk, Hk, outlier, gate_nis, huber_k, joseph)
+                if outlier == MIXTURE:
+                    out = mixture_update(x, P, z[k], Rk, Hk, eps_event[k], kappa_event[k], joseph, consider)
+                else:
+                    out = kalman_update(x, P, z[k], Rk, Hk, outlier, gate_nis, huber_k, joseph, consider)
             xn, Pn, nu, S, K, Ru, nis, w, ok = out
             nu_rec[k] = nu
             S_rec[k] = S
@@ -329,13 +395,53 @@ def run_ekf_events(kind, avail, z, length_m, heading_rad, phi, q, h_idx, H, x0, 
             if ok:
                 K_rec[k] = K
                 x, P = xn, Pn
-                if correct is not None:
-                    dc = correct(k, x_prior[k], x, P, nu, S, K)
-                    if dc is not None:
-                        x = x.copy()
-                        x[0] += dc[0]
-                        x[1] += dc[1]
-                        correction[k, 0] = dc[0]
-                        correction[k, 1] = dc[1]
         x_post[k] = x
         P_post[k] = P
+
+
+@njit(cache=True)
+def rts_step(x, P, xp_next, Pp_next, C, xs_next, Ps_next):
+    """One backward step of the RTS smoother (Rauch, Tung & Striebel 1965):
+    x^s = x + C (x^s_{k+1} − x⁻_{k+1}),  P^s = P + C (P^s_{k+1} − P⁻_{k+1}) C'."""
+    # x^s = x + C (x^s_{k+1} − x⁻_{k+1})
+    xs = x + mv(C, xs_next - xp_next)
+    # P^s = P + C (P^s_{k+1} − P⁻_{k+1}) C'
+    Ps = P + mmt(mm(C, Ps_next - Pp_next), C)
+    return xs, 0.5 * (Ps + Ps.T)
+
+
+@njit(cache=True)
+def fixed_lag_pass(t, x, P, xp, Pp, C, lag_s):
+    """The fixed-lag smoothed state of every event: the RTS recursion (:func:`rts_step`) from the last event at
+    most ``lag_s`` after it back to it. Shapes: t (m,), x, xp (m, n), P, Pp (m, n, n), C (m − 1, n, n)."""
+    m, n = x.shape
+    xs_out = np.empty((m, n))
+    Ps_out = np.empty((m, n, n))
+    j = 0
+    for k in range(m):
+        if j < k:
+            j = k
+        while j + 1 < m and t[j + 1] <= t[k] + lag_s:
+            j += 1
+        xs = x[j].copy()
+        Ps = P[j].copy()
+        for i in range(j - 1, k - 1, -1):
+            xs, Ps = rts_step(x[i], P[i], xp[i + 1], Pp[i + 1], C[i], xs, Ps)
+        xs_out[k] = xs
+        Ps_out[k] = Ps
+    return xs_out, Ps_out
+
+
+@njit(cache=True)
+def rts_pass(x, P, xp, Pp, C):
+    """The RTS smoothed state of every event (:func:`rts_step` from the last event back); shapes as
+    :func:`fixed_lag_pass`."""
+    m, n = x.shape
+    xs_out = np.empty((m, n))
+    Ps_out = np.empty((m, n, n))
+    xs_out[m - 1] = x[m - 1]
+    Ps_out[m - 1] = P[m - 1]
+    for k in range(m - 2, -1, -1):
+        xs_out[k], Ps_out[k] = rts_step(x[k], P[k], xp[k + 1], Pp[k + 1], C[k], xs_out[k + 1], Ps_out[k + 1])
+    return xs_out, Ps_out
+

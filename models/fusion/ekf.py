@@ -19,13 +19,23 @@ the bias decay, so events of any rate fuse without resampling; a step then
 moves the state, a fix updates it. The equations, the Joseph form and the
 outlier handling (``outlier``: ``"gate"`` — the χ² validation gate of
 Bar-Shalom, Li & Kirubarajan 2001, ch. 5; ``"huber"`` — Huber (1964) weights
-applied as R/w; ``"none"``) are those of the one compiled filter core,
+applied as R/w; ``"mixture"`` — each fix's ε-contaminated likelihood from the
+noise policy, :func:`models.fusion.core.mixture_update`; ``"none"``) are those of
+the one compiled filter core,
 :mod:`models.fusion.core`; this module builds its inputs (Q, Φ, H per event,
 R from the noise policy) and its records.
 
 ``joseph=False`` switches to the short form P = (I − KH)P, symmetrised: equal
 for the optimal gain up to rounding, but without the Joseph form's guarantee
-of a PD P when the gain is perturbed.
+of a PD P when the gain is perturbed. ``consider_bias`` makes the bias states
+Schmidt consider states (Schmidt 1966; Petovello et al. 2009): their
+uncertainty is carried into every update, their value never estimated.
+
+The GNSS bias block follows the noise policy's process when it models one
+(:class:`~models.fusion.context.ContextNoise`: σ_b and τ per quality and
+class, shared only by the fixes of biased qualities, reset on a quality
+change or a gap), else the config's single process shared by every GNSS fix
+(``gnss_bias``).
 
 Written on its own core rather than ``filterpy.kalman.ExtendedKalmanFilter``:
 the predict is a control-driven step whose Jacobian and Q change per event, H
@@ -48,6 +58,11 @@ from models.fusion.events import GNSS, STEP, EventStream
 
 __all__ = ["EkfConfig", "FilterRun", "EventEKF", "FilterError", "empty_records", "initial_state", "time_noise",
            "measurement_models", "OUTLIER_CODES"]
+
+
+OUTLIER_CODES = {"gate": 0, "huber": 1, "none": 2, "mixture": 3}
+"""Codes of :attr:`EkfConfig.outlier` in the compiled core (:data:`models.fusion.core.GATE` ...); ``mixture``
+needs a noise policy that gives each fix's contamination (:class:`models.fusion.context.ContextNoise`)."""
 
 
 class FilterError(EnvfuseError, ValueError):
@@ -74,6 +89,7 @@ class EkfConfig:
     gnss_bias: bool = False
     bias_sigma_m: float = 1.5
     bias_tau_s: float = 30.0
+    consider_bias: bool = False
 
     def __post_init__(self):
         for name in ("sigma_step_length_m", "sigma_heading_rad", "q_heading_rad2_s", "q_scale_1_s", "q_walk_m2_s",
@@ -85,8 +101,8 @@ class EkfConfig:
             v = getattr(self, name)
             if not (math.isfinite(v) and v > 0):
                 raise FilterError(f"{name} must be finite and > 0, got {v}")
-        if self.outlier not in ("gate", "huber", "none"):
-            raise FilterError(f"outlier must be 'gate', 'huber' or 'none', got {self.outlier!r}")
+        if self.outlier not in OUTLIER_CODES:
+            raise FilterError(f"outlier must be one of {sorted(OUTLIER_CODES)}, got {self.outlier!r}")
         if not 0 < self.gate_prob < 1:
             raise FilterError(f"gate_prob must lie in (0, 1), got {self.gate_prob}")
 
@@ -110,7 +126,6 @@ class FilterRun:
     per update (NaN elsewhere): ``nu`` (m, 2) innovation, ``S`` (m, 2, 2), ``K`` (m, n, 2) gain,
     ``R`` (m, 2, 2) noise used, ``nis`` (m,), ``weight`` (m,) Huber weight (1 full, 0 rejected);
     ``updated`` (m,) bool: an available fix was processed; ``accepted`` (m,) bool: it changed the state;
-    ``correction`` (m, 2): a closed-loop corrector's east/north shift added to ``x`` (zeros without one);
     ``mode_proba`` (m, n_modes) for multiple-model runs, else None.
     """
 
@@ -132,7 +147,6 @@ class FilterRun:
     weight: np.ndarray
     updated: np.ndarray
     accepted: np.ndarray
-    correction: np.ndarray
     available: np.ndarray
     mode_proba: np.ndarray | None = None
     info: dict = field(default_factory=dict)
@@ -158,10 +172,6 @@ class FilterRun:
         return self.P[:, :2, :2]
 
 
-OUTLIER_CODES = {"gate": 0, "huber": 1, "none": 2}
-"""Codes of :attr:`EkfConfig.outlier` in the compiled core (:data:`models.fusion.core.GATE` ...)."""
-
-
 def empty_records(m: int, n: int) -> dict:
     """The record arrays of a :class:`FilterRun` for m events and n states (F the identity, NaN where no
     update)."""
@@ -170,13 +180,14 @@ def empty_records(m: int, n: int) -> dict:
     return dict(x_prior=np.empty((m, n)), P_prior=np.empty((m, n, n)), F=eye, x=np.empty((m, n)),
                 P=np.empty((m, n, n)), nu=np.full((m, 2), nan), S=np.full((m, 2, 2), nan),
                 K=np.full((m, n, 2), nan), R=np.full((m, 2, 2), nan), nis=np.full(m, nan), weight=np.full(m, nan),
-                updated=np.zeros(m, bool), accepted=np.zeros(m, bool), correction=np.zeros((m, 2)))
+                updated=np.zeros(m, bool), accepted=np.zeros(m, bool))
 
 
-def initial_state(stream: EventStream, cfg: EkfConfig, x0_en=None, x0=None, P0=None) -> tuple[np.ndarray, np.ndarray]:
+def initial_state(stream: EventStream, cfg: EkfConfig, x0_en=None, x0=None, P0=None,
+                  n_state: int | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Prior (x0 (n,), P0 (n, n)): ``x0``/``P0`` as given, else the position ``x0_en`` (default: the first
-    available fix) with the configured σ0 of each state."""
-    n = cfg.n_state
+    available fix) with the configured σ0 of each state (bias states: ``bias_sigma_m``)."""
+    n = cfg.n_state if n_state is None else n_state
     if x0 is not None:
         x0 = np.asarray(x0, float).copy()
         if x0.shape != (n,):
@@ -195,17 +206,24 @@ def initial_state(stream: EventStream, cfg: EkfConfig, x0_en=None, x0=None, P0=N
             raise FilterError(f"P0 must have shape ({n}, {n}), got {P0.shape}")
     else:
         d = [cfg.sigma0_pos_m ** 2] * 2 + [cfg.sigma0_heading_rad ** 2, cfg.sigma0_scale ** 2]
-        if cfg.gnss_bias:
-            d += [cfg.bias_sigma_m ** 2] * 2
+        d += [cfg.bias_sigma_m ** 2] * (n - 4)
         P0 = np.diag(d)
     return x0, P0
 
 
-def time_noise(stream: EventStream, cfg: EkfConfig) -> tuple[np.ndarray, np.ndarray]:
-    """Per event the diagonals of the time update's Q and Φ, both (m, n) (see :func:`models.fusion.core.time_update`)."""
+def has_bias(cfg: EkfConfig, spec=None) -> bool:
+    """Whether the state carries the GNSS bias block: asked for by the config, or modelled by the noise policy."""
+    return bool(cfg.gnss_bias or (spec is not None and spec.bias_shared is not None))
+
+
+def time_noise(stream: EventStream, cfg: EkfConfig, spec=None) -> tuple[np.ndarray, np.ndarray]:
+    """Per event the diagonals of the time update's Q and Φ, both (m, n) (see :func:`models.fusion.core.time_update`).
+
+    The GNSS bias block follows the noise policy's process when it gives one (``spec.bias_phi``,
+    ``bias_q``: per quality and class, with resets), else the config's one Gauss–Markov process."""
     dt = stream.dt_s
     st = stream.dt_stand_s
-    m, n = dt.shape[0], cfg.n_state
+    m, n = dt.shape[0], 4 + 2 * has_bias(cfg, spec)
     q = np.zeros((m, n))
     phi = np.ones((m, n))
     # Q_pos = q_walk·(Δt − Δt_stand) + q_stand·Δt_stand
@@ -213,7 +231,10 @@ def time_noise(stream: EventStream, cfg: EkfConfig) -> tuple[np.ndarray, np.ndar
     # Q_δψ = q_ψ·Δt,  Q_s = q_s·Δt   (random walks)
     q[:, 2] = cfg.q_heading_rad2_s * dt
     q[:, 3] = cfg.q_scale_1_s * dt
-    if cfg.gnss_bias:
+    if n > 4 and spec is not None and spec.bias_phi is not None:
+        phi[:, 4] = phi[:, 5] = spec.bias_phi
+        q[:, 4] = q[:, 5] = spec.bias_q
+    elif n > 4:
         # φ = e^(−Δt/τ);  Q_b = σ_b²·(1 − φ²)   (first-order Gauss–Markov)
         decay = np.exp(-dt / cfg.bias_tau_s)
         phi[:, 4] = phi[:, 5] = decay
@@ -221,17 +242,21 @@ def time_noise(stream: EventStream, cfg: EkfConfig) -> tuple[np.ndarray, np.ndar
     return q, phi
 
 
-def measurement_models(stream: EventStream, cfg: EkfConfig) -> tuple[np.ndarray, np.ndarray]:
+def measurement_models(stream: EventStream, cfg: EkfConfig, spec=None) -> tuple[np.ndarray, np.ndarray]:
     """(H (n_models, 2, n), model index per event (m,)): the position rows for every fix, plus the bias block
-    for GNSS fixes when the state carries ``gnss_bias`` (acoustic fixes do not share it)."""
-    n = cfg.n_state
+    for the GNSS fixes that share the bias (the policy's ``bias_shared``, else every GNSS fix when the config
+    asks for ``gnss_bias``); acoustic fixes never share it."""
+    n = 4 + 2 * has_bias(cfg, spec)
     h = np.zeros((2, n))
     h[0, 0] = h[1, 1] = 1.0
     hg = h.copy()
-    if cfg.gnss_bias:
+    if n > 4:
         hg[0, 4] = hg[1, 5] = 1.0
-    idx = np.where(stream.kind == GNSS, 1, 0).astype(np.int64)
-    return np.stack([h, hg]), idx
+    if spec is not None and spec.bias_shared is not None:
+        shares = np.asarray(spec.bias_shared, bool)
+    else:
+        shares = (stream.kind == GNSS) & (n > 4)
+    return np.stack([h, hg]), shares.astype(np.int64)
 
 
 class EventEKF:
@@ -247,25 +272,21 @@ class EventEKF:
     (7, True)
     """
 
-    def __init__(self, config: EkfConfig | None = None, noise=None, method: str = "kf"):
+    def __init__(self, config: EkfConfig | None = None, noise=None, method: str = "kf", scales: dict | None = None):
         self.config = config
         self.noise = noise
         self.method = method
+        self.scales = scales
 
     def run(self, stream: EventStream, x0_en=None, classes=None, class_at=None, x0=None, P0=None,
-            correct=None) -> FilterRun:
+            r_scale_event: np.ndarray | None = None) -> FilterRun:
         """Filter the whole stream once.
 
         ``x0_en``: (2,) initial east/north (default: the first available fix); ``x0``/``P0``: full prior;
         ``classes``: :class:`~models.fusion.events.ClassTrack` and ``class_at``:
-        :class:`~models.fusion.events.ClassMap`, for per-class noise.
-
-        ``correct``: closed-loop corrector (``adaptive_closed``), called after every accepted update as
-        ``correct(k, x_prior, x, P, nu, S, K)`` (shapes (n,), (n,), (n, n), (2,), (2, 2), (n, 2)); a
-        returned (2,) east/north correction is added to the posterior, which the next prediction then
-        starts from, and is recorded in ``run.correction`` (m, 2) (``None`` or zeros: no change). The
-        covariance is left as the filter computed it. The core then runs as Python (its ``py_func``),
-        calling the same compiled kernels.
+        :class:`~models.fusion.events.ClassMap`, for per-class noise. ``scales`` (at construction):
+        ``{"gnss", "acoustic", "bias"}`` multipliers of the policy's R and bias variance (a method's tuning);
+        ``r_scale_event`` (m,): a further multiplier of each event's R (the BP parameter network's).
         """
         from models.fusion import core
         from models.fusion.noise import FixedNoise
@@ -273,37 +294,37 @@ class EventEKF:
         cfg = self.config or EkfConfig()
         noise = self.noise if self.noise is not None else FixedNoise()
         spec = noise.measurement_noise(stream, classes=classes, class_at=class_at)
-        x, P = initial_state(stream, cfg, x0_en, x0, P0)
-        m, n = len(stream), cfg.n_state
-        q, phi = time_noise(stream, cfg)
-        H, h_idx = measurement_models(stream, cfg)
+        if self.scales:
+            spec = spec.scaled(stream.kind, **{k: float(v) for k, v in self.scales.items()
+                                               if k in ("gnss", "acoustic", "bias")})
+        if r_scale_event is not None:
+            f = np.asarray(r_scale_event, float)
+            if f.shape != (len(stream),) or not np.all(np.isfinite(f) & (f > 0)):
+                raise FilterError(f"r_scale_event must be {len(stream)} positive finite values")
+            if spec.r_event.shape[0] != len(stream):
+                raise FilterError("r_scale_event needs a noise policy that gives R per event")
+            spec = spec.with_fields(r_event=spec.r_event * f[:, None, None])
+        if cfg.outlier == "mixture" and spec.eps_event is None:
+            raise FilterError(f"outlier='mixture' needs a noise policy that gives each fix's contamination; "
+                              f"{type(noise).__name__} does not")
+        m = len(stream)
+        n = 4 + 2 * has_bias(cfg, spec)
+        x, P = initial_state(stream, cfg, x0_en, x0, P0, n_state=n)
+        q, phi = time_noise(stream, cfg, spec)
+        H, h_idx = measurement_models(stream, cfg, spec)
+        consider = np.zeros(n, bool)
+        consider[4:] = cfg.consider_bias
+        eps = spec.eps_event if spec.eps_event is not None else np.zeros(m)
+        kappa = spec.kappa_event if spec.kappa_event is not None else np.ones(m)
         rec = empty_records(m, n)
-        driver = core.run_ekf_events
-        if correct is not None:
-            driver = driver.py_func
-            correct = _checked(correct)
-        driver(stream.kind.astype(np.int64), stream.available, stream.z_m, stream.step_length_m, stream.heading_rad,
-               phi, q, h_idx, H, x, P, cfg.sigma_step_length_m ** 2, cfg.sigma_heading_rad ** 2,
-               OUTLIER_CODES[cfg.outlier], cfg.gate_nis, cfg.huber_k, cfg.joseph, spec.mode, spec.r_event,
-               spec.r_table, spec.map_grid, spec.map_geo, spec.vb_alpha, spec.vb_beta, spec.vb_cap, spec.vb_rho,
-               spec.vb_n_iter, rec["x_prior"], rec["P_prior"], rec["F"], rec["x"], rec["P"], rec["nu"], rec["S"],
-               rec["K"], rec["R"], rec["nis"], rec["weight"], rec["updated"], rec["accepted"], rec["correction"],
-               correct)
+        core.run_ekf_events(stream.kind.astype(np.int64), stream.available, stream.z_m, stream.step_length_m,
+                            stream.heading_rad, phi, q, h_idx, H, x, P, cfg.sigma_step_length_m ** 2,
+                            cfg.sigma_heading_rad ** 2, OUTLIER_CODES[cfg.outlier], cfg.gate_nis, cfg.huber_k,
+                            cfg.joseph, consider, spec.mode, spec.r_event, np.asarray(eps, float),
+                            np.asarray(kappa, float), spec.r_table, spec.map_grid, spec.map_geo, spec.vb_alpha,
+                            spec.vb_beta, spec.vb_cap, spec.vb_rho, spec.vb_n_iter, rec["x_prior"], rec["P_prior"],
+                            rec["F"], rec["x"], rec["P"], rec["nu"], rec["S"], rec["K"], rec["R"], rec["nis"],
+                            rec["weight"], rec["updated"], rec["accepted"])
         # a gated fix leaves no gain
         rec["K"][rec["updated"] & ~rec["accepted"]] = np.nan
         return FilterRun(self.method, stream.t_s, stream.kind, x.copy(), P.copy(), available=stream.available, **rec)
-
-
-def _checked(correct):
-    """``correct`` with its output validated: None, or a finite east/north shift of shape (2,)."""
-
-    def call(k, x_prior, x, P, nu, S, K):
-        dc = correct(k, x_prior, x, P, nu, S, K)
-        if dc is None:
-            return None
-        dc = np.asarray(dc, float)
-        if dc.shape != (2,) or not np.all(np.isfinite(dc)):
-            raise FilterError(f"correct must return a finite (2,) correction, got {dc!r}")
-        return dc
-
-    return call

@@ -184,17 +184,19 @@ class IMMFilter:
     """IMM over environment classes.
 
     ``noise``: a :class:`~models.fusion.noise.PerClassNoise` (fitted; its classes are the modes);
-    ``switch_rate_hz`` λ; ``evidence_weight`` w; ``mu0`` (M,) initial mode probabilities (uniform).
+    ``switch_rate_hz`` λ; ``evidence_weight`` w; ``mu0`` (M,) initial mode probabilities (uniform);
+    ``scales``: ``{"gnss", "acoustic"}`` multipliers of every mode's R (a method's tuning).
     """
 
     def __init__(self, noise, config: EkfConfig | None = None, switch_rate_hz: float = 0.05,
-                 evidence_weight: float = 1.0, mu0=None, method: str = "imm"):
+                 evidence_weight: float = 1.0, mu0=None, method: str = "imm", scales: dict | None = None):
         self.noise = noise
         self.config = config
         self.switch_rate_hz = switch_rate_hz
         self.evidence_weight = evidence_weight
         self.mu0 = mu0
         self.method = method
+        self.scales = scales
 
     def run(self, stream: EventStream, x0_en=None, classes: ClassTrack | None = None, x0=None, P0=None) -> FilterRun:
         """Filter the stream; the result's ``mode_proba`` (m, M) holds the posterior mode probabilities."""
@@ -203,7 +205,9 @@ class IMMFilter:
             self.noise.fit()
         M = self.noise.R_gnss_.shape[0]
         table = np.zeros((3, M, 2, 2))
-        table[GNSS], table[ACOUSTIC] = self.noise.R_gnss_, self.noise.R_acoustic_
+        sc = self.scales or {}
+        table[GNSS] = self.noise.R_gnss_ * float(sc.get("gnss", 1.0))
+        table[ACOUSTIC] = self.noise.R_acoustic_ * float(sc.get("acoustic", 1.0))
         if not (math.isfinite(self.switch_rate_hz) and self.switch_rate_hz >= 0):
             raise FilterError(f"switch_rate_hz must be finite and >= 0, got {self.switch_rate_hz}")
         if classes is not None and classes.n_classes != M:

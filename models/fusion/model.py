@@ -7,10 +7,14 @@ A :class:`FusionModel` holds, for one substation family:
   source), ``kf_quality`` (UERE per GGA quality, GST and acoustic scales),
   ``kf_map`` (R per class, classes from the site map at the truth position),
   ``imm`` (R per class, classes from the online classifier — what it will
-  see when running), ``adaptive`` (UERE per class and GGA quality, acoustic
-  scale per class: :class:`~models.fusion.noise.ClassQualityNoise`),
-- the filter's process-noise settings (:class:`models.fusion.ekf.EkfConfig`),
-- the BP corrector (:class:`models.bp.BPCorrector`), or None,
+  see when running), ``adaptive_nobp`` and its environment-blind twin (the
+  error model in context, :class:`~models.fusion.context.ContextNoise`: white
+  scale, Gauss–Markov bias and outlier prior per class and GGA quality),
+- the filter's process-noise settings (:class:`models.fusion.ekf.EkfConfig`) and, per method, the knobs
+  it was tuned to on the training walks (``tuning``: scales of R, the walking noise, the bias variance),
+- the BP networks: the parameter network and its environment-blind twin (:class:`models.bp_params.ParamNet`,
+  ``adaptive`` / ``adaptive_blind``) and the literal position corrector (:class:`models.bp.BPCorrector`,
+  ``adaptive_correction``), each or None,
 - metadata: the training walks and their hashes, the site names, versions.
 
 Saved as one bundle (:mod:`models.bundle`, kind ``"fusion"``): JSON parameters
@@ -19,15 +23,19 @@ and safetensors arrays, never pickle.
 
 from __future__ import annotations
 
+import math
 from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
 from models.bp import BPCorrector
+from models.bp_params import ParamNet
 from models.bundle import BundleError, load_bundle, save_bundle
+from models.checks import check_bp, check_classifier, check_covariances, check_positive
 from models.environment import EnvironmentClassifier
 from models.fusion.ekf import EkfConfig
-from models.fusion.noise import ClassQualityNoise, FixedNoise, PerClassNoise, QualityNoise
+from models.fusion.context import ContextNoise
+from models.fusion.noise import FixedNoise, PerClassNoise, QualityNoise
 
 __all__ = ["FusionModel", "save_fusion_model", "load_fusion_model"]
 
@@ -41,14 +49,18 @@ class FusionModel:
     quality: QualityNoise
     per_class_map: PerClassNoise
     per_class: PerClassNoise
-    class_quality: ClassQualityNoise | None = None
+    context: ContextNoise | None = None
+    context_blind: ContextNoise | None = None
     ekf: EkfConfig = field(default_factory=EkfConfig)
     bp: BPCorrector | None = None
     meta: dict = field(default_factory=dict)
+    tuning: dict = field(default_factory=dict)
+    bp_params: ParamNet | None = None
+    bp_params_blind: ParamNet | None = None
 
     def adaptive_policy(self):
         """The adaptive methods' noise policy: R per class and GGA quality when the model has it, else per class."""
-        return self.class_quality if self.class_quality is not None else self.per_class
+        return self.context if self.context is not None else self.per_class
 
 
 def _noise_arrays(model: FusionModel) -> dict:
@@ -65,38 +77,65 @@ def save_fusion_model(model: FusionModel, path, overwrite: bool = False):
               "quality": {"uere_m": {str(k): v for k, v in model.quality.uere_m_.items()},
                           "gst_scale": model.quality.gst_scale_, "acoustic_scale": model.quality.acoustic_scale_},
               "per_class": {"combine": model.per_class.combine}, "per_class_map": {"combine": model.per_class_map.combine},
-              "bp": None, "class_quality": model.class_quality.get_state() if model.class_quality else None}
+              "bp": None, "context": model.context.get_state() if model.context else None,
+              "context_blind": model.context_blind.get_state() if model.context_blind else None,
+              "tuning": {m: {k: float(v) for k, v in kn.items()} for m, kn in model.tuning.items()}}
     arrays = {"classifier": cls_arrays, "noise": _noise_arrays(model)}
     if model.bp is not None:
         bp_params, bp_arrays = model.bp.get_state()
         params["bp"] = bp_params
         arrays["bp"] = bp_arrays
+    for key in ("bp_params", "bp_params_blind"):
+        net = getattr(model, key)
+        params[key] = None
+        if net is not None:
+            params[key], arrays[key] = net.get_state()
     return save_bundle(path, "fusion", params, arrays, meta=model.meta, overwrite=overwrite)
 
 
 def load_fusion_model(path) -> FusionModel:
-    """Read a ``fusion`` bundle; a damaged or inconsistent one raises :class:`~models.bundle.BundleError`."""
+    """Read a ``fusion`` bundle; a damaged or inconsistent one raises :class:`~models.bundle.BundleError`.
+
+    Beyond the bundle's hashes, the contents are checked (:mod:`models.checks`): every R a symmetric
+    positive-definite 2×2 matrix of the right count, UEREs and scales positive, the classifier's and the BP
+    network's numbers finite and of the shapes this version uses."""
     b = load_bundle(path, "fusion")
     try:
         p, a = b.params, b.arrays
         clf = EnvironmentClassifier.from_state(p["classifier"], a["classifier"])
+        check_classifier(clf)
         n = a["noise"]
+        k = clf.n_classes_
+        shapes = {"fixed.R_gnss": (2, 2), "fixed.R_acoustic": (2, 2), "map.R_gnss": (k, 2, 2),
+                  "map.R_acoustic": (k, 2, 2), "cls.R_gnss": (k, 2, 2), "cls.R_acoustic": (k, 2, 2)}
+        for name, shape in shapes.items():
+            if name not in n:
+                raise ValueError(f"noise array {name} is missing")
+            if n[name].shape != shape:
+                raise ValueError(f"noise array {name} has shape {n[name].shape}, expected {shape}")
+            check_covariances(f"noise array {name}", n[name])
         fixed = FixedNoise()
         fixed.R_gnss_, fixed.R_acoustic_ = n["fixed.R_gnss"], n["fixed.R_acoustic"]
         q = QualityNoise()
-        q.uere_m_ = {int(k): float(v) for k, v in p["quality"]["uere_m"].items()}
-        q.gst_scale_, q.acoustic_scale_ = float(p["quality"]["gst_scale"]), float(p["quality"]["acoustic_scale"])
-        per_map = PerClassNoise(n_classes=clf.n_classes_, combine=p["per_class_map"]["combine"])
+        q.uere_m_ = {int(c): check_positive(f"UERE of GGA quality {c}", v) for c, v in p["quality"]["uere_m"].items()}
+        q.gst_scale_ = check_positive("GST scale", p["quality"]["gst_scale"])
+        q.acoustic_scale_ = check_positive("acoustic scale", p["quality"]["acoustic_scale"])
+        per_map = PerClassNoise(n_classes=k, combine=p["per_class_map"]["combine"])
         per_map.R_gnss_, per_map.R_acoustic_ = n["map.R_gnss"], n["map.R_acoustic"]
-        per = PerClassNoise(n_classes=clf.n_classes_, combine=p["per_class"]["combine"])
+        per = PerClassNoise(n_classes=k, combine=p["per_class"]["combine"])
         per.R_gnss_, per.R_acoustic_ = n["cls.R_gnss"], n["cls.R_acoustic"]
-        for name, r in n.items():
-            if not (np.all(np.isfinite(r)) and r.shape[-2:] == (2, 2)):
-                raise ValueError(f"noise array {name} is not a finite set of 2×2 matrices")
         bp = BPCorrector.from_state(p["bp"], a["bp"]) if p.get("bp") else None
-        cq = ClassQualityNoise.from_state(p["class_quality"]) if p.get("class_quality") else None
+        if bp is not None:
+            check_bp(bp)
+        nets = {k: ParamNet.from_state(p[k], a[k]) if p.get(k) else None for k in ("bp_params", "bp_params_blind")}
+        ctx = ContextNoise.from_state(p["context"]) if p.get("context") else None
+        ctx_blind = ContextNoise.from_state(p["context_blind"]) if p.get("context_blind") else None
         ekf = EkfConfig(**p["ekf"])
-    except (KeyError, TypeError, ValueError) as exc:
+        tuning = {str(m): {str(k): float(v) for k, v in kn.items()} for m, kn in p.get("tuning", {}).items()}
+        for m, kn in tuning.items():
+            if not all(math.isfinite(v) and v > 0 for v in kn.values()):
+                raise ValueError(f"tuning of {m} holds a non-positive or non-finite knob {kn}")
+    except (KeyError, TypeError, ValueError, AttributeError) as exc:
         raise BundleError(f"{path}: the fusion model is inconsistent ({exc})") from None
     return FusionModel(classifier=clf, fixed=fixed, quality=q, per_class_map=per_map, per_class=per,
-                       class_quality=cq, ekf=ekf, bp=bp, meta=b.meta)
+                       context=ctx, context_blind=ctx_blind, ekf=ekf, bp=bp, meta=b.meta, tuning=tuning, **nets)

@@ -24,8 +24,8 @@ Policies and the methods they serve (``walks.methods``):
     R per environment class and source; the class from a site map
     (:class:`~models.fusion.events.ClassMap`) at the last estimate, or from
     per-event class probabilities (expected R).
-``ClassQualityNoise`` (``adaptive_nobp``, ``adaptive``)
-    the UERE per (class, GGA quality) and the acoustic scale per class.
+``ContextNoise`` (``adaptive_nobp`` and its blind twin; :mod:`models.fusion.context`)
+    a white part, a Gauss–Markov bias and an outlier prior per (class, GGA quality).
 ``VBAdaptiveNoise`` (``aekf``)
     variational-Bayes adaptive KF, diagonal R with inverse-gamma posteriors
     (Särkkä & Nummenmaa 2009, IEEE TAC 54(3), 596–600).
@@ -42,7 +42,7 @@ from features.errors import EnvfuseError
 from features.gnss.positions import ASSUMED_HDOP, UERE_BY_QUALITY_M
 from models.fusion.events import ACOUSTIC, GNSS, ClassMap, ClassTrack, EventStream
 
-__all__ = ["FixedNoise", "QualityNoise", "PerClassNoise", "ClassQualityNoise", "VBAdaptiveNoise", "NoiseError",
+__all__ = ["FixedNoise", "QualityNoise", "PerClassNoise", "VBAdaptiveNoise", "NoiseError",
            "NoiseSpec", "second_moment_m2", "chi2_2_mean", "SCALE_ESTIMATORS"]
 
 
@@ -111,6 +111,10 @@ class NoiseSpec:
     (``r_table`` (3, n_classes, 2, 2) per event kind and class, the class from ``map_grid`` / ``map_geo``) or
     :data:`~models.fusion.core.R_VB` (``vb_alpha``, ``vb_beta``, ``vb_cap`` (3, 2) per event kind and axis,
     ``vb_rho``, ``vb_n_iter``). Unused fields hold empty placeholders of the right type.
+
+    Optional, per event (m,): ``eps_event``, ``kappa_event`` the contamination of each fix's noise (for the
+    filter's ``outlier="mixture"``); ``bias_shared`` which GNSS fixes see the GNSS bias state, with its
+    ``bias_phi``, ``bias_q`` (φ and per-axis Q of the time update; a reset is φ = 0). None: not given.
     """
 
     mode: int
@@ -123,6 +127,34 @@ class NoiseSpec:
     vb_cap: np.ndarray
     vb_rho: float = 1.0
     vb_n_iter: int = 1
+    eps_event: np.ndarray | None = None
+    kappa_event: np.ndarray | None = None
+    bias_shared: np.ndarray | None = None
+    bias_phi: np.ndarray | None = None
+    bias_q: np.ndarray | None = None
+
+    def with_fields(self, **kw) -> "NoiseSpec":
+        """A copy with the given fields replaced."""
+        from dataclasses import replace
+
+        return replace(self, **kw)
+
+    def scaled(self, kind: np.ndarray, gnss: float = 1.0, acoustic: float = 1.0, bias: float = 1.0) -> "NoiseSpec":
+        """A copy with every GNSS and acoustic R multiplied by ``gnss`` / ``acoustic`` (per event, by the
+        events' ``kind`` (m,); also the site map's table and the VB-AKF's starting R and cap) and the bias
+        variance by ``bias`` — the knobs a method's tuning on training walks sets."""
+        r_event = self.r_event
+        if r_event.shape[0]:
+            f = np.where(kind == GNSS, gnss, np.where(kind == ACOUSTIC, acoustic, 1.0))
+            r_event = r_event * f[:, None, None]
+        table = self.r_table.copy()
+        beta, cap = self.vb_beta.copy(), self.vb_cap.copy()
+        for code, f in ((GNSS, gnss), (ACOUSTIC, acoustic)):
+            table[code] *= f
+            beta[code] *= f
+            cap[code] *= f
+        q = None if self.bias_q is None else self.bias_q * bias
+        return self.with_fields(r_event=r_event, r_table=table, vb_beta=beta, vb_cap=cap, bias_q=q)
 
     @classmethod
     def _make(cls, mode, r_event=None, r_table=None, map_grid=None, map_geo=None, **vb):
@@ -388,133 +420,3 @@ class VBAdaptiveNoise:
             cap[code] = float(self.max_ratio) * d
         return NoiseSpec._make(R_VB, vb_alpha=alpha, vb_beta=beta, vb_cap=cap, vb_rho=self.rho,
                                vb_n_iter=int(self.n_iter))
-
-# -- R per (environment class, GGA quality): the adaptive methods' policy ------------------------------------
-#
-# Environment class alone cannot tell an RTK-fixed epoch (centimetres) from a float one (metres) in the same
-# light-occlusion aisle, and the device's own report alone cannot tell that a "fixed" epoch among fire walls is
-# more often wrong than one in the open. So the UERE of σ_axis = UERE·HDOP/√2 (Kaplan & Hegarty 2006, ch. 7) is
-# learnt per (class, GGA quality), UERE² = E[(e² + n²)/HDOP²], and the acoustic covariance is scaled per class,
-# k_c² = E[e'C⁻¹e]/2. A (class, quality) cell with fewer than ``min_samples`` fixes falls back to the quality's
-# value pooled over classes, then to the device table. At run time R is the expectation over the online
-# classifier's probabilities, R = Σ_c p_c R_c (or the most probable class's with ``combine="argmax"``).
-
-
-class ClassQualityNoise:
-    """R per (environment class, GGA quality) for GNSS and per class for the acoustic covariance.
-
-    Parameters
-    ----------
-    n_classes : int
-    min_samples : int
-        Fixes needed in a (class, quality) cell before it gets its own UERE.
-    combine : {"mean", "argmax"}
-
-    Attributes
-    ----------
-    uere_m_ : dict
-        ``{class: {quality: UERE}}``.
-    acoustic_scale_ : ndarray of shape (n_classes,)
-    """
-
-    def __init__(self, n_classes: int = 3, min_samples: int = 20, combine: str = "mean"):
-        self.n_classes = n_classes
-        self.min_samples = min_samples
-        self.combine = combine
-
-    def fit(self, gnss_class, quality, hdop, gnss_errors_m, acoustic_class=None, acoustic_cov_m2=None,
-            acoustic_errors_m=None, prior: QualityNoise | None = None,
-            estimator: str = "mean") -> "ClassQualityNoise":
-        """Fit from training fixes: GNSS class (n,), quality (n,), hdop (n,), errors (n, 2) fix − truth;
-        acoustic class (k,), covariance (k, 2, 2), errors (k, 2). ``prior``: the class-free fit it falls back to.
-        ``estimator``: see :func:`models.fusion.noise.chi2_2_mean`."""
-        if self.combine not in ("mean", "argmax"):
-            raise NoiseError(f"combine must be 'mean' or 'argmax', got {self.combine!r}")
-        prior = prior if prior is not None else QualityNoise().fit()
-        if not hasattr(prior, "uere_m_"):
-            prior.fit()
-        cls = np.asarray(gnss_class, int)
-        q = np.asarray(quality, int)
-        h = np.asarray(hdop, float)
-        h = np.where(np.isfinite(h) & (h > 0), h, prior.assumed_hdop)
-        e = np.asarray(gnss_errors_m, float).reshape(-1, 2)
-        r2 = np.sum(e * e, axis=1)
-        ok = np.isfinite(r2)
-        self.uere_m_ = {}
-        for c in range(self.n_classes):
-            table = dict(prior.uere_m_)
-            for code in np.unique(q):
-                sel = ok & (cls == c) & (q == code)
-                if sel.sum() >= self.min_samples:
-                    # UERE² = E[(e² + n²) / HDOP²]
-                    table[int(code)] = float(math.sqrt(chi2_2_mean(r2[sel] / h[sel] ** 2, estimator)))
-            self.uere_m_[c] = table
-        self.acoustic_scale_ = np.full(self.n_classes, float(prior.acoustic_scale_))
-        if acoustic_errors_m is not None and len(acoustic_errors_m):
-            ac = np.asarray(acoustic_class, int)
-            ea = np.asarray(acoustic_errors_m, float)
-            ca = np.asarray(acoustic_cov_m2, float)
-            good = np.all(np.isfinite(ea), axis=1) & np.all(np.isfinite(ca), axis=(1, 2))
-            d2 = np.full(len(ea), np.nan)
-            d2[good] = np.einsum("ni,nij,nj->n", ea[good], np.linalg.inv(ca[good]), ea[good])
-            for c in range(self.n_classes):
-                sel = good & (ac == c)
-                if sel.sum() >= self.min_samples:
-                    # k² = E[e' C⁻¹ e] / 2
-                    self.acoustic_scale_[c] = float(math.sqrt(chi2_2_mean(d2[sel], estimator) / 2.0))
-        self.assumed_hdop_ = float(prior.assumed_hdop)
-        return self
-
-    def gnss_var_m2(self, quality: np.ndarray, hdop: np.ndarray) -> np.ndarray:
-        """Per-axis variance of each fix under each class, shape (n, n_classes)."""
-        q = np.asarray(quality, int)
-        h = np.asarray(hdop, float)
-        h = np.where(np.isfinite(h) & (h > 0), h, self.assumed_hdop_)
-        out = np.empty((q.size, self.n_classes))
-        for c in range(self.n_classes):
-            u = np.array([self.uere_m_[c].get(int(v), np.nan) for v in q]) if q.size else np.zeros(0)
-            out[:, c] = (u * h) ** 2 / 2.0
-        return out
-
-    def measurement_noise(self, stream: EventStream, classes: ClassTrack | None = None,
-                          class_at=None) -> NoiseSpec:
-        """R of each fix: the per-class variances of its quality and HDOP (GNSS) or the per-class scale of its
-        covariance (acoustic), expected under the class probabilities in force."""
-        if not hasattr(self, "uere_m_"):
-            raise NoiseError("ClassQualityNoise must be fitted before a run")
-        if classes is None:
-            raise NoiseError("ClassQualityNoise needs class evidence (a ClassTrack)")
-        p = _class_weights(classes, stream, self.combine, self.n_classes)
-        r = np.array(stream.cov_m2, copy=True)
-        sel = stream.kind == GNSS
-        if stream.gnss is not None and sel.any():
-            g, i = stream.gnss, stream.index[sel]
-            var = self.gnss_var_m2(g.quality[i], g.hdop[i])
-            known = np.all(np.isfinite(var), axis=1)
-            # R = Σ_c p_c σ²_c I
-            v = np.sum(p[sel] * np.where(np.isfinite(var), var, 0.0), axis=1)
-            rr = r[sel]
-            rr[known] = v[known, None, None] * np.eye(2)
-            r[sel] = rr
-        sel = stream.kind == ACOUSTIC
-        if sel.any():
-            # R = C · Σ_c p_c k_c²
-            r[sel] *= (p[sel] @ self.acoustic_scale_ ** 2)[:, None, None]
-        return NoiseSpec.per_event(r)
-
-    # -- state ------------------------------------------------------------------------------------
-
-    def get_state(self) -> dict:
-        return {"n_classes": self.n_classes, "min_samples": self.min_samples, "combine": self.combine,
-                "uere_m": {str(c): {str(q): u for q, u in t.items()} for c, t in self.uere_m_.items()},
-                "acoustic_scale": self.acoustic_scale_.tolist(), "assumed_hdop": self.assumed_hdop_}
-
-    @classmethod
-    def from_state(cls, state: dict) -> "ClassQualityNoise":
-        self = cls(n_classes=int(state["n_classes"]), min_samples=int(state["min_samples"]), combine=state["combine"])
-        self.uere_m_ = {int(c): {int(q): float(u) for q, u in t.items()} for c, t in state["uere_m"].items()}
-        self.acoustic_scale_ = np.asarray(state["acoustic_scale"], float)
-        self.assumed_hdop_ = float(state["assumed_hdop"])
-        if sorted(self.uere_m_) != list(range(self.n_classes)) or self.acoustic_scale_.shape != (self.n_classes,):
-            raise NoiseError("ClassQualityNoise state does not match its number of classes")
-        return self

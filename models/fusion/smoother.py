@@ -2,7 +2,8 @@
 
 Rauch, Tung & Striebel (1965), AIAA J. 3(8); in the extended form for a
 linearised step model (the extended RTS smoother, Särkkä 2013, *Bayesian
-Filtering and Smoothing*, ch. 9), backwards over the events, k = m − 2 … 0::
+Filtering and Smoothing*, ch. 9), backwards over the events, k = m − 2 … 0
+(the step is :func:`models.fusion.core.rts_step`, compiled)::
 
     # C_k = P_k F'_{k+1} (P⁻_{k+1})⁻¹
     # x^s_k = x_k + C_k (x^s_{k+1} − x⁻_{k+1})
@@ -13,6 +14,10 @@ stores (identity between fixes, the step Jacobian on steps). It needs nothing
 else, so it smooths every method's run, the multiple-model one included — for
 that it smooths the moment-matched mixture (an approximation of the IMM
 smoother of Helmick, Blair & Hoffman 1995, stated as such).
+
+:func:`fixed_lag_smooth` runs the same recursion from the last event within a
+lag back to each event: the estimate ``envfuse run`` can give a few seconds
+late instead of at the end of the walk.
 """
 
 from __future__ import annotations
@@ -21,7 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["SmoothedTrack", "rts_smooth"]
+__all__ = ["SmoothedTrack", "rts_smooth", "fixed_lag_smooth", "smoother_gains"]
 
 
 @dataclass(frozen=True)
@@ -46,30 +51,39 @@ class SmoothedTrack:
         return int(self.t_s.shape[0])
 
 
+def smoother_gains(run) -> np.ndarray:
+    """C_k = P_k F'_{k+1} (P⁻_{k+1})⁻¹ of every event but the last, (m − 1, n, n): solved as
+    (P⁻_{k+1})⁻¹ F_{k+1} P_k, transposed, since P⁻ and P are symmetric (the gains do not depend on the
+    smoothed values, so all at once)."""
+    return np.swapaxes(np.linalg.solve(run.P_prior[1:], run.F[1:] @ run.P[:-1]), 1, 2)
+
+
+def fixed_lag_smooth(run, lag_s: float) -> SmoothedTrack:
+    """Fixed-lag smoothing of a filter run: the estimate at each event from every event up to ``lag_s`` later
+    (Särkkä 2013, §12.5: the RTS recursion run back from the last event within the lag), so the track lags
+    the walk by ``lag_s`` and no more. ``lag_s`` = 0 gives the filter's track; ∞, the RTS smoother's.
+    Returns a :class:`SmoothedTrack` named ``<method>+lag``."""
+    from models.fusion.core import fixed_lag_pass
+
+    if not lag_s >= 0:
+        raise ValueError(f"lag_s must be >= 0, got {lag_s}")
+    m = run.x.shape[0]
+    if m < 2:
+        return SmoothedTrack(f"{run.method}+lag", run.t_s, run.kind, run.x.copy(), run.P.copy())
+    xs, Ps = fixed_lag_pass(np.asarray(run.t_s, float), run.x, run.P, run.x_prior, run.P_prior,
+                            smoother_gains(run), float(lag_s))
+    return SmoothedTrack(f"{run.method}+lag", run.t_s, run.kind, xs, Ps)
+
+
 def rts_smooth(run) -> SmoothedTrack:
     """Smooth a filter run (any object with ``x``, ``P``, ``x_prior``, ``P_prior``, ``F``, ``t_s``, ``kind``).
 
     Returns a :class:`SmoothedTrack` named ``<method>+rts``; its last row equals the filter's.
     """
-    x, P, xp, Pp, F = run.x, run.P, run.x_prior, run.P_prior, run.F
-    m = x.shape[0]
-    xs = np.empty_like(x)
-    Ps = np.empty_like(P)
-    xs[-1], Ps[-1] = x[-1], P[-1]
-    if m < 2:
-        return SmoothedTrack(f"{run.method}+rts", run.t_s, run.kind, xs, Ps)
-    # C_k = P_k F'_{k+1} (P⁻_{k+1})⁻¹ for all k at once (the gains do not depend on the smoothed values):
-    # solved as (P⁻_{k+1})⁻¹ F_{k+1} P_k, transposed, since P⁻ and P are symmetric
-    C = np.swapaxes(np.linalg.solve(Pp[1:], F[1:] @ P[:-1]), 1, 2)
-    xs_next = xs[-1]
-    Ps_next = Ps[-1]
-    for k in range(m - 2, -1, -1):
-        Ck = C[k]
-        # x^s = x + C (x^s_{k+1} − x⁻_{k+1})
-        xk = x[k] + Ck @ (xs_next - xp[k + 1])
-        # P^s = P + C (P^s_{k+1} − P⁻_{k+1}) C'
-        Pk = P[k] + Ck @ (Ps_next - Pp[k + 1]) @ Ck.T
-        Pk = 0.5 * (Pk + Pk.T)
-        xs[k], Ps[k] = xk, Pk
-        xs_next, Ps_next = xk, Pk
+    from models.fusion.core import rts_pass
+
+    x, P = run.x, run.P
+    if x.shape[0] < 2:
+        return SmoothedTrack(f"{run.method}+rts", run.t_s, run.kind, x.copy(), P.copy())
+    xs, Ps = rts_pass(x, P, run.x_prior, run.P_prior, smoother_gains(run))
     return SmoothedTrack(f"{run.method}+rts", run.t_s, run.kind, xs, Ps)
