@@ -184,8 +184,9 @@ def test_graph_methods_end_to_end_on_a_simulated_walk(walk_dir, tmp_path):
     again = load_fusion_model(tmp_path / "m")
     assert graph_model_of(again).get_state() == gm.get_state()
     names = method_names()
-    at = names.index("adaptive_closed") + 1
-    assert names[at: at + len(GRAPH_METHODS)] == GRAPH_METHODS
+    at = names.index(GRAPH_METHODS[0])
+    assert names[at: at + len(GRAPH_METHODS)] == GRAPH_METHODS      # one block, after the Kalman methods
+    assert at > names.index("adaptive_correction")
     tracks, skipped = run_methods(again, walk_inputs(data, again.classifier), ("gnss",) + GRAPH_METHODS)
     assert skipped == {}
     assert "ekf_rtk_pdr+rts" in tracks
