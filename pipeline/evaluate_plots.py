@@ -30,7 +30,7 @@ def _style(m: str) -> dict:
 
 def plot_report(results: list[dict], pooled: list[dict], out_dir: Path) -> list[Path]:
     """Write ``trajectory_<walk>.png`` (first walk of each site), ``error_time_<walk>.png``, ``error_cdf.png``
-    and ``error_by_class.png``; returns their paths."""
+    and ``error_by_class.png`` (not when no epoch has a known truth class); returns their paths."""
     import matplotlib.pyplot as plt
 
     out_dir = Path(out_dir)
@@ -64,6 +64,8 @@ def plot_report(results: list[dict], pooled: list[dict], out_dir: Path) -> list[
 
     methods = [m for m in dict.fromkeys(r["method"] for r in pooled) if not m.endswith("+rts")]
     by = {(r["method"], r["env_class"]): r for r in pooled}
+    if not any(c in ENV_CLASSES for _, c in by):
+        return paths            # no epoch of a known class (a drive's reference): no bars to draw
     fig, ax = plt.subplots(figsize=(max(8, 0.9 * len(methods) + 2), 5))
     width = 0.8 / len(ENV_CLASSES)
     for k, c in enumerate(ENV_CLASSES):
@@ -84,10 +86,12 @@ def plot_report(results: list[dict], pooled: list[dict], out_dir: Path) -> list[
 
 
 def _class_band(ax, truth: dict) -> None:
+    """Shade the time axis by the truth class; epochs of unknown class (code < 0, a drive's reference) stay white."""
     t, c = truth["t_s"], truth["cls"]
     edges = np.flatnonzero(np.diff(c)) + 1
     for a, b in zip(np.r_[0, edges], np.r_[edges, len(t)]):
-        ax.axvspan(t[a], t[min(b, len(t) - 1)], color=CLASS_COLOURS[ENV_CLASSES[c[a]]], lw=0)
+        if c[a] >= 0:
+            ax.axvspan(t[a], t[min(b, len(t) - 1)], color=CLASS_COLOURS[ENV_CLASSES[c[a]]], lw=0)
 
 
 def _trajectory(res: dict, path: Path) -> Path:
@@ -146,7 +150,11 @@ def _error_time(res: dict, path: Path) -> Path:
     ax.set_xlabel("walk time (s)")
     ax.set_ylabel("horizontal error (m)")
     handles, _ = ax.get_legend_handles_labels()
+    known = np.asarray(res["series"]["_truth"]["cls"]) >= 0
     handles += [Patch(color=CLASS_COLOURS[c], label=f"truth: {c}") for c in ENV_CLASSES]
+    if not known.all():
+        handles.append(Patch(facecolor="white", edgecolor="0.6", label="truth class unknown"))
     ax.legend(handles=handles, fontsize=7, loc="center left", bbox_to_anchor=(1.01, 0.5))
-    ax.set_title(f"{res['walk']}: error over time, background = truth class")
+    ax.set_title(f"{res['walk']}: error over time, background = truth class"
+                 + ("" if known.any() else " (none known: white)"))
     return save_figure(fig, path)
