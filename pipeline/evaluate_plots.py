@@ -128,7 +128,7 @@ def _trajectory(res: dict, path: Path) -> Path:
     ax.set_xlabel("east (m)")
     ax.set_ylabel("north (m)")
     handles, labels = ax.get_legend_handles_labels()
-    if site is not None:
+    if site is not None and site.layout:
         handles.append(Patch(facecolor="#dddddd", edgecolor="#999999", label="solid structure"))
     ax.legend(handles=handles, fontsize=7, loc="center left", bbox_to_anchor=(1.01, 0.5))
     ax.set_title(f"{res['walk']}: trajectories against truth")
