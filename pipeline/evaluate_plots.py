@@ -29,7 +29,8 @@ def _style(m: str) -> dict:
 
 
 def plot_report(results: list[dict], pooled: list[dict], out_dir: Path) -> list[Path]:
-    """Write ``trajectory_<walk>.png`` (first walk of each site), ``error_time_<walk>.png``, ``error_cdf.png``
+    """Write ``trajectory_<walk>.png`` (first walk of each site), ``error_time_<walk>.png``, ``classes_<walk>.png``
+    (the environment model's classes along the track), ``error_cdf.png``
     and ``error_by_class.png`` (not when no epoch has a known truth class); returns their paths."""
     import matplotlib.pyplot as plt
 
@@ -43,6 +44,8 @@ def plot_report(results: list[dict], pooled: list[dict], out_dir: Path) -> list[
         tag = res["walk"].replace("/", "_")
         paths.append(_trajectory(res, out_dir / f"trajectory_{tag}.png"))
         paths.append(_error_time(res, out_dir / f"error_time_{tag}.png"))
+        if "_windows" in res["series"]:
+            paths.append(_classes(res, out_dir / f"classes_{tag}.png"))
     fig, ax = plt.subplots(figsize=(8, 5.5))
     pools: dict = {}
     for res in results:
@@ -83,6 +86,22 @@ def plot_report(results: list[dict], pooled: list[dict], out_dir: Path) -> list[
     ax.legend(fontsize=8)
     paths.append(save_figure(fig, out_dir / "error_by_class.png"))
     return paths
+
+
+def _classes(res: dict, path: Path) -> Path:
+    """The classifier's classes along the truth track, with the GNSS fixes' error per window beside them."""
+    from pipeline.env_error import window_error
+    from pipeline.env_plots import plot_class_track
+
+    w = res["series"]["_windows"]
+    err = None
+    g = res["series"].get("gnss")
+    if g is not None:
+        t_end = np.asarray(w["t_s"], float) + 1.0
+        err = {"t_s": w["t_s"], "err_m": window_error(t_end, g["t_s"], g["err_m"]),
+               "label": "GNSS fixes: mean error per window"}
+    return plot_class_track(res["series"]["_truth"], w["t_s"], {"environment model": w["proba"]}, path, err,
+                            f"{res['walk']}: environment classes along the truth track")
 
 
 def _class_band(ax, truth: dict) -> None:
