@@ -5,8 +5,9 @@
 folder that ``run``, ``evaluate`` and ``train fusion`` read like any walk (:mod:`walks.reader`):
 
 - ``site.toml``: the site's name and origin. The origin is the **median per-epoch fix** of the
-  converted span (:func:`features.gnss.wls.solve_epochs`, every coordinate's median in ECEF, then
-  geodetic) — never the reference, which a device would not have; no beacons. The grid spans the fixes.
+  converted span (:func:`features.gnss.wls.solve_epochs`; median east, north, up in the local frame,
+  :func:`site_origin_from_fixes`) — never the reference, which a device would not have; no beacons.
+  The grid spans the fixes.
 - ``walk.toml``: ``name``, ``site``, ``duration_s``, ``[gnss_pseudoranges]`` (file, corrections),
   ``[odometry]`` (file), the source files, and ``source_t0_s``, the source's time of the walk's
   ``t_s = 0`` (the start of the converted span). smartLoc states only relative times, so
@@ -66,12 +67,16 @@ class ConvertedWalk:
 
 
 def site_origin_from_fixes(ecef_m: np.ndarray) -> Origin:
-    """The median of the fixes ``ecef_m`` (n, 3) per ECEF coordinate, as a geodetic origin (NaN rows ignored)."""
+    """The median fix of ``ecef_m`` (n, 3) as a geodetic origin (NaN rows ignored): the median east, north and up
+    of the fixes in the local frame at their mean, so that the fixes' median is the origin of the site's ENU
+    frame (a median per ECEF axis is not: ECEF axes are tilted against the local ones)."""
     ok = np.all(np.isfinite(ecef_m), axis=1)
     if not ok.any():
         raise DataError("no epoch could be solved, so the site has no origin (need >= 4 satellites at one epoch)")
-    x, y, z = np.median(ecef_m[ok], axis=0)
-    lat, lon, alt = pymap3d.ecef2geodetic(x, y, z)
+    x = ecef_m[ok]
+    lat0, lon0, alt0 = pymap3d.ecef2geodetic(*np.mean(x, axis=0))
+    e, n, u = pymap3d.ecef2enu(x[:, 0], x[:, 1], x[:, 2], lat0, lon0, alt0)
+    lat, lon, alt = pymap3d.enu2geodetic(np.median(e), np.median(n), np.median(u), lat0, lon0, alt0)
     return Origin(lat_deg=float(lat), lon_deg=float(lon), alt_m=float(alt))
 
 
