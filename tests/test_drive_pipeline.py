@@ -211,3 +211,24 @@ def test_convert_run_evaluate_end_to_end(slices, tmp_path):
     assert float(g["mean_m"]) == pytest.approx(np.mean(np.hypot(p.east_m - tg_e, p.north_m - tg_n)), rel=1e-5)
     assert len(list(rep.glob("classes_*.png"))) == 1
     assert not (rep / "error_by_class.png").exists()              # no epoch of a known class
+
+
+def test_readme_drive_commands_parse():
+    """The README's drive block names options that exist (bench/smartloc_study.py does the same through the
+    library; here each line must parse as written, so the block cannot drift from the CLI)."""
+    import re
+    import shlex
+    from pathlib import Path
+
+    from pipeline.cli import build_parser
+
+    readme = (Path(__file__).resolve().parents[1] / "README.md").read_text()
+    block = re.search(r"```\n(.*?)```", readme.split("## A real drive: smartLoc", 1)[1], re.S).group(1)
+    lines = [line for line in block.splitlines() if line.strip()]
+    assert len(lines) == 7 and lines[0].startswith("envfuse convert smartloc")
+    parser = build_parser()
+    for line in lines:
+        argv = shlex.split(line)
+        assert argv[0] == "envfuse"
+        args = parser.parse_args(argv[1:])
+        assert callable(args.func)
