@@ -1,7 +1,7 @@
 """Fusion filter speed: PDR steps (and events) per wall second for each method on a 10-minute walk, one core.
 
 The walk is synthetic (``tests/fusion_synth.py``, seed 1: 1.8 steps/s, GNSS
-at 5 Hz, acoustic fixes every 0.8 s frame — the device rates of DESIGN.md §4
+at 5 Hz, acoustic fixes every 0.8 s frame — the device rates of docs/design.md §4
 — so about 3.5 fixes per step: 1,080 steps and ~4,800 events in all), and the
 same walk again with GNSS at 1 Hz to show how the rate of fixes, not of
 steps, sets the cost. Each method is timed best-of-``REPEATS`` because this

@@ -4,7 +4,7 @@ Simulates a static capture in every survey cell of a generated site (the same
 work as ``envfuse simulate survey`` does for the GNSS stream), times the
 simulation and the NMEA formatting, and prints the calibration figures:
 per-class medians (untracked share, attenuation, C/N0, fix error), LOS/NLOS
-C/N0 against the smartLoc figures of DESIGN.md §6, and error by fix quality.
+C/N0 against the smartLoc figures of docs/design.md §6, and error by fix quality.
 
 Usage: .venv/bin/python bench/bench_gnss_sim.py [--site-seed 1] [--cells 0 (all)] [--capture-s 30] [--walk-s 600]
 """

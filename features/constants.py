@@ -47,10 +47,10 @@ BOLTZMANN_DBW_HZ_K = -228.6
 """Boltzmann's constant, dBW/(Hz·K)."""
 
 ELEVATION_MASK_DEG = 10.0
-"""Default elevation mask for features and environment truth, degrees (DESIGN.md §5)."""
+"""Default elevation mask for features and environment truth, degrees (docs/design.md §5)."""
 
 AUDIO_FS_HZ = 48_000
-"""Sample rate of envfuse audio, Hz (DESIGN.md §4)."""
+"""Sample rate of envfuse audio, Hz (docs/design.md §4)."""
 
 SPEED_OF_SOUND_0C_M_S = 331.3
 """Speed of sound in dry air at 0 °C, m/s; c(T) = 331.3·sqrt(1 + T/273.15) (Cramer 1993, ideal-gas form)."""

@@ -1,6 +1,6 @@
 """The shared schema: the 14 environment features in their fixed order, and the class names.
 
-``models`` imports only this module of ``features`` (STYLE.md). The names are
+``models`` imports only this module of ``features`` (docs/style.md). The names are
 written out here, not imported from the sensor packages, so that importing the
 schema costs nothing; ``tests/test_schema.py`` checks that they equal
 :data:`features.gnss.features.FEATURE_COLUMNS` and
@@ -17,11 +17,11 @@ from features.site import ENV_CLASSES
 __all__ = ["GNSS_FEATURES", "ACOUSTIC_FEATURES", "FEATURES", "ENV_CLASSES", "MODALITIES", "modality_columns"]
 
 GNSS_FEATURES = ("att_mean_db", "att_std_db", "fluct_per_s", "invisible_ratio", "dop_growth")
-"""The five GNSS features of DESIGN.md §5 (μ, σ, β, ζ, λ), in order."""
+"""The five GNSS features of docs/design.md §5 (μ, σ, β, ζ, λ), in order."""
 
 ACOUSTIC_FEATURES = ("mean_excess_delay_ms", "rms_delay_ms", "delay_kurtosis", "delay_skewness", "rician_k_db",
                      "gain_mean_db", "gain_rms_db", "gain_kurtosis", "gain_skewness")
-"""The nine acoustic CIR features of DESIGN.md §5, in order."""
+"""The nine acoustic CIR features of docs/design.md §5, in order."""
 
 FEATURES = GNSS_FEATURES + ACOUSTIC_FEATURES
 """All 14 features: the column order of every feature matrix, library row and model."""

@@ -1,6 +1,6 @@
 """The site description ``site.toml``: frozen dataclasses, validated on load.
 
-Format (DESIGN.md §4)::
+Format (docs/design.md §4)::
 
     name = "sim-0007"
     device_height_m = 1.0
@@ -33,7 +33,7 @@ __all__ = [
 ]
 
 ENV_CLASSES = ("open", "light", "heavy")
-"""Environment class names, in order of increasing occlusion (DESIGN.md §4)."""
+"""Environment class names, in order of increasing occlusion (docs/design.md §4)."""
 
 BOX_KINDS = ("transformer", "firewall", "building", "gantry", "equipment")
 
@@ -113,7 +113,7 @@ class Grid:
 
 @dataclass(frozen=True)
 class AcousticConfig:
-    """Beacon chirp and TDMA frame parameters (defaults: DESIGN.md §6)."""
+    """Beacon chirp and TDMA frame parameters (defaults: docs/design.md §6)."""
 
     f0_hz: float = 17_000.0
     f1_hz: float = 23_000.0

@@ -1,4 +1,4 @@
-"""Walk logs and survey cells on disk: ``walk.toml`` / ``cell.toml`` metadata (DESIGN.md §4).
+"""Walk logs and survey cells on disk: ``walk.toml`` / ``cell.toml`` metadata (docs/design.md §4).
 
 A walk directory holds ``walk.toml``, ``gnss.nmea``, ``audio.wav``, ``imu.csv``
 and optionally ``truth.csv``; each stream is described by its own table in
@@ -156,37 +156,52 @@ class Truth:
 def read_truth(path: str | os.PathLike) -> Truth:
     """Read ``truth.csv`` (t_s, east_m, north_m, env_class; optional blocked_sky_share).
 
-    ``env_class`` is a name of :data:`~features.site.ENV_CLASSES` or ``unknown`` (code :data:`UNKNOWN_CLASS`);
-    times must increase strictly and every number be finite.
+    ``env_class`` is a name of :data:`~features.site.ENV_CLASSES` or ``unknown`` (code :data:`UNKNOWN_CLASS`).
+    Refused with one :class:`~features.errors.DataError` naming the file and, for a bad row, its line: a
+    file that is not UTF-8 text, without the columns, with fewer than two rows, a non-finite number (NaN, inf) or
+    an unknown class, or whose times do not increase (truth is interpolated in time).
     """
     path = Path(path)
     if path.is_dir():
         path = path / "truth.csv"
     try:
-        with open(path, newline="") as fh:
-            rows = list(csv.DictReader(fh))
+        with open(path, newline="", encoding="utf-8") as fh:
+            reader = csv.DictReader(fh)
+            header = reader.fieldnames or []
+            rows = list(reader)
     except FileNotFoundError:
         raise DataError(f"{path}: file not found") from None
+    except UnicodeDecodeError:
+        raise DataError(f"{path}: not a text CSV file (not UTF-8)") from None
+    except csv.Error as exc:
+        raise DataError(f"{path}: not a CSV file ({exc})") from None
     need = {"t_s", "east_m", "north_m", "env_class"}
-    if not rows or not need <= set(rows[0]):
-        raise DataError(f"{path}: needs columns {sorted(need)}")
-    try:
-        t = np.array([float(r["t_s"]) for r in rows])
-        e = np.array([float(r["east_m"]) for r in rows])
-        n = np.array([float(r["north_m"]) for r in rows])
-        share = (np.array([float(r["blocked_sky_share"]) for r in rows])
-                 if "blocked_sky_share" in rows[0] else None)
-    except (ValueError, KeyError, TypeError) as exc:
-        raise DataError(f"{path}: malformed row ({exc})") from None
+    if not need <= set(header):
+        raise DataError(f"{path}: needs columns {sorted(need)}, found {sorted(h for h in header if h)[:8]}")
+    if len(rows) < 2:
+        raise DataError(f"{path}: has the columns but {'no rows' if not rows else 'one row'}; truth is "
+                        "interpolated in time and needs at least two")
+    has_share = "blocked_sky_share" in header
     names = {c: k for k, c in enumerate(ENV_CLASSES)} | {UNKNOWN_CLASS_NAME: UNKNOWN_CLASS}
-    bad = next((i for i, r in enumerate(rows) if r["env_class"] not in names), None)
-    if bad is not None:
-        raise DataError(f"{path}: row {bad + 2}: env_class {rows[bad]['env_class']!r} is none of "
-                        f"{sorted(names)}")
-    c = np.array([names[r["env_class"]] for r in rows], dtype=int)
-    if not (np.all(np.isfinite(t)) and np.all(np.isfinite(e)) and np.all(np.isfinite(n))):
-        raise DataError(f"{path}: t_s, east_m and north_m must be finite numbers")
-    if len(t) > 1 and np.any(np.diff(t) <= 0):
-        k = int(np.flatnonzero(np.diff(t) <= 0)[0])
-        raise DataError(f"{path}: row {k + 3}: t_s {t[k + 1]:g} does not follow {t[k]:g} (times must increase)")
-    return Truth(t, e, n, c, share)
+    t, e, n, share = (np.empty(len(rows)) for _ in range(4))
+    c = np.empty(len(rows), int)
+    for i, r in enumerate(rows):
+        line = i + 2
+        try:
+            vals = [float(r[k]) for k in ("t_s", "east_m", "north_m")]
+            sh = float(r["blocked_sky_share"]) if has_share and r["blocked_sky_share"] not in ("", None) else np.nan
+        except (TypeError, ValueError):
+            raise DataError(f"{path}: line {line}: t_s, east_m and north_m must be numbers, got "
+                            f"{[r.get(k) for k in ('t_s', 'east_m', 'north_m')]}") from None
+        if not all(np.isfinite(vals)):
+            raise DataError(f"{path}: line {line}: non-finite value in {vals} (truth must be finite)")
+        if r["env_class"] not in names:
+            raise DataError(f"{path}: line {line}: env_class {r['env_class']!r} is not one of {list(names)}")
+        t[i], e[i], n[i] = vals
+        c[i] = names[r["env_class"]]
+        share[i] = sh
+    bad = np.flatnonzero(np.diff(t) <= 0)
+    if bad.size:
+        raise DataError(f"{path}: line {int(bad[0]) + 3}: t_s {t[bad[0] + 1]:g} does not increase "
+                        f"(previous {t[bad[0]]:g})")
+    return Truth(t, e, n, c, share if has_share else None)

@@ -1,4 +1,4 @@
-"""The fingerprint library and survey ingestion (DESIGN.md §2, §4). Imports only :mod:`features`.
+"""The fingerprint library and survey ingestion (docs/design.md §2, §4). Imports only :mod:`features`.
 
 Which module to open for what:
 

@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import contextlib
 import csv
+import functools
 import json
 import os
 import sqlite3
@@ -67,6 +68,17 @@ def _same_params(stored_json: str, params: Mapping) -> bool:
     except (TypeError, ValueError):
         return False
     return stored == json.loads(json.dumps(dict(params)))
+
+
+def _reads(method):
+    """A read of the library: an SQLite error (a damaged file) becomes one :class:`LibraryError` naming it."""
+    @functools.wraps(method)
+    def wrapper(self, *args, **kwargs):
+        try:
+            return method(self, *args, **kwargs)
+        except sqlite3.DatabaseError as exc:
+            raise LibraryError(f"{self.path}: cannot read the library ({exc}); the file is damaged") from None
+    return wrapper
 
 
 class FingerprintLibrary(ClusteringRunsMixin):
@@ -192,6 +204,7 @@ class FingerprintLibrary(ClusteringRunsMixin):
     def schema_version(self) -> int:
         return int(self._conn.execute("PRAGMA user_version").fetchone()[0])
 
+    @_reads
     def sites(self) -> list[str]:
         """Names of the sites in the library, sorted."""
         return [r[0] for r in self._conn.execute("SELECT name FROM sites ORDER BY name")]
@@ -250,6 +263,28 @@ class FingerprintLibrary(ClusteringRunsMixin):
                                (site_id, name, description, text, int(bool(calibrated)), now_utc()))
             return int(cur.lastrowid)
 
+    def recalibrate_receiver(self, site: str, name: str, cn0_reference: Mapping) -> None:
+        """Store a calibrated C/N0 reference for receiver ``name`` of ``site``, stored until now with the
+        uncalibrated default (a calibrated one is never changed: its cells were computed with it). The
+        cells computed with the old reference keep it in their feature parameters, so the next build sees
+        them as stale and recomputes them (``--replace``)."""
+        Cn0Reference.from_dict(dict(cn0_reference))
+        try:
+            text = json.dumps(dict(cn0_reference), sort_keys=True, allow_nan=False)
+        except (TypeError, ValueError) as exc:
+            raise LibraryError(f"receiver {name!r}: C/N0 reference is not plain JSON ({exc})") from None
+        with self._transaction() as conn:
+            site_id = self._site_id(site)
+            row = conn.execute("SELECT receiver_id, cn0_calibrated FROM receivers WHERE site_id = ? AND name = ?",
+                               (site_id, name)).fetchone()
+            if row is None:
+                raise LibraryError(f"{self.path}: site {site!r} has no receiver {name!r}")
+            if row[1]:
+                raise LibraryError(f"{self.path}: receiver {name!r} of site {site!r} is already calibrated")
+            conn.execute("UPDATE receivers SET cn0_reference_json = ?, cn0_calibrated = 1 WHERE receiver_id = ?",
+                         (text, int(row[0])))
+
+    @_reads
     def receiver(self, site: str, name: str) -> ReceiverRecord | None:
         """The stored receiver ``name`` of ``site``, or None."""
         row = self._conn.execute(
@@ -372,6 +407,7 @@ class FingerprintLibrary(ClusteringRunsMixin):
         self._site_id(site)
         return f" WHERE {alias}.name = ?", (site,)
 
+    @_reads
     def cells(self, site: str | None = None) -> np.ndarray:
         """Stored cells as a structured array, ordered by site and cell id.
 
@@ -390,6 +426,22 @@ class FingerprintLibrary(ClusteringRunsMixin):
         kinds = "UUUffUfUfUi"
         return structured_rows(rows, names, kinds)
 
+    @_reads
+    def cell_feature_params(self, site: str | None = None) -> dict:
+        """The feature parameters each stored cell was computed with (window, hop, receiver, C/N0 reference),
+        keyed by (site, cell_id)."""
+        where, args = self._where_site(site)
+        rows = self._conn.execute("SELECT s.name, c.cell_id, c.feature_params_json FROM cells c JOIN sites s "
+                                  "USING (site_id)" + where, args).fetchall()
+        out = {}
+        for name, cell_id, text in rows:
+            try:
+                out[(str(name), str(cell_id))] = json.loads(text) if text else {}
+            except ValueError:
+                out[(str(name), str(cell_id))] = {}
+        return out
+
+    @_reads
     def samples(self, site: str | None = None) -> np.ndarray:
         """Stored samples as a structured array (n_samples,), ordered by site, cell id and t_s.
 
@@ -411,6 +463,7 @@ class FingerprintLibrary(ClusteringRunsMixin):
         return structured_rows(rows, names, kinds)
 
     # ---------------------------------------------------------------- export
+    @_reads
     def export_csv(self, out, site: str | None = None) -> int:
         """Write every sample (of ``site``) as CSV with :data:`EXPORT_COLUMNS`; returns the number of rows.
 

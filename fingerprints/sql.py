@@ -1,4 +1,4 @@
-"""The fingerprint library's SQLite schema (DESIGN.md §4): tables, feature order, version.
+"""The fingerprint library's SQLite schema (docs/design.md §4): tables, feature order, version.
 
 Plain tables and columns, so ``sqlite3 FP.sqlite`` and ``sqlite-utils`` users can
 query a library without envfuse, e.g.::
@@ -72,10 +72,10 @@ APPLICATION_ID = 0x45465031
 """``PRAGMA application_id`` marking an envfuse fingerprint library (ASCII ``EFP1``)."""
 
 GNSS_FEATURES: tuple[str, ...] = tuple(_GNSS_FEATURES)
-"""The five GNSS features, DESIGN.md §5 order (from :mod:`features.schema`)."""
+"""The five GNSS features, docs/design.md §5 order (from :mod:`features.schema`)."""
 
 ACOUSTIC_FEATURES: tuple[str, ...] = tuple(_CIR_FEATURES)
-"""The nine acoustic CIR features, DESIGN.md §5 order (from :mod:`features.schema`)."""
+"""The nine acoustic CIR features, docs/design.md §5 order (from :mod:`features.schema`)."""
 
 FEATURES: tuple[str, ...] = tuple(_ALL_FEATURES)
 """The 14 features in the library's fixed order: the columns of ``samples`` and of every feature matrix.

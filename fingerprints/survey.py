@@ -1,4 +1,4 @@
-"""Ingest a survey directory into a fingerprint library (DESIGN.md §4, §5).
+"""Ingest a survey directory into a fingerprint library (docs/design.md §4, §5).
 
 A survey is ``site.toml`` plus ``cells/<cell_id>/{gnss.nmea, audio.wav,
 cell.toml}``. :func:`build_library` computes, for every cell, the 14 features
@@ -75,6 +75,10 @@ __all__ = ["SurveyConfig", "SurveyWarning", "BuildReport", "build_library", "cal
 
 _DEFAULT_FILES = {"gnss": "gnss.nmea", "audio": "audio.wav"}
 
+MIN_GNSS_EPOCHS = 2
+"""Fewest NMEA epochs in a window for its GNSS features to count as available: one epoch has no C/N0 series,
+so no fluctuation rate β and no time spread (a capture of one epoch is recorded as a missing GNSS stream)."""
+
 
 class SurveyWarning(UserWarning):
     """Something a survey build did that the user should know: a missing stream, an uncalibrated C/N0 reference."""
@@ -116,6 +120,7 @@ class BuildReport:
     n_samples: int
     missing: dict = field(default_factory=dict)
     receivers: dict = field(default_factory=dict)
+    empty: tuple = ()
 
     def summary(self) -> str:
         rx = ", ".join(f"{k} ({'calibrated' if v else 'DEFAULT C/N0 reference'})" for k, v in self.receivers.items())
@@ -125,6 +130,9 @@ class BuildReport:
             items = [f"{c} {'+'.join(s)}" for c, s in self.missing.items()]
             more = f" and {len(items) - 10} more cells" if len(items) > 10 else ""
             text += f"; missing streams in {len(items)} cells: " + ", ".join(items[:10]) + more
+        if self.empty:
+            more = f" and {len(self.empty) - 10} more" if len(self.empty) > 10 else ""
+            text += f"; {len(self.empty)} cells stored without any window: " + ", ".join(self.empty[:10]) + more
         return text
 
 
@@ -185,6 +193,22 @@ def _plan_cell(cell_dir: Path, default_receiver: str) -> _CellPlan:
         gnss_sha256=hashes.get("gnss"), audio_sha256=hashes.get("audio"))
     receiver = str(walk.streams.get("gnss", {}).get("receiver") or default_receiver)
     return _CellPlan(walk, capture, receiver, paths)
+
+
+def _check_window(plans: list, config: SurveyConfig, survey_dir) -> None:
+    """Refuse a window longer than every capture (no cell would get a sample); warn for the cells it exceeds."""
+    durations = {p.capture.cell_id: p.capture.duration_s for p in plans if p.capture.duration_s is not None}
+    if not durations:
+        return
+    short = sorted(c for c, d in durations.items() if d < config.window_s)
+    if len(short) == len(plans):
+        raise ConfigError(f"{survey_dir}: --window-s {config.window_s:g} is longer than every capture (the longest "
+                          f"lasts {max(durations.values()):g} s): no window would fit in any cell; use a window no "
+                          "longer than the captures")
+    if short:
+        warnings.warn(f"{len(short)} cells are captured for less than one {config.window_s:g} s window and get no "
+                      f"sample: {', '.join(short[:10])}{' ...' if len(short) > 10 else ''}", SurveyWarning,
+                      stacklevel=3)
 
 
 def _tracked_samples(sky, mask_deg: float) -> tuple[np.ndarray, np.ndarray]:
@@ -269,12 +293,16 @@ def _gnss_table(plan: _CellPlan, reference: Cn0Reference, config: SurveyConfig):
 
 
 def _audio_rows(plan: _CellPlan, site, config: SurveyConfig) -> list[dict]:
-    from features.acoustic.audio import audio_info
+    from features.acoustic.audio import audio_info, require_beacon_band
     from features.acoustic.detection import DetectorConfig
     from features.acoustic.positions import PositionConfig
 
-    if audio_info(plan.paths["audio"]).n_frames == 0:
-        raise DataError("holds no audio samples")
+    if not site.beacons:
+        if audio_info(plan.paths["audio"]).n_frames == 0:
+            raise DataError("holds no audio samples")
+    else:
+        require_beacon_band(plan.paths["audio"], min(b.f0_hz if b.f0_hz is not None else site.acoustic.f0_hz
+                                                     for b in site.beacons))
     timing = timing_from_walk(plan.walk, site, where=plan.walk.directory / "cell.toml")
     # a survey capture is static: no walking-speed prior (as the CLI does for a cell.toml)
     positions = PositionConfig(max_clock_offset_s=timing.start_uncertainty_s + 0.05, motion_speed_m_s=0.0)
@@ -309,7 +337,8 @@ def _merge(gnss: dict | None, audio: list[dict] | None, config: SurveyConfig, du
             cols[k].append(float(gnss[k][i]) if i >= 0 else math.nan)
         for k in GNSS_COUNTS:
             cols[k].append(int(gnss[k][i]) if i >= 0 else 0)
-        cols["gnss_available"].append(int(i >= 0 and gnss["n_pairs_in_view"][i] > 0))
+        cols["gnss_available"].append(int(i >= 0 and gnss["n_pairs_in_view"][i] > 0
+                                          and gnss["n_epochs"][i] >= MIN_GNSS_EPOCHS))
         row = audio[j] if j >= 0 else None
         for k in ACOUSTIC_FEATURES:
             cols[k].append(row[k] if row else math.nan)
@@ -376,6 +405,7 @@ def build_library(survey_dir: str | os.PathLike, library: str | os.PathLike, con
     if len(set(ids)) != len(ids):
         dup = sorted({i for i in ids if ids.count(i) > 1})
         raise ConfigError(f"{survey_dir}: cell ids occur twice: {', '.join(dup)}")
+    _check_window(plans, config, survey_dir)
     out = _Progress(len(plans), progress)
     counts = {"added": 0, "unchanged": 0, "replaced": 0}
     with FingerprintLibrary.open(library) as lib:
@@ -390,8 +420,7 @@ def build_library(survey_dir: str | os.PathLike, library: str | os.PathLike, con
                 lib.add_receiver(site.name, name, record, calibrated=ok)
                 stored = lib.receiver(site.name, name)
             elif not stored.calibrated:
-                warnings.warn(f"receiver {name!r}: stored with the uncalibrated default C/N0 reference",
-                              SurveyWarning, stacklevel=2)
+                stored = _recalibrate(lib, site.name, plans, name, config, replace, out) or stored
             refs[name], calibrated[name] = stored.reference, stored.calibrated
         try:
             for plan in plans:
@@ -410,8 +439,32 @@ def build_library(survey_dir: str | os.PathLike, library: str | os.PathLike, con
     n_samples = int(sum(int(c["n_samples"]) for c in cells))
     # as stored, so a resumed build reports the streams found unusable in an earlier run too
     missing = {str(c["cell_id"]): tuple(str(c["missing_streams"]).split("+")) for c in cells if c["missing_streams"]}
+    empty = tuple(str(c["cell_id"]) for c in cells if int(c["n_samples"]) == 0)
     return BuildReport(site.name, len(plans), counts["added"], counts["unchanged"], counts["replaced"], n_samples,
-                       missing, calibrated)
+                       missing, calibrated, empty)
+
+
+def _recalibrate(lib: FingerprintLibrary, site: str, plans: list, name: str, config: SurveyConfig, replace: bool,
+                 out) -> object | None:
+    """A receiver stored with the uncalibrated default: calibrate it again from this survey's data. When that
+    now succeeds, store the calibrated reference with ``replace`` (its cells are then recomputed: their
+    feature parameters name the old reference) and return the new record; without ``replace`` say how."""
+    out.line(f"survey build: receiver {name!r} is stored uncalibrated; trying to calibrate it from this survey")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", SurveyWarning)
+        ref, record, ok = _calibrate(plans, name, config)
+    if not ok:
+        warnings.warn(f"receiver {name!r}: stored with the uncalibrated default C/N0 reference, and this survey "
+                      "still cannot calibrate it", SurveyWarning, stacklevel=3)
+        return None
+    if not replace:
+        warnings.warn(f"receiver {name!r}: stored with the uncalibrated default C/N0 reference, which this "
+                      f"survey can now calibrate ({ref.intercept_dbhz:.1f} + {ref.slope_dbhz:.1f}·sin(el) dB-Hz); "
+                      "pass --replace to store it and recompute the receiver's cells", SurveyWarning, stacklevel=3)
+        return None
+    lib.recalibrate_receiver(site, name, record)
+    out.line(f"survey build: receiver {name!r} calibrated; its cells are recomputed")
+    return lib.receiver(site, name)
 
 
 def _feature_params(config: SurveyConfig, receiver: str, reference: Cn0Reference) -> dict:
@@ -439,6 +492,13 @@ def _ingest(lib: FingerprintLibrary, site, plan: _CellPlan, reference: Cn0Refere
         except DataError as exc:
             unusable.append("audio")
             notes.append(f"audio: {plan.paths['audio'].name} unusable: {exc}")
+    rows = _merge(gnss, audio, config, cap.duration_s)
+    if gnss is not None and not any(rows["gnss_available"]):
+        # e.g. an NMEA file of one epoch: read, but no window of it can be used; as unusable as no file
+        unusable.append("gnss")
+        notes.append(f"gnss: {plan.paths['gnss'].name} gives no complete {config.window_s:g} s window with "
+                     "satellites in view inside the capture")
+        rows = _merge(None, audio, config, cap.duration_s)
     missing = tuple(s for s in _DEFAULT_FILES if s in cap.missing_streams or s in unusable)
     params = _feature_params(config, plan.receiver, reference)
     cap = CellCapture(cap.cell_id, cap.east_m, cap.north_m, cap.start_utc, cap.duration_s, cap.map_label,
@@ -446,5 +506,4 @@ def _ingest(lib: FingerprintLibrary, site, plan: _CellPlan, reference: Cn0Refere
     if missing:
         warnings.warn(f"cell {cap.cell_id}: stream{'s' if len(missing) > 1 else ''} {' and '.join(missing)} "
                       f"missing ({cap.stream_notes}); recorded as missing", SurveyWarning, stacklevel=3)
-    rows = _merge(gnss, audio, config, cap.duration_s)
     return lib.ingest_cell(site.name, cap, rows, receiver=plan.receiver, replace=replace)

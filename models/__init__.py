@@ -9,12 +9,14 @@ Which module to open for what:
   severity naming of clusters as open / light / heavy (``severity_scores``, ``name_clusters``).
 * ``models.environment`` — the online classifier (``EnvironmentClassifier``): one logistic
   sub-model per available modality, OOD flag, occlusion estimate, cell combination.
-* ``models.fusion`` — the event-driven filter core: event streams (steps, GNSS, acoustic,
-  standing), the EKF with heading-offset and step-scale states (optional GNSS Gauss–Markov
-  bias), noise policies (fixed, quality, per class, VB-AKF, Sage–Husa), the IMM over
-  environment classes, the RTS smoother and NEES/NIS consistency.
-* ``models.adaptive_noise`` — the adaptive method's R per (class, GGA quality).
-* ``models.bp`` — the BP corrector (ensemble with variance heads) and its guards.
-* ``models.fusion_model`` / ``models.bundle`` — the fusion model and pickle-free bundles
+* ``models.fusion`` — event-driven fusion: event streams (steps, GNSS, acoustic, standing), the one
+  compiled Kalman filter core, the EKF with heading-offset, step-scale and GNSS Gauss–Markov bias
+  states, noise policies (fixed, quality, per class, VB-AKF) and the error model in context
+  (white scale, bias and outlier prior per class and GGA quality), the IMM over environment
+  classes, RTS and fixed-lag smoothing, NEES/NIS consistency.
+* ``models.bp`` — the BP position corrector of the seed's section 2.2 (ensemble with variance heads)
+  and its guards.
+* ``models.bp_params`` — the BP network that maps the environment and the filter's state to each fix's R.
+* ``models.fusion.model`` / ``models.bundle`` — the fusion model and pickle-free bundles
   (JSON + safetensors).
 """

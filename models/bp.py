@@ -44,6 +44,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from features.errors import DataError
+
 __all__ = ["BPConfig", "BPCorrector", "bp_inputs", "N_INPUTS", "Correction"]
 
 N_CLASSES = 3
@@ -169,7 +171,7 @@ class BPCorrector:
         okv = np.isfinite(Y_va).all(axis=1)
         X_va, Y_va = X_va[okv], Y_va[okv]
         if len(X_tr) < 20:
-            raise ValueError(f"too few training events for the BP network ({len(X_tr)}; need at least 20)")
+            raise DataError(f"too few training events for the BP network ({len(X_tr)}; need at least 20)")
         self.x_mean_ = X_tr.mean(axis=0)
         self.x_scale_ = np.where(X_tr.std(axis=0) > 1e-9, X_tr.std(axis=0), 1.0)
         self.y_scale_ = float(max(np.sqrt(np.mean(Y_tr ** 2)), 1e-3))

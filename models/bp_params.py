@@ -38,6 +38,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from features.errors import DataError
+
 __all__ = ["ParamNetConfig", "ParamNet", "parameter_inputs", "N_CLASSES", "N_WINDOW"]
 
 N_CLASSES = 3
@@ -135,7 +137,7 @@ class ParamNet:
 
         cfg = self.config
         if not walks:
-            raise ValueError("no training walks with fixes for the BP parameter network")
+            raise DataError("no training walks with fixes for the BP parameter network")
         n_val = max(1, round(0.2 * len(walks))) if len(walks) > 1 else 0
         tr, va = walks[: len(walks) - n_val], (walks[len(walks) - n_val:] if n_val else walks)
         Xtr = np.vstack([w.X for w in tr])

@@ -11,10 +11,16 @@ A bundle is a directory::
 
 :func:`save_bundle` writes into a temporary sibling directory and renames it
 into place, so a bundle is complete or absent; an existing bundle is replaced
-only with ``overwrite=True`` (and then only after the new one is complete).
+only with ``overwrite=True``, only when it is a bundle of the same kind holding
+nothing else (never a survey, a walk or another kind of model), and only after
+the new one is complete. Folders and files get the permissions a plain
+``mkdir``/``open`` would give (0755/0644 under the usual umask), so colleagues
+on a shared drive can read a model.
 :func:`load_bundle` checks the format, the kind, the version (a bundle from a
-newer format fails with one clear message) and each array file's hash (a
-damaged bundle fails, naming the file), and returns plain dicts.
+newer format fails with one clear message), that no file is a link out of the
+folder, and each array file's hash (a damaged bundle fails, naming the file),
+and returns plain dicts; what the numbers mean is checked by each model's
+loader (:mod:`models.checks`).
 """
 
 from __future__ import annotations
@@ -32,7 +38,7 @@ import numpy as np
 from features.errors import EnvfuseError
 from features.fileio import sha256_file
 
-__all__ = ["BundleError", "Bundle", "save_bundle", "load_bundle", "FORMAT", "FORMAT_VERSION"]
+__all__ = ["BundleError", "Bundle", "save_bundle", "load_bundle", "bundle_kind", "FORMAT", "FORMAT_VERSION"]
 
 FORMAT = "envfuse-model"
 """Value of ``format`` in every bundle.json."""
@@ -85,8 +91,11 @@ def save_bundle(path: str | os.PathLike, kind: str, params: dict, arrays: dict, 
         raise BundleError(f"{path} exists; pass overwrite to replace it")
     if path.exists() and not path.is_dir():
         raise BundleError(f"{path} exists and is not a directory")
+    if path.exists():
+        _check_replaceable(path, kind)
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}.", suffix=".partial", dir=path.parent))
+    mask = _umask()
     try:
         hashes = {}
         for part, named in arrays.items():
@@ -103,6 +112,10 @@ def save_bundle(path: str | os.PathLike, kind: str, params: dict, arrays: dict, 
                "created_utc": datetime.now(timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ"), "params": params,
                "meta": meta or {}, "files": hashes}
         (tmp / "bundle.json").write_text(json.dumps(doc, indent=2, sort_keys=True, allow_nan=False) + "\n")
+        # readable by colleagues as a plain mkdir/open would make them (mkdtemp gives 0700), umask respected
+        for f in tmp.iterdir():
+            os.chmod(f, 0o666 & ~mask)
+        os.chmod(tmp, 0o777 & ~mask)
         if path.exists():
             old = path.with_name(f".{path.name}.old")
             if old.exists():
@@ -118,6 +131,43 @@ def save_bundle(path: str | os.PathLike, kind: str, params: dict, arrays: dict, 
     return path
 
 
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
+def bundle_kind(path: str | os.PathLike) -> str | None:
+    """The ``kind`` of the bundle at ``path`` (``"environment"``, ``"fusion"``), or None when it holds none."""
+    try:
+        doc = json.loads((Path(path) / "bundle.json").read_text())
+    except (OSError, ValueError, UnicodeDecodeError):
+        return None
+    return doc.get("kind") if isinstance(doc, dict) and doc.get("format") == FORMAT else None
+
+
+def _check_replaceable(path: Path, kind: str) -> None:
+    """Replace only an empty directory or a bundle of the same kind holding nothing else (never a survey, a
+    walk, a library's folder, another kind of model)."""
+    entries = [e for e in path.iterdir() if not e.name.startswith(".")]
+    if not entries:
+        return
+    found = bundle_kind(path)
+    if found != kind:
+        what = f"a {found!r} model" if found else "no envfuse model"
+        raise BundleError(f"{path} holds {what}: only a {kind!r} model folder is replaced; name a new directory")
+    foreign = [e.name for e in entries if not (e.name == "bundle.json" or e.name.endswith(".safetensors"))]
+    if foreign:
+        raise BundleError(f"{path} holds files a model does not ({', '.join(sorted(foreign)[:5])}): it is not "
+                          "replaced; name a new directory")
+
+
+def _within(f: Path, root: Path) -> bool:
+    """``f`` (symbolic links followed) lies inside ``root``."""
+    real, base = Path(os.path.realpath(f)), Path(os.path.realpath(root))
+    return base in real.parents
+
+
 def load_bundle(path: str | os.PathLike, kind: str) -> Bundle:
     """Read and check a bundle written by :func:`save_bundle`; raises :class:`BundleError` with one clear line."""
     from safetensors import SafetensorError
@@ -129,6 +179,8 @@ def load_bundle(path: str | os.PathLike, kind: str) -> Bundle:
         raise BundleError(f"{path}: not a model directory")
     if not doc_path.is_file():
         raise BundleError(f"{path}: no bundle.json (not an envfuse model, or an incomplete one)")
+    if not _within(doc_path, path):
+        raise BundleError(f"{doc_path}: is a link out of the model folder; a bundle's files lie inside it")
     try:
         doc = json.loads(doc_path.read_text())
     except (ValueError, UnicodeDecodeError) as exc:
@@ -153,6 +205,8 @@ def load_bundle(path: str | os.PathLike, kind: str) -> Bundle:
             raise BundleError(f"{doc_path}: bad array file name {name!r}")
         if not f.is_file():
             raise BundleError(f"{path}: {name} is missing")
+        if not _within(f, path):
+            raise BundleError(f"{path}: {name} is a link out of the model folder; a bundle's files lie inside it")
         if sha256_file(f) != digest:
             raise BundleError(f"{path}: {name} is damaged (its SHA-256 differs from bundle.json)")
         try:

@@ -1,7 +1,7 @@
 """Environment classes from the 14 window features: standardise → t-SNE to 2-D → density peaks,
 then clusters named ``open`` / ``light`` / ``heavy`` by a severity order.
 
-The route of the method this package implements (DESIGN.md §5, issue 13 item 4): t-SNE (van der
+The route of the method this package implements (docs/design.md §5, issue 13 item 4): t-SNE (van der
 Maaten & Hinton, JMLR 9:2579, 2008) maps the standardised windows to a plane where
 density-peak clustering (Rodriguez & Laio, Science 2014; :mod:`models.dpc`) finds the
 environment clusters without labels; t-SNE cannot place new points, so classifying new windows
@@ -38,16 +38,16 @@ __all__ = ["ENV_FEATURES", "ENV_CLASSES", "SEVERITY_WEIGHTS", "EnvironmentEmbedd
            "severity_scores", "name_clusters"]
 
 ENV_FEATURES: tuple[str, ...] = tuple(_GNSS_FEATURES) + tuple(_CIR_FEATURES)
-"""The 14 window features in library order (DESIGN.md §5): 5 GNSS, then 9 acoustic CIR."""
+"""The 14 window features in library order (docs/design.md §5): 5 GNSS, then 9 acoustic CIR."""
 
 ENV_CLASSES: tuple[str, ...] = ("open", "light", "heavy")
-"""Environment class names, least to most severe (DESIGN.md §4)."""
+"""Environment class names, least to most severe (docs/design.md §4)."""
 
 SEVERITY_WEIGHTS: dict[str, float] = {
     "att_mean_db": 1.0, "invisible_ratio": 1.0, "dop_growth": 1.0, "rms_delay_ms": 1.0, "rician_k_db": -1.0,
 }
 """Sign (and weight) of each standardised feature in the severity score: GNSS attenuation,
-invisible ratio and DOP growth rise under blocking (DESIGN.md §5 items 1, 4, 5), so does the
+invisible ratio and DOP growth rise under blocking (docs/design.md §5 items 1, 4, 5), so does the
 acoustic delay spread τ_rms (item 7), and the Rician K (first path over the rest, item 10) falls."""
 
 

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import argparse
 import math
-import os
 from pathlib import Path
 
 __all__ = ["seed", "positive", "non_negative", "finite", "bounded", "open_interval", "UsageError", "check_outputs",
@@ -89,37 +88,12 @@ def open_interval(lo: float, hi: float, unit: str = ""):
     return parse
 
 
-def _inside(child: Path, parent: Path) -> bool:
-    child, parent = Path(os.path.realpath(child)), Path(os.path.realpath(parent))
-    return child == parent or parent in child.parents
+def check_outputs(inputs: dict, outputs: dict, directory_outputs: dict | None = None, sealed: dict | None = None) -> None:
+    """Refuse an output that would overwrite an input, or two outputs naming one file (exit 2); see
+    :func:`pipeline.outputs.check_outputs`."""
+    from pipeline.outputs import check_outputs as check
 
-
-def check_outputs(inputs: dict, outputs: dict, directory_outputs: dict | None = None) -> None:
-    """Refuse an output that would overwrite an input, or two outputs naming one file (exit 2).
-
-    ``inputs``/``outputs``/``directory_outputs`` map the option the user wrote
-    (``"--out"``, ``"NMEA"``) to a path or None; ``-`` (stdout) never clashes.
-    A directory output clashes with every input inside it.
-    """
-    from features.fileio import is_stdout, same_file
-
-    ins = {k: Path(v) for k, v in inputs.items() if v is not None and not is_stdout(v)}
-    outs = {k: Path(v) for k, v in outputs.items() if v is not None and not is_stdout(v)}
-    for ko, o in outs.items():
-        for ki, i in ins.items():
-            if same_file(o, i):
-                raise UsageError(f"{ko} {o} is the input {ki}: an output never overwrites an input")
-    names = list(outs.items())
-    for n, (ka, a) in enumerate(names):
-        for kb, b in names[n + 1:]:
-            if same_file(a, b):
-                raise UsageError(f"{ka} and {kb} name the same file {a}")
-    for ko, d in (directory_outputs or {}).items():
-        if d is None:
-            continue
-        for ki, i in ins.items():
-            if _inside(i, Path(d)):
-                raise UsageError(f"{ko} {d} holds the input {ki} ({i}): an output never replaces an input")
+    check(inputs, outputs, directory_outputs, sealed)
 
 
 def plot_path(text: str) -> Path:

@@ -21,7 +21,7 @@ from typing import Callable
 
 from models.bp import BPConfig
 from models.fusion.model import save_fusion_model
-from pipeline.evaluate import evaluate, summary_table
+from pipeline.evaluate import bp_guard_line, evaluate, summary_table
 from simulation.split import build_split
 from training.env import fit_env_model, save_env_model, training_set
 from training.filters import train_fusion
@@ -43,17 +43,19 @@ def fit_and_evaluate(layout, library: Path, out: Path, *, env_mode: str = "super
     save_env_model(clf, out / "env_model", info, library=library, overwrite=True)
     say(f"environment model ({env_mode}): {info['n_windows']} windows of {info['n_cells']} cells, "
         f"open/light/heavy = {'/'.join(map(str, info['class_counts']))}")
+    for text in info.get("warnings", []):
+        say(f"warning: {text}")
     from pipeline.site_map import class_map_for
 
     model = train_fusion(layout.train_walks, clf, bp_config=BPConfig(seed=seed, n_members=bp_members),
-                         meta={"split": sp.name, "env_mode": env_mode, **(meta or {})}, class_map_for=class_map_for,
-                         progress=lambda line: say(f"  {line}"))
-    # The model may be applied to the held-out sites: that is the point of the split.
-    model.meta["sites"] = []
+                         meta={"split": sp.name, "env_mode": env_mode, "env_meta": info, **(meta or {})},
+                         class_map_for=class_map_for, progress=lambda line: say(f"  {line}"))
     save_fusion_model(model, out / "fusion_model", overwrite=True)
     say(f"fusion model: {len(layout.train_walks)} training walks on sites {list(sp.train_sites)}")
+    # The model names its training sites (so 'run' and 'evaluate' guard other sites later); here it is applied
+    # to the held-out sites on purpose: that is the point of the split.
     return evaluate(layout.test_walks, out / "fusion_model", out / "report", workers=workers, progress=progress,
-                    plots=plots)
+                    plots=plots, force=True)
 
 
 def run_benchmark(split: str, out: str | os.PathLike, *, env_mode: str = "supervised", workers: int | None = None,
@@ -81,8 +83,7 @@ def run_benchmark(split: str, out: str | os.PathLike, *, env_mode: str = "superv
     say(summary_table(result["pooled"]))
     shares = [r["bp_disabled_share"] for r in result["results"] if r["bp_disabled_share"] is not None]
     if shares:
-        say(f"BP position correction (adaptive_correction) withheld by its guards on "
-            f"{100 * sum(shares) / len(shares):.1f} % of epochs")
+        say(bp_guard_line(sum(shares) / len(shares)))
     say(f"report: {out / 'report'} (metrics.csv, {len(result['pngs'])} plots)")
     return result
 

@@ -125,10 +125,32 @@ def _run(args) -> int:
     return int(args.func(args) or 0)
 
 
+_OUR_PACKAGES = ("features", "simulation", "fingerprints", "models", "walks", "training", "pipeline")
+
+
+def _show_warning(message, category, filename, lineno, file=None, line=None):  # noqa: ARG001 - warnings API
+    """envfuse's own warnings as one ``envfuse: warning:`` line; a library's (numpy's RuntimeWarning on an
+    all-NaN window, openTSNE's, scikit-learn's) say nothing a user can act on and stay off stderr unless
+    ENVFUSE_DEBUG is set."""
+    ours = category.__module__.split(".")[0] in _OUR_PACKAGES
+    if ours or os.environ.get("ENVFUSE_DEBUG"):
+        print(f"envfuse: warning: {message}", file=sys.stderr, flush=True)
+
+
+@contextlib.contextmanager
+def _warnings_as_lines():
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("default")
+        warnings.showwarning = _show_warning
+        yield
+
+
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     try:
-        with _sigterm_as_interrupt():
+        with _sigterm_as_interrupt(), _warnings_as_lines():
             parser = build_parser()
             args = parser.parse_args(argv)
             if not hasattr(args, "func"):

@@ -10,7 +10,8 @@ import numpy as np
 from features.site import ENV_CLASSES, Site
 from pipeline.plots import CLASS_COLOURS, save_figure
 
-__all__ = ["plot_survey_map", "plot_decision_graph", "plot_embedding", "plot_confusion", "confusion", "plot_class_track"]
+__all__ = ["plot_survey_map", "plot_decision_graph", "plot_embedding", "plot_confusion", "confusion",
+           "cell_rectangles", "plot_class_track"]
 
 
 def confusion(y_true: np.ndarray, y_pred: np.ndarray, n: int = 3) -> np.ndarray:
@@ -25,38 +26,110 @@ def confusion(y_true: np.ndarray, y_pred: np.ndarray, n: int = 3) -> np.ndarray:
     return out
 
 
-def plot_survey_map(site: Site, cells: list[dict], cell_size_m: float, path: str | os.PathLike) -> Path:
-    """Each cell a square coloured by predicted class (hatched when OOD), the site outline, beacons;
-    cells whose map label disagrees are outlined in black."""
+def cell_rectangles(cells: list[dict], site: Site, pitch_m: float | None = None) -> list[tuple] | None:
+    """Each cell's grid square (east0, north0, width, height), or None when the captures do not sit one per
+    square of a grid.
+
+    A survey is laid on a square grid from the site grid's south-west corner (``simulate survey`` does so;
+    a crew with a tape would too); a capture may be moved off its square's centre, out of equipment, but
+    stays inside its square. The pitch is ``pitch_m`` or, from the captures alone, the largest multiple of
+    0.5 m up to twice the largest nearest-neighbour spacing that puts every capture in a square of its own
+    (a larger pitch would merge two captures' squares, a smaller one leave gaps between them). Squares are
+    clipped to the site's extent, as the survey clips its last row and column.
+    """
+    g = site.grid
+    pts = np.array([[c["east_m"], c["north_m"]] for c in cells], float).reshape(-1, 2)
+    if len(pts) == 0:
+        return []
+    if pitch_m:
+        cands = [float(pitch_m)]
+    elif len(pts) > 1:
+        d = np.hypot(*(pts[:, None, :] - pts[None, :, :]).transpose(2, 0, 1))
+        np.fill_diagonal(d, np.inf)
+        cands = list(np.arange(0.5, min(2.0 * float(d.min(axis=1).max()), 100.0) + 0.25, 0.5))
+    else:
+        cands = [g.cell_size_m]
+    for pitch in sorted({c for c in cands if c and c > 0}, reverse=True):
+        col = np.floor((pts[:, 0] - g.east_min_m) / pitch + 1e-9).astype(int)
+        row = np.floor((pts[:, 1] - g.north_min_m) / pitch + 1e-9).astype(int)
+        if len(set(zip(col.tolist(), row.tolist()))) != len(pts):
+            continue
+        rects = []
+        for c, r in zip(col, row):
+            e0, n0 = g.east_min_m + c * pitch, g.north_min_m + r * pitch
+            e1, n1 = min(e0 + pitch, g.east_max_m), min(n0 + pitch, g.north_max_m)
+            rects.append((e0, n0, max(e1 - e0, 1e-3), max(n1 - n0, 1e-3)))
+        return rects
+    return None
+
+
+def _shade(colour: str, probability: float, n_classes: int = 3) -> tuple:
+    """The class colour by the probability of the class: near-white at chance (1/n_classes), the class hue
+    darker and more saturated at certainty, so the shading shows on the pale class colours."""
+    import colorsys
+
+    from matplotlib.colors import to_rgb
+
+    hue, light, sat = colorsys.rgb_to_hls(*to_rgb(colour))
+    w = float(np.clip((probability - 1.0 / n_classes) / (1 - 1.0 / n_classes), 0.0, 1.0))
+    return colorsys.hls_to_rgb(hue, (1 - w) * 0.95 + w * max(light - 0.12, 0.35), min(1.0, sat * (0.6 + 0.6 * w)))
+
+
+def plot_survey_map(site: Site, cells: list[dict], cell_size_m: float | None, path: str | os.PathLike) -> Path:
+    """Each cell drawn as its grid square (:func:`cell_rectangles`; squares around the captures when they do
+    not fit a grid), filled with the predicted class in a shade that deepens with its probability (chance
+    pale, certain deep; the colour bars give the scale) and the probability written in it, hatched when out of
+    distribution, outlined in black where the map label disagrees; structures as in the site plot; beacons;
+    the capture points."""
     import matplotlib.pyplot as plt
+    from matplotlib.cm import ScalarMappable
+    from matplotlib.colors import ListedColormap, Normalize
     from matplotlib.patches import Patch, Rectangle
 
+    from pipeline.plots import draw_structures
+
     g = site.grid
-    fig, ax = plt.subplots(figsize=(10, 10 * (g.north_max_m - g.north_min_m) / (g.east_max_m - g.east_min_m) + 1))
-    h = cell_size_m / 2
-    for c in cells:
-        colour = CLASS_COLOURS[c["predicted"]]
+    rects = cell_rectangles(cells, site, cell_size_m)
+    fitted = rects is not None
+    if not fitted:
+        h = 0.5 * (cell_size_m or g.cell_size_m)
+        rects = [(c["east_m"] - h, c["north_m"] - h, 2 * h, 2 * h) for c in cells]
+    fig, ax = plt.subplots(figsize=(11, 10 * (g.north_max_m - g.north_min_m) / (g.east_max_m - g.east_min_m) + 1.8))
+    size = float(np.median([r[2] for r in rects])) if rects else 10.0
+    for c, (e0, n0, w, hgt) in zip(cells, rects):
         wrong = c.get("map_label") in ENV_CLASSES and c["map_label"] != c["predicted"]
-        ax.add_patch(Rectangle((c["east_m"] - h, c["north_m"] - h), 2 * h, 2 * h, facecolor=colour,
-                               alpha=0.35 + 0.6 * float(c["probability"]), hatch="xx" if c["ood"] else None,
-                               edgecolor="black" if wrong else "white", lw=1.4 if wrong else 0.5))
-    for b in site.layout:
-        ax.add_patch(Rectangle((b.east_min_m, b.north_min_m), b.east_max_m - b.east_min_m, b.north_max_m - b.north_min_m,
-                               facecolor="none", edgecolor="#333333", hatch="//" if b.porous else None, lw=0.9))
+        ax.add_patch(Rectangle((e0, n0), w, hgt, facecolor=_shade(CLASS_COLOURS[c["predicted"]], c["probability"]),
+                               hatch="xx" if c["ood"] else None, edgecolor="black" if wrong else "white",
+                               lw=1.6 if wrong else 0.6, zorder=1 if not wrong else 1.5))
+        if size >= 6.0 and w >= 4.0:
+            ax.text(e0 + 0.06 * w, n0 + 0.94 * hgt, f"{c['probability']:.2f}", ha="left", va="top", fontsize=6,
+                    color="#222222", zorder=4)
+    handles = draw_structures(ax, site, alpha=0.55, zorder=2)
     for bc in site.beacons:
-        ax.plot(bc.east_m, bc.north_m, "k^", ms=6)
+        ax.plot(bc.east_m, bc.north_m, "k^", ms=6, zorder=3)
+    ax.plot([c["east_m"] for c in cells], [c["north_m"] for c in cells], ".", color="#444444", ms=2.5, zorder=3)
     ax.set_xlim(g.east_min_m, g.east_max_m)
     ax.set_ylim(g.north_min_m, g.north_max_m)
     ax.set_aspect("equal")
     ax.set_xlabel("east (m)")
     ax.set_ylabel("north (m)")
-    handles = [Patch(facecolor=CLASS_COLOURS[k], label=f"predicted {k}") for k in ENV_CLASSES]
-    handles += [Patch(facecolor="white", edgecolor="black", lw=1.4, label="map label differs"),
-                Patch(facecolor="white", hatch="xx", edgecolor="grey", label="out of distribution"),
-                Patch(facecolor="none", edgecolor="#333333", label="structure (hatched: porous)"),
-                plt.Line2D([], [], marker="^", color="k", ls="", label="beacon")]
+    handles = [Patch(facecolor=_shade(CLASS_COLOURS[k], 1.0), label=f"predicted {k}") for k in ENV_CLASSES] + [
+        Patch(facecolor="white", edgecolor="black", lw=1.6, label="map label differs"),
+        Patch(facecolor="white", hatch="xx", edgecolor="grey", label="out of distribution"),
+        plt.Line2D([], [], marker=".", color="#444444", ls="", label="capture point"),
+        plt.Line2D([], [], marker="^", color="k", ls="", label="beacon")] + handles
     ax.legend(handles=handles, loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8)
-    ax.set_title(f"{site.name}: environment map from the survey (shade = class probability)")
+    # the shade scale: one thin bar per class, right of the map under the legend
+    for k, name in enumerate(reversed(ENV_CLASSES)):
+        ramp = ListedColormap([_shade(CLASS_COLOURS[name], p) for p in np.linspace(1 / 3, 1, 32)])
+        cax = ax.inset_axes([1.04, 0.03 + 0.11 * k, 0.3, 0.025])
+        bar = fig.colorbar(ScalarMappable(Normalize(1 / 3, 1), ramp), cax=cax, orientation="horizontal",
+                           ticks=[1 / 3, 0.5, 0.75, 1.0])
+        bar.ax.set_xticklabels(["1/3 (chance)", "0.5", "0.75", "1"], fontsize=6)
+        bar.ax.set_title(f"probability, predicted {name}", fontsize=7, loc="left")
+    how = "grid squares" if fitted else "squares round the captures (they fit no grid)"
+    ax.set_title(f"{site.name}: environment map from the survey ({how}; shade and number = class probability)",
+                 fontsize=10)
     return save_figure(fig, path)
 
 

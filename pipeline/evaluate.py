@@ -12,6 +12,7 @@ the rows.
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import io
 import os
@@ -26,7 +27,8 @@ from walks.inputs import WINDOW_S
 from walks.methods import method_names
 from walks.score import METRIC_COLUMNS, metric_rows, score, track_errors
 
-__all__ = ["evaluate_walk", "evaluate", "summary_table", "pooled_rows", "load_model", "method_order"]
+__all__ = ["evaluate_walk", "evaluate", "summary_table", "pooled_rows", "load_model", "method_order", "NEES_NOTE",
+           "bp_guard_line", "REPORT_PLOT_PREFIXES"]
 
 _MODELS: dict = {}
 
@@ -55,9 +57,17 @@ def evaluate_walk(walk, model_dir: str, methods: tuple, force: bool = False) -> 
     from pipeline.site_map import class_map_for
     from walks.fuse import fuse_walk
 
+    from features.errors import DataError
+
     fused = fuse_walk(walk, load_model(model_dir), methods, class_map_for=class_map_for, force=force)
     data, tracks = fused.data, fused.tracks
+    if data.truth is None:
+        raise DataError(f"{walk}: no truth.csv, so no error to measure (evaluate scores tracks against truth; "
+                        "'envfuse run' writes a walk's track without one)")
     rows = score(tracks, data, fused.name)
+    if not rows:
+        why = "; ".join(f"{m}: {r}" for m, r in fused.skipped.items()) or "no track overlaps the truth in time"
+        raise DataError(f"{walk}: no method gave a track to score ({why})")
     series = {}
     if data.truth is not None:
         for m, tr in tracks.items():
@@ -78,7 +88,8 @@ def evaluate_walk(walk, model_dir: str, methods: tuple, force: bool = False) -> 
               if "adaptive_correction" in tracks else None)
     guard = tracks["adaptive"].info["run"].info.get("bp_guard_share") if "adaptive" in tracks else None
     return {"walk": fused.name, "walk_dir": str(walk), "rows": rows, "skipped": fused.skipped, "series": series,
-            "bp_disabled_share": bp_off, "bp_guard_share": guard, "site": data.site.name}
+            "bp_disabled_share": bp_off, "bp_guard_share": guard, "site": data.site.name,
+            "notes": list(data.notes)}
 
 
 def pooled_rows(results: list[dict]) -> list[dict]:
@@ -104,13 +115,21 @@ def method_order(names) -> list[str]:
     return known + sorted(n for n in names if n not in order)
 
 
+NEES_NOTE = ("NEES ok: share of epochs whose normalised error e'P^-1e (e: error, P: the track's own covariance) "
+             "lies inside the two-sided 95 % chi-square(2) interval [0.05, 7.38]; a filter whose covariance "
+             "matches its errors scores about 0.95, lower means it is over- or under-confident "
+             "(metrics.csv: nees_in_bounds; empty for a source without a covariance)")
+"""The footnote printed under :func:`summary_table`."""
+
+
 def summary_table(rows: list[dict]) -> str:
-    """Plain-text table of pooled rows: method, then mean / median / p95 / max per class and NEES share."""
+    """Plain-text table of pooled rows: method, then mean / median / p95 / max per class and the NEES share
+    (:data:`NEES_NOTE` says what it is)."""
     classes = ("all", "open", "light", "heavy")
     by = {(r["method"], r["env_class"]): r for r in rows}
     methods = method_order({r["method"] for r in rows})
     w = max([18] + [len(m) for m in methods])
-    head = f"{'method':{w}s} " + " ".join(f"{c + ' mean/med/p95':>21s}" for c in classes) + "  max_m  NEES95"
+    head = f"{'method':{w}s} " + " ".join(f"{c + ' mean/med/p95 m':>21s}" for c in classes) + "  max_m NEES ok"
     lines = [head, "-" * len(head)]
     for m in methods:
         cells = []
@@ -121,7 +140,7 @@ def summary_table(rows: list[dict]) -> str:
         nib = "" if a is None or not np.isfinite(a["nees_in_bounds"]) else f"{a['nees_in_bounds']:.2f}"
         lines.append(f"{m:{w}s} " + " ".join(f"{x:>21s}" for x in cells) + f" {a['max_m'] if a else float('nan'):6.2f}"
                      f"  {nib:>6s}")
-    return "\n".join(lines)
+    return "\n".join(lines + [NEES_NOTE])
 
 
 def _csv_text(rows: list[dict]) -> str:
@@ -137,7 +156,13 @@ def evaluate(walks: list, model_dir: str | os.PathLike, report_dir: str | os.Pat
              workers: int | None = None, scheduler: str | None = None, force: bool = False,
              progress: bool = True, plots: bool = True) -> dict:
     """Evaluate ``methods`` (default: every registered one) on ``walks``; writes ``metrics.csv`` and the plots
-    into ``report_dir``."""
+    into ``report_dir``.
+
+    A walk whose task fails (any error, here or on a worker) is named in ``failures`` and left out; the
+    others' report is written. An existing report is replaced consistently: its ``metrics.csv`` is removed
+    first, the plots written, plots of walks no longer in the report removed, and the new ``metrics.csv``
+    written last (atomically) — so a report with a ``metrics.csv`` is always a complete one.
+    """
     methods = method_names() if methods is None else tuple(methods)
     load_model(model_dir)                  # a damaged model fails here, once, before any worker starts
     report = Path(report_dir)
@@ -150,10 +175,30 @@ def evaluate(walks: list, model_dir: str | os.PathLike, report_dir: str | os.Pat
     report.mkdir(parents=True, exist_ok=True)
     per_walk = [row for r in ok for row in r["rows"]]
     pooled = pooled_rows(ok) if ok else []
-    atomic_write_text(report / "metrics.csv", _csv_text(per_walk + pooled))
+    with contextlib.suppress(FileNotFoundError):
+        (report / "metrics.csv").unlink()       # from here until the new one lands, the report is incomplete
     pngs = []
     if plots and ok:
         from pipeline.evaluate_plots import plot_report
 
         pngs = plot_report(ok, pooled, report)
+    keep = {Path(p).name for p in pngs}
+    for old in report.glob("*.png"):
+        if old.name not in keep and old.name.startswith(REPORT_PLOT_PREFIXES):
+            old.unlink()
+    atomic_write_text(report / "metrics.csv", _csv_text(per_walk + pooled))
     return {"results": ok, "failures": failures, "pooled": pooled, "pngs": pngs}
+
+
+REPORT_PLOT_PREFIXES = ("trajectory_", "error_time_", "error_cdf", "error_by_class")
+"""Names of the plots an evaluation writes; older ones not written again are removed from the report."""
+
+
+def bp_guard_line(share: float) -> str:
+    """What the BP guards did, in words a reader of the summary can use."""
+    text = (f"BP correction (method adaptive): applied on {100 * (1 - share):.1f} % of epochs; withheld on "
+            f"{100 * share:.1f} % by its guards (input outside the network's training range, correction smaller "
+            "than its own uncertainty, or the next fixes fitting worse with it), where adaptive equals adaptive_nobp")
+    if share >= 0.999:
+        text += "; here the network never acted, so adaptive is adaptive_nobp"
+    return text

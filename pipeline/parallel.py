@@ -11,9 +11,14 @@ and a distributed run give identical results, in the input order.
   N single-threaded worker processes, started and shut down here;
 - ``scheduler="tcp://host:8786"``: an existing Dask cluster.
 
-A task that raises an :class:`~features.errors.EnvfuseError` (bad data in
-one walk) is returned as a :class:`TaskFailure` in its place, so one bad
-walk costs that walk only and is reported; any other exception propagates.
+A task that raises (an :class:`~features.errors.EnvfuseError` for bad data in
+one walk, or any other exception, on this process or on a Dask worker, or a
+worker that dies under it) is returned as a :class:`TaskFailure` in its place,
+naming the walk and the error in one line, so one bad walk costs that walk
+only and the others' results are kept.
+
+Progress: a tqdm bar on a terminal; in a log (not a TTY) one plain line per
+finished walk (``evaluate: 3/10 walks (30 %)``), never carriage-return frames.
 """
 
 from __future__ import annotations
@@ -25,7 +30,7 @@ from typing import Callable, Sequence
 
 from features.errors import ConfigError, EnvfuseError
 
-__all__ = ["TaskFailure", "map_walks", "default_workers"]
+__all__ = ["TaskFailure", "map_walks", "default_workers", "check_scheduler"]
 
 
 @dataclass(frozen=True)
@@ -53,20 +58,61 @@ faults against 1,500 in a plain process, and 0.8 s of system time. ``None`` leav
 unset (the worker inherits this process's environment, so a user's own setting still holds)."""
 
 
+def _failure(walk, exc: BaseException) -> TaskFailure:
+    """One line for a failed task: the domain error's message, else the exception's type and message."""
+    if isinstance(exc, EnvfuseError):
+        text = str(exc)
+    else:
+        first = (str(exc).strip().splitlines() or [""])[0]
+        text = f"internal error {type(exc).__name__}: {first}" + (" (set ENVFUSE_DEBUG=1 for a traceback)"
+                                                                    if not os.environ.get("ENVFUSE_DEBUG") else "")
+    return TaskFailure(str(walk), text)
+
+
 def _guarded(func: Callable, walk, *args):
+    import warnings
+
     try:
-        return func(walk, *args)
-    except EnvfuseError as exc:
-        return TaskFailure(str(walk), str(exc))
+        with warnings.catch_warnings():
+            # numpy's RuntimeWarnings (empty slices, all-NaN windows) are not for the user's terminal; what
+            # matters reaches the report as NaN rows or notes
+            warnings.simplefilter("ignore", RuntimeWarning)
+            return func(walk, *args)
+    except Exception as exc:  # noqa: BLE001 - one walk's failure must not cost the others (named in the report)
+        if os.environ.get("ENVFUSE_DEBUG") and not isinstance(exc, EnvfuseError):
+            import traceback
+
+            traceback.print_exc()
+        return _failure(walk, exc)
 
 
-def _progress_bar(total: int, desc: str, enabled: bool):
-    from tqdm import tqdm
+class _Progress:
+    """A tqdm bar on a terminal; in a log (stderr not a TTY) one plain line per finished walk,
+    ``evaluate: 2/5 walks (40 %)``, never carriage-return frames."""
 
-    tty = sys.stderr.isatty()
-    # Not a terminal (a log file, CI): one plain line per ~10 % instead of carriage-return frames.
-    return tqdm(total=total, desc=desc, disable=not enabled, file=sys.stderr, ascii=not tty,
-                mininterval=0.5 if tty else 1e9, miniters=1 if tty else max(1, total // 10), dynamic_ncols=tty)
+    def __init__(self, total: int, desc: str, enabled: bool):
+        self.total, self.desc, self.enabled, self.n = total, desc, enabled, 0
+        self.bar = None
+        if enabled and sys.stderr.isatty():
+            from tqdm import tqdm
+
+            self.bar = tqdm(total=total, desc=desc, unit="walk", file=sys.stderr, leave=False)
+
+    def update(self, k: int = 1) -> None:
+        self.n += k
+        if self.bar is not None:
+            self.bar.update(k)
+        elif self.enabled:
+            print(f"{self.desc}: {self.n}/{self.total} walks ({100 * self.n / max(self.total, 1):.0f} %)",
+                  file=sys.stderr, flush=True)
+
+    def close(self) -> None:
+        if self.bar is not None:
+            self.bar.close()
+
+
+def _progress_bar(total: int, desc: str, enabled: bool) -> _Progress:
+    return _Progress(total, desc, enabled)
 
 
 def map_walks(func: Callable, walks: Sequence, *args, workers: int | None = None, scheduler: str | None = None,
@@ -80,6 +126,7 @@ def map_walks(func: Callable, walks: Sequence, *args, workers: int | None = None
         raise ConfigError(f"--workers must be at least 1, got {workers}")
     if not walks:
         return []
+    client_address = check_scheduler(scheduler) if scheduler is not None else None
     bar = _progress_bar(len(walks), desc, progress)
     try:
         if scheduler is None and (workers == 1 or (workers is None and default_workers() == 1) or len(walks) == 1):
@@ -88,9 +135,30 @@ def map_walks(func: Callable, walks: Sequence, *args, workers: int | None = None
                 out.append(_guarded(func, w, *args))
                 bar.update(1)
             return out
-        return _map_dask(func, walks, args, workers, scheduler, bar)
+        return _map_dask(func, walks, args, workers, client_address, bar)
     finally:
         bar.close()
+
+
+def check_scheduler(address: str, timeout_s: float = 3.0) -> str:
+    """A Dask scheduler address checked before any work: ``tcp://host:port`` (or ``host:port``, or ``tls://``)
+    that accepts a connection within ``timeout_s`` — a malformed address is a usage error (exit 2), a refused
+    or silent port a :class:`~features.errors.ConfigError` at once, not after the client's 10 s wait."""
+    import re
+    import socket
+
+    from pipeline.args import UsageError
+
+    m = re.fullmatch(r"(?:(tcp|tls)://)?(\[[0-9A-Fa-f:.]+\]|[A-Za-z0-9_.-]+):(\d{1,5})", str(address).strip())
+    if m is None or not 0 < int(m.group(3)) < 65536:
+        raise UsageError(f"--scheduler {address!r}: expected a Dask scheduler address such as tcp://host:8786")
+    scheme, host, port = m.group(1) or "tcp", m.group(2).strip("[]"), int(m.group(3))
+    try:
+        with socket.create_connection((host, port), timeout=timeout_s):
+            pass
+    except OSError as exc:
+        raise ConfigError(f"--scheduler {address}: cannot connect ({exc.strerror or exc})") from None
+    return f"{scheme}://{m.group(2)}:{port}"
 
 
 def _map_dask(func, walks, args, workers, scheduler, bar) -> list:
@@ -110,7 +178,7 @@ def _map_dask(func, walks, args, workers, scheduler, bar) -> list:
     else:
         try:
             client = Client(scheduler, timeout="10s")
-        except (OSError, TimeoutError) as exc:
+        except (OSError, TimeoutError, ValueError) as exc:
             raise ConfigError(f"--scheduler {scheduler}: cannot connect ({exc})") from None
     try:
         futures = [client.submit(_guarded, func, w, *args, key=f"walk-{i}-{os.path.basename(str(w))}", pure=False)
@@ -118,7 +186,11 @@ def _map_dask(func, walks, args, workers, scheduler, bar) -> list:
         index = {f.key: i for i, f in enumerate(futures)}
         out = [None] * len(walks)
         for fut in as_completed(futures):
-            out[index[fut.key]] = fut.result()
+            i = index[fut.key]
+            try:
+                out[i] = fut.result()
+            except Exception as exc:  # noqa: BLE001 - a worker died under the task (KilledWorker, lost data)
+                out[i] = _failure(walks[i], exc)
             bar.update(1)
         return out
     finally:

@@ -17,7 +17,8 @@ from features.errors import ConfigError  # noqa: E402
 from features.fileio import atomic_path  # noqa: E402
 from features.site import ENV_CLASSES, Site  # noqa: E402
 
-__all__ = ["CLASS_COLOURS", "PLOT_FORMATS", "plot_format", "plot_site", "save_figure", "EMI_COLOUR"]
+__all__ = ["CLASS_COLOURS", "PLOT_FORMATS", "plot_format", "plot_site", "save_figure", "EMI_COLOUR", "KIND_COLOURS",
+           "draw_structures"]
 
 PLOT_FORMATS = ("png", "pdf", "svg")
 """Figure formats written, chosen by the output's suffix (``-``, standard output, is PNG)."""
@@ -42,7 +43,36 @@ _KIND_COLOURS = {"transformer": "#151515", "firewall": "#8b8b8b", "building": "#
                  "equipment": "#2f7f8f"}
 """Structure colours, distinct from each other and from the class colours (transformers near-black,
 switchyard equipment teal)."""
+KIND_COLOURS = _KIND_COLOURS
+"""Public name of the structure colours: every plot that draws a site's layout uses them."""
 EMI_COLOUR = "purple"
+
+
+def draw_structures(ax, site: Site, alpha: float = 1.0, zorder: float = 1, extent=None) -> list:
+    """Draw ``site``'s layout as every plot does: solid structures filled in their kind's colour
+    (:data:`KIND_COLOURS`), porous ones (lattice gantries) hatched in it; ``alpha`` < 1 fades them under data.
+    Returns legend handles for the kinds drawn (porous ones marked "hatched: porous, attenuates only"); with
+    ``extent`` (east0, east1, north0, north1) only for the kinds seen inside it."""
+    kinds = {}
+    for b in site.layout:
+        if extent is not None and (b.east_max_m < extent[0] or b.east_min_m > extent[1]
+                                   or b.north_max_m < extent[2] or b.north_min_m > extent[3]):
+            continue
+        colour = _KIND_COLOURS.get(b.kind, "#777777")
+        ax.add_patch(Rectangle((b.east_min_m, b.north_min_m), b.east_max_m - b.east_min_m,
+                               b.north_max_m - b.north_min_m, facecolor="none" if b.porous else colour,
+                               edgecolor=colour, hatch="////" if b.porous else None, lw=1.0, alpha=alpha,
+                               zorder=zorder))
+        kinds[b.kind] = kinds.get(b.kind, False) or b.porous
+    handles = []
+    for kind, porous in kinds.items():
+        colour = _KIND_COLOURS.get(kind, "#777777")
+        if porous:
+            handles.append(Patch(facecolor="none", edgecolor=colour, hatch="////", alpha=alpha,
+                                 label=f"{kind} (hatched: porous lattice, attenuates only)"))
+        else:
+            handles.append(Patch(facecolor=colour, edgecolor=colour, alpha=alpha, label=kind))
+    return handles
 
 
 def save_figure(fig, path: str | os.PathLike, dpi: int = 130) -> Path:

@@ -169,9 +169,9 @@ def plot_walk(src: WalkSources, path: str | os.PathLike, title: str = "") -> Pat
     Legends sit outside the axes, so nothing covers the track; without ``truth.csv`` there is only the map.
     """
     import matplotlib.pyplot as plt
-    from matplotlib.patches import Patch, Rectangle
+    from matplotlib.patches import Patch
 
-    from pipeline.plots import CLASS_COLOURS, save_figure
+    from pipeline.plots import CLASS_COLOURS, draw_structures, save_figure
 
     has_truth = src.truth is not None
     if has_truth:
@@ -179,14 +179,16 @@ def plot_walk(src: WalkSources, path: str | os.PathLike, title: str = "") -> Pat
     else:
         fig, ax = plt.subplots(figsize=(9, 6.5))
         ax2 = None
-    for b in src.site.layout:
-        ax.add_patch(Rectangle((b.east_min_m, b.north_min_m), b.east_max_m - b.east_min_m,
-                               b.north_max_m - b.north_min_m, facecolor="none" if b.porous else "#cccccc",
-                               edgecolor="#999999", hatch="//" if b.porous else None, lw=0.6))
+    e0, e1, n0, n1 = _walk_extent(src)
+    structures = draw_structures(ax, src.site, alpha=0.45, zorder=1, extent=(e0, e1, n0, n1))
     for bc in src.site.beacons:
         ax.plot(bc.east_m, bc.north_m, "k^", ms=5)
     if has_truth:
-        ax.plot(src.truth.east_m, src.truth.north_m, "k-", lw=1.2, label="truth", zorder=3)
+        ax.plot(src.truth.east_m, src.truth.north_m, "k-", lw=0.8, label="truth", zorder=3)
+        ax.plot(src.truth.east_m[0], src.truth.north_m[0], "o", ms=9, mfc="white", mec="black", mew=1.5, zorder=6,
+                label="start")
+        ax.plot(src.truth.east_m[-1], src.truth.north_m[-1], "s", ms=8, mfc="black", mec="black", zorder=6,
+                label="end")
     for name, tr in src.tracks.items():
         style = _SRC_STYLE.get(name, {})
         if name in ("PDR", "odometry"):
@@ -202,7 +204,9 @@ def plot_walk(src: WalkSources, path: str | os.PathLike, title: str = "") -> Pat
     ax.set_aspect("equal")
     ax.set_xlabel("east (m)")
     ax.set_ylabel("north (m)")
-    ax.legend(loc="upper left", bbox_to_anchor=(0.0, -0.12), ncol=3, fontsize=8, frameon=False)
+    handles, _ = ax.get_legend_handles_labels()
+    ax.legend(handles=handles + structures, loc="upper left", bbox_to_anchor=(0.0, -0.12), ncol=3, fontsize=8,
+              frameon=False)
     ax.set_title(title or ("walk: sources against truth" if has_truth else "walk: sources (no truth.csv)"))
     if has_truth:
         t = src.truth.t_s
@@ -221,7 +225,8 @@ def plot_walk(src: WalkSources, path: str | os.PathLike, title: str = "") -> Pat
                             label=name, zorder=3, **style)
             handles.append(h)
         ax2.set_yscale("log")
-        handles += [Patch(color=CLASS_COLOURS[k], alpha=0.6, label=f"truth class: {k}") for k in ENV_CLASSES]
+        handles += [Patch(color=CLASS_COLOURS[k], alpha=0.6, label=f"truth class: {k}")
+                    for i, k in enumerate(ENV_CLASSES) if np.any(c == i)]
         if np.any(c < 0):
             handles.append(Patch(facecolor="white", edgecolor="0.6", label="truth class unknown"))
         ax2.set_xlabel("t (s)")

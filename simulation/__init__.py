@@ -1,6 +1,6 @@
 """Synthetic substations that write exactly what real devices write.
 
-Writes the on-disk formats of DESIGN.md §4 and nothing else; downstream code
+Writes the on-disk formats of docs/design.md §4 and nothing else; downstream code
 reads those files, never this package's internals. Imports only ``features``
 (its constants, site model, geodesy, file writing).
 

@@ -1,4 +1,4 @@
-"""Simulated fingerprint surveys: one static capture per grid cell (DESIGN.md §4).
+"""Simulated fingerprint surveys: one static capture per grid cell (docs/design.md §4).
 
 The crew walks the grid row by row (boustrophedon), standing ``capture_s`` in
 each cell at its centre — or, when the centre lies inside a structure, at the

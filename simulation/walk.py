@@ -1,4 +1,4 @@
-"""Simulated walk logs: ``walk.toml``, ``truth.csv`` and every sensor stream (DESIGN.md §4)."""
+"""Simulated walk logs: ``walk.toml``, ``truth.csv`` and every sensor stream (docs/design.md §4)."""
 
 from __future__ import annotations
 
@@ -51,7 +51,10 @@ def write_truth_csv(path: Path, site, trajectory, rate_hz: float = 10.0) -> None
     t = trajectory.t_s[::step]
     e = trajectory.east_m[::step]
     n = trajectory.north_m[::step]
-    share = blocked_share(site, e, n)
+    # A walker standing at an inspection stop repeats one position for minutes: the share is computed once per
+    # distinct position (mm), which also keeps the sky test's per-tile arrays small.
+    uniq, inverse = np.unique(np.round(np.column_stack([e, n]), 3), axis=0, return_inverse=True)
+    share = blocked_share(site, uniq[:, 0], uniq[:, 1])[inverse.ravel()]
     cls = [ENV_CLASSES[i] for i in classify_share(share)]
     lines = ["t_s,east_m,north_m,env_class,blocked_sky_share"]
     lines += [f"{ti:.2f},{ei:.3f},{ni:.3f},{ci},{si:.4f}" for ti, ei, ni, ci, si in zip(t, e, n, cls, share)]
@@ -96,7 +99,7 @@ def simulate_walk(site_path: str | os.PathLike, out_dir: str | os.PathLike, seed
         ctx = StreamContext(site=site, trajectory=traj, out_dir=tmp, seed=seed, kind="walk", person_seed=person,
                             options=opts)
         meta = {}
-        with Progress(len(writers), f"walk {out_dir.name} streams", enabled=bool(opts["progress"]),
+        with Progress(len(writers), f"simulate walk {out_dir.name!r}: streams written", enabled=bool(opts["progress"]),
                       every_fraction=1e-9) as bar:
             for spec in writers:
                 meta.update(run_stream_writers(ctx, (spec,)))

@@ -66,3 +66,12 @@ def gnss_survey_dir(site_dir, tmp_path_factory) -> Path:
 
     return simulate_survey(site_dir, tmp_path_factory.mktemp("gsurveys") / "g3", seed=5, cell_size_m=10.0,
                            capture_s=10.0, progress=False, writers=("simulation.gnss.stream:write_gnss",))
+
+
+@pytest.fixture(scope="session")
+def bad_input_world(site_dir, walk_dir, tmp_path_factory):
+    """The bad-input corpus's world (tests/bad_inputs.py): three short walks cut from ``walk_dir``, a synthetic
+    library, environment and fusion models, a three-cell survey; built once per test process."""
+    from tests.bad_inputs import build_world
+
+    return build_world(tmp_path_factory.mktemp("bad_inputs") / "world", site_dir, walk_dir)

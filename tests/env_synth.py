@@ -1,7 +1,7 @@
 """A synthetic 14-feature fingerprint library whose environment classes are known.
 
 Windows of three classes (open / light / heavy, severity 0 / 1 / 2) with the direction of
-DESIGN.md §5: attenuation, its spread, fluctuations, invisible ratio, DOP growth and delay
+docs/design.md §5: attenuation, its spread, fluctuations, invisible ratio, DOP growth and delay
 spread grow with severity, the Rician K falls; the shape features (kurtosis, skewness, gain
 statistics) are noise of the same size in every class. Not physics: a test fixture with a
 right answer, for the severity naming and for timing the embedding.

@@ -17,7 +17,7 @@ from features.site import load_site
 
 
 def cref_dbhz(el_deg):
-    """Nominal open-sky C/N0 (DESIGN.md §6: ≈ 38 dB-Hz at 5°, ≈ 50 at zenith), linear in sin(el)."""
+    """Nominal open-sky C/N0 (docs/design.md §6: ≈ 38 dB-Hz at 5°, ≈ 50 at zenith), linear in sin(el)."""
     s5 = np.sin(np.radians(5.0))
     return 38.0 + 12.0 * (np.sin(np.radians(el_deg)) - s5) / (1.0 - s5)
 

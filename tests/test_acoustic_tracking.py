@@ -127,8 +127,10 @@ def test_short_walk_fix_rate_and_error(short_walk):
                    np.array([float(f["north_m"]) for f in fixes]) - np.interp(t, truth["t_s"], truth["north_m"]))
     moving = np.hypot(np.interp(t + 0.5, truth["t_s"], truth["east_m"]) - np.interp(t - 0.5, truth["t_s"], truth["east_m"]),
                       np.interp(t + 0.5, truth["t_s"], truth["north_m"]) - np.interp(t - 0.5, truth["t_s"], truth["north_m"])) > 0.5
-    # 11 frames of 1.3 s (every beacon its own slot); measured: 10 fixes, median 0.03 m, max 0.18 m.
-    assert len(fixes) >= 9
+    # 11 frames of 1.3 s (every beacon its own slot); measured: 10 fixes, median 0.03 m, max 0.18 m. Issue 21's
+    # routes (an inspection stop of 4.5 s, 30 % of this 15 s walk, after the standing start) changed the walk:
+    # 7 fixes from 9.2 s on, 4 of them walking, median 0.25 m, max 0.28 m.
+    assert len(fixes) >= 6
     assert moving.sum() >= 3                       # fixes while walking, not only standing
     # Issue 10: true air (thermometer error, hot air, wind up to 4 m/s) moved these from < 0.1 / < 0.3.
     assert np.median(err) < 0.5 and err.max() < 0.8

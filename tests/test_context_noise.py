@@ -14,7 +14,7 @@ from scipy.stats import multivariate_normal
 
 from models.fusion import ClassTrack, EkfConfig, EventEKF, FixedNoise, GnssEvents, merge_events, nees
 from models.fusion.context import BIASED_QUALITIES, ContextNoise, ErrorSeries, fit_contamination, fit_gauss_markov
-from models.fusion.core import MIXTURE, kalman_update, mixture_update
+from models.fusion.core import MIXTURE, MIXTURE_DROP, kalman_update, mixture_update
 from tests.fusion_synth import synth_walk
 
 
@@ -80,9 +80,11 @@ def test_mixture_update_is_the_collapsed_gaussian_sum():
         beta = parts[1][0] / (parts[0][0] + parts[1][0])
         mean = (1 - beta) * parts[0][1] + beta * parts[1][1]
         cov = sum(wt * (Pi + np.outer(xi - mean, xi - mean)) for wt, (_, xi, Pi) in zip((1 - beta, beta), parts))
-        assert w == pytest.approx(1 - beta, rel=1e-9)
-        np.testing.assert_allclose(xn, mean, atol=1e-10)
-        np.testing.assert_allclose(Pn, cov, atol=1e-10)
+        # a component of weight below MIXTURE_DROP (1e-6) is dropped: the moments then agree to that fraction
+        assert w == pytest.approx(1 - beta, rel=1e-9, abs=MIXTURE_DROP)
+        scale = np.abs(parts[0][1] - parts[1][1]).max() ** 2 + np.abs(parts[0][2] - parts[1][2]).max()
+        np.testing.assert_allclose(xn, mean, atol=1e-10 + MIXTURE_DROP * np.sqrt(scale))
+        np.testing.assert_allclose(Pn, cov, atol=1e-10 + MIXTURE_DROP * scale)
     assert w < 0.01                                                  # the 7 m fix is judged an outlier
 
 
@@ -125,7 +127,7 @@ def test_bias_states_reset_on_quality_change_and_gap():
     q = np.array([5, 5, 4, 4, 5, 5, 2, 2])
     g = GnssEvents.from_sigma(t, np.zeros(8), np.zeros(8), np.ones(8), quality=q)
     ev = merge_events(gnss=g)
-    cn = ContextNoise(n_classes=1, reset_gap_s=5.0)
+    cn = ContextNoise(n_classes=1, reset_gap_s=5.0, biased_qualities=(2, 4, 5))
     cn.gnss_ = {(0, 5): {"s2": 1.0, "eps": 0.0, "kappa": 1.0, "sb2": 0.25, "tau_s": 10.0},
                 (0, 2): {"s2": 1.0, "eps": 0.0, "kappa": 1.0, "sb2": 1.0, "tau_s": 40.0},
                 (0, 4): {"s2": 1.0, "eps": 0.0, "kappa": 1.0, "sb2": 0.0, "tau_s": 1.0}}
@@ -196,8 +198,9 @@ def test_class_contamination_distrusts_fixes_where_the_class_says_so():
 
     train, tr_cls = walk(41)
     g, a = series(train, tr_cls)
-    aware = ContextNoise(n_classes=3, min_samples=50).fit(g, a)
-    blind = ContextNoise(n_classes=1).fit(g, a)
+    # wrong fixes here are frequent and long: the fixed runs get a bias state too
+    aware = ContextNoise(n_classes=3, min_samples=50, biased_qualities=BIASED_QUALITIES + (4,)).fit(g, a)
+    blind = ContextNoise(n_classes=1, biased_qualities=BIASED_QUALITIES + (4,)).fit(g, a)
     test, te_cls = walk(42)
     cfg = EkfConfig(outlier="mixture")
     ra = EventEKF(cfg, aware).run(test.stream, classes=te_cls, x0_en=test.x0[:2])
@@ -212,4 +215,4 @@ def test_class_contamination_distrusts_fixes_where_the_class_says_so():
     assert err(ra, late & ~occluded) < 0.5 * err(rb, late & ~occluded)
     assert err(ra, late & occluded) < err(rb, late & occluded)
     assert aware.gnss_[(0, 4)]["sb2"] < 1e-4 < 0.1 < aware.gnss_[(2, 4)]["sb2"]
-    assert MIXTURE == 3 and set(BIASED_QUALITIES) == {1, 2, 4, 5, 6}
+    assert MIXTURE == 3 and set(BIASED_QUALITIES) == {1, 2, 5, 6}

@@ -136,7 +136,7 @@ def test_nan_rows_are_refused():
         EnvironmentEmbedding(random_state=0).fit(X)
 
 
-# Which way each feature moves when the sky and the beacons are blocked, from the physics (DESIGN.md §5),
+# Which way each feature moves when the sky and the beacons are blocked, from the physics (docs/design.md §5),
 # written here, not read from SEVERITY_WEIGHTS: attenuation, invisible ratio, DOP growth and the delay
 # spread grow; the Rician K (first path over the rest) falls; the others do not enter the score.
 _DIRECTION = {"att_mean_db": 1, "invisible_ratio": 1, "dop_growth": 1, "rms_delay_ms": 1, "rician_k_db": -1}

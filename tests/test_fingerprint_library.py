@@ -264,7 +264,7 @@ def test_plain_sqlite_users_can_query(lib):
 
 
 def test_fingerprints_imports_only_features():
-    """Layering (DESIGN.md §2): fingerprints imports features and third-party libraries, nothing else of ours."""
+    """Layering (docs/design.md §2): fingerprints imports features and third-party libraries, nothing else of ours."""
     import ast
     from pathlib import Path
 

@@ -105,16 +105,24 @@ def test_cli_refuses_bad_models_and_walks(walk_dir, tmp_path, capsys):
     assert not (tmp_path / "t.csv").exists()
 
 
-def test_evaluate_on_dask_equals_serial(trained, walk_dir, tmp_path):
-    """Each walk is a pure task of its files and the bundle: two local workers give the serial metrics."""
+def test_evaluate_on_dask_equals_serial(trained, walk_dir, site_dir, tmp_path):
+    """Each walk is a pure task of its files and the bundle: two local workers give the serial metrics, in the
+    input order — on distinct walks (the whole walk, then its first 20 s without audio, which finishes first),
+    so that results put in completion order would show."""
     from pipeline.evaluate import evaluate
+    from tests.bad_inputs import _trim_walk
 
     _, model = trained
     save_fusion_model(model, tmp_path / "fm")
-    walks = [walk_dir, walk_dir]
+    (tmp_path / "site").mkdir()
+    (tmp_path / "site" / "site.toml").write_bytes((site_dir / "site.toml").read_bytes())
+    _trim_walk(walk_dir, tmp_path / "walks" / "short", 20.0, "../../site/site.toml", audio=False)
+    walks = [walk_dir, tmp_path / "walks" / "short"]
     a = evaluate(walks, tmp_path / "fm", tmp_path / "r1", methods=("kf", "adaptive"), workers=1, progress=False,
                  plots=False)
     b = evaluate(walks, tmp_path / "fm", tmp_path / "r2", methods=("kf", "adaptive"), workers=2, progress=False,
                  plots=False)
+    assert [r["walk_dir"] for r in b["results"]] == [str(w) for w in walks]
+    assert a["results"][0]["rows"] != a["results"][1]["rows"]           # distinct walks, distinct metrics
     assert (tmp_path / "r1" / "metrics.csv").read_text() == (tmp_path / "r2" / "metrics.csv").read_text()
     assert [r["rows"] for r in a["results"]] == [r["rows"] for r in b["results"]]

@@ -227,7 +227,7 @@ def test_simulated_survey_features_order_classes(simulated_survey):
 
 
 def test_reference_fitted_on_open_cells_recovers_the_simulated_open_sky_model(simulated_survey):
-    """The simulator draws open-sky C/N0 round 38 dB-Hz at 5° to 50 at zenith (DESIGN.md §6): the
+    """The simulator draws open-sky C/N0 round 38 dB-Hz at 5° to 50 at zenith (docs/design.md §6): the
     median fit on open cells finds that line; the default upper quantile sits a few dB above it."""
     els, cn0s = [], []
     for cell in sorted((simulated_survey / "cells").iterdir()):

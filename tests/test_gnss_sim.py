@@ -12,6 +12,7 @@ from features.site import Box, EmiZone, Origin, Site
 from simulation.gnss import signal as gnss_signal
 from simulation.site.geometry import boxes_array
 from simulation.gnss.fix import FixConfig, code_sigma_m, solve_fixes
+from simulation.gnss.rtk import RtkConfig
 from simulation.gnss.signal import SignalConfig, blockage, knife_edge_loss_db, open_sky_cn0_dbhz, rician_power, track
 from simulation.gnss.stream import simulate_gnss, write_gnss
 from simulation.site.route import static_trajectory
@@ -35,7 +36,7 @@ def _stats(sim):
         "untracked": (view & ~sim.tracked).sum() / view.sum(),
         "att_db": sim.attenuation_db[trk].mean(),
         "err_m": np.nanmedian(sim.horizontal_error_m),
-        "fixed": np.mean(sim.quality[sim.t_s >= FixConfig().ttf_max_s] == 4),  # after the cold-start time-to-fix
+        "fixed": np.mean(sim.quality[sim.t_s >= 10.0] == 4),  # after the cold start's first 10 s
         "first_fixed_s": float(sim.t_s[np.argmax(sim.quality == 4)]) if (sim.quality == 4).any() else np.inf,
     }
 
@@ -60,8 +61,10 @@ def test_wall_foot_is_worse_than_open_sky(open_and_foot):
 
 def test_open_sky_is_rtk_fixed_at_centimetre_level(open_and_foot):
     for o, _ in open_and_foot:
-        # Cold start: the first fix needs a time-to-fix of 3-10 s (ZED-F9P data sheet: RTK convergence < 10 s).
-        assert FixConfig().ttf_min_s <= o["first_fixed_s"] <= FixConfig().ttf_max_s + 0.2
+        # Cold start: the first fix once the carriers are locked (3 s) and the ambiguity search's success rate
+        # allows it; GPS + BeiDou open sky (≈ 20 satellites) is strong enough at once (ZED-F9P data sheet: RTK
+        # convergence < 10 s).
+        assert 3.0 <= o["first_fixed_s"] <= 10.0
         assert o["fixed"] >= 0.9
         assert o["err_m"] < 0.03
         assert o["untracked"] < 0.05
@@ -70,7 +73,7 @@ def test_open_sky_is_rtk_fixed_at_centimetre_level(open_and_foot):
 def test_open_sky_cn0_and_los_nlos_calibration():
     sim = simulate_gnss(CANYON, _static(-100.0, 0.0, dur=30.0), seed=4)
     los = sim.cn0_reported_dbhz[sim.tracked & sim.los & (sim.el_rad > np.radians(10))]
-    # smartLoc (DESIGN.md §6): LOS 43.8 ± 4.5 dB-Hz on a u-blox receiver; open sky sits at or above.
+    # smartLoc (docs/design.md §6): LOS 43.8 ± 4.5 dB-Hz on a u-blox receiver; open sky sits at or above.
     assert 42.0 < los.mean() < 48.0 and 2.5 < los.std() < 7.0
     foot = simulate_gnss(CANYON, _static(9.0, 0.0, dur=30.0), seed=4)
     nlos = foot.cn0_reported_dbhz[foot.tracked & foot.nlos]
@@ -162,9 +165,12 @@ def test_walking_fluctuates_more_than_standing():
 
 
 def test_tracking_hysteresis():
+    # Lost below 25, reacquired after 1 s at or above 28 (the thresholds of before issue 21, set explicitly; the
+    # defaults are now 20 / 23 dB-Hz).
     cn0 = np.array([40, 30, 24, 27, 29, 29, 29, 29, 29, 29, 26, 24.0])[:, None]
     view = np.ones_like(cn0, bool)
-    st = track(cn0, view, 0.2, SignalConfig(reacquire_delay_s=1.0))[:, 0]
+    st = track(cn0, view, 0.2, SignalConfig(reacquire_delay_s=1.0, track_lose_dbhz=25.0,
+                                            track_acquire_dbhz=28.0))[:, 0]
     assert st.tolist() == [True, True, False, False, False, False, False, False, True, True, True, False]
 
 
@@ -201,7 +207,7 @@ def _ctx(tmp_path, seed, name, options=None):
 
 def test_write_gnss_contract_and_determinism(tmp_path):
     meta = write_gnss(_ctx(tmp_path, 3, "a"))
-    assert meta == {"gnss": {"file": "gnss.nmea", "rate_hz": 5.0}}
+    assert meta == {"gnss": {"file": "gnss.nmea", "rate_hz": 5.0, "gst": True}}
     a = (tmp_path / "a" / "gnss.nmea").read_bytes()
     write_gnss(_ctx(tmp_path, 3, "b"))
     write_gnss(_ctx(tmp_path, 4, "c"))
@@ -209,8 +215,11 @@ def test_write_gnss_contract_and_determinism(tmp_path):
     assert a != (tmp_path / "c" / "gnss.nmea").read_bytes()
     lines = a.decode("ascii").split("\r\n")[:-1]
     assert sum(1 for line in lines if line.startswith("$GNGGA")) == 21  # 4 s at 5 Hz, both ends included
+    assert sum(1 for line in lines if line.startswith("$GNGST")) == 21  # an RTK receiver sends GST each epoch
     for line in lines:
         pynmea2.parse(line, check=True)
+    write_gnss(_ctx(tmp_path, 3, "nogst", {"gnss_gst": False}))
+    assert "GST" not in (tmp_path / "nogst" / "gnss.nmea").read_text()
     assert list(tmp_path.joinpath("a").iterdir()) == [tmp_path / "a" / "gnss.nmea"]  # no temporary left over
 
 
@@ -223,13 +232,18 @@ def test_corrections_option_and_bad_options(tmp_path):
         write_gnss(_ctx(tmp_path, 3, "bad1", {"gnss_corrections": "yes"}))
     with pytest.raises(ConfigError, match="gnss_rate_hz"):
         write_gnss(_ctx(tmp_path, 3, "bad2", {"gnss_rate_hz": 0}))
+    with pytest.raises(ConfigError, match="gnss_gst"):
+        write_gnss(_ctx(tmp_path, 3, "bad3", {"gnss_gst": 1}))
+    assert "GST" not in text                      # a receiver without corrections (no RTK) sends no GST by default
 
 
 def test_config_validation():
     with pytest.raises(ConfigError, match="track_acquire_dbhz"):
         SignalConfig(track_lose_dbhz=30.0, track_acquire_dbhz=28.0)
-    with pytest.raises(ConfigError, match="ttf_max_s"):
-        FixConfig(ttf_min_s=5.0, ttf_max_s=2.0)
+    with pytest.raises(ConfigError, match="xpr_min_db"):
+        SignalConfig(xpr_min_db=10.0, xpr_max_db=5.0)
+    with pytest.raises(ValueError, match="ratio_threshold"):
+        RtkConfig(ratio_threshold=0.5)
     assert gnss_signal.emi_loss_db(np.zeros((1, 2)), ()).tolist() == [0.0]
 
 
@@ -260,26 +274,54 @@ def test_raim_excludes_the_biased_satellite():
     assert np.all(with_raim.n_used == 13)
 
 
-def test_rtk_fix_needs_phase_lock_then_time_to_fix():
-    """Code-differential until the carriers lock, float until they have been locked rtk_conv_lock_s (20 s, the
-    single-frequency convergence; before: the time-to-fix ran from phase lock), then fixed after a time-to-fix."""
-    n, k = 250, 14
+def test_rtk_fix_needs_phase_lock_then_a_confident_search():
+    """Code-differential until the carriers lock (3 s), float until the ambiguity search is confident — the
+    bootstrapped success rate of the receiver's own float covariance reaches 0.99 and the ratio test passes —
+    then fixed. 14 satellites round the sky with perfect observables: the success rate alone holds the fix back
+    (the float ambiguities' variance σ²_code/N_eff shrinks as lock time grows); with the success-rate gate off,
+    the fix comes at phase lock."""
+    n, k = 400, 11
     az = np.tile(np.radians(np.linspace(0.0, 330.0, k)), (n, 1))
     el = np.tile(np.radians(np.linspace(20.0, 85.0, k)), (n, 1))
     sys_idx = np.arange(k) % 2  # GPS and BeiDou interleaved round the sky: PDOP ≈ 2
     tracked = np.ones((n, k), bool)
     tracked[:10] = False  # the receiver acquires everything at epoch 10 (2 s)
-    cn0 = np.where(tracked, 48.0, np.nan)
+    cn0 = np.where(tracked, 44.0, np.nan)
     zero = np.zeros((n, k))
     errors = {"noise": zero, "multipath": zero, "nlos_bias": zero, "atmosphere": zero, "carrier": zero}
     cfg = FixConfig(slip_weak_prob=0.0)
-    q = solve_fixes(np.random.default_rng(3), az, el, sys_idx, tracked, cn0, errors, zero.astype(bool), 0.2,
-                    corrections=True, cfg=cfg).quality
-    assert np.all(q[:10] == 0)
-    locked_at = 10 + int(round(cfg.phase_lock_s / 0.2)) - 1  # lock age counts the acquiring epoch as 0.2 s
-    assert np.all(q[10:locked_at] == 2)                     # code-differential until the carriers are locked
-    converged_at = 10 + int(round(cfg.rtk_conv_lock_s / 0.2)) - 1
-    first_fix = int(np.flatnonzero(q == 4)[0])
-    ttf_s = (first_fix - converged_at) * 0.2
-    assert cfg.ttf_min_s - 0.21 <= ttf_s <= cfg.ttf_max_s + 0.21
-    assert np.all(q[locked_at:first_fix] == 5) and np.all(q[first_fix:] == 4)
+    first = {}
+    for p_min in (0.99, 0.0):
+        fix = solve_fixes(np.random.default_rng(3), az, el, sys_idx, tracked, cn0, errors, zero.astype(bool), 0.2,
+                          corrections=True, cfg=cfg, rtk_cfg=RtkConfig(min_success_rate=p_min))
+        q = fix.quality
+        assert np.all(q[:10] == 0)
+        locked_at = 10 + int(round(RtkConfig().phase_lock_s / 0.2)) - 1  # the acquiring epoch counts 0.2 s of lock
+        assert np.all(q[10:locked_at] == 2)                     # code-differential until the carriers are locked
+        first[p_min] = int(np.flatnonzero(q == 4)[0])
+        assert np.all(q[locked_at:first[p_min]] == 5) and np.all(q[first[p_min]:] == 4)
+        assert np.nanmax(np.abs(fix.error_enu_m[first[p_min]:])) < 1e-6     # right integers, perfect carriers
+    assert first[0.0] == locked_at
+    assert first[0.99] > locked_at + 5                            # seconds of float before the search is sure
+
+
+def test_wrong_fix_under_occlusion_with_an_overconfident_gst():
+    """A receiver standing beside a transformer (tuning site 2, a heavy stand point) fixes wrong integers: the
+    float ambiguities carry the code multipath and NLOS delays held while the carriers stay locked, the search
+    is confident in its own white-noise model, and the fixed position is a metre off while its GST σ says a
+    centimetre — the public low-cost RTK log's failure (fixed epochs scattered 0.85 m median, GST σ 0.014 m).
+    Measured: 68 % of the epochs fixed, all of them > 0.2 m off (median 1.41 m), GST σ 0.014 m."""
+    from simulation.site.layout import generate_site
+
+    site = generate_site(2)
+    tr = static_trajectory(10.75, 68.25, 1.0, 120.0, datetime(2026, 6, 1, tzinfo=timezone.utc))
+    sim = simulate_gnss(site, tr, seed=200, body=False)
+    h = sim.horizontal_error_m
+    q4 = sim.quality == 4
+    assert 0.3 < q4.mean() < 0.95
+    wrong = q4 & (h > 0.2)
+    assert wrong.sum() > 0.8 * q4.sum() and 0.3 < np.median(h[wrong]) < 5.0
+    sigma_h = np.hypot(sim.gst[wrong, 4], sim.gst[wrong, 5])
+    assert np.median(sigma_h) < 0.05                                    # the receiver believes centimetres
+    # One persistent episode (fix-and-hold keeps the wrong integers), not epoch-to-epoch flicker.
+    assert np.count_nonzero(np.diff(q4.astype(int)) == 1) <= 3

@@ -40,6 +40,10 @@ def _loop_fixes_to_enu(epochs, lat0, lon0, alt0, uere=None):
             u = UERE_BY_QUALITY_M[f.quality] * g
         s = u * hdop / math.sqrt(2.0)
         up = u * (f.vdop if f.vdop is not None else 1.5 * hdop)
+        g_st = e.gst   # issue 21: the receiver's own GST σ wins where the epoch carries it, a fitted cell over it
+        if g_st is not None and g_st.sigma_lat_m is not None and g_st.sigma_lon_m is not None and fitted is None:
+            s = max(g_st.sigma_lat_m, g_st.sigma_lon_m)
+            up = g_st.sigma_alt_m if g_st.sigma_alt_m is not None else up
         alt = (f.alt_m or 0.0) + (f.geoid_sep_m or 0.0) if f.alt_m is not None else alt0
         rows.append((e.t_s, f.lat_deg, f.lon_deg, alt, s, up, att, hdop))
     c = np.array(rows, float).reshape(-1, 8)
@@ -62,7 +66,17 @@ def _check(epochs, uere=None):
 
 
 def test_vectorised_positions_equal_the_loop_on_a_simulated_walk(walk_dir):
+    import dataclasses
+
     epochs, _ = read_nmea(walk_dir / "gnss.nmea")
+    # Issue 21: the simulated RTK receiver sends GST, so its fixes carry the receiver's own σ, a fitted table's
+    # cells over it ...
+    assert (_check(epochs).sigma_source == "gst").mean() > 0.9
+    table = UereTable({4: (0.02, 0.02, 0.02, 0.02)}, {})
+    both = _check(epochs, table)
+    assert ((both.sigma_source == "fitted") == (both.quality == 4)).all()
+    # ... and without GST (another receiver model) the C/N0 and fitted rules, as before.
+    epochs = [dataclasses.replace(e, gst=None) for e in epochs]
     pos = _check(epochs)
     assert len(pos) > 250 and (pos.sigma_source == "cn0").any()
     table = UereTable({5: (0.3, 0.5, 0.8, 1.5), 2: (None, 1.0, 2.0, 3.0)}, {})

@@ -120,7 +120,7 @@ def test_features_read_one_primary_signal_per_satellite():
 
 
 def _cref_dbhz(el_deg: float) -> float:
-    """DESIGN.md §6 open-sky line through 38 dB-Hz at 5° and 50 dB-Hz at zenith, linear in sin(el)."""
+    """docs/design.md §6 open-sky line through 38 dB-Hz at 5° and 50 dB-Hz at zenith, linear in sin(el)."""
     s5 = math.sin(math.radians(5.0))
     return 38.0 + 12.0 * (math.sin(math.radians(el_deg)) - s5) / (1.0 - s5)
 

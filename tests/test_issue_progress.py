@@ -28,7 +28,7 @@ def test_simulate_walk_reports_progress(site_dir, tmp_path, capfd):
     simulate_walk(site_dir, tmp_path / "w", seed=2, duration_s=5.0,
                   writers=("simulation.gnss.stream:write_gnss", "simulation.imu.stream:write_imu"))
     err = capfd.readouterr().err
-    assert "streams: 1/2" in err and "streams: 2/2" in err and "\r" not in err
+    assert "'w': streams written: 1/2" in err and "'w': streams written: 2/2" in err and "\r" not in err
     simulate_walk(site_dir, tmp_path / "q", seed=2, duration_s=5.0, progress=False,
                   writers=("simulation.gnss.stream:write_gnss",))
     assert capfd.readouterr().err == ""

@@ -298,11 +298,13 @@ def test_cli_build_and_export(survey, tmp_path):
     (["survey", "export", "--library", "{lib}", "--out", "{tmp}/x.csv", "--site", "nope"], 1, "no site named 'nope'"),
     (["survey", "export", "--library", "{tmp}/absent.sqlite", "--out", "-"], 1, "no fingerprint library there"),
     (["survey", "build", "{tmp}", "--library", "{tmp}/fp.sqlite"], 1, "site.toml"),
-    (["survey", "build", "{survey}", "--library", "{survey}/site.toml"], 1, "not a fingerprint library"),
+    (["survey", "build", "{survey}", "--library", "{survey}/site.toml"], 2, "is the input SURVEY_DIR's site.toml"),
+    (["survey", "build", "{survey}", "--library", "{tmp}/notes.txt"], 1, "not a fingerprint library"),
     (["survey", "export", "--out", "x.csv"], 2, "required: --library"),
     (["survey", "build", "{survey}", "--library", "{tmp}/fp.sqlite", "--cn0-quantile", "1.5"], 2, "--cn0-quantile"),
 ])
 def test_cli_errors_are_one_line(built, survey, tmp_path, argv, code, needle):
+    (tmp_path / "notes.txt").write_text("not a library\n")
     argv = [a.format(lib=built[0], tmp=tmp_path, survey=survey) for a in argv]
     r = _envfuse(*argv)
     assert r.returncode == code, r.stderr

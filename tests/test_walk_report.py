@@ -31,19 +31,25 @@ def test_errors_per_source_are_sensor_like(sources):
     before the calibrated PDR track was re-anchored on the GNSS fix its start came from (the anchor
     is the first RTK-fixed epoch, 29 s in). The invariant light > open in mean is the physical check;
     the independent references (gpsd, Oxford truth, closed forms) live in the reader and simulator
-    tests."""
+    tests.
+
+    Re-pinned after issue 21 (inspection stops in the default routes, the GNSS world from the ambiguities, GST):
+    walk 11 now spends 88 % of its 60 s in the open and stands 18 s beside equipment in light ground, RTK-fixed
+    there. GNSS all median 0.0113 → 0.0069, open 0.0115 → 0.0065, light mean 0.65 → 0.015 (fixed, not float:
+    the invariant light > open no longer holds on this walk, whose open mean carries the float of the cold
+    start; occlusion degrading GNSS is pinned per class on many walks in tests/test_calibration.py); acoustic
+    58 → 60 fixes, median 0.21 → 0.14 m; PDR mean 0.56 → 0.30 m over 64 m walked, K 0.418 → 0.425."""
     table = error_table(sources)
     gnss = table["GNSS"]
-    assert 0.0113 / 3 < gnss["all"][2] < 0.0113 * 3           # median: RTK most of the walk
-    assert 0.0115 / 3 < gnss["open"][2] < 0.0115 * 3
-    assert 0.65 / 3 < gnss["light"][1] < 0.65 * 3              # mean: float epochs behind the buildings
-    assert gnss["light"][1] > 2 * gnss["open"][1]              # invariant: occlusion degrades GNSS
+    assert 0.0069 / 3 < gnss["all"][2] < 0.0069 * 3           # median: RTK most of the walk
+    assert 0.0065 / 3 < gnss["open"][2] < 0.0065 * 3
+    assert 0.015 / 3 < gnss["light"][1] < 0.015 * 3            # mean: RTK fixed beside the equipment
     ac = table["acoustic"]["all"]
-    assert 58 / 3 <= ac[0] <= 58 * 3 and 0.21 / 3 < ac[2] < 0.21 * 3
+    assert 60 / 3 <= ac[0] <= 60 * 3 and 0.14 / 3 < ac[2] < 0.14 * 3
     pdr = sources.tracks["PDR"]
-    assert "calibrated_steps" in pdr.info and 0.418 * 0.9 < pdr.info["k"] < 0.418 * 1.1
+    assert "calibrated_steps" in pdr.info and 0.425 * 0.9 < pdr.info["k"] < 0.425 * 1.1
     walked = float(np.sum(np.hypot(np.diff(sources.truth.east_m), np.diff(sources.truth.north_m))))
-    assert 0.56 / 3 < table["PDR"]["all"][1] < 0.56 * 3        # mean PDR error, m
+    assert 0.30 / 3 < table["PDR"]["all"][1] < 0.30 * 3        # mean PDR error, m
     assert table["PDR"]["all"][1] < 0.02 * walked
 
 

@@ -1,1 +1,1 @@
-"""envfuse training package (see DESIGN.md §2)."""
+"""envfuse training package (see docs/design.md §2)."""

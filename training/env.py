@@ -1,6 +1,6 @@
 """Fitting the environment model from a fingerprint library (``envfuse train env``).
 
-Modes (DESIGN.md §1, issue 13):
+Modes (docs/design.md §1, issue 13):
 
 ``supervised``
     the classifier learns the map labels of the training sites' cells — what
@@ -40,7 +40,7 @@ from models.bundle import load_bundle, save_bundle
 from models.environment import EnvironmentClassifier
 
 __all__ = ["MODES", "TrainingSet", "training_set", "walk_training_set", "fit_env_model", "save_env_model",
-           "load_env_model"]
+           "load_env_model", "naming_warnings", "SMALL_LIBRARY_WINDOWS"]
 
 MODES = ("supervised", "survey", "transfer")
 
@@ -56,13 +56,29 @@ class TrainingSet:
     label: np.ndarray
     share: np.ndarray
     t_s: np.ndarray
+    window_s: float = 2.0
+    hop_s: float = 1.0
 
     def __len__(self) -> int:
         return int(self.X.shape[0])
 
     def subset(self, keep: np.ndarray) -> "TrainingSet":
         return TrainingSet(self.X[keep], self.site[keep], self.cell[keep], self.label[keep], self.share[keep],
-                           self.t_s[keep])
+                           self.t_s[keep], self.window_s, self.hop_s)
+
+
+def _windows(params: dict, library) -> tuple[float, float]:
+    """The one (window_s, hop_s) every chosen cell was computed with; a library mixing them is refused."""
+    seen: dict = {}
+    for key, p in params.items():
+        w = (float(p.get("window_s", 2.0)), float(p.get("hop_s", 1.0)))
+        seen.setdefault(w, []).append(key)
+    if len(seen) > 1:
+        parts = ", ".join(f"{w:g} s / hop {h:g} s ({len(v)} cells, e.g. {v[0][0]}:{v[0][1]})"
+                          for (w, h), v in sorted(seen.items()))
+        raise DataError(f"{library}: the cells were computed with different windows ({parts}); a model learns "
+                        "one window length: rebuild them with one --window-s/--hop-s (survey build --replace)")
+    return next(iter(seen)) if seen else (2.0, 1.0)
 
 
 def training_set(library: str | os.PathLike, sites=None) -> TrainingSet:
@@ -73,10 +89,11 @@ def training_set(library: str | os.PathLike, sites=None) -> TrainingSet:
         missing = sorted(set(chosen) - set(known))
         if missing:
             raise ConfigError(f"{library}: no site {missing} (the library holds {known})")
-        parts_s, parts_c = [], []
+        parts_s, parts_c, params = [], [], {}
         for site in chosen:
             parts_s.append(lib.samples(site))
             parts_c.append(lib.cells(site))
+            params.update(lib.cell_feature_params(site))
     samples = np.concatenate(parts_s) if parts_s else np.zeros(0)
     cells = np.concatenate(parts_c) if parts_c else np.zeros(0)
     if len(samples) == 0:
@@ -89,8 +106,10 @@ def training_set(library: str | os.PathLike, sites=None) -> TrainingSet:
         if c["map_label"] in ENV_CLASSES:
             label[i] = ENV_CLASSES.index(str(c["map_label"]))
         share[i] = float(c["map_share"])
+    with_samples = {(str(s["site"]), str(s["cell_id"])) for s in samples}
+    window_s, hop_s = _windows({k: v for k, v in params.items() if k in with_samples}, library)
     return TrainingSet(feature_matrix(samples), np.asarray(samples["site"], str), np.asarray(samples["cell_id"], str),
-                       label, share, np.asarray(samples["t_s"], float))
+                       label, share, np.asarray(samples["t_s"], float), window_s, hop_s)
 
 
 def walk_training_set(walk_dirs, t_range_s: tuple[float, float] | None = None) -> TrainingSet:
@@ -98,7 +117,7 @@ def walk_training_set(walk_dirs, t_range_s: tuple[float, float] | None = None) -
     the walk's site, ``cell`` the walk's folder, ``label`` the truth class at the window's centre (−1 where
     unknown or without ``truth.csv``), ``share`` the truth's blocked-sky share there (NaN without one), ``t_s``
     the window centre; ``t_range_s``: only windows whose whole span lies in [t0, t1]."""
-    from walks.inputs import WINDOW_S, window_features
+    from walks.inputs import HOP_S, WINDOW_S, window_features
     from walks.reader import read_walk
 
     parts = []
@@ -119,7 +138,7 @@ def walk_training_set(walk_dirs, t_range_s: tuple[float, float] | None = None) -
         raise DataError("the walks hold no feature window")
     X, site, cell, label, share, t = (np.concatenate(c) for c in zip(*parts))
     return TrainingSet(X.reshape(-1, len(FEATURES)), site.astype(str), cell.astype(str), label.astype(int), share,
-                       t.astype(float))
+                       t.astype(float), WINDOW_S, HOP_S)
 
 
 def fit_env_model(data: TrainingSet, mode: str = "supervised", *, random_state: int = 0,
@@ -144,6 +163,10 @@ def fit_env_model(data: TrainingSet, mode: str = "supervised", *, random_state: 
         if ok.sum() < 30:
             raise DataError("supervised mode needs map labels: fewer than 30 windows lie in labelled cells")
         labels, X = data.label[ok], data.X[ok]
+        present = np.unique(labels)
+        if present.size < 2:
+            raise DataError(f"every labelled window is {ENV_CLASSES[int(present[0])]!r}: an environment model needs "
+                            "windows of at least two classes (survey more of the site, or other sites)")
         share = data.share[ok] if np.isfinite(data.share[ok]).all() else None
         info = {"labels": "map"}
     else:
@@ -154,16 +177,60 @@ def fit_env_model(data: TrainingSet, mode: str = "supervised", *, random_state: 
             diagnostics["clusters"] = result
         ok = result.labels >= 0
         labels, X = result.labels[ok], data.X[ok]
+        if np.unique(labels).size < 2:
+            raise DataError(f"the clustering found {np.unique(labels).size} cluster in {len(data)} windows: an "
+                            "environment model needs at least two classes (a larger or more varied library, or "
+                            "--mode supervised with map labels)")
         share = None            # map shares are for evaluation only in the unsupervised modes
         info = {"labels": "clusters", "n_clusters": int(result.n_clusters), "embedding": result.method}
+        info["warnings"] = naming_warnings(labels, data.share[ok], data.label[ok], len(data))
     clf.fit(X, labels, share=share)
     if diagnostics is not None:
         diagnostics["data"] = data
     info.update({"mode": mode, "n_windows": int(len(X)), "sites": sorted(set(data.site.tolist())),
                  "n_cells": int(len(set(zip(data.site.tolist(), data.cell.tolist())))),
                  "class_counts": np.bincount(labels, minlength=len(ENV_CLASSES)).tolist(),
-                 "constant_features": const, "random_state": int(random_state)})
+                 "constant_features": const, "random_state": int(random_state),
+                 "window_s": float(data.window_s), "hop_s": float(data.hop_s)})
+    info.setdefault("warnings", [])
     return clf, info
+
+
+SMALL_LIBRARY_WINDOWS = 300
+"""Below this many windows a clustering mode's severity naming is warned about as fragile."""
+
+
+def naming_warnings(names: np.ndarray, share: np.ndarray, label: np.ndarray, n_windows: int) -> list[str]:
+    """Warnings about the severity naming of clusters (open / light / heavy by signed feature means).
+
+    Where the cells carry map shares (evaluation data, never used to fit), a naming whose clusters' mean
+    blocked share does not grow from open to heavy is upside down somewhere; where they carry map labels,
+    a naming that agrees with them less often than a constant answer would is too. On a small library
+    (fewer than :data:`SMALL_LIBRARY_WINDOWS` windows) the naming is fragile either way.
+    """
+    out = []
+    names = np.asarray(names, int)
+    share = np.asarray(share, float)
+    present = [c for c in range(len(ENV_CLASSES)) if np.any((names == c) & np.isfinite(share))]
+    means = {c: float(np.nanmean(share[names == c])) for c in present}
+    order = [means[c] for c in present]
+    if len(order) >= 2 and any(b <= a for a, b in zip(order, order[1:])):
+        text = ", ".join(f"{ENV_CLASSES[c]} {100 * means[c]:.0f} %" for c in present)
+        out.append(f"the clusters named by severity disagree with the cells' map shares (mean blocked sky: {text}; "
+                   "it should grow from open to heavy): the naming is upside down on this library; do not use "
+                   "this model, or use --mode supervised")
+    lab = np.asarray(label, int)
+    known = lab >= 0
+    if known.sum() >= 10:
+        agree = float(np.mean(names[known] == lab[known]))
+        constant = float(np.max(np.bincount(lab[known], minlength=len(ENV_CLASSES))) / known.sum())
+        if agree < constant:
+            out.append(f"the cluster names agree with the cells' map labels on {100 * agree:.0f} % of windows, less "
+                       f"than naming every window the most common class ({100 * constant:.0f} %)")
+    if n_windows < SMALL_LIBRARY_WINDOWS:
+        out.append(f"only {n_windows} windows: clusters and their severity names are fragile on a library this "
+                   f"small (fewer than {SMALL_LIBRARY_WINDOWS}); check them with --plots")
+    return out
 
 
 def save_env_model(clf: EnvironmentClassifier, path, info: dict, library: str | os.PathLike | None = None,
@@ -179,11 +246,15 @@ def save_env_model(clf: EnvironmentClassifier, path, info: dict, library: str | 
 
 
 def load_env_model(path) -> tuple[EnvironmentClassifier, dict]:
-    """The classifier of an ``environment`` bundle and its metadata."""
+    """The classifier of an ``environment`` bundle and its metadata; beyond the bundle's hashes its numbers are
+    checked (:func:`models.checks.check_classifier`: finite, of the expected shapes, a usable precision)."""
     from models.bundle import BundleError
+    from models.checks import check_classifier
 
     b = load_bundle(path, "environment")
     try:
-        return EnvironmentClassifier.from_state(b.params, b.arrays["classifier"]), b.meta
-    except (KeyError, ValueError) as exc:
+        clf = EnvironmentClassifier.from_state(b.params, b.arrays["classifier"])
+        check_classifier(clf)
+    except (KeyError, TypeError, ValueError, AttributeError) as exc:
         raise BundleError(f"{path}: the environment model is inconsistent ({exc})") from None
+    return clf, b.meta

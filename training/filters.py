@@ -69,6 +69,7 @@ class WalkTraining:
     g_t: np.ndarray = None
     g_cov: np.ndarray = None
     a_t: np.ndarray = None
+    g_gst: np.ndarray = None
 
     def error_series(self) -> tuple[ErrorSeries, ErrorSeries]:
         """The walk's GNSS and acoustic fixes as :class:`~models.fusion.context.ErrorSeries` (classes as predicted)."""
@@ -87,12 +88,17 @@ def fit_noise(rows: list[WalkTraining], n_classes: int = 3, estimator: str = "me
     """(fixed, quality, per-class by map, per-class by classifier) noise policies from training walks."""
     g_err, a_err = _cat(rows, "g_err", (2,)), _cat(rows, "a_err", (2,))
     if len(g_err) + len(a_err) == 0:
-        raise ValueError("the training walks hold no GNSS or acoustic fix with truth")
+        raise DataError("the training walks hold no GNSS or acoustic fix with truth")
     g = g_err if len(g_err) else None
     a = a_err if len(a_err) else None
     fixed = FixedNoise().fit(gnss_errors_m=g, acoustic_errors_m=a)
+    gst = None
+    if g is not None:
+        gst = np.concatenate([r.g_gst if r.g_gst is not None else np.full((len(r.g_err), 2), np.nan)
+                              for r in rows if len(r.g_err)])
     quality = QualityNoise().fit(quality=_cat(rows, "g_quality", ()), hdop=_cat(rows, "g_hdop", ()),
-                                 gnss_errors_m=g, acoustic_cov_m2=_cat(rows, "a_cov", (2, 2)) if a is not None else None,
+                                 gnss_errors_m=g, gst_sigma_m=gst if gst is not None and len(gst) == len(g) else None,
+                                 acoustic_cov_m2=_cat(rows, "a_cov", (2, 2)) if a is not None else None,
                                  acoustic_errors_m=a, estimator=estimator)
     per_map = PerClassNoise(n_classes=n_classes).fit(
         gnss_class=_cat(rows, "g_map_class", ()) if g is not None else None, gnss_errors_m=g,
@@ -152,7 +158,7 @@ def training_rows(data: WalkData, inputs: WalkInputs, name: str) -> WalkTraining
 
     g_err, g_q, g_h, g_mc, g_pc = (np.zeros((0, 2)), np.zeros(0, int), np.zeros(0), np.zeros(0, int),
                                    np.zeros(0, int))
-    g_t, g_cov = np.zeros(0), np.zeros((0, 2, 2))
+    g_t, g_cov, g_gst = np.zeros(0), np.zeros((0, 2, 2)), np.zeros((0, 2))
     ev = inputs.events
     if data.gnss is not None and len(data.gnss.positions):
         p = data.gnss.positions
@@ -160,13 +166,14 @@ def training_rows(data: WalkData, inputs: WalkInputs, name: str) -> WalkTraining
         g_q, g_h = p.quality[ok], np.where(p.hdop_assumed, np.nan, p.hdop)[ok]
         g_t = p.t_s[ok]
         g_cov = ev.gnss.cov_m2[ok] if ev.gnss is not None else np.eye(2) * (p.sigma_en_m[ok] ** 2)[:, None, None]
+        g_gst = ev.gnss.gst_sigma_m[ok] if ev.gnss is not None else np.full((int(ok.sum()), 2), np.nan)
     a_err, a_cov, a_mc, a_pc = np.zeros((0, 2)), np.zeros((0, 2, 2)), np.zeros(0, int), np.zeros(0, int)
     a_t = np.zeros(0)
     if data.acoustic is not None and len(data.acoustic.t_s):
         a = data.acoustic
         ok, a_err, a_mc, a_pc = against(a.t_s, a.east_m, a.north_m)
         a_cov, a_t = a.covariance_en_m2[ok], a.t_s[ok]
-    return WalkTraining(name, g_err, g_q, g_h, g_mc, g_pc, a_err, a_cov, a_mc, a_pc, g_t, g_cov, a_t)
+    return WalkTraining(name, g_err, g_q, g_h, g_mc, g_pc, a_err, a_cov, a_mc, a_pc, g_t, g_cov, a_t, g_gst)
 
 
 DEFAULT_EKF = EkfConfig(outlier="huber")

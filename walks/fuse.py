@@ -14,13 +14,13 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
-from features.errors import ConfigError
+from features.errors import ConfigError, DataError, EnvfuseError
 from models.fusion.model import FusionModel
-from walks.inputs import WalkInputs, walk_inputs
+from walks.inputs import HOP_S, WINDOW_S, WalkInputs, walk_inputs
 from walks.methods import LAG_S, run_methods
 from walks.reader import WalkData, read_walk
 
-__all__ = ["FusedWalk", "fuse_walk", "check_site", "walk_name"]
+__all__ = ["FusedWalk", "fuse_walk", "check_site", "check_windows", "walk_name"]
 
 
 @dataclass
@@ -50,21 +50,47 @@ def check_site(model: FusionModel, site_name: str, walk: str, force: bool = Fals
                           "pass --force to fuse it anyway")
 
 
+def check_windows(env_meta: dict, where: str) -> None:
+    """Refuse (:class:`~features.errors.ConfigError`) an environment model fitted on feature windows other
+    than those a walk is classified on (:data:`walks.inputs.WINDOW_S`, hop :data:`walks.inputs.HOP_S`): its class
+    probabilities would describe another statistic. A model that states no window predates the check and was
+    fitted on the only windows there were then (2 s, hop 1 s)."""
+    window, hop = env_meta.get("window_s"), env_meta.get("hop_s")
+    if window is None and hop is None:
+        return
+    if abs(float(window) - WINDOW_S) > 1e-9 or abs(float(hop) - HOP_S) > 1e-9:
+        raise ConfigError(f"{where} was fitted on {float(window):g} s windows (hop {float(hop):g} s) but walks are "
+                          f"classified on {WINDOW_S:g} s windows (hop {HOP_S:g} s): rebuild the library with "
+                          f"'survey build --window-s {WINDOW_S:g} --hop-s {HOP_S:g} --replace' and refit")
+
+
+
 def fuse_walk(walk_dir: str | os.PathLike, model: FusionModel, methods=None, *, smooth: bool = True,
-              lag_s: float | None = LAG_S, class_map_for: Callable | None = None, force: bool = False) -> FusedWalk:
+              lag_s: float | None = LAG_S, class_map_for: Callable | None = None, force: bool = False,
+              truth: bool = True) -> FusedWalk:
     """Read ``walk_dir`` and run ``methods`` (default: all) on it with ``model``.
 
     ``class_map_for``: callable site → :class:`~models.fusion.events.ClassMap` or None, the site map of the
     map baseline (``kf_map``), called only when that method is asked for. ``smooth``: the filters' RTS tracks
-    too; ``lag_s``: their fixed-lag tracks with that lag (None: none).
+    too; ``lag_s``: their fixed-lag tracks with that lag (None: none). ``truth=False``: leave ``truth.csv``
+    unread (``run``). A domain error raised past the read names the walk.
     """
     name = walk_name(walk_dir)
-    data = read_walk(walk_dir)
+    data = read_walk(walk_dir, truth=truth)
     check_site(model, data.site.name, str(walk_dir), force)
-    inputs = walk_inputs(data, model.classifier)
-    want = methods
-    class_at = None
-    if class_map_for is not None and (want is None or "kf_map" in want):
-        class_at = class_map_for(data.site)
-    tracks, skipped = run_methods(model, inputs, want, smooth=smooth, class_at=class_at, lag_s=lag_s)
+    check_windows(model.meta.get("env_meta", {}), "the model's environment classifier")
+    if data.gnss is None and data.acoustic is None and data.pdr is None:
+        why = "; ".join(data.notes) if data.notes else "walk.toml names no gnss, audio or imu stream"
+        raise DataError(f"{walk_dir}: no usable stream to fuse ({why})")
+    try:
+        inputs = walk_inputs(data, model.classifier)
+        want = methods
+        class_at = None
+        if class_map_for is not None and (want is None or "kf_map" in want):
+            class_at = class_map_for(data.site)
+        tracks, skipped = run_methods(model, inputs, want, smooth=smooth, class_at=class_at, lag_s=lag_s)
+    except EnvfuseError as exc:
+        if str(walk_dir) in str(exc):
+            raise
+        raise DataError(f"{walk_dir}: {exc}") from None
     return FusedWalk(name, data, inputs, tracks, skipped)

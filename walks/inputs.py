@@ -22,8 +22,8 @@ from models.fusion import AcousticEvents, ClassTrack, GnssEvents, StandIntervals
 from models.fusion.events import EventStream
 from walks.reader import OdometryStream, WalkData
 
-__all__ = ["WalkInputs", "walk_inputs", "window_features", "split_steps", "STAND_GAP_S", "TYPICAL_STEP_S",
-           "WINDOW_S"]
+__all__ = ["WalkInputs", "walk_inputs", "window_features", "split_steps", "gnss_events", "STAND_GAP_S",
+           "TYPICAL_STEP_S", "WINDOW_S", "HOP_S"]
 
 STAND_GAP_S = 1.5
 """A gap between steps longer than this is standing (from 0.5 s after the last step to 0.5 s before the next)."""
@@ -33,6 +33,9 @@ TYPICAL_STEP_S = 0.55
 
 WINDOW_S = 2.0
 """Feature window length, s (the readers' default): a window centred at t is complete at t + 1 s."""
+
+HOP_S = 1.0
+"""Hop between the walk's feature windows, s (the readers' default)."""
 
 
 @dataclass(frozen=True)
@@ -122,6 +125,29 @@ def split_steps(t_s: np.ndarray, length_m: np.ndarray, heading_rad: np.ndarray,
     return np.concatenate(out_t), np.concatenate(out_l), np.concatenate(out_h)
 
 
+def gnss_events(p) -> GnssEvents:
+    """The reader's fixes (:class:`features.gnss.positions.GnssPositions`) as filter events: the covariance the
+    reader reports (its full east/north covariance when it has one, else σ per axis: GST's east and north σ
+    when the receiver sent GST, else the C/N0 or table model), the GGA quality, the HDOP the receiver gave
+    (NaN where the reader only assumed one) and the GST σ (NaN where there was none), so a quality-aware
+    policy can tell a receiver's own belief from the reader's model."""
+    n = len(p.t_s)
+    if p.cov_en_m2 is not None:
+        cov = np.asarray(p.cov_en_m2, float)
+    else:
+        se = p.sigma_east_m if p.sigma_east_m is not None else p.sigma_en_m
+        sn = p.sigma_north_m if p.sigma_north_m is not None else p.sigma_en_m
+        se, sn = np.where(np.isfinite(se), se, p.sigma_en_m), np.where(np.isfinite(sn), sn, p.sigma_en_m)
+        cov = np.zeros((n, 2, 2))
+        cov[:, 0, 0], cov[:, 1, 1] = se ** 2, sn ** 2
+    gst = np.full((n, 2), np.nan)
+    if p.sigma_source is not None and p.sigma_east_m is not None and p.sigma_north_m is not None:
+        g = np.asarray(p.sigma_source) == "gst"
+        gst[g, 0], gst[g, 1] = p.sigma_east_m[g], p.sigma_north_m[g]
+    return GnssEvents(p.t_s, p.east_m, p.north_m, cov, quality=p.quality,
+                      hdop=np.where(p.hdop_assumed, np.nan, p.hdop), gst_sigma_m=gst)
+
+
 def _stands(step_t: np.ndarray) -> StandIntervals:
     if step_t.size < 2:
         return StandIntervals(np.zeros(0), np.zeros(0))
@@ -162,9 +188,7 @@ def walk_inputs(data: WalkData, classifier) -> WalkInputs:
         stands = _stands(r.t_s[ok])
         steps = StepEvents(*split_steps(r.t_s[ok], r.step_length_m[ok], r.heading_rad[ok], fix_t))
     if data.gnss is not None and len(data.gnss.positions):
-        p = data.gnss.positions
-        gnss = GnssEvents.from_sigma(p.t_s, p.east_m, p.north_m, p.sigma_en_m, quality=p.quality,
-                                     hdop=np.where(p.hdop_assumed, np.nan, p.hdop))
+        gnss = gnss_events(data.gnss.positions)
     if data.acoustic is not None and len(data.acoustic.t_s):
         a = data.acoustic
         acoustic = AcousticEvents(a.t_s, a.east_m, a.north_m, a.covariance_en_m2)

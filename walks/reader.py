@@ -27,7 +27,10 @@ reader turns them into the same streams:
   :class:`OdometryStream`, in the PDR stream's place (``WalkData.pdr``): the filters take its events
   as steps.
 
-A stream the walk does not have is ``None``.
+A stream the walk does not have is ``None``; so is one whose file is named but absent, empty (0 bytes, a
+WAV without samples, an IMU header without rows) or unusable (its reader refuses it): the walk is read
+without it, exactly as without the file, and :attr:`WalkData.notes` says which and why, so ``run``,
+``evaluate`` and ``train fusion`` behave the same for all of these and say so.
 """
 
 from __future__ import annotations
@@ -39,6 +42,7 @@ from pathlib import Path
 
 import numpy as np
 
+from features.acoustic.audio import require_beacon_band
 from features.acoustic.features import AudioAnalysis, analyse_audio
 from features.acoustic.positions import PositionConfig
 from features.acoustic.timing import AudioTiming, timing_from_walk
@@ -53,12 +57,16 @@ from features.imu.reader import read_imu_csv
 from features.imu.steps import StepLengthModel
 from features.raw_tables import read_odometry_csv, read_pseudorange_csv
 from features.site import Site
+from features.errors import DataError
 from features.vehicle.odometry import DeadReckoning, HeadingAlignment, OdometryConfig, odometry_dead_reckoning
 from features.walk import STREAMS, Truth, WalkInfo, load_walk, read_truth
 
 __all__ = ["GnssStream", "AcousticStream", "PdrStream", "OdometryStream", "WalkData", "read_walk",
            "WALK_SPEED_PRIOR_M_S", "walk_has", "pdr_start_from_gnss", "pdr_position_at", "read_gnss_stream",
            "read_pseudorange_stream", "read_acoustic_stream", "read_pdr_stream", "read_odometry_stream"]
+
+SKIPPED_NOTE_SHARE = 0.05
+"""A walk's note names the NMEA reader's skips when they exceed this share of the file's sentences."""
 
 WALK_SPEED_PRIOR_M_S = 1.4
 """Walking-speed prior of the acoustic solver on a walk, m/s (a survey cell is static: 0)."""
@@ -76,6 +84,8 @@ class GnssStream:
     features: dict
     nmea_summary: dict
     solution: object = None
+    skipped_share: float = 0.0
+    """Share of the file's sentences the NMEA reader skipped (bad checksum, truncated, ...)."""
 
 
 @dataclass(frozen=True)
@@ -109,6 +119,8 @@ class PdrStream:
     result: PdrResult
     config: PdrConfig
     start_en_m: tuple[float, float]
+    repaired: str = ""
+    """What the IMU reader repaired (its :meth:`~features.imu.reader.ImuRepairReport.summary`), empty if nothing."""
 
 
 @dataclass(frozen=True)
@@ -139,10 +151,12 @@ class WalkData:
     acoustic: AcousticStream | None
     pdr: PdrStream | OdometryStream | None
     truth: Truth | None
+    notes: tuple = ()
+    """One line per stream the walk names but could not use (absent, empty or unusable file)."""
 
 
 def read_walk(walk_dir: str | os.PathLike, *, site: Site | None = None, pdr_k: float | None = None,
-              audio_positions: PositionConfig | None = None) -> WalkData:
+              audio_positions: PositionConfig | None = None, truth: bool = True) -> WalkData:
     """Read a walk directory once: GNSS, acoustic and PDR streams and the truth when present.
 
     ``site`` overrides the site named in ``walk.toml``; ``pdr_k`` the step-length
@@ -151,22 +165,28 @@ def read_walk(walk_dir: str | os.PathLike, *, site: Site | None = None, pdr_k: f
     walking-speed prior :data:`WALK_SPEED_PRIOR_M_S`).
 
     The PDR track is anchored on data, never on truth: at the first good GNSS
-    fix (:func:`pdr_start_from_gnss`), else at the origin.
+    fix (:func:`pdr_start_from_gnss`), else at the origin. ``truth=False`` leaves ``truth.csv`` unread
+    (``run`` needs none).
     """
     walk = load_walk(walk_dir)
     site = walk.load_site() if site is None else site
-    truth = read_truth(walk.directory) if (walk.directory / "truth.csv").is_file() else None
-    gnss = None
-    if walk.path("gnss") is not None:
-        gnss = read_gnss_stream(walk, site)
-    elif walk.path("gnss_pseudoranges") is not None:
-        gnss = read_pseudorange_stream(walk, site)
+    truth = read_truth(walk.directory) if truth and (walk.directory / "truth.csv").is_file() else None
+    notes: list[str] = []
+    gnss = _optional(walk, "gnss", lambda: read_gnss_stream(walk, site), notes)
+    if gnss is None and not walk.streams.get("gnss"):
+        gnss = _optional(walk, "gnss_pseudoranges", lambda: read_pseudorange_stream(walk, site), notes)
     acoustic = None
-    if walk.path("audio") is not None and site.beacons:
-        acoustic = read_acoustic_stream(walk, site, audio_positions)
-    pdr = None
-    if walk.path("imu") is not None:
-        pdr = read_pdr_stream(walk, (0.0, 0.0), pdr_k)
+    if site.beacons:
+        acoustic = _optional(walk, "audio", lambda: read_acoustic_stream(walk, site, audio_positions), notes)
+    elif walk.path("audio") is not None:
+        notes.append("audio: the site has no beacons; the walk is read without acoustic positions")
+    pdr = _optional(walk, "imu", lambda: read_pdr_stream(walk, (0.0, 0.0), pdr_k), notes)
+    if gnss is not None and gnss.skipped_share > SKIPPED_NOTE_SHARE:
+        notes.append(f"gnss: {walk.streams['gnss']['file']}: {100 * gnss.skipped_share:.0f} % of the sentences "
+                     f"skipped ({gnss.nmea_summary})")
+    if pdr is not None and pdr.repaired:
+        notes.append(f"imu: {walk.streams['imu']['file']} repaired by the reader ({pdr.repaired})")
+    if pdr is not None:
         anchor = pdr_start_from_gnss(gnss.positions) if gnss is not None else None
         if anchor is not None:
             # Shift the track so that it passes through the fix at the fix's time. The dead-reckoned
@@ -175,9 +195,38 @@ def read_walk(walk_dir: str | os.PathLike, *, site: Site | None = None, pdr_k: f
             t_fix, e_fix, n_fix = anchor
             e_p, n_p = pdr_position_at(pdr.result, t_fix, (0.0, 0.0))
             pdr = _shift_pdr(pdr, e_fix - e_p, n_fix - n_p)
-    elif walk.path("odometry") is not None:
-        pdr = read_odometry_stream(walk, gnss.positions if gnss is not None else None)
-    return WalkData(walk=walk, site=site, gnss=gnss, acoustic=acoustic, pdr=pdr, truth=truth)
+    if pdr is None and not walk.streams.get("imu"):
+        pdr = _optional(walk, "odometry",
+                        lambda: read_odometry_stream(walk, gnss.positions if gnss is not None else None), notes)
+    return WalkData(walk=walk, site=site, gnss=gnss, acoustic=acoustic, pdr=pdr, truth=truth, notes=tuple(notes))
+
+
+_WHAT = {"gnss": "GNSS", "gnss_pseudoranges": "GNSS", "audio": "acoustic positions", "imu": "PDR",
+         "odometry": "odometry"}
+
+
+def _optional(walk: WalkInfo, stream: str, read, notes: list):
+    """``read()`` of a stream the walk names, or None with a note when its file is absent, empty or refused."""
+    table = walk.streams.get(stream)
+    if not table:
+        return None
+    name = str(table.get("file", ""))
+    path = walk.directory / name
+    without = f"the walk is read without {_WHAT[stream]}"
+    if not path.is_file():
+        notes.append(f"{stream}: walk.toml names {name}, which is absent; {without}")
+        return None
+    if path.stat().st_size == 0:
+        notes.append(f"{stream}: {name} is empty (0 bytes); {without}")
+        return None
+    try:
+        return read()
+    except DataError as exc:
+        text = str(exc)
+        prefix = f"{path}: "
+        notes.append(f"{stream}: {name} is unusable ({text[len(prefix):] if text.startswith(prefix) else text}); "
+                     f"{without}")
+        return None
 
 
 def pdr_start_from_gnss(positions: GnssPositions, window_s: float = 60.0) -> tuple[float, float, float] | None:
@@ -218,7 +267,7 @@ def _shift_pdr(pdr: PdrStream, d_east_m: float, d_north_m: float) -> PdrStream:
     r = pdr.result
     moved = dataclasses.replace(r, east_m=d_east_m + r.east_m, north_m=d_north_m + r.north_m)
     start = (pdr.start_en_m[0] + d_east_m, pdr.start_en_m[1] + d_north_m)
-    return PdrStream(result=moved, config=pdr.config, start_en_m=start)
+    return PdrStream(result=moved, config=pdr.config, start_en_m=start, repaired=pdr.repaired)
 
 
 def read_gnss_stream(walk: WalkInfo, site: Site) -> GnssStream:
@@ -228,7 +277,9 @@ def read_gnss_stream(walk: WalkInfo, site: Site) -> GnssStream:
     o = site.origin
     sky = sky_arrays(epochs)  # once, for both the positions' sigma and the features
     positions = fixes_to_enu(epochs, o.lat_deg, o.lon_deg, o.alt_m, sky=sky)
-    return GnssStream(positions=positions, features=gnss_features(sky), nmea_summary=stats.summary())
+    share = stats.skipped / max(stats.sentences + stats.non_nmea_lines, 1)
+    return GnssStream(positions=positions, features=gnss_features(sky), nmea_summary=stats.summary(),
+                      skipped_share=float(share))
 
 
 def read_pseudorange_stream(walk: WalkInfo, site: Site, config: WlsConfig | None = None) -> GnssStream:
@@ -255,8 +306,6 @@ def read_odometry_stream(walk: WalkInfo, fixes: GnssPositions | None,
                          config: OdometryConfig | None = None) -> OdometryStream:
     """The walk's odometry integrated into displacement events (:mod:`features.vehicle.odometry`), its heading
     and start fitted to the GNSS ``fixes`` (never to the truth). Raises DataError without fixes to fit."""
-    from features.errors import DataError
-
     table = read_odometry_csv(walk.path("odometry"))
     if fixes is None or len(fixes.t_s) < 3:
         raise DataError(f"{walk.path('odometry')}: odometry needs >= 3 GNSS fixes in the walk to fit its initial "
@@ -268,6 +317,8 @@ def read_odometry_stream(walk: WalkInfo, fixes: GnssPositions | None,
 
 def read_acoustic_stream(walk: WalkInfo, site: Site, positions: PositionConfig | None) -> AcousticStream:
     """The walk's audio through the acoustic receiver: fixes with covariance and the nine CIR windows."""
+    require_beacon_band(walk.path("audio"), min(b.f0_hz if b.f0_hz is not None else site.acoustic.f0_hz
+                                                for b in site.beacons))
     timing = timing_from_walk(walk, site)
     if positions is None:
         positions = PositionConfig(max_clock_offset_s=timing.start_uncertainty_s + 0.05,
@@ -285,7 +336,8 @@ def read_pdr_stream(walk: WalkInfo, start_en: tuple[float, float], k: float | No
     decl = float(walk.streams["imu"].get("declination_deg", 0.0))
     heading = HeadingConfig(declination_rad=np.radians(decl))
     cfg = PdrConfig(heading=heading) if k is None else PdrConfig(length=StepLengthModel(k=k), heading=heading)
-    return PdrStream(result=run_pdr(imu, start_en[0], start_en[1], cfg), config=cfg, start_en_m=start_en)
+    return PdrStream(result=run_pdr(imu, start_en[0], start_en[1], cfg), config=cfg, start_en_m=start_en,
+                     repaired=imu.report.summary() if imu.report.n_defects else "")
 
 
 def walk_has(walk_dir: str | os.PathLike) -> dict:

@@ -39,7 +39,7 @@ from features.constants import AUDIO_FS_HZ
 from features.errors import AudioError
 
 __all__ = ["AudioWarning", "AudioInfo", "AudioBlock", "audio_info", "iter_audio_blocks", "read_audio",
-           "count_clipped"]
+           "count_clipped", "require_beacon_band"]
 
 _RESAMPLE_PAD = 64
 """Input samples of context each side of a resampled block (the default
@@ -103,6 +103,19 @@ def _declared_data_bytes(path: Path) -> int | None:
                 fh.seek(size + (size & 1), os.SEEK_CUR)
     except OSError:
         return None
+
+
+def require_beacon_band(path: str | os.PathLike, band_low_hz: float) -> "AudioInfo":
+    """The file's :class:`AudioInfo`, or :class:`~features.errors.AudioError` when it cannot hold a beacon
+    chirp at all: no samples, or a Nyquist frequency at or below ``band_low_hz`` (the lowest beacon band
+    edge; resampling cannot bring back what the recorder never sampled)."""
+    info = audio_info(path)
+    if info.n_frames == 0:
+        raise AudioError(f"{path}: holds no audio samples")
+    if info.fs_hz / 2 <= band_low_hz:
+        raise AudioError(f"{path}: sample rate {info.fs_hz} Hz (Nyquist {info.fs_hz / 2:.0f} Hz) cannot carry "
+                         f"the beacon band starting at {band_low_hz:.0f} Hz")
+    return info
 
 
 def audio_info(path: str | os.PathLike) -> AudioInfo:

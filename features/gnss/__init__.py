@@ -2,7 +2,7 @@
 
 Open ``nmea`` to read a file (:func:`~features.gnss.nmea.read_nmea`, epochs on the
 walk's time base); ``tokens`` for checksums and splitting, ``quirks`` for every
-receiver's field layouts; ``features`` for μ, σ, β, ζ, λ of DESIGN.md §5 and the
+receiver's field layouts; ``features`` for μ, σ, β, ζ, λ of docs/design.md §5 and the
 open-sky C/N0 reference; ``positions`` for fixes in the site's ENU frame with σ.
 
 From pseudoranges: ``pseudorange`` reads smartLoc text files into column tables (the

@@ -1,4 +1,4 @@
-"""The five GNSS environment features of DESIGN.md §5, vectorised over epochs.
+"""The five GNSS environment features of docs/design.md §5, vectorised over epochs.
 
 Per analysis window (default 2 s, hop 1 s), over satellites at or above the
 elevation mask (default 10°):
@@ -10,7 +10,7 @@ elevation mask (default 10°):
    whose swing from the previous extremum is ≥ 2 dB-Hz, per second of
    tracking: the extrema of all satellites over their tracked satellite-seconds
    in the window (the per-satellite rates weighted by tracked time; equal to
-   their plain mean when every satellite is tracked throughout). DESIGN.md says 1 dB-Hz, but NMEA
+   their plain mean when every satellite is tracked throughout). docs/design.md says 1 dB-Hz, but NMEA
    reports C/N0 in whole dB-Hz, so a 1 dB-Hz swing is a single quantisation
    step: it counts the estimator flicker of strong line-of-sight signals and
    the feature then orders the classes backwards (open > heavy on simulated
@@ -32,10 +32,10 @@ azimuth or elevation has no line of sight and stays out of G (it was read as
 north before).
 
 The open-sky reference C_ref(el) = a + b·sin(el) defaults to ≈ 38 dB-Hz at 5°
-and 50 dB-Hz at zenith (DESIGN.md §6). The linear form in sin(el) is an
+and 50 dB-Hz at zenith (docs/design.md §6). The linear form in sin(el) is an
 engineering choice, not a published model: it follows the monotone rise of
 C/N0 with elevation seen in real data (smartLoc bins 29.9 / 35.8 / 38.8 /
-46.6 dB-Hz for 0-15 / 15-30 / 30-60 / 60-90°, DESIGN.md §6) with two
+46.6 dB-Hz for 0-15 / 15-30 / 30-60 / 60-90°, docs/design.md §6) with two
 parameters that :func:`fit_cn0_reference` can fit to open-sky epochs (an
 upper quantile per elevation bin, then a count-weighted least-squares line in
 sin(el)); a median fit on simulated open cells recovers the simulator's
@@ -70,7 +70,7 @@ __all__ = [
 ]
 
 FEATURE_COLUMNS = ("att_mean_db", "att_std_db", "fluct_per_s", "invisible_ratio", "dop_growth")
-"""The five GNSS feature names, in DESIGN.md §5 order."""
+"""The five GNSS feature names, in docs/design.md §5 order."""
 
 COUNT_COLUMNS = ("n_epochs", "n_in_view", "n_tracked", "n_pairs_in_view", "n_pairs_tracked")
 """Counts behind each window: epochs with a reported sky; distinct satellites above the mask in
@@ -83,7 +83,7 @@ MAX_WINDOWS = 20_000_000
 
 @dataclass(frozen=True)
 class GnssFeatureConfig:
-    """Window and feature parameters (DESIGN.md §5 defaults)."""
+    """Window and feature parameters (docs/design.md §5 defaults)."""
 
     window_s: float = 2.0
     hop_s: float = 1.0
@@ -114,7 +114,7 @@ class Cn0Reference:
 
     intercept_dbhz: float = 38.0 - 12.0 * math.sin(math.radians(5.0)) / (1.0 - math.sin(math.radians(5.0)))
     slope_dbhz: float = 12.0 / (1.0 - math.sin(math.radians(5.0)))
-    source: str = "default: 38 dB-Hz at 5 deg, 50 dB-Hz at zenith (DESIGN.md 6)"
+    source: str = "default: 38 dB-Hz at 5 deg, 50 dB-Hz at zenith (docs/design.md 6)"
 
     def __post_init__(self):
         for name in ("intercept_dbhz", "slope_dbhz"):

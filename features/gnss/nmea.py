@@ -40,13 +40,13 @@ from features.gnss.quirks import (
     primary_signal_rank as _primary_rank,
 )
 
-__all__ = ["Satellite", "Fix", "Epoch", "ReadStats", "read_nmea", "iter_epochs", "epochs_from_bytes",
+__all__ = ["Satellite", "Fix", "Gst", "Epoch", "ReadStats", "read_nmea", "iter_epochs", "epochs_from_bytes",
            "epochs_on_time_base",
            "parse_sentence"]
 
 _TIMED = TIMED_TYPES
 _USED_TYPES = USED_TYPES
-_FIX_TYPES = frozenset(("GGA", "RMC", "GNS", "ZDA"))  # timed sentences that carry more than the time
+_FIX_TYPES = frozenset(("GGA", "RMC", "GNS", "ZDA", "GST"))  # timed sentences that carry more than the time
 _EPOCH_GAP_DEFAULT_S = 1.0
 _FIRST_GNSS_YEAR = 1980
 """GPS time began on 1980-01-06: an earlier ZDA year is garbage (RMC's two-digit years map to 1980-2079)."""
@@ -65,6 +65,19 @@ class Satellite(NamedTuple):
     az_deg: float | None
     cn0_dbhz: float | None
     used: bool
+
+
+class Gst(NamedTuple):
+    """The receiver's own error statistics of an epoch's fix (NMEA 0183 GST), metres, 1σ; None when empty.
+
+    ``rms_m`` is the RMS of the pseudorange residuals (field 2), ``sigma_lat_m`` / ``sigma_lon_m`` /
+    ``sigma_alt_m`` the standard deviations of latitude, longitude and altitude (fields 6–8).
+    """
+
+    rms_m: float | None
+    sigma_lat_m: float | None
+    sigma_lon_m: float | None
+    sigma_alt_m: float | None
 
 
 @dataclass(frozen=True)
@@ -102,7 +115,9 @@ class Epoch:
     given); ``sky_reported`` is False for epochs without any GSV (receivers
     that report the sky every few fixes), whose ``satellites`` are then empty
     but not "none in view". ``satellites`` holds one entry per satellite per
-    signal, in GSV order; :attr:`primary_satellites` one per satellite.
+    signal, in GSV order; :attr:`primary_satellites` one per satellite;
+    ``gst`` the epoch's GST statistics when the receiver sent them (None
+    otherwise).
     """
 
     t_s: float
@@ -111,6 +126,7 @@ class Epoch:
     fix: Fix
     satellites: tuple[Satellite, ...]
     sky_reported: bool
+    gst: Gst | None = None
 
     @functools.cached_property
     def primary_satellites(self) -> tuple[Satellite, ...]:
@@ -160,6 +176,7 @@ class Epoch:
                     "quality": f.quality, "n_used": f.n_used, "hdop": f.hdop, "pdop": f.pdop, "vdop": f.vdop,
                     "mode": f.mode},
             "sky_reported": self.sky_reported,
+            "gst": None if self.gst is None else self.gst._asdict(),
             "satellites": [{"system": s.system, "prn": s.prn, "signal": s.signal, "el_deg": s.el_deg,
                             "az_deg": s.az_deg, "cn0_dbhz": s.cn0_dbhz, "used": s.used} for s in self.satellites],
         }
@@ -204,11 +221,11 @@ class _Clock:
 
 
 class _EpochBuilder:
-    __slots__ = ("rel_s", "tod", "day", "date", "gga", "gns", "rmc", "gsa", "sats", "sky")
+    __slots__ = ("rel_s", "tod", "day", "date", "gga", "gns", "rmc", "gst", "gsa", "sats", "sky")
 
     def __init__(self, rel_s: float, tod: float, day: int, date: dt.date | None):
         self.rel_s, self.tod, self.day, self.date = rel_s, tod, day, date
-        self.gga = self.gns = self.rmc = None
+        self.gga = self.gns = self.rmc = self.gst = None
         self.gsa: list = []
         self.sats: dict = {}
         self.sky = False
@@ -297,7 +314,7 @@ def _finish(b: _EpochBuilder, first_rel: float) -> Epoch:
     if b.date is not None:
         when = (dt.datetime(b.date.year, b.date.month, b.date.day, tzinfo=dt.timezone.utc)
                 + dt.timedelta(seconds=b.tod))
-    return Epoch(b.rel_s - first_rel, when, b.tod, _fix_of(b, len(used)), sats, b.sky)
+    return Epoch(b.rel_s - first_rel, when, b.tod, _fix_of(b, len(used)), sats, b.sky, b.gst)
 
 
 def _add_gsv(current: _EpochBuilder, talker: str, payload, gsv_parts: dict, gsv_open: dict,
@@ -428,6 +445,8 @@ def _assemble(sentences: Iterable[list[str]], stats: ReadStats, resync_after: in
                 current.gns = payload
             elif kind == "RMC":
                 current.rmc = payload
+            elif kind == "GST" and payload is not None:
+                current.gst = payload
             continue
         if current is None:
             if kind == "GSV":
@@ -448,8 +467,14 @@ def _assemble(sentences: Iterable[list[str]], stats: ReadStats, resync_after: in
 def _timed_payload(kind: str, data: list[str]):
     """Fix content of a timed sentence.
 
-    GGA/GNS → (lat, lon, alt, sep, quality, n_used, hdop); RMC → (lat, lon, quality); others None.
+    GGA/GNS → (lat, lon, alt, sep, quality, n_used, hdop); RMC → (lat, lon, quality); GST → :class:`Gst`
+    (None when it states neither σ_lat nor σ_lon); others None. A GST σ that is not a positive finite
+    number (empty, 0, negative) is None.
     """
+    if kind == "GST":
+        vals = [_opt_num(data[i]) if len(data) > i else None for i in (1, 5, 6, 7)]
+        vals = [v if v is not None and 0.0 < v < 1e6 else None for v in vals]
+        return None if vals[1] is None and vals[2] is None else _tuple_new(Gst, vals)
     if kind == "GGA":
         lat = parse_latlon(data[1], data[2], True)
         lon = parse_latlon(data[3], data[4], False)

@@ -11,7 +11,7 @@ the classic error model σ_position = UERE · DOP (Kaplan & Hegarty,
 equally between east and north. The UERE per fix mode are order-of-magnitude
 values of typical error budgets and receiver datasheets, chosen here, not
 measured: they only seed the fusion filter, whose per-class measurement
-noise is learnt from training walks (DESIGN.md §7).
+noise is learnt from training walks (docs/design.md §7).
 
 =======  ==========================  ============  =========================================
 quality  mode (GGA field 6)          UERE (1σ)     reasoning
@@ -36,8 +36,13 @@ of preference, by:
 
 1. **GST** (NMEA 0183 GST, "GNSS pseudorange error statistics": the
    receiver's own 1σ latitude and longitude errors from its residuals) when the
-   receiver sends it for that epoch: σ_east, σ_north = GST's σ_lon, σ_lat
-   (:func:`read_gst`, matched by UTC time of day);
+   receiver sends it for that epoch: σ_east, σ_north = GST's σ_lon, σ_lat, and
+   σ_up = GST's σ_alt when given. The epoch reader keeps each epoch's GST
+   (:attr:`features.gnss.nmea.Epoch.gst`), so every reader of fixes gets it;
+   a ``gst`` table from :func:`read_gst` (matched by UTC time of day) overrides
+   it. GST is what the receiver believes: under NLOS it is too small (issue 21),
+   which is why the fusion's quality noise scales it, and why a fitted table
+   (3.) wins over it where it holds the fix's cell;
 2. otherwise the **C/N0 of the used satellites**: the SIGMA-ε variance model
    (Hartinger & Brunner 1999, "Variances of GPS phase observations: the
    SIGMA-ε model", GPS Solutions 2(4); Wieser & Brunner 2000) gives each
@@ -48,7 +53,7 @@ of preference, by:
    g² = mean ᵢ 10^(aᵢ/10), and σ_axis = UERE·HDOP·g/√2 (not for RTK fixed,
    whose carrier-phase error the code's C/N0 does not describe: table only);
 3. a **fitted table** (:class:`UereTable`, :func:`fit_uere`, ``envfuse features
-   gnss --fit-uere``) replaces 1–2 for the fix modes it holds: UERE per fix
+   gnss --fit-uere``) replaces 1–2 for the fix modes (and attenuation bins) it holds: UERE per fix
    quality and per bin of the used satellites' mean attenuation, fitted from
    walks with truth as UERE² = mean(|e|²/HDOP²) (the maximum-likelihood
    estimate for a 2-D Gaussian error with per-axis σ = UERE·HDOP/√2, so the
@@ -64,7 +69,7 @@ far below NEES 2 (DGNSS heavy 0.22 → 0.01) while mending RTK float light
 1.04 → 1.45 (c_q by the cells' criterion) or 1.63 (by maximum likelihood). The
 SIGMA-ε factor already sees most of what ζ shows (weak satellites are lost
 first). GST's rms residual (field 2) adds nothing where GST's own σ_lat/σ_lon
-are used, and the simulated receiver sends no GST, so it was not tried.
+are used.
 Known limit of the built-in model: on walks without corrections (SPS, 3
 held-out walks, 4,503 fixes) the SIGMA-ε factor over-inflates the code
 solution (mean NEES 0.19 / 0.28 / 0.21 heavy / light / open, against 2.5 /
@@ -344,7 +349,8 @@ def fixes_to_enu(epochs: Sequence, lat0_deg: float, lon0_deg: float, alt0_m: flo
     """Convert the epochs' fixes to ENU about (lat0, lon0, alt0 ellipsoidal); no fix → no row.
 
     σ per the module docstring: ``gst`` ({UTC time of day s: (σ_lat, σ_lon)}, :func:`read_gst`)
-    where it has the epoch, else a fitted ``uere`` table where it has the cell, else
+    where it has the epoch, else the epoch's own GST (:attr:`~features.gnss.nmea.Epoch.gst`), else a
+    fitted ``uere`` table where it has the cell, else
     UERE(quality)·HDOP·g/√2 with the SIGMA-ε factor g of the used satellites' C/N0
     (``cn0_reference``: the open-sky C_ref, default built-in). ``sky``: the
     :class:`~features.gnss.features.SkyArrays` of these same epochs when the caller has them
@@ -392,10 +398,21 @@ def fixes_to_enu(epochs: Sequence, lat0_deg: float, lon0_deg: float, alt0_m: flo
     s_e = u * hdop / math.sqrt(2.0)
     s_n = s_e.copy()
     sigma_up = u * np.where(np.isnan(vdop), 1.5 * hdop, vdop)
+    # The receiver's own GST where the epoch has it — unless a fitted table (calibrated against truth) holds the
+    # fix's cell: GST is what the receiver believes, too small under NLOS.
+    fitted_row = source == "fitted"
+    for i, e in enumerate(fixed):
+        own = getattr(e, "gst", None)
+        if (own is not None and own.sigma_lat_m is not None and own.sigma_lon_m is not None
+                and not fitted_row[i]):
+            s_n[i], s_e[i] = own.sigma_lat_m, own.sigma_lon_m
+            if own.sigma_alt_m is not None:
+                sigma_up[i] = own.sigma_alt_m
+            source[i] = "gst"
     if gst:
         for i, key in enumerate(np.round(tod, 3).tolist()):
             stats = gst.get(key)
-            if stats is not None:
+            if stats is not None and not fitted_row[i]:
                 s_n[i], s_e[i] = stats
                 source[i] = "gst"
     alt = np.where(np.isnan(alt_msl), alt0_m, alt_msl + sep)

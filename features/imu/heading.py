@@ -1,7 +1,7 @@
 """Heading of a body-fixed IMU: gyro, tilt-compensated magnetometer, and their complementary filter.
 
 Conventions: body frame forward-right-down (x = the device's forward axis);
-heading ψ of the x axis from true north, clockwise, radians (DESIGN.md §3);
+heading ψ of the x axis from true north, clockwise, radians (docs/design.md §3);
 accelerometer reads specific force (≈ −g·down at rest).
 
 - Tilt: the down direction in the body frame is minus the normalised

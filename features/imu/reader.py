@@ -1,6 +1,6 @@
 """IMU CSV reader and repair: one uniform time base, every defect counted.
 
-Format (DESIGN.md §4): header line, columns ``t_s, ax, ay, az`` (m/s², body
+Format (docs/design.md §4): header line, columns ``t_s, ax, ay, az`` (m/s², body
 frame, gravity included) required; ``gx, gy, gz`` (rad/s) and ``mx, my, mz``
 (µT) optional, each triple all-or-none. Extra columns are ignored.
 

@@ -58,6 +58,10 @@ GATE, HUBER, NO_OUTLIER, MIXTURE = 0, 1, 2, 3
 """Outlier handling codes: χ² gate, Huber weights, none, an ε-contaminated Gaussian likelihood
 (:func:`mixture_update`, ε and κ given per fix)."""
 
+MIXTURE_DROP = 1e-6
+"""Weight below which :func:`mixture_update` drops a component of the Gaussian sum (most fixes are plainly
+inliers: their outlier weight is far below this)."""
+
 R_PER_EVENT, R_MAP, R_VB = 0, 1, 2
 """Noise modes of :func:`run_ekf_events`."""
 
@@ -82,17 +86,8 @@ def mm(A, B):
 
 @njit(cache=True)
 def mmt(A, B):
-    """A B' for small dense matrices."""
-    n, k = A.shape
-    m = B.shape[0]
-    C = np.zeros((n, m))
-    for i in range(n):
-        for j in range(m):
-            s = 0.0
-            for l in range(k):
-                s += A[i, l] * B[j, l]
-            C[i, j] = s
-    return C
+    """A B' for small dense matrices (:func:`mm` on the transposed view)."""
+    return mm(A, B.T)
 
 
 @njit(cache=True)
@@ -211,14 +206,15 @@ def kalman_update(x, P, z, R, H, outlier, gate_nis, huber_k, joseph, consider=No
                 K[i, 1] = 0.0
     # x = x⁻ + K ν
     xn = x + mv(K, nu)
-    # A = I − K H
-    A = np.eye(n) - mm(K, H)
+    # K H P⁻ = K (P⁻H')'   (n × n from n × 2 products: P⁻ is symmetric)
+    KHP = mmt(K, PHt)
     if joseph:
-        # P = (I − KH) P⁻ (I − KH)' + K R K'   (Joseph form: symmetric PD for any K)
-        Pn = mmt(mm(A, P), A) + mmt(mm(K, R), K)
+        # P = (I − KH) P⁻ (I − KH)' + K R K'   (Joseph form: symmetric PD for any K), expanded as
+        # P = P⁻ − K H P⁻ − (K H P⁻)' + K (H P⁻ H' + R) K' = P⁻ − KHP⁻ − (KHP⁻)' + K S K'
+        Pn = P - KHP - KHP.T + mmt(mm(K, S), K)
     else:
         # P = (I − KH) P⁻   (short form: exact for the optimal K only)
-        Pn = mm(A, P)
+        Pn = P - KHP
     # P = (P + P') / 2
     Pn = 0.5 * (Pn + Pn.T)
     return xn, Pn, nu, S, K, R, nis, w, True
@@ -238,11 +234,13 @@ def mixture_update(x, P, z, R, H, eps, kappa, joseph, consider=None):
     with (x_i, P_i) the Kalman updates under R and κR. Returns what :func:`kalman_update` returns, with the
     inlier model's ν, S, R and NIS, the mixed gain K = (1 − β)K₁ + βK₂ and weight 1 − β.
     """
-    x1, P1, nu, S1, K1, _, nis, _, _ = kalman_update(x, P, z, R, H, NO_OUTLIER, 0.0, 1.0, joseph, consider)
+    # ν = z − Hx⁻;  S₁ = HP⁻H' + R;  S₂ = HP⁻H' + κR
+    nu = z - mv(H, x)
+    HPH = mm(H, mmt(P, H))
     Rk = kappa * R
-    x2, P2, _, S2, K2, _, _, _, _ = kalman_update(x, P, z, Rk, H, NO_OUTLIER, 0.0, 1.0, joseph, consider)
-    Si2, det2 = inv2(S2)
-    _, det1 = inv2(S1)
+    Si1, det1 = inv2(HPH + R)
+    Si2, det2 = inv2(HPH + Rk)
+    nis = nu[0] * (Si1[0, 0] * nu[0] + Si1[0, 1] * nu[1]) + nu[1] * (Si1[1, 0] * nu[0] + Si1[1, 1] * nu[1])
     nis2 = nu[0] * (Si2[0, 0] * nu[0] + Si2[0, 1] * nu[1]) + nu[1] * (Si2[1, 0] * nu[0] + Si2[1, 1] * nu[1])
     # ln of (1 − ε) N(ν; S₁) and ε N(ν; S₂), the common −ln 2π dropped
     l1 = math.log(max(1.0 - eps, 1e-300)) - 0.5 * (nis + math.log(det1))
@@ -250,6 +248,20 @@ def mixture_update(x, P, z, R, H, eps, kappa, joseph, consider=None):
     top = max(l1, l2)
     # β = ε N₂ / ((1 − ε) N₁ + ε N₂)
     beta = math.exp(l2 - top) / (math.exp(l1 - top) + math.exp(l2 - top))
+    if beta < MIXTURE_DROP:
+        # a component of weight below MIXTURE_DROP is dropped (and its update not computed): it would move
+        # the mean by less than that fraction of the two updates' difference
+        beta = 0.0
+    elif beta > 1.0 - MIXTURE_DROP:
+        beta = 1.0
+    if beta < 1.0:
+        x1, P1, _, S1, K1, _, _, _, _ = kalman_update(x, P, z, R, H, NO_OUTLIER, 0.0, 1.0, joseph, consider)
+    if beta > 0.0:
+        x2, P2, _, S2, K2, _, _, _, _ = kalman_update(x, P, z, Rk, H, NO_OUTLIER, 0.0, 1.0, joseph, consider)
+    if beta == 0.0:
+        return x1, P1, nu, S1, K1, R, nis, 1.0, True
+    if beta == 1.0:
+        return x2, P2, nu, HPH + R, K2, R, nis, 0.0, True
     # x = (1 − β) x₁ + β x₂
     xn = (1.0 - beta) * x1 + beta * x2
     d1 = x1 - xn

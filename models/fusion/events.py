@@ -6,7 +6,7 @@ ENU metres, heading from north, clockwise) and merges them with
 :func:`merge_events` into one time-ordered :class:`EventStream`. The filter
 walks that stream once: a step predicts, a fix updates, and the time between
 events feeds a stationary random-walk model, so sources of any rate fuse
-without resampling (DESIGN.md §7).
+without resampling (docs/design.md §7).
 
 Ties in time are broken by kind — step, then GNSS, then acoustic — and then by
 the order within each source, so a merge is deterministic.

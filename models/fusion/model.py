@@ -31,6 +31,7 @@ import numpy as np
 from models.bp import BPCorrector
 from models.bp_params import ParamNet
 from models.bundle import BundleError, load_bundle, save_bundle
+from models.checks import check_bp, check_classifier, check_covariances, check_positive
 from models.environment import EnvironmentClassifier
 from models.fusion.ekf import EkfConfig
 from models.fusion.context import ContextNoise
@@ -93,25 +94,39 @@ def save_fusion_model(model: FusionModel, path, overwrite: bool = False):
 
 
 def load_fusion_model(path) -> FusionModel:
-    """Read a ``fusion`` bundle; a damaged or inconsistent one raises :class:`~models.bundle.BundleError`."""
+    """Read a ``fusion`` bundle; a damaged or inconsistent one raises :class:`~models.bundle.BundleError`.
+
+    Beyond the bundle's hashes, the contents are checked (:mod:`models.checks`): every R a symmetric
+    positive-definite 2×2 matrix of the right count, UEREs and scales positive, the classifier's and the BP
+    network's numbers finite and of the shapes this version uses."""
     b = load_bundle(path, "fusion")
     try:
         p, a = b.params, b.arrays
         clf = EnvironmentClassifier.from_state(p["classifier"], a["classifier"])
+        check_classifier(clf)
         n = a["noise"]
+        k = clf.n_classes_
+        shapes = {"fixed.R_gnss": (2, 2), "fixed.R_acoustic": (2, 2), "map.R_gnss": (k, 2, 2),
+                  "map.R_acoustic": (k, 2, 2), "cls.R_gnss": (k, 2, 2), "cls.R_acoustic": (k, 2, 2)}
+        for name, shape in shapes.items():
+            if name not in n:
+                raise ValueError(f"noise array {name} is missing")
+            if n[name].shape != shape:
+                raise ValueError(f"noise array {name} has shape {n[name].shape}, expected {shape}")
+            check_covariances(f"noise array {name}", n[name])
         fixed = FixedNoise()
         fixed.R_gnss_, fixed.R_acoustic_ = n["fixed.R_gnss"], n["fixed.R_acoustic"]
         q = QualityNoise()
-        q.uere_m_ = {int(k): float(v) for k, v in p["quality"]["uere_m"].items()}
-        q.gst_scale_, q.acoustic_scale_ = float(p["quality"]["gst_scale"]), float(p["quality"]["acoustic_scale"])
-        per_map = PerClassNoise(n_classes=clf.n_classes_, combine=p["per_class_map"]["combine"])
+        q.uere_m_ = {int(c): check_positive(f"UERE of GGA quality {c}", v) for c, v in p["quality"]["uere_m"].items()}
+        q.gst_scale_ = check_positive("GST scale", p["quality"]["gst_scale"])
+        q.acoustic_scale_ = check_positive("acoustic scale", p["quality"]["acoustic_scale"])
+        per_map = PerClassNoise(n_classes=k, combine=p["per_class_map"]["combine"])
         per_map.R_gnss_, per_map.R_acoustic_ = n["map.R_gnss"], n["map.R_acoustic"]
-        per = PerClassNoise(n_classes=clf.n_classes_, combine=p["per_class"]["combine"])
+        per = PerClassNoise(n_classes=k, combine=p["per_class"]["combine"])
         per.R_gnss_, per.R_acoustic_ = n["cls.R_gnss"], n["cls.R_acoustic"]
-        for name, r in n.items():
-            if not (np.all(np.isfinite(r)) and r.shape[-2:] == (2, 2)):
-                raise ValueError(f"noise array {name} is not a finite set of 2×2 matrices")
         bp = BPCorrector.from_state(p["bp"], a["bp"]) if p.get("bp") else None
+        if bp is not None:
+            check_bp(bp)
         nets = {k: ParamNet.from_state(p[k], a[k]) if p.get(k) else None for k in ("bp_params", "bp_params_blind")}
         ctx = ContextNoise.from_state(p["context"]) if p.get("context") else None
         ctx_blind = ContextNoise.from_state(p["context_blind"]) if p.get("context_blind") else None
@@ -120,7 +135,7 @@ def load_fusion_model(path) -> FusionModel:
         for m, kn in tuning.items():
             if not all(math.isfinite(v) and v > 0 for v in kn.values()):
                 raise ValueError(f"tuning of {m} holds a non-positive or non-finite knob {kn}")
-    except (KeyError, TypeError, ValueError) as exc:
+    except (KeyError, TypeError, ValueError, AttributeError) as exc:
         raise BundleError(f"{path}: the fusion model is inconsistent ({exc})") from None
     return FusionModel(classifier=clf, fixed=fixed, quality=q, per_class_map=per_map, per_class=per,
                        context=ctx, context_blind=ctx_blind, ekf=ekf, bp=bp, meta=b.meta, tuning=tuning, **nets)

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from pipeline.args import seed
+from pipeline.args import UsageError, seed
 
 GROUP = None  # a top-level command, registered by register_top
 
@@ -50,15 +50,15 @@ def register_top(sub) -> None:
 
 
 def run_demo(args) -> int:
-    from features.errors import ConfigError
     from pipeline.benchmark import run_benchmark
     from pipeline.plots import plot_site
     from pipeline.walk_report import error_table, plot_walk, walk_sources
     from simulation.split import split_layout
 
     if args.workers is not None and args.workers < 1:
-        raise ConfigError(f"--workers must be at least 1, got {args.workers}")
+        raise UsageError(f"--workers must be at least 1, got {args.workers}")
     out = Path(args.out)
+    check_benchmark_dir(out)
     run_benchmark("demo", out, workers=args.workers, seed=args.seed)
     layout = split_layout(out / "data")
     test_site = layout.split.test_sites[0]
@@ -78,10 +78,29 @@ def run_demo(args) -> int:
 
 
 def run_benchmark_command(args) -> int:
-    from features.errors import ConfigError
     from pipeline.benchmark import run_benchmark
 
     if args.workers is not None and args.workers < 1:
-        raise ConfigError(f"--workers must be at least 1, got {args.workers}")
+        raise UsageError(f"--workers must be at least 1, got {args.workers}")
+    check_benchmark_dir(args.out)
     run_benchmark(args.split, args.out, env_mode=args.env_mode, workers=args.workers, seed=args.seed)
     return 0
+
+
+def check_benchmark_dir(out: Path) -> None:
+    """``--out`` of ``benchmark`` / ``demo``: absent, empty, or a benchmark folder (its ``data/split.toml``
+    and nothing a benchmark does not write) — it is resumed and its models and report replaced, so nothing
+    else may be there (exit 2)."""
+    from pipeline.outputs import check_outputs, directory_kind
+
+    check_outputs({}, {}, {"--out": out})
+    if not out.exists():
+        return
+    if not out.is_dir():
+        raise UsageError(f"--out {out} exists and is not a directory")
+    kind = directory_kind(out)
+    if kind == "empty" or (kind == "benchmark" and (out / "data" / "split.toml").is_file()):
+        return
+    raise UsageError(f"--out {out} holds {'a ' + kind if kind else 'other files'}, not a benchmark (data/split.toml "
+                     "with the models and report a benchmark writes): its models and report would be replaced; "
+                     "name a new or empty directory")

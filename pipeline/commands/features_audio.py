@@ -53,16 +53,14 @@ def _columns(rows: list[dict], names) -> dict:
 
 def _check_audio(wav: Path, site) -> None:
     """Refuse audio that cannot hold a beacon chirp at all: no samples, or a Nyquist below every band."""
-    from features.acoustic.audio import audio_info
+    from features.acoustic.audio import audio_info, require_beacon_band
     from features.errors import AudioError
 
-    info = audio_info(wav)
-    if info.n_frames == 0:
-        raise AudioError(f"{wav}: holds no audio samples")
-    lowest = min(b.f0_hz if b.f0_hz is not None else site.acoustic.f0_hz for b in site.beacons)
-    if info.fs_hz / 2 <= lowest:
-        raise AudioError(f"{wav}: sample rate {info.fs_hz} Hz (Nyquist {info.fs_hz / 2:.0f} Hz) cannot carry "
-                         f"the beacon band starting at {lowest:.0f} Hz")
+    if not site.beacons:
+        if audio_info(wav).n_frames == 0:
+            raise AudioError(f"{wav}: holds no audio samples")
+        return
+    require_beacon_band(wav, min(b.f0_hz if b.f0_hz is not None else site.acoustic.f0_hz for b in site.beacons))
 
 
 def _print_warnings(caught) -> None:
@@ -83,7 +81,8 @@ def _run(args) -> int:
 
     from features.walk import load_walk
 
-    check_outputs({"WAV": args.wav, "--site": args.site, "--walk": args.walk},
+    check_outputs({"WAV": args.wav, "--site": args.site, "--walk": args.walk,
+                   **{f"{n} beside it": args.wav.parent / n for n in ("walk.toml", "cell.toml")}},
                   {"--out": args.out, "--positions": args.positions})
     if args.walk is None:
         beside = [args.wav.parent / n for n in ("walk.toml", "cell.toml") if (args.wav.parent / n).is_file()]

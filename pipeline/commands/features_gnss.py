@@ -108,6 +108,14 @@ def _utc_of_t0(epochs):
     return None if dated is None else dated.time_utc - dt.timedelta(seconds=dated.t_s)
 
 
+def _beside(path) -> dict:
+    """The walk.toml / cell.toml beside a recording (read for its time base and site): inputs too."""
+    from pathlib import Path
+
+    parent = Path(path).parent
+    return {f"{n} beside it": parent / n for n in ("walk.toml", "cell.toml")}
+
+
 def _run(args) -> int:
     from features.fileio import atomic_write_many
     from features.gnss.features import (
@@ -115,7 +123,8 @@ def _run(args) -> int:
     )
     from features.gnss.nmea import read_nmea
 
-    check_outputs({"NMEA": args.nmea, "--site": args.site, "--cn0-reference": args.cn0_reference},
+    check_outputs({"NMEA": args.nmea, "--site": args.site, "--cn0-reference": args.cn0_reference,
+                   **_beside(args.nmea)},
                   {"--out": args.out, "--epochs": args.epochs, "--positions": args.positions,
                    "--fit-cn0-reference": args.fit_cn0_reference, "--gpsd-json": args.gpsd_json,
                    "--fit-uere": args.fit_uere})

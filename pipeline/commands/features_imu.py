@@ -99,7 +99,7 @@ def _run(args) -> int:
     from features.imu.pdr import PdrConfig, run_pdr
     from features.imu.steps import StepLengthModel, calibrate_weinberg_k
 
-    check_outputs({"IMU": args.imu}, {"--out": args.out})
+    check_outputs({"IMU": args.imu, "walk.toml beside it": args.imu.parent / "walk.toml"}, {"--out": args.out})
     imu = read_imu_csv(args.imu, accel_unit=args.accel_unit, gyro_unit=args.gyro_unit)
     heading = HeadingConfig(declination_rad=math.radians(_declination_deg(args.imu, args.declination_deg)))
     length = StepLengthModel() if args.k is None else StepLengthModel(k=args.k)

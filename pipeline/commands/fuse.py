@@ -7,6 +7,7 @@ from pathlib import Path
 
 from features.errors import ConfigError
 from features.fileio import atomic_write_text
+from pipeline.args import UsageError
 
 GROUP = None  # top-level commands, registered by register_top
 
@@ -36,13 +37,17 @@ def register_top(sub) -> None:
         "evaluate", help="every fusion method on many walks: metrics.csv, summary, plots",
         description="Run every method on every walk (one task per walk, on Dask: a LocalCluster with one worker "
                     "per core by default), write metrics.csv (walk, method, env_class, n, mean_m, median_m, "
-                    "p95_m, max_m, nees_in_bounds), print a summary and draw trajectories, error over time, "
-                    "error CDFs and error by class.",
+                    "p95_m, max_m, nees_in_bounds: the share of epochs whose normalised error lies inside the 95 %% "
+                    "chi-square interval, about 0.95 for a consistent filter), print a summary and draw, for every "
+                    "walk, its trajectories and error over time, and the error CDFs and error by class. Each walk "
+                    "needs truth.csv; a walk that fails is named and skipped (exit 1).",
         epilog="Example: envfuse evaluate split/walks/201/w0 split/walks/201/w1 --model fusion_model "
                "--report report --workers 2")
     p.add_argument("walks", type=Path, nargs="+", help="walk directories (with truth.csv for errors)")
     p.add_argument("--model", type=Path, required=True, help="fusion model directory")
-    p.add_argument("--report", type=Path, required=True, help="directory for metrics.csv and the PNGs")
+    p.add_argument("--report", type=Path, required=True,
+                   help="directory for metrics.csv and the PNGs: new, empty or an earlier report (its plots of "
+                        "walks no longer evaluated are removed)")
     p.add_argument("--methods", nargs="+", choices=method_names(), default=list(method_names()),
                    help="methods (default all)")
     p.add_argument("--workers", type=int, default=None, help="local worker processes (default one per core; "
@@ -54,11 +59,15 @@ def register_top(sub) -> None:
 
 
 def _run(args) -> int:
+    import numpy as np
+
     from pipeline.evaluate import load_model
+    from pipeline.outputs import check_outputs, model_inputs, walk_files
     from pipeline.site_map import class_map_for
     from walks.fuse import fuse_walk
     from walks.track import track_rows, track_text
 
+    check_outputs(walk_files(args.walk), {"--out": args.out}, sealed=model_inputs(args.model, "--model"))
     if not (args.walk / "walk.toml").is_file():
         raise ConfigError(f"{args.walk}: no walk.toml (expected a walk directory)")
     from walks.methods import LAG_S
@@ -69,39 +78,76 @@ def _run(args) -> int:
         raise ConfigError(f"--lag-s must lie in [0, 3600), got {args.lag_s}")
     fused = fuse_walk(args.walk, load_model(args.model), (base,), smooth=args.method.endswith("+rts"),
                       lag_s=lag if args.method.endswith("+lag") else None, class_map_for=class_map_for,
-                      force=args.force)
+                      force=args.force, truth=False)
+    for note in fused.data.notes:
+        print(f"envfuse: note: {args.walk}: {note}", file=sys.stderr)
     if args.method not in fused.tracks:
         raise ConfigError(f"{args.walk}: method {args.method} cannot run: {fused.skipped.get(base, 'no output')}")
-    rows = track_rows(fused.tracks[args.method], fused.inputs)
+    track = fused.tracks[args.method]
+    rows = track_rows(track, fused.inputs)
     fmt = args.format or ("geojson" if args.out.suffix.lower() in (".geojson", ".json") else "csv")
     text = track_text(rows, fmt, {"walk": str(args.walk), "method": args.method})
     atomic_write_text(args.out, text)
-    print(f"{args.walk}: {args.method}, {len(rows)} positions -> {args.out}")
+    n = len(rows)
+    placed = int(np.sum(np.isfinite(track.east_m) & np.isfinite(track.north_m)))
+    ood = sum(r["ood"] for r in rows)
+    parts = [f"{n} epochs"]
+    if placed < n:
+        parts.append(f"{n - placed} without a position")
+    parts.append(f"{100 * ood / max(n, 1):.0f} % out of the environment model's training distribution"
+                 + (" (their class is a guess)" if ood else ""))
+    print(f"{args.walk}: {args.method}, {', '.join(parts)} -> {args.out}")
+    if n and ood / n > 0.5:
+        print(f"envfuse: warning: {args.walk}: {100 * ood / n:.0f} % of the track's epochs fall outside what the "
+              "environment model was trained on (column ood): its classes, and the noise they set, are unreliable "
+              "here; train on surveys of this kind of site", file=sys.stderr)
+    if placed == 0:
+        raise ConfigError(f"{args.walk}: {args.method} gave no position at any of its {n} epochs")
     return 0
 
 
 def _evaluate(args) -> int:
-    from pipeline.evaluate import evaluate, summary_table
+    from pipeline.evaluate import bp_guard_line, evaluate, summary_table
+    from pipeline.outputs import check_outputs, directory_kind, model_inputs, refuse_repeated, walk_files
 
     if args.workers is not None and args.workers < 1:
-        raise ConfigError(f"--workers must be at least 1, got {args.workers}")
+        raise UsageError(f"--workers must be at least 1, got {args.workers}")
+    refuse_repeated(args.walks, "WALKS")
+    inputs = {}
+    for w in args.walks:
+        inputs.update(walk_files(w, f"walk {Path(w).name}"))
+    check_outputs(inputs, {}, {"--report": args.report}, model_inputs(args.model, "--model"))
+    if args.report.exists():
+        if not args.report.is_dir():
+            raise UsageError(f"--report {args.report} exists and is not a directory")
+        if directory_kind(args.report) not in ("empty", "report"):
+            raise UsageError(f"--report {args.report} holds other files than a report (metrics.csv and PNGs): "
+                             "its plots are replaced, so name a new or empty directory")
+    if args.scheduler is not None:
+        from pipeline.parallel import check_scheduler
+
+        check_scheduler(args.scheduler)
     for w in args.walks:
         if not (w / "walk.toml").is_file():
             raise ConfigError(f"{w}: no walk.toml (expected a walk directory)")
     out = evaluate(args.walks, args.model, args.report, methods=tuple(args.methods), workers=args.workers,
                    scheduler=args.scheduler, force=args.force, progress=True, plots=not args.no_plots)
     for f in out["failures"]:
-        print(f"envfuse: warning: {f.walk}: {f.message} (walk skipped)", file=sys.stderr)
+        text = f.message if f.message.startswith(f.walk) else f"{f.walk}: {f.message}"
+        print(f"envfuse: warning: {text} (walk skipped)", file=sys.stderr)
     for r in out["results"]:
+        for note in r.get("notes", []):
+            print(f"envfuse: note: {r['walk_dir']}: {note}", file=sys.stderr)
         for m, why in r["skipped"].items():
-            print(f"envfuse: note: {r['walk']}: {m} skipped: {why}", file=sys.stderr)
+            print(f"envfuse: note: {r['walk_dir']}: {m} skipped: {why}", file=sys.stderr)
     if not out["results"]:
-        raise ConfigError("no walk could be evaluated")
+        raise ConfigError(f"no walk could be evaluated ({len(out['failures'])} failed, named above)")
     print(summary_table(out["pooled"]))
     shares = [r["bp_disabled_share"] for r in out["results"] if r["bp_disabled_share"] is not None]
     if shares:
-        print(f"BP position correction (adaptive_correction) withheld by its guards on "
-              f"{100 * sum(shares) / len(shares):.1f} % of epochs")
-    print(f"{len(out['results'])} walks -> {args.report / 'metrics.csv'}"
-          + (f", {len(out['pngs'])} plots" if out["pngs"] else ""))
+        print(bp_guard_line(sum(shares) / len(shares)))
+    n = len(out["results"])
+    print(f"{n} walk{'s' if n != 1 else ''} -> {args.report / 'metrics.csv'}"
+          + (f", {len(out['pngs'])} plots" if out["pngs"] else "")
+          + (f"; {len(out['failures'])} skipped (named above)" if out["failures"] else ""))
     return 1 if out["failures"] else 0

@@ -6,6 +6,7 @@ from pathlib import Path
 
 from features.errors import ConfigError
 from pipeline.args import bounded, check_outputs, seed
+from pipeline.outputs import check_replaceable
 
 GROUP = "simulate"
 
@@ -67,6 +68,9 @@ def _site(args) -> int:
     from features.site import save_site
     from simulation.site.layout import LayoutConfig, class_shares, generate_site
 
+    check_outputs({}, {}, {"--out": args.out})
+    if args.force:
+        check_replaceable(args.out, "site", flag="--force")
     site = generate_site(args.seed, LayoutConfig(emi_zones=not args.no_emi))
     with atomic_directory(args.out, overwrite=args.force) as tmp:
         save_site(site, tmp / "site.toml")
@@ -104,6 +108,8 @@ def _walk(args) -> int:
     from simulation.walk import simulate_walk
 
     check_outputs({"SITE": args.site}, {}, {"--out": args.out})
+    if args.force:
+        check_replaceable(args.out, "walk", flag="--force")
     start = _start(args.start)
     out = simulate_walk(args.site, args.out, seed=args.seed, duration_s=args.duration, person=args.person,
                         start_utc=start, overwrite=args.force, options=_options(args))
@@ -145,6 +151,8 @@ def _survey(args) -> int:
     from simulation.survey import simulate_survey
 
     check_outputs({"SITE": args.site}, {}, {"--out": args.out})
+    if args.force:
+        check_replaceable(args.out, "survey", flag="--force")
     n_cells, size = survey_size_bytes(args.site, args.cell_size, args.capture_s)
     _check_survey_size(args, n_cells, size)
     start = _start(args.start)

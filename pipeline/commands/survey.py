@@ -10,7 +10,8 @@ import sys
 import warnings
 from pathlib import Path
 
-from pipeline.args import bounded
+from features.errors import ConfigError
+from pipeline.args import UsageError, bounded
 
 GROUP = "survey"
 
@@ -58,7 +59,14 @@ def _build(args) -> int:
     from features.acoustic.audio import AudioWarning
     from fingerprints.survey import SurveyConfig, SurveyWarning, build_library
 
-    config = SurveyConfig(window_s=args.window_s, hop_s=args.hop_s, cn0_quantile=args.cn0_quantile)
+    from pipeline.outputs import check_outputs, survey_inputs
+
+    files, cells = survey_inputs(args.survey)
+    check_outputs(files, {"--library": args.library}, sealed=cells)
+    try:
+        config = SurveyConfig(window_s=args.window_s, hop_s=args.hop_s, cn0_quantile=args.cn0_quantile)
+    except ConfigError as exc:            # options that contradict each other: a usage error
+        raise UsageError(f"--window-s {args.window_s:g} / --hop-s {args.hop_s:g}: {exc}") from None
     with warnings.catch_warnings():
         warnings.simplefilter("always", SurveyWarning)
         warnings.simplefilter("always", AudioWarning)
@@ -71,7 +79,9 @@ def _build(args) -> int:
 
 def _export(args) -> int:
     from fingerprints.library import FingerprintLibrary
+    from pipeline.outputs import check_outputs
 
+    check_outputs({"--library": args.library}, {"--out": args.out})
     with FingerprintLibrary.open(args.library, create=False) as lib:
         # "-" (or /dev/stdout) goes through the atomic writer to the real standard output; the CLI sends
         # this summary to stderr then.

@@ -6,6 +6,8 @@ import io
 from pathlib import Path
 
 from features.errors import ConfigError
+from pipeline.args import plot_path
+from pipeline.outputs import check_outputs, model_inputs, survey_inputs
 
 GROUP = "survey"
 
@@ -25,7 +27,7 @@ def register(sub) -> None:
     p.add_argument("survey", type=Path, metavar="SURVEY_DIR", help="survey directory (its site.toml names the site)")
     p.add_argument("--library", type=Path, required=True, help="fingerprint library holding the survey")
     p.add_argument("--model", type=Path, required=True, help="environment model directory (train env)")
-    p.add_argument("--out", type=Path, required=True, help="PNG to write")
+    p.add_argument("--out", type=plot_path, required=True, help="plot to write (.png, .pdf or .svg)")
     p.add_argument("--csv", type=Path, default=None, help="also write one row per cell")
     p.set_defaults(func=_run)
 
@@ -40,6 +42,9 @@ def _run(args) -> int:
     from pipeline.env_plots import confusion, plot_survey_map
     from training.env import load_env_model, training_set
 
+    survey_files, survey_cells = survey_inputs(args.survey)
+    check_outputs({"--library": args.library, **survey_files}, {"--out": args.out, "--csv": args.csv},
+                  sealed={**survey_cells, **model_inputs(args.model, "--model")})
     if not (args.survey / "site.toml").is_file():
         raise ConfigError(f"{args.survey}: not a survey directory (no site.toml)")
     if not args.library.is_file():
@@ -70,7 +75,7 @@ def _run(args) -> int:
         c["east_m"], c["north_m"] = pos[c["cell_id"]]
     if not cells:
         raise ConfigError(f"{args.library}: no windows of site {site.name!r} (run 'envfuse survey build' first)")
-    plot_survey_map(site, cells, _cell_pitch(cells), args.out)
+    plot_survey_map(site, cells, None, args.out)
     if args.csv is not None:
         buf = io.StringIO()
         buf.write(",".join(CELL_COLUMNS) + "\n")
@@ -89,16 +94,12 @@ def _run(args) -> int:
         pr = np.array([ENV_CLASSES.index(c["predicted"]) for c in labelled])
         m = confusion(t, pr)
         rec = [f"{k} {100 * m[i, i] / m[i].sum():.1f} % ({m[i].sum()})" for i, k in enumerate(ENV_CLASSES) if m[i].sum()]
-        print("per-class accuracy against map labels (cells): " + ", ".join(rec))
+        trained_here = site.name in meta.get("sites", [])
+        print("per-class accuracy against map labels (cells): " + ", ".join(rec)
+              + (" -- a training-site figure: the model was fitted on this site's windows, so it says how well "
+                 "the model learnt them, not how it does on a site it has not seen" if trained_here else
+                 " (a site the model was not fitted on)"))
         print("confusion (rows map label, columns predicted open/light/heavy):")
         for i, k in enumerate(ENV_CLASSES):
             print(f"  {k:5s} " + " ".join(f"{v:4d}" for v in m[i]))
     return 0
-
-
-def _cell_pitch(cells) -> float:
-    import numpy as np
-
-    e = np.unique(np.round([c["east_m"] for c in cells], 3))
-    d = np.diff(e)
-    return float(np.median(d)) if d.size else 10.0

@@ -6,7 +6,8 @@ import sys
 from pathlib import Path
 
 from features.errors import ConfigError
-from pipeline.args import seed
+from pipeline.args import UsageError, seed
+from pipeline.outputs import check_outputs, check_replaceable
 
 GROUP = "train"
 
@@ -54,15 +55,31 @@ def register(sub) -> None:
     p.set_defaults(func=_run_fusion)
 
 
-def _refuse_existing(out: Path, overwrite: bool) -> None:
+ENV_PLOTS = ("decision_graph.png", "tsne_map.png", "confusion.png")
+"""The PNGs ``train env --plots DIR`` may write."""
+
+
+def _refuse_existing(out: Path, overwrite: bool, kind: str) -> None:
+    """An existing --out needs --overwrite, and then must be a model folder of ``kind`` (or empty)."""
     if out.exists() and not overwrite:
-        raise ConfigError(f"--out {out} exists; pass --overwrite to replace it")
+        raise UsageError(f"--out {out} exists; pass --overwrite to replace it (only a {kind} folder is replaced)")
+    if overwrite:
+        check_replaceable(out, kind)
 
 
 def _run_env(args) -> int:
     from training.env import fit_env_model, save_env_model, training_set
 
-    _refuse_existing(args.out, args.overwrite)
+    plots = {f"--plots {args.plots / n}": args.plots / n for n in ENV_PLOTS} if args.plots is not None else {}
+    sealed = {f"--walks {w}": w for w in args.walks} if args.walks is not None else None
+    check_outputs({"--library": args.library}, plots, {"--out": args.out}, sealed)
+    _refuse_existing(args.out, args.overwrite, "environment model")
+    if args.plots is not None and args.plots.exists() and not args.plots.is_dir():
+        raise UsageError(f"--plots {args.plots} exists and is not a directory")
+    if args.plots is not None and (args.plots.resolve() == args.out.resolve() or args.out.resolve() in
+                                   args.plots.resolve().parents):
+        raise UsageError(f"--plots {args.plots} lies inside the model folder --out {args.out}: a model folder holds "
+                         "the model only; name another directory")
     if args.walks is not None:
         from training.env import walk_training_set
 
@@ -78,6 +95,8 @@ def _run_env(args) -> int:
         data = training_set(args.library, args.site)
     diag: dict = {}
     clf, info = fit_env_model(data, args.mode, random_state=args.seed, diagnostics=diag)
+    for text in info.get("warnings", []):
+        print(f"envfuse: warning: {text}", file=sys.stderr)
     if args.walks is not None:
         info["walks"] = [str(w) for w in args.walks]
     save_env_model(clf, args.out, info, library=args.library, overwrite=args.overwrite)
@@ -85,9 +104,9 @@ def _run_env(args) -> int:
         for png in _env_plots(clf, diag, args.plots):
             print(f"plot -> {png}")
     counts = "/".join(str(c) for c in info["class_counts"])
-    print(f"environment model ({args.mode}): {info['n_windows']} windows of {info['n_cells']} cells on "
-          f"{', '.join(info['sites'])}; windows per class open/light/heavy = {counts}; sub-models "
-          f"{', '.join(sorted(clf.submodels_))} -> {args.out}")
+    print(f"environment model ({args.mode}): {info['n_windows']} windows ({info['window_s']:g} s, hop "
+          f"{info['hop_s']:g} s) of {info['n_cells']} cells on {', '.join(info['sites'])}; windows per class "
+          f"open/light/heavy = {counts}; sub-models {', '.join(sorted(clf.submodels_))} -> {args.out}")
     return 0
 
 
@@ -107,27 +126,64 @@ def _env_plots(clf, diag: dict, out: Path) -> list:
 
 
 def _run_fusion(args) -> int:
+    from features.errors import DataError, EnvfuseError
     from models.bp import BPConfig
     from models.fusion.model import save_fusion_model
-    from training.filters import train_fusion
+    from models.fusion.noise import NoiseError
+    from pipeline.outputs import model_inputs, refuse_repeated, walk_files
     from training.env import load_env_model
+    from training.filters import train_fusion
+    from walks.fuse import check_windows
 
-    _refuse_existing(args.out, args.overwrite)
     if args.hidden < 1:
-        raise ConfigError(f"--hidden must be at least 1, got {args.hidden}")
+        raise UsageError(f"--hidden must be at least 1, got {args.hidden}")
+    refuse_repeated(args.walks, "--walks")
+    inputs = {}
+    for w in args.walks:
+        inputs.update(walk_files(w, f"training walk {w.name}"))
+    check_outputs(inputs, {}, {"--out": args.out}, model_inputs(args.env_model, "--env-model"))
+    _refuse_existing(args.out, args.overwrite, "fusion model")
     for w in args.walks:
         if not (w / "walk.toml").is_file():
             raise ConfigError(f"--walks {w}: no walk.toml (expected a walk directory)")
     clf, env_meta = load_env_model(args.env_model)
+    check_windows(env_meta, f"--env-model {args.env_model}")
     from models.fusion.ekf import EkfConfig
 
     from pipeline.site_map import class_map_for
 
-    model = train_fusion(args.walks, clf, bp=not args.no_bp, bp_config=BPConfig(hidden=args.hidden, seed=args.seed),
-                         ekf=EkfConfig(outlier=args.outlier), class_map_for=class_map_for,
-                         meta={"env_model": str(args.env_model), "env_meta": env_meta},
-                         progress=lambda line: print(line, file=sys.stderr))
+    try:
+        model = train_fusion(args.walks, clf, bp=not args.no_bp,
+                             bp_config=BPConfig(hidden=args.hidden, seed=args.seed), ekf=EkfConfig(outlier=args.outlier),
+                             meta={"env_model": str(args.env_model), "env_meta": env_meta},
+                             class_map_for=class_map_for,
+                             progress=lambda line: print(f"train fusion: {line}", file=sys.stderr))
+    except (NoiseError, ValueError) as exc:
+        if isinstance(exc, EnvfuseError) and not isinstance(exc, NoiseError):
+            raise
+        # the fits raise ValueError / NoiseError on data they cannot use (no fix with truth, too few events)
+        walks = ", ".join(str(w) for w in args.walks)
+        raise DataError(f"the fusion model cannot be fitted on --walks {walks}: {exc}") from None
+    for text in default_noise_warnings(model):
+        print(f"envfuse: warning: {text}", file=sys.stderr)
     save_fusion_model(model, args.out, overwrite=args.overwrite)
     print(f"fusion model: {len(args.walks)} training walks on {', '.join(model.meta['sites'])}; "
           f"BP {'on' if model.bp is not None else 'off'} -> {args.out}")
     return 0
+
+
+def default_noise_warnings(model) -> list[str]:
+    """One line per source whose noise was not fitted because no training walk had its fixes with truth: that
+    source keeps the built-in default R (an isotropic σ per axis), which may be far from this receiver's."""
+    import numpy as np
+
+    from models.fusion.noise import FixedNoise
+
+    default = FixedNoise()
+    out = []
+    for name, r, sigma in (("GNSS", model.fixed.R_gnss_, default.gnss_sigma_m),
+                           ("acoustic", model.fixed.R_acoustic_, default.acoustic_sigma_m)):
+        if np.allclose(r, sigma ** 2 * np.eye(2)):
+            out.append(f"no training walk has {name} fixes with truth: the {name} noise keeps the default R "
+                       f"(sigma {sigma:g} m per axis, {sigma ** 2:g} m2), not one fitted to this receiver")
+    return out

@@ -33,40 +33,26 @@ with the χ² quantile for the degrees of freedom and, when it fails, excludes
 the satellite with the largest standardised residual (Brown 1992, "A baseline
 GPS RAIM scheme", Navigation 39(3)), up to ``raim_max_exclusions`` times.
 
-Fix quality (GGA field 6): this module does not search integer ambiguities; it
-models the RTK engine's behaviour from what a receiver sees, never from the
-true NLOS flags. RTK fixed (4) needs the acceptance test — the stand-in for the
-ambiguity ratio test — to hold for a time-to-fix of 3–10 s (after power-on and
-after every loss): at least ``rtk_min_sats`` satellites in continuous lock,
-PDOP ≤ ``rtk_max_pdop``, the code solution's a-posteriori variance factor
-≤ ``rtk_max_residual_var``, at most ``rtk_max_raim_exclusions`` RAIM
-exclusions, and at most ``rtk_max_weak_share`` of the locked carriers below an
-elevation-dependent SNR mask (nominal open sky less ``rtk_snr_margin_db``). Its
-error is the carrier-phase WLS error (cm) — unless the fix is wrong: each
-ambiguity fixed on a reflected carrier takes a wrong integer with a small
-probability, and the position offset persists until the receiver's validation
-resets the fix (:func:`_rtk_state`). RTK float (5) needs ≥ 5 satellites in
-lock; each satellite's float ambiguity carries the mean of its code error since
-its lock began (:func:`float_ambiguity_bias`), so a bias held while locked stays
-in the float solution until the carrier slips, and cycle slips — frequent on
-weak and reflected carriers — restart it. The float solution weights each
-carrier by its ambiguity's precision, 1/(σ²_code/N + σ²_carrier) with N the
-epochs of lock (capped at ``float_weight_window_s``): the filter assumes white
-code errors, so a freshly locked carrier counts as little as its code, a long
-locked one much more (least squares over N epochs, the same growing-window
-mean as :func:`float_ambiguity_bias`). The float filter runs beneath the
-fixed output (not restarted when a fix is declared or lost). The fix gate
-counts only carriers locked for ``rtk_conv_lock_s`` (20 s): a single-frequency
-(L1/B1) engine's float ambiguities need tens of seconds to converge (the
-NEO-M8P single-frequency RTK data sheet states a convergence time < 60 s,
-u-blox UBX-15016700), so carriers that keep slipping never join a fix. DGNSS (2)
+Fix quality (GGA field 6): RTK fixed (4) and float (5) come from the RTK
+engine of :mod:`simulation.gnss.rtk` — float ambiguities from the
+code-minus-carrier since lock, integer search (LAMBDA), ratio test and
+bootstrapping success rate, fix-and-hold and its validation — which reads the
+receiver's observables only. Its fixes are wrong when the float ambiguities
+are biased beyond what the receiver's white-noise model allows: code multipath
+and NLOS delays held while a carrier stays locked, and NLOS carriers, which
+measure the reflected path (:func:`pseudorange_errors`). RTK float (5) needs
+≥ ``float_min_sats`` satellites in phase lock, one more than the unknowns, with
+PDOP ≤ ``float_pdop_mask``; the float filter runs beneath
+the fixed output (not restarted when a fix is declared or lost). DGNSS (2)
 otherwise; autonomous (1) when corrections are off; no fix (0) when the
 geometry cannot be solved (fewer than 4 satellites, or fewer than 3 + the
-number of systems).
+number of systems). Every solution carries the receiver's GST: σ from its own
+least-squares covariance scaled by its a-posteriori variance factor
+(:func:`_gst_sigma`), which is too small wherever the solution has absorbed a
+bias.
 
 The truth NLOS flags enter only physics the receiver cannot choose: reflected
-carriers slip more often and bias the float ambiguities, which is what makes
-an accepted fix wrong.
+carriers slip more often, and their code and carrier carry the reflected path.
 """
 
 from __future__ import annotations
@@ -78,6 +64,8 @@ from scipy.signal import lfilter
 from scipy.stats import chi2
 
 from features.errors import ConfigError
+from simulation.gnss.gst import gst_fields
+from simulation.gnss.rtk import RtkConfig, carrier_model_var_m2, float_solution, rtk_engine
 from simulation.gnss.signal import open_sky_cn0_dbhz
 
 __all__ = ["FixConfig", "FixResult", "code_sigma_m", "carrier_sigma_m", "klobuchar_obliquity",
@@ -119,27 +107,10 @@ class FixConfig:
     raim_max_exclusions: int = 2
     rx_floor_autonomous_m: float = 3.0
     rx_floor_differential_m: float = 0.6
-    rtk_min_sats: int = 8
-    rtk_max_pdop: float = 3.0
-    rtk_max_residual_var: float = 4.0
-    rtk_snr_margin_db: float = 10.0
-    rtk_max_weak_share: float = 0.25
-    rtk_max_raim_exclusions: int = 1
-    rtk_conv_lock_s: float = 20.0
-    ttf_min_s: float = 3.0
-    ttf_max_s: float = 10.0
-    ttf_weak_gain: float = 3.0
-    ttf_weak_free_share: float = 0.1
     rtk_cold_start: bool = True
-    wrong_fix_base_prob: float = 0.001
-    wrong_fix_nlos_prob: float = 0.10
-    wrong_fix_max_cycles: int = 3
-    wrong_fix_nlos_max_cycles: int = 20
-    wrong_fix_reset_mean_s: float = 10.0
     float_min_sats: int = 5
-    phase_lock_s: float = 3.0
+    float_pdop_mask: float = 25.0
     float_filter_tau_s: float = 8.0
-    float_weight_window_s: float = 30.0
     warm_start_lock_s: float = 60.0
     slip_nlos_prob: float = 0.05
     slip_weak_prob: float = 0.5
@@ -150,17 +121,12 @@ class FixConfig:
         for name, value in vars(self).items():
             if not np.isfinite(value) or value < 0:
                 raise ConfigError(f"FixConfig.{name} must be finite and non-negative, got {value!r}")
-        for name in ("wrong_fix_base_prob", "wrong_fix_nlos_prob", "nlos_var_share", "rtk_max_weak_share"):
-            if getattr(self, name) > 1.0:
-                raise ConfigError(f"FixConfig.{name} must lie in [0, 1], got {getattr(self, name)}")
-        if self.wrong_fix_max_cycles < 1 or self.wrong_fix_nlos_max_cycles < 1:
-            raise ConfigError("FixConfig.wrong_fix_max_cycles and wrong_fix_nlos_max_cycles must be >= 1")
-        if self.ttf_max_s < self.ttf_min_s:
-            raise ConfigError(f"FixConfig.ttf_max_s ({self.ttf_max_s}) < ttf_min_s ({self.ttf_min_s})")
+        if self.nlos_var_share > 1.0:
+            raise ConfigError(f"FixConfig.nlos_var_share must lie in [0, 1], got {self.nlos_var_share}")
         if not 0.0 < self.raim_pfa < 1.0:
             raise ConfigError(f"FixConfig.raim_pfa must lie in (0, 1), got {self.raim_pfa}")
-        if self.rtk_min_sats < 4 or self.float_min_sats < 4:
-            raise ConfigError("FixConfig.rtk_min_sats and float_min_sats must be >= 4")
+        if self.float_min_sats < 4:
+            raise ConfigError("FixConfig.float_min_sats must be >= 4")
 
 
 def code_sigma_m(cn0_dbhz, a_m: float = 0.2, b_m_sqrt_hz: float = 47.4) -> np.ndarray:
@@ -261,7 +227,7 @@ def distance_gm_phi(speed_m_s: np.ndarray, dt_s: float, tau_s: float, corr_dist_
 def pseudorange_errors(rng: np.random.Generator, el_rad: np.ndarray, cn0_dbhz: np.ndarray, nlos: np.ndarray,
                        nlos_extra_m: np.ndarray, clutter: np.ndarray, speed_m_s: np.ndarray, dt_s: float,
                        wavelength_m: float, cfg: FixConfig = FixConfig(),
-                       reset: np.ndarray | None = None) -> dict[str, np.ndarray]:
+                       reset: np.ndarray | None = None, specular: np.ndarray | None = None) -> dict[str, np.ndarray]:
     """Error components, each of shape (n, k), metres.
 
     Returns a dict with ``noise`` (code noise, carrier-smoothed), ``multipath``
@@ -275,7 +241,9 @@ def pseudorange_errors(rng: np.random.Generator, el_rad: np.ndarray, cn0_dbhz: n
     over minutes; the NLOS extra path, geometric (≈ 2·d·cos el off the
     reflector) plus an exponential part per satellite–reflector pair, is
     modulated by (1 + s·u) with u such a process (s = ``nlos_var_share``),
-    since the reflecting face is not a mirror. The code-only parts (noise,
+    since a diffusely scattering face is no mirror; a specular reflection
+    (``specular`` (n, k), True) keeps the extra path its geometry gives — it
+    changes as the walker or the satellite moves, not at random. The code-only parts (noise,
     multipath) are carrier smoothed (:func:`hatch_smooth`), restarted where
     ``reset`` (n, k) is True (cycle slips, loss of lock; default: where
     ``cn0_dbhz`` is NaN, i.e. untracked, and the epoch after).
@@ -306,10 +274,11 @@ def pseudorange_errors(rng: np.random.Generator, el_rad: np.ndarray, cn0_dbhz: n
     carrier = (carrier_sigma_m(cn0, cfg.carrier_c_m2_hz) * rng.standard_normal((n, k))
                + sigma_cmp * gauss_markov(rng, phi_cmp, (n, k)))
     u = gauss_markov(rng, distance_gm_phi(v, dt_s, cfg.nlos_tau_s, cfg.nlos_corr_dist_m), (n, k))
-    extra = np.where(nlos, np.maximum(nlos_extra_m * (1.0 + cfg.nlos_var_share * u), 0.0), 0.0)
-    # A reflected carrier is offset by the extra path modulo one cycle.
-    frac = np.mod(extra, wavelength_m) - 0.5 * wavelength_m
-    carrier = np.where(nlos, carrier + frac, carrier)
+    share = cfg.nlos_var_share if specular is None else np.where(specular, 0.0, cfg.nlos_var_share)
+    extra = np.where(nlos, np.maximum(nlos_extra_m * (1.0 + share * u), 0.0), 0.0)
+    # A reflected carrier measures the reflected path: its error is the whole extra path (Groves 2013 §10.4.2),
+    # as the code's; code-minus-carrier (the float ambiguity) therefore does not see it, the float position does.
+    carrier = np.where(nlos, carrier + extra, carrier)
     if reset is None:
         reset = untracked | np.vstack([np.ones((1, k), bool), untracked[:-1]])
     window = max(1, int(round(cfg.hatch_window_s / dt_s)))
@@ -328,6 +297,9 @@ class FixResult:
     quality : (n,) int, GGA fix quality 0/1/2/4/5
     used : (n, k) bool, satellites in the solution (after RAIM)
     hdop, vdop, pdop : (n,) from the used satellites (NaN without a fix)
+    gst : (n, 7) the receiver's own error statistics of the solution it reports, NMEA GST fields 2–8
+        (:func:`gst_fields`: rms, semi-major, semi-minor, orientation, σ lat, σ lon, σ alt), NaN without a fix
+    code_error_m : (n, k) pseudorange errors after the differential corrections (simulator truth, for reports)
     """
 
     error_enu_m: np.ndarray
@@ -336,6 +308,8 @@ class FixResult:
     hdop: np.ndarray
     vdop: np.ndarray
     pdop: np.ndarray
+    gst: np.ndarray = None
+    code_error_m: np.ndarray = None
 
     @property
     def n_used(self) -> np.ndarray:
@@ -452,7 +426,8 @@ def _smooth_runs(x: np.ndarray, mask: np.ndarray, dt_s: float, tau_s: float) -> 
     return out
 
 
-def float_ambiguity_bias(code_err_m: np.ndarray, lock_age_s: np.ndarray, dt_s: float) -> np.ndarray:
+def float_ambiguity_bias(code_err_m: np.ndarray, lock_age_s: np.ndarray, dt_s: float,
+                         window_s: float = np.inf) -> np.ndarray:
     """Range error a float ambiguity carries, (n, k) m: the mean of the code error since the lock began.
 
     An ambiguity held constant in the RTK filter (no process noise) is estimated from code minus
@@ -461,7 +436,10 @@ def float_ambiguity_bias(code_err_m: np.ndarray, lock_age_s: np.ndarray, dt_s: f
     2nd ed., §6.2 on carrier smoothing as ambiguity estimation). White noise averages down as 1/√N,
     a bias the code held while the carrier stayed locked (an NLOS delay, slow multipath) stays in the
     float solution until a slip restarts the lock. Lock present at the first epoch (warm start, age
-    > 0) starts from the first code error with the weight of its age.
+    > 0) starts from the first code error with the weight of its age. With ``window_s`` the weight
+    1/N stops falling at N = window_s/dt_s (an exponentially fading mean): the filter's ambiguity
+    process noise forgets data older than about the window, as the receiver's own variance
+    s² = σ²/N_eff assumes (:mod:`simulation.gnss.rtk`).
 
     >>> e = np.array([[1.0], [3.0], [5.0], [7.0]]); age = np.array([[0.0], [1.0], [2.0], [0.0]])
     >>> float_ambiguity_bias(e, age, 1.0)[:, 0].tolist()
@@ -469,7 +447,7 @@ def float_ambiguity_bias(code_err_m: np.ndarray, lock_age_s: np.ndarray, dt_s: f
     """
     n, k = code_err_m.shape
     out = np.empty((n, k))
-    count = np.rint(lock_age_s / dt_s) + 1.0
+    count = np.minimum(np.rint(lock_age_s / dt_s) + 1.0, max(window_s / dt_s, 1.0))
     restart = np.zeros((n, k), bool)
     restart[0] = True
     restart[1:] = lock_age_s[1:] <= lock_age_s[:-1]
@@ -487,98 +465,12 @@ def cycle_slips(rng: np.random.Generator, cn0_dbhz: np.ndarray, nlos: np.ndarray
     return rng.random(np.shape(cn0_dbhz)) < slip_probability(cn0_dbhz, nlos, cfg)
 
 
-def _rtk_state(rng: np.random.Generator, fixed_ok: np.ndarray, locked: np.ndarray, nlos: np.ndarray,
-               nlos_cycles: np.ndarray, dt_s: float, cfg: FixConfig, weak_share: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, list]:
-    """The RTK engine's fixed state (n,) and its wrong-fix episodes.
-
-    Returns ``fixed`` (n,) bool, ``episode`` (n,) int (−1 = right fix or no
-    fix, else the index of the wrong-fix episode) and ``starts``, per episode
-    (epoch, cycles (k,)): the wrong integers at the epoch it began.
-
-    A fix is declared after ``fixed_ok`` (the observable acceptance test) has
-    held for a time-to-fix drawn from U(ttf_min, ttf_max) — also at the first
-    epoch unless ``rtk_cold_start`` is off — and after every loss (the ZED-F9P
-    data sheet states RTK convergence "< 10 s"; u-blox UBX-17051259), stretched
-    by (1 + g·max(w − w₀, 0)/0.1) where w is the share of weak locked carriers
-    (observable), w₀ = ``ttf_weak_free_share`` and g = ``ttf_weak_gain``: weak, multipath-prone carriers keep the ratio
-    test from passing for longer. A warm start (``rtk_cold_start`` off) has
-    already served the base time and waits only the stretch. Each
-    ambiguity fixed — all locked satellites at a new fix, and every satellite
-    that joins a running fix (rising, or re-locked after a slip) — takes a
-    wrong integer with probability p₀ for a direct carrier and p_nlos for a
-    reflected one. p₀ = 0.1 % is the ratio test's design failure rate for
-    unbiased data (the fixed-failure-rate ratio test, Teunissen & Verhagen
-    2009, "The GNSS ambiguity ratio-test revisited", Survey Review 41(312));
-    biased phases break its assumptions: a float-ambiguity bias β (cycles)
-    lowers the rounding success rate to Φ((1−2β)/2σ) + Φ((1+2β)/2σ) − 1
-    (Teunissen 2001, "Integer estimation in the presence of biases", J. Geodesy
-    75), about 50 % at β ≈ ½ cycle whatever σ, and a reflected carrier's
-    float ambiguity is pulled by the varying part of its extra path (metres).
-    Most such candidates fail the ratio test; p_nlos = 10 % of the reflected
-    ambiguities in an accepted fix being wrong is not published but
-    calibrated (tuning site seeds 1–4) to the 0.5–5 % of wrong quality-4 epochs
-    issue 10 asks for; bench/calibrate_sim.py reports the realised share. A wrong integer is ±1…``wrong_fix_max_cycles``
-    cycles on a direct carrier and, on a reflected one, the extra path in
-    cycles (1…``wrong_fix_nlos_max_cycles``: its float ambiguity was pulled by
-    the code's NLOS bias); the position offset it causes stays (later ambiguities are fixed
-    consistently with the wrong position) until the fix is lost or the
-    receiver's continued validation resets it after an exponential time of
-    mean ``wrong_fix_reset_mean_s`` (then a new time-to-fix).
-    """
-    n, k = locked.shape
-    base = rng.uniform(cfg.ttf_min_s, cfg.ttf_max_s, n)
-    w = np.zeros(n) if weak_share is None else np.asarray(weak_share, float)
-    stretch = cfg.ttf_weak_gain * np.maximum(w - cfg.ttf_weak_free_share, 0.0) / 0.1
-    ttf = base * (1.0 + stretch)
-    u_wrong = rng.random((n, k))
-    cyc_draw = rng.integers(1, cfg.wrong_fix_max_cycles + 1, (n, k)) * rng.choice([-1, 1], (n, k))
-    # A reflected carrier's float ambiguity is pulled by the code's extra path: its wrong integer is that
-    # many cycles (the range comes out as long as the reflected path), at least one.
-    cyc_draw = np.where(nlos, np.clip(np.rint(nlos_cycles), 1, cfg.wrong_fix_nlos_max_cycles), cyc_draw)
-    reset_draw = rng.exponential(max(cfg.wrong_fix_reset_mean_s, 1e-9), n)
-    p_wrong = np.where(nlos, cfg.wrong_fix_nlos_prob, cfg.wrong_fix_base_prob)
-    fixed = np.zeros(n, bool)
-    episode = np.full(n, -1, int)
-    starts: list[tuple[int, np.ndarray]] = []
-    held, need = 0.0, (ttf[0] if cfg.rtk_cold_start else base[0] * stretch[0])
-    is_fixed, timer, ep = False, np.inf, -1
-    prev_locked = np.zeros(k, bool)
-    for i in range(n):
-        lk = locked[i]
-        if not fixed_ok[i]:
-            held, is_fixed, timer, ep = 0.0, False, np.inf, -1
-            prev_locked = lk
-            continue
-        if held == 0.0 and i > 0:
-            need = ttf[i]
-        held += dt_s
-        new = np.zeros(k, bool)
-        if not is_fixed and held >= need:
-            is_fixed, new = True, lk
-        elif is_fixed:
-            new = lk & ~prev_locked
-        hit = new & (u_wrong[i] < p_wrong[i])
-        if hit.any() and ep < 0:
-            # The wrong integers pull the fixed position; the engine then fixes every later ambiguity
-            # consistently with that position, so the offset stays until the fix is reset.
-            ep = len(starts)
-            starts.append((i, np.where(hit, cyc_draw[i], 0.0)))
-            timer = reset_draw[i]
-        if ep >= 0:
-            timer -= dt_s
-            if timer <= 0.0:  # validation caught it: back to float, a new time-to-fix
-                is_fixed, held, need, timer, ep = False, dt_s, ttf[i], np.inf, -1
-        fixed[i] = is_fixed
-        episode[i] = ep if is_fixed else -1
-        prev_locked = lk
-    return fixed, episode, starts
-
-
 def solve_fixes(rng: np.random.Generator, az_rad: np.ndarray, el_rad: np.ndarray, sys_idx: np.ndarray,
                 tracked: np.ndarray, cn0_reported_dbhz: np.ndarray, errors: dict[str, np.ndarray],
                 nlos: np.ndarray, dt_s: float, corrections: bool = True,
                 cfg: FixConfig = FixConfig(), slip: np.ndarray | None = None,
-                wavelength_m: float = 0.1903, receiver_offset_db: float = 0.0) -> FixResult:
+                wavelength_m: float = 0.1903, receiver_offset_db: float = 0.0,
+                rtk_cfg: RtkConfig = RtkConfig()) -> FixResult:
     """Weighted least squares with RAIM and the fix-quality state machine (module docstring).
 
     Parameters
@@ -586,30 +478,87 @@ def solve_fixes(rng: np.random.Generator, az_rad: np.ndarray, el_rad: np.ndarray
     az_rad, el_rad : (n, k); sys_idx : (k,) 0 = GPS, 1 = BeiDou
     tracked, cn0_reported_dbhz : (n, k) receiver tracking state and reported C/N0
     errors : from :func:`pseudorange_errors`
-    nlos : (n, k) truth NLOS flags — physics only: they raise the slip rate and the chance that an
-        accepted fix is wrong; the receiver's decisions (used set, RAIM, fixed/float) never read them
+    nlos : (n, k) truth NLOS flags — physics only: they raise the slip rate; the receiver's decisions (used set,
+        RAIM, float, ambiguities, fixed/float) never read them
     corrections : differential corrections (DGNSS/RTK) available
     slip : (n, k) cycle slips (default: drawn here with :func:`cycle_slips`)
     receiver_offset_db : the receiver's own C/N0 offset from the nominal open-sky curve, dB — its maker
         tunes the SNR mask to its antenna, so the mask moves with it
+    rtk_cfg : the RTK engine's parameters (:mod:`simulation.gnss.rtk`)
     """
     n, k = el_rad.shape
     g = _design(az_rad, el_rad, sys_idx)
     cand = tracked & (el_rad >= np.radians(cfg.fix_mask_deg))
     used, ok = _solvable(cand, sys_idx)
-    used_before_raim = used.copy()
     atm_scale = cfg.dgnss_residual_fraction if corrections else 1.0
     code_err = errors["noise"] + errors["multipath"] + errors["nlos_bias"] + atm_scale * errors["atmosphere"]
     floor = cfg.rx_floor_differential_m if corrections else cfg.rx_floor_autonomous_m
     sig2 = floor ** 2 + code_sigma_m(np.nan_to_num(cn0_reported_dbhz, nan=0.0),
                                      cfg.code_a_m, cfg.code_b_m_sqrt_hz) ** 2
-    w_all = 1.0 / sig2
+    used, ok, theta_code, cov_code, w = _raim(g, used, ok, code_err, 1.0 / sig2, sys_idx, cfg)
+    hdop, vdop, pdop = _dops(g, used)
+    gst = _gst_sigma(g, w, code_err, theta_code, cov_code, used, sys_idx)
+
+    quality = np.zeros(n, int)
+    err = np.full((n, 3), np.nan)
+    if not corrections:
+        quality[ok] = QUALITY_AUTONOMOUS
+        err[ok] = _smooth_runs(theta_code[:, :3], ok, dt_s, cfg.float_filter_tau_s)[ok]
+    else:
+        if slip is None:
+            slip = cycle_slips(rng, cn0_reported_dbhz, nlos, cfg)
+        lock = _lock_age_s(tracked, slip, dt_s, 0.0 if cfg.rtk_cold_start else cfg.warm_start_lock_s)
+        locked = used & (lock >= rtk_cfg.phase_lock_s)
+        # The float solution needs a redundant, well-shaped set of locked carriers: one more than the unknowns and
+        # PDOP within the receiver's mask (u-blox's navigation PDOP mask defaults to 25, UBX-CFG-NAV5 pDop); five
+        # high satellites of two systems solve exactly and can throw the float position hundreds of metres.
+        lock_pdop = _dops(g, locked)[2]
+        lock_dof = locked.sum(axis=1) - 3 - _n_systems(locked, sys_idx)
+        float_ok = (ok & (locked.sum(axis=1) >= cfg.float_min_sats) & (lock_dof >= 1)
+                    & (lock_pdop <= cfg.float_pdop_mask))
+        # Double-differenced carrier: the base a few km away leaves ≈ 1 ppm of the atmosphere (rtk_atm_fraction).
+        carrier_err = errors["carrier"] + cfg.rtk_atm_fraction * errors["atmosphere"]
+        # Float ambiguity prior λÑ = mean(Φ − P) since lock: its error a = mean(e_Φ − e_P); the receiver's variance
+        # s² = σ²_code/N_eff, its filter counting float_indep_rate_hz independent code samples a second.
+        amb = float_ambiguity_bias(carrier_err - code_err, lock, dt_s, rtk_cfg.float_weight_window_s)
+        n_eff = np.minimum(lock * rtk_cfg.float_indep_rate_hz + 1.0,
+                           max(rtk_cfg.float_weight_window_s * rtk_cfg.float_indep_rate_hz, 1.0))
+        s2 = sig2 / n_eff
+        sig_phi2 = carrier_model_var_m2(el_rad, rtk_cfg)
+        theta_f, cov_f, w_f = float_solution(g, locked, carrier_err, amb, s2, sig_phi2)
+        # Partial ambiguity resolution: carriers above an elevation-dependent SNR mask, the nominal open-sky C/N0
+        # less a margin (RTKLIB's pos1-snrmask; Takasu, RTKLIB 2.4.2 manual).
+        mask = open_sky_cn0_dbhz(el_rad) + receiver_offset_db - rtk_cfg.snr_margin_db
+        cn0_ok = np.nan_to_num(cn0_reported_dbhz, nan=0.0) >= mask
+        res = rtk_engine(g, used, lock, cn0_ok, el_rad, sys_idx, carrier_err, amb, s2, theta_f, cov_f, float_ok,
+                         wavelength_m, theta_code, cov_code, dt_s, rtk_cfg)
+        fixed = res.fixed & ok
+        quality[ok] = QUALITY_DGNSS
+        quality[float_ok] = QUALITY_RTK_FLOAT
+        quality[fixed] = QUALITY_RTK_FIXED
+        raw = np.where(float_ok[:, None], theta_f[:, :3], theta_code[:, :3])
+        # The float (or code) filter runs beneath the fixed output and is not restarted when a fix is
+        # declared or lost: a lost fix falls back to the float state it had all along.
+        free = ok & ~fixed
+        err[free] = _smooth_runs(raw, ok, dt_s, cfg.float_filter_tau_s)[free]
+        err[fixed] = res.fixed_error_enu_m[fixed]
+        gst_f = _gst_sigma(g, w_f, carrier_err - amb, theta_f, cov_f, locked, sys_idx)
+        gst = np.where(float_ok[:, None], gst_f, gst)
+        gst[fixed] = res.gst[fixed]
+    hdop = np.where(ok, hdop, np.nan)
+    vdop = np.where(ok, vdop, np.nan)
+    pdop = np.where(ok, pdop, np.nan)
+    gst[~ok] = np.nan
+    return FixResult(err, quality, used, hdop, vdop, pdop, gst, code_err)
+
+
+def _raim(g, used, ok, code_err, w_all, sys_idx, cfg):
+    """Code WLS with RAIM exclusions (module docstring); returns (used, ok, θ (n, 5), (GᵀWG)⁻¹, weights (n, k))."""
     for n_excluded in range(cfg.raim_max_exclusions + 1):
         w = np.where(used & ok[:, None], w_all, 0.0)
         theta, ninv = _wls(g, w, code_err)
         resid = code_err - np.matmul(g, theta[..., None])[..., 0]
-        n_sys = (used[:, sys_idx == 0].any(axis=1).astype(int) + used[:, sys_idx == 1].any(axis=1))
-        dof = used.sum(axis=1) - 3 - n_sys
+        dof = used.sum(axis=1) - 3 - _n_systems(used, sys_idx)
         test = (w * resid ** 2).sum(axis=1)
         thresh = chi2.ppf(1.0 - cfg.raim_pfa, np.maximum(dof, 1))
         fail = ok & (dof >= 2) & (test > thresh)
@@ -624,75 +573,22 @@ def solve_fixes(rng: np.random.Generator, az_rad: np.ndarray, el_rad: np.ndarray
         used, ok = _solvable(used, sys_idx)
     used &= ok[:, None]
     w = np.where(used, w_all, 0.0)
-    theta_code, _ = _wls(g, w, code_err)
-    # Double-differenced carrier: the base a few km away leaves ≈ 1 ppm of the atmosphere (rtk_atm_fraction).
-    carrier_dd = errors["carrier"] + cfg.rtk_atm_fraction * errors["atmosphere"]
-    theta_car, _ = _wls(g, w, carrier_dd)
-    hdop, vdop, pdop = _dops(g, used)
+    theta, ninv = _wls(g, w, code_err)
+    return used, ok, theta, ninv, w
 
-    quality = np.zeros(n, int)
-    err = np.full((n, 3), np.nan)
-    if not corrections:
-        quality[ok] = QUALITY_AUTONOMOUS
-        err[ok] = _smooth_runs(theta_code[:, :3], ok, dt_s, cfg.float_filter_tau_s)[ok]
-    else:
-        if slip is None:
-            slip = cycle_slips(rng, cn0_reported_dbhz, nlos, cfg)
-        lock = _lock_age_s(tracked, slip, dt_s, cfg.warm_start_lock_s)
-        locked = used & (lock >= cfg.phase_lock_s)
-        n_lock = locked.sum(axis=1)
-        # The acceptance test reads observables only: locked satellites, PDOP, the code solution's
-        # a-posteriori variance factor (weighted residuals over the degrees of freedom, which biased
-        # reflections inflate), the number of satellites RAIM had to exclude (outliers mean multipath
-        # the ambiguity search cannot trust) and the share of weak carriers among the locked ones.
-        resid = code_err - np.matmul(g, theta_code[..., None])[..., 0]
-        n_sys = (used[:, sys_idx == 0].any(axis=1).astype(int) + used[:, sys_idx == 1].any(axis=1))
-        dof = np.maximum(used.sum(axis=1) - 3 - n_sys, 1)
-        var_factor = (w * resid ** 2).sum(axis=1) / dof
-        # Weak: below an elevation-dependent SNR mask, the nominal open-sky C/N0 less a margin (as
-        # RTKLIB's per-elevation snrmask rejects multipath-prone signals; Takasu, RTKLIB 2.4.2 manual,
-        # option pos1-snrmask).
-        mask = open_sky_cn0_dbhz(el_rad) + receiver_offset_db - cfg.rtk_snr_margin_db
-        weak = locked & (np.nan_to_num(cn0_reported_dbhz, nan=0.0) < mask)
-        weak_share = weak.sum(axis=1) / np.maximum(n_lock, 1)
-        n_excluded = (used_before_raim & ~used).sum(axis=1)
-        # The ratio test of a single-frequency engine passes only on ambiguities whose float estimates
-        # have converged: carriers in continuous lock for at least rtk_conv_lock_s (the lock time is an
-        # observable, reported per signal in RTCM MSM; the NEO-M8P single-frequency RTK data sheet gives
-        # a convergence time < 60 s, u-blox UBX-15016700).
-        n_conv = (locked & (lock >= cfg.rtk_conv_lock_s)).sum(axis=1)
-        fixed_ok = (ok & (n_conv >= cfg.rtk_min_sats) & (pdop <= cfg.rtk_max_pdop)
-                    & (var_factor <= cfg.rtk_max_residual_var) & (weak_share <= cfg.rtk_max_weak_share)
-                    & (n_excluded <= cfg.rtk_max_raim_exclusions))
-        float_ok = ok & (n_lock >= cfg.float_min_sats)
-        fixed, episode, starts = _rtk_state(rng, fixed_ok, locked, nlos, errors["nlos_bias"] / wavelength_m,
-                                            dt_s, cfg, weak_share)
-        quality[ok] = QUALITY_DGNSS
-        quality[float_ok] = QUALITY_RTK_FLOAT
-        quality[fixed] = QUALITY_RTK_FIXED
-        err[ok] = theta_code[ok, :3]
-        # Float: each satellite's ambiguity is the mean of its code-minus-carrier since its lock began
-        # (:func:`float_ambiguity_bias`), so a bias the code carried while locked stays in the solution
-        # until the carrier slips, and a satellite that keeps slipping (NLOS) carries its current code error.
-        bias = float_ambiguity_bias(code_err, lock, dt_s)
-        # Weights of the float solution: carrier plus an ambiguity known to σ²_code/N after N epochs of lock
-        # (the filter assumes white code errors), so a freshly locked carrier counts little.
-        n_eff = np.minimum(lock / dt_s + 1.0, max(cfg.float_weight_window_s / dt_s, 1.0))
-        w_float = np.where(used, 1.0 / (sig2 / n_eff + carrier_sigma_m(np.nan_to_num(cn0_reported_dbhz, nan=0.0),
-                                                                     cfg.carrier_c_m2_hz) ** 2), 0.0)
-        theta_float, _ = _wls(g, w_float, carrier_dd + bias)
-        raw = np.where(float_ok[:, None], theta_float[:, :3], theta_code[:, :3])
-        # The float (or code) filter runs beneath the fixed output and is not restarted when a fix is
-        # declared or lost: a lost fix falls back to the float state it had all along.
-        free = ok & ~fixed
-        err[free] = _smooth_runs(raw, ok, dt_s, cfg.float_filter_tau_s)[free]
-        err[fixed] = theta_car[fixed, :3]
-        for e, (i0, cyc) in enumerate(starts):
-            # Offset of the wrong integers: δx = (GᵀWG)⁻¹GᵀW·λc at the epoch the episode began.
-            off, _ = _wls(g[i0:i0 + 1], w[i0:i0 + 1], (wavelength_m * cyc)[None])
-            sel = episode == e
-            err[sel] = theta_car[sel, :3] + off[0, :3]
-    hdop = np.where(ok, hdop, np.nan)
-    vdop = np.where(ok, vdop, np.nan)
-    pdop = np.where(ok, pdop, np.nan)
-    return FixResult(err, quality, used, hdop, vdop, pdop)
+
+def _n_systems(used: np.ndarray, sys_idx: np.ndarray) -> np.ndarray:
+    return used[:, sys_idx == 0].any(axis=1).astype(int) + used[:, sys_idx == 1].any(axis=1)
+
+
+def _gst_sigma(g, w, y_err, theta, cov, used, sys_idx) -> np.ndarray:
+    """The receiver's GST of a solution (:func:`gst_fields`, shape (n, 7)): its covariance (GᵀWG)⁻¹ scaled by the
+    a-posteriori variance factor of its own residuals r = y − Gθ, σ̂₀² = rᵀWr/(m − p) (the receiver scales its
+    covariance by how well its residuals fit, so biases the solution absorbs make σ too small), and the RMS of
+    the residuals. NaN where fewer observations than unknowns + 1."""
+    r = np.where(used, y_err - np.matmul(g, theta[..., None])[..., 0], 0.0)
+    m = used.sum(axis=1)
+    dof = m - 3 - _n_systems(used, sys_idx)
+    v = np.where(dof >= 1, (w * r * r).sum(axis=1) / np.maximum(dof, 1), np.nan)
+    rms = np.where(m > 0, np.sqrt((r * r).sum(axis=1) / np.maximum(m, 1)), np.nan)
+    return gst_fields(cov[:, :3, :3], v, rms)

@@ -9,6 +9,9 @@ Per epoch, in the order a u-blox receiver emits them:
 * ``$GNGSA`` — one or more per system (system id 1 = GPS, 4 = BeiDou, the
   4.10 trailing field), at most 12 satellites each; the PRNs are each system's
   own numbers. The GGA count equals the number of PRNs listed in all GSA lines.
+* ``$GNGST`` (when the receiver model sends it) — RMS of the residuals, the
+  horizontal error ellipse and σ of latitude, longitude and altitude
+  (:mod:`simulation.gnss.gst`), empty fields without a fix.
 * ``$GPGSV`` / ``$GBGSV`` — satellites in view, four per sentence, with the
   signal id field (1 = GPS L1 C/A, 1 = BeiDou B1I); tracked satellites carry
   their C/N0 in dB-Hz, in-view untracked ones an empty SNR field.
@@ -48,6 +51,8 @@ class NmeaEpochs:
     sat_system : (k,) NMEA system id (1 GPS, 4 BeiDou); sat_prn : (k,) the system's own number
     el_deg, az_deg : (n, k); in_view, used : (n, k) bool
     snr_dbhz : (n, k) reported C/N0, NaN where untracked
+    gst : (n, 7) GST fields 2–8 (rms, semi-major, semi-minor, orientation deg, σ lat, σ lon, σ alt; metres), or
+        None when the receiver sends no GST
     """
 
     unix_s: np.ndarray
@@ -70,6 +75,7 @@ class NmeaEpochs:
     geoid_sep_m: float = 0.0
     diff_age_s: float = 1.0
     station_id: int = 0
+    gst: np.ndarray | None = None
 
     def __post_init__(self):
         n = len(self.unix_s)
@@ -80,6 +86,8 @@ class NmeaEpochs:
         for name in ("el_deg", "az_deg", "in_view", "used", "snr_dbhz"):
             if np.shape(getattr(self, name)) != (n, k):
                 raise ValueError(f"NmeaEpochs.{name} has shape {np.shape(getattr(self, name))}, expected ({n}, {k})")
+        if self.gst is not None and np.shape(self.gst) != (n, 7):
+            raise ValueError(f"NmeaEpochs.gst has shape {np.shape(self.gst)}, expected ({n}, 7)")
         if np.any(self.used & ~self.in_view):
             raise ValueError("NmeaEpochs: a used satellite must be in view")
         if not set(np.unique(self.sat_system)) <= set(_TALKER):
@@ -167,6 +175,7 @@ def format_nmea(ep: NmeaEpochs) -> str:
     age = f"{ep.diff_age_s:.1f}"
     sid = f"{ep.station_id:04d}"
     empty12 = [""] * 12
+    gst_text = _gst_bodies(ep.gst, times, has_fix) if ep.gst is not None else None
     bodies: list[str] = []
     add = bodies.append
     for i in range(n):
@@ -189,11 +198,15 @@ def format_nmea(ep: NmeaEpochs) -> str:
                 for j0 in range(0, max(1, len(prns)), 12):
                     chunk = prns[j0:j0 + 12]
                     add(f"GNGSA,A,3,{','.join(chunk + empty12[len(chunk):])},{tail},{s}")
+            if gst_text is not None:
+                add(gst_text[i])
         else:
             add(f"GNRMC,{t},V,,,,,,,{dates[i]},,,N,V")
             add(f"GNGGA,{t},,,,,0,00,,,,,,,")
             for s in systems:
                 add(f"GNGSA,A,1,,,,,,,,,,,,,,,,{s}")
+            if gst_text is not None:
+                add(gst_text[i])
         g_r, view_r = gidx[i], ep.in_view[i]
         for s in systems:
             cols = sys_cols[s]
@@ -205,6 +218,18 @@ def format_nmea(ep: NmeaEpochs) -> str:
             for mnum in range(n_msg):
                 add(f"{head}{mnum + 1},{n_view:02d}{''.join(grp[4 * mnum:4 * mnum + 4])},{tail_sig}")
     return _finish(bodies)
+
+
+def _gst_bodies(gst: np.ndarray, times: list[str], has_fix: np.ndarray) -> list[str]:
+    """``GNGST`` bodies per epoch: 3 decimals of metres, orientation 1 decimal; empty fields without a fix."""
+    out = []
+    for t, row, f in zip(times, np.asarray(gst, float).tolist(), has_fix.tolist()):
+        if not f or not all(v == v for v in row):
+            out.append(f"GNGST,{t},,,,,,,")
+            continue
+        rms, smaj, smin, orient, s_lat, s_lon, s_alt = row
+        out.append(f"GNGST,{t},{rms:.3f},{smaj:.3f},{smin:.3f},{orient:.1f},{s_lat:.3f},{s_lon:.3f},{s_alt:.3f}")
+    return out
 
 
 def _finish(bodies: list[str]) -> str:

@@ -96,7 +96,7 @@ BDS_GEO_LON_DEG = (140.0, 80.0, 110.5)
 """GEO slots of C59, C60, C61 (degrees east)."""
 
 BDS_IGSO_NODE_LON_DEG = 118.0
-"""Geographic longitude of the IGSO ground track's ascending node (DESIGN.md §6)."""
+"""Geographic longitude of the IGSO ground track's ascending node (docs/design.md §6)."""
 
 
 @dataclass(frozen=True, eq=False)

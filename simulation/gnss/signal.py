@@ -8,16 +8,23 @@ Per epoch and satellite (arrays of shape (n_epochs, k)):
    antenna's gain roll-off (a patch antenna loses roughly 8–10 dB from zenith to
    5°; Kaplan & Hegarty 2017, *Understanding GPS/GNSS*, 3rd ed., §§ on the
    link budget and antenna patterns). Calibrated to ≈ 38 dB-Hz at 5° and
-   ≈ 50 dB-Hz at zenith (DESIGN.md §6), plus a per-satellite offset (transmit
+   ≈ 50 dB-Hz at zenith (docs/design.md §6), plus a per-satellite offset (transmit
    power and antenna differences between satellites).
 2. **Blockage** (:func:`blockage`): rays from the receiver toward each satellite
    are tested against the layout boxes with :func:`simulation.site.geometry.ray_blockers`.
    A solid box in the way makes the direct path unavailable: the signal arrives
-   either diffracted over the roof edge, with the knife-edge loss J(ν) of
-   ITU-R P.526-15 eq. (31), or reflected off another structure (NLOS), with a
-   loss of 15–25 dB drawn once per (satellite, box) so it is stable in time.
-   The receiver gets the stronger of the two: loss = min(J(ν), L_refl), and the
-   path is NLOS (biased pseudorange) when the reflection dominates. Rays that
+   diffracted over the roof edge, with the knife-edge loss J(ν) of
+   ITU-R P.526-15 eq. (31); or specularly reflected off another structure's
+   face (NLOS), found by the image method with the loss of the face's material
+   (ITU-R P.2040-1 permittivities, Fresnel coefficients) and of the antenna's
+   cross-polar rejection, and the extra path 2·d·cos θᵢ of the geometry
+   (:mod:`simulation.gnss.reflection`); or diffusely scattered (NLOS) with a
+   loss of 15–30 dB drawn once per (satellite, blocking box) so it is stable in
+   time — sized so that, with the tracking threshold below, the NLOS C/N0 of the
+   smartLoc u-blox log is reproduced (its NLOS pile up at 21–24 dB-Hz, a third
+   of them: diffuse signals at the tracking limit). The receiver gets the
+   strongest: loss = min(J(ν), L_spec, L_diffuse), and the path is NLOS
+   (biased pseudorange) when a reflection dominates. Rays that
    pass just above a roof edge (−0.78 < ν < 0) lose up to 6 dB, so the shadow
    edge is not a hard cut. Porous boxes (lattice gantries) add 5–10 dB each.
 3. **EMI zones** (:func:`emi_loss_db`): a raised-cosine loss profile around
@@ -28,14 +35,21 @@ Per epoch and satellite (arrays of shape (n_epochs, k)):
    Radio Channels*, §4.1) driven by the distance the walker has moved, so
    decorrelation follows the Doppler spread f_d = v/λ; a small Doppler floor
    stands for satellite motion and moving scatterers. K ≈ 10 dB for LOS in the
-   open, lower near clutter, 0 (Rayleigh) for NLOS.
+   open, lower near clutter; a specular reflection's K from its face's
+   roughness (:func:`simulation.gnss.reflection.specular_fraction`, capped at
+   the place's LOS K), 0 (Rayleigh) for diffuse scattering.
 5. **C/N0 estimator and tracking** (:func:`estimate_cn0`, :func:`track`):
    the receiver averages power over each 200 ms epoch and smooths it with a
    ≈ 1 s first-order filter, adds estimator noise that grows at low C/N0, and
-   reports integer dB-Hz. A satellite is lost below ≈ 25 dB-Hz and reacquired
-   only above ≈ 28 dB-Hz held for a short delay (hysteresis).
+   reports integer dB-Hz. A satellite is lost below ≈ 20 dB-Hz and reacquired
+   only above ≈ 23 dB-Hz held for a short delay (hysteresis), plus a
+   per-receiver offset of 0–3 dB. u-blox receivers hold far weaker signals
+   (tracking sensitivity −167 dBm, ≈ 7 dB-Hz, on the M8 data sheet), but their
+   logs report nothing below ≈ 20 dB-Hz: the smartLoc u-blox sample's lowest
+   C/N0 is 21 dB-Hz. NLOS signals that clear the threshold are tracked and
+   used like any other: the receiver cannot tell them apart.
 
-Calibration against DESIGN.md §6 "Real figures" is reported by
+Calibration against docs/design.md §6 "Real figures" is reported by
 ``bench/bench_gnss_sim.py`` and checked by ``tests/test_gnss_sim.py``.
 """
 
@@ -48,10 +62,11 @@ from scipy.signal import lfilter
 
 from features.constants import GPS_L1_HZ, SPEED_OF_LIGHT_M_S, WGS84_A_M
 from features.errors import ConfigError
+from simulation.gnss.reflection import specular_reflections
 from simulation.site.geometry import ray_blockers
 
 __all__ = [
-    "SignalConfig", "Blockage", "open_sky_cn0_dbhz", "knife_edge_loss_db", "fresnel_nu",
+    "SignalConfig", "Blockage", "Reflectors", "open_sky_cn0_dbhz", "knife_edge_loss_db", "fresnel_nu",
     "blockage", "emi_loss_db", "clutter_index", "rician_power", "estimate_cn0", "track", "body_loss_db",
     "receiver_draws",
 ]
@@ -64,7 +79,7 @@ _GPS_RADIUS_M = 26_559_700.0
 
 @dataclass(frozen=True)
 class SignalConfig:
-    """Parameters of the signal model (defaults per DESIGN.md §6).
+    """Parameters of the signal model (defaults per docs/design.md §6).
 
     Attributes are in dB, dB-Hz, metres, seconds and hertz as named.
     """
@@ -74,7 +89,7 @@ class SignalConfig:
     low_el_deg: float = 5.0
     sat_offset_sigma_db: float = 1.0
     nlos_loss_min_db: float = 15.0
-    nlos_loss_max_db: float = 25.0
+    nlos_loss_max_db: float = 30.0
     porous_loss_min_db: float = 5.0
     porous_loss_max_db: float = 10.0
     nlos_excess_mean_m: float = 3.0
@@ -87,13 +102,15 @@ class SignalConfig:
     n_sinusoids: int = 12
     estimator_tau_s: float = 1.0
     estimator_noise_db: float = 0.4
-    track_lose_dbhz: float = 25.0
-    track_acquire_dbhz: float = 28.0
+    track_lose_dbhz: float = 20.0
+    track_acquire_dbhz: float = 23.0
     reacquire_delay_s: float = 1.0
     in_view_mask_deg: float = 0.0
     rx_offset_min_db: float = -5.0
     rx_offset_max_db: float = 0.0
     rx_threshold_max_db: float = 3.0
+    xpr_min_db: float = 5.0
+    xpr_max_db: float = 15.0
     body_loss_db: float = 10.0
     body_el_deg: float = 40.0
     body_half_width_deg: float = 90.0
@@ -114,6 +131,9 @@ class SignalConfig:
         if self.track_acquire_dbhz < self.track_lose_dbhz:
             raise ConfigError(f"SignalConfig.track_acquire_dbhz ({self.track_acquire_dbhz}) must be >= "
                              f"track_lose_dbhz ({self.track_lose_dbhz})")
+        if not 0.0 <= self.xpr_min_db <= self.xpr_max_db:
+            raise ConfigError(f"SignalConfig needs 0 <= xpr_min_db <= xpr_max_db, got {self.xpr_min_db}, "
+                              f"{self.xpr_max_db}")
         if not self.rx_offset_min_db <= self.rx_offset_max_db or self.rx_threshold_max_db < 0:
             raise ConfigError("SignalConfig needs rx_offset_min_db <= rx_offset_max_db and rx_threshold_max_db >= 0")
         if self.body_loss_db < 0 or not 0 < self.body_el_deg <= 90 or not 0 < self.body_half_width_deg <= 180:
@@ -191,6 +211,10 @@ class Blockage:
     solid_blocked : a solid box stands in the direct path
     nlos_extra_m : extra path length of the reflected signal, m (0 where not NLOS)
     diffraction_db : J(ν) of the dominant roof edge, dB
+    specular : the reflection is a specular one off a face (else diffuse); False where not NLOS
+    nlos_k_lin : Rician K of the reflected signal (0 for diffuse scattering and where not NLOS)
+    path_id : int, which path arrives: −1 direct or diffracted, the reflecting box's index for a specular
+        reflection, −2 − (index of the dominant blocking box) for diffuse scattering
     """
 
     loss_db: np.ndarray
@@ -198,13 +222,43 @@ class Blockage:
     solid_blocked: np.ndarray
     nlos_extra_m: np.ndarray
     diffraction_db: np.ndarray
+    specular: np.ndarray = None
+    nlos_k_lin: np.ndarray = None
+    path_id: np.ndarray = None
+
+    FIELDS = ("loss_db", "nlos", "solid_blocked", "nlos_extra_m", "diffraction_db", "specular", "nlos_k_lin",
+              "path_id")
+
+    def take(self, rows: np.ndarray) -> "Blockage":
+        """The same outcome at the epochs ``rows`` (an index array)."""
+        return Blockage(*(getattr(self, f)[rows] for f in self.FIELDS))
+
+
+@dataclass(frozen=True, eq=False)
+class Reflectors:
+    """What the specular search needs of the site and receiver (:mod:`simulation.gnss.reflection`).
+
+    eta : (m,) complex relative permittivity of each box at the carrier; roughness_m : (m,) σ_h
+    xpr_db : the receive antenna's cross-polar rejection, dB; k_los_lin : (n,) line-of-sight K at each epoch
+    (a reflection's K is capped there)
+    """
+
+    eta: np.ndarray
+    roughness_m: np.ndarray
+    xpr_db: float
+    k_los_lin: np.ndarray
 
 
 def blockage(p_en: np.ndarray, z0_m: np.ndarray, az_rad: np.ndarray, el_rad: np.ndarray, boxes: np.ndarray,
              porous: np.ndarray, nlos_loss_db: np.ndarray, porous_loss_db: np.ndarray,
              nlos_excess_m: np.ndarray, cfg: SignalConfig = SignalConfig(),
-             max_block: int = 2_000_000) -> Blockage:
+             max_block: int = 2_000_000, reflectors: Reflectors | None = None) -> Blockage:
     """Propagation loss and NLOS state of every ray (see the module docstring, item 2).
+
+    A solid box in the direct path leaves three ways in: diffraction over its roof edge (J(ν), counted as
+    line of sight), a specular reflection off another structure's face (:func:`simulation.gnss.reflection.
+    specular_reflections`, when ``reflectors`` is given) and diffuse scattering (loss ``nlos_loss_db`` of the
+    dominant blocking box); the receiver gets the strongest.
 
     Parameters
     ----------
@@ -212,8 +266,9 @@ def blockage(p_en: np.ndarray, z0_m: np.ndarray, az_rad: np.ndarray, el_rad: np.
     az_rad, el_rad : (n, k) satellite directions
     boxes : (m, 5) from :func:`simulation.site.geometry.boxes_array`; porous : bool (m,)
     nlos_loss_db, porous_loss_db, nlos_excess_m : (k, m) per (satellite, box) draws
-        reflection loss, porous-crossing loss, exponential part of the NLOS extra path.
+        diffuse-scattering loss, porous-crossing loss, exponential part of the diffuse NLOS extra path.
     max_block : work size (n·k·m) per chunk, to bound memory.
+    reflectors : the faces' materials and the antenna (None: no specular search, diffuse only).
     """
     p_en = np.asarray(p_en, float)
     n, k = np.shape(el_rad)
@@ -222,19 +277,23 @@ def blockage(p_en: np.ndarray, z0_m: np.ndarray, az_rad: np.ndarray, el_rad: np.
     if m == 0:
         z = np.zeros(shape)
         f = np.zeros(shape, bool)
-        return Blockage(z, f, f.copy(), z.copy(), z.copy())
+        return Blockage(z, f, f.copy(), z.copy(), z.copy(), f.copy(), z.copy(), np.full(shape, -1, int))
     loss = np.empty(shape)
     nlos = np.empty(shape, bool)
     solid_any = np.empty(shape, bool)
     extra = np.empty(shape)
     diff = np.empty(shape)
+    spec_out = np.zeros(shape, bool)
+    k_out = np.zeros(shape)
+    path_out = np.full(shape, -1, int)
     solid = ~np.asarray(porous, bool)
+    z0_all = np.asarray(z0_m, float)
     step = max(1, max_block // max(1, k * m))
     for i0 in range(0, n, step):
         sl = slice(i0, min(n, i0 + step))
         el = el_rad[sl]
         _, clearance, t_in = ray_blockers(p_en[sl], az_rad[sl], el, boxes, 0.0)
-        clearance = clearance - np.asarray(z0_m, float)[sl, None, None]
+        clearance = clearance - z0_all[sl, None, None]
         blocked = clearance > 0.0
         cos_el = np.cos(el)[..., None]
         with np.errstate(invalid="ignore", divide="ignore"):
@@ -248,19 +307,35 @@ def blockage(p_en: np.ndarray, z0_m: np.ndarray, az_rad: np.ndarray, el_rad: np.
         any_sb = sb.any(axis=-1)
         refl = np.where(sb, nlos_loss_db[None], -np.inf)
         jdom = refl.argmax(axis=-1)
-        l_refl = np.take_along_axis(refl, jdom[..., None], -1)[..., 0]
-        is_nlos = any_sb & (l_refl < j_max)
-        solid_loss = np.where(is_nlos, l_refl, j_max)
-        porous_loss = np.where(blocked & ~solid, porous_loss_db[None], 0.0).sum(axis=-1)
+        l_diffuse = np.take_along_axis(refl, jdom[..., None], -1)[..., 0]
         d_h = np.take_along_axis(t_in, jdom[..., None], -1)[..., 0]
         exc = np.take_along_axis(np.broadcast_to(nlos_excess_m[None], sb.shape), jdom[..., None], -1)[..., 0]
-        ex = np.minimum(2.0 * np.where(np.isfinite(d_h), d_h, 0.0) * np.cos(el) + exc, cfg.nlos_extra_max_m)
+        ex_diffuse = np.minimum(2.0 * np.where(np.isfinite(d_h), d_h, 0.0) * np.cos(el) + exc, cfg.nlos_extra_max_m)
+        l_spec = np.full(any_sb.shape, np.inf)
+        ex_spec = np.zeros(any_sb.shape)
+        k_spec = np.zeros(any_sb.shape)
+        box_spec = np.full(any_sb.shape, -1, int)
+        if reflectors is not None and any_sb.any():
+            ei, si = np.nonzero(any_sb)
+            rows = ei + i0
+            r = specular_reflections(p_en[rows], z0_all[rows], az_rad[rows, si], el_rad[rows, si], boxes, porous,
+                                     reflectors.eta, reflectors.roughness_m, reflectors.xpr_db, cfg.wavelength_m,
+                                     np.asarray(reflectors.k_los_lin, float)[rows], cfg.nlos_extra_max_m)
+            l_spec[ei, si], ex_spec[ei, si], k_spec[ei, si], box_spec[ei, si] = r.loss_db, r.extra_m, r.k_lin, r.box
+        is_spec = any_sb & (l_spec <= l_diffuse) & (l_spec < j_max)
+        is_diffuse = any_sb & ~is_spec & (l_diffuse < j_max)
+        is_nlos = is_spec | is_diffuse
+        solid_loss = np.where(is_spec, l_spec, np.where(is_diffuse, l_diffuse, j_max))
+        porous_loss = np.where(blocked & ~solid, porous_loss_db[None], 0.0).sum(axis=-1)
         loss[sl] = solid_loss + porous_loss
         nlos[sl] = is_nlos
         solid_any[sl] = any_sb
-        extra[sl] = np.where(is_nlos, ex, 0.0)
+        extra[sl] = np.where(is_spec, ex_spec, np.where(is_diffuse, ex_diffuse, 0.0))
         diff[sl] = j_max
-    return Blockage(loss, nlos, solid_any, extra, diff)
+        spec_out[sl] = is_spec
+        k_out[sl] = np.where(is_spec, k_spec, 0.0)
+        path_out[sl] = np.where(is_spec, box_spec, np.where(is_diffuse, -2 - jdom, -1))
+    return Blockage(loss, nlos, solid_any, extra, diff, spec_out, k_out, path_out)
 
 
 def body_loss_db(az_rad: np.ndarray, el_rad: np.ndarray, heading_rad: np.ndarray,
@@ -287,8 +362,8 @@ def body_loss_db(az_rad: np.ndarray, el_rad: np.ndarray, heading_rad: np.ndarray
     return cfg.body_loss_db * az_term * el_term
 
 
-def receiver_draws(rng: np.random.Generator, cfg: SignalConfig = SignalConfig()) -> tuple[float, float]:
-    """One receiver's C/N0 offset and tracking-threshold offset, dB.
+def receiver_draws(rng: np.random.Generator, cfg: SignalConfig = SignalConfig()) -> tuple[float, float, float]:
+    """One receiver's C/N0 offset, tracking-threshold offset and antenna cross-polar rejection, dB.
 
     Receivers differ: a body-worn device's small antenna and front end report
     C/N0 several dB below a survey antenna on a pole (smartphones sit about
@@ -297,10 +372,13 @@ def receiver_draws(rng: np.random.Generator, cfg: SignalConfig = SignalConfig())
     observations", Meas. Sci. Technol. 31(9)), offset ~ U(min, max); and
     their tracking loops hold and reacquire at different strengths, so the
     same sky leaves a different share listed without SNR (threshold offset
-    ~ U(0, ``rx_threshold_max_db``)).
+    ~ U(0, ``rx_threshold_max_db``)); and their antennas reject left-hand
+    polarised (reflected) signals by different amounts (XPR ~ U(``xpr_min_db``,
+    ``xpr_max_db``), :mod:`simulation.gnss.reflection`).
     """
     return (float(rng.uniform(cfg.rx_offset_min_db, cfg.rx_offset_max_db)),
-            float(rng.uniform(0.0, cfg.rx_threshold_max_db)))
+            float(rng.uniform(0.0, cfg.rx_threshold_max_db)),
+            float(rng.uniform(cfg.xpr_min_db, cfg.xpr_max_db)))
 
 
 def emi_loss_db(p_en: np.ndarray, zones) -> np.ndarray:

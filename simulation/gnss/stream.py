@@ -8,7 +8,9 @@ change in one part never shifts the draws of another.
 
 Options read from ``StreamContext.options``: ``gnss_corrections`` (bool,
 default True: DGNSS/RTK corrections available), ``gnss_rate_hz`` (default 5),
-``gnss_rtk_cold_start`` (default: True for a walk, False for a survey cell).
+``gnss_rtk_cold_start`` (default: True for a walk, False for a survey cell),
+``gnss_gst`` (the receiver model sends GST; default: when corrections are on,
+as RTK receivers do).
 """
 
 from __future__ import annotations
@@ -18,11 +20,14 @@ from datetime import timezone
 
 import numpy as np
 
+from features.constants import SPEED_OF_LIGHT_M_S
 from features.errors import ConfigError
 from features.fileio import atomic_write_text
 from features.geodesy import enu_to_geodetic
 from simulation.gnss import fix as gnss_fix
 from simulation.gnss import signal as gnss_signal
+from simulation.gnss.rtk import RtkConfig
+from simulation.gnss.reflection import SURFACE_ROUGHNESS_M, material_key, relative_permittivity
 from simulation.site.geometry import boxes_array
 from simulation.gnss.nmea_writer import NMEA_SYSTEM_BDS, NMEA_SYSTEM_GPS, NmeaEpochs, format_nmea
 from simulation.gnss.orbits import SYSTEM_GPS, all_satellites, azel
@@ -51,6 +56,10 @@ class GnssSimulation:
     attenuation_db : (n, k) blockage + EMI loss (no fading), dB
     cn0_true_dbhz : (n, k) epoch-mean C/N0 with fading; cn0_reported_dbhz : (n, k) integer, NaN untracked
     receiver_offset_db, receiver_threshold_db : this receiver's C/N0 offset and tracking-threshold offset, dB
+    code_error_m : (n, k) each satellite's pseudorange error after the differential corrections, m
+    gst : (n, 7) the receiver's GST fields (:func:`simulation.gnss.gst.gst_fields`), NaN without a fix
+    specular : (n, k) bool, NLOS by a specular reflection off a face (else diffuse scattering)
+    nlos_extra_m : (n, k) the reflected path's geometric extra length, m (0 where not NLOS)
     """
 
     t_s: np.ndarray
@@ -78,6 +87,10 @@ class GnssSimulation:
     cn0_reported_dbhz: np.ndarray
     receiver_offset_db: float = 0.0
     receiver_threshold_db: float = 0.0
+    specular: np.ndarray = None
+    nlos_extra_m: np.ndarray = None
+    gst: np.ndarray = None
+    code_error_m: np.ndarray = None
 
     @property
     def horizontal_error_m(self) -> np.ndarray:
@@ -114,7 +127,7 @@ def _key_epochs(t_s: np.ndarray, p_en: np.ndarray, up_m: np.ndarray, move_m: flo
 def simulate_gnss(site, traj: Trajectory, seed: int, corrections: bool = True, rate_hz: float = DEFAULT_RATE_HZ,
                   signal_cfg: gnss_signal.SignalConfig = gnss_signal.SignalConfig(),
                   fix_cfg: gnss_fix.FixConfig = gnss_fix.FixConfig(), receiver_seed: int | None = None,
-                  body: bool = True) -> GnssSimulation:
+                  body: bool = True, rtk_cfg: RtkConfig = RtkConfig()) -> GnssSimulation:
     """Simulate the receiver along ``traj`` at ``site`` (see the module docstrings of the parts).
 
     Parameters
@@ -158,15 +171,19 @@ def simulate_gnss(site, traj: Trajectory, seed: int, corrections: bool = True, r
     offset, refl, por, excess = offset[rises], refl[rises], por[rises], excess[rises]
     k = len(sats)
 
-    key = _key_epochs(t, p_en, up)
-    blk = gnss_signal.blockage(p_en[key], up[key], az[key], el[key], boxes, porous, refl, por, excess, cfg)
-    fill = np.searchsorted(key, np.arange(n), side="right") - 1
-    blk = gnss_signal.Blockage(*(getattr(blk, f)[fill] for f in (
-        "loss_db", "nlos", "solid_blocked", "nlos_extra_m", "diffraction_db")))
-    emi = gnss_signal.emi_loss_db(p_en, site.emi_zones)
     clutter = gnss_signal.clutter_index(p_en, boxes, porous, cfg.clutter_scale_m)
-    rx_offset_db, rx_threshold_db = gnss_signal.receiver_draws(
+    k_db = cfg.k_open_db - cfg.k_clutter_drop_db * clutter
+    rx_offset_db, rx_threshold_db, xpr_db = gnss_signal.receiver_draws(
         stream_rng(seed if receiver_seed is None else receiver_seed, "gnss", "receiver"), cfg)
+    eta = np.array([relative_permittivity(b.material, SPEED_OF_LIGHT_M_S / cfg.wavelength_m) for b in site.layout],
+                   complex)
+    rough = np.array([SURFACE_ROUGHNESS_M.get(material_key(b.material), 0.01) for b in site.layout], float)
+    key = _key_epochs(t, p_en, up)
+    reflectors = gnss_signal.Reflectors(eta, rough, xpr_db, 10.0 ** (k_db[key] / 10.0))
+    blk = gnss_signal.blockage(p_en[key], up[key], az[key], el[key], boxes, porous, refl, por, excess, cfg,
+                               reflectors=reflectors)
+    blk = blk.take(np.searchsorted(key, np.arange(n), side="right") - 1)
+    emi = gnss_signal.emi_loss_db(p_en, site.emi_zones)
     cn0_open = gnss_signal.open_sky_cn0_dbhz(el, sats.a_m[None, :], cfg) + offset[None, :] + rx_offset_db
     attenuation = blk.loss_db + emi[:, None]
     if body:
@@ -174,10 +191,10 @@ def simulate_gnss(site, traj: Trajectory, seed: int, corrections: bool = True, r
         attenuation = attenuation + gnss_signal.body_loss_db(az, el, traj.heading_rad[idx], cfg)
     cn0_mean = cn0_open - attenuation
 
-    # Fading: K from clutter for direct/diffracted paths, Rayleigh for reflections; the receiver averages
-    # power over each epoch, sampled fast enough for the walker's Doppler spread.
-    k_db = cfg.k_open_db - cfg.k_clutter_drop_db * clutter
-    k_lin = np.where(blk.nlos, 0.0, 10.0 ** (k_db[:, None] / 10.0) * np.ones((1, k)))
+    # Fading: K from clutter for direct/diffracted paths, the specular reflection's own K (roughness) for
+    # specular NLOS, Rayleigh for diffuse scattering; the receiver averages power over each epoch, sampled fast
+    # enough for the walker's Doppler spread.
+    k_lin = np.where(blk.nlos, blk.nlos_k_lin, 10.0 ** (k_db[:, None] / 10.0) * np.ones((1, k)))
     f_max = float(np.max(speed, initial=0.0)) / cfg.wavelength_m + cfg.doppler_floor_hz
     n_sub = int(min(8, max(1, np.ceil(2.0 * f_max * dt))))
     sub = t[:, None] - dt + dt * (np.arange(n_sub) + 0.5)[None, :] / n_sub  # (n, n_sub) inside each epoch
@@ -197,25 +214,33 @@ def simulate_gnss(site, traj: Trajectory, seed: int, corrections: bool = True, r
     sys_idx = np.where(sats.system == SYSTEM_GPS, 0, 1)
     # Cycle slips restart both the carrier smoothing of the code and the RTK engine's lock.
     slip = gnss_fix.cycle_slips(stream_rng(seed, "gnss", "slips"), reported, blk.nlos, fix_cfg)
+    # A change of the arriving path (direct ↔ reflected, one reflector for another) moves the carrier by metres
+    # between two epochs, which no tracking loop follows: a cycle slip (the receiver re-locks on the new path).
+    switch = np.zeros((n, k), bool)
+    switch[1:] = blk.path_id[1:] != blk.path_id[:-1]
+    slip |= switch & tracked
     untracked = ~tracked
     reset = slip | untracked | np.vstack([np.ones((1, k), bool), untracked[:-1]])
     errors = gnss_fix.pseudorange_errors(stream_rng(seed, "gnss", "errors"), el, np.where(tracked, est, np.nan),
                                          blk.nlos, blk.nlos_extra_m, clutter, speed, dt, cfg.wavelength_m, fix_cfg,
-                                         reset=reset)
+                                         reset=reset, specular=blk.specular)
     fix = gnss_fix.solve_fixes(stream_rng(seed, "gnss", "rtk"), az, el, sys_idx, tracked, reported, errors,
                                blk.nlos, dt, corrections, fix_cfg, slip=slip, wavelength_m=cfg.wavelength_m,
-                               receiver_offset_db=rx_offset_db)
+                               receiver_offset_db=rx_offset_db, rtk_cfg=rtk_cfg)
     truth = np.stack([east, north, up], axis=1)
     return GnssSimulation(
         t_s=t, unix_s=unix, truth_enu_m=truth, fix_enu_m=truth + fix.error_enu_m, quality=fix.quality,
         n_used=fix.n_used, hdop=fix.hdop, vdop=fix.vdop, pdop=fix.pdop, system=sats.system, prn=sats.prn,
         az_rad=az, el_rad=el, in_view=in_view, tracked=tracked, used=fix.used, los=in_view & ~blk.nlos,
         nlos=in_view & blk.nlos, blocked=in_view & blk.solid_blocked, cn0_open_dbhz=cn0_open, attenuation_db=attenuation, cn0_true_dbhz=cn0_true,
-        cn0_reported_dbhz=reported, receiver_offset_db=rx_offset_db, receiver_threshold_db=rx_threshold_db)
+        cn0_reported_dbhz=reported, receiver_offset_db=rx_offset_db, receiver_threshold_db=rx_threshold_db,
+        specular=in_view & blk.specular, nlos_extra_m=np.where(in_view, blk.nlos_extra_m, 0.0), gst=fix.gst,
+        code_error_m=fix.code_error_m)
 
 
-def to_nmea_epochs(sim: GnssSimulation, site, seed: int, traj: Trajectory) -> NmeaEpochs:
-    """Receiver-reported quantities for the NMEA writer (geodetic fix, velocity from the Doppler solution).
+def to_nmea_epochs(sim: GnssSimulation, site, seed: int, traj: Trajectory, gst: bool = False) -> NmeaEpochs:
+    """Receiver-reported quantities for the NMEA writer (geodetic fix, velocity from the Doppler solution, and its
+    GST statistics when ``gst``).
 
     The site origin's ``alt_m`` is taken as the ground's height and written as
     GGA altitude with a geoid separation of 0.0 (no geoid model is simulated),
@@ -242,7 +267,8 @@ def to_nmea_epochs(sim: GnssSimulation, site, seed: int, traj: Trajectory) -> Nm
         unix_s=sim.unix_s, lat_deg=np.asarray(lat, float), lon_deg=np.asarray(lon, float), alt_m=np.asarray(alt, float),
         quality=sim.quality, hdop=sim.hdop, vdop=sim.vdop, pdop=sim.pdop, speed_m_s=spd, course_deg=course,
         sat_system=system, sat_prn=sim.prn, el_deg=np.degrees(sim.el_rad), az_deg=np.degrees(sim.az_rad),
-        in_view=sim.in_view, used=sim.used, snr_dbhz=sim.cn0_reported_dbhz)
+        in_view=sim.in_view, used=sim.used, snr_dbhz=sim.cn0_reported_dbhz,
+        gst=sim.gst if gst and sim.gst is not None else None)
 
 
 def write_gnss(ctx: StreamContext) -> dict:
@@ -261,9 +287,13 @@ def write_gnss(ctx: StreamContext) -> dict:
     cold = ctx.options.get("gnss_rtk_cold_start", ctx.kind == "walk")
     if not isinstance(cold, bool):
         raise ConfigError(f"option gnss_rtk_cold_start must be true or false, got {cold!r}")
+    # GST: RTK receivers (u-blox F9P, NEO-M8P, Unicore UM980) send it; a receiver model without it is one option away.
+    gst = ctx.options.get("gnss_gst", corrections)
+    if not isinstance(gst, bool):
+        raise ConfigError(f"option gnss_gst must be true or false, got {gst!r}")
     sim = simulate_gnss(ctx.site, ctx.trajectory, ctx.seed, corrections=corrections, rate_hz=float(rate_hz),
                         fix_cfg=replace(gnss_fix.FixConfig(), rtk_cold_start=cold), receiver_seed=ctx.person_seed,
                         body=ctx.kind == "walk")
-    text = format_nmea(to_nmea_epochs(sim, ctx.site, ctx.seed, ctx.trajectory))
+    text = format_nmea(to_nmea_epochs(sim, ctx.site, ctx.seed, ctx.trajectory, gst=gst))
     atomic_write_text(ctx.out_dir / GNSS_FILE, text)
-    return {"gnss": {"file": GNSS_FILE, "rate_hz": float(rate_hz)}}
+    return {"gnss": {"file": GNSS_FILE, "rate_hz": float(rate_hz), "gst": gst}}

@@ -6,7 +6,7 @@ field a belt-clipped device would measure, and returns the true steps.
 
 Frames and conventions
     Navigation frame north-east-down (NED); heading ψ from true north,
-    clockwise (DESIGN.md §3). Device (body) frame forward-right-down (x along
+    clockwise (docs/design.md §3). Device (body) frame forward-right-down (x along
     the direction of travel, z down). The accelerometer measures specific
     force f = a − g, so a device at rest reads az ≈ −9.81 m/s². Body → NED
     rotation C = Rz(ψ)·Ry(θ)·Rx(φ) (Titterton & Weston, *Strapdown Inertial

@@ -1,6 +1,6 @@
 """Ground-truth environment class of a position: the share of sky hidden by solid structures.
 
-DESIGN.md §6: open < 10 %, light 10–40 %, heavy > 40 % of the sky above the
+docs/design.md §6: open < 10 %, light 10–40 %, heavy > 40 % of the sky above the
 elevation mask. Porous structures (lattice gantries) do not count: they
 attenuate satellites but do not hide the sky. Survey cells take the class at
 their capture point.
@@ -83,10 +83,10 @@ def satellite_sky(lat_deg: float, lon_deg: float, mask_deg: float = ELEVATION_MA
     return SatelliteSky(tuple(np.sort(el[b == k]) for k in range(n_az)), int(el.size))
 
 OPEN_MAX = 0.10
-"""Largest blocked-sky share still called open (DESIGN.md §6)."""
+"""Largest blocked-sky share still called open (docs/design.md §6)."""
 
 LIGHT_MAX = 0.40
-"""Largest blocked-sky share still called light; above it, heavy (DESIGN.md §6)."""
+"""Largest blocked-sky share still called light; above it, heavy (docs/design.md §6)."""
 
 
 def solid_boxes(site: Site) -> np.ndarray:

@@ -1,4 +1,4 @@
-"""Synthetic 220 kV-class substation layouts (DESIGN.md §6).
+"""Synthetic 220 kV-class substation layouts (docs/design.md §6).
 
 A yard of about 120 × 80 m with, from one long side to the other:
 
@@ -42,7 +42,7 @@ __all__ = ["LayoutConfig", "generate_site", "assign_slots"]
 
 @dataclass(frozen=True)
 class LayoutConfig:
-    """Parameters of the site generator (defaults: DESIGN.md §6)."""
+    """Parameters of the site generator (defaults: docs/design.md §6)."""
 
     lat_deg: float = 31.2
     lon_deg: float = 118.8

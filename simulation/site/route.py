@@ -1,13 +1,26 @@
 """Walking routes through a site's aisles, time-parameterised into a :class:`Trajectory`.
 
-The walker visits waypoints drawn in turn from each environment class (so
-every walk sees open, light and heavy ground), follows the shortest 8-connected
-path on a 0.5 m occupancy grid between them (Dijkstra, scipy.sparse.csgraph),
-with corners cut where the line of sight is clear (string pulling) and rounded
-by Gaussian smoothing. Speed: a cruising speed of 1.0–1.5 m/s (typical adult
-walking, Bohannon 1997: 1.27–1.46 m/s comfortable), slowed in turns so lateral
-acceleration stays below 0.8 m/s², with ±0.5 m/s² acceleration limits; standing
-stops of 5–20 s at some waypoints (maintenance work) and a standing start.
+The walker works as a maintenance crew does: rounds of visits, each round a
+random order of the three environment classes, each class visited with
+probability ``visit_probability`` (open ground is mostly crossed on the way,
+not a destination), so every walk sees open, light and heavy ground. A visit in a class is, with probability
+``inspect_probability`` of that class, an **inspection stop** at a piece of
+equipment of the site's layout (transformers, apparatus, buildings and kiosks:
+the boxes whose ``kind`` is in ``inspect_kinds``) — the walker stands beside it,
+on a free point within ``inspect_reach_m`` of its face, for 30–300 s
+(``inspect_stop_s``; routine inspections of a transformer, a breaker or a panel
+take minutes) — otherwise a transit waypoint with a short standing stop now and
+then. The stand point is drawn among the equipment's stand points of the
+visit's class, so heavy visits stand beside tanks and fire walls, where the
+static multipath lasts as long as the stop. A stop never takes more than
+``max_stop_share`` of the walk, so a short walk still holds several visits.
+
+Between waypoints the walker follows the shortest 8-connected path on a 0.5 m
+occupancy grid (Dijkstra, scipy.sparse.csgraph), with corners cut where the
+line of sight is clear (string pulling) and rounded by Gaussian smoothing.
+Speed: a cruising speed of 1.0–1.5 m/s (typical adult walking, Bohannon 1997:
+1.27–1.46 m/s comfortable), slowed in turns so lateral acceleration stays below
+0.8 m/s², with ±0.5 m/s² acceleration limits; a standing start.
 """
 
 from __future__ import annotations
@@ -26,7 +39,8 @@ from simulation.site.environment import classify_share, blocked_share
 from simulation.site.geometry import boxes_array, inside_boxes
 from simulation.streams import Trajectory
 
-__all__ = ["RouteConfig", "walkable_grid", "plan_route", "route_trajectory", "static_trajectory"]
+__all__ = ["RouteConfig", "walkable_grid", "inspection_points", "plan_route", "route_trajectory",
+           "static_trajectory"]
 
 
 @dataclass(frozen=True)
@@ -42,12 +56,29 @@ class RouteConfig:
     stop_s: tuple[float, float] = (5.0, 15.0)
     start_stand_s: tuple[float, float] = (3.0, 6.0)
     rate_hz: float = 100.0
+    visit_probability: tuple[float, float, float] = (0.35, 1.0, 1.0)
+    inspect_probability: tuple[float, float, float] = (0.15, 0.7, 0.9)
+    inspect_stop_s: tuple[float, float] = (30.0, 300.0)
+    inspect_kinds: tuple[str, ...] = ("transformer", "equipment", "building", "firewall")
+    inspect_reach_m: float = 1.5
+    max_stop_share: float = 0.3
 
     def __post_init__(self):
         if not 1.0 <= self.speed_m_s[0] <= self.speed_m_s[1] <= 2.0:
             raise ValueError(f"speed_m_s must lie within [1.0, 2.0] and be ordered, got {self.speed_m_s}")
         if self.resolution_m <= 0 or self.clearance_m < 0:
             raise ValueError("resolution_m must be positive and clearance_m non-negative")
+        for name in ("visit_probability", "inspect_probability"):
+            v = getattr(self, name)
+            if len(v) != 3 or not all(0.0 <= p <= 1.0 for p in v):
+                raise ValueError(f"{name} must be three probabilities (open, light, heavy), got {v}")
+        if max(self.visit_probability) <= 0.0:
+            raise ValueError("visit_probability must allow at least one class")
+        if not 0.0 <= self.inspect_stop_s[0] <= self.inspect_stop_s[1]:
+            raise ValueError(f"inspect_stop_s must be an ordered pair of non-negative seconds, got {self.inspect_stop_s}")
+        if not self.inspect_reach_m > 0 or not 0.0 < self.max_stop_share <= 1.0:
+            raise ValueError(f"inspect_reach_m must be positive and max_stop_share in (0, 1], got "
+                             f"{self.inspect_reach_m}, {self.max_stop_share}")
 
 
 def walkable_grid(site: Site, cfg: RouteConfig):
@@ -109,14 +140,59 @@ def _string_pull(path, free, east, north, r):
     return np.array(out)
 
 
+def inspection_points(site: Site, east: np.ndarray, north: np.ndarray, free: np.ndarray,
+                      cfg: RouteConfig = RouteConfig()) -> tuple[np.ndarray, np.ndarray]:
+    """Where a crew stands to inspect each piece of equipment: free grid cells beside its faces.
+
+    A cell is a stand point of a box whose ``kind`` is in ``cfg.inspect_kinds`` when it is free and
+    its horizontal distance to the box is at most ``clearance_m + inspect_reach_m``. Returns
+    (flat cell indices (p,) into ``free``, box index (p,)), sorted by box.
+    """
+    ee, nn = np.meshgrid(east, north)
+    flat_free = np.flatnonzero(free.ravel())
+    pe, pn = ee.ravel()[flat_free], nn.ravel()[flat_free]
+    reach = cfg.clearance_m + cfg.inspect_reach_m
+    cells, owner = [], []
+    for j, b in enumerate(site.layout):
+        if b.kind not in cfg.inspect_kinds or b.porous:
+            continue
+        de = np.maximum(np.maximum(b.east_min_m - pe, pe - b.east_max_m), 0.0)
+        dn = np.maximum(np.maximum(b.north_min_m - pn, pn - b.north_max_m), 0.0)
+        near = np.flatnonzero(np.hypot(de, dn) <= reach)
+        cells.append(flat_free[near])
+        owner.append(np.full(near.size, j))
+    if not cells:
+        return np.zeros(0, int), np.zeros(0, int)
+    return np.concatenate(cells), np.concatenate(owner)
+
+
+def _stand_pools(site, east, north, free, main_cells, cfg, rng):
+    """Per class, the inspection stand points (flat cells) in the walkable region: a list of 3 arrays.
+
+    Each box contributes at most 6 stand points (drawn), so a long wall does not outweigh a breaker.
+    """
+    cells, owner = inspection_points(site, east, north, free, cfg)
+    keep = np.isin(cells, main_cells)
+    cells, owner = cells[keep], owner[keep]
+    pick = []
+    for j in np.unique(owner):
+        idx = np.flatnonzero(owner == j)
+        pick.append(rng.choice(idx, size=min(6, idx.size), replace=False))
+    if not pick:
+        return [np.zeros(0, int)] * 3
+    cells = cells[np.sort(np.concatenate(pick))]
+    iy, ix = np.divmod(cells, free.shape[1])
+    cls = classify_share(blocked_share(site, east[ix], north[iy], n_az=72))
+    return [cells[cls == c] for c in range(3)]
+
+
 def plan_route(site: Site, rng: np.random.Generator, duration_s: float, cfg: RouteConfig = RouteConfig()):
-    """Waypoints and polyline of a walk long enough for ``duration_s``.
+    """Waypoints and polyline of a walk long enough for ``duration_s`` (module docstring: rounds of visits).
 
     Returns (polyline (k, 2) ENU metres, stop_at (k,) seconds of standing at each vertex, speed_m_s).
     """
     east, north, free = walkable_grid(site, cfg)
     r = cfg.resolution_m
-    # Component reachable from the largest free region only.
     graph = _graph(free, r)
     fy, fx = np.nonzero(free)
     # Waypoint candidates: a random sample of free cells, classified by blocked sky.
@@ -125,23 +201,40 @@ def plan_route(site: Site, rng: np.random.Generator, duration_s: float, cfg: Rou
     flat = fy * free.shape[1] + fx
     cls = classify_share(blocked_share(site, east[fx], north[fy], n_az=72))
     speed = float(rng.uniform(*cfg.speed_m_s))
-    budget_m = duration_s * speed * 1.1 + 50.0
     # Walk only within the largest connected free region.
     _, comp = connected_components(graph, directed=False)
-    main = comp[flat] == np.bincount(comp[flat]).argmax()
+    main_label = np.bincount(comp[flat]).argmax()
+    main = comp[flat] == main_label
     pool = [np.flatnonzero(main & (cls == c)) for c in range(3)]
     pool = [p if len(p) else np.flatnonzero(main) for p in pool]
+    budget_m = duration_s * speed * 1.1 + 50.0
+    # Stand points are drawn only when inspections are on: with them off the draws are those of the transit-only
+    # routes before issue 21, so a walk of that kind is the same walk.
+    empty = np.zeros(0, int)
+    stands = (_stand_pools(site, east, north, free, np.flatnonzero(comp == main_label), cfg, rng)
+              if max(cfg.inspect_probability) > 0 else [empty, empty, empty])
+    max_stop = cfg.max_stop_share * duration_s
     nodes = [flat[np.flatnonzero(main)[rng.integers(main.sum())]]]
-    length = 0.0
+    inspect_stop: list = [None]
+    length = 0.0  # metres walked, plus the metres the walker would have covered while inspecting
     while length < budget_m and len(nodes) < 400:
         for c in rng.permutation(3):
-            nodes.append(flat[pool[c][rng.integers(len(pool[c]))]])
+            if cfg.visit_probability[c] < 1.0 and rng.random() >= cfg.visit_probability[c]:
+                continue
+            p_insp = cfg.inspect_probability[c]
+            if p_insp > 0.0 and stands[c].size > 0 and rng.random() < p_insp:
+                nodes.append(int(stands[c][rng.integers(stands[c].size)]))
+                inspect_stop.append(min(float(rng.uniform(*cfg.inspect_stop_s)), max_stop))
+                length += speed * inspect_stop[-1]
+            else:
+                nodes.append(flat[pool[c][rng.integers(len(pool[c]))]])
+                inspect_stop.append(None)
             ay, ax = np.divmod(nodes[-2], free.shape[1])
             by, bx = np.divmod(nodes[-1], free.shape[1])
             length += 1.3 * r * float(np.hypot(bx - ax, by - ay))  # detour factor of aisles
     pts_all = []
     stops = []
-    for a, b in zip(nodes[:-1], nodes[1:]):
+    for a, b, insp in zip(nodes[:-1], nodes[1:], inspect_stop[1:]):
         _, pred = dijkstra(graph, indices=a, directed=False, return_predecessors=True)
         seq = [b]
         while seq[-1] != a and pred[seq[-1]] >= 0:
@@ -156,7 +249,8 @@ def plan_route(site: Site, rng: np.random.Generator, duration_s: float, cfg: Rou
             seg = seg[1:]
         stops.extend([0.0] * (len(seg) - 1))
         pts_all.append(seg)
-        stop = float(rng.uniform(*cfg.stop_s)) if rng.random() < cfg.stop_probability else 0.0
+        stop = insp if insp is not None else (
+            float(rng.uniform(*cfg.stop_s)) if rng.random() < cfg.stop_probability else 0.0)
         stops.append(stop)
     poly = np.vstack(pts_all)
     stops = np.array(stops[:len(poly)])
