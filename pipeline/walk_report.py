@@ -41,6 +41,8 @@ class WalkSources:
     gnss_features: dict | None
     quality: np.ndarray | None
     acoustic_features: list | None = None
+    notes: tuple = ()
+    """The reader's notes: streams the walk names but could not use (:attr:`walks.reader.WalkData.notes`)."""
 
 
 def _pdr_track(pdr: PdrStream, gnss: SourceTrack | None = None, quality=None, calibrate: bool = True,
@@ -106,7 +108,7 @@ def walk_sources(walk_dir: str | os.PathLike, pdr_k: float | None = None) -> Wal
         anchor = pdr_start_from_gnss(data.gnss.positions) if data.gnss is not None else None
         tracks["PDR"] = _pdr_track(data.pdr, tracks.get("GNSS"), quality, calibrate=pdr_k is None, anchor=anchor)
     return WalkSources(site=data.site, tracks=tracks, truth=data.truth, gnss_features=feats, quality=quality,
-                       acoustic_features=acoustic_rows)
+                       acoustic_features=acoustic_rows, notes=data.notes)
 
 
 def error_table(src: WalkSources) -> dict:

@@ -124,11 +124,11 @@ def test_truth_with_unknown_class_and_malformed_truth(tmp_path):
     p.write_text("t_s,east_m,north_m,env_class\n0.0,1.0,2.0,unknown\n0.3,1.5,2.5,heavy\n")
     tr = read_truth(p)
     assert tr.env_class.tolist() == [UNKNOWN_CLASS, 2]
-    p.write_text("t_s,east_m,north_m,env_class\n0.0,1.0,2.0,urban\n")
-    with pytest.raises(DataError, match=r"row 2: env_class 'urban' is none of"):
+    p.write_text("t_s,east_m,north_m,env_class\n0.0,1.0,2.0,urban\n0.3,1.5,2.5,heavy\n")
+    with pytest.raises(DataError, match=r"line 2: env_class 'urban' is not one of"):
         read_truth(p)
     p.write_text("t_s,east_m,north_m,env_class\n0.3,1.0,2.0,open\n0.3,1.0,2.0,open\n")
-    with pytest.raises(DataError, match=r"row 3: t_s 0.3 does not follow 0.3"):
+    with pytest.raises(DataError, match=r"line 3: t_s 0.3 does not increase"):
         read_truth(p)
 
 
@@ -153,4 +153,5 @@ def test_cli_on_a_malformed_drive_is_one_line(tmp_path, capsys):
     err = capsys.readouterr().err
     assert code == 1 and err.count("\n") == 1 and "Traceback" not in err
     assert err.startswith("envfuse: error:") and "gnss_pseudoranges.csv:2: system must be one of" in err
+    assert "no usable stream" in err
     assert not (tmp_path / "w.png").exists()
