@@ -16,7 +16,13 @@ Prints, horizontal error against the NovAtel reference at the same epochs:
   yardsticks timed in the same run: ``numpy.linalg.lstsq`` on the same final weighted design
   matrices, one call per epoch (one Gauss–Newton step of a per-epoch loop), and
   ``scipy.signal.oaconvolve`` of 48,000 samples with a 480-tap kernel (the other benches' gauge);
-  best of ``--repeat``, CPU time, one thread.
+  best of ``--repeat``, CPU time, one thread;
+* time per drive of the whole path, stage by stage: ``convert smartloc`` (read the text, solve for the
+  site origin, write the walk folder), ``read_walk`` (read the CSVs, solve every epoch with RAIM, the five
+  features, integrate and align the odometry), ``walk_inputs`` (events, the classifier on every window),
+  every registered method with its RTS and fixed-lag tracks (``fuse_walk``), and the scores — with the
+  demo split's fusion model (``--model``, default ``demo_out/fusion_model``; without it one is fitted on
+  the drive with no tuning and no BP, for timing only), against the same oaconvolve yardstick.
 
 Run: ``.venv/bin/python bench/bench_smartloc.py`` (no assertions; the figures are pinned in tests).
 """
@@ -149,9 +155,60 @@ def _speed(table, repeat):
     print(f"  {'yardstick: scipy.signal.oaconvolve 48000 x 480':48s} {1e3 * oa:7.3f} ms per call")
 
 
+def _whole_path(folder: Path, model_dir: Path, repeat: int) -> None:
+    import tempfile
+
+    from models.fusion.model import load_fusion_model
+    from walks.convert import convert_smartloc
+    from walks.fuse import fuse_walk
+    from walks.inputs import walk_inputs
+    from walks.methods import run_methods
+    from walks.reader import read_walk
+    from walks.score import score
+
+    src = (folder / "Berlin_Potsdamer_Platz_Input.txt", folder / "Berlin_Potsdamer_Platz_GT.txt")
+    with tempfile.TemporaryDirectory() as tmp:
+        walk = Path(tmp) / "drive"
+        convert_smartloc(*src, walk)
+        data = read_walk(walk)
+        if (model_dir / "bundle.json").is_file():
+            model, which = load_fusion_model(model_dir), f"{model_dir}"
+        else:
+            from training.env import fit_env_model, walk_training_set
+            from training.filters import train_fusion
+
+            clf, _ = fit_env_model(walk_training_set([walk]), "survey")
+            model, which = train_fusion([walk], clf, bp=False, tune=False), "fitted on the drive (no tuning, no BP)"
+        inputs = walk_inputs(data, model.classifier)
+        fuse_walk(walk, model, None, force=True)          # compile (numba caches) and warm up
+        n_ep = len(data.gnss.solution)
+        stages = {
+            "convert smartloc (read text, origin, write)": lambda: convert_smartloc(*src, walk, overwrite=True),
+            "read_walk (CSV, WLS + RAIM, features, odometry)": lambda: read_walk(walk),
+            "walk_inputs (events, classifier)": lambda: walk_inputs(data, model.classifier),
+            "every method + RTS + fixed-lag (run_methods)": lambda: run_methods(model, inputs),
+            "score": None,
+        }
+        tracks, _ = run_methods(model, inputs)
+        stages["score"] = lambda: score(tracks, data, "drive")
+        times = {name: _best(fn, repeat) for name, fn in stages.items()}
+        times["whole path: fuse_walk of the folder + score"] = _best(
+            lambda: score(fuse_walk(walk, model, None, force=True).tracks, data, "drive"), repeat)
+    sig = np.random.default_rng(0).standard_normal(48_000)
+    ker = np.random.default_rng(1).standard_normal(480)
+    oa = _best(lambda: scipy.signal.oaconvolve(sig, ker), repeat)
+    print(f"\nwhole path per drive ({n_ep} epochs, {data.walk.duration_s:.0f} s; model: {which}; "
+          f"{len(tracks)} tracks; best of {repeat}, CPU time):")
+    for name, t in times.items():
+        print(f"  {name:52s} {1e3 * t:8.1f} ms/drive {1e6 * t / n_ep:8.1f} us/epoch ({t / oa:6.1f} oaconvolve calls)")
+    print(f"  {'yardstick: scipy.signal.oaconvolve 48000 x 480':52s} {1e3 * oa:8.3f} ms per call")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--repeat", type=int, default=5)
+    parser.add_argument("--model", type=Path, default=ROOT / "demo_out" / "fusion_model",
+                        help="fusion model for the whole path (default: the demo split's)")
     args = parser.parse_args()
     folder = _folder()
     log = read_smartloc(folder / "Berlin_Potsdamer_Platz_Input.txt")
@@ -159,6 +216,7 @@ def main() -> None:
     _accuracy(log.pseudoranges, ref)
     _odometry(log, log.pseudoranges, ref)
     _speed(log.pseudoranges, args.repeat)
+    _whole_path(folder, args.model, max(1, min(args.repeat, 3)))
 
 
 if __name__ == "__main__":

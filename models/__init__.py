@@ -14,6 +14,10 @@ Which module to open for what:
   states, noise policies (fixed, quality, per class, VB-AKF) and the error model in context
   (white scale, bias and outlier prior per class and GGA quality), the IMM over environment
   classes, RTS and fixed-lag smoothing, NEES/NIS consistency.
+* ``models.graph`` — factor-graph fusion on GTSAM: the walk as a graph of PDR, GNSS and acoustic
+  factors (batch Levenberg–Marquardt, iSAM2, fixed-lag), robust and class-aware kernels, tightly
+  coupled acoustic ranges, IMU preintegration; ``models.rtkpdr`` — the RTK/PDR EKF of Zhang et al.
+  2023 on the fusion core's kernels.
 * ``models.bp`` — the BP position corrector of the seed's section 2.2 (ensemble with variance heads)
   and its guards.
 * ``models.bp_params`` — the BP network that maps the environment and the filter's state to each fix's R.

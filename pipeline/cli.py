@@ -28,6 +28,7 @@ GROUP_EXAMPLES = {
     "report": "envfuse report walk walk7 --out walk7.png",
     "train": "envfuse train env --library fp.sqlite --out env_model",
     "survey": "envfuse survey build survey1 --library fp.sqlite",
+    "convert": "envfuse convert smartloc Berlin_Potsdamer_Platz_Input.txt Berlin_Potsdamer_Platz_GT.txt --out drive",
 }
 """One example per command group, shown at the foot of ``envfuse GROUP --help``."""
 
@@ -37,6 +38,7 @@ GROUPS = {
     "train": "fit environment and fusion models",
     "survey": "fingerprint survey of a substation",
     "report": "tables and plots of what a walk recorded",
+    "convert": "turn other recordings (a smartLoc drive) into a walk folder",
 }
 
 

@@ -11,7 +11,7 @@ from features.site import ENV_CLASSES, Site
 from pipeline.plots import CLASS_COLOURS, save_figure
 
 __all__ = ["plot_survey_map", "plot_decision_graph", "plot_embedding", "plot_confusion", "confusion",
-           "cell_rectangles"]
+           "cell_rectangles", "plot_class_track"]
 
 
 def confusion(y_true: np.ndarray, y_pred: np.ndarray, n: int = 3) -> np.ndarray:
@@ -189,4 +189,72 @@ def plot_confusion(matrix: np.ndarray, path, title: str = "confusion matrix") ->
     ax.set_xlabel("predicted")
     ax.set_ylabel("map label")
     ax.set_title(title)
+    return save_figure(fig, path)
+
+
+_CLASS_MARKERS = {"open": "#3a9a3a", "light": "#e0a100", "heavy": "#c8321e"}
+"""Saturated class colours for points on a track (the pale :data:`CLASS_COLOURS` are for background shading)."""
+
+
+def plot_class_track(track: dict, window_t_s: np.ndarray, proba: dict, path, error: dict | None = None,
+                     title: str = "") -> Path:
+    """The environment model's classes along a track: per model a map of the track with each window's class at
+    the window's centre (``track``: {"t_s", "east_m", "north_m"} (n,), the reference or any position
+    track); below, on one time axis, every model's class band and ``error`` ({"t_s", "err_m", "label"}: e.g.
+    the per-epoch solver's error per window) on a log scale.
+
+    ``window_t_s`` (k,) window centres; ``proba``: {model name: (k, 3) class probabilities}.
+    """
+    import matplotlib.pyplot as plt
+    from matplotlib.gridspec import GridSpec
+    from matplotlib.patches import Patch
+
+    names = list(proba)
+    t = np.asarray(window_t_s, float)
+    e = np.interp(t, track["t_s"], track["east_m"])
+    n = np.interp(t, track["t_s"], track["north_m"])
+    span_e = float(np.ptp(track["east_m"])) or 1.0
+    span_n = float(np.ptp(track["north_m"])) or 1.0
+    map_w = float(np.clip(5.0 * span_e / span_n, 2.5, 7.0))
+    rows = [2.8, 0.25 + 0.22 * len(names)] + ([1.1] if error is not None else [])
+    fig = plt.figure(figsize=(max(9.0, (map_w + 1.2) * len(names) + 1.0), 7.0 + 2.2 * (len(rows) - 1)))
+    gs = GridSpec(len(rows), len(names), height_ratios=rows, figure=fig, hspace=0.35)
+    for j, name in enumerate(names):
+        ax = fig.add_subplot(gs[0, j])
+        ax.plot(track["east_m"], track["north_m"], "-", color="0.75", lw=2.5, zorder=1)
+        cls = np.argmax(proba[name], axis=1)
+        conf = np.max(proba[name], axis=1)
+        for k, c in enumerate(ENV_CLASSES):
+            sel = cls == k
+            ax.scatter(e[sel], n[sel], s=8 + 30 * conf[sel], color=_CLASS_MARKERS[c], edgecolor="k", lw=0.3,
+                       zorder=2, label=f"{c} ({int(sel.sum())} windows)")
+        ax.plot(e[0], n[0], "k>", ms=8, zorder=3)
+        ax.set_aspect("equal")
+        ax.set_xlabel("east (m)")
+        ax.set_ylabel("north (m)" if j == 0 else "")
+        ax.set_title(name, fontsize=10)
+        ax.legend(fontsize=7, loc="best", framealpha=0.8)
+    band = fig.add_subplot(gs[1, :])
+    for i, name in enumerate(names):
+        cls = np.argmax(proba[name], axis=1)
+        for k, c in enumerate(ENV_CLASSES):
+            sel = cls == k
+            band.bar(t[sel], 0.8, width=1.0, bottom=len(names) - 1 - i - 0.4, color=_CLASS_MARKERS[c], lw=0)
+    band.set_yticks(range(len(names)))
+    band.set_yticklabels([s if len(s) < 30 else s[:28] + "…" for s in names[::-1]], fontsize=8)
+    band.set_ylim(-0.5, len(names) - 0.5)
+    band.legend(handles=[Patch(color=_CLASS_MARKERS[c], label=c) for c in ENV_CLASSES], fontsize=8, ncol=3,
+                loc="lower left", bbox_to_anchor=(0.0, 1.0), frameon=False)
+    band.set_title("class per window", fontsize=9, loc="right")
+    if error is not None:
+        ax = fig.add_subplot(gs[2, :], sharex=band)
+        ok = np.isfinite(error["err_m"])
+        ax.semilogy(np.asarray(error["t_s"])[ok], np.asarray(error["err_m"])[ok], "k-", lw=1.0)
+        ax.set_ylabel("error (m)")
+        ax.set_title(error.get("label", "error"), fontsize=9, loc="right")
+        ax.grid(True, which="both", alpha=0.3)
+        ax.set_xlabel("time (s)")
+    else:
+        band.set_xlabel("time (s)")
+    fig.suptitle(title or "environment classes along the track (marker size = class probability; ▶ start)")
     return save_figure(fig, path)

@@ -23,6 +23,7 @@ import numpy as np
 from features.errors import ConfigError
 from features.fileio import atomic_write_text
 from pipeline.parallel import TaskFailure, map_walks
+from walks.inputs import WINDOW_S
 from walks.methods import method_names
 from walks.score import METRIC_COLUMNS, metric_rows, score, track_errors
 
@@ -78,6 +79,11 @@ def evaluate_walk(walk, model_dir: str, methods: tuple, force: bool = False) -> 
         series["_truth"] = {"t_s": data.truth.t_s.astype(np.float32), "cls": data.truth.env_class.astype(np.int8),
                             "east_m": data.truth.east_m.astype(np.float32),
                             "north_m": data.truth.north_m.astype(np.float32)}
+    inputs = fused.inputs
+    if len(inputs.window_t_s):
+        # the classifier's answer per window (the first row of the class track is the prior before any window)
+        series["_windows"] = {"t_s": (inputs.window_t_s - WINDOW_S / 2.0).astype(np.float32),
+                              "proba": inputs.classes.proba[1:].astype(np.float32)}
     bp_off = (tracks["adaptive_correction"].info.get("bp_disabled_share")
               if "adaptive_correction" in tracks else None)
     guard = tracks["adaptive"].info["run"].info.get("bp_guard_share") if "adaptive" in tracks else None

@@ -46,8 +46,9 @@ def _walks(n: int) -> str:
 
 
 def plot_report(results: list[dict], pooled: list[dict], out_dir: Path) -> list[Path]:
-    """Write ``trajectory_<walk>.png`` and ``error_time_<walk>.png`` for every walk with truth,
-    ``error_cdf.png`` and ``error_by_class.png``; returns their paths."""
+    """Write ``trajectory_<walk>.png``, ``error_time_<walk>.png`` and ``classes_<walk>.png`` (the environment
+    model's classes along the track) for every walk with truth, ``error_cdf.png`` and ``error_by_class.png`` (not
+    when no epoch has a known truth class); returns their paths."""
     from pipeline.evaluate import method_order
 
     out_dir = Path(out_dir)
@@ -64,8 +65,11 @@ def plot_report(results: list[dict], pooled: list[dict], out_dir: Path) -> list[
         tags.add(tag)
         paths.append(_trajectory(res, out_dir / f"trajectory_{tag}.png"))
         paths.append(_error_time(res, out_dir / f"error_time_{tag}.png"))
+        if "_windows" in res["series"]:
+            paths.append(_classes(res, out_dir / f"classes_{tag}.png"))
     paths.append(_cdf(results, out_dir / "error_cdf.png", method_order))
-    paths.append(_by_class(pooled, out_dir / "error_by_class.png", method_order))
+    if any(r["env_class"] in ENV_CLASSES for r in pooled):
+        paths.append(_by_class(pooled, out_dir / "error_by_class.png", method_order))
     return paths
 
 
@@ -143,15 +147,36 @@ def _by_class(pooled: list[dict], path: Path, method_order) -> Path:
     return save_figure(fig, path)
 
 
+def _classes(res: dict, path: Path) -> Path:
+    """The classifier's classes along the truth track, with the GNSS fixes' error per window beside them."""
+    from pipeline.env_error import window_error
+    from pipeline.env_plots import plot_class_track
+
+    w = res["series"]["_windows"]
+    err = None
+    g = res["series"].get("gnss")
+    if g is not None:
+        t_end = np.asarray(w["t_s"], float) + 1.0
+        err = {"t_s": w["t_s"], "err_m": window_error(t_end, g["t_s"], g["err_m"]),
+               "label": "GNSS fixes: mean error per window"}
+    return plot_class_track(res["series"]["_truth"], w["t_s"], {"environment model": w["proba"]}, path, err,
+                            f"{res['walk']}: environment classes along the truth track")
+
+
 def _class_band(ax, truth: dict) -> list:
-    """The truth class as background spans; returns legend handles for the classes that occur."""
+    """The truth class as background spans (epochs of unknown class, code < 0 as on a drive's reference, stay
+    white); returns legend handles for the classes that occur."""
     from matplotlib.patches import Patch
 
     t, c = truth["t_s"], truth["cls"]
     edges = np.flatnonzero(np.diff(c)) + 1
     for a, b in zip(np.r_[0, edges], np.r_[edges, len(t)]):
-        ax.axvspan(t[a], t[min(b, len(t) - 1)], color=CLASS_COLOURS[ENV_CLASSES[c[a]]], lw=0)
-    return [Patch(color=CLASS_COLOURS[k], label=f"truth: {k}") for i, k in enumerate(ENV_CLASSES) if np.any(c == i)]
+        if c[a] >= 0:
+            ax.axvspan(t[a], t[min(b, len(t) - 1)], color=CLASS_COLOURS[ENV_CLASSES[c[a]]], lw=0)
+    handles = [Patch(color=CLASS_COLOURS[k], label=f"truth: {k}") for i, k in enumerate(ENV_CLASSES) if np.any(c == i)]
+    if np.any(np.asarray(c) < 0):
+        handles.append(Patch(facecolor="white", edgecolor="0.6", label="truth class unknown"))
+    return handles
 
 
 def _trajectory(res: dict, path: Path) -> Path:
@@ -212,5 +237,7 @@ def _error_time(res: dict, path: Path) -> Path:
     ax.set_ylabel("horizontal error (m; below 1 mm drawn at 1 mm)")
     handles, _ = ax.get_legend_handles_labels()
     ax.legend(handles=handles + band, fontsize=7, loc="center left", bbox_to_anchor=(1.01, 0.5))
-    ax.set_title(f"{res['walk']}: error over time, background = truth class")
+    known = np.asarray(res["series"]["_truth"]["cls"]) >= 0
+    ax.set_title(f"{res['walk']}: error over time, background = truth class"
+                 + ("" if known.any() else " (none known: white)"))
     return save_figure(fig, path)

@@ -17,7 +17,7 @@ import numpy as np
 
 from features.site import ENV_CLASSES
 from features.imu.pdr import dead_reckon
-from walks.reader import PdrStream, pdr_position_at, pdr_start_from_gnss, read_walk
+from walks.reader import OdometryStream, PdrStream, pdr_position_at, pdr_start_from_gnss, read_walk
 
 __all__ = ["SourceTrack", "WalkSources", "walk_sources", "error_table", "plot_walk"]
 
@@ -41,6 +41,8 @@ class WalkSources:
     gnss_features: dict | None
     quality: np.ndarray | None
     acoustic_features: list | None = None
+    notes: tuple = ()
+    """The reader's notes: streams the walk names but could not use (:attr:`walks.reader.WalkData.notes`)."""
 
 
 def _pdr_track(pdr: PdrStream, gnss: SourceTrack | None = None, quality=None, calibrate: bool = True,
@@ -97,11 +99,16 @@ def walk_sources(walk_dir: str | os.PathLike, pdr_k: float | None = None) -> Wal
         tracks["acoustic"] = SourceTrack("acoustic", ac.t_s, ac.east_m, ac.north_m,
                                          {"chirps": ac.analysis.n_detections, "fixes": len(ac.t_s)})
         acoustic_rows = ac.feature_rows
-    if data.pdr is not None:
+    if isinstance(data.pdr, OdometryStream):
+        r = data.pdr.result
+        tracks["odometry"] = SourceTrack("odometry", r.t_s, r.east_m, r.north_m,
+                                         {"events": len(r), "distance_m": r.distance_m,
+                                          "initial_heading_deg": float(np.degrees(data.pdr.alignment.heading_rad))})
+    elif data.pdr is not None:
         anchor = pdr_start_from_gnss(data.gnss.positions) if data.gnss is not None else None
         tracks["PDR"] = _pdr_track(data.pdr, tracks.get("GNSS"), quality, calibrate=pdr_k is None, anchor=anchor)
     return WalkSources(site=data.site, tracks=tracks, truth=data.truth, gnss_features=feats, quality=quality,
-                       acoustic_features=acoustic_rows)
+                       acoustic_features=acoustic_rows, notes=data.notes)
 
 
 def error_table(src: WalkSources) -> dict:
@@ -186,12 +193,14 @@ def plot_walk(src: WalkSources, path: str | os.PathLike, title: str = "") -> Pat
                 label="end")
     for name, tr in src.tracks.items():
         style = _SRC_STYLE.get(name, {})
-        if name == "PDR":
+        if name in ("PDR", "odometry"):
             lab = name + (" (K, yaw from RTK GNSS)" if "calibrated_steps" in tr.info else "")
-            ax.plot(tr.east_m, tr.north_m, "-", color=style["color"], lw=1, label=lab, zorder=4)
+            ax.plot(tr.east_m, tr.north_m, "-", color=_SRC_STYLE["PDR"]["color"], lw=1, label=lab, zorder=4)
         else:
             ax.scatter(tr.east_m, tr.north_m, label=name, alpha=0.8, zorder=5, **style)
-    ax.plot([], [], "k^", ms=5, ls="", label="beacon")
+    if src.site.beacons:
+        ax.plot([], [], "k^", ms=5, ls="", label="beacon")
+    e0, e1, n0, n1 = _walk_extent(src)
     ax.set_xlim(e0, e1)
     ax.set_ylim(n0, n1)
     ax.set_aspect("equal")
@@ -206,12 +215,13 @@ def plot_walk(src: WalkSources, path: str | os.PathLike, title: str = "") -> Pat
         c = src.truth.env_class
         edges = np.flatnonzero(np.diff(c)) + 1
         for a, b in zip(np.r_[0, edges], np.r_[edges, len(t)]):
-            ax2.axvspan(t[a], t[min(b, len(t) - 1)], color=CLASS_COLOURS[ENV_CLASSES[c[a]]], alpha=0.6, lw=0)
+            if c[a] >= 0:           # unknown class (a drive's reference): not shaded
+                ax2.axvspan(t[a], t[min(b, len(t) - 1)], color=CLASS_COLOURS[ENV_CLASSES[c[a]]], alpha=0.6, lw=0)
         handles = []
         for name, tr in src.tracks.items():
             ok = np.isfinite(tr.east_m)
             te, tn = src.truth.at(tr.t_s[ok])
-            style = dict(_SRC_STYLE.get(name, {}))
+            style = dict(_SRC_STYLE.get(name, _SRC_STYLE["PDR"]))
             style["s"] = max(4, style.get("s", 4) - 3)
             h = ax2.scatter(tr.t_s[ok], np.maximum(np.hypot(tr.east_m[ok] - te, tr.north_m[ok] - tn), 1e-3),
                             label=name, zorder=3, **style)
@@ -219,6 +229,8 @@ def plot_walk(src: WalkSources, path: str | os.PathLike, title: str = "") -> Pat
         ax2.set_yscale("log")
         handles += [Patch(color=CLASS_COLOURS[k], alpha=0.6, label=f"truth class: {k}")
                     for i, k in enumerate(ENV_CLASSES) if np.any(c == i)]
+        if np.any(c < 0):
+            handles.append(Patch(facecolor="white", edgecolor="0.6", label="truth class unknown"))
         ax2.set_xlabel("t (s)")
         ax2.set_ylabel("horizontal error (m)")
         ax2.set_title("horizontal error over time, on the truth class")

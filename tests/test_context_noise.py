@@ -137,11 +137,13 @@ def test_bias_states_reset_on_quality_change_and_gap():
     # resets: the first fix, fixed after float (t = 2), float after fixed (t = 4), after the 8 s gap (t = 12),
     # DGNSS after float (t = 13): each run of one quality has its own bias, of that quality's prior variance
     assert np.flatnonzero(spec.bias_phi == 0).tolist() == [0, 2, 4, 5, 6]
-    np.testing.assert_allclose(spec.bias_q[[0, 2, 4, 5, 6]], [0.25, 0.0, 0.25, 0.25, 1.0])
+    # (σ_b² = 0 of the fixed run is floored at 1e-8 m², so P stays positive definite: issue 24)
+    np.testing.assert_allclose(spec.bias_q[[0, 2, 4, 5, 6]], [0.25, 1e-8, 0.25, 0.25, 1.0])
     # between: φ = e^(−Δt/τ) of the regime in force, Q = σ_b²(1 − φ²)
     assert spec.bias_phi[1] == pytest.approx(math.exp(-0.1)) and spec.bias_phi[7] == pytest.approx(math.exp(-1 / 40))
     assert spec.bias_q[7] == pytest.approx(1.0 * (1 - math.exp(-2 / 40)))
-    assert spec.bias_phi[3] == pytest.approx(math.exp(-1.0)) and spec.bias_q[3] == 0.0
+    assert spec.bias_phi[3] == pytest.approx(math.exp(-1.0))
+    assert spec.bias_q[3] == pytest.approx(1e-8 * (1 - math.exp(-2.0)), rel=1e-9)     # the floored σ_b²
 
 
 def test_bias_states_win_on_correlated_float_errors():

@@ -47,8 +47,10 @@ def test_every_method_runs_and_the_device_aware_filter_follows_rtk(trained):
     data, model = trained
     inputs = walk_inputs(data, model.classifier)
     tracks, skipped = run_methods(model, inputs)
-    assert set(skipped) == {"kf_map"}                  # no site map given here
-    assert set(method_names()) - {"kf_map"} <= set(tracks)
+    # no site map given here; the graph kernel tables (fg_env, fg_blind) are fitted by training.graph_fit,
+    # which train_fusion does not run (issue 23)
+    assert set(skipped) == {"kf_map", "fg_env", "fg_blind"}
+    assert set(method_names()) - set(skipped) <= set(tracks)
     assert {m + "+rts" for m in ("kf", "kf_quality", "aekf", "imm", "adaptive_nobp")} <= set(tracks)
     rows = {(r["method"], r["env_class"]): r for r in score(tracks, data, "w")}
     gnss, kfq, pdr = rows[("gnss", "all")], rows[("kf_quality", "all")], rows[("pdr", "all")]

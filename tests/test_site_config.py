@@ -81,9 +81,12 @@ def test_walk_toml_reading(tmp_path):
     assert w.start_utc.hour == 0 and w.duration_s == 5.0
     assert w.path("gnss") == tmp_path / "gnss.nmea"
     assert w.path("audio") is None
-    (tmp_path / "walk.toml").write_text('name = "w"\n')
-    with pytest.raises(ConfigError, match="missing start_utc"):
+    (tmp_path / "walk.toml").write_text('name = "w"\n[gnss]\nfile = "gnss.nmea"\n')
+    with pytest.raises(ConfigError, match=r"missing start_utc \(needed by its \[gnss\] stream\)"):
         load_walk(tmp_path)
+    # a walk without NMEA or audio (a drive whose files state relative times only) may leave it out
+    (tmp_path / "walk.toml").write_text('name = "w"\n[odometry]\nfile = "odometry.csv"\n')
+    assert load_walk(tmp_path).start_utc is None
 
 
 def test_outputs_get_ordinary_permissions(tmp_path):

@@ -50,8 +50,9 @@ def test_every_filter_method_has_knobs_and_untunable_names_are_refused(untuned):
     from walks.methods import method, method_names
 
     filters = {n for n in method_names() if method(n).filter}
-    # the BP's second passes run on their first pass's tuned knobs (adaptive_nobp's, its twin's)
-    assert filters - {"adaptive", "adaptive_blind"} <= set(KNOBS)
+    # the BP's second passes run on their first pass's tuned knobs (adaptive_nobp's, its twin's); the seed
+    # paper's RTK/PDR EKF keeps the paper's published noise, its step model and heading tau fitted by graph_fit
+    assert filters - {"adaptive", "adaptive_blind", "ekf_rtk_pdr"} <= set(KNOBS)
     model, inputs = untuned
     with pytest.raises(KeyError):
         tune_method(model, "gnss", [TuningWalk.of(inputs)])

@@ -18,7 +18,11 @@ Only windows with every feature (both modalities) are clustered: t-SNE and
 K-means need complete rows, and imputing a modality would invent the
 statistics the classes are told apart by. The others get label −1 (the
 online classifier still answers for them, from its single-modality
-sub-models trained on the clustered windows' features).
+sub-models trained on the clustered windows' features). Data with fewer than
+40 complete windows but a single modality throughout — a vehicle's drive has
+GNSS and no beacons — are clustered on that modality's features alone
+(:func:`cluster_columns`), and the clusters are named by the severity features
+among them.
 """
 
 from __future__ import annotations
@@ -30,7 +34,10 @@ import numpy as np
 from features.errors import DataError
 from features.schema import ENV_CLASSES, FEATURES
 
-__all__ = ["ClusterResult", "cluster_windows"]
+__all__ = ["ClusterResult", "cluster_windows", "cluster_columns"]
+
+_MIN_WINDOWS = 40
+"""Fewest complete windows the clustering accepts."""
 
 
 @dataclass(frozen=True)
@@ -49,27 +56,52 @@ class ClusterResult:
     clustered: np.ndarray | None = None
 
 
+def cluster_columns(X: np.ndarray) -> tuple[int, ...]:
+    """The feature columns the windows of ``X`` (n, 14) are clustered on: all 14 when at least 40 windows have
+    both modalities; else, when one modality has at least 40 complete windows and the other none at all, that
+    modality's columns; else all 14 (and :func:`cluster_windows` refuses).
+
+    >>> X = np.full((50, 14), np.nan); X[:, :5] = 1.0
+    >>> cluster_columns(X)
+    (0, 1, 2, 3, 4)
+    """
+    from features.schema import MODALITIES, modality_columns
+
+    X = np.asarray(X, float)
+    every = tuple(range(len(FEATURES)))
+    if np.isfinite(X).all(axis=1).sum() >= _MIN_WINDOWS:
+        return every
+    for m, other in zip(MODALITIES, MODALITIES[::-1]):
+        cols, rest = list(modality_columns(m)), list(modality_columns(other))
+        if np.isfinite(X[:, cols]).all(axis=1).sum() >= _MIN_WINDOWS and not np.isfinite(X[:, rest]).any():
+            return tuple(cols)
+    return every
+
+
 def cluster_windows(X: np.ndarray, *, method: str = "dpc", random_state: int = 0,
                     n_clusters: int | None = None, max_windows: int = 20_000) -> ClusterResult:
-    """Cluster the complete windows of ``X`` (n, 14) and name the clusters by severity."""
+    """Cluster the complete windows of ``X`` (n, 14) on :func:`cluster_columns` and name the clusters by
+    severity."""
     from models.embedding import EnvironmentEmbedding, name_clusters, severity_scores, tsne_backend
 
     X = np.asarray(X, float)
     if X.ndim != 2 or X.shape[1] != len(FEATURES):
         raise DataError(f"windows must have shape (n, {len(FEATURES)}), got {X.shape}")
-    complete = np.isfinite(X).all(axis=1)
-    if complete.sum() < 40:
-        raise DataError(f"only {int(complete.sum())} windows have both GNSS and acoustic features; clustering "
-                        "needs at least 40")
+    cols = list(cluster_columns(X))
+    names = [FEATURES[c] for c in cols]
+    complete = np.isfinite(X[:, cols]).all(axis=1)
+    if complete.sum() < _MIN_WINDOWS:
+        raise DataError(f"only {int(complete.sum())} windows have both GNSS and acoustic features (and not one "
+                        f"modality throughout); clustering needs at least {_MIN_WINDOWS}")
     rows = np.flatnonzero(complete)
     if rows.size > max_windows:
         rows = np.sort(np.random.default_rng(random_state).choice(rows, size=max_windows, replace=False))
     sub = np.zeros(len(X), bool)
     sub[rows] = True
-    Xc = X[sub]
+    Xc = X[sub][:, cols]
     labels = np.full(len(X), -1)
     if method == "dpc":
-        emb = EnvironmentEmbedding(random_state=random_state, n_clusters=n_clusters).fit(Xc)
+        emb = EnvironmentEmbedding(random_state=random_state, n_clusters=n_clusters, feature_names=names).fit(Xc)
         labels[sub] = [ENV_CLASSES.index(c) for c in emb.classes_]
         embedding = np.full((len(X), 2), np.nan)
         embedding[sub] = emb.embedding_
@@ -83,8 +115,8 @@ def cluster_windows(X: np.ndarray, *, method: str = "dpc", random_state: int = 0
 
         Z = StandardScaler().fit_transform(Xc)
         km = KMeans(n_clusters=n_clusters or 3, n_init=10, random_state=random_state).fit(Z)
-        names = name_clusters(severity_scores(Xc, km.labels_, FEATURES))
-        labels[sub] = [ENV_CLASSES.index(names[k]) for k in km.labels_]
+        named = name_clusters(severity_scores(Xc, km.labels_, names))
+        labels[sub] = [ENV_CLASSES.index(named[k]) for k in km.labels_]
         _label_rest(X, labels, complete & ~sub)
         return ClusterResult(labels, int(km.n_clusters), "K-means (k = 3)", clustered=sub)
     raise DataError(f"clustering method must be 'dpc' or 'kmeans', got {method!r}")

@@ -13,6 +13,11 @@ Modes (docs/design.md §1, issue 13):
     the same clustering on the training sites' libraries, the classifier then
     applied to a new site.
 
+The windows come from a fingerprint library (:func:`training_set`) or straight from walks
+(:func:`walk_training_set`: every 2 s window of each walk, as the filters see them; labels from
+``truth.csv`` where its class is known) — the clustering modes need no label, so a drive with an
+unlabelled reference can be clustered on its own windows.
+
 Every mode ends in an :class:`models.environment.EnvironmentClassifier`
 saved as an ``environment`` bundle with its mode, feature order, class names,
 the library's hash and the sites and sample counts it was fitted on.
@@ -34,8 +39,8 @@ from fingerprints.records import feature_matrix
 from models.bundle import load_bundle, save_bundle
 from models.environment import EnvironmentClassifier
 
-__all__ = ["MODES", "TrainingSet", "training_set", "fit_env_model", "save_env_model", "load_env_model",
-           "naming_warnings", "SMALL_LIBRARY_WINDOWS"]
+__all__ = ["MODES", "TrainingSet", "training_set", "walk_training_set", "fit_env_model", "save_env_model",
+           "load_env_model", "naming_warnings", "SMALL_LIBRARY_WINDOWS"]
 
 MODES = ("supervised", "survey", "transfer")
 
@@ -105,6 +110,35 @@ def training_set(library: str | os.PathLike, sites=None) -> TrainingSet:
     window_s, hop_s = _windows({k: v for k, v in params.items() if k in with_samples}, library)
     return TrainingSet(feature_matrix(samples), np.asarray(samples["site"], str), np.asarray(samples["cell_id"], str),
                        label, share, np.asarray(samples["t_s"], float), window_s, hop_s)
+
+
+def walk_training_set(walk_dirs, t_range_s: tuple[float, float] | None = None) -> TrainingSet:
+    """Every feature window of the walks (:func:`walks.inputs.window_features`, as the filters see them): ``site``
+    the walk's site, ``cell`` the walk's folder, ``label`` the truth class at the window's centre (−1 where
+    unknown or without ``truth.csv``), ``share`` the truth's blocked-sky share there (NaN without one), ``t_s``
+    the window centre; ``t_range_s``: only windows whose whole span lies in [t0, t1]."""
+    from walks.inputs import HOP_S, WINDOW_S, window_features
+    from walks.reader import read_walk
+
+    parts = []
+    for w in walk_dirs:
+        data = read_walk(w)
+        t_end, X = window_features(data)
+        t = t_end - WINDOW_S / 2.0
+        keep = np.ones(len(t), bool) if t_range_s is None else ((t_end - WINDOW_S >= t_range_s[0])
+                                                               & (t_end <= t_range_s[1]))
+        t, X = t[keep], X[keep]
+        label, share = np.full(len(t), -1), np.full(len(t), np.nan)
+        if data.truth is not None and len(t):
+            label = np.asarray(data.truth.class_at(t), int)
+            if data.truth.blocked_share is not None:
+                share = np.interp(t, data.truth.t_s, data.truth.blocked_share)
+        parts.append((X, np.full(len(t), data.site.name), np.full(len(t), str(w)), label, share, t))
+    if not parts or sum(len(p[0]) for p in parts) == 0:
+        raise DataError("the walks hold no feature window")
+    X, site, cell, label, share, t = (np.concatenate(c) for c in zip(*parts))
+    return TrainingSet(X.reshape(-1, len(FEATURES)), site.astype(str), cell.astype(str), label.astype(int), share,
+                       t.astype(float), WINDOW_S, HOP_S)
 
 
 def fit_env_model(data: TrainingSet, mode: str = "supervised", *, random_state: int = 0,

@@ -4,7 +4,9 @@
 stream of :mod:`models.fusion.events` — PDR steps (each spread over the time
 it took, :func:`split_steps`), GNSS fixes with their reported σ, quality and
 HDOP, acoustic fixes with their covariance, standing intervals from the gaps
-between steps — and the online environment classifier's evidence over time.
+between steps — and the online environment classifier's evidence over time. A vehicle's odometry
+(:class:`~walks.reader.OdometryStream`) gives the steps instead, each with its own
+noise from the odometry's variances (:func:`_odometry_steps`).
 The classifier answers on each 2 s feature window only once the window is
 complete (its end time), so a filter never uses a class from the future.
 """
@@ -18,7 +20,7 @@ import numpy as np
 from features.schema import ACOUSTIC_FEATURES, FEATURES, GNSS_FEATURES
 from models.fusion import AcousticEvents, ClassTrack, GnssEvents, StandIntervals, StepEvents, merge_events
 from models.fusion.events import EventStream
-from walks.reader import WalkData
+from walks.reader import OdometryStream, WalkData
 
 __all__ = ["WalkInputs", "walk_inputs", "window_features", "split_steps", "gnss_events", "STAND_GAP_S",
            "TYPICAL_STEP_S", "WINDOW_S", "HOP_S"]
@@ -85,7 +87,8 @@ def window_features(data: WalkData) -> tuple[np.ndarray, np.ndarray]:
 
 
 def split_steps(t_s: np.ndarray, length_m: np.ndarray, heading_rad: np.ndarray,
-                fix_t_s: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                fix_t_s: np.ndarray, duration_s: np.ndarray | None = None
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Each step spread over the time it took, cut at the fixes that fall inside it.
 
     A step is detected at its heel strike, but the walker covered it during the
@@ -96,7 +99,8 @@ def split_steps(t_s: np.ndarray, length_m: np.ndarray, heading_rad: np.ndarray,
     stop, to ``t_k``) becomes sub-steps ending at each fix time inside it and at
     ``t_k``, of lengths proportional to their durations, same heading. The cost
     is a fixed lag of one step (≤ ~0.6 s): a fix is fused once the step it falls
-    in has ended.
+    in has ended. ``duration_s`` (n,): each step's own duration where the source states it (odometry's
+    segments), replacing the previous heel strike and :data:`TYPICAL_STEP_S`.
 
     Returns (t_s, step_length_m, heading_rad) of the sub-steps, in time order.
     """
@@ -106,6 +110,8 @@ def split_steps(t_s: np.ndarray, length_m: np.ndarray, heading_rad: np.ndarray,
     fix = np.sort(np.asarray(fix_t_s, float))
     prev = np.concatenate([[-np.inf], t_s[:-1]])
     start = np.where(t_s - prev > STAND_GAP_S, t_s - TYPICAL_STEP_S, prev)
+    if duration_s is not None:
+        start = np.maximum(t_s - np.asarray(duration_s, float), prev)
     lo = np.searchsorted(fix, start, side="right")
     hi = np.searchsorted(fix, t_s, side="left")
     out_t, out_l, out_h = [], [], []
@@ -149,13 +155,34 @@ def _stands(step_t: np.ndarray) -> StandIntervals:
     return StandIntervals(step_t[gaps] + 0.5, step_t[gaps + 1] - 0.5)
 
 
+def _odometry_steps(r, fix_t: np.ndarray) -> tuple[StepEvents, StandIntervals]:
+    """Odometry events (:class:`~features.vehicle.odometry.DeadReckoning`) as steps with their own noise, split at
+    the fixes over their own segments; standing wherever no segment runs.
+
+    A sub-step of a share f of its event's segment takes σ_L·√f (the segment's length is an integral of
+    speed over time, its noise spread evenly) and the white part of the event's heading, ½σ_Δψ (the
+    segment's heading is ψ + ½Δψ; the accumulated Σ Δψ is the filter's heading-offset random walk).
+    """
+    t, seg = r.t_s, r.segment_s
+    st, sl, sh = split_steps(t, r.step_length_m, r.heading_rad, fix_t, seg)
+    parent = np.searchsorted(t, st, side="left")
+    frac = np.divide(sl, r.step_length_m[parent], out=np.ones_like(sl), where=r.step_length_m[parent] > 0)
+    steps = StepEvents(st, sl, sh, sigma_length_m=r.sigma_step_length_m[parent] * np.sqrt(frac),
+                       sigma_heading_rad=0.5 * r.sigma_heading_increment_rad[parent])
+    gap_start, gap_end = t[:-1], (t - seg)[1:]
+    still = gap_end - gap_start > 1e-6
+    return steps, StandIntervals(gap_start[still], gap_end[still])
+
+
 def walk_inputs(data: WalkData, classifier) -> WalkInputs:
     """Events and class evidence of one walk (see the module docstring); ``classifier``: the online
     :class:`~models.environment.EnvironmentClassifier`."""
     steps = gnss = acoustic = stands = None
     fix_t = np.concatenate([data.gnss.positions.t_s if data.gnss is not None else np.zeros(0),
                             data.acoustic.t_s if data.acoustic is not None else np.zeros(0)])
-    if data.pdr is not None and len(data.pdr.result):
+    if isinstance(data.pdr, OdometryStream) and len(data.pdr.result):
+        steps, stands = _odometry_steps(data.pdr.result, fix_t)
+    elif data.pdr is not None and len(data.pdr.result):
         r = data.pdr.result
         ok = np.isfinite(r.heading_rad) & np.isfinite(r.step_length_m)
         stands = _stands(r.t_s[ok])

@@ -13,6 +13,20 @@ only the walk's files (as for a real device's log) and returns, per source:
 - truth, when ``truth.csv`` is present (evaluation only: nothing above reads
   it; the PDR start comes from the first good GNSS fix, see :func:`pdr_start_from_gnss`).
 
+A vehicle's drive (``envfuse convert smartloc``) holds raw measurements in their place, and the
+reader turns them into the same streams:
+
+- ``gnss_pseudoranges.csv`` → per-epoch weighted least squares with one clock per system, Sagnac
+  and RAIM (:func:`features.gnss.wls.solve_epochs`, default :class:`~features.gnss.wls.WlsConfig`)
+  → the same :class:`GnssStream`: fixes in the site's ENU frame with their covariance
+  (:func:`~features.gnss.wls.wls_positions`) and the five features from the per-satellite data
+  (:func:`~features.gnss.sat_features.pseudorange_features`);
+- ``odometry.csv`` → speed × yaw rate integrated into displacement events with their own noise
+  from the file's variances, the initial heading and start fitted to the first GNSS fixes
+  (:func:`~features.vehicle.odometry.odometry_dead_reckoning`; it looks ahead, so offline) →
+  :class:`OdometryStream`, in the PDR stream's place (``WalkData.pdr``): the filters take its events
+  as steps.
+
 A stream the walk does not have is ``None``; so is one whose file is named but absent, empty (0 bytes, a
 WAV without samples, an IMU header without rows) or unusable (its reader refuses it): the walk is read
 without it, exactly as without the file, and :attr:`WalkData.notes` says which and why, so ``run``,
@@ -35,16 +49,23 @@ from features.acoustic.timing import AudioTiming, timing_from_walk
 from features.gnss.features import gnss_features, sky_arrays
 from features.gnss.nmea import epochs_on_time_base, read_nmea
 from features.gnss.positions import GnssPositions, fixes_to_enu
+from features.gnss.sat_features import pseudorange_features
+from features.gnss.wls import WlsConfig, solve_epochs, wls_positions
 from features.imu.heading import HeadingConfig
 from features.imu.pdr import PdrConfig, PdrResult, run_pdr
-from features.imu.reader import read_imu_csv
+from features.imu.reader import ImuData, read_imu_csv
 from features.imu.steps import StepLengthModel
+from features.raw_tables import read_odometry_csv, read_pseudorange_csv
 from features.site import Site
 from features.errors import DataError
-from features.walk import Truth, WalkInfo, load_walk, read_truth
+from features.vehicle.odometry import DeadReckoning, HeadingAlignment, OdometryConfig, odometry_dead_reckoning
+from features.walk import STREAMS, Truth, WalkInfo, load_walk, read_truth
+from models.graph.tight import RangeRows
+from walks.acoustic_ranges import range_rows
 
-__all__ = ["GnssStream", "AcousticStream", "PdrStream", "WalkData", "read_walk", "WALK_SPEED_PRIOR_M_S", "walk_has",
-           "pdr_start_from_gnss", "pdr_position_at", "read_gnss_stream", "read_acoustic_stream", "read_pdr_stream"]
+__all__ = ["GnssStream", "AcousticStream", "PdrStream", "OdometryStream", "WalkData", "read_walk",
+           "WALK_SPEED_PRIOR_M_S", "walk_has", "pdr_start_from_gnss", "pdr_position_at", "read_gnss_stream",
+           "read_pseudorange_stream", "read_acoustic_stream", "read_pdr_stream", "read_odometry_stream"]
 
 SKIPPED_NOTE_SHARE = 0.05
 """A walk's note names the NMEA reader's skips when they exceed this share of the file's sentences."""
@@ -57,11 +78,14 @@ WALK_SPEED_PRIOR_M_S = 1.4
 class GnssStream:
     """GNSS of a walk: ``positions`` (fixes with σ, quality, HDOP; arrays of shape (n_fixes,)),
     ``features`` (the five feature windows, dict of arrays of shape (n_windows,)), and the
-    NMEA reader's summary."""
+    reader's summary (the NMEA reader's, or the pseudorange solver's counts); ``solution``
+    the per-epoch solution (:class:`~features.gnss.wls.WlsSolution`) when the fixes were solved
+    from pseudoranges, else None."""
 
     positions: GnssPositions
     features: dict
     nmea_summary: dict
+    solution: object = None
     skipped_share: float = 0.0
     """Share of the file's sentences the NMEA reader skipped (bad checksum, truncated, ...)."""
 
@@ -73,7 +97,9 @@ class AcousticStream:
     ``t_s``, ``east_m``, ``north_m`` : ndarray of shape (n_fixes,);
     ``covariance_en_m2`` : ndarray of shape (n_fixes, 2, 2), the fixes' horizontal covariance;
     ``analysis`` : the receiver's full output (feature rows, fixes with clock offsets, counts);
-    ``timing`` : the audio time base used.
+    ``timing`` : the audio time base used;
+    ``ranges`` : every associated beacon range of every frame (:func:`walks.acoustic_ranges.range_rows`),
+    for tightly coupled fusion.
     """
 
     t_s: np.ndarray
@@ -82,6 +108,7 @@ class AcousticStream:
     covariance_en_m2: np.ndarray
     analysis: AudioAnalysis
     timing: AudioTiming
+    ranges: RangeRows | None = None
 
     @property
     def feature_rows(self) -> list:
@@ -92,24 +119,46 @@ class AcousticStream:
 @dataclass(frozen=True)
 class PdrStream:
     """PDR of a walk: ``result`` holds the steps (``t_s``, ``step_length_m``, ``heading_rad``) and
-    the track dead-reckoned from ``start_en_m``; ``config`` the settings used."""
+    the track dead-reckoned from ``start_en_m``; ``config`` the settings used; ``imu`` the repaired
+    100 Hz samples PDR ran on (accelerometer, gyro, magnetometer: for the methods that integrate the
+    IMU themselves, the seed's complementary heading and IMU preintegration; 72 bytes per sample,
+    26 MB per hour at 100 Hz)."""
 
     result: PdrResult
     config: PdrConfig
     start_en_m: tuple[float, float]
+    imu: ImuData | None = None
     repaired: str = ""
     """What the IMU reader repaired (its :meth:`~features.imu.reader.ImuRepairReport.summary`), empty if nothing."""
 
 
 @dataclass(frozen=True)
+class OdometryStream:
+    """A vehicle's odometry in the PDR stream's place: ``result`` holds the displacement events with PDR's
+    names (``t_s``, ``step_length_m``, ``heading_rad``, ``east_m``, ``north_m``) and their own noise
+    (``sigma_step_length_m``, ``sigma_heading_increment_rad``, ``segment_s``:
+    :class:`~features.vehicle.odometry.DeadReckoning`); ``alignment`` the initial heading and start fitted to
+    the GNSS fixes; ``config`` the settings used."""
+
+    result: DeadReckoning
+    alignment: HeadingAlignment
+    config: OdometryConfig
+
+    @property
+    def start_en_m(self) -> tuple[float, float]:
+        return self.result.start_en_m
+
+
+@dataclass(frozen=True)
 class WalkData:
-    """Every source of one walk; a stream the walk lacks is ``None``."""
+    """Every source of one walk; a stream the walk lacks is ``None``. ``pdr`` is a :class:`PdrStream` (IMU) or
+    an :class:`OdometryStream` (a vehicle's odometry)."""
 
     walk: WalkInfo
     site: Site
     gnss: GnssStream | None
     acoustic: AcousticStream | None
-    pdr: PdrStream | None
+    pdr: PdrStream | OdometryStream | None
     truth: Truth | None
     notes: tuple = ()
     """One line per stream the walk names but could not use (absent, empty or unusable file)."""
@@ -133,6 +182,8 @@ def read_walk(walk_dir: str | os.PathLike, *, site: Site | None = None, pdr_k: f
     truth = read_truth(walk.directory) if truth and (walk.directory / "truth.csv").is_file() else None
     notes: list[str] = []
     gnss = _optional(walk, "gnss", lambda: read_gnss_stream(walk, site), notes)
+    if gnss is None and not walk.streams.get("gnss"):
+        gnss = _optional(walk, "gnss_pseudoranges", lambda: read_pseudorange_stream(walk, site), notes)
     acoustic = None
     if site.beacons:
         acoustic = _optional(walk, "audio", lambda: read_acoustic_stream(walk, site, audio_positions), notes)
@@ -153,10 +204,14 @@ def read_walk(walk_dir: str | os.PathLike, *, site: Site | None = None, pdr_k: f
             t_fix, e_fix, n_fix = anchor
             e_p, n_p = pdr_position_at(pdr.result, t_fix, (0.0, 0.0))
             pdr = _shift_pdr(pdr, e_fix - e_p, n_fix - n_p)
+    if pdr is None and not walk.streams.get("imu"):
+        pdr = _optional(walk, "odometry",
+                        lambda: read_odometry_stream(walk, gnss.positions if gnss is not None else None), notes)
     return WalkData(walk=walk, site=site, gnss=gnss, acoustic=acoustic, pdr=pdr, truth=truth, notes=tuple(notes))
 
 
-_WHAT = {"gnss": "GNSS", "audio": "acoustic positions", "imu": "PDR"}
+_WHAT = {"gnss": "GNSS", "gnss_pseudoranges": "GNSS", "audio": "acoustic positions", "imu": "PDR",
+         "odometry": "odometry"}
 
 
 def _optional(walk: WalkInfo, stream: str, read, notes: list):
@@ -221,7 +276,7 @@ def _shift_pdr(pdr: PdrStream, d_east_m: float, d_north_m: float) -> PdrStream:
     r = pdr.result
     moved = dataclasses.replace(r, east_m=d_east_m + r.east_m, north_m=d_north_m + r.north_m)
     start = (pdr.start_en_m[0] + d_east_m, pdr.start_en_m[1] + d_north_m)
-    return PdrStream(result=moved, config=pdr.config, start_en_m=start, repaired=pdr.repaired)
+    return PdrStream(result=moved, config=pdr.config, start_en_m=start, imu=pdr.imu, repaired=pdr.repaired)
 
 
 def read_gnss_stream(walk: WalkInfo, site: Site) -> GnssStream:
@@ -236,6 +291,39 @@ def read_gnss_stream(walk: WalkInfo, site: Site) -> GnssStream:
                       skipped_share=float(share))
 
 
+def read_pseudorange_stream(walk: WalkInfo, site: Site, config: WlsConfig | None = None) -> GnssStream:
+    """The walk's pseudoranges solved epoch by epoch (``config``, default :class:`~features.gnss.wls.WlsConfig`:
+    RTKLIB weights, Sagnac, RAIM): fixes in the site's ENU frame with their covariance and quality text, and
+    the five GNSS windows from the per-satellite data (ζ, λ with the untracked satellites predicted from
+    their own tracked positions: :mod:`features.gnss.sat_features`)."""
+    table = read_pseudorange_csv(walk.path("gnss_pseudoranges"),
+                                 walk.streams["gnss_pseudoranges"].get("corrections",
+                                                                       ["satellite_clock", "ionosphere",
+                                                                        "troposphere"]))
+    sol = solve_epochs(table, config or WlsConfig())
+    o = site.origin
+    positions = wls_positions(sol, o.lat_deg, o.lon_deg, o.alt_m, table=table)
+    summary = {"source": "pseudoranges", "weights": sol.weight_model, "epochs": len(sol),
+               "fixes": int(sol.has_fix.sum()), "mean_used": float(np.mean(sol.n_used[sol.has_fix]))
+               if sol.has_fix.any() else 0.0, "excluded": int(sol.n_excluded.sum()),
+               "raim_alarms": int(np.sum(sol.integrity[sol.has_fix] == 1))}
+    return GnssStream(positions=positions, features=pseudorange_features(table, sol), nmea_summary=summary,
+                      solution=sol)
+
+
+def read_odometry_stream(walk: WalkInfo, fixes: GnssPositions | None,
+                         config: OdometryConfig | None = None) -> OdometryStream:
+    """The walk's odometry integrated into displacement events (:mod:`features.vehicle.odometry`), its heading
+    and start fitted to the GNSS ``fixes`` (never to the truth). Raises DataError without fixes to fit."""
+    table = read_odometry_csv(walk.path("odometry"))
+    if fixes is None or len(fixes.t_s) < 3:
+        raise DataError(f"{walk.path('odometry')}: odometry needs >= 3 GNSS fixes in the walk to fit its initial "
+                        "heading and start")
+    cfg = config or OdometryConfig()
+    dr, align = odometry_dead_reckoning(table, fixes.t_s, fixes.east_m, fixes.north_m, cfg)
+    return OdometryStream(result=dr, alignment=align, config=cfg)
+
+
 def read_acoustic_stream(walk: WalkInfo, site: Site, positions: PositionConfig | None) -> AcousticStream:
     """The walk's audio through the acoustic receiver: fixes with covariance and the nine CIR windows."""
     require_beacon_band(walk.path("audio"), min(b.f0_hz if b.f0_hz is not None else site.acoustic.f0_hz
@@ -244,11 +332,14 @@ def read_acoustic_stream(walk: WalkInfo, site: Site, positions: PositionConfig |
     if positions is None:
         positions = PositionConfig(max_clock_offset_s=timing.start_uncertainty_s + 0.05,
                                    motion_speed_m_s=WALK_SPEED_PRIOR_M_S)
-    res = analyse_audio(walk.path("audio"), site, timing, positions=positions)
+    res = analyse_audio(walk.path("audio"), site, timing, positions=positions, keep_frames=True)
+    # the frames' ranges kept compactly (56 bytes per range), the frames themselves dropped
+    ranges = range_rows(res.frames, res.fixes, site, positions)
+    res = dataclasses.replace(res, frames=None)
     arr = np.array([[f.t_s, f.east_m, f.north_m] for f in res.fixes]).reshape(-1, 3)
     cov = np.array([f.covariance[:2, :2] for f in res.fixes]).reshape(-1, 2, 2)
     return AcousticStream(t_s=arr[:, 0], east_m=arr[:, 1], north_m=arr[:, 2], covariance_en_m2=cov,
-                          analysis=res, timing=timing)
+                          analysis=res, timing=timing, ranges=ranges)
 
 
 def read_pdr_stream(walk: WalkInfo, start_en: tuple[float, float], k: float | None) -> PdrStream:
@@ -257,13 +348,13 @@ def read_pdr_stream(walk: WalkInfo, start_en: tuple[float, float], k: float | No
     decl = float(walk.streams["imu"].get("declination_deg", 0.0))
     heading = HeadingConfig(declination_rad=np.radians(decl))
     cfg = PdrConfig(heading=heading) if k is None else PdrConfig(length=StepLengthModel(k=k), heading=heading)
-    return PdrStream(result=run_pdr(imu, start_en[0], start_en[1], cfg), config=cfg, start_en_m=start_en,
+    return PdrStream(result=run_pdr(imu, start_en[0], start_en[1], cfg), config=cfg, start_en_m=start_en, imu=imu,
                      repaired=imu.report.summary() if imu.report.n_defects else "")
 
 
 def walk_has(walk_dir: str | os.PathLike) -> dict:
     """Which streams a walk directory holds, without reading them: {'gnss': bool, 'audio': ..., 'imu': ...,
-    'truth': ...}."""
+    'gnss_pseudoranges': ..., 'odometry': ..., 'truth': ...}."""
     walk = load_walk(walk_dir)
-    return {s: walk.path(s) is not None for s in ("gnss", "audio", "imu")} | {
+    return {s: walk.path(s) is not None for s in STREAMS} | {
         "truth": (Path(walk.directory) / "truth.csv").is_file()}

@@ -158,5 +158,7 @@ def timing_from_walk(walk: WalkInfo | None, site: Site, uncertainty_override: fl
         warnings.warn(f"[audio] fs_hz is {fs}; the file's own header rate is used", AudioWarning, stacklevel=2)
     if uncertainty_override is not None:
         u = uncertainty_override
+    if walk.start_utc is None:
+        raise ConfigError(f"{where}: no start_utc; the beacons' frames are tied to UTC, so audio needs it")
     return AudioTiming(start_s=float(start_s), start_uncertainty_s=float(u),
                        frame_phase_s=frame_phase_s(walk.start_utc, site.acoustic.frame_s))

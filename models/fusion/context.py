@@ -341,12 +341,15 @@ class ContextNoise:
         last = np.maximum.accumulate(last)
         regime = np.where(last >= 0, quality[np.maximum(last, 0)], self.biased_qualities[0])
         tau = self._expect(p, regime, "tau_s", log=True)
-        sb2 = self._expect(p, regime, "sb2")
+        # floored as σ_b below: a quality never seen in training has σ_b = 0, and a bias state reset to zero
+        # variance makes P singular (the RTS smoother's gain solve then fails; issue 24, a drive's autonomous
+        # fixes against a model trained on RTK walks)
+        sb2 = np.maximum(self._expect(p, regime, "sb2"), 1e-8)
         # a Gauss–Markov process whose stationary σ_b follows the context: b/σ_b is a unit Gauss–Markov, so
         # b_k = (σ_k/σ_{k−1}) e^(−Δt/τ) b_{k−1} + w_k,  Var w_k = σ_k² (1 − e^(−2Δt/τ))
         # (a bias learnt under occlusion shrinks when the sky opens, as its variance says it must)
         decay = np.exp(-stream.dt_s / tau)
-        sig = np.sqrt(np.maximum(sb2, 1e-8))
+        sig = np.sqrt(sb2)
         ratio = sig / np.concatenate([[sig[0]], sig[:-1]])
         phi = ratio * decay
         q = sb2 * (1.0 - decay * decay)

@@ -57,7 +57,7 @@ from features.errors import EnvfuseError
 from models.fusion.events import GNSS, STEP, EventStream
 
 __all__ = ["EkfConfig", "FilterRun", "EventEKF", "FilterError", "empty_records", "initial_state", "time_noise",
-           "measurement_models", "OUTLIER_CODES"]
+           "measurement_models", "step_variances", "OUTLIER_CODES"]
 
 
 OUTLIER_CODES = {"gate": 0, "huber": 1, "none": 2, "mixture": 3}
@@ -211,6 +211,21 @@ def initial_state(stream: EventStream, cfg: EkfConfig, x0_en=None, x0=None, P0=N
     return x0, P0
 
 
+def step_variances(stream: EventStream, cfg: EkfConfig) -> tuple[float, float]:
+    """(σ_L² (m²), σ_ψ² (rad²)) of a step for the compiled core: the configured ones, or, when the stream's
+    steps state their own σ (:class:`~models.fusion.events.StepEvents`, e.g. odometry from its variances), the
+    mean of their squares — the core takes one value per run, and the mean gives the walk's steps the same
+    summed variance as their own values would."""
+    s = stream.steps
+    sl2, sp2 = cfg.sigma_step_length_m ** 2, cfg.sigma_heading_rad ** 2
+    if s is not None and len(s):
+        if s.sigma_length_m is not None:
+            sl2 = float(np.mean(s.sigma_length_m ** 2))
+        if s.sigma_heading_rad is not None:
+            sp2 = float(np.mean(s.sigma_heading_rad ** 2))
+    return sl2, sp2
+
+
 def has_bias(cfg: EkfConfig, spec=None) -> bool:
     """Whether the state carries the GNSS bias block: asked for by the config, or modelled by the noise policy."""
     return bool(cfg.gnss_bias or (spec is not None and spec.bias_shared is not None))
@@ -317,9 +332,9 @@ class EventEKF:
         eps = spec.eps_event if spec.eps_event is not None else np.zeros(m)
         kappa = spec.kappa_event if spec.kappa_event is not None else np.ones(m)
         rec = empty_records(m, n)
+        sl2, sp2 = step_variances(stream, cfg)
         core.run_ekf_events(stream.kind.astype(np.int64), stream.available, stream.z_m, stream.step_length_m,
-                            stream.heading_rad, phi, q, h_idx, H, x, P, cfg.sigma_step_length_m ** 2,
-                            cfg.sigma_heading_rad ** 2, OUTLIER_CODES[cfg.outlier], cfg.gate_nis, cfg.huber_k,
+                            stream.heading_rad, phi, q, h_idx, H, x, P, sl2, sp2, OUTLIER_CODES[cfg.outlier], cfg.gate_nis, cfg.huber_k,
                             cfg.joseph, consider, spec.mode, spec.r_event, np.asarray(eps, float),
                             np.asarray(kappa, float), spec.r_table, spec.map_grid, spec.map_geo, spec.vb_alpha,
                             spec.vb_beta, spec.vb_cap, spec.vb_rho, spec.vb_n_iter, rec["x_prior"], rec["P_prior"],

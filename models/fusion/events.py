@@ -77,11 +77,17 @@ class StepEvents:
 
     Steps without a heading (NaN) are kept by the readers but dropped here: the
     filter cannot move the walker without a direction.
+
+    ``sigma_length_m``, ``sigma_heading_rad`` (n,), optional: each step's own noise (σ of its length and
+    of the white part of its heading), when the source states it (a vehicle's odometry from its
+    variances); None: the filter's configured per-step σ (:class:`~models.fusion.ekf.EkfConfig`).
     """
 
     t_s: np.ndarray
     step_length_m: np.ndarray
     heading_rad: np.ndarray
+    sigma_length_m: np.ndarray | None = None
+    sigma_heading_rad: np.ndarray | None = None
 
     def __post_init__(self):
         t = _col("steps.t_s", self.t_s)
@@ -91,6 +97,13 @@ class StepEvents:
         keep = np.isfinite(t) & np.isfinite(length) & np.isfinite(heading)
         if np.any(length[keep] < 0):
             raise EventError("steps.step_length_m must be >= 0")
+        for name in ("sigma_length_m", "sigma_heading_rad"):
+            v = getattr(self, name)
+            if v is not None:
+                v = _col(f"steps.{name}", v, n)
+                if not np.all(np.isfinite(v[keep]) & (v[keep] >= 0)):
+                    raise EventError(f"steps.{name} must be finite and >= 0")
+                object.__setattr__(self, name, v[keep])
         object.__setattr__(self, "t_s", t[keep])
         object.__setattr__(self, "step_length_m", length[keep])
         object.__setattr__(self, "heading_rad", heading[keep])

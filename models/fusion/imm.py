@@ -42,7 +42,7 @@ from numba import njit
 
 from models.fusion.core import STEP_KIND, inv2, kalman_update, mm, mmt, predict_step, time_update
 from models.fusion.ekf import (OUTLIER_CODES, EkfConfig, FilterError, FilterRun, empty_records, initial_state,
-                               measurement_models, time_noise)
+                               measurement_models, step_variances, time_noise)
 from models.fusion.events import ACOUSTIC, GNSS, ClassTrack, EventStream
 
 __all__ = ["IMMFilter"]
@@ -225,9 +225,9 @@ class IMMFilter:
             rows, proba_w = np.full(m, -1, np.int64), np.ones((1, M))
         rec = empty_records(m, n)
         mode_p = np.empty((m, M))
+        sl2, sp2 = step_variances(stream, cfg)
         _imm_events(stream.kind.astype(np.int64), stream.available, stream.z_m, stream.step_length_m,
-                    stream.heading_rad, stream.dt_s, phi, q, h_idx, H, x, P, cfg.sigma_step_length_m ** 2,
-                    cfg.sigma_heading_rad ** 2, OUTLIER_CODES[cfg.outlier], cfg.gate_nis, cfg.huber_k, cfg.joseph,
+                    stream.heading_rad, stream.dt_s, phi, q, h_idx, H, x, P, sl2, sp2, OUTLIER_CODES[cfg.outlier], cfg.gate_nis, cfg.huber_k, cfg.joseph,
                     table, mu, float(self.switch_rate_hz), rows, proba_w, rec["x_prior"], rec["P_prior"], rec["F"],
                     rec["x"], rec["P"], rec["nu"], rec["S"], rec["K"], rec["R"], rec["nis"], rec["weight"],
                     rec["updated"], rec["accepted"], mode_p)

@@ -147,7 +147,7 @@ def _run(args) -> int:
             site = resolve_site(walk, args.site)
         except ConfigError as exc:
             raise ConfigError(f"--positions needs --site (the ENU origin): {exc}") from None
-    if args.start_utc is None and walk is not None:
+    if args.start_utc is None and walk is not None and walk.start_utc is not None:
         args.start_utc = walk.start_utc.isoformat()  # t_s on the walk's time base
     try:
         epochs, stats = read_nmea(args.nmea, require_checksum=not args.allow_missing_checksum)

@@ -2,9 +2,10 @@
 
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 
-from features.errors import ConfigError
+from features.errors import ConfigError, DataError
 from pipeline.args import bounded, check_outputs, plot_path
 
 GROUP = "report"
@@ -34,7 +35,10 @@ def _run(args) -> int:
         check_outputs({f"WALK file {f.name}": f for f in args.walk.iterdir() if f.is_file()}, {"--out": args.out})
     src = walk_sources(args.walk, pdr_k=args.k)
     if not src.tracks:
-        raise ConfigError(f"{args.walk}: walk.toml lists no gnss, audio or imu stream")
+        why = "; ".join(src.notes) if src.notes else "walk.toml names no gnss, audio or imu stream"
+        raise DataError(f"{args.walk}: no usable stream ({why})")
+    for note in src.notes:
+        print(f"envfuse: note: {args.walk}: {note}", file=sys.stderr)
     table = error_table(src)
     if table:
         print("horizontal error, m: n / mean / median / p95 per class")

@@ -20,7 +20,11 @@ def register(sub) -> None:
                     "(t-SNE + density-peak clustering, clusters named by severity) and learns the clusters; "
                     "'transfer' does the same on training sites for use on a new one.",
         epilog="Example: envfuse train env --library fp.sqlite --site sim-0101 --site sim-0102 --out env_model")
-    p.add_argument("--library", type=Path, required=True, help="fingerprint library (SQLite, from survey build)")
+    src = p.add_mutually_exclusive_group(required=True)
+    src.add_argument("--library", type=Path, help="fingerprint library (SQLite, from survey build)")
+    src.add_argument("--walks", type=Path, nargs="+",
+                     help="walk directories instead of a library: every 2 s window of each (a drive converted by "
+                          "'convert smartloc' has no survey; --mode survey clusters its own windows)")
     p.add_argument("--site", action="append", default=None, help="site to fit on (repeat; default: every site)")
     p.add_argument("--mode", choices=("supervised", "survey", "transfer"), default="supervised",
                    help="where the classes come from (default supervised)")
@@ -67,7 +71,8 @@ def _run_env(args) -> int:
     from training.env import fit_env_model, save_env_model, training_set
 
     plots = {f"--plots {args.plots / n}": args.plots / n for n in ENV_PLOTS} if args.plots is not None else {}
-    check_outputs({"--library": args.library}, plots, {"--out": args.out})
+    sealed = {f"--walks {w}": w for w in args.walks} if args.walks is not None else None
+    check_outputs({"--library": args.library}, plots, {"--out": args.out}, sealed)
     _refuse_existing(args.out, args.overwrite, "environment model")
     if args.plots is not None and args.plots.exists() and not args.plots.is_dir():
         raise UsageError(f"--plots {args.plots} exists and is not a directory")
@@ -75,13 +80,25 @@ def _run_env(args) -> int:
                                    args.plots.resolve().parents):
         raise UsageError(f"--plots {args.plots} lies inside the model folder --out {args.out}: a model folder holds "
                          "the model only; name another directory")
-    if not args.library.is_file():
-        raise ConfigError(f"--library {args.library}: no such file")
-    data = training_set(args.library, args.site)
+    if args.walks is not None:
+        from training.env import walk_training_set
+
+        for w in args.walks:
+            if not (w / "walk.toml").is_file():
+                raise ConfigError(f"--walks {w}: no walk.toml (expected a walk directory)")
+        if args.site:
+            raise ConfigError("--site selects sites of a --library; with --walks, list the walks to use")
+        data = walk_training_set(args.walks)
+    else:
+        if not args.library.is_file():
+            raise ConfigError(f"--library {args.library}: no such file")
+        data = training_set(args.library, args.site)
     diag: dict = {}
     clf, info = fit_env_model(data, args.mode, random_state=args.seed, diagnostics=diag)
     for text in info.get("warnings", []):
         print(f"envfuse: warning: {text}", file=sys.stderr)
+    if args.walks is not None:
+        info["walks"] = [str(w) for w in args.walks]
     save_env_model(clf, args.out, info, library=args.library, overwrite=args.overwrite)
     if args.plots is not None:
         for png in _env_plots(clf, diag, args.plots):
