@@ -10,10 +10,12 @@ block so generation stays flat too), then times
 * the whole receiver, ``features.acoustic.features.analyse_audio``: reading,
   matched filter, detection, CIR features per window and positions per frame;
 
-and, on a simulated 120 s walk (``envfuse simulate site --seed 3`` and
+and, on a simulated 300 s walk (``envfuse simulate site --seed 3`` and
 ``simulate walk --seed 7``, run through the CLI: the receiver itself never
 imports the simulator), the whole receiver with acquisition and tracking of a
-moving receiver, its fix count and its error against truth.csv;
+moving receiver (best of 3, beside ``oaconvolve`` of the same kernel over the same
+audio, and CPU per stage), its fix count and its error against truth.csv
+(``--walk-only``: this part alone);
 
 and the receiver on files of 1, 5 and 10 minutes, each in its own process:
 the first run there (imports, FFT plans), the best of six, the peak resident set (``resource.getrusage(RUSAGE_SELF).ru_maxrss``,
