@@ -56,8 +56,8 @@ from features.vehicle.odometry import odometry_dead_reckoning  # noqa: E402
 
 def _folder() -> Path:
     env = os.environ.get("ENVFUSE_SHARED_DATA")
-    candidates = ([Path(env)] if env else []) + [ROOT.parent / "shared" / "data", ROOT.parents[1] / "shared" / "data",
-                                                 ROOT.parents[2] / "shared" / "data"]
+    # ../shared/data beside the clone, or beside a worktree two or three levels down (however shallow the path)
+    candidates = ([Path(env)] if env else []) + [p / "shared" / "data" for p in list(ROOT.parents)[:3]]
     for c in candidates:
         if (c / "gnss_urban_smartloc").is_dir():
             return c / "gnss_urban_smartloc"

@@ -37,7 +37,7 @@ What transfers from a car in a Berlin street canyon to a walker in a substation,
   building; a yard's heavy class is the nearest counterpart.
 
 Usage: /work/main/.venv/bin/python bench/calibrate_sim.py [--sites 21 22 23 24 25] [--walk-s 400]
-       [--png calibration.png] [--quick]
+       [--walks 1 2] [--full-walk-s 120] [--png calibration.png]
 """
 
 from __future__ import annotations
