@@ -168,8 +168,10 @@ def _fingerprint(model) -> str:
         h.update(np.ascontiguousarray(v, float).tobytes())
     q = model.quality
     h.update(json.dumps([q.uere_m_, q.gst_scale_, q.acoustic_scale_], sort_keys=True, default=str).encode())
-    if model.class_quality is not None:
-        h.update(json.dumps(model.class_quality.get_state(), sort_keys=True, default=str).encode())
+    for ctx in (model.context, model.context_blind):
+        if ctx is not None:
+            h.update(json.dumps(ctx.get_state(), sort_keys=True, default=str).encode())
+    h.update(json.dumps(model.tuning, sort_keys=True, default=str).encode())
     h.update(json.dumps(model.meta.get("graph_model"), sort_keys=True).encode())
     return h.hexdigest()
 
