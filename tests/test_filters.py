@@ -281,6 +281,17 @@ def test_gnss_bias_state_keeps_consistency_under_correlated_errors():
     assert in_bounds_share(nees(plain.x, plain.P, s.truth), 2) < 0.6
 
 
+def test_in_bounds_share_counts_both_tails_by_hand():
+    """χ²₂ is exponential with mean 2: the two-sided 95 % region is [−2 ln 0.975, −2 ln 0.025] = [0.0506, 7.378]
+    in closed form. Of 0.01, 0.04, 0.06, 1, 7, 8 three lie inside (0.06, 1, 7): share 1/2, single run or
+    pooled over a (2, 3) array; an upper-bound-only test would count 5/6."""
+    v = np.array([0.01, 0.04, 0.06, 1.0, 7.0, 8.0])
+    lo, hi = chi2_bounds(2)
+    assert lo == pytest.approx(-2 * math.log(0.975), rel=1e-9) and hi == pytest.approx(-2 * math.log(0.025), rel=1e-9)
+    assert in_bounds_share(v, 2) == pytest.approx(0.5)
+    assert in_bounds_share(v.reshape(2, 3), 2, pooled=True) == pytest.approx(0.5)
+
+
 def test_chi2_bounds_reference_values():
     # N = 50 runs, n_x = 2 → [1.5, 2.6], the worked example of Bar-Shalom, Li & Kirubarajan 2001, §5.4
     # (χ²₁₀₀ quantiles 74.22 and 129.56, over 50)

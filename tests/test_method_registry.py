@@ -111,3 +111,19 @@ def test_metric_rows_by_hand():
     # a track without covariance: no NEES share rather than a made-up one
     bare = track_errors(Track("y", t, t.copy(), err.copy(), None), truth)
     assert np.isnan(metric_rows(bare["err_m"], bare["nees"], bare["cls"], "w", "y")[0]["nees_in_bounds"])
+
+
+def test_nees_in_bounds_counts_the_lower_tail_by_hand():
+    """The NEES region is two-sided: χ²₂ is exponential with mean 2, so its 2.5 % and 97.5 % points are
+    −2 ln 0.975 = 0.0506 and −2 ln 0.025 = 7.378 in closed form. Errors 0.1, 0.2, 0.5, 1, 3 m north under
+    P = I give NEES 0.01, 0.04, 0.25, 1, 9: two below the region (too small an error for P — a filter that
+    overstates its uncertainty), one above, so 2/5 inside. A one-sided test (upper bound only) would say 4/5."""
+    t = np.arange(5.0)
+    truth = Truth(t_s=t, east_m=t.copy(), north_m=np.zeros(5), env_class=np.zeros(5, int))
+    err = np.array([0.1, 0.2, 0.5, 1.0, 3.0])
+    te = track_errors(Track("x", t, t.copy(), err.copy(), np.broadcast_to(np.eye(2), (5, 2, 2)).copy()), truth)
+    np.testing.assert_allclose(te["nees"], [0.01, 0.04, 0.25, 1.0, 9.0], rtol=1e-12)
+    assert -2 * np.log(0.975) == pytest.approx(0.0506, abs=1e-4) and -2 * np.log(0.025) == pytest.approx(7.378, abs=1e-3)
+    rows = metric_rows(te["err_m"], te["nees"], te["cls"], "w", "x")
+    assert [r["env_class"] for r in rows] == ["all", "open"]
+    assert rows[0]["nees_in_bounds"] == pytest.approx(0.4) and rows[1]["nees_in_bounds"] == pytest.approx(0.4)
