@@ -17,12 +17,15 @@ Prints, in Markdown, and writes ``<out>/study.json``:
    ``kf``, ``kf_quality``, their own environment-blind twin and the best single input, per class, with a
    95 % interval from a bootstrap over test sites (:mod:`pipeline.compare`), per-walk means first averaged
    over the seeds;
-3. sanity: the default method (``adaptive``) against the best single input (gnss or acoustic), per class;
+3. sanity: ``run``'s default method (``adaptive+lag``, :data:`pipeline.commands.fuse.DEFAULT_METHOD`) and the
+   zero-latency ``adaptive`` against the best single input (gnss or acoustic), per class;
 4. BP: ``adaptive`` vs ``adaptive_nobp`` vs ``adaptive_correction``, and the guards' share;
 5. the oracle ceilings against ``adaptive_nobp``; 6. what tuning did on the training walks (seed 0).
 
 Usage: ``python bench/fusion_study.py --split standard --out /tmp/std --seeds 0 1 2``; a replicate on other
-layouts: ``--train-sites 111 112 113 114 115 116 --test-sites 211 212 213 214 215``.
+layouts: ``--train-sites 111 112 113 114 115 116 --test-sites 211 212 213 214 215``. ``--reports-only`` re-reads a
+finished study's per-walk ``seed*/report/metrics.csv`` and prints the claim and sanity tables again (no fitting,
+no oracles). ``study.json`` keeps every walk's rows (``walks``), so any other pair can be compared later.
 """
 
 from __future__ import annotations
@@ -45,6 +48,8 @@ AWARE = ("adaptive_nobp", "adaptive", "adaptive_nobp+lag", "adaptive_nobp+rts")
 TWIN = {"adaptive_nobp": "adaptive_nobp_blind", "adaptive": "adaptive_blind",
         "adaptive_nobp+lag": "adaptive_nobp_blind+lag", "adaptive_nobp+rts": "adaptive_nobp_blind+rts"}
 RIVALS = ("kf", "kf_quality", "best input")
+SANITY = ("adaptive+lag", "adaptive")
+"""The methods held to 'never worse than the best single input': run's default (fixed lag) and the zero-latency one."""
 
 
 def run_seed(layout, library: Path, out: Path, seed: int, env_mode: str, workers: int | None) -> dict:
@@ -98,6 +103,67 @@ def _best_input(scores, env_class: str) -> str:
     return name
 
 
+def sanity(scores) -> list[dict]:
+    """Print and return run's default method and the zero-latency one against the best single input per class."""
+    from pipeline.compare import compare
+
+    print("\nSanity: the default method of run (adaptive+lag) and the zero-latency adaptive against the best "
+          "single input (must not be worse)\n")
+    out = []
+    for m in SANITY:
+        for c in CLASSES:
+            b = _best_input(scores, c)
+            cmp = compare(scores, m, b, c)
+            if cmp is not None:
+                out.append({"method": m, "env_class": c, "input": b, "delta": cmp.delta, "lo": cmp.lo, "hi": cmp.hi,
+                            "mean_a_m": cmp.mean_a_m, "mean_b_m": cmp.mean_b_m})
+                print(f"- {cmp}")
+    return out
+
+
+def claims(scores) -> list[dict]:
+    """Print and return the environment-aware methods against kf, kf_quality, the best input and their twin."""
+    from pipeline.compare import compare
+
+    print("\nThe claim: Δ = pooled mean error ratio − 1 (negative: the first method better), 95 % interval over "
+          "test sites (bootstrap)\n")
+    print("| method | against | class | Δ | 95 % interval | means (m) | walks / sites |")
+    print("|---|---|---|---|---|---|---|")
+    out = []
+    for a in AWARE:
+        for rival in RIVALS + (TWIN[a],):
+            for c in CLASSES:
+                b = _best_input(scores, c) if rival == "best input" else rival
+                cmp = compare(scores, a, b, c)
+                if cmp is None:
+                    continue
+                out.append({"a": a, "b": b, "env_class": c, "delta": cmp.delta, "lo": cmp.lo, "hi": cmp.hi,
+                            "mean_a_m": cmp.mean_a_m, "mean_b_m": cmp.mean_b_m})
+                print(f"| {a} | {b} | {c} | {100 * cmp.delta:+.1f} % | [{100 * cmp.lo:+.1f}, {100 * cmp.hi:+.1f}] | "
+                      f"{cmp.mean_a_m:.3f} / {cmp.mean_b_m:.3f} | {cmp.n_walks} / {cmp.n_sites} |")
+    return out
+
+
+def results_from_reports(out: Path, seeds: list[int]) -> list[list[dict]]:
+    """Each seed's per-walk rows as :func:`pipeline.compare.walk_scores` takes them, from
+    ``out/seed<s>/report/metrics.csv`` (a walk's site is the first part of its name, ``201/w0``; the pooled
+    ``all`` rows are left out)."""
+    import csv
+
+    by_seed = []
+    for s in seeds:
+        walks: dict = {}
+        with open(out / f"seed{s}" / "report" / "metrics.csv", newline="") as fh:
+            for r in csv.DictReader(fh):
+                if r["walk"] == "all":          # evaluate's pooled rows, not a walk
+                    continue
+                row = {"method": r["method"], "env_class": r["env_class"], "n": int(r["n"]),
+                       "mean_m": float(r["mean_m"])}
+                walks.setdefault(r["walk"], []).append(row)
+        by_seed.append([{"walk": w, "site": w.split("/")[0], "rows": rows} for w, rows in walks.items()])
+    return by_seed
+
+
 def main() -> None:
     from fingerprints.survey import build_library
     from pipeline.compare import compare, walk_scores
@@ -113,7 +179,14 @@ def main() -> None:
     ap.add_argument("--train-sites", type=int, nargs="+", default=None,
                     help="site seeds to train on instead of the split's (a replicate with other layouts)")
     ap.add_argument("--test-sites", type=int, nargs="+", default=None, help="site seeds to test on instead")
+    ap.add_argument("--reports-only", action="store_true",
+                    help="re-read a finished study's seed*/report/metrics.csv: the claim and sanity tables again")
     args = ap.parse_args()
+    if args.reports_only:
+        scores = walk_scores(results_from_reports(args.out, args.seeds))
+        claims(scores)
+        sanity(scores)
+        return
     t0 = time.perf_counter()
     split = SPLITS[args.split]
     if args.train_sites or args.test_sites:
@@ -153,28 +226,8 @@ def main() -> None:
             doc["table"].append({"method": m, "env_class": c, "n": rs[0]["n"], **row})
             print(f"| {m} | {c} | {rs[0]['n']} | {row['mean_m']:.3f} | {row['median_m']:.3f} | {row['p95_m']:.3f} | "
                   f"{row['max_m']:.2f} | {row['nees_in_bounds']:.2f} |")
-    print("\nThe claim: Δ = pooled mean error ratio − 1 (negative: the first method better), 95 % interval over "
-          "test sites (bootstrap)\n")
-    print("| method | against | class | Δ | 95 % interval | means (m) | walks / sites |")
-    print("|---|---|---|---|---|---|---|")
-    for a in AWARE:
-        for rival in RIVALS + (TWIN[a],):
-            for c in CLASSES:
-                b = _best_input(scores, c) if rival == "best input" else rival
-                cmp = compare(scores, a, b, c)
-                if cmp is None:
-                    continue
-                doc["claims"].append({"a": a, "b": b, "env_class": c, "delta": cmp.delta, "lo": cmp.lo, "hi": cmp.hi,
-                                      "mean_a_m": cmp.mean_a_m, "mean_b_m": cmp.mean_b_m})
-                print(f"| {a} | {b} | {c} | {100 * cmp.delta:+.1f} % | [{100 * cmp.lo:+.1f}, {100 * cmp.hi:+.1f}] | "
-                      f"{cmp.mean_a_m:.3f} / {cmp.mean_b_m:.3f} | {cmp.n_walks} / {cmp.n_sites} |")
-    print("\nSanity: the default method against its best single input (must not be worse)\n")
-    for c in CLASSES:
-        b = _best_input(scores, c)
-        cmp = compare(scores, "adaptive", b, c) or compare(scores, "adaptive_nobp", b, c)
-        if cmp is not None:
-            doc["sanity"].append({"env_class": c, "input": b, "delta": cmp.delta, "lo": cmp.lo, "hi": cmp.hi})
-            print(f"- {cmp}")
+    doc["claims"] = claims(scores)
+    doc["sanity"] = sanity(scores)
     print("\nOracle ceilings against adaptive_nobp\n")
     for o in ("oracle_class", "oracle_variance", "oracle_debias"):
         cmp = compare(scores, o, "adaptive_nobp")
@@ -197,7 +250,9 @@ def main() -> None:
     print("\nTuning on the training walks (seed 0): mean error before -> after\n")
     for m, r in doc["tuning"].items():
         print(f"- {m}: {r['error_before_m']:.3f} -> {r['error_after_m']:.3f} m")
-    (args.out / "study.json").write_text(json.dumps(doc, indent=1, allow_nan=True))
+    doc["walks"] = {f"seed{s}": [{"walk": r["walk"], "site": r["site"], "rows": r["rows"]} for r in results[s]["results"]]
+                    for s in args.seeds}
+    (args.out / "study.json").write_text(json.dumps(doc, indent=1, allow_nan=True, default=float))
     print(f"\nwall time {time.perf_counter() - t0:.0f} s; tables in {args.out / 'study.json'}")
 
 
