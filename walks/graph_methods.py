@@ -26,6 +26,8 @@ method runs.
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 
 from models.fusion.events import STEP, StepEvents, merge_events
@@ -182,6 +184,18 @@ def _ekf_rtk_pdr(ctx: MethodContext):
     return RtkPdrEKF(method="ekf_rtk_pdr").run(stream, r, frac)
 
 
+def _solver_guard(build):
+    """A GTSAM solver that gives up on a walk (an indeterminate system, a failed elimination: RuntimeError)
+    skips that method with GTSAM's reason instead of failing the walk, so every other method's track is kept."""
+    def guarded(ctx: MethodContext):
+        try:
+            return build(ctx)
+        except RuntimeError as exc:
+            first = next((ln.strip() for ln in str(exc).splitlines() if ln.strip()), type(exc).__name__)
+            raise MethodSkipped(f"GTSAM could not solve this walk ({first})") from None
+    return guarded
+
+
 for _m in (Method("fg_batch", _batch("fg_batch"), "factor graph, Levenberg–Marquardt, Huber factors"),
            Method("fg_gauss", _batch("fg_gauss", gnss_kernel="gauss", acoustic_kernel="gauss"),
                   "factor graph with Gaussian factors (the seed's form)"),
@@ -196,4 +210,4 @@ for _m in (Method("fg_batch", _batch("fg_batch"), "factor graph, Levenberg–Mar
            Method("fg_tight", _fg_tight, "fixed lag, tightly coupled acoustic ranges and clocks"),
            Method("fg_ins", _fg_ins, "IMU preintegration factors with GNSS and acoustic factors"),
            Method("ekf_rtk_pdr", _ekf_rtk_pdr, "the RTK/PDR EKF of Zhang et al. 2023", filter=True)):
-    register(_m)
+    register(_m if _m.filter else dataclasses.replace(_m, build=_solver_guard(_m.build)))
