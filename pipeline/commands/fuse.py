@@ -12,12 +12,21 @@ from pipeline.args import UsageError
 GROUP = None  # top-level commands, registered by register_top
 
 
-DEFAULT_METHOD = "adaptive+lag"
-"""run's method when none is named: the adaptive filter's fixed-lag track (:data:`walks.methods.LAG_S` late). On
-the standard split's held-out sites (3 seeds) it is never worse than the best single input in any class (open
-0.045 m against the RTK fixes' 0.056 m) where the zero-latency ``adaptive`` is worse in the open (0.068 m, +22 %):
-after an outage the filter rejoins the fixes over a few seconds, which the lag smooths out. A patrol track is rarely
-needed with zero latency; ``--method adaptive`` gives it."""
+DEFAULT_METHOD = "adaptive_blind+lag"
+"""run's method when none is named: the context error model (GNSS bias states, outlier prior, the receiver's
+GST, the BP parameter network) *without* the environment class, as its fixed-lag track (:data:`walks.methods.LAG_S`
+late). Chosen on held-out evidence (``bench/fusion_study.py``, 5 sites × 3 walks × 3 seeds per split):
+
+- it is never worse than the best single input in any class on either split (means; standard: open 0.046 vs the
+  RTK fixes' 0.056 m, light 0.132 vs 0.273 m; four weeks later: open 0.032 vs 0.041 m, light 0.186 vs 0.189 m);
+- the class-aware ``adaptive+lag`` ties it on new sites (−2.6 % [−16.5, +13.4]) and is worse four weeks later at
+  the same sites (+15.0 % [+4.2, +24.6]; open 0.051 vs the fixes' 0.041 m): per-(class, quality) error models
+  fitted on a few walks do not carry to another day's sky, and the class is wrong often enough to pick the
+  wrong one;
+- the zero-latency filters trail the RTK fixes in the open for a few seconds after each outage; the lag
+  smooths that out. A patrol track is rarely needed with zero latency (``--method adaptive_blind``).
+
+The environment class is still computed and written with every position (``env_class``, its probability)."""
 
 
 def register_top(sub) -> None:
@@ -27,14 +36,14 @@ def register_top(sub) -> None:
         "run", help="fuse one walk into a track (CSV or GeoJSON)",
         description="Read a walk directory (NMEA, audio, IMU), classify its environment window by window and "
                     "fuse GNSS, acoustic positions and PDR with the chosen method.",
-        epilog="Example: envfuse run walk7 --model fusion_model --out track.csv  (the adaptive filter, 3 s late; "
-               "--method adaptive for zero latency)")
+        epilog="Example: envfuse run walk7 --model fusion_model --out track.csv  (the context filter, 3 s late; "
+               "--method adaptive_blind for zero latency, --method adaptive+lag for the class-aware one)")
     p.add_argument("walk", type=Path, help="walk directory")
     p.add_argument("--model", type=Path, required=True, help="fusion model directory (train fusion)")
     p.add_argument("--out", type=Path, required=True, help="track file to write (CSV, or GeoJSON with --format)")
     p.add_argument("--method", choices=method_names(smoothed=True), default=DEFAULT_METHOD,
                    help=f"fusion method (default {DEFAULT_METHOD}; a filter's +rts variant is its RTS-smoothed track, "
-                        "+lag its fixed-lag track, --lag-s late; adaptive is the same filter with zero latency)")
+                        "+lag its fixed-lag track, --lag-s late)")
     p.add_argument("--lag-s", type=float, default=None,
                    help="lag of a +lag track, s (default 3: the track a few seconds late, most of the smoother's gain)")
     p.add_argument("--format", choices=("csv", "geojson"), default=None,
