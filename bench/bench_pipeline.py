@@ -8,11 +8,15 @@
    ratio is the figure to compare). Target: ≥ 500× real time.
 2. **Fusion step alone**: events per second of each method on that walk's
    event stream (reading excluded). Target: ≥ 50,000 steps/s for ``adaptive``.
-3. **evaluate over 8 walks** with 1 and 2 local workers: wall time, parallel
-   efficiency T1 / (2·T2) (target ≥ 0.8) and the peak resident memory of a
-   worker process.
+3. **evaluate over 16 walks** (``--eval-walk-s`` each, default 60 s, simulated on the same site) with 1 and
+   2 local workers: wall time, parallel efficiency T1 / (2·T2) (target ≥ 0.9), the same on a long-lived
+   2-worker cluster reached as ``--scheduler`` (its second run: workers warm), the peak resident memory of a
+   worker process, and the **fixed cost per run**: cluster start, a fresh worker's imports, its model load,
+   the first walk's caches (its first walk minus the same walk again), the model loads per worker and
+   cold-minus-warm run time; with the ``oaconvolve`` yardstick timed in the same run.
 
-Usage: ``python bench/bench_pipeline.py [--quick]`` (``--quick``: 2-minute walks, 4 walks).
+Usage: ``python bench/bench_pipeline.py [--quick] [--evaluate-only]`` (``--quick``: 2-minute walks, 4 walks;
+``--evaluate-only``: 2 training walks of 120 s, then section 3 only).
 """
 
 from __future__ import annotations
@@ -188,7 +192,8 @@ def evaluate_scaling(walks, model_dir: Path, tmp: Path, repeat: int = 2) -> dict
     """Wall time of ``evaluate`` with 1 and 2 local workers, the runs interleaved (1, 2, 1, 2, ...) and the
     best of ``repeat`` kept: this VM's speed moves by tens of per cent within minutes, and interleaving
     lets both see the same machine. Each 2-worker run starts its own Dask cluster (worker start-up and
-    imports included, as a user's ``envfuse evaluate --workers 2`` pays them)."""
+    imports included, as a user's ``envfuse evaluate --workers 2`` pays them). The 1-worker run is a loop in
+    this process, already warm (imports made, model read, caches filled)."""
     from pipeline.evaluate import evaluate
 
     out: dict = {1: np.inf, 2: np.inf}
@@ -198,6 +203,78 @@ def evaluate_scaling(walks, model_dir: Path, tmp: Path, repeat: int = 2) -> dict
             evaluate(walks, model_dir, tmp / f"rep{workers}", workers=workers, progress=False, plots=False)
             out[workers] = min(out[workers], time.perf_counter() - t0)
     return out
+
+
+def long_lived_cluster(walks, model_dir: Path, tmp: Path, runs: int = 3) -> dict:
+    """``evaluate --scheduler`` on one 2-worker ``LocalCluster`` kept across ``runs`` runs (as a long-lived
+    cluster would be): each run's wall time and the model loads each worker has made after it (one per worker
+    in all when the workers keep their model across walks and runs)."""
+    import logging
+
+    from distributed import Client, LocalCluster
+
+    from pipeline.evaluate import evaluate, model_loads
+
+    t0 = time.perf_counter()
+    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None,
+                      silence_logs=logging.ERROR) as cluster, Client(cluster) as client:
+        client.wait_for_workers(2)
+        start = time.perf_counter() - t0
+        walls, loads = [], []
+        for k in range(runs):
+            t0 = time.perf_counter()
+            evaluate(walks, model_dir, tmp / f"sched{k}", scheduler=cluster.scheduler_address, progress=False,
+                     plots=False)
+            walls.append(time.perf_counter() - t0)
+            loads.append(sorted(client.run(model_loads).values()))
+    return {"start_s": start, "walls": walls, "loads": loads}
+
+
+def _cold_probe(walk, model_dir) -> dict:
+    """On a fresh worker: seconds to import what a task needs, to read the model, to run the first walk and
+    the same walk again (the difference: the first walk's caches: numba's on-disk cache, lazy imports)."""
+    import sys
+
+    t0 = time.perf_counter()
+    before = len(sys.modules)
+    from pipeline.evaluate import evaluate_walk, load_model
+    from walks.methods import method_names
+    import pipeline.site_map  # noqa: F401 - what evaluate_walk imports on its first call
+    import walks.fuse  # noqa: F401
+
+    t1 = time.perf_counter()
+    load_model(model_dir)
+    t2 = time.perf_counter()
+    evaluate_walk(walk, model_dir, method_names(), False)
+    t3 = time.perf_counter()
+    evaluate_walk(walk, model_dir, method_names(), False)
+    t4 = time.perf_counter()
+    return {"imports_s": t1 - t0, "modules": len(sys.modules) - before, "load_s": t2 - t1,
+            "first_s": t3 - t2, "again_s": t4 - t3}
+
+
+def fixed_cost(walk, model_dir: Path) -> dict:
+    """The parts of a run's fixed cost on a fresh 2-worker cluster, as ``evaluate --workers 2`` starts it:
+    the cluster's start (until both workers answer), then per worker :func:`_cold_probe` (worst worker)."""
+    import logging
+
+    import dask
+    from distributed import Client, LocalCluster
+
+    from pipeline.parallel import local_worker_config
+
+    t0 = time.perf_counter()
+    with dask.config.set(local_worker_config()):
+        cluster = LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None,
+                               silence_logs=logging.ERROR)
+    with cluster, Client(cluster) as client:
+        client.wait_for_workers(2)
+        start = time.perf_counter() - t0
+        workers = list(client.scheduler_info()["workers"])
+        probes = client.gather([client.submit(_cold_probe, str(walk), str(model_dir), workers=[w], pure=False)
+                                for w in workers])
+    worst = {k: max(p[k] for p in probes) for k in probes[0]}
+    return {"start_s": start, **worst}
 
 
 def machine_ceiling(walks, model_dir: Path) -> float:
@@ -230,50 +307,95 @@ def _ceiling_worker(args) -> float:
     return time.perf_counter() - t0
 
 
+def build_eval_walks(tmp: Path, walk_s: float, n: int = 16) -> list[Path]:
+    """``n`` more walks of ``walk_s`` seconds on the site :func:`build` drew (seeds 100...)."""
+    from simulation.walk import simulate_walk
+
+    return [simulate_walk(tmp / "site", tmp / f"e{k}", seed=100 + k, duration_s=walk_s, progress=False)
+            for k in range(n)]
+
+
+def evaluate_section(walks, model_dir: Path, tmp: Path, walk_s: float) -> None:
+    """Section 3: evaluate over the walks on 1 and 2 workers, a long-lived cluster, the fixed cost per run."""
+    from pipeline.parallel import map_walks
+    from walks.methods import method_names
+
+    n = len(walks)
+    yard, yard_warm = oaconvolve_rate(walks[0] / "audio.wav")
+    times = evaluate_scaling(walks, model_dir, tmp)
+    eff = times[1] / (2 * times[2])
+    lived = long_lived_cluster(walks, model_dir, tmp)
+    warm = min(lived["walls"][1:])
+    fc = fixed_cost(walks[0], model_dir)
+    ceiling = machine_ceiling(walks, model_dir)
+    rss = map_walks(_peak_rss_task, [str(w) for w in walks], str(model_dir), method_names(), False,
+                    workers=2, progress=False)
+    print(f"yardstick in this run: oaconvolve over one {walk_s:.0f} s walk's audio, first run {yard:,.0f}x, "
+          f"best of 3 {yard_warm:,.0f}x real time")
+    print(f"evaluate {n} walks of {walk_s:.0f} s, every method (best of 2, interleaved): 1 worker (this process, "
+          f"warm) {times[1]:.1f} s = {times[1] / n:.2f} s/walk; 2 workers (a new local cluster per run) "
+          f"{times[2]:.1f} s: parallel efficiency {eff:.2f} (target 0.9); the same work in two warmed-up plain "
+          f"processes: {ceiling:.2f}; peak RSS of a worker process {max(rss):.0f} MiB")
+    print(f"long-lived 2-worker cluster (evaluate --scheduler), started in {lived['start_s']:.1f} s: runs "
+          + ", ".join(f"{w:.1f} s" for w in lived["walls"])
+          + f"; efficiency of a warm run {times[1] / (2 * warm):.2f}; model loads per worker after each run "
+          + ", ".join(str(x) for x in lived["loads"]))
+    print(f"fixed cost of a run on a new 2-worker cluster: cluster start {fc['start_s']:.2f} s, a worker's "
+          f"imports {fc['imports_s']:.2f} s ({fc['modules']} modules), model load {fc['load_s'] * 1e3:.1f} ms, "
+          f"first walk's caches {fc['first_s'] - fc['again_s']:.2f} s (first walk {fc['first_s']:.2f} s, again "
+          f"{fc['again_s']:.2f} s): {fc['start_s'] + fc['imports_s'] + fc['load_s'] + fc['first_s'] - fc['again_s']:.2f} s"
+          f"; new-cluster run minus warm run: {times[2] - warm:.2f} s")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="2-minute walks, 4 walks")
     ap.add_argument("--breakdown-only", action="store_true",
                     help="3 walks (2 to train, 1 timed): the per-stage breakdown, no evaluate scaling")
+    ap.add_argument("--evaluate-only", action="store_true",
+                    help="2 training walks of 120 s, then only the evaluate figures (section 3)")
+    ap.add_argument("--eval-walk-s", type=float, default=60.0, help="length of each of the 16 evaluated walks (s)")
     args = ap.parse_args()
     walk_s, n_walks = (120.0, 4) if args.quick else (600.0, 8)
     if args.breakdown_only:
         n_walks = 3
+    if args.evaluate_only:
+        walk_s, n_walks = 120.0, 2
     with tempfile.TemporaryDirectory() as d:
         tmp = Path(d)
         t0 = time.perf_counter()
         walks, model_dir = build(tmp, walk_s, n_walks)
         print(f"built {n_walks} walks of {walk_s:.0f} s and a model in {time.perf_counter() - t0:.0f} s")
-        rate, n_events, step_rates = pipeline_rate(walks[-1], model_dir)
-        yard, yard_warm = oaconvolve_rate(walks[-1] / "audio.wav")
-        print(f"raw files -> adaptive track, one core: {rate:,.0f}x real time (oaconvolve matched filter in the same "
-              f"run: first run {yard:,.0f}x, ratio {rate / yard:.3f}; best of 3 {yard_warm:,.0f}x, ratio "
-              f"{rate / yard_warm:.3f}; target 500x)")
-        stages = stage_breakdown(walks[-1], model_dir)
-        total = sum(stages.values())
-        print(f"breakdown of one run (CPU s, best of 5; sum {total:.3f} s = {walk_s / total:,.0f}x real time, "
-              f"ratio to oaconvolve {walk_s / total / yard:.3f}):")
-        for name, sec in stages.items():
-            print(f"  {name:36s} {sec:7.3f} s  {100 * sec / total:5.1f} %  ({walk_s / sec:,.0f}x real time)")
-        n_events, n_steps = n_events
-        print(f"fusion alone on a {walk_s:.0f} s walk, best of 3: filter events (a predict or an update; "
-              f"{n_events:,} in all: {n_steps:,} PDR heel strikes cut at the fixes inside them, GNSS and acoustic "
-              f"fixes) per second, and PDR heel strikes per second")
-        for m, r in step_rates.items():
-            print(f"  {m:16s} {r:12,.0f} events/s {r * n_steps / n_events:12,.0f} heel strikes/s")
+        if not args.evaluate_only:
+            timing_sections(walks, model_dir, walk_s)
         if args.breakdown_only:
             return
-        times = evaluate_scaling(walks, model_dir, tmp)
-        eff = times[1] / (2 * times[2])
-        ceiling = machine_ceiling(walks, model_dir)
-        from pipeline.parallel import map_walks
-        from walks.methods import method_names
+        t0 = time.perf_counter()
+        eval_walks = build_eval_walks(tmp, args.eval_walk_s)
+        print(f"built 16 walks of {args.eval_walk_s:.0f} s to evaluate in {time.perf_counter() - t0:.0f} s")
+        evaluate_section(eval_walks, model_dir, tmp, args.eval_walk_s)
 
-        rss = map_walks(_peak_rss_task, [str(w) for w in walks], str(model_dir), method_names(), False,
-                        workers=2, progress=False)
-        print(f"evaluate {n_walks} walks (best of 2, interleaved): 1 worker {times[1]:.1f} s, 2 workers "
-              f"{times[2]:.1f} s, parallel efficiency {eff:.2f} (target 0.8); the same work in two warmed-up "
-              f"plain processes: {ceiling:.2f}; peak RSS of a worker process {max(rss):.0f} MiB")
+
+def timing_sections(walks, model_dir: Path, walk_s: float) -> None:
+    """Sections 1 and 2: raw files to the adaptive track, the per-stage breakdown, fusion alone."""
+    rate, n_events, step_rates = pipeline_rate(walks[-1], model_dir)
+    yard, yard_warm = oaconvolve_rate(walks[-1] / "audio.wav")
+    print(f"raw files -> adaptive track, one core: {rate:,.0f}x real time (oaconvolve matched filter in the same "
+          f"run: first run {yard:,.0f}x, ratio {rate / yard:.3f}; best of 3 {yard_warm:,.0f}x, ratio "
+          f"{rate / yard_warm:.3f}; target 500x)")
+    stages = stage_breakdown(walks[-1], model_dir)
+    total = sum(stages.values())
+    print(f"breakdown of one run (CPU s, best of 5; sum {total:.3f} s = {walk_s / total:,.0f}x real time, "
+          f"ratio to oaconvolve {walk_s / total / yard:.3f}):")
+    for name, sec in stages.items():
+        print(f"  {name:36s} {sec:7.3f} s  {100 * sec / total:5.1f} %  ({walk_s / sec:,.0f}x real time)")
+    n_events, n_steps = n_events
+    print(f"fusion alone on a {walk_s:.0f} s walk, best of 3: filter events (a predict or an update; "
+          f"{n_events:,} in all: {n_steps:,} PDR heel strikes cut at the fixes inside them, GNSS and acoustic "
+          f"fixes) per second, and PDR heel strikes per second")
+    for m, r in step_rates.items():
+        print(f"  {m:16s} {r:12,.0f} events/s {r * n_steps / n_events:12,.0f} heel strikes/s")
+
 
 if __name__ == "__main__":
     main()

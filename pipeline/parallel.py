@@ -30,7 +30,7 @@ from typing import Callable, Sequence
 
 from features.errors import ConfigError, EnvfuseError
 
-__all__ = ["TaskFailure", "map_walks", "default_workers", "check_scheduler"]
+__all__ = ["TaskFailure", "map_walks", "default_workers", "check_scheduler", "local_worker_config"]
 
 
 @dataclass(frozen=True)
@@ -56,6 +56,11 @@ back to the OS. Setting any glibc trim threshold also switches off malloc's dyna
 that is page-faulted in and unmapped again: on four 300 s walks a worker took 184,000 minor page
 faults against 1,500 in a plain process, and 0.8 s of system time. ``None`` leaves the variable
 unset (the worker inherits this process's environment, so a user's own setting still holds)."""
+
+
+def local_worker_config() -> dict:
+    """The Dask settings a local cluster of ``map_walks`` is started with (for a bench that starts its own)."""
+    return dict(_LOCAL_WORKER_CONFIG)
 
 
 def _failure(walk, exc: BaseException) -> TaskFailure:
@@ -171,7 +176,7 @@ def _map_dask(func, walks, args, workers, scheduler, bar) -> list:
     cluster = None
     if scheduler is None:
         n = workers or default_workers()
-        with dask.config.set(_LOCAL_WORKER_CONFIG):
+        with dask.config.set(local_worker_config()):
             cluster = LocalCluster(n_workers=min(n, len(walks)), threads_per_worker=1, processes=True,
                                    dashboard_address=None, silence_logs=logging.ERROR)
         client = Client(cluster)
