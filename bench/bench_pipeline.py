@@ -207,8 +207,10 @@ def evaluate_scaling(walks, model_dir: Path, tmp: Path, repeat: int = 2) -> dict
 
 def long_lived_cluster(walks, model_dir: Path, tmp: Path, runs: int = 3) -> dict:
     """``evaluate --scheduler`` on one 2-worker ``LocalCluster`` kept across ``runs`` runs (as a long-lived
-    cluster would be): each run's wall time and the model loads each worker has made after it (one per worker
-    in all when the workers keep their model across walks and runs)."""
+    cluster would be; its workers spawned, as ``dask worker`` processes are): each run's wall time, the model
+    loads each worker has made after it (one per worker in all when the workers keep their model across walks
+    and runs), and the peak resident memory of a worker (VmHWM; a spawned worker shares no pages with this
+    process, which a forked one would count)."""
     import logging
 
     from distributed import Client, LocalCluster
@@ -227,7 +229,11 @@ def long_lived_cluster(walks, model_dir: Path, tmp: Path, runs: int = 3) -> dict
                      plots=False)
             walls.append(time.perf_counter() - t0)
             loads.append(sorted(client.run(model_loads).values()))
-    return {"start_s": start, "walls": walls, "loads": loads}
+        from walks.methods import method_names
+
+        rss = client.gather(client.map(_peak_rss_task, [str(w) for w in walks], model_dir=str(model_dir),
+                                       methods=method_names(), force=False, pure=False))
+    return {"start_s": start, "walls": walls, "loads": loads, "rss_mib": max(rss)}
 
 
 def _cold_probe(walk, model_dir) -> dict:
@@ -253,9 +259,43 @@ def _cold_probe(walk, model_dir) -> dict:
             "first_s": t3 - t2, "again_s": t4 - t3}
 
 
+def fresh_imports_s(repeat: int = 3) -> float:
+    """Seconds a new interpreter takes to import what a walk's task needs (best of ``repeat``): a spawned
+    worker pays them before its first walk (the bench's own workers also import this script, so the probe on
+    them under-counts)."""
+    import subprocess
+
+    code = ("import time; t = time.perf_counter(); import distributed.worker, pipeline.evaluate, walks.fuse, "
+            "pipeline.site_map; print(time.perf_counter() - t)")
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}
+    return min(float(subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env,
+                                    check=True).stdout) for _ in range(repeat))
+
+
+def cli_runs(walks, model_dir: Path, tmp: Path) -> dict:
+    """``envfuse evaluate --workers N --no-plots`` on the walks as a user runs it (a new process: its imports,
+    the model read, for N = 2 the local cluster): wall seconds for N = 1, N = 2 (workers forked on Linux) and
+    N = 2 with the workers spawned (Dask's default, what evaluate did before), one run each."""
+    import subprocess
+
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}
+    out = {}
+    for name, n, extra in ((1, 1, {}), (2, 2, {}), ("2 spawned", 2,
+                                                   {"DASK_DISTRIBUTED__WORKER__MULTIPROCESSING_METHOD": "spawn"})):
+        t0 = time.perf_counter()
+        subprocess.run([sys.executable, "-m", "pipeline", "evaluate", *map(str, walks), "--model", str(model_dir),
+                        "--report", str(tmp / f"cli{n}"), "--workers", str(n), "--no-plots"], env={**env, **extra},
+                       check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        out[name] = time.perf_counter() - t0
+    return out
+
+
 def fixed_cost(walk, model_dir: Path) -> dict:
     """The parts of a run's fixed cost on a fresh 2-worker cluster, as ``evaluate --workers 2`` starts it:
-    the cluster's start (until both workers answer), then per worker :func:`_cold_probe` (worst worker)."""
+    the cluster's start (until both workers answer), then per worker :func:`_cold_probe` (worst worker), and
+    a new interpreter's imports (:func:`fresh_imports_s`). With forked workers (Linux) the probe's imports and
+    model load are what the fork did not already give, from this process, which has run walks: warmer than
+    ``envfuse evaluate``'s, which has only read the model (:func:`cli_runs` times that)."""
     import logging
 
     import dask
@@ -274,7 +314,7 @@ def fixed_cost(walk, model_dir: Path) -> dict:
         probes = client.gather([client.submit(_cold_probe, str(walk), str(model_dir), workers=[w], pure=False)
                                 for w in workers])
     worst = {k: max(p[k] for p in probes) for k in probes[0]}
-    return {"start_s": start, **worst}
+    return {"start_s": start, **worst, "fresh_imports_s": fresh_imports_s()}
 
 
 def machine_ceiling(walks, model_dir: Path) -> float:
@@ -317,9 +357,6 @@ def build_eval_walks(tmp: Path, walk_s: float, n: int = 16) -> list[Path]:
 
 def evaluate_section(walks, model_dir: Path, tmp: Path, walk_s: float) -> None:
     """Section 3: evaluate over the walks on 1 and 2 workers, a long-lived cluster, the fixed cost per run."""
-    from pipeline.parallel import map_walks
-    from walks.methods import method_names
-
     n = len(walks)
     yard, yard_warm = oaconvolve_rate(walks[0] / "audio.wav")
     times = evaluate_scaling(walks, model_dir, tmp)
@@ -327,24 +364,28 @@ def evaluate_section(walks, model_dir: Path, tmp: Path, walk_s: float) -> None:
     lived = long_lived_cluster(walks, model_dir, tmp)
     warm = min(lived["walls"][1:])
     fc = fixed_cost(walks[0], model_dir)
+    cli = cli_runs(walks, model_dir, tmp)
     ceiling = machine_ceiling(walks, model_dir)
-    rss = map_walks(_peak_rss_task, [str(w) for w in walks], str(model_dir), method_names(), False,
-                    workers=2, progress=False)
     print(f"yardstick in this run: oaconvolve over one {walk_s:.0f} s walk's audio, first run {yard:,.0f}x, "
           f"best of 3 {yard_warm:,.0f}x real time")
     print(f"evaluate {n} walks of {walk_s:.0f} s, every method (best of 2, interleaved): 1 worker (this process, "
           f"warm) {times[1]:.1f} s = {times[1] / n:.2f} s/walk; 2 workers (a new local cluster per run) "
           f"{times[2]:.1f} s: parallel efficiency {eff:.2f} (target 0.9); the same work in two warmed-up plain "
-          f"processes: {ceiling:.2f}; peak RSS of a worker process {max(rss):.0f} MiB")
+          f"processes: {ceiling:.2f}")
+    print(f"as a user runs it (envfuse evaluate --no-plots, a new process each): --workers 1 {cli[1]:.1f} s, "
+          f"--workers 2 {cli[2]:.1f} s: efficiency {cli[1] / (2 * cli[2]):.2f}; --workers 2 with spawned "
+          f"workers (as before) {cli['2 spawned']:.1f} s: {cli[1] / (2 * cli['2 spawned']):.2f}")
     print(f"long-lived 2-worker cluster (evaluate --scheduler), started in {lived['start_s']:.1f} s: runs "
           + ", ".join(f"{w:.1f} s" for w in lived["walls"])
           + f"; efficiency of a warm run {times[1] / (2 * warm):.2f}; model loads per worker after each run "
-          + ", ".join(str(x) for x in lived["loads"]))
-    print(f"fixed cost of a run on a new 2-worker cluster: cluster start {fc['start_s']:.2f} s, a worker's "
-          f"imports {fc['imports_s']:.2f} s ({fc['modules']} modules), model load {fc['load_s'] * 1e3:.1f} ms, "
-          f"first walk's caches {fc['first_s'] - fc['again_s']:.2f} s (first walk {fc['first_s']:.2f} s, again "
-          f"{fc['again_s']:.2f} s): {fc['start_s'] + fc['imports_s'] + fc['load_s'] + fc['first_s'] - fc['again_s']:.2f} s"
-          f"; new-cluster run minus warm run: {times[2] - warm:.2f} s")
+          + ", ".join(str(x) for x in lived["loads"]) + f"; peak RSS of a worker {lived['rss_mib']:.0f} MiB")
+    first = fc["first_s"] - fc["again_s"]
+    print(f"fixed cost of a run on a new 2-worker cluster (as evaluate --workers 2 starts it): cluster start "
+          f"{fc['start_s']:.2f} s; on a worker, imports {fc['imports_s']:.2f} s ({fc['modules']} modules; a new "
+          f"interpreter's: {fc['fresh_imports_s']:.2f} s), model load {fc['load_s'] * 1e3:.1f} ms, first walk's "
+          f"caches {first:.2f} s (first walk {fc['first_s']:.2f} s, again {fc['again_s']:.2f} s): "
+          f"{fc['start_s'] + fc['imports_s'] + fc['load_s'] + first:.2f} s in all; "
+          f"new-cluster run minus warm run: {times[2] - warm:.2f} s")
 
 
 def main() -> None:

@@ -96,3 +96,16 @@ def test_a_long_lived_cluster_keeps_its_model_across_runs_until_the_folder_chang
         assert loads_on_worker() == 2
         marker = client.submit(lambda p: load_model(p).meta.get("marker"), str(fm), pure=False).result()
         assert marker == "C" and loads_on_worker() == 2
+
+
+def test_local_workers_are_forked_on_linux_unless_the_user_chose_dask_s_start_method(monkeypatch):
+    """Forked workers start with this process's imports and checked model; a user's DASK_... setting stands."""
+    import sys
+
+    from pipeline.parallel import local_worker_config
+
+    monkeypatch.delenv("DASK_DISTRIBUTED__WORKER__MULTIPROCESSING_METHOD", raising=False)
+    method = local_worker_config()["distributed.worker.multiprocessing-method"]
+    assert method == ("fork" if sys.platform.startswith("linux") else "spawn")
+    monkeypatch.setenv("DASK_DISTRIBUTED__WORKER__MULTIPROCESSING_METHOD", "spawn")
+    assert "distributed.worker.multiprocessing-method" not in local_worker_config()
