@@ -238,7 +238,8 @@ def long_lived_cluster(walks, model_dir: Path, tmp: Path, runs: int = 3) -> dict
 
 def _cold_probe(walk, model_dir) -> dict:
     """On a fresh worker: seconds to import what a task needs, to read the model, to run the first walk and
-    the same walk again (the difference: the first walk's caches: numba's on-disk cache, lazy imports)."""
+    the same walk again (the difference: the first walk's caches: numba's on-disk cache, lazy imports), and
+    how many times the worker read the model meanwhile."""
     import sys
 
     t0 = time.perf_counter()
@@ -248,6 +249,9 @@ def _cold_probe(walk, model_dir) -> dict:
     import pipeline.site_map  # noqa: F401 - what evaluate_walk imports on its first call
     import walks.fuse  # noqa: F401
 
+    from pipeline.evaluate import model_loads
+
+    loads = model_loads()            # a forked worker inherits this process's count; what it adds is its own
     t1 = time.perf_counter()
     load_model(model_dir)
     t2 = time.perf_counter()
@@ -256,7 +260,7 @@ def _cold_probe(walk, model_dir) -> dict:
     evaluate_walk(walk, model_dir, method_names(), False)
     t4 = time.perf_counter()
     return {"imports_s": t1 - t0, "modules": len(sys.modules) - before, "load_s": t2 - t1,
-            "first_s": t3 - t2, "again_s": t4 - t3}
+            "first_s": t3 - t2, "again_s": t4 - t3, "loads": model_loads() - loads}
 
 
 def fresh_imports_s(repeat: int = 3) -> float:
@@ -384,7 +388,8 @@ def evaluate_section(walks, model_dir: Path, tmp: Path, walk_s: float) -> None:
           f"{fc['start_s']:.2f} s; on a worker, imports {fc['imports_s']:.2f} s ({fc['modules']} modules; a new "
           f"interpreter's: {fc['fresh_imports_s']:.2f} s), model load {fc['load_s'] * 1e3:.1f} ms, first walk's "
           f"caches {first:.2f} s (first walk {fc['first_s']:.2f} s, again {fc['again_s']:.2f} s): "
-          f"{fc['start_s'] + fc['imports_s'] + fc['load_s'] + first:.2f} s in all; "
+          f"{fc['start_s'] + fc['imports_s'] + fc['load_s'] + first:.2f} s in all; model reads on a worker over "
+          f"its first two walks {fc['loads']} (the run's own check in this process: 1); "
           f"new-cluster run minus warm run: {times[2] - warm:.2f} s")
 
 

@@ -8,7 +8,8 @@ and a distributed run give identical results, in the input order.
 
 - ``workers=1`` and no scheduler: a plain loop in this process (no Dask at all);
 - ``workers=N`` (default: one per core): a ``dask.distributed.LocalCluster`` of
-  N single-threaded worker processes, started and shut down here;
+  N single-threaded worker processes (forked on Linux: :data:`_LOCAL_WORKER_CONFIG`), started and shut
+  down here;
 - ``scheduler="tcp://host:8786"``: an existing Dask cluster.
 
 A task that raises (an :class:`~features.errors.EnvfuseError` for bad data in
@@ -66,7 +67,8 @@ interpreter and imports again what a task needs (1.2-1.4 s on this VM, scipy.sig
 first walk, and reads the model again; a forked worker starts as a copy of this process, with those imports
 made and the model ``evaluate`` has just read and checked (its content hash is still checked on every walk,
 :func:`pipeline.evaluate.load_model`), and the cluster starts in 0.1 s instead of 0.5 s. What makes forking
-this process safe: the thread that forks is Dask's event loop; the others at that moment are idle pools
+this process safe: Dask forks from a thread of its own (each worker's message-queue thread); the other
+threads at that moment wait on queues and sockets (Dask's event loop, its watch threads) or are idle pools
 (OpenBLAS, which re-initialises itself in the child through its pthread_atfork handlers; torch's, when a
 model was trained in this process, which no worker calls: the fusion model runs on numpy and numba); numba is
 used without its parallel threading layer and gtsam is built without TBB. Elsewhere (macOS, Windows) fork is
