@@ -15,6 +15,14 @@
    the first walk's caches (its first walk minus the same walk again), the model loads per worker and
    cold-minus-warm run time; with the ``oaconvolve`` yardstick timed in the same run.
 
+   Measured 2026-12-02 (``--evaluate-only``, 16 walks of 60 s, oaconvolve 1,795-1,856x best of 3 in the same
+   runs), two runs: 1 worker 29.8-29.9 s (1.87 s/walk); a new 2-worker cluster 17.2 / 16.3 s, efficiency
+   0.86 / 0.92 (two warmed-up plain processes: 0.90 / 0.94); before local workers were forked (spawned,
+   one run): 0.79 (33.7 s / 21.3 s), fixed cost 2.66 s in parts, 1.49 s as new-cluster minus warm run, now
+   0.13-0.19 s and 0.07-0.68 s. A long-lived cluster's warm runs: 0.87 / 0.95, one model read per worker in
+   all over 3 runs. ``envfuse evaluate`` as a user runs it: 0.78 forked against 0.72-0.73 spawned (its parent
+   has only read the model, so each worker still pays the first walk's caches and lazy imports).
+
 Usage: ``python bench/bench_pipeline.py [--quick] [--evaluate-only]`` (``--quick``: 2-minute walks, 4 walks;
 ``--evaluate-only``: 2 training walks of 120 s, then section 3 only).
 """
