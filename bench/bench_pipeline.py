@@ -8,11 +8,23 @@
    ratio is the figure to compare). Target: ≥ 500× real time.
 2. **Fusion step alone**: events per second of each method on that walk's
    event stream (reading excluded). Target: ≥ 50,000 steps/s for ``adaptive``.
-3. **evaluate over 8 walks** with 1 and 2 local workers: wall time, parallel
-   efficiency T1 / (2·T2) (target ≥ 0.8) and the peak resident memory of a
-   worker process.
+3. **evaluate over 16 walks** (``--eval-walk-s`` each, default 60 s, simulated on the same site) with 1 and
+   2 local workers: wall time, parallel efficiency T1 / (2·T2) (target ≥ 0.9), the same on a long-lived
+   2-worker cluster reached as ``--scheduler`` (its second run: workers warm), the peak resident memory of a
+   worker process, and the **fixed cost per run**: cluster start, a fresh worker's imports, its model load,
+   the first walk's caches (its first walk minus the same walk again), the model loads per worker and
+   cold-minus-warm run time; with the ``oaconvolve`` yardstick timed in the same run.
 
-Usage: ``python bench/bench_pipeline.py [--quick]`` (``--quick``: 2-minute walks, 4 walks).
+   Measured 2026-12-02 (``--evaluate-only``, 16 walks of 60 s, oaconvolve 1,795-1,856x best of 3 in the same
+   runs), two runs: 1 worker 29.8-29.9 s (1.87 s/walk); a new 2-worker cluster 17.2 / 16.3 s, efficiency
+   0.86 / 0.92 (two warmed-up plain processes: 0.90 / 0.94); before local workers were forked (spawned,
+   one run): 0.79 (33.7 s / 21.3 s), fixed cost 2.66 s in parts, 1.49 s as new-cluster minus warm run, now
+   0.13-0.19 s and 0.07-0.68 s. A long-lived cluster's warm runs: 0.87 / 0.95, one model read per worker in
+   all over 3 runs. ``envfuse evaluate`` as a user runs it: 0.78 forked against 0.72-0.73 spawned (its parent
+   has only read the model, so each worker still pays the first walk's caches and lazy imports).
+
+Usage: ``python bench/bench_pipeline.py [--quick] [--evaluate-only]`` (``--quick``: 2-minute walks, 4 walks;
+``--evaluate-only``: 2 training walks of 120 s, then section 3 only).
 """
 
 from __future__ import annotations
@@ -188,7 +200,8 @@ def evaluate_scaling(walks, model_dir: Path, tmp: Path, repeat: int = 2) -> dict
     """Wall time of ``evaluate`` with 1 and 2 local workers, the runs interleaved (1, 2, 1, 2, ...) and the
     best of ``repeat`` kept: this VM's speed moves by tens of per cent within minutes, and interleaving
     lets both see the same machine. Each 2-worker run starts its own Dask cluster (worker start-up and
-    imports included, as a user's ``envfuse evaluate --workers 2`` pays them)."""
+    imports included, as a user's ``envfuse evaluate --workers 2`` pays them). The 1-worker run is a loop in
+    this process, already warm (imports made, model read, caches filled)."""
     from pipeline.evaluate import evaluate
 
     out: dict = {1: np.inf, 2: np.inf}
@@ -198,6 +211,122 @@ def evaluate_scaling(walks, model_dir: Path, tmp: Path, repeat: int = 2) -> dict
             evaluate(walks, model_dir, tmp / f"rep{workers}", workers=workers, progress=False, plots=False)
             out[workers] = min(out[workers], time.perf_counter() - t0)
     return out
+
+
+def long_lived_cluster(walks, model_dir: Path, tmp: Path, runs: int = 3) -> dict:
+    """``evaluate --scheduler`` on one 2-worker ``LocalCluster`` kept across ``runs`` runs (as a long-lived
+    cluster would be; its workers spawned, as ``dask worker`` processes are): each run's wall time, the model
+    loads each worker has made after it (one per worker in all when the workers keep their model across walks
+    and runs), and the peak resident memory of a worker (VmHWM; a spawned worker shares no pages with this
+    process, which a forked one would count)."""
+    import logging
+
+    from distributed import Client, LocalCluster
+
+    from pipeline.evaluate import evaluate, model_loads
+
+    t0 = time.perf_counter()
+    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None,
+                      silence_logs=logging.ERROR) as cluster, Client(cluster) as client:
+        client.wait_for_workers(2)
+        start = time.perf_counter() - t0
+        walls, loads = [], []
+        for k in range(runs):
+            t0 = time.perf_counter()
+            evaluate(walks, model_dir, tmp / f"sched{k}", scheduler=cluster.scheduler_address, progress=False,
+                     plots=False)
+            walls.append(time.perf_counter() - t0)
+            loads.append(sorted(client.run(model_loads).values()))
+        from walks.methods import method_names
+
+        rss = client.gather(client.map(_peak_rss_task, [str(w) for w in walks], model_dir=str(model_dir),
+                                       methods=method_names(), force=False, pure=False))
+    return {"start_s": start, "walls": walls, "loads": loads, "rss_mib": max(rss)}
+
+
+def _cold_probe(walk, model_dir) -> dict:
+    """On a fresh worker: seconds to import what a task needs, to read the model, to run the first walk and
+    the same walk again (the difference: the first walk's caches: numba's on-disk cache, lazy imports), and
+    how many times the worker read the model meanwhile."""
+    import sys
+
+    t0 = time.perf_counter()
+    before = len(sys.modules)
+    from pipeline.evaluate import evaluate_walk, load_model
+    from walks.methods import method_names
+    import pipeline.site_map  # noqa: F401 - what evaluate_walk imports on its first call
+    import walks.fuse  # noqa: F401
+
+    from pipeline.evaluate import model_loads
+
+    loads = model_loads()            # a forked worker inherits this process's count; what it adds is its own
+    t1 = time.perf_counter()
+    load_model(model_dir)
+    t2 = time.perf_counter()
+    evaluate_walk(walk, model_dir, method_names(), False)
+    t3 = time.perf_counter()
+    evaluate_walk(walk, model_dir, method_names(), False)
+    t4 = time.perf_counter()
+    return {"imports_s": t1 - t0, "modules": len(sys.modules) - before, "load_s": t2 - t1,
+            "first_s": t3 - t2, "again_s": t4 - t3, "loads": model_loads() - loads}
+
+
+def fresh_imports_s(repeat: int = 3) -> float:
+    """Seconds a new interpreter takes to import what a walk's task needs (best of ``repeat``): a spawned
+    worker pays them before its first walk (the bench's own workers also import this script, so the probe on
+    them under-counts)."""
+    import subprocess
+
+    code = ("import time; t = time.perf_counter(); import distributed.worker, pipeline.evaluate, walks.fuse, "
+            "pipeline.site_map; print(time.perf_counter() - t)")
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}
+    return min(float(subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env,
+                                    check=True).stdout) for _ in range(repeat))
+
+
+def cli_runs(walks, model_dir: Path, tmp: Path) -> dict:
+    """``envfuse evaluate --workers N --no-plots`` on the walks as a user runs it (a new process: its imports,
+    the model read, for N = 2 the local cluster): wall seconds for N = 1, N = 2 (workers forked on Linux) and
+    N = 2 with the workers spawned (Dask's default, what evaluate did before), one run each."""
+    import subprocess
+
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}
+    out = {}
+    for name, n, extra in ((1, 1, {}), (2, 2, {}), ("2 spawned", 2,
+                                                   {"DASK_DISTRIBUTED__WORKER__MULTIPROCESSING_METHOD": "spawn"})):
+        t0 = time.perf_counter()
+        subprocess.run([sys.executable, "-m", "pipeline", "evaluate", *map(str, walks), "--model", str(model_dir),
+                        "--report", str(tmp / f"cli{n}"), "--workers", str(n), "--no-plots"], env={**env, **extra},
+                       check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        out[name] = time.perf_counter() - t0
+    return out
+
+
+def fixed_cost(walk, model_dir: Path) -> dict:
+    """The parts of a run's fixed cost on a fresh 2-worker cluster, as ``evaluate --workers 2`` starts it:
+    the cluster's start (until both workers answer), then per worker :func:`_cold_probe` (worst worker), and
+    a new interpreter's imports (:func:`fresh_imports_s`). With forked workers (Linux) the probe's imports and
+    model load are what the fork did not already give, from this process, which has run walks: warmer than
+    ``envfuse evaluate``'s, which has only read the model (:func:`cli_runs` times that)."""
+    import logging
+
+    import dask
+    from distributed import Client, LocalCluster
+
+    from pipeline.parallel import local_worker_config
+
+    t0 = time.perf_counter()
+    with dask.config.set(local_worker_config()):
+        cluster = LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None,
+                               silence_logs=logging.ERROR)
+    with cluster, Client(cluster) as client:
+        client.wait_for_workers(2)
+        start = time.perf_counter() - t0
+        workers = list(client.scheduler_info()["workers"])
+        probes = client.gather([client.submit(_cold_probe, str(walk), str(model_dir), workers=[w], pure=False)
+                                for w in workers])
+    worst = {k: max(p[k] for p in probes) for k in probes[0]}
+    return {"start_s": start, **worst, "fresh_imports_s": fresh_imports_s()}
 
 
 def machine_ceiling(walks, model_dir: Path) -> float:
@@ -230,50 +359,97 @@ def _ceiling_worker(args) -> float:
     return time.perf_counter() - t0
 
 
+def build_eval_walks(tmp: Path, walk_s: float, n: int = 16) -> list[Path]:
+    """``n`` more walks of ``walk_s`` seconds on the site :func:`build` drew (seeds 100...)."""
+    from simulation.walk import simulate_walk
+
+    return [simulate_walk(tmp / "site", tmp / f"e{k}", seed=100 + k, duration_s=walk_s, progress=False)
+            for k in range(n)]
+
+
+def evaluate_section(walks, model_dir: Path, tmp: Path, walk_s: float) -> None:
+    """Section 3: evaluate over the walks on 1 and 2 workers, a long-lived cluster, the fixed cost per run."""
+    n = len(walks)
+    yard, yard_warm = oaconvolve_rate(walks[0] / "audio.wav")
+    times = evaluate_scaling(walks, model_dir, tmp)
+    eff = times[1] / (2 * times[2])
+    lived = long_lived_cluster(walks, model_dir, tmp)
+    warm = min(lived["walls"][1:])
+    fc = fixed_cost(walks[0], model_dir)
+    cli = cli_runs(walks, model_dir, tmp)
+    ceiling = machine_ceiling(walks, model_dir)
+    print(f"yardstick in this run: oaconvolve over one {walk_s:.0f} s walk's audio, first run {yard:,.0f}x, "
+          f"best of 3 {yard_warm:,.0f}x real time")
+    print(f"evaluate {n} walks of {walk_s:.0f} s, every method (best of 2, interleaved): 1 worker (this process, "
+          f"warm) {times[1]:.1f} s = {times[1] / n:.2f} s/walk; 2 workers (a new local cluster per run) "
+          f"{times[2]:.1f} s: parallel efficiency {eff:.2f} (target 0.9); the same work in two warmed-up plain "
+          f"processes: {ceiling:.2f}")
+    print(f"as a user runs it (envfuse evaluate --no-plots, a new process each): --workers 1 {cli[1]:.1f} s, "
+          f"--workers 2 {cli[2]:.1f} s: efficiency {cli[1] / (2 * cli[2]):.2f}; --workers 2 with spawned "
+          f"workers (as before) {cli['2 spawned']:.1f} s: {cli[1] / (2 * cli['2 spawned']):.2f}")
+    print(f"long-lived 2-worker cluster (evaluate --scheduler), started in {lived['start_s']:.1f} s: runs "
+          + ", ".join(f"{w:.1f} s" for w in lived["walls"])
+          + f"; efficiency of a warm run {times[1] / (2 * warm):.2f}; model loads per worker after each run "
+          + ", ".join(str(x) for x in lived["loads"]) + f"; peak RSS of a worker {lived['rss_mib']:.0f} MiB")
+    first = fc["first_s"] - fc["again_s"]
+    print(f"fixed cost of a run on a new 2-worker cluster (as evaluate --workers 2 starts it): cluster start "
+          f"{fc['start_s']:.2f} s; on a worker, imports {fc['imports_s']:.2f} s ({fc['modules']} modules; a new "
+          f"interpreter's: {fc['fresh_imports_s']:.2f} s), model load {fc['load_s'] * 1e3:.1f} ms, first walk's "
+          f"caches {first:.2f} s (first walk {fc['first_s']:.2f} s, again {fc['again_s']:.2f} s): "
+          f"{fc['start_s'] + fc['imports_s'] + fc['load_s'] + first:.2f} s in all; model reads on a worker over "
+          f"its first two walks {fc['loads']} (the run's own check in this process: 1); "
+          f"new-cluster run minus warm run: {times[2] - warm:.2f} s")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="2-minute walks, 4 walks")
     ap.add_argument("--breakdown-only", action="store_true",
                     help="3 walks (2 to train, 1 timed): the per-stage breakdown, no evaluate scaling")
+    ap.add_argument("--evaluate-only", action="store_true",
+                    help="2 training walks of 120 s, then only the evaluate figures (section 3)")
+    ap.add_argument("--eval-walk-s", type=float, default=60.0, help="length of each of the 16 evaluated walks (s)")
     args = ap.parse_args()
     walk_s, n_walks = (120.0, 4) if args.quick else (600.0, 8)
     if args.breakdown_only:
         n_walks = 3
+    if args.evaluate_only:
+        walk_s, n_walks = 120.0, 2
     with tempfile.TemporaryDirectory() as d:
         tmp = Path(d)
         t0 = time.perf_counter()
         walks, model_dir = build(tmp, walk_s, n_walks)
         print(f"built {n_walks} walks of {walk_s:.0f} s and a model in {time.perf_counter() - t0:.0f} s")
-        rate, n_events, step_rates = pipeline_rate(walks[-1], model_dir)
-        yard, yard_warm = oaconvolve_rate(walks[-1] / "audio.wav")
-        print(f"raw files -> adaptive track, one core: {rate:,.0f}x real time (oaconvolve matched filter in the same "
-              f"run: first run {yard:,.0f}x, ratio {rate / yard:.3f}; best of 3 {yard_warm:,.0f}x, ratio "
-              f"{rate / yard_warm:.3f}; target 500x)")
-        stages = stage_breakdown(walks[-1], model_dir)
-        total = sum(stages.values())
-        print(f"breakdown of one run (CPU s, best of 5; sum {total:.3f} s = {walk_s / total:,.0f}x real time, "
-              f"ratio to oaconvolve {walk_s / total / yard:.3f}):")
-        for name, sec in stages.items():
-            print(f"  {name:36s} {sec:7.3f} s  {100 * sec / total:5.1f} %  ({walk_s / sec:,.0f}x real time)")
-        n_events, n_steps = n_events
-        print(f"fusion alone on a {walk_s:.0f} s walk, best of 3: filter events (a predict or an update; "
-              f"{n_events:,} in all: {n_steps:,} PDR heel strikes cut at the fixes inside them, GNSS and acoustic "
-              f"fixes) per second, and PDR heel strikes per second")
-        for m, r in step_rates.items():
-            print(f"  {m:16s} {r:12,.0f} events/s {r * n_steps / n_events:12,.0f} heel strikes/s")
+        if not args.evaluate_only:
+            timing_sections(walks, model_dir, walk_s)
         if args.breakdown_only:
             return
-        times = evaluate_scaling(walks, model_dir, tmp)
-        eff = times[1] / (2 * times[2])
-        ceiling = machine_ceiling(walks, model_dir)
-        from pipeline.parallel import map_walks
-        from walks.methods import method_names
+        t0 = time.perf_counter()
+        eval_walks = build_eval_walks(tmp, args.eval_walk_s)
+        print(f"built 16 walks of {args.eval_walk_s:.0f} s to evaluate in {time.perf_counter() - t0:.0f} s")
+        evaluate_section(eval_walks, model_dir, tmp, args.eval_walk_s)
 
-        rss = map_walks(_peak_rss_task, [str(w) for w in walks], str(model_dir), method_names(), False,
-                        workers=2, progress=False)
-        print(f"evaluate {n_walks} walks (best of 2, interleaved): 1 worker {times[1]:.1f} s, 2 workers "
-              f"{times[2]:.1f} s, parallel efficiency {eff:.2f} (target 0.8); the same work in two warmed-up "
-              f"plain processes: {ceiling:.2f}; peak RSS of a worker process {max(rss):.0f} MiB")
+
+def timing_sections(walks, model_dir: Path, walk_s: float) -> None:
+    """Sections 1 and 2: raw files to the adaptive track, the per-stage breakdown, fusion alone."""
+    rate, n_events, step_rates = pipeline_rate(walks[-1], model_dir)
+    yard, yard_warm = oaconvolve_rate(walks[-1] / "audio.wav")
+    print(f"raw files -> adaptive track, one core: {rate:,.0f}x real time (oaconvolve matched filter in the same "
+          f"run: first run {yard:,.0f}x, ratio {rate / yard:.3f}; best of 3 {yard_warm:,.0f}x, ratio "
+          f"{rate / yard_warm:.3f}; target 500x)")
+    stages = stage_breakdown(walks[-1], model_dir)
+    total = sum(stages.values())
+    print(f"breakdown of one run (CPU s, best of 5; sum {total:.3f} s = {walk_s / total:,.0f}x real time, "
+          f"ratio to oaconvolve {walk_s / total / yard:.3f}):")
+    for name, sec in stages.items():
+        print(f"  {name:36s} {sec:7.3f} s  {100 * sec / total:5.1f} %  ({walk_s / sec:,.0f}x real time)")
+    n_events, n_steps = n_events
+    print(f"fusion alone on a {walk_s:.0f} s walk, best of 3: filter events (a predict or an update; "
+          f"{n_events:,} in all: {n_steps:,} PDR heel strikes cut at the fixes inside them, GNSS and acoustic "
+          f"fixes) per second, and PDR heel strikes per second")
+    for m, r in step_rates.items():
+        print(f"  {m:16s} {r:12,.0f} events/s {r * n_steps / n_events:12,.0f} heel strikes/s")
+
 
 if __name__ == "__main__":
     main()

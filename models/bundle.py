@@ -38,7 +38,7 @@ import numpy as np
 from features.errors import EnvfuseError
 from features.fileio import sha256_file
 
-__all__ = ["BundleError", "Bundle", "save_bundle", "load_bundle", "bundle_kind", "FORMAT", "FORMAT_VERSION"]
+__all__ = ["BundleError", "Bundle", "save_bundle", "load_bundle", "bundle_kind", "bundle_digest", "FORMAT", "FORMAT_VERSION"]
 
 FORMAT = "envfuse-model"
 """Value of ``format`` in every bundle.json."""
@@ -144,6 +144,25 @@ def bundle_kind(path: str | os.PathLike) -> str | None:
     except (OSError, ValueError, UnicodeDecodeError):
         return None
     return doc.get("kind") if isinstance(doc, dict) and doc.get("format") == FORMAT else None
+
+
+def bundle_digest(path: str | os.PathLike) -> str | None:
+    """Hex SHA-256 of the bundle folder's content: every regular file in it (``bundle.json`` and the array files),
+    by name and by the SHA-256 of its bytes, in name order; None when the folder cannot be read.
+
+    Two folders with the same digest hold the same model, whatever their modification times: a cache keyed by
+    it never serves a model whose folder was replaced (a copy with ``cp -p`` or ``rsync -a`` keeps the old
+    times; a coarse file system may give two writes the same one). A bundle is a few tens of KiB to a few MiB,
+    so the digest costs well under a millisecond to a few milliseconds."""
+    import hashlib
+
+    h = hashlib.sha256()
+    try:
+        for f in sorted((e for e in Path(path).iterdir() if e.is_file()), key=lambda e: e.name):
+            h.update(f"{f.name}\0{sha256_file(f)}\n".encode())
+    except OSError:
+        return None
+    return h.hexdigest()
 
 
 def _check_replaceable(path: Path, kind: str) -> None:

@@ -4,7 +4,7 @@
 path ``envfuse run`` takes, then the walk's metric rows and the per-epoch
 series the plots draw. It is a pure function of the walk's files and the model
 bundle's path, so it runs the same serially or on a Dask worker
-(:mod:`pipeline.parallel`); the model is loaded once per process
+(:mod:`pipeline.parallel`); the model is loaded once per process and content
 (:func:`load_model`). :func:`evaluate` maps it over the walks, writes
 ``metrics.csv`` (:data:`walks.score.METRIC_COLUMNS`) and the PNGs, and returns
 the rows.
@@ -28,27 +28,40 @@ from walks.methods import method_names
 from walks.score import METRIC_COLUMNS, metric_rows, score, track_errors
 
 __all__ = ["evaluate_walk", "evaluate", "summary_table", "pooled_rows", "load_model", "method_order", "NEES_NOTE",
-           "bp_guard_line", "REPORT_PLOT_PREFIXES"]
+           "bp_guard_line", "REPORT_PLOT_PREFIXES", "model_loads"]
 
 _MODELS: dict = {}
+"""This process's model cache: {resolved model folder: (its :func:`~models.bundle.bundle_digest`, the model)}."""
+_LOADS = {"n": 0}
 
 
 def load_model(model_dir: str | os.PathLike):
-    """The fusion model of ``model_dir``, loaded once per process (again only if its ``bundle.json`` changed):
-    a Dask worker keeps it across the walks it is given."""
+    """The fusion model of ``model_dir``, read once per process and kept while the folder's content is unchanged.
+
+    The cache is keyed by the folder's resolved path AND its content hash (:func:`models.bundle.bundle_digest`,
+    every file's SHA-256), checked on every call: a Dask worker keeps its model across the walks it is given
+    and, on a long-lived cluster (``evaluate --scheduler``), across runs, yet a folder replaced by another model
+    (even one with the same modification times) is read again, never served stale. One model is kept: a
+    different path or content replaces it."""
+    from models.bundle import bundle_digest
     from models.fusion.model import load_fusion_model
 
     path = Path(model_dir).resolve()
-    try:
-        stamp = (path / "bundle.json").stat().st_mtime_ns
-    except OSError:
-        stamp = None
+    digest = bundle_digest(path)
     key = str(path)
     hit = _MODELS.get(key)
-    if hit is None or hit[0] != stamp or stamp is None:
+    if hit is None or digest is None or hit[0] != digest:
         _MODELS.clear()
-        _MODELS[key] = (stamp, load_fusion_model(path))
+        model = load_fusion_model(path)      # an unreadable or damaged folder raises BundleError here
+        _LOADS["n"] += 1
+        _MODELS[key] = (digest, model)
     return _MODELS[key][1]
+
+
+def model_loads() -> int:
+    """How many times this process has read a model bundle through :func:`load_model` (a worker's count tells
+    whether it kept its model: one per model, not one per walk)."""
+    return _LOADS["n"]
 
 
 def evaluate_walk(walk, model_dir: str, methods: tuple, force: bool = False) -> dict:
