@@ -12,11 +12,12 @@ therefore ``atan((height − z0) / t_in)``.
 from __future__ import annotations
 
 import numpy as np
+from numba import njit
 
 from features.site import Box
 
 __all__ = ["boxes_array", "footprint_entry", "horizon_elevation", "sky_blocked_fraction",
-           "ray_blockers", "segment_hits_boxes", "inside_boxes"]
+           "ray_blockers", "segment_hits_boxes", "segment_box_hits", "inside_boxes"]
 
 
 def boxes_array(boxes) -> np.ndarray:
@@ -164,27 +165,46 @@ def ray_blockers(p_en: np.ndarray, az_rad: np.ndarray, el_rad: np.ndarray, boxes
 
 
 def segment_hits_boxes(a_xyz: np.ndarray, b_xyz: np.ndarray, boxes: np.ndarray) -> np.ndarray:
-    """Whether 3-D segments a→b pass through boxes (ground to top), slab test in 3-D.
+    """Whether 3-D segments a→b pass through boxes (ground to top), slab test in 3-D (Kay & Kajiya 1986).
 
-    a_xyz, b_xyz : ndarray of shape (n, 3) (east, north, up). Returns bool (n, m).
+    a_xyz, b_xyz : ndarray of shape (n, 3) (east, north, up); boxes : (m, 5). Returns bool (n, m).
     Endpoints lying exactly on a face do not count as hits.
     """
-    a = np.asarray(a_xyz, float)[:, None, :]
-    d = np.asarray(b_xyz, float)[:, None, :] - a
-    lo = np.stack([boxes[:, 0], boxes[:, 2], np.zeros(len(boxes))], axis=-1)[None]
-    hi = np.stack([boxes[:, 1], boxes[:, 3], boxes[:, 4]], axis=-1)[None]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        inv = np.where(np.abs(d) > 1e-12, 1.0 / d, np.inf)
-        t1 = (lo - a) * inv
-        t2 = (hi - a) * inv
-    par = ~np.isfinite(inv)
-    inside = (a > lo) & (a < hi)
-    tmin = np.where(par, np.where(inside, -np.inf, np.inf), np.minimum(t1, t2))
-    tmax = np.where(par, np.where(inside, np.inf, -np.inf), np.maximum(t1, t2))
-    t_enter = tmin.max(axis=-1)
-    t_exit = tmax.min(axis=-1)
+    a = np.ascontiguousarray(a_xyz, dtype=float).reshape(-1, 3)
+    b = np.ascontiguousarray(b_xyz, dtype=float).reshape(-1, 3)
+    return segment_box_hits(a, b, np.ascontiguousarray(boxes, dtype=float).reshape(-1, 5))
+
+
+@njit(cache=True)
+def segment_box_hits(a: np.ndarray, b: np.ndarray, boxes: np.ndarray) -> np.ndarray:
+    """Slab test of every segment a[i]→b[i] (n, 3) against every box (m, 5); bool (n, m). Compiled: callable
+    from other compiled code with float arrays (:func:`segment_hits_boxes` converts any input).
+
+    Per axis k with direction d_k = b_k − a_k: entry/exit parameters (lo_k − a_k)/d_k and (hi_k − a_k)/d_k
+    (computed as products with 1/d_k); an axis with |d_k| ≤ 1e-12 is parallel and admits all t when a_k lies
+    strictly inside the slab, none otherwise. The segment hits when t_exit > t_enter + ε, t_exit > ε and
+    t_enter < 1 − ε (ε = 1e-9), i.e. it runs a positive length inside the box within t ∈ (0, 1).
+    """
+    n, m = a.shape[0], boxes.shape[0]
+    out = np.zeros((n, m), np.bool_)
     eps = 1e-9
-    return (t_exit > t_enter + eps) & (t_exit > eps) & (t_enter < 1.0 - eps)
+    for i in range(n):
+        for j in range(m):
+            t_enter, t_exit = -np.inf, np.inf
+            for k in range(3):
+                lo = boxes[j, 2 * k] if k < 2 else 0.0
+                hi = boxes[j, 2 * k + 1] if k < 2 else boxes[j, 4]
+                d = b[i, k] - a[i, k]
+                if abs(d) > 1e-12:
+                    inv = 1.0 / d
+                    t1 = (lo - a[i, k]) * inv
+                    t2 = (hi - a[i, k]) * inv
+                    t_enter = max(t_enter, min(t1, t2))
+                    t_exit = min(t_exit, max(t1, t2))
+                elif not (a[i, k] > lo and a[i, k] < hi):
+                    t_enter, t_exit = np.inf, -np.inf
+            out[i, j] = (t_exit > t_enter + eps) and (t_exit > eps) and (t_enter < 1.0 - eps)
+    return out
 
 
 def inside_boxes(p_en: np.ndarray, boxes: np.ndarray, margin_m: float = 0.0) -> np.ndarray:
