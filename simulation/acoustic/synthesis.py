@@ -38,7 +38,7 @@ from features.site import Site
 
 from simulation.acoustic.channel import ChannelConfig, PathSet, tail_model
 from simulation.acoustic.atmosphere import absorption_db_per_m, fresnel_number, maekawa_loss_db, speed_of_sound_m_s
-from simulation.acoustic.chirp import ChirpSpec, chirp_waveform
+from simulation.acoustic.chirp import ChirpSpec, chirp_length, chirp_waveform
 from simulation.acoustic.discharge import DischargeConfig, DischargeSources
 from simulation.site.geometry import boxes_array
 from simulation.rng import stream_rng
@@ -194,6 +194,7 @@ class ChirpRenderer:
         self.c = speed_of_sound_m_s(site.atmosphere.temperature_c)
         self.atmosphere = site.atmosphere
         self._alpha_cache: dict[int, np.ndarray] = {}
+        self._chirp_cache: dict[tuple, np.ndarray] = {}
 
     def _band(self, n_fft: int, spec: ChirpSpec, eta: float) -> tuple[int, int]:
         df = self.fs / n_fft
@@ -211,14 +212,14 @@ class ChirpRenderer:
                rng: np.random.Generator, level_scale: float) -> tuple[int, np.ndarray]:
         """Return (start sample, segment) of one emission as recorded (digital full-scale units)."""
         fs, c = self.fs, self.c
-        chirp = chirp_waveform(spec, fs, eta)
+        n_chirp = chirp_length(spec, fs, eta)
         start = int(math.floor(first_sample)) - _PRE_SAMPLES
         rel = first_sample - start + (paths.length_m - paths.length_m[0]) / c * fs   # (p,) samples
         keep = rel - rel[0] <= self.cfg.max_excess_delay_s * fs
         tail = tail_model(clutter)
         tail_len = int(5.0 * tail.decay_ms * 1e-3 * fs)
         tail0 = rel[0] + tail.onset_ms * 1e-3 * fs
-        n_used = int(max(rel[keep].max(), tail0 + tail_len)) + len(chirp) + _POST_SAMPLES
+        n_used = int(max(rel[keep].max(), tail0 + tail_len)) + n_chirp + _POST_SAMPLES
         n_fft = sfft.next_fast_len(n_used, real=True)
         k0, k1 = self._band(n_fft, spec, eta)
         k = np.arange(k0, k1)
@@ -240,12 +241,21 @@ class ChirpRenderer:
             e_target = 10.0 ** (level_db / 10.0) / max(paths.direct_m, 1e-3) ** 2
             scale = math.sqrt(e_target / (tail.density_per_ms * tail.decay_ms / 2.0))
             amp = rng.standard_normal(n_taps) * np.exp(-t_ms / tail.decay_ms) * scale
-            taps = np.zeros(n_fft)
-            np.add.at(taps, np.minimum((tail0 + t_ms * 1e-3 * fs).astype(int), n_fft - 1), amp)
+            taps = np.bincount(np.minimum((tail0 + t_ms * 1e-3 * fs).astype(int), n_fft - 1), amp, n_fft)
             h += sfft.rfft(taps)[k0:k1] * 10.0 ** (-alpha * paths.direct_m / 20.0)
         spectrum = np.zeros(n_fft // 2 + 1, complex)
-        spectrum[k0:k1] = sfft.rfft(chirp, n_fft)[k0:k1] * h
+        spectrum[k0:k1] = self._chirp_spectrum(spec, eta, n_fft)[k0:k1] * h
         return start, sfft.irfft(spectrum, n_fft) * level_scale
+
+    def _chirp_spectrum(self, spec: ChirpSpec, eta: float, n_fft: int) -> np.ndarray:
+        """rfft of the chirp heard with Doppler factor η, zero-padded to ``n_fft``; the last few kept (a
+        standing walker, η = 1, hears the same chirp frame after frame)."""
+        key = (spec, eta, n_fft)
+        if key not in self._chirp_cache:
+            if len(self._chirp_cache) >= 64:
+                self._chirp_cache.pop(next(iter(self._chirp_cache)))
+            self._chirp_cache[key] = sfft.rfft(chirp_waveform(spec, self.fs, eta), n_fft)
+        return self._chirp_cache[key]
 
 
 def _distance_to_boxes(p_en: np.ndarray, boxes: np.ndarray) -> np.ndarray:
