@@ -150,7 +150,7 @@ def test_arrival_fixed_point_per_emission_of_a_batch():
         def pos(ta):
             return np.array([-20.0 + 1.5 * ta, 5.0, 1.0])
         want = brentq(lambda ta: ta - t_e[i] - np.linalg.norm(src[i] - pos(ta)) / c, t_e[i], t_e[i] + 1.0)
-        assert arr.t_a_s[i] == pytest.approx(want, abs=5e-6)      # two fixed-point steps: error ≈ (v/c)²·d/c ≈ 1.4 µs
+        assert arr.t_a_s[i] == pytest.approx(want, abs=5e-6)      # two fixed-point steps: ≈ (v/c)²·d/c ≈ 1.4 µs
         assert np.allclose(arr.rx[i], pos(arr.t_a_s[i]), atol=1e-9)
         assert arr.d_m[i] == pytest.approx(np.linalg.norm(src[i] - arr.rx[i]), abs=1e-12)
     assert arr.heard.tolist() == [True, True, False]

@@ -32,8 +32,8 @@ from scipy.signal.windows import tukey
 from features.errors import ConfigError
 from features.site import Beacon, Site
 
-__all__ = ["ChirpSpec", "beacon_chirp", "chirp_length", "chirp_waveform", "reference_chirp", "frame_phase_s", "emission_times_s",
-           "slot_reuse_conflicts"]
+__all__ = ["ChirpSpec", "beacon_chirp", "chirp_length", "chirp_waveform", "reference_chirp", "frame_phase_s",
+           "emission_times_s", "slot_reuse_conflicts"]
 
 _EPOCH = datetime(1970, 1, 1, tzinfo=timezone.utc)
 

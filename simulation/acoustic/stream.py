@@ -107,7 +107,7 @@ def _velocity_table(traj: Trajectory) -> tuple[np.ndarray, np.ndarray]:
     return traj.speed_m_s * np.sin(traj.heading_rad), traj.speed_m_s * np.cos(traj.heading_rad)
 
 
-def _emission_batches(site: Site, start_utc, t_begin_s: float, t_end_s: float, size: int = 2048) -> Iterator[list]:
+def _emission_batches(site: Site, start_utc, t_begin_s: float, t_end_s: float, size: int = 128) -> Iterator[list]:
     """Every (t_emit_s, beacon_id, index, beacon, spec) in [t_begin_s, t_end_s), in emission order, in lists of
     at most ``size``.
 
@@ -185,14 +185,16 @@ class _Emitter:
             t_e = (t_sched + np.array([self.delays[bid] for bid in bids])
                    + self.hardware.emission_jitter_s * self.jitter_rng.standard_normal(len(batch)))
         arr = self.arrivals(t_e, src, bids, [e[4] for e in batch])
+        heard = [self.prepare(arr, j, e[1], src[j], e[4]) for j, e in enumerate(batch)]
+        segments = iter(self.renderer.render_many([got[0] for got in heard if got is not None]))
         for j, (t_s, bid, _, beacon, spec) in enumerate(batch):
             self.n_emissions += 1
             bar.set(int(min(max(float(t_e[j]) - self.true_start, 0.0), self.trajectory.duration_s)))
             recorder.flush_until((float(t_e[j]) - self.true_start) * self.fs_true - _PRE_SAMPLES - 2)
-            got = self.render(arr, j, bid, src[j], spec)
-            if got is None:
+            if heard[j] is None:
                 continue
-            start, seg, paths, t_a, first_sample, rx, eta = got
+            start, seg = next(segments)
+            _, paths, t_a, first_sample, rx, eta = heard[j]
             recorder.acc.add(start, seg)
             self.n_rendered += 1
             if first_sample >= 0:
@@ -223,7 +225,8 @@ class _Emitter:
         rx = _positions_at(trajectory, t_a)
         d = _norms(src - rx)
         # whether even in free field it could rise out of the noise
-        heard = self.sl_db - 20.0 * np.log10(np.maximum(d, 1e-3)) - alpha * d >= self.noise_floor_db - self.cfg.skip_margin_db
+        floor_db = self.noise_floor_db - self.cfg.skip_margin_db
+        heard = self.sl_db - 20.0 * np.log10(np.maximum(d, 1e-3)) - alpha * d >= floor_db
         return _Arrivals(t_e_s=t_e, c_m_s=c_e, t_a_s=t_a, rx=rx, d_m=d, heard=heard,
                          speed_m_s=np.interp(t_a, trajectory.t_s, trajectory.speed_m_s),
                          hardware=self.hardware_factors(t_e, src, rx, bids, specs))
@@ -240,9 +243,9 @@ class _Emitter:
         return _hardware_factors(src, rx, np.array([self.axes[bid] for bid in bids]), f_c, self.renderer.c,
                                  traj.heading_rad[i], self.hardware)
 
-    def render(self, arr: _Arrivals, j: int, bid: int, src: np.ndarray, spec: ChirpSpec):
-        """(start, samples, paths, t_a, first_sample, rx, η) of emission ``j`` of the batch ``arr``, or None
-        when it cannot be heard (below the noise even in free field, no path, outside the recording)."""
+    def prepare(self, arr: _Arrivals, j: int, bid: int, src: np.ndarray, spec: ChirpSpec):
+        """(the renderer's arguments, paths, t_a, first_sample, rx, η) of emission ``j`` of the batch ``arr``, or
+        None when it cannot be heard (below the noise even in free field, no path, outside the recording)."""
         trajectory, cfg = self.trajectory, self.cfg
         sl_db, noise_floor_db, fs = self.sl_db, self.noise_floor_db, cfg.fs_hz
         if not arr.heard[j]:
@@ -279,9 +282,8 @@ class _Emitter:
         # the tail realisation belongs to the place (1 cm grid): a static receiver hears the same tail every
         # frame, a walker (≥ 1 m between a beacon's chirps, ≫ λ/2 ≈ 8 mm) an independent one
         rng = stream_rng(self.seed, "audio", "tail", bid, *(int(round(x_m * 100.0)) + 10**8 for x_m in rx))
-        start, seg = self.renderer.render(paths, spec, eta, first_sample, self.clutter_cache[cell], rng,
-                                          self.level_scale)
-        return start, seg, paths, t_a, first_sample, rx, eta
+        return ((paths, spec, eta, first_sample, self.clutter_cache[cell], rng, self.level_scale), paths, t_a,
+                first_sample, rx, eta)
 
 
 def render_audio(site: Site, trajectory: Trajectory, seed: int, wav_path,
