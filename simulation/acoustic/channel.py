@@ -43,8 +43,8 @@ from features.errors import ConfigError
 from features.site import Site
 
 from simulation.acoustic.atmosphere import GROUND_MATERIAL, reflection_coefficient, speed_of_sound_m_s
-from simulation.acoustic.path_geometry import NUDGE_M, lateral_length, over_top_length, wall_reflections
-from simulation.site.geometry import boxes_array, footprint_entry, segment_hits_boxes
+from simulation.acoustic.path_geometry import discrete_paths
+from simulation.site.geometry import boxes_array, footprint_entry
 
 __all__ = ["PATH_KINDS", "PathSet", "ChannelConfig", "Scene", "build_scene", "channel_paths", "clutter_index",
            "TailModel", "tail_model", "beacon_arrivals"]
@@ -162,14 +162,6 @@ def build_scene(site: Site, config: ChannelConfig | None = None) -> Scene:
                  ground_r=reflection_coefficient(config.ground_material), config=config)
 
 
-def _porous_gain(scene: Scene, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Pressure factor 10^(−n·loss/20) for segments a→b (n, 3) crossing n porous boxes; shape (n,)."""
-    if scene.porous.shape[0] == 0 or scene.config.porous_loss_db == 0:
-        return np.ones(a.shape[0])
-    n_cross = segment_hits_boxes(a, b, scene.porous).sum(axis=1)
-    return 10.0 ** (-n_cross * scene.config.porous_loss_db / 20.0)
-
-
 def channel_paths(scene: Scene, src_xyz, rx_xyz) -> PathSet:
     """Discrete paths from a source to a receiver (ENU metres, up = height above ground).
 
@@ -182,47 +174,15 @@ def channel_paths(scene: Scene, src_xyz, rx_xyz) -> PathSet:
     -------
     PathSet sorted by length.
     """
-    src = np.asarray(src_xyz, float)
-    rx = np.asarray(rx_xyz, float)
-    d = float(np.linalg.norm(rx - src))
-    kinds, lengths, gains, detours, boxes = [], [], [], [], []
-    # direct path and both legs of the ground reflection (image source at z = −z_src) in one test
-    img = src * np.array([1.0, 1.0, -1.0])
-    lg = float(np.linalg.norm(rx - img))
-    u = src[2] / (src[2] + rx[2]) if src[2] > 0 and rx[2] > 0 else 0.0
-    gp = (src + u * (rx - src)) * np.array([1.0, 1.0, 0.0]) + np.array([0.0, 0.0, NUDGE_M])
-    a, b = np.vstack([src, src, gp]), np.vstack([rx, gp, rx])
-    hits = segment_hits_boxes(a, b, scene.solid) if scene.solid.shape[0] else np.zeros((3, 0), bool)
-    porous3 = _porous_gain(scene, a, b)
-    hit = hits[0]
-    los = not hit.any()
-    porous = float(porous3[0])
-    if los:
-        kinds.append(0), lengths.append(d), gains.append(porous / max(d, 1e-3)), detours.append(0.0), boxes.append(-1)
-    else:
-        path = min(over_top_length(scene.solid, src, rx), lateral_length(scene.solid, src, rx, np.flatnonzero(hit)))
-        if math.isfinite(path):
-            first = int(scene.solid_index[np.flatnonzero(hit)[0]])
-            kinds.append(3), lengths.append(path), gains.append(porous / max(d, 1e-3))
-            detours.append(max(path - d, 0.0)), boxes.append(first)
-    if u > 0 and scene.config.ground_reflection and not (hits[1].any() or hits[2].any()):
-        g = scene.ground_r / lg * porous3[1] * porous3[2]
-        kinds.append(1), lengths.append(lg), gains.append(g), detours.append(0.0), boxes.append(-1)
-    if scene.config.wall_reflections:
-        rl, rg, face = wall_reflections(scene.faces, scene.solid, scene.porous, scene.config.porous_loss_db, src, rx,
-                                        d, scene.config.max_excess_m)
-        rb = scene.solid_index[scene.face_box[face]]
-    else:
-        rl, rg, rb = np.zeros(0), np.zeros(0), np.zeros(0, int)
-    kinds += [2] * len(rl)
-    lengths += rl.tolist()
-    gains += rg.tolist()
-    detours += [0.0] * len(rl)
-    boxes += rb.tolist()
-    order = np.argsort(np.asarray(lengths), kind="stable")
-    return PathSet(kind=np.asarray(kinds, int)[order], length_m=np.asarray(lengths, float)[order],
-                   gain=np.asarray(gains, float)[order], detour_m=np.asarray(detours, float)[order],
-                   box=np.asarray(boxes, int)[order], direct_m=d, los=los)
+    src = np.ascontiguousarray(src_xyz, dtype=float)
+    rx = np.ascontiguousarray(rx_xyz, dtype=float)
+    cfg = scene.config
+    kind, length, gain, detour, box, d, los = discrete_paths(
+        scene.solid, scene.solid_index, scene.porous, scene.faces, scene.face_box, cfg.porous_loss_db, scene.ground_r,
+        cfg.ground_reflection, cfg.wall_reflections, cfg.max_excess_m, src, rx)
+    order = np.argsort(length, kind="stable")
+    return PathSet(kind=kind[order], length_m=length[order], gain=gain[order], detour_m=detour[order], box=box[order],
+                   direct_m=float(d), los=bool(los))
 
 
 def clutter_index(scene: Scene, rx_en, n_azimuths: int = 72) -> float:

@@ -24,7 +24,7 @@ from numba import njit
 
 from simulation.site.geometry import segment_box_hits
 
-__all__ = ["over_top_length", "lateral_length", "wall_reflections", "NUDGE_M"]
+__all__ = ["over_top_length", "lateral_length", "wall_reflections", "discrete_paths", "NUDGE_M"]
 
 NUDGE_M = 1e-6
 """Step off a reflecting face or the ground onto the outer side before testing a leg's visibility, m."""
@@ -267,3 +267,63 @@ def wall_reflections(faces: np.ndarray, solid: np.ndarray, porous: np.ndarray, p
         length[n], gain[n], index[n] = length_i, g, i
         n += 1
     return length[:n], gain[:n], index[:n]
+
+
+@njit(cache=True)
+def _porous_factor(a: np.ndarray, b: np.ndarray, porous: np.ndarray, porous_loss_db: float) -> float:
+    """Pressure factor 10^(−n·loss/20) of the segment a→b crossing n porous boxes."""
+    if porous.shape[0] == 0 or porous_loss_db == 0:
+        return 1.0
+    return 10.0 ** (-_crossings(a, b, porous) * porous_loss_db / 20.0)
+
+
+@njit(cache=True)
+def discrete_paths(solid: np.ndarray, solid_index: np.ndarray, porous: np.ndarray, faces: np.ndarray,
+                   face_box: np.ndarray, porous_loss_db: float, ground_r: float, ground_reflection: bool,
+                   reflections: bool, max_excess_m: float, src: np.ndarray, rx: np.ndarray):
+    """Every discrete path from ``src`` to ``rx`` (3,), unsorted: (kind, length_m, gain, detour_m, box) arrays
+    (kind: 0 direct, 1 ground, 2 reflection, 3 diffraction; box: ``solid_index`` of the box first hit by a
+    diffracted path or of the reflecting face's box, −1 otherwise), the direct distance and line of sight.
+
+    The direct path when the segment clears every solid box, else the shorter of :func:`over_top_length` and
+    :func:`lateral_length`, gain 1/d either way (Maekawa's loss comes with frequency, at rendering); the ground
+    reflection by the image source at z = −z_src with the ground's |R| when both legs are clear; the
+    :func:`wall_reflections` (``face_box``: each face's row of ``solid``). Porous boxes crossed cost
+    ``porous_loss_db`` each.
+    """
+    n_max = 2 + faces.shape[0]
+    kind, box = np.full(n_max, -1), np.full(n_max, -1)
+    length, gain, detour = np.zeros(n_max), np.zeros(n_max), np.zeros(n_max)
+    dv = rx - src
+    d = math.sqrt(np.dot(dv, dv))          # as numpy.linalg.norm computes it (BLAS ddot)
+    hit = segment_box_hits(src.reshape(1, 3), rx.reshape(1, 3), solid)[0]
+    los = not hit.any()
+    n = 0
+    if los:
+        kind[0], length[0], gain[0] = 0, d, _porous_factor(src, rx, porous, porous_loss_db) / max(d, 1e-3)
+        n = 1
+    else:
+        blockers = np.flatnonzero(hit)
+        path = min(over_top_length(solid, src, rx), lateral_length(solid, src, rx, blockers))
+        if np.isfinite(path):
+            kind[0], length[0], gain[0] = 3, path, _porous_factor(src, rx, porous, porous_loss_db) / max(d, 1e-3)
+            detour[0], box[0] = max(path - d, 0.0), solid_index[blockers[0]]
+            n = 1
+    u = src[2] / (src[2] + rx[2]) if src[2] > 0 and rx[2] > 0 else 0.0
+    gp = src + u * (rx - src)              # the specular point on the ground, nudged above it
+    gp[2] = 0.0 * gp[2] + NUDGE_M
+    if u > 0 and ground_reflection and _crossings(src, gp, solid) == 0 and _crossings(gp, rx, solid) == 0:
+        img = src.copy()
+        img[2] = -src[2]
+        gv = rx - img
+        length[n] = math.sqrt(np.dot(gv, gv))
+        kind[n] = 1
+        gain[n] = (ground_r / length[n] * _porous_factor(src, gp, porous, porous_loss_db)
+                   * _porous_factor(gp, rx, porous, porous_loss_db))
+        n += 1
+    if reflections:
+        rl, rg, face = wall_reflections(faces, solid, porous, porous_loss_db, src, rx, d, max_excess_m)
+        for i in range(len(rl)):
+            kind[n], length[n], gain[n], box[n] = 2, rl[i], rg[i], solid_index[face_box[face[i]]]
+            n += 1
+    return kind[:n], length[:n], gain[:n], detour[:n], box[:n], d, los
