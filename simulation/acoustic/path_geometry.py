@@ -22,7 +22,7 @@ import math
 import numpy as np
 from numba import njit
 
-from simulation.site.geometry import segment_box_hits
+from simulation.site.geometry import footprint_slab, inverse_direction, segment_box_hits
 
 __all__ = ["over_top_length", "lateral_length", "wall_reflections", "discrete_paths", "NUDGE_M"]
 
@@ -54,38 +54,20 @@ def _upper_hull_length(u: np.ndarray, z: np.ndarray) -> float:
 
 
 @njit(cache=True)
-def _ray_footprint(pe: float, pn: float, az: float, box: np.ndarray) -> tuple[float, float]:
-    """Entry and exit distances of the horizontal ray from (pe, pn) in azimuth ``az`` (from north, clockwise)
-    into a box footprint (2-D slab test, as :func:`simulation.site.geometry.footprint_entry`); (inf, inf) when
-    it misses or the box lies behind; entry 0 when the origin is inside."""
-    de, dn = math.sin(az), math.cos(az)
-    de = 1e-12 if abs(de) < 1e-12 else de
-    dn = 1e-12 if abs(dn) < 1e-12 else dn
-    inv_e, inv_n = 1.0 / de, 1.0 / dn
-    t1, t2 = (box[0] - pe) * inv_e, (box[1] - pe) * inv_e
-    t3, t4 = (box[2] - pn) * inv_n, (box[3] - pn) * inv_n
-    t_lo = max(max(min(t1, t2), min(t3, t4)), 0.0)
-    t_hi = min(max(t1, t2), max(t3, t4))
-    if t_hi >= t_lo:
-        return t_lo, t_hi
-    return np.inf, np.inf
-
-
-@njit(cache=True)
 def over_top_length(solid: np.ndarray, src: np.ndarray, rx: np.ndarray) -> float:
     """Taut-string length over the box tops in the vertical plane through src and rx, m (inf if no box is
     crossed). solid : (m, 5); src, rx : (3,)."""
     d_h = math.hypot(rx[0] - src[0], rx[1] - src[1])
     if d_h < 1e-6 or solid.shape[0] == 0:
         return np.inf
-    az = math.atan2(rx[0] - src[0], rx[1] - src[1])
+    inv_e, inv_n = inverse_direction(math.atan2(rx[0] - src[0], rx[1] - src[1]))
     m = solid.shape[0]
     u = np.empty(2 * m)
     z = np.empty(2 * m)
     n = 0
     crossed = False
     for j in range(m):          # each crossed footprint's entry and exit edge at its top's height
-        t_in, t_out = _ray_footprint(src[0], src[1], az, solid[j])
+        t_in, t_out = footprint_slab(src[0], src[1], inv_e, inv_n, solid[j])
         if np.isfinite(t_in) and t_in < d_h:
             crossed = True
             for t in (t_in, min(t_out, d_h)):

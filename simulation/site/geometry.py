@@ -11,13 +11,16 @@ therefore ``atan((height − z0) / t_in)``.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numba import njit
 
 from features.site import Box
 
 __all__ = ["boxes_array", "footprint_entry", "horizon_elevation", "sky_blocked_fraction",
-           "ray_blockers", "segment_hits_boxes", "segment_box_hits", "inside_boxes"]
+           "ray_blockers", "segment_hits_boxes", "segment_box_hits", "inside_boxes", "inverse_direction",
+           "footprint_slab"]
 
 
 def boxes_array(boxes) -> np.ndarray:
@@ -44,31 +47,48 @@ def footprint_entry(p_en: np.ndarray, az_rad: np.ndarray, boxes: np.ndarray) -> 
         Entry distance (0 when the origin is inside) and exit distance; ``t_in``
         is ``inf`` where the ray misses the footprint or the box lies behind.
     """
-    p = np.asarray(p_en, float)
+    p = np.ascontiguousarray(p_en, dtype=float).reshape(-1, 2)
     az = np.asarray(az_rad, float)
-    if az.ndim == 1:
-        az = az[None, :]
-    # A direction component of exactly 0 is nudged to 1e-12: the slab bounds
-    # then become ±1e12-scale numbers, which the min/max logic treats exactly
-    # like the infinite slab of a parallel ray (Williams et al. 2005).
-    de = np.sin(az)[..., None]
-    dn = np.cos(az)[..., None]
-    de = np.where(np.abs(de) < 1e-12, 1e-12, de)
-    dn = np.where(np.abs(dn) < 1e-12, 1e-12, dn)
-    inv_e = 1.0 / de
-    inv_n = 1.0 / dn
-    pe = p[:, 0][:, None, None]
-    pn = p[:, 1][:, None, None]
-    t1 = (boxes[:, 0] - pe) * inv_e
-    t2 = (boxes[:, 1] - pe) * inv_e
-    t3 = (boxes[:, 2] - pn) * inv_n
-    t4 = (boxes[:, 3] - pn) * inv_n
-    t_lo = np.maximum(np.minimum(t1, t2), np.minimum(t3, t4))
-    t_hi = np.minimum(np.maximum(t1, t2), np.maximum(t3, t4))
-    np.maximum(t_lo, 0.0, out=t_lo)
-    hit = t_hi >= t_lo
-    t_in = np.where(hit, t_lo, np.inf)
-    t_out = np.where(hit, t_hi, np.inf)
+    az = np.ascontiguousarray(az[None, :] if az.ndim == 1 else az)
+    if az.shape[0] not in (1, p.shape[0]):
+        raise ValueError(f"az_rad of shape {az.shape} does not match {p.shape[0]} origins")
+    return _footprint_kernel(p, az, np.ascontiguousarray(boxes, dtype=float).reshape(-1, 5))
+
+
+@njit(cache=True)
+def inverse_direction(az_rad: float) -> tuple[float, float]:
+    """(1/sin az, 1/cos az) of a horizontal ray, a component of exactly 0 nudged to 1e-12: the slab bounds then
+    become ±1e12-scale numbers, which the min/max logic treats exactly like the infinite slab of a parallel ray
+    (Williams et al. 2005)."""
+    de, dn = math.sin(az_rad), math.cos(az_rad)
+    return 1.0 / (1e-12 if abs(de) < 1e-12 else de), 1.0 / (1e-12 if abs(dn) < 1e-12 else dn)
+
+
+@njit(cache=True)
+def footprint_slab(pe: float, pn: float, inv_e: float, inv_n: float, box: np.ndarray) -> tuple[float, float]:
+    """Entry and exit distances of the horizontal ray from (pe, pn) with inverse direction (inv_e, inv_n) (from
+    :func:`inverse_direction`) into the footprint of ``box`` (5,): 2-D slab test (Kay & Kajiya 1986); (inf, inf)
+    when it misses or the box lies behind, entry 0 when the origin is inside."""
+    t1, t2 = (box[0] - pe) * inv_e, (box[1] - pe) * inv_e
+    t3, t4 = (box[2] - pn) * inv_n, (box[3] - pn) * inv_n
+    t_lo = max(max(min(t1, t2), min(t3, t4)), 0.0)
+    t_hi = min(max(t1, t2), max(t3, t4))
+    if t_hi >= t_lo:
+        return t_lo, t_hi
+    return np.inf, np.inf
+
+
+@njit(cache=True)
+def _footprint_kernel(p: np.ndarray, az: np.ndarray, boxes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`footprint_entry` of origins p (n, 2), azimuths az (1 or n, k), boxes (m, 5): t_in, t_out (n, k, m)."""
+    n, k, m = p.shape[0], az.shape[1], boxes.shape[0]
+    t_in = np.empty((n, k, m))
+    t_out = np.empty((n, k, m))
+    for i in range(n):
+        for j in range(k):
+            inv_e, inv_n = inverse_direction(az[i if az.shape[0] > 1 else 0, j])
+            for b in range(m):
+                t_in[i, j, b], t_out[i, j, b] = footprint_slab(p[i, 0], p[i, 1], inv_e, inv_n, boxes[b])
     return t_in, t_out
 
 
