@@ -34,6 +34,7 @@ diffraction detour. The channel is static over one chirp (the receiver moves
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -221,13 +222,15 @@ class TailModel:
     level_db: float
 
 
+@functools.lru_cache(maxsize=4096)
 def tail_model(clutter: float) -> TailModel:
     """Tail parameters from the clutter index c ∈ [0, 1] (linear in c).
 
     decay 3 → 23 ms, density 0.5 → 10 arrivals/ms and level −20 → −6 dB as c
     goes 0 → 1: an open area keeps a faint, short, sparse tail (ground
     roughness, distant structures), a court of steel tanks and walls a dense,
-    long, strong one, which lowers the Rician K and raises τ_rms there.
+    long, strong one, which lowers the Rician K and raises τ_rms there. Cached
+    (a walk meets a few hundred clutter values, one per metre cell).
 
     >>> tail_model(0.0)
     TailModel(onset_ms=0.5, decay_ms=3.0, density_per_ms=0.5, level_db=-20.0)
