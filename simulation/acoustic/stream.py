@@ -86,7 +86,8 @@ class _Accumulator:
     def pop_block(self) -> np.ndarray:
         n = min(self.block, self.n_total - self.base)
         out = self.buf[:n].copy()
-        self.buf = np.concatenate([self.buf[n:], np.zeros(n)])
+        self.buf[:-n] = self.buf[n:]     # shift in place (numpy copies overlapping slices safely)
+        self.buf[-n:] = 0.0
         self.base += n
         return out
 
