@@ -23,8 +23,30 @@
    all over 3 runs. ``envfuse evaluate`` as a user runs it: 0.78 forked against 0.72-0.73 spawned (its parent
    has only read the model, so each worker still pays the first walk's caches and lazy imports).
 
-Usage: ``python bench/bench_pipeline.py [--quick] [--evaluate-only]`` (``--quick``: 2-minute walks, 4 walks;
-``--evaluate-only``: 2 training walks of 120 s, then section 3 only).
+4. **The simulator** (issue 25 item 2, :func:`simulator_section`): a 10-minute walk on the benchmark site
+   (site seed 5, walk seed 40) simulated end to end by ``simulate_walk`` (every file: gnss.nmea, imu.csv,
+   truth_steps.csv, audio.wav, audio_truth.csv, truth.csv, walk.toml), each run in a fresh spawned process,
+   best of 2: × real time by wall clock and by the process's CPU time (the fairer clock on a shared machine);
+   the peak resident set of that process (``ru_maxrss``) beside its resident set after the imports; then
+   stream by stream (each stream's simulation and its file writing apart, CPU s; the WAV is written block by
+   block inside the audio renderer, so its writing is re-timed alone); ``oaconvolve`` over the walk's audio
+   in the same run. Target ≥ 100× real time.
+
+   Measured 2026-12-02 on this 2-core VM while four other jobs ran (load average 8–10; ``oaconvolve``, ~1,800×
+   on a quiet machine, read 428–603× best of 3 in these runs, so wall clocks ran at about a third of speed):
+   main and this branch alternated in fresh processes, three 600 s walks each (``/tmp`` A/B script, the same
+   simulate_walk call; every file byte-identical between the two): main wall 47.1–48.4 s, CPU 15.4–15.7 s
+   (39× real time by CPU), branch wall 24.8–25.5 s, CPU 8.2–8.4 s (73×); ratio 1.9× by either clock. After
+   two more changes (the hum's carrier, the buffer shift), this section alone: branch CPU 7.17 s = 84× real
+   time (wall 22.0 s = 27×, oaconvolve 569× in the same run); per stream (CPU s): GNSS simulate_gnss 1.10,
+   NMEA 0.10, IMU 0.15 + CSV 0.16, audio 5.78 (104× alone; WAV writing 0.03 of it), truth.csv 0.09; main
+   the same day: CPU 13.38 s (45×), audio 12.21, GNSS 1.23. Peak RSS 291 MiB (191 MiB after imports; main 295
+   / 205), the stream-by-stream process 343 MiB (it keeps every stream's arrays). On a quieter machine the
+   same morning (load 4): main 33.4 s, branch 11.1 s wall for a 600 s walk on site 1, seed 1 (54×).
+
+Usage: ``python bench/bench_pipeline.py [--quick] [--evaluate-only | --simulator-only]`` (``--quick``: 2-minute
+walks, 4 walks; ``--evaluate-only``: 2 training walks of 120 s, then section 3 only; ``--simulator-only``:
+section 4 only, with ``--quick`` on a 120 s walk).
 """
 
 from __future__ import annotations

@@ -8,7 +8,11 @@ the channel is evaluated once, static over the 10 ms chirp (the walker moves
 clicks come from :class:`simulation.acoustic.synthesis.AmbientNoise`. Emissions whose
 free-field level could not rise out of the noise are skipped. Samples are
 summed in a rolling buffer and written block by block, so memory stays
-bounded for any length of walk.
+bounded for any length of walk. Emissions go in batches of 128: their first
+look (true emission instant, effective speed of sound, arrival fixed point,
+walker position, free-field screen, tweeter and torso factors) is computed over
+the batch at once, and their FFTs of equal length run as one call; every draw
+and every sample is what one emission at a time gives (issue 25 item 2).
 
 The receiver: its recording starts at ``start_s + U(−u, u)`` on the walk's time
 base (stated ``start_s``, stated uncertainty ``u``), its sample clock runs
@@ -297,7 +301,8 @@ def render_audio(site: Site, trajectory: Trajectory, seed: int, wav_path,
     as it is produced, or, without a path, into ``AudioResult.truth_csv``.
     Randomness comes only from ``stream_rng(seed, "audio", ...)``: the same
     seed gives the same bytes, whatever ``block_samples``. With a truth path,
-    memory is bounded by the block size, not the recording's length.
+    memory is bounded by the block size and a batch of emissions (128, rendered together: their arrivals
+    vectorised, their FFTs batched; a few MB), not the recording's length.
     ``progress`` shows audio seconds rendered on stderr: a bar on a terminal, plain lines otherwise.
     ``air``: the true air (:mod:`simulation.acoustic.air`: the crew's thermometer error drawn from
     ``crew_seed`` (default ``seed``), hot air over transformers, humidity, wind); the site's stated
