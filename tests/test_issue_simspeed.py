@@ -25,7 +25,7 @@ from simulation.acoustic.path_geometry import lateral_length, over_top_length, w
 from simulation.acoustic.stream import _Emitter, _hardware_factors
 from simulation.acoustic.synthesis import AudioConfig, ChirpRenderer
 from simulation.rng import stream_rng
-from simulation.site.geometry import segment_hits_boxes
+from simulation.site.geometry import footprint_entry, segment_hits_boxes
 from simulation.streams import Trajectory
 
 EPS = 1e-3       # corners of the visibility graph stand 1 mm outside a box
@@ -45,6 +45,22 @@ def test_segment_hits_pattern_rows_are_segments_columns_are_boxes():
     # an end point exactly on a face is not a hit; a segment along a face plane (parallel, on the slab's edge) neither
     assert not segment_hits_boxes(np.array([[-3.0, 0.0, 1.0]]), np.array([[0.0, 0.0, 1.0]]), boxes).any()
     assert not segment_hits_boxes(np.array([[0.0, -5.0, 1.0]]), np.array([[0.0, 5.0, 1.0]]), boxes).any()
+
+
+def test_footprint_entry_axes_are_origins_azimuths_boxes():
+    """Two origins, each with its own two azimuths (east, west), two boxes: entry/exit by hand."""
+    boxes = np.array([_box(5, 6, -1, 1, 3), _box(-3, -2, 4, 9, 2)], float)
+    p = np.array([[0.0, 0.0], [0.0, 6.0]])
+    az = np.array([[np.pi / 2, -np.pi / 2], [np.pi / 2, -np.pi / 2]])
+    t_in, t_out = footprint_entry(p, az, boxes)
+    inf = np.inf
+    assert np.array_equal(t_in, [[[5.0, inf], [inf, inf]], [[inf, inf], [inf, 2.0]]])
+    assert np.array_equal(t_out, [[[6.0, inf], [inf, inf]], [[inf, inf], [inf, 3.0]]])
+    # one origin with rows of azimuths broadcasts as numpy would; an origin inside a box enters at 0
+    one, _ = footprint_entry(p[:1], az, boxes)
+    assert np.array_equal(one[1], t_in[0])
+    inside, out = footprint_entry(np.array([[5.5, 0.0]]), np.array([np.pi / 2]), boxes)
+    assert inside[0, 0, 0] == 0.0 and out[0, 0, 0] == pytest.approx(0.5)
 
 
 def test_over_top_string_skips_a_lower_box_under_it():

@@ -50,6 +50,8 @@ def footprint_entry(p_en: np.ndarray, az_rad: np.ndarray, boxes: np.ndarray) -> 
     p = np.ascontiguousarray(p_en, dtype=float).reshape(-1, 2)
     az = np.asarray(az_rad, float)
     az = np.ascontiguousarray(az[None, :] if az.ndim == 1 else az)
+    if p.shape[0] == 1 and az.shape[0] > 1:       # one origin, rows of azimuths: broadcast as numpy would
+        p = np.repeat(p, az.shape[0], axis=0)
     if az.shape[0] not in (1, p.shape[0]):
         raise ValueError(f"az_rad of shape {az.shape} does not match {p.shape[0]} origins")
     return _footprint_kernel(p, az, np.ascontiguousarray(boxes, dtype=float).reshape(-1, 5))
