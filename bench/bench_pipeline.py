@@ -32,17 +32,23 @@
    block inside the audio renderer, so its writing is re-timed alone); ``oaconvolve`` over the walk's audio
    in the same run. Target ≥ 100× real time.
 
-   Measured 2026-12-02 on this 2-core VM while four other jobs ran (load average 8–10; ``oaconvolve``, ~1,800×
-   on a quiet machine, read 428–603× best of 3 in these runs, so wall clocks ran at about a third of speed):
-   main and this branch alternated in fresh processes, three 600 s walks each (``/tmp`` A/B script, the same
-   simulate_walk call; every file byte-identical between the two): main wall 47.1–48.4 s, CPU 15.4–15.7 s
-   (39× real time by CPU), branch wall 24.8–25.5 s, CPU 8.2–8.4 s (73×); ratio 1.9× by either clock. After
-   two more changes (the hum's carrier, the buffer shift), this section alone: branch CPU 7.17 s = 84× real
-   time (wall 22.0 s = 27×, oaconvolve 569× in the same run); per stream (CPU s): GNSS simulate_gnss 1.10,
-   NMEA 0.10, IMU 0.15 + CSV 0.16, audio 5.78 (104× alone; WAV writing 0.03 of it), truth.csv 0.09; main
-   the same day: CPU 13.38 s (45×), audio 12.21, GNSS 1.23. Peak RSS 291 MiB (191 MiB after imports; main 295
-   / 205), the stream-by-stream process 343 MiB (it keeps every stream's arrays). On a quieter machine the
-   same morning (load 4): main 33.4 s, branch 11.1 s wall for a 600 s walk on site 1, seed 1 (54×).
+   Measured 2026-12-02 on this 2-core VM while four other jobs ran (load average 6–10; ``oaconvolve``, ~1,800×
+   on a quiet machine, read 428–603× best of 3 in these runs, so wall clocks ran at a third to a half of speed
+   and the CPU time is the figure to compare). main and this branch alternated in fresh processes on the same
+   ``simulate_walk`` call (a 600 s walk; every file byte-identical between the two):
+
+   - this section's walk (site 5, seed 40), 3 rounds: main CPU 13.98–14.81 s (43× real time), branch
+     7.73–7.94 s (78×), ratio 1.89 by CPU and 1.88 by wall (medians); peak RSS 277 vs 287 MiB;
+   - ``bench/bench_walk.py``'s walk (site 1, seed 1), 2 rounds: main CPU 19.9–20.3 s (30×), branch 8.9–9.1 s
+     (67×), ratio 2.2 by CPU, 2.1 by wall; peak RSS 318–337 vs 331 MiB.
+
+   This section alone on the branch: CPU 7.17 s = 84× real time (wall 22.0 s = 27×, oaconvolve 569× best of 3
+   in the same run, ratio 0.048); per stream (CPU s): GNSS simulate_gnss 1.10, NMEA 0.10, IMU 0.15 + CSV 0.16,
+   audio 5.78 (104× alone; its WAV writing 0.03), truth.csv 0.09; main in the same section: CPU 13.38 s (45×),
+   audio 12.21, GNSS 1.23. Peak RSS 291 MiB (191 MiB after imports; main 295 / 205); the stream-by-stream
+   process 343 MiB (it keeps every stream's arrays). Target 100× not reached: the audio's floor with the same
+   numerics is its per-emission FFTs, phase ramps and per-place tail generators (SeedSequence) and the
+   ambient's 28.8 M samples of noise, hum and codec.
 
 Usage: ``python bench/bench_pipeline.py [--quick] [--evaluate-only | --simulator-only]`` (``--quick``: 2-minute
 walks, 4 walks; ``--evaluate-only``: 2 training walks of 120 s, then section 3 only; ``--simulator-only``:
