@@ -70,7 +70,7 @@ def test_pdoa_sign_convention_single_anchor():
 def test_rounds_with_fewer_than_three_anchors_are_dropped_range_only():
     t = [0.0, 0.01, 0.5, 0.51, 0.52]
     log = _log(t, [1, 2, 1, 2, 3], [5.220153, 8.200610, 5.220153, 8.200610, 6.873864], az=[0.0] * 5)
-    assert [list(r) for r in uwb_epochs(log, 0.15)] == [[0, 1], [2, 3, 4]]
+    assert [list(r) for r in uwb_epochs(log, 0.05)] == [[0, 1], [2, 3, 4]]
     never = uwb_positions(log, SQUARE, 1.0, UwbSolveConfig(use_aoa="never"))
     assert len(never) == 1 and never.n_rounds == 2 and never.t_s[0] == pytest.approx(0.51)
     fallback = uwb_positions(log, SQUARE, 1.0, UwbSolveConfig(use_aoa="fallback"))

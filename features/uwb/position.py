@@ -51,14 +51,16 @@ class UwbSolveConfig:
 
     ``range_sigma_m``: LOS two-way-ranging σ (DW3000 datasheet: ±10 cm ranging accuracy);
     ``azimuth_sigma_deg``: PDoA angle σ at boresight (Qorvo DW3000 PDoA: ±5° typical within ±60°);
-    grown by 1/cos(φ) off boresight, as the phase-to-angle slope ``dφ/dθ ∝ cos θ`` shrinks.
+    grown by 1/cos(φ) off boresight, as the phase-to-angle slope ``dφ/dθ ∝ cos θ`` shrinks (floor
+    ``max_cos_floor``). ``epoch_s``: a ranging round's span (8 anchors × a ≈ 3 ms DS-TWR exchange ≈ 25 ms;
+    shorter than the 100 ms between rounds at 10 Hz).
     """
 
     range_sigma_m: float = 0.10
     azimuth_sigma_deg: float = 5.0
     nlos_quality_db: float = -6.0
     nlos_sigma_scale: float = 5.0
-    epoch_s: float = 0.15
+    epoch_s: float = 0.05
     min_range_anchors: int = 3
     use_aoa: str = "fallback"
     max_iter: int = 15
