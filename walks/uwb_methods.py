@@ -1,0 +1,61 @@
+"""The UWB methods in the registry (registered after the graph methods, in this order):
+
+================  ===========================================================================
+``uwb``           the UWB fixes alone: every ranging round solved from ranges and PDoA angles
+                  (:func:`features.uwb.position.uwb_positions`, ``use_aoa="always"``)
+``uwb_aoa_pdr``   Zhou et al. 2025: a Kalman filter on the difference of the PDR and the UWB AOA+range
+                  positions, the gain compensating the PDR error (:mod:`models.uwb_pdr`), χ²-gated
+================  ===========================================================================
+
+Both are skipped (:class:`~walks.methods.MethodSkipped`) on a walk without UWB — no ``uwb.csv``, or a site
+without ``[[uwb_anchors]]`` — so walks written before UWB existed run every other method unchanged.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from features.uwb.position import UwbSolveConfig
+from walks.methods import Method, MethodContext, MethodSkipped, register
+from walks.track import Track
+
+__all__ = ["UWB_METHODS", "AOA_SOLVE"]
+
+UWB_METHODS = ("uwb", "uwb_aoa_pdr")
+"""The methods this module registers, in report order."""
+
+AOA_SOLVE = UwbSolveConfig(use_aoa="always")
+"""How the methods solve each round: ranges and angles together, as the seed's AOA positioning."""
+
+
+def _fixes(ctx: MethodContext):
+    uwb = ctx.inputs.data.uwb
+    if uwb is None:
+        raise MethodSkipped("no UWB (the walk has no uwb.csv, or its site lists no [[uwb_anchors]])")
+    fixes = uwb.positions(AOA_SOLVE)
+    if not len(fixes):
+        raise MethodSkipped("no UWB round could be solved")
+    return fixes
+
+
+def _uwb(ctx: MethodContext) -> Track:
+    f = _fixes(ctx)
+    return Track("uwb", f.t_s, f.east_m, f.north_m, f.cov_en.copy())
+
+
+def _uwb_aoa_pdr(ctx: MethodContext):
+    from models.uwb_pdr import UwbPdrFilter
+
+    pdr = ctx.inputs.data.pdr
+    if pdr is None or not len(pdr.result.t_s):
+        raise MethodSkipped("no steps (the walk has no usable imu.csv)")
+    if not np.isfinite(pdr.result.east_m).any():
+        raise MethodSkipped("no PDR track (the IMU has no heading sensors)")
+    fixes = _fixes(ctx)
+    return UwbPdrFilter(method="uwb_aoa_pdr").run(pdr.result, pdr.start_en_m, fixes)
+
+
+for _m in (Method("uwb", _uwb, "the UWB fixes alone (ranges and PDoA angles per round)"),
+           Method("uwb_aoa_pdr", _uwb_aoa_pdr, "KF on the PDR − UWB AOA position difference (Zhou et al. 2025)",
+                  filter=True)):
+    register(_m)
