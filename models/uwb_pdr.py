@@ -41,7 +41,7 @@ from models.fusion.core import kalman_update
 from models.fusion.ekf import OUTLIER_CODES, FilterError, FilterRun, empty_records
 from models.fusion.events import STEP
 
-__all__ = ["UwbPdrConfig", "UwbPdrFilter", "UWB_FIX", "pdr_track_at"]
+__all__ = ["UwbPdrConfig", "UwbPdrFilter", "UWB_FIX", "pdr_track_at", "UwbNoisePrior", "uwb_nees"]
 
 UWB_FIX = 3
 """Event kind of a UWB position fix in a :class:`~models.fusion.ekf.FilterRun` (after STEP, GNSS, ACOUSTIC)."""
@@ -72,6 +72,62 @@ class UwbPdrConfig:
             raise FilterError(f"gate_prob must lie in (0, 1), got {self.gate_prob}")
         if isinstance(self.reset_after, bool) or not isinstance(self.reset_after, int) or self.reset_after < 0:
             raise FilterError(f"reset_after must be a non-negative integer, got {self.reset_after!r}")
+
+
+def uwb_nees(err_en_m, cov_en_m2) -> np.ndarray:
+    """Normalised squared error of each fix, eᵀC⁻¹e, shape (n,) (err (n, 2), cov (n, 2, 2)); χ²₂ when C is right."""
+    e = np.asarray(err_en_m, float)
+    return np.einsum("ni,nij,nj->n", e, np.linalg.inv(np.asarray(cov_en_m2, float)), e)
+
+
+class UwbNoisePrior:
+    """The environment's NLOS prior for UWB fixes: a scale of each fix's covariance per environment class.
+
+    ``fit(nees, classes)``: the scale of class c is the χ²₂-mean estimate of its fixes' eᵀC⁻¹e on the training
+    walks, halved (:func:`models.fusion.noise.chi2_2_mean`: ``"mean"``, every NLOS fix counting in full — the
+    prior of how often and how far UWB is off where that class holds; ``"median"``, the core only), floored
+    at 1 (never trusting a fix more than its solver does). With ``n_classes=1`` it is the blind twin: one
+    scale pooled over every class. ``r_scale(class_proba)``: the scale of fixes whose class probabilities are
+    given, Σ_c p_c·s_c, shape (n,).
+    """
+
+    def __init__(self, n_classes: int = 3, estimator: str = "mean"):
+        self.n_classes = n_classes
+        self.estimator = estimator
+
+    def fit(self, nees, classes) -> "UwbNoisePrior":
+        from models.fusion.noise import chi2_2_mean
+
+        nees = np.asarray(nees, float)
+        cls = np.zeros(nees.size, int) if self.n_classes == 1 else np.asarray(classes, int)
+        ok = np.isfinite(nees)
+        pooled = chi2_2_mean(nees[ok], self.estimator) / 2.0 if ok.any() else 1.0
+        scale = np.full(self.n_classes, pooled)
+        for c in range(self.n_classes):
+            sel = ok & (cls == c)
+            if sel.sum() >= 20:          # too few fixes of a class: the pooled scale
+                scale[c] = chi2_2_mean(nees[sel], self.estimator) / 2.0
+        self.scale_ = np.maximum(scale, 1.0)
+        return self
+
+    def r_scale(self, class_proba) -> np.ndarray:
+        p = np.atleast_2d(np.asarray(class_proba, float))
+        if self.n_classes == 1:
+            return np.full(p.shape[0], float(self.scale_[0]))
+        return p @ self.scale_
+
+    def get_state(self) -> dict:
+        return {"n_classes": int(self.n_classes), "estimator": self.estimator,
+                "scale": [float(v) for v in self.scale_]}
+
+    @classmethod
+    def from_state(cls, state: dict) -> "UwbNoisePrior":
+        prior = cls(int(state["n_classes"]), str(state["estimator"]))
+        scale = np.asarray(state["scale"], float)
+        if scale.shape != (prior.n_classes,) or not np.all(np.isfinite(scale) & (scale >= 1.0)):
+            raise ValueError(f"UWB prior scales must be {prior.n_classes} finite numbers >= 1, got {state['scale']}")
+        prior.scale_ = scale
+        return prior
 
 
 def pdr_track_at(t_s, step_t_s, east_m, north_m, start_en) -> tuple[np.ndarray, np.ndarray]:

@@ -133,3 +133,33 @@ def test_method_on_a_simulated_walk_and_skipped_without_uwb(walk_dir, tmp_path):
     assert old.uwb is None and old.pdr is not None and any("uwb" in n for n in old.notes)
     with pytest.raises(MethodSkipped, match="no UWB"):
         method("uwb_aoa_pdr").build(MethodContext(model=None, inputs=SimpleNamespace(data=old)))
+
+
+def test_noise_prior_by_hand_and_its_twin():
+    from models.uwb_pdr import UwbNoisePrior, uwb_nees
+
+    # eᵀC⁻¹e by hand: e = (1, 2), C = diag(1, 4) → 1 + 1 = 2
+    assert uwb_nees([[1.0, 2.0]], [np.diag([1.0, 4.0])])[0] == pytest.approx(2.0)
+    # class 0: NEES 2 (χ²₂ mean 2: scale 1), class 1: NEES 10 (scale 5), class 2: 5 fixes only → the pooled
+    # scale (30·2 + 30·10 + 5·40) / 65 / 2 = 560 / 130 = 4.3077
+    nees = np.r_[np.full(30, 2.0), np.full(30, 10.0), np.full(5, 40.0)]
+    cls = np.r_[np.zeros(30, int), np.ones(30, int), np.full(5, 2)]
+    prior = UwbNoisePrior(3).fit(nees, cls)
+    np.testing.assert_allclose(prior.scale_, [1.0, 5.0, 560.0 / 130.0])
+    np.testing.assert_allclose(prior.r_scale([[0.5, 0.5, 0.0], [0.0, 0.0, 1.0]]), [3.0, 560.0 / 130.0])
+    blind = UwbNoisePrior(1).fit(nees, cls)
+    np.testing.assert_allclose(blind.r_scale(np.ones((2, 1))), [560.0 / 130.0] * 2)
+    assert UwbNoisePrior(3).fit(np.full(40, 0.5), np.zeros(40, int)).scale_[0] == 1.0     # floored at 1
+    back = UwbNoisePrior.from_state(prior.get_state())
+    np.testing.assert_array_equal(back.scale_, prior.scale_)
+    with pytest.raises(ValueError, match=">= 1"):
+        UwbNoisePrior.from_state({"n_classes": 3, "estimator": "mean", "scale": [1.0, 0.2, 2.0]})
+
+
+def test_prior_scales_each_fix_covariance_in_the_filter():
+    truth, pdr, fixes = _drifting_walk()
+    plain = UwbPdrFilter(UwbPdrConfig(outlier="none")).run(pdr, (0.0, 0.0), fixes)
+    scaled = UwbPdrFilter(UwbPdrConfig(outlier="none")).run(pdr, (0.0, 0.0), fixes, r_scale=np.full(len(fixes), 4.0))
+    u = scaled.updated
+    np.testing.assert_allclose(scaled.R[u], 4.0 * plain.R[u])
+    assert np.trace(scaled.P[-1]) > np.trace(plain.P[-1])
