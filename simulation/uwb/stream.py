@@ -147,7 +147,7 @@ def _wrap(x: float) -> float:
     return (x + math.pi) % (2 * math.pi) - math.pi
 
 
-def _measure(rng, paths: UwbPaths, d_m: float, cfg: UwbSimConfig):
+def _measure(rng, paths: UwbPaths, cfg: UwbSimConfig):
     """One poll: ``None`` (lost) or (first-path excess m, first kind, angle offset rad, fp margin dB, quality dB)."""
     p = paths.power_dbm + rng.normal(0.0, cfg.fading_db, len(paths.power_dbm))
     if not len(p) or not np.isfinite(p).any():
@@ -195,7 +195,7 @@ def simulate_uwb(ctx: StreamContext, cfg: UwbSimConfig = UwbSimConfig()) -> tupl
             paths = cache.get(key)
             if paths is None:
                 paths = cache[key] = uwb_paths(scene, xyz[j], float(bore[j]), (e, n, u))
-            got = _measure(rng, paths, d, cfg)
+            got = _measure(rng, paths, cfg)
             if got is None:
                 continue
             excess, kind, off, fp_margin, quality = got
