@@ -15,7 +15,14 @@ UWB (no audio: the acoustic receiver dominates the cost and ``uwb_aoa_pdr`` does
 true environment class, and the time of ``uwb_aoa_pdr`` (UWB solve + filter, best of 3) scaled to a
 10-minute walk, beside ``scipy.signal.oaconvolve`` (480,000 × 480 taps, float32) timed in the same run.
 
-Run: ``.venv/bin/python bench/bench_uwb.py`` (``--methods`` for the second section; prints tables).
+Section ``study`` (``--study /work/studies/standard``): a benchmark study's walks (both splits are studies:
+``standard``, ``later``) with ``uwb.csv`` added — UWB anchors placed on the study sites' beacon poles, each
+walk's trajectory rebuilt from its seed and checked against its ``truth.csv`` — then ``uwb``,
+``uwb_aoa_pdr``, ``uwb_aoa_pdr_env`` and ``uwb_aoa_pdr_blind`` (the NLOS prior fitted on the study's
+training walks, classes from the study's seed-0 classifier) on its held-out walks, per true class with a
+95 % bootstrap interval over walks, beside the study's own rows for ``kf_quality`` and Fusion II.
+
+Run: ``.venv/bin/python bench/bench_uwb.py`` (``--methods`` / ``--study DIR`` for the others; prints tables).
 
 Measured (this machine, 2026-12-02; defaults: 3 walks of 300 s on sites 3, 7, 11)::
 
@@ -233,6 +240,148 @@ def section_methods(args) -> None:
           f"ratio {np.median(per10) / y:.0f}x")
 
 
+def _study_walks(study: Path, out: Path):
+    """The study's walks with ``uwb.csv`` added: the sites copied with UWB anchors placed on their beacon poles
+    (:func:`simulation.uwb.placement.place_uwb_anchors`), each walk's trajectory rebuilt from its seed (as
+    :func:`simulation.walk.simulate_walk` draws it; checked against its ``truth.csv`` to 1 cm) and its UWB
+    simulated; the other files linked. Returns ({site id: [walk dirs]}, split table)."""
+    from dataclasses import replace
+
+    from features.fileio import read_toml, write_toml
+    from features.site import load_site, save_site
+    from features.uwb.reader import write_uwb
+    from features.walk import parse_utc, read_truth
+    from simulation.rng import stream_rng
+    from simulation.site.route import RouteConfig, plan_route, route_trajectory
+    from simulation.streams import StreamContext
+    from simulation.uwb.placement import place_uwb_anchors
+    from simulation.uwb.stream import UwbSimConfig, simulate_uwb
+    from simulation.walk import device_height_m
+
+    data = study / "data"
+    split = read_toml(data / "split.toml")
+    walks = {}
+    for sid in list(split["train_sites"]) + list(split["test_sites"]):
+        site = load_site(data / "sites" / str(sid) / "site.toml")
+        sdir = out / "sites" / str(sid)
+        sdir.mkdir(parents=True, exist_ok=True)
+        if not (sdir / "site.toml").is_file():
+            save_site(replace(site, uwb_anchors=place_uwb_anchors(site)), sdir / "site.toml")
+        site_u = load_site(sdir / "site.toml")
+        walks[sid] = []
+        for wd in sorted((data / "walks" / str(sid)).iterdir()):
+            dst = out / "walks" / str(sid) / wd.name
+            if not (dst / "uwb.csv").is_file():
+                dst.mkdir(parents=True, exist_ok=True)
+                for f in wd.iterdir():
+                    if f.name != "walk.toml" and not (dst / f.name).exists():
+                        (dst / f.name).symlink_to(f.resolve())
+                meta = read_toml(wd / "walk.toml")
+                route = RouteConfig()
+                dur = float(meta["duration_s"])
+                poly, stops, speed = plan_route(site, stream_rng(int(meta["seed"]), "route"), dur, route)
+                traj = route_trajectory(poly, stops, speed, dur, parse_utc(meta["start_utc"]),
+                                        device_height_m(site, int(meta["person"])), route)
+                truth = read_truth(wd)
+                te, tn, _ = traj.interp(truth.t_s)
+                dev = float(np.max(np.hypot(te - truth.east_m, tn - truth.north_m)))
+                if dev > 0.01:
+                    print(f"  {wd}: rebuilt trajectory {dev:.2f} m off its truth.csv; left out")
+                    continue
+                log, _ = simulate_uwb(StreamContext(site=site_u, trajectory=traj, out_dir=dst, seed=int(meta["seed"]),
+                                                    kind="walk", person_seed=int(meta["person"])))
+                write_uwb(dst / "uwb.csv", log)
+                meta["uwb"] = {"file": "uwb.csv", "rate_hz": UwbSimConfig().rate_hz}
+                write_toml(dst / "walk.toml", meta)
+            walks[sid].append(dst)
+    return walks, split
+
+
+def _ci(per_walk: list, stat, rng, n_boot: int = 1000) -> tuple[float, float]:
+    """95 % bootstrap interval of ``stat`` over the pooled errors, resampling whole walks."""
+    vals = []
+    for _ in range(n_boot):
+        pick = rng.integers(0, len(per_walk), len(per_walk))
+        d = np.concatenate([per_walk[i] for i in pick])
+        if d.size:
+            vals.append(stat(d))
+    return float(np.percentile(vals, 2.5)), float(np.percentile(vals, 97.5))
+
+
+def section_study(args) -> None:
+    """``uwb``, ``uwb_aoa_pdr`` and the prior's two methods on a benchmark study's held-out walks, by class,
+    beside the study's own ``kf_quality`` and Fusion II rows (``study.json``)."""
+    import json
+
+    from features.site import ENV_CLASSES
+    from models.fusion.model import load_fusion_model
+    from models.uwb_pdr import UwbNoisePrior, UwbPdrFilter, uwb_nees
+    from walks.inputs import walk_inputs
+    from walks.reader import read_walk
+    from walks.uwb_methods import AOA_SOLVE
+
+    study = Path(args.study)
+    walks, split = _study_walks(study, Path(args.workdir) / f"study_{study.name}")
+    model = load_fusion_model(study / "seed0" / "fusion_model")
+    read = {}
+    for sid, dirs in walks.items():
+        for wd in dirs:
+            t0 = time.perf_counter()
+            d = read_walk(wd)
+            inputs = walk_inputs(d, model.classifier)
+            read[wd] = (sid, d, inputs, d.uwb.positions(AOA_SOLVE))
+            print(f"  read {wd.parent.name}/{wd.name} in {time.perf_counter() - t0:.1f} s", flush=True)
+    nees, cls = [], []
+    for wd, (sid, d, inputs, f) in read.items():
+        if sid in split["train_sites"]:
+            te, tn = d.truth.at(f.t_s)
+            nees.append(uwb_nees(np.column_stack([f.east_m - te, f.north_m - tn]), f.cov_en))
+            cls.append(np.argmax(inputs.classes.at(f.t_s), axis=1))
+    prior = UwbNoisePrior(model.classifier.n_classes_).fit(np.concatenate(nees), np.concatenate(cls))
+    blind = UwbNoisePrior(1).fit(np.concatenate(nees), np.concatenate(cls))
+    print(f"NLOS prior fitted on {len(nees)} training walks: per class {np.round(prior.scale_, 2).tolist()}, "
+          f"blind {blind.scale_[0]:.2f}")
+    errs = {m: {c: [] for c in ENV_CLASSES} for m in ("uwb", "uwb_aoa_pdr", "uwb_aoa_pdr_env", "uwb_aoa_pdr_blind")}
+    per10 = []
+    for wd, (sid, d, inputs, f) in read.items():
+        if sid not in split["test_sites"]:
+            continue
+        t0 = time.perf_counter()
+        f = d.uwb.positions(AOA_SOLVE)
+        run = UwbPdrFilter().run(d.pdr.result, d.pdr.start_en_m, f)
+        per10.append((time.perf_counter() - t0) / float(d.walk.duration_s) * 600.0)
+        tracks = {"uwb": (f.t_s, f.east_m, f.north_m), "uwb_aoa_pdr": (run.t_s, run.x[:, 0], run.x[:, 1])}
+        for name, pr in (("uwb_aoa_pdr_env", prior), ("uwb_aoa_pdr_blind", blind)):
+            scale = pr.r_scale(np.ones((len(f), 1)) if pr.n_classes == 1 else inputs.classes.at(f.t_s))
+            r = UwbPdrFilter(method=name).run(d.pdr.result, d.pdr.start_en_m, f, r_scale=scale)
+            tracks[name] = (r.t_s, r.x[:, 0], r.x[:, 1])
+        for name, (t, e, n) in tracks.items():
+            te, tn = d.truth.at(t)
+            c = d.truth.class_at(t)
+            err = np.hypot(e - te, n - tn)
+            for k, cname in enumerate(ENV_CLASSES):
+                errs[name][cname].append(err[c == k])
+    rng = np.random.default_rng(0)
+    n_test = sum(len(walks[s]) for s in split["test_sites"])
+    print(f"\nStudy {study.name}: {n_test} held-out walks on sites {split['test_sites']}; horizontal error, m: "
+          f"median [95 % CI over walks] / p95 / mean")
+    for name, per in errs.items():
+        for cname in ENV_CLASSES:
+            d = np.concatenate(per[cname])
+            if not d.size:
+                continue
+            lo, hi = _ci(per[cname], np.median, rng)
+            print(f"{name:20s} {cname:6s} n {d.size:6d}  median {np.median(d):6.3f} [{lo:.3f}, {hi:.3f}]  "
+                  f"p95 {np.percentile(d, 95):6.2f}  mean {np.mean(d):6.3f}")
+    table = json.loads((study / "study.json").read_text())["table"]
+    print("\nThe study's own rows (study.json, its seeds pooled):")
+    for r in table:
+        if r["method"] in args.compare and r["env_class"] in ENV_CLASSES:
+            print(f"{r['method']:20s} {r['env_class']:6s} n {r['n']:6d}  median {r['median_m']:6.3f}"
+                  f"{'':18s}  p95 {r['p95_m']:6.2f}  mean {r['mean_m']:6.3f}")
+    print(f"\nuwb_aoa_pdr (solve + filter) per 10-minute walk: median {np.median(per10):.3f} s over {len(per10)} walks")
+
+
 def main(argv=None) -> None:
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("--methods", action="store_true", help="run the methods section instead of the NLOS one")
@@ -240,8 +389,17 @@ def main(argv=None) -> None:
     p.add_argument("--walk-s", type=float, default=300.0)
     p.add_argument("--site-seeds", type=int, nargs="+", default=[3, 7, 11])
     p.add_argument("--workdir", default="/tmp/bench_uwb")
+    p.add_argument("--study", help="a benchmark study folder (data/, seed0/fusion_model, study.json): the UWB "
+                                   "methods on its held-out walks beside its own rows")
+    p.add_argument("--compare", nargs="+", default=["kf_quality", "adaptive", "fg_env", "pdr"],
+                   help="the study's methods printed beside (default: kf_quality adaptive fg_env pdr)")
     args = p.parse_args(argv)
-    section_methods(args) if args.methods else section_nlos(args)
+    if args.study:
+        section_study(args)
+    elif args.methods:
+        section_methods(args)
+    else:
+        section_nlos(args)
 
 
 if __name__ == "__main__":
