@@ -23,8 +23,36 @@
    all over 3 runs. ``envfuse evaluate`` as a user runs it: 0.78 forked against 0.72-0.73 spawned (its parent
    has only read the model, so each worker still pays the first walk's caches and lazy imports).
 
-Usage: ``python bench/bench_pipeline.py [--quick] [--evaluate-only]`` (``--quick``: 2-minute walks, 4 walks;
-``--evaluate-only``: 2 training walks of 120 s, then section 3 only).
+4. **The simulator** (issue 25 item 2, :func:`simulator_section`): a 10-minute walk on the benchmark site
+   (site seed 5, walk seed 40) simulated end to end by ``simulate_walk`` (every file: gnss.nmea, imu.csv,
+   truth_steps.csv, audio.wav, audio_truth.csv, truth.csv, walk.toml), each run in a fresh spawned process,
+   best of 2: × real time by wall clock and by the process's CPU time (the fairer clock on a shared machine);
+   the peak resident set of that process (``ru_maxrss``) beside its resident set after the imports; then
+   stream by stream (each stream's simulation and its file writing apart, CPU s; the WAV is written block by
+   block inside the audio renderer, so its writing is re-timed alone); ``oaconvolve`` over the walk's audio
+   in the same run. Target ≥ 100× real time.
+
+   Measured 2026-12-02 on this 2-core VM while four other jobs ran (load average 6–10; ``oaconvolve``, ~1,800×
+   on a quiet machine, read 428–603× best of 3 in these runs, so wall clocks ran at a third to a half of speed
+   and the CPU time is the figure to compare). main and this branch alternated in fresh processes on the same
+   ``simulate_walk`` call (a 600 s walk; every file byte-identical between the two):
+
+   - this section's walk (site 5, seed 40), 3 rounds: main CPU 13.98–14.81 s (43× real time), branch
+     7.73–7.94 s (78×), ratio 1.89 by CPU and 1.88 by wall (medians); peak RSS 277 vs 287 MiB;
+   - ``bench/bench_walk.py``'s walk (site 1, seed 1), 2 rounds: main CPU 19.9–20.3 s (30×), branch 8.9–9.1 s
+     (67×), ratio 2.2 by CPU, 2.1 by wall; peak RSS 318–337 vs 331 MiB.
+
+   This section alone on the branch: CPU 7.17 s = 84× real time (wall 22.0 s = 27×, oaconvolve 569× best of 3
+   in the same run, ratio 0.048); per stream (CPU s): GNSS simulate_gnss 1.10, NMEA 0.10, IMU 0.15 + CSV 0.16,
+   audio 5.78 (104× alone; its WAV writing 0.03), truth.csv 0.09; main in the same section: CPU 13.38 s (45×),
+   audio 12.21, GNSS 1.23. Peak RSS 291 MiB (191 MiB after imports; main 295 / 205); the stream-by-stream
+   process 343 MiB (it keeps every stream's arrays). Target 100× not reached: the audio's floor with the same
+   numerics is its per-emission FFTs, phase ramps and per-place tail generators (SeedSequence) and the
+   ambient's 28.8 M samples of noise, hum and codec.
+
+Usage: ``python bench/bench_pipeline.py [--quick] [--evaluate-only | --simulator-only]`` (``--quick``: 2-minute
+walks, 4 walks; ``--evaluate-only``: 2 training walks of 120 s, then section 3 only; ``--simulator-only``:
+section 4 only, with ``--quick`` on a 120 s walk).
 """
 
 from __future__ import annotations
@@ -409,7 +437,13 @@ def main() -> None:
     ap.add_argument("--evaluate-only", action="store_true",
                     help="2 training walks of 120 s, then only the evaluate figures (section 3)")
     ap.add_argument("--eval-walk-s", type=float, default=60.0, help="length of each of the 16 evaluated walks (s)")
+    ap.add_argument("--simulator-only", action="store_true",
+                    help="only the simulator's figures (section 4): a 10-minute walk, per stream, memory")
     args = ap.parse_args()
+    if args.simulator_only:
+        with tempfile.TemporaryDirectory() as d:
+            simulator_section(Path(d), 120.0 if args.quick else 600.0)
+        return
     walk_s, n_walks = (120.0, 4) if args.quick else (600.0, 8)
     if args.breakdown_only:
         n_walks = 3
@@ -449,6 +483,118 @@ def timing_sections(walks, model_dir: Path, walk_s: float) -> None:
           f"fixes) per second, and PDR heel strikes per second")
     for m, r in step_rates.items():
         print(f"  {m:16s} {r:12,.0f} events/s {r * n_steps / n_events:12,.0f} heel strikes/s")
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# Section 4: the simulator (issue 25 item 2)
+# ---------------------------------------------------------------------------------------------------------------
+
+def _simulator_child(site_dir: str, out_dir: str, duration_s: float, seed: int, breakdown: bool) -> dict:
+    """In a fresh (spawned) process: simulate one walk end to end (``simulate_walk``), or stream by stream with
+    each stream's simulation and file writing timed apart; returns wall/CPU seconds and the process's peak RSS
+    (``ru_maxrss``) beside its resident set after the imports."""
+    import resource
+    from dataclasses import replace as dc_replace
+    from features.fileio import atomic_write_text
+    from features.site import load_site
+    from simulation.gnss import fix as gnss_fix
+    from simulation.gnss.nmea_writer import format_nmea
+    from simulation.gnss.stream import simulate_gnss, to_nmea_epochs
+    from simulation.imu.stream import imu_csv_text, simulate_imu, truth_steps_csv_text
+    from simulation.acoustic.stream import write_audio
+    from simulation.rng import stream_rng
+    from simulation.site.route import RouteConfig, plan_route, route_trajectory
+    from simulation.streams import StreamContext
+    from simulation.walk import default_start_utc, device_height_m, simulate_walk, write_truth_csv
+
+    rss0_mib = int(Path("/proc/self/statm").read_text().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 2**20
+    out = Path(out_dir)
+    times: dict[str, float] = {}
+    c0, t0 = time.process_time(), time.perf_counter()
+    if not breakdown:
+        simulate_walk(site_dir, out, seed=seed, duration_s=duration_s, progress=False, overwrite=True)
+    else:
+        out.mkdir(parents=True, exist_ok=True)
+        site = load_site(Path(site_dir) / "site.toml")
+        route = RouteConfig()
+        poly, stops, speed = plan_route(site, stream_rng(seed, "route"), duration_s, route)
+        traj = route_trajectory(poly, stops, speed, duration_s, default_start_utc(seed), device_height_m(site, seed),
+                                route)
+        ctx = StreamContext(site=site, trajectory=traj, out_dir=out, seed=seed, kind="walk", person_seed=seed,
+                            options={"progress": False})
+        mark = time.process_time()
+
+        def lap(name: str) -> None:
+            nonlocal mark
+            now = time.process_time()
+            times[name] = now - mark
+            mark = now
+
+        sim = simulate_gnss(site, traj, seed, fix_cfg=dc_replace(gnss_fix.FixConfig(), rtk_cold_start=True),
+                            receiver_seed=seed, body=True)
+        lap("GNSS: simulate_gnss")
+        atomic_write_text(out / "gnss.nmea", format_nmea(to_nmea_epochs(sim, site, seed, traj, gst=True)))
+        lap("GNSS: NMEA text and file")
+        imu, steps = simulate_imu(ctx)
+        lap("IMU: simulate_imu")
+        atomic_write_text(out / "imu.csv", imu_csv_text(imu))
+        atomic_write_text(out / "truth_steps.csv", truth_steps_csv_text(steps))
+        lap("IMU: CSV text and files")
+        write_audio(ctx)
+        lap("audio: render_audio (WAV, CSV within)")
+        write_truth_csv(out / "truth.csv", site, traj)
+        lap("truth.csv")
+    wall, cpu = time.perf_counter() - t0, time.process_time() - c0
+    if breakdown:           # the WAV's writing alone: the same int16 samples written again block by block
+        import soundfile
+        x, fs = soundfile.read(str(out / "audio.wav"), dtype="int16")
+        t1 = time.process_time()
+        with soundfile.SoundFile(str(out / "rewrite.wav"), "w", samplerate=fs, channels=1, subtype="PCM_16") as f:
+            for i in range(0, len(x), 1 << 16):
+                f.write(x[i:i + (1 << 16)])
+        times["audio: of which WAV writing (re-timed)"] = time.process_time() - t1
+        (out / "rewrite.wav").unlink()
+    return {"wall_s": wall, "cpu_s": cpu, "times": times, "rss0_mib": rss0_mib,
+            "peak_rss_mib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0}
+
+
+def _in_child(*args) -> dict:
+    """Run :func:`_simulator_child` in a spawned interpreter (nothing inherited: its RSS is the simulator's)."""
+    import multiprocessing
+    with multiprocessing.get_context("spawn").Pool(1) as pool:
+        return pool.apply(_simulator_child, args)
+
+
+def simulator_section(tmp: Path, duration_s: float = 600.0, site_seed: int = 5, seed: int = 40,
+                      repeat: int = 2) -> dict:
+    """Section 4: the simulator's × real time on a ``duration_s`` walk (best of ``repeat`` end-to-end runs, each
+    in a fresh process), the breakdown per stream, peak memory, and oaconvolve over the walk's audio."""
+    from features.site import save_site
+    from simulation.site.layout import generate_site
+
+    site = tmp / "sim_site"
+    site.mkdir(exist_ok=True)
+    save_site(generate_site(site_seed), site / "site.toml")
+    warm = _in_child(str(site), str(tmp / "sim_warm"), 20.0, seed, False)      # numba's on-disk cache filled
+    runs = [_in_child(str(site), str(tmp / "sim_walk"), duration_s, seed, False) for _ in range(repeat)]
+    parts = _in_child(str(site), str(tmp / "sim_parts"), duration_s, seed, True)
+    yard, yard_best = oaconvolve_rate(tmp / "sim_walk" / "audio.wav")
+    best = min(runs, key=lambda r: r["wall_s"])
+    rate = duration_s / best["wall_s"]
+    walls = ", ".join(f"{r['wall_s']:.2f}" for r in runs)
+    print(f"simulator, a {duration_s:.0f} s walk end to end (simulate_walk, every file written; best of {repeat} "
+          f"fresh processes, {walls} s wall): {rate:,.1f}x real time "
+          f"(CPU {best['cpu_s']:.2f} s: {duration_s / best['cpu_s']:,.1f}x; target 100x); oaconvolve over its audio "
+          f"in the same run: first run {yard:,.0f}x, best of 3 {yard_best:,.0f}x, ratio {rate / yard_best:.4f}; "
+          f"a 20 s walk in a new process first: {warm['wall_s']:.2f} s")
+    print(f"  peak RSS of the simulating process {best['peak_rss_mib']:.0f} MiB ({best['rss0_mib']:.0f} MiB after "
+          f"its imports); the stream-by-stream run's {parts['peak_rss_mib']:.0f} MiB")
+    total = sum(v for k, v in parts["times"].items() if "re-timed" not in k)
+    print(f"  per stream (one run, CPU s of the process, a fairer clock than wall time on a shared machine; sum "
+          f"{total:.2f} s = {duration_s / total:,.1f}x real time):")
+    for name, sec in parts["times"].items():
+        print(f"    {name:40s} {sec:7.2f} s  {100 * sec / total:5.1f} %  ({duration_s / sec:,.0f}x real time)")
+    return {"rate": rate, "yard_best": yard_best, "best": best, "parts": parts}
 
 
 if __name__ == "__main__":

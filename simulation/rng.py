@@ -7,6 +7,7 @@ stable hash of the name, so adding a stream never changes the draws of another
 
 from __future__ import annotations
 
+import functools
 import zlib
 
 import numpy as np
@@ -23,10 +24,14 @@ def stream_seed(seed: int, *names: str | int) -> np.random.SeedSequence:
     """
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
         raise ValueError(f"seed must be a non-negative integer, got {seed!r}")
-    keys = [int(seed)]
-    for name in names:
-        keys.append(int(name) if isinstance(name, (int, np.integer)) else zlib.crc32(str(name).encode()))
-    return np.random.SeedSequence(keys)
+    return np.random.SeedSequence([int(seed), *(int(name) if isinstance(name, (int, np.integer)) else _crc32(name)
+                                                for name in names)])
+
+
+@functools.lru_cache(maxsize=1024)
+def _crc32(name) -> int:
+    """CRC-32 of a stream name's text (a few dozen names recur for every emission and chunk)."""
+    return zlib.crc32(str(name).encode())
 
 
 def stream_rng(seed: int, *names: str | int) -> np.random.Generator:

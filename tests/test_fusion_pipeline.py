@@ -73,6 +73,9 @@ def test_bundle_round_trip_gives_the_same_track(trained, tmp_path):
     b, _ = run_methods(again, walk_inputs(data, again.classifier), ("adaptive", "kf_quality"), smooth=False)
     for m in ("adaptive", "kf_quality"):
         assert np.array_equal(a[m].east_m, b[m].east_m) and np.array_equal(a[m].north_m, b[m].north_m)
+        # the covariance calibrators survive the bundle: the same scale, so the same reported covariance
+        assert "cov_scale" in a[m].info and np.allclose(a[m].info["cov_scale"], b[m].info["cov_scale"], rtol=1e-12)
+        assert np.allclose(a[m].cov_m2, b[m].cov_m2, rtol=1e-12)
 
 
 def test_cli_train_run_evaluate(trained, walk_dir, tmp_path, capsys):

@@ -38,6 +38,7 @@ from models.bp_params import OneStep, ParamNet, ParamNetConfig
 from models.environment import EnvironmentClassifier
 from models.fusion import FixedNoise, PerClassNoise, QualityNoise
 from models.fusion.context import ContextNoise, ErrorSeries
+from models.fusion.calibration import CalibrationConfig
 from models.fusion.ekf import EkfConfig
 from models.fusion.model import FusionModel
 from models.uwb_pdr import UwbNoisePrior, uwb_nees
@@ -203,11 +204,13 @@ DEFAULT_EKF = EkfConfig(outlier="huber")
 def train_fusion(walk_dirs: list, classifier: EnvironmentClassifier, *, bp: bool = True,
                  bp_config: BPConfig = BPConfig(), ekf: EkfConfig = DEFAULT_EKF, meta: dict | None = None,
                  progress: Callable[[str], None] | None = None, noise_estimator: str = "median",
-                 tune: bool = True, tune_evals: int = 60, class_map_for: Callable | None = None) -> FusionModel:
+                 tune: bool = True, tune_evals: int = 60, class_map_for: Callable | None = None,
+                 calibrate: bool = True) -> FusionModel:
     """Fit a :class:`~models.fusion.model.FusionModel` on ``walk_dirs`` (each with truth.csv): the noise
     policies, then (``tune``) every filter method's knobs by its own error on the same walks
     (:mod:`training.tuning`, at most ``tune_evals`` passes each), then the BP network on the tuned
-    ``adaptive_nobp``. ``noise_estimator``: :func:`models.fusion.noise.chi2_2_mean` (the median form by
+    ``adaptive_nobp``, then (``calibrate``) the covariance calibrators of the filters' tracks
+    (:mod:`training.calibration`). ``noise_estimator``: :func:`models.fusion.noise.chi2_2_mean` (the median form by
     default: a few wrong RTK-fixed epochs would otherwise set the fixed UERE). ``class_map_for``: site →
     :class:`~models.fusion.events.ClassMap`, so the map baseline can be tuned too (None: it keeps its fit)."""
     say = progress or (lambda line: None)
@@ -259,6 +262,10 @@ def train_fusion(walk_dirs: list, classifier: EnvironmentClassifier, *, bp: bool
             setattr(model, "bp_params_blind" if blind else "bp_params", net)
             say(f"BP parameter network{' (blind)' if blind else ''}: one-step validation error "
                 f"{net.validation_error_m_:.3f} m")
+    if calibrate:
+        from training.calibration import fit_calibration
+
+        model.calibration = fit_calibration(model, walks, CalibrationConfig(seed=bp_config.seed), say)
     return model
 
 

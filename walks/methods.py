@@ -49,6 +49,7 @@ from models.bp import bp_inputs
 from models.fusion import (ClassMap, ContextNoise, EventEKF, FilterRun, IMMFilter, VBAdaptiveNoise, fixed_lag_smooth,
                            rts_smooth)
 from models.fusion.model import FusionModel
+from walks.calibrate import calibrate_tracks
 from walks.inputs import WalkInputs
 from walks.track import Track
 
@@ -171,6 +172,7 @@ def run_methods(model: FusionModel, inputs: WalkInputs, methods=None, smooth: bo
             for suffix, sm in smoothed:
                 tracks[n + suffix] = Track(n + suffix, sm.t_s, sm.x[:, 0].copy(), sm.x[:, 1].copy(),
                                            sm.P[:, :2, :2].copy())
+            calibrate_tracks(tracks, n, out, model, inputs)
         else:
             tracks[n] = out
     return tracks, skipped

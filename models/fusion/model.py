@@ -15,6 +15,8 @@ A :class:`FusionModel` holds, for one substation family:
 - the BP networks: the parameter network and its environment-blind twin (:class:`models.bp_params.ParamNet`,
   ``adaptive`` / ``adaptive_blind``) and the literal position corrector (:class:`models.bp.BPCorrector`,
   ``adaptive_correction``), each or None,
+- the covariance calibrators per track name (:class:`models.fusion.calibration.CovarianceCalibrator`,
+  ``calibration``): what multiplies a track's reported covariance so its NEES holds (empty: raw covariances),
 - the UWB NLOS prior per class and its blind twin (:class:`models.uwb_pdr.UwbNoisePrior`,
   ``uwb_aoa_pdr_env`` / ``uwb_aoa_pdr_blind``), each None when no training walk had UWB,
 - metadata: the training walks and their hashes, the site names, versions.
@@ -35,6 +37,7 @@ from models.bp_params import ParamNet
 from models.bundle import BundleError, load_bundle, save_bundle
 from models.checks import check_bp, check_classifier, check_covariances, check_positive
 from models.environment import EnvironmentClassifier
+from models.fusion.calibration import CovarianceCalibrator
 from models.fusion.ekf import EkfConfig
 from models.fusion.context import ContextNoise
 from models.fusion.noise import FixedNoise, PerClassNoise, QualityNoise
@@ -60,6 +63,8 @@ class FusionModel:
     tuning: dict = field(default_factory=dict)
     bp_params: ParamNet | None = None
     bp_params_blind: ParamNet | None = None
+    calibration: dict = field(default_factory=dict)
+    """{track name: CovarianceCalibrator}, e.g. ``adaptive_blind+lag``."""
     uwb_prior: UwbNoisePrior | None = None
     uwb_prior_blind: UwbNoisePrior | None = None
 
@@ -97,6 +102,14 @@ def save_fusion_model(model: FusionModel, path, overwrite: bool = False):
         params[key] = None
         if net is not None:
             params[key], arrays[key] = net.get_state()
+    params["calibration"] = {}
+    if model.calibration:
+        arrays["calibration"] = {}
+        for name, cal in model.calibration.items():
+            cp, ca = cal.get_state()
+            cp = {k: (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in cp.items()}
+            params["calibration"][name] = cp
+            arrays["calibration"].update({f"{name}/{k}": v for k, v in ca.items()})
     return save_bundle(path, "fusion", params, arrays, meta=model.meta, overwrite=overwrite)
 
 
@@ -140,10 +153,16 @@ def load_fusion_model(path) -> FusionModel:
         ekf = EkfConfig(**p["ekf"])
         uwb = {k: UwbNoisePrior.from_state(p[k]) if p.get(k) else None for k in ("uwb_prior", "uwb_prior_blind")}
         tuning = {str(m): {str(k): float(v) for k, v in kn.items()} for m, kn in p.get("tuning", {}).items()}
+        calibration = {}
+        for name, cp in (p.get("calibration") or {}).items():     # a bundle from before calibration has none
+            cp = {k: (float("nan") if v is None else v) for k, v in cp.items()}
+            ca = {k.split("/", 1)[1]: v for k, v in a["calibration"].items() if k.split("/", 1)[0] == name}
+            calibration[str(name)] = CovarianceCalibrator.from_state(cp, ca)
         for m, kn in tuning.items():
             if not all(math.isfinite(v) and v > 0 for v in kn.values()):
                 raise ValueError(f"tuning of {m} holds a non-positive or non-finite knob {kn}")
     except (KeyError, TypeError, ValueError, AttributeError) as exc:
         raise BundleError(f"{path}: the fusion model is inconsistent ({exc})") from None
     return FusionModel(classifier=clf, fixed=fixed, quality=q, per_class_map=per_map, per_class=per,
-                       context=ctx, context_blind=ctx_blind, ekf=ekf, bp=bp, meta=b.meta, tuning=tuning, **nets, **uwb)
+                       context=ctx, context_blind=ctx_blind, ekf=ekf, bp=bp, meta=b.meta, tuning=tuning,
+                       calibration=calibration, **nets, **uwb)

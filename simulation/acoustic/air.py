@@ -141,24 +141,35 @@ class Air:
             t = t + self.hot_air_k * np.exp(-np.hypot(de, dn) / self.cfg.hot_air_scale_m).sum(axis=1)
         return t
 
-    def wind_at(self, t_s: float) -> np.ndarray:
-        """Wind vector (east, north), m/s, at recording time ``t_s``."""
-        g = np.array([np.interp(t_s, self._gust_t, self._gust[:, 0]), np.interp(t_s, self._gust_t, self._gust[:, 1])])
+    def wind_at(self, t_s) -> np.ndarray:
+        """Wind vector (east, north), m/s, at recording time(s) ``t_s``: shape (2,) for a scalar, (n, 2) for (n,)."""
+        g = np.stack([np.interp(t_s, self._gust_t, self._gust[:, 0]), np.interp(t_s, self._gust_t, self._gust[:, 1])],
+                     axis=-1)
         return self.wind_mean + g
 
-    def c_eff(self, t_s: float, src_m: np.ndarray, rx_m: np.ndarray) -> float:
-        """Effective speed of sound from ``src_m`` to ``rx_m`` (ENU, m) at time ``t_s``: path-mean c + w·n̂."""
+    def c_eff(self, t_s, src_m: np.ndarray, rx_m: np.ndarray):
+        """Effective speed of sound from ``src_m`` to ``rx_m`` (ENU, m) at time ``t_s``: path-mean c + w·n̂, m/s.
+
+        The path mean is over 5 points evenly spaced from source to receiver (hot air beside transformers);
+        w the wind at ``t_s``, n̂ the path's unit vector. ``t_s`` a float and ``src_m``, ``rx_m`` of shape (3,)
+        give a float; ``t_s`` (n,) and positions (n, 3) (or one of them (3,)) give an array (n,).
+        """
+        scalar = np.ndim(t_s) == 0
+        t = np.atleast_1d(np.asarray(t_s, float))
+        src, rx = np.broadcast_arrays(np.atleast_2d(np.asarray(src_m, float)), np.atleast_2d(np.asarray(rx_m, float)))
         if self._dry:
-            return self.mean_c()
+            c = np.full(len(t), self.mean_c())
+            return float(c[0]) if scalar else c
         s = np.linspace(0.0, 1.0, 5)
-        pts = src_m[None, :2] + s[:, None] * (rx_m[None, :2] - src_m[None, :2])
-        c = float(np.mean(moist_speed_of_sound_m_s(self.temperature_at_c(pts[:, 0], pts[:, 1]), self.rh_pct,
-                                                   self.pressure_kpa)))
-        d = np.asarray(rx_m, float) - np.asarray(src_m, float)
-        norm = float(np.linalg.norm(d))
-        if norm < 1e-9:
-            return c
-        return c + float(self.wind_at(t_s) @ (d[:2] / norm))
+        pts = src[:, None, :2] + s[None, :, None] * (rx[:, None, :2] - src[:, None, :2])        # (n, 5, 2)
+        temp = self.temperature_at_c(pts[..., 0].ravel(), pts[..., 1].ravel()).reshape(len(t), 5)
+        c = np.mean(moist_speed_of_sound_m_s(temp, self.rh_pct, self.pressure_kpa), axis=1)
+        d = rx - src
+        norm = np.sqrt(np.vecdot(d, d))          # |d| as numpy.linalg.norm computes it (a dot product)
+        far = norm >= 1e-9
+        n_hat = d[:, :2] / np.where(far, norm, 1.0)[:, None]
+        c = np.where(far, c + np.vecdot(self.wind_at(t), n_hat), c)
+        return float(c[0]) if scalar else c
 
     def mean_c(self) -> float:
         """Speed of sound of the air away from equipment, without wind, m/s (moist; dry ideal gas when disabled,

@@ -34,6 +34,7 @@ diffraction detour. The channel is static over one chirp (the receiver moves
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -43,15 +44,14 @@ from features.errors import ConfigError
 from features.site import Site
 
 from simulation.acoustic.atmosphere import GROUND_MATERIAL, reflection_coefficient, speed_of_sound_m_s
-from simulation.site.geometry import boxes_array, footprint_entry, segment_hits_boxes
+from simulation.acoustic.path_geometry import discrete_paths
+from simulation.site.geometry import boxes_array, footprint_entry
 
 __all__ = ["PATH_KINDS", "PathSet", "ChannelConfig", "Scene", "build_scene", "channel_paths", "clutter_index",
            "TailModel", "tail_model", "beacon_arrivals"]
 
 PATH_KINDS = ("direct", "ground", "reflection", "diffraction")
 """Path kind names, indexed by :attr:`PathSet.kind`."""
-
-_NUDGE_M = 1e-6
 
 
 @dataclass(frozen=True)
@@ -163,195 +163,6 @@ def build_scene(site: Site, config: ChannelConfig | None = None) -> Scene:
                  ground_r=reflection_coefficient(config.ground_material), config=config)
 
 
-def _segment_hits(a: np.ndarray, b: np.ndarray, boxes: np.ndarray) -> np.ndarray:
-    """``simulation.site.geometry.segment_hits_boxes`` restricted to boxes overlapping the segments' bounding box.
-
-    Same result, shape (n, m); only the candidate columns are tested (most of
-    a yard's boxes lie far from any one beacon–receiver pair).
-    """
-    a = np.asarray(a, float)
-    b = np.asarray(b, float)
-    out = np.zeros((a.shape[0], boxes.shape[0]), bool)
-    if a.shape[0] == 0 or boxes.shape[0] == 0:
-        return out
-    lo = np.minimum(a.min(axis=0), b.min(axis=0))
-    hi = np.maximum(a.max(axis=0), b.max(axis=0))
-    near = ((boxes[:, 0] <= hi[0]) & (boxes[:, 1] >= lo[0]) & (boxes[:, 2] <= hi[1]) & (boxes[:, 3] >= lo[1])
-            & (boxes[:, 4] >= lo[2]))
-    if near.any():
-        out[:, near] = segment_hits_boxes(a, b, boxes[near])
-    return out
-
-
-def _porous_gain(scene: Scene, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Pressure factor 10^(−n·loss/20) for segments a→b (n, 3) crossing n porous boxes; shape (n,)."""
-    if scene.porous.shape[0] == 0 or scene.config.porous_loss_db == 0:
-        return np.ones(a.shape[0])
-    n_cross = _segment_hits(a, b, scene.porous).sum(axis=1)
-    return 10.0 ** (-n_cross * scene.config.porous_loss_db / 20.0)
-
-
-def _blocked(scene: Scene, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Whether segments a→b (n, 3) pass through a solid box; shape (n,)."""
-    if scene.solid.shape[0] == 0:
-        return np.zeros(a.shape[0], bool)
-    return _segment_hits(a, b, scene.solid).any(axis=1)
-
-
-def _upper_hull_length(points_uz: np.ndarray) -> float:
-    """Length of the upper convex hull of points (k, 2) sorted by u (Andrew's monotone chain, 1979)."""
-    hull: list[np.ndarray] = []
-    for p in points_uz:
-        while len(hull) >= 2:
-            o, a = hull[-2], hull[-1]
-            cross = (a[0] - o[0]) * (p[1] - o[1]) - (a[1] - o[1]) * (p[0] - o[0])
-            if cross >= 0:       # a lies on or below o→p: not on the upper hull
-                hull.pop()
-            else:
-                break
-        hull.append(p)
-    h = np.asarray(hull)
-    return float(np.hypot(np.diff(h[:, 0]), np.diff(h[:, 1])).sum())
-
-
-def _over_top_length(scene: Scene, src: np.ndarray, rx: np.ndarray) -> float:
-    """Taut-string length over the box tops in the vertical plane through src and rx (inf if none)."""
-    d_h = math.hypot(rx[0] - src[0], rx[1] - src[1])
-    if d_h < 1e-6 or scene.solid.shape[0] == 0:
-        return math.inf
-    az = math.atan2(rx[0] - src[0], rx[1] - src[1])
-    t_in, t_out = footprint_entry(src[None, :2], np.array([az]), scene.solid)
-    t_in, t_out = t_in[0, 0], t_out[0, 0]
-    crossed = np.isfinite(t_in) & (t_in < d_h)
-    if not crossed.any():
-        return math.inf
-    h = scene.solid[crossed, 4]
-    u = np.concatenate([t_in[crossed], np.minimum(t_out[crossed], d_h)])
-    pts = np.column_stack([np.concatenate([[0.0], u, [d_h]]), np.concatenate([[src[2]], h, h, [rx[2]]])])
-    pts = pts[np.lexsort((pts[:, 1], pts[:, 0]))]
-    # the end points must stay the ends of the chain even when a box touches them
-    pts = np.vstack([[0.0, src[2]], pts[(pts[:, 0] > 0) & (pts[:, 0] < d_h)], [d_h, rx[2]]])
-    return _upper_hull_length(pts)
-
-
-def _plan_hits(p: np.ndarray, q: np.ndarray, boxes: np.ndarray) -> np.ndarray:
-    """Whether plan segments p→q (n, 2) cross box footprints (treated as infinitely tall); (n,)."""
-    tall = boxes.copy()
-    tall[:, 4] = 1e9
-    a = np.column_stack([p, np.ones(len(p))])
-    b = np.column_stack([q, np.ones(len(q))])
-    return _segment_hits(a, b, tall).any(axis=1)
-
-
-def _dijkstra_dense(w: np.ndarray, source: int) -> tuple[np.ndarray, np.ndarray]:
-    """Shortest distances and predecessors from ``source`` over a dense (k, k) weight matrix (inf = no edge).
-
-    Dijkstra (1959) with an O(k²) array scan: the graphs here have a handful of
-    corner nodes, for which scipy.sparse.csgraph's validation costs more than the search.
-    """
-    k = w.shape[0]
-    dist = np.full(k, np.inf)
-    pred = np.full(k, -1)
-    done = np.zeros(k, bool)
-    dist[source] = 0.0
-    for _ in range(k):
-        u = int(np.argmin(np.where(done, np.inf, dist)))
-        if not np.isfinite(dist[u]):
-            break
-        done[u] = True
-        alt = dist[u] + w[u]
-        better = (alt < dist) & ~done
-        dist[better] = alt[better]
-        pred[better] = u
-    return dist, pred
-
-
-def _lateral_length(scene: Scene, src: np.ndarray, rx: np.ndarray, blockers: np.ndarray) -> float:
-    """Shortest path round the vertical edges (plan visibility graph of box corners), 3-D length.
-
-    The plan route is found by Dijkstra over the corners of the obstructing
-    boxes; boxes the resulting 3-D route still hits join the obstacle set and
-    the search repeats (at most four rounds). Its 3-D length is
-    sqrt(L_plan² + Δz²): the route rises linearly from source to receiver.
-    """
-    obstacles = set(int(j) for j in blockers)
-    dz = rx[2] - src[2]
-    for _round in range(4):
-        ob = scene.solid[sorted(obstacles)]
-        e0, e1, n0, n1 = (ob[:, k] for k in range(4))
-        eps = 1e-3
-        corners = np.concatenate([np.column_stack([e0 - eps, n0 - eps]), np.column_stack([e0 - eps, n1 + eps]),
-                                  np.column_stack([e1 + eps, n0 - eps]), np.column_stack([e1 + eps, n1 + eps])])
-        nodes = np.vstack([src[:2], rx[:2], corners])
-        k = len(nodes)
-        ii, jj = np.triu_indices(k, 1)
-        free = ~_plan_hits(nodes[ii], nodes[jj], ob)
-        w = np.full((k, k), np.inf)
-        lengths = np.hypot(*(nodes[jj] - nodes[ii]).T)
-        w[ii[free], jj[free]] = lengths[free]
-        w[jj[free], ii[free]] = lengths[free]
-        dist, pred = _dijkstra_dense(w, 0)
-        if not np.isfinite(dist[1]):
-            return math.inf
-        route = [1]
-        while route[-1] != 0:
-            route.append(int(pred[route[-1]]))
-        route = route[::-1]
-        plan = nodes[route]
-        seg = np.hypot(*np.diff(plan, axis=0).T)
-        cum = np.concatenate([[0.0], np.cumsum(seg)])
-        total = cum[-1]
-        z = src[2] + dz * cum / max(total, 1e-9)
-        pts = np.column_stack([plan, z])
-        hits = _segment_hits(pts[:-1], pts[1:], scene.solid).any(axis=0)
-        new = set(np.flatnonzero(hits).tolist()) - obstacles
-        if not new:
-            return math.hypot(total, dz)
-        obstacles |= new
-    return math.inf
-
-
-def _reflections(scene: Scene, src: np.ndarray, rx: np.ndarray, direct_m: float):
-    """First-order image-source reflections off vertical faces; returns (length, gain, box) arrays."""
-    f = scene.faces
-    if f.shape[0] == 0:
-        return np.zeros(0), np.zeros(0), np.zeros(0, int)
-    axis = f[:, 0].astype(int)
-    plane, sign = f[:, 1], f[:, 2]
-    s_a, r_a = src[axis], rx[axis]
-    ok = (sign * (s_a - plane) > 0) & (sign * (r_a - plane) > 0)
-    image = np.broadcast_to(src, (len(f), 3)).copy()
-    rows = np.arange(len(f))
-    image[rows, axis] = 2.0 * plane - s_a
-    length = np.linalg.norm(rx[None, :] - image, axis=1)
-    ok &= length - direct_m <= scene.config.max_excess_m
-    if not ok.any():
-        return np.zeros(0), np.zeros(0), np.zeros(0, int)
-    idx = np.flatnonzero(ok)
-    im, ax = image[idx], axis[idx]
-    u = (plane[idx] - im[np.arange(len(idx)), ax]) / (r_a[idx] - im[np.arange(len(idx)), ax])
-    p = im + u[:, None] * (rx[None, :] - im)
-    other = p[np.arange(len(idx)), 1 - ax]
-    on_face = (other >= f[idx, 3]) & (other <= f[idx, 4]) & (p[:, 2] >= 0.0) & (p[:, 2] <= f[idx, 5])
-    idx, p, ax = idx[on_face], p[on_face], ax[on_face]
-    if len(idx) == 0:
-        return np.zeros(0), np.zeros(0), np.zeros(0, int)
-    p[np.arange(len(idx)), ax] += sign[idx] * _NUDGE_M       # step off the face onto the outer side
-    # both legs in one call: rows [src→p_i ..., p_i→rx ...]
-    n = len(idx)
-    a = np.vstack([np.broadcast_to(src, p.shape), p])
-    b = np.vstack([p, np.broadcast_to(rx, p.shape)])
-    blocked = _blocked(scene, a, b)
-    visible = ~(blocked[:n] | blocked[n:])
-    if not visible.any():
-        return np.zeros(0), np.zeros(0), np.zeros(0, int)
-    idx = idx[visible]
-    legs = np.concatenate([visible, visible])
-    porous = _porous_gain(scene, a[legs], b[legs])
-    gain = f[idx, 6] / length[idx] * porous[:len(idx)] * porous[len(idx):]
-    return length[idx], gain, scene.solid_index[scene.face_box[idx]]
-
-
 def channel_paths(scene: Scene, src_xyz, rx_xyz) -> PathSet:
     """Discrete paths from a source to a receiver (ENU metres, up = height above ground).
 
@@ -364,45 +175,15 @@ def channel_paths(scene: Scene, src_xyz, rx_xyz) -> PathSet:
     -------
     PathSet sorted by length.
     """
-    src = np.asarray(src_xyz, float)
-    rx = np.asarray(rx_xyz, float)
-    d = float(np.linalg.norm(rx - src))
-    kinds, lengths, gains, detours, boxes = [], [], [], [], []
-    # direct path and both legs of the ground reflection (image source at z = −z_src) in one test
-    img = src * np.array([1.0, 1.0, -1.0])
-    lg = float(np.linalg.norm(rx - img))
-    u = src[2] / (src[2] + rx[2]) if src[2] > 0 and rx[2] > 0 else 0.0
-    gp = (src + u * (rx - src)) * np.array([1.0, 1.0, 0.0]) + np.array([0.0, 0.0, _NUDGE_M])
-    a, b = np.vstack([src, src, gp]), np.vstack([rx, gp, rx])
-    hits = _segment_hits(a, b, scene.solid) if scene.solid.shape[0] else np.zeros((3, 0), bool)
-    porous3 = _porous_gain(scene, a, b)
-    hit = hits[0]
-    los = not hit.any()
-    porous = float(porous3[0])
-    if los:
-        kinds.append(0), lengths.append(d), gains.append(porous / max(d, 1e-3)), detours.append(0.0), boxes.append(-1)
-    else:
-        path = min(_over_top_length(scene, src, rx), _lateral_length(scene, src, rx, np.flatnonzero(hit)))
-        if math.isfinite(path):
-            first = int(scene.solid_index[np.flatnonzero(hit)[0]])
-            kinds.append(3), lengths.append(path), gains.append(porous / max(d, 1e-3))
-            detours.append(max(path - d, 0.0)), boxes.append(first)
-    if u > 0 and scene.config.ground_reflection and not (hits[1].any() or hits[2].any()):
-        g = scene.ground_r / lg * porous3[1] * porous3[2]
-        kinds.append(1), lengths.append(lg), gains.append(g), detours.append(0.0), boxes.append(-1)
-    if scene.config.wall_reflections:
-        rl, rg, rb = _reflections(scene, src, rx, d)
-    else:
-        rl, rg, rb = np.zeros(0), np.zeros(0), np.zeros(0, int)
-    kinds += [2] * len(rl)
-    lengths += rl.tolist()
-    gains += rg.tolist()
-    detours += [0.0] * len(rl)
-    boxes += rb.tolist()
-    order = np.argsort(np.asarray(lengths), kind="stable")
-    return PathSet(kind=np.asarray(kinds, int)[order], length_m=np.asarray(lengths, float)[order],
-                   gain=np.asarray(gains, float)[order], detour_m=np.asarray(detours, float)[order],
-                   box=np.asarray(boxes, int)[order], direct_m=d, los=los)
+    src = np.ascontiguousarray(src_xyz, dtype=float)
+    rx = np.ascontiguousarray(rx_xyz, dtype=float)
+    cfg = scene.config
+    kind, length, gain, detour, box, d, los = discrete_paths(
+        scene.solid, scene.solid_index, scene.porous, scene.faces, scene.face_box, cfg.porous_loss_db, scene.ground_r,
+        cfg.ground_reflection, cfg.wall_reflections, cfg.max_excess_m, src, rx)
+    order = np.argsort(length, kind="stable")
+    return PathSet(kind=kind[order], length_m=length[order], gain=gain[order], detour_m=detour[order], box=box[order],
+                   direct_m=float(d), los=bool(los))
 
 
 def clutter_index(scene: Scene, rx_en, n_azimuths: int = 72) -> float:
@@ -441,13 +222,15 @@ class TailModel:
     level_db: float
 
 
+@functools.lru_cache(maxsize=4096)
 def tail_model(clutter: float) -> TailModel:
     """Tail parameters from the clutter index c ∈ [0, 1] (linear in c).
 
     decay 3 → 23 ms, density 0.5 → 10 arrivals/ms and level −20 → −6 dB as c
     goes 0 → 1: an open area keeps a faint, short, sparse tail (ground
     roughness, distant structures), a court of steel tanks and walls a dense,
-    long, strong one, which lowers the Rician K and raises τ_rms there.
+    long, strong one, which lowers the Rician K and raises τ_rms there. Cached
+    (a walk meets a few hundred clutter values, one per metre cell).
 
     >>> tail_model(0.0)
     TailModel(onset_ms=0.5, decay_ms=3.0, density_per_ms=0.5, level_db=-20.0)

@@ -32,8 +32,8 @@ from scipy.signal.windows import tukey
 from features.errors import ConfigError
 from features.site import Beacon, Site
 
-__all__ = ["ChirpSpec", "beacon_chirp", "chirp_waveform", "reference_chirp", "frame_phase_s", "emission_times_s",
-           "slot_reuse_conflicts"]
+__all__ = ["ChirpSpec", "beacon_chirp", "chirp_length", "chirp_waveform", "reference_chirp", "frame_phase_s",
+           "emission_times_s", "slot_reuse_conflicts"]
 
 _EPOCH = datetime(1970, 1, 1, tzinfo=timezone.utc)
 
@@ -98,6 +98,20 @@ def _tukey_continuous(x: np.ndarray, alpha: float) -> np.ndarray:
     return w
 
 
+def chirp_length(spec: ChirpSpec, fs_hz: float, time_scale: float = 1.0) -> int:
+    """Samples of the chirp heard with Doppler factor η = ``time_scale``: ceil(N/η), N = round(T·fs).
+
+    >>> chirp_length(ChirpSpec(17000.0, 23000.0, 0.010, 0.2), 48000.0, 1.001)
+    480
+    """
+    if not 0.9 < time_scale < 1.1:
+        raise ValueError(f"time_scale must lie near 1 (|v| << c), got {time_scale}")
+    n_ref = int(round(spec.duration_s * fs_hz))
+    if n_ref < 2:
+        raise ConfigError(f"chirp of {spec.duration_s} s is shorter than two samples at {fs_hz} Hz")
+    return int(math.ceil(n_ref / time_scale))
+
+
 def chirp_waveform(spec: ChirpSpec, fs_hz: float, time_scale: float = 1.0) -> np.ndarray:
     """Sampled chirp ``s(η·t_n)``, t_n = n/fs: the waveform as heard with Doppler factor η.
 
@@ -114,13 +128,8 @@ def chirp_waveform(spec: ChirpSpec, fs_hz: float, time_scale: float = 1.0) -> np
     >>> s.shape, float(s[0]), round(float(np.abs(s).max()), 3)
     ((480,), 0.0, 1.0)
     """
-    if not 0.9 < time_scale < 1.1:
-        raise ValueError(f"time_scale must lie near 1 (|v| << c), got {time_scale}")
     n_ref = int(round(spec.duration_s * fs_hz))
-    if n_ref < 2:
-        raise ConfigError(f"chirp of {spec.duration_s} s is shorter than two samples at {fs_hz} Hz")
-    n_out = int(math.ceil(n_ref / time_scale))
-    t = np.arange(n_out) * (time_scale / fs_hz)
+    t = np.arange(chirp_length(spec, fs_hz, time_scale)) * (time_scale / fs_hz)
     x = t * fs_hz / (n_ref - 1)
     w = _tukey_continuous(x, spec.taper_fraction)
     phase = 2.0 * np.pi * (spec.f0_hz * t + 0.5 * spec.sweep_rate_hz_s * t * t)

@@ -154,16 +154,19 @@ def beacon_axes(site: Site, n_tweeters: int = 4) -> dict[int, np.ndarray]:
     return out
 
 
-def torso_shadow(bearing_rad: float, heading_rad: float, cfg: HardwareConfig = HardwareConfig()) -> tuple[float, float]:
+def torso_shadow(bearing_rad, heading_rad, cfg: HardwareConfig = HardwareConfig()):
     """(extra path m, loss dB) of a beacon at ``bearing_rad`` (from north, clockwise) for a walker heading
-    ``heading_rad``: nothing within 90° of the front, round the torso behind (module docstring).
+    ``heading_rad``: nothing within 90° of the front, round the torso behind (module docstring). Floats for
+    scalar angles, arrays of their broadcast shape otherwise.
 
     >>> torso_shadow(0.0, 0.0), tuple(round(x, 3) for x in torso_shadow(np.pi, 0.0))
     ((0.0, 0.0), (0.236, 20.0))
     """
-    delta = abs(float(np.angle(np.exp(1j * (bearing_rad - heading_rad)))))
-    if delta <= np.pi / 2 or cfg.torso_radius_m <= 0:
-        return 0.0, 0.0
+    delta = np.abs(np.angle(np.exp(1j * (np.asarray(bearing_rad, float) - np.asarray(heading_rad, float)))))
+    behind = (delta > np.pi / 2) & (cfg.torso_radius_m > 0)
     u = (delta - np.pi / 2) / (np.pi / 2)
-    return cfg.torso_radius_m * (delta - np.pi / 2), cfg.torso_loss_min_db + (cfg.torso_loss_max_db
-                                                                              - cfg.torso_loss_min_db) * u
+    extra = np.where(behind, cfg.torso_radius_m * (delta - np.pi / 2), 0.0)
+    loss_db = np.where(behind, cfg.torso_loss_min_db + (cfg.torso_loss_max_db - cfg.torso_loss_min_db) * u, 0.0)
+    if extra.ndim == 0:
+        return float(extra), float(loss_db)
+    return extra, loss_db

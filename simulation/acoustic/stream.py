@@ -8,7 +8,11 @@ the channel is evaluated once, static over the 10 ms chirp (the walker moves
 clicks come from :class:`simulation.acoustic.synthesis.AmbientNoise`. Emissions whose
 free-field level could not rise out of the noise are skipped. Samples are
 summed in a rolling buffer and written block by block, so memory stays
-bounded for any length of walk.
+bounded for any length of walk. Emissions go in batches of 128: their first
+look (true emission instant, effective speed of sound, arrival fixed point,
+walker position, free-field screen, tweeter and torso factors) is computed over
+the batch at once, and their FFTs of equal length run as one call; every draw
+and every sample is what one emission at a time gives (issue 25 item 2).
 
 The receiver: its recording starts at ``start_s + U(−u, u)`` on the walk's time
 base (stated ``start_s``, stated uncertainty ``u``), its sample clock runs
@@ -24,6 +28,7 @@ import contextlib
 import csv
 import heapq
 import io
+import itertools
 import math
 from dataclasses import dataclass, fields, replace
 from typing import Iterator
@@ -85,14 +90,21 @@ class _Accumulator:
     def pop_block(self) -> np.ndarray:
         n = min(self.block, self.n_total - self.base)
         out = self.buf[:n].copy()
-        self.buf = np.concatenate([self.buf[n:], np.zeros(n)])
+        self.buf[:-n] = self.buf[n:]     # shift in place (numpy copies overlapping slices safely)
+        self.buf[-n:] = 0.0
         self.base += n
         return out
 
 
-def _position_at(traj: Trajectory, t_s: float) -> np.ndarray:
-    return np.array([np.interp(t_s, traj.t_s, traj.east_m), np.interp(t_s, traj.t_s, traj.north_m),
-                     np.interp(t_s, traj.t_s, traj.up_m)])
+def _positions_at(traj: Trajectory, t_s: np.ndarray) -> np.ndarray:
+    """True device positions (east, north, up), m, at times ``t_s`` (n,): shape (n, 3), linear interpolation."""
+    return np.column_stack([np.interp(t_s, traj.t_s, traj.east_m), np.interp(t_s, traj.t_s, traj.north_m),
+                            np.interp(t_s, traj.t_s, traj.up_m)])
+
+
+def _norms(d: np.ndarray) -> np.ndarray:
+    """Euclidean norms of the rows of ``d`` (n, 3), as ``numpy.linalg.norm`` computes each (a dot product)."""
+    return np.sqrt(np.vecdot(d, d))
 
 
 def _velocity_table(traj: Trajectory) -> tuple[np.ndarray, np.ndarray]:
@@ -100,29 +112,64 @@ def _velocity_table(traj: Trajectory) -> tuple[np.ndarray, np.ndarray]:
     return traj.speed_m_s * np.sin(traj.heading_rad), traj.speed_m_s * np.cos(traj.heading_rad)
 
 
-def _emissions(site: Site, start_utc, t_begin_s: float, t_end_s: float) -> Iterator[tuple]:
-    """Every (t_emit_s, beacon_id, index, beacon, spec) in [t_begin_s, t_end_s), in emission order.
+def _emission_batches(site: Site, start_utc, t_begin_s: float, t_end_s: float, size: int = 128) -> Iterator[list]:
+    """Every (t_emit_s, beacon_id, index, beacon, spec) in [t_begin_s, t_end_s), in emission order, in lists of
+    at most ``size``.
 
-    A lazy k-way merge of the beacons' schedules: memory per beacon, not per emission.
+    A lazy k-way merge of the beacons' schedules: memory per beacon and batch, not per emission.
     """
     def one(b):
         spec = beacon_chirp(site, b)
         for i, t_e in enumerate(emission_times_s(site, b, start_utc, t_begin_s, t_end_s)):
             yield float(t_e), b.id, i, b, spec
 
-    return heapq.merge(*(one(b) for b in site.beacons), key=lambda e: (e[0], e[1]))
+    merged = heapq.merge(*(one(b) for b in site.beacons), key=lambda e: (e[0], e[1]))
+    while batch := list(itertools.islice(merged, size)):
+        yield batch
+
+
+@dataclass(frozen=True)
+class _Arrivals:
+    """Straight-line first look at a batch of emissions: true emission times ``t_e_s``, the paths' effective
+    speed of sound ``c_m_s``, arrival times ``t_a_s`` (t_a = t_e + |src − x(t_a)|/c, two fixed-point steps),
+    the walker there ``rx`` (n, 3), the straight distance ``d_m``, whether the free-field level could rise out
+    of the noise ``heard``, the walker's speed ``speed_m_s`` and the (gain, extra path m) of tweeter and torso
+    there ``hardware`` (None without hardware); each (n,) unless stated."""
+
+    t_e_s: np.ndarray
+    c_m_s: np.ndarray
+    t_a_s: np.ndarray
+    rx: np.ndarray
+    d_m: np.ndarray
+    heard: np.ndarray
+    speed_m_s: np.ndarray
+    hardware: tuple[np.ndarray, np.ndarray] | None
 
 
 class _Emitter:
-    """One emission through the time-varying channel: where the walker is when it arrives, its paths
-    (with body and transducers), Doppler, clutter tail; the rendered samples."""
+    """Emissions through the time-varying channel: where the walker is when each arrives, its paths (with
+    body and transducers), Doppler, clutter tail; the rendered samples. Built from the recording's true clock
+    (``true_start``, ``fs_true``); draws the air from ``stream_rng(seed | crew, "audio", ...)``."""
 
-    def __init__(self, site, trajectory, seed, cfg, scene, renderer, air_state, hardware, axes, true_start,
-                 fs_true, n_total):
-        self.site, self.trajectory, self.seed, self.cfg = site, trajectory, seed, cfg
-        self.scene, self.renderer, self.air_state, self.hardware, self.axes = scene, renderer, air_state, hardware, axes
+    def __init__(self, site, trajectory, seed, cfg, air: AirConfig, crew: int, hardware, true_start, fs_true,
+                 n_total):
+        self.site, self.trajectory, self.seed, self.cfg, self.hardware = site, trajectory, seed, cfg, hardware
         self.true_start, self.fs_true, self.n_total = true_start, fs_true, n_total
-        self.c = renderer.c
+        self.scene = build_scene(site, cfg.channel)
+        self.air_state = Air(site, stream_rng(crew, "audio", "thermometer"), stream_rng(seed, "audio", "air"),
+                             trajectory.duration_s, air)
+        true_site = replace(site, atmosphere=replace(site.atmosphere, temperature_c=self.air_state.temperature_c))
+        self.renderer = ChirpRenderer(true_site, cfg)
+        self.renderer.c = self.c = self.air_state.mean_c()
+        if hardware is not None:
+            self.true_pos = true_beacon_positions(site, hardware)
+            self.delays = beacon_delays_s(site, hardware)
+            self.jitter_rng = stream_rng(seed, "audio", "emission_jitter")
+            self.axes = beacon_axes(site, hardware.n_tweeters)
+        else:
+            self.true_pos = {b.id: np.array([b.east_m, b.north_m, b.up_m]) for b in site.beacons}
+            self.delays = {b.id: 0.0 for b in site.beacons}
+            self.jitter_rng, self.axes = None, None
         self.sl_db = site.acoustic.source_level_db
         self.noise_floor_db = cfg.inband_noise_db_spl
         self.level_scale = 10.0 ** ((self.sl_db - cfg.full_scale_db_spl) / 20.0)
@@ -130,6 +177,35 @@ class _Emitter:
         self.alpha_min: dict[ChirpSpec, float] = {}
         self.clutter_cache: dict[tuple[int, int], float] = {}
         self.path_cache: dict[tuple, PathSet] = {}     # a static receiver sees the same geometry every frame
+        self.n_emissions = self.n_rendered = 0
+
+    def render_batch(self, batch: list, recorder: _Recorder, truth: "_TruthWriter", bar) -> None:
+        """Render a batch of emissions (t_sched_s, beacon_id, index, beacon, spec) in order: flush the recorder
+        up to each one, add its samples, write its truth row."""
+        t_sched = np.array([e[0] for e in batch])
+        bids = [e[1] for e in batch]
+        src = np.array([self.true_pos[bid] for bid in bids])
+        t_e = t_sched      # the schedule slot (the truth file's key); t_e the true emission instant
+        if self.jitter_rng is not None:  # the chirp leaves the tweeter late by the beacon's latency and jitter
+            t_e = (t_sched + np.array([self.delays[bid] for bid in bids])
+                   + self.hardware.emission_jitter_s * self.jitter_rng.standard_normal(len(batch)))
+        arr = self.arrivals(t_e, src, bids, [e[4] for e in batch])
+        heard = [self.prepare(arr, j, e[1], src[j], e[4]) for j, e in enumerate(batch)]
+        segments = iter(self.renderer.render_many([got[0] for got in heard if got is not None]))
+        for j, (t_s, bid, _, beacon, spec) in enumerate(batch):
+            self.n_emissions += 1
+            bar.set(int(min(max(float(t_e[j]) - self.true_start, 0.0), self.trajectory.duration_s)))
+            recorder.flush_until((float(t_e[j]) - self.true_start) * self.fs_true - _PRE_SAMPLES - 2)
+            if heard[j] is None:
+                continue
+            start, seg = next(segments)
+            _, paths, t_a, first_sample, rx, eta = heard[j]
+            recorder.acc.add(start, seg)
+            self.n_rendered += 1
+            if first_sample >= 0:
+                truth.row(bid, beacon.slot, t_s, t_a, first_sample, PATH_KINDS[paths.kind[0]], paths.length_m[0],
+                          paths.direct_m, int(paths.los), rx,
+                          _first_path_db_spl(paths, spec, self.sl_db, self.renderer), eta)
 
     def paths_at(self, bid: int, src: np.ndarray, rx: np.ndarray) -> PathSet:
         key = (bid, *np.round(rx, 4).tolist())
@@ -139,34 +215,61 @@ class _Emitter:
             self.path_cache[key] = channel_paths(self.scene, src, rx)
         return self.path_cache[key]
 
-    def render(self, t_e: float, bid: int, src: np.ndarray, spec: ChirpSpec):
-        """(start, samples, paths, t_a, first_sample, rx, η) of the emission at true time ``t_e``, or None
-        when it cannot be heard (below the noise even in free field, no path, outside the recording)."""
-        site, trajectory, cfg, air_state = self.site, self.trajectory, self.cfg, self.air_state
-        sl_db, noise_floor_db, fs = self.sl_db, self.noise_floor_db, cfg.fs_hz
-        if spec not in self.alpha_min:
-            self.alpha_min[spec] = float(absorption_db_per_m(spec.f0_hz, site.atmosphere))
-        alpha = self.alpha_min[spec]
+    def arrivals(self, t_e: np.ndarray, src: np.ndarray, bids: list[int], specs: list[ChirpSpec]) -> _Arrivals:
+        """The straight-line first look at emissions of beacons ``bids`` at true times ``t_e`` (n,) from
+        ``src`` (n, 3)."""
+        trajectory = self.trajectory
+        for spec in set(specs) - set(self.alpha_min):
+            self.alpha_min[spec] = float(absorption_db_per_m(spec.f0_hz, self.site.atmosphere))
+        alpha = np.array([self.alpha_min[spec] for spec in specs])
         # receiver position when the first path arrives: t_a = t_e + L(x(t_a))/c, straight line first
+        c_e = self.air_state.c_eff(t_e, src, _positions_at(trajectory, t_e))  # effective speed of each path
         t_a = t_e
-        c_e = air_state.c_eff(t_e, src, _position_at(trajectory, t_e))  # effective speed of this path
         for _ in range(2):
-            t_a = t_e + float(np.linalg.norm(src - _position_at(trajectory, t_a))) / c_e
-        rx = _position_at(trajectory, t_a)
-        d = float(np.linalg.norm(src - rx))
-        if sl_db - 20.0 * math.log10(max(d, 1e-3)) - alpha * d < noise_floor_db - cfg.skip_margin_db:
-            return None          # even in free field it could not rise out of the noise
+            t_a = t_e + _norms(src - _positions_at(trajectory, t_a)) / c_e
+        rx = _positions_at(trajectory, t_a)
+        d = _norms(src - rx)
+        # whether even in free field it could rise out of the noise
+        floor_db = self.noise_floor_db - self.cfg.skip_margin_db
+        heard = self.sl_db - 20.0 * np.log10(np.maximum(d, 1e-3)) - alpha * d >= floor_db
+        return _Arrivals(t_e_s=t_e, c_m_s=c_e, t_a_s=t_a, rx=rx, d_m=d, heard=heard,
+                         speed_m_s=np.interp(t_a, trajectory.t_s, trajectory.speed_m_s),
+                         hardware=self.hardware_factors(t_e, src, rx, bids, specs))
+
+    def hardware_factors(self, t_e: np.ndarray, src: np.ndarray, rx: np.ndarray, bids: list[int],
+                         specs: list[ChirpSpec]) -> tuple[np.ndarray, np.ndarray] | None:
+        """(gain, extra path m), each (n,), of tweeter and torso for emissions at ``t_e`` from ``src`` heard at
+        ``rx``; None without hardware."""
+        if self.hardware is None:
+            return None
+        traj = self.trajectory
+        i = np.minimum(np.searchsorted(traj.t_s, t_e), len(traj.t_s) - 1)
+        f_c = np.array([0.5 * (spec.f0_hz + spec.f1_hz) for spec in specs])
+        return _hardware_factors(src, rx, np.array([self.axes[bid] for bid in bids]), f_c, self.renderer.c,
+                                 traj.heading_rad[i], self.hardware)
+
+    def prepare(self, arr: _Arrivals, j: int, bid: int, src: np.ndarray, spec: ChirpSpec):
+        """(the renderer's arguments, paths, t_a, first_sample, rx, η) of emission ``j`` of the batch ``arr``, or
+        None when it cannot be heard (below the noise even in free field, no path, outside the recording)."""
+        trajectory, cfg = self.trajectory, self.cfg
+        sl_db, noise_floor_db, fs = self.sl_db, self.noise_floor_db, cfg.fs_hz
+        if not arr.heard[j]:
+            return None
+        t_e, c_e, rx, alpha = float(arr.t_e_s[j]), float(arr.c_m_s[j]), arr.rx[j], self.alpha_min[spec]
         paths = self.paths_at(bid, src, rx)
-        speed = float(np.interp(t_a, trajectory.t_s, trajectory.speed_m_s))
-        if len(paths) and speed * (paths.length_m[0] - d) / c_e > 0.005:
+        moved = bool(len(paths) and float(arr.speed_m_s[j]) * (paths.length_m[0] - float(arr.d_m[j])) / c_e > 0.005)
+        if moved:
             # a detour delays the arrival long enough for the walker to move: look again there
-            rx = _position_at(trajectory, t_e + paths.length_m[0] / c_e)
+            rx = _positions_at(trajectory, np.array([t_e + paths.length_m[0] / c_e]))[0]
             paths = self.paths_at(bid, src, rx)
         if len(paths) == 0:
             return None
-        if self.hardware is not None:
-            paths = _hardware_paths(paths, src, rx, self.axes[bid], spec, self.renderer.c, trajectory, t_e,
-                                    self.hardware)
+        if arr.hardware is not None:
+            gain, extra = arr.hardware[0][j], arr.hardware[1][j]
+            if moved:
+                (gain,), (extra,) = self.hardware_factors(arr.t_e_s[j:j + 1], src[None], rx[None], [bid], [spec])
+            if gain != 1.0 or extra != 0.0:
+                paths = replace(paths, length_m=paths.length_m + extra, gain=paths.gain * gain)
         t_a = t_e + paths.length_m[0] / c_e
         best_db = sl_db + 20.0 * math.log10(max(paths.gain.max(), 1e-12)) - alpha * paths.length_m[0]
         first_sample = (t_a - self.true_start) * self.fs_true
@@ -184,9 +287,8 @@ class _Emitter:
         # the tail realisation belongs to the place (1 cm grid): a static receiver hears the same tail every
         # frame, a walker (≥ 1 m between a beacon's chirps, ≫ λ/2 ≈ 8 mm) an independent one
         rng = stream_rng(self.seed, "audio", "tail", bid, *(int(round(x_m * 100.0)) + 10**8 for x_m in rx))
-        start, seg = self.renderer.render(paths, spec, eta, first_sample, self.clutter_cache[cell], rng,
-                                          self.level_scale)
-        return start, seg, paths, t_a, first_sample, rx, eta
+        return ((paths, spec, eta, first_sample, self.clutter_cache[cell], rng, self.level_scale), paths, t_a,
+                first_sample, rx, eta)
 
 
 def render_audio(site: Site, trajectory: Trajectory, seed: int, wav_path,
@@ -199,7 +301,8 @@ def render_audio(site: Site, trajectory: Trajectory, seed: int, wav_path,
     as it is produced, or, without a path, into ``AudioResult.truth_csv``.
     Randomness comes only from ``stream_rng(seed, "audio", ...)``: the same
     seed gives the same bytes, whatever ``block_samples``. With a truth path,
-    memory is bounded by the block size, not the recording's length.
+    memory is bounded by the block size and a batch of emissions (128, rendered together: their arrivals
+    vectorised, their FFTs batched; a few MB), not the recording's length.
     ``progress`` shows audio seconds rendered on stderr: a bar on a terminal, plain lines otherwise.
     ``air``: the true air (:mod:`simulation.acoustic.air`: the crew's thermometer error drawn from
     ``crew_seed`` (default ``seed``), hot air over transformers, humidity, wind); the site's stated
@@ -207,112 +310,87 @@ def render_audio(site: Site, trajectory: Trajectory, seed: int, wav_path,
     jitter, the recorder's microphone/codec response (:mod:`simulation.acoustic.hardware`); None: ideal.
     """
     cfg = cfg or AudioConfig()
-    fs = cfg.fs_hz
     clock_rng = stream_rng(seed, "audio", "clock")
     true_start = cfg.start_s + float(clock_rng.uniform(-1.0, 1.0)) * cfg.start_uncertainty_s
     drift_ppm = float(clock_rng.uniform(-1.0, 1.0)) * cfg.clock_drift_ppm
-    fs_true = fs * (1.0 + drift_ppm * 1e-6)        # device samples per second of true time
-    n_total = int(math.floor(trajectory.duration_s * fs))
-    t_end = true_start + n_total / fs_true
-    scene = build_scene(site, cfg.channel)
-    air_state = Air(site, stream_rng(seed if crew_seed is None else crew_seed, "audio", "thermometer"),
-                    stream_rng(seed, "audio", "air"), trajectory.duration_s, air)
-    true_site = replace(site, atmosphere=replace(site.atmosphere, temperature_c=air_state.temperature_c))
-    renderer = ChirpRenderer(true_site, cfg)
-    renderer.c = air_state.mean_c()
-    if hardware is not None:
-        true_pos = true_beacon_positions(site, hardware)
-        delays = beacon_delays_s(site, hardware)
-        jitter_rng = stream_rng(seed, "audio", "emission_jitter")
-        codec = CodecFilter(fs, stream_rng(seed if crew_seed is None else crew_seed, "audio", "codec"), hardware)
-        axes = beacon_axes(site, hardware.n_tweeters)
-    else:
-        true_pos = {b.id: np.array([b.east_m, b.north_m, b.up_m]) for b in site.beacons}
-        delays = {b.id: 0.0 for b in site.beacons}
-        jitter_rng, codec = None, None
+    fs_true = cfg.fs_hz * (1.0 + drift_ppm * 1e-6)        # device samples per second of true time
+    n_total = int(math.floor(trajectory.duration_s * cfg.fs_hz))
+    crew = seed if crew_seed is None else crew_seed
+    emitter = _Emitter(site, trajectory, seed, cfg, air, crew, hardware, true_start, fs_true, n_total)
+    codec = CodecFilter(cfg.fs_hz, stream_rng(crew, "audio", "codec"), hardware) if hardware is not None else None
     ambient = AmbientNoise(site, trajectory, seed, cfg, true_start, fs_true)
-    sl_db = site.acoustic.source_level_db
-    emitter = _Emitter(site, trajectory, seed, cfg, scene, renderer, air_state, hardware,
-                       axes if hardware is not None else None, true_start, fs_true, n_total)
-    emissions = _emissions(site, trajectory.start_utc, true_start - 0.5, t_end)
-    acc = _Accumulator(cfg.block_samples, n_total)
-    counts = {"emissions": 0, "rendered": 0, "clipped": 0}
-    next_chunk = 0
-    carry = np.zeros(0)
-
     with contextlib.ExitStack() as stack:
         tmp = stack.enter_context(atomic_path(wav_path, suffix=".wav"))
-        out = stack.enter_context(sf.SoundFile(tmp, "w", samplerate=fs, channels=1, subtype="PCM_16", format="WAV"))
+        out = stack.enter_context(sf.SoundFile(tmp, "w", samplerate=cfg.fs_hz, channels=1, subtype="PCM_16",
+                                               format="WAV"))
         if truth_path is None:
             truth_file = io.StringIO()
         else:
             truth_file = stack.enter_context(open(stack.enter_context(atomic_path(truth_path)), "w", newline=""))
         truth = _TruthWriter(truth_file)
-
-        def flush_until(sample: float) -> None:
-            nonlocal next_chunk, carry
-            while acc.base < n_total and acc.base + min(acc.block, n_total - acc.base) <= sample:
-                n = min(acc.block, n_total - acc.base)
-                pieces = []
-                while next_chunk * CHUNK_SAMPLES < acc.base + n:        # ambient of the chunks of this block
-                    m = min(CHUNK_SAMPLES, n_total - next_chunk * CHUNK_SAMPLES)
-                    amb = ambient.chunk(next_chunk, m)
-                    amb[:len(carry)] += carry                     # click tails from the previous chunk
-                    pieces.append(amb[:m])
-                    carry = amb[m:]
-                    next_chunk += 1
-                mixed = acc.pop_block() + np.concatenate(pieces)
-                if codec is not None:
-                    mixed = codec(mixed)
-                q = np.rint(mixed * 32767.0)
-                counts["clipped"] += int(np.count_nonzero(np.abs(q) > 32767))
-                out.write(np.clip(q, -32768, 32767).astype(np.int16))
-
+        recorder = _Recorder(out, cfg.block_samples, n_total, ambient, codec)
         bar = stack.enter_context(Progress(int(math.ceil(trajectory.duration_s)), "audio", unit="s",
                                            enabled=progress))
-        for t_e, bid, i, b, spec in emissions:
-            counts["emissions"] += 1
-            t_sched = t_e  # the schedule slot (the truth file's key); t_e becomes the true emission instant
-            if jitter_rng is not None:  # the chirp leaves the tweeter late by the beacon's latency and jitter
-                t_e = t_e + delays[bid] + hardware.emission_jitter_s * float(jitter_rng.standard_normal())
-            done = int(min(max(t_e - true_start, 0.0), trajectory.duration_s))
-            bar.set(done)
-            flush_until((t_e - true_start) * fs_true - _PRE_SAMPLES - 2)
-            got = emitter.render(t_e, bid, true_pos[bid], spec)
-            if got is None:
-                continue
-            start, seg, paths, t_a, first_sample, rx, eta = got
-            acc.add(start, seg)
-            counts["rendered"] += 1
-            if first_sample >= 0:
-                truth.row(bid, b.slot, t_sched, t_a, first_sample, PATH_KINDS[paths.kind[0]], paths.length_m[0],
-                          paths.direct_m, int(paths.los), rx, _first_path_db_spl(paths, spec, sl_db, renderer), eta)
-        flush_until(float(n_total))
+        for batch in _emission_batches(site, trajectory.start_utc, true_start - 0.5, true_start + n_total / fs_true):
+            emitter.render_batch(batch, recorder, truth, bar)
+        recorder.flush_until(float(n_total))
         text = truth_file.getvalue() if truth_path is None else None
     return AudioResult(true_start_s=true_start, drift_ppm=drift_ppm, n_samples=n_total,
-                       n_emissions=counts["emissions"],
-                       n_rendered=counts["rendered"], n_clipped=counts["clipped"], truth_csv=text)
+                       n_emissions=emitter.n_emissions, n_rendered=emitter.n_rendered, n_clipped=recorder.n_clipped,
+                       truth_csv=text)
 
 
-def _hardware_paths(paths: PathSet, src: np.ndarray, rx: np.ndarray, axis: np.ndarray, spec: ChirpSpec, c: float,
-                    trajectory: Trajectory, t_s: float, hw: HardwareConfig) -> PathSet:
-    """Apply the tweeter's directivity and the wearer's torso to every path of one emission (by the direct
-    bearing; :mod:`simulation.acoustic.hardware`)."""
+class _Recorder:
+    """The device's sample stream: emissions summed in a rolling buffer, the ambient added chunk by chunk
+    (click tails carried into the next chunk), the codec, rounding to int16; finished blocks go to ``out``."""
+
+    def __init__(self, out, block_samples: int, n_total: int, ambient: AmbientNoise, codec: CodecFilter | None):
+        self.out, self.ambient, self.codec, self.n_total = out, ambient, codec, n_total
+        self.acc = _Accumulator(block_samples, n_total)
+        self.next_chunk = 0
+        self.carry = np.zeros(0)
+        self.n_clipped = 0
+
+    def flush_until(self, sample: float) -> None:
+        """Write every block that ends at or before device sample ``sample``."""
+        acc, n_total = self.acc, self.n_total
+        while acc.base < n_total and acc.base + min(acc.block, n_total - acc.base) <= sample:
+            n = min(acc.block, n_total - acc.base)
+            pieces = []
+            while self.next_chunk * CHUNK_SAMPLES < acc.base + n:        # ambient of the chunks of this block
+                m = min(CHUNK_SAMPLES, n_total - self.next_chunk * CHUNK_SAMPLES)
+                amb = self.ambient.chunk(self.next_chunk, m)
+                amb[:len(self.carry)] += self.carry                     # click tails from the previous chunk
+                pieces.append(amb[:m])
+                self.carry = amb[m:]
+                self.next_chunk += 1
+            mixed = acc.pop_block() + np.concatenate(pieces)
+            if self.codec is not None:
+                mixed = self.codec(mixed)
+            q = np.rint(mixed * 32767.0)
+            self.n_clipped += int(np.count_nonzero(np.abs(q) > 32767))
+            self.out.write(np.clip(q, -32768, 32767).astype(np.int16))
+
+
+def _hardware_factors(src: np.ndarray, rx: np.ndarray, axes: np.ndarray, f_c_hz: np.ndarray, c: float,
+                      heading_rad: np.ndarray, hw: HardwareConfig) -> tuple[np.ndarray, np.ndarray]:
+    """(pressure gain, extra path m), each (n,), of the tweeter's directivity and the wearer's torso for
+    emissions from ``src`` (n, 3) heard at ``rx`` (n, 3) by the direct bearing (:mod:`simulation.acoustic.hardware`).
+
+    axes : (n, k, 3) unit axes of each emitting beacon's k tweeters (the best-aimed one radiates); f_c_hz : (n,)
+    band centres; heading_rad : (n,) the wearer's heading (held through stops, so a standing wearer shadows too).
+    """
     d = rx - src
-    dist = float(np.linalg.norm(d))
-    gain = 1.0
-    if hw.piston_radius_m > 0 and dist > 1e-6:
-        theta = np.arccos(np.clip(axis @ d / dist, -1.0, 1.0))     # off each tweeter's axis
-        gain *= float(np.max(piston_directivity(theta, 0.5 * (spec.f0_hz + spec.f1_hz), hw.piston_radius_m, c,
-                                                hw.piston_floor_db)))
-    i = min(int(np.searchsorted(trajectory.t_s, t_s)), len(trajectory.t_s) - 1)
-    bearing = math.atan2(-d[0], -d[1])  # from the receiver towards the beacon, from north clockwise
-    # the heading is held through stops, so a standing wearer shadows too
-    extra, loss_db = torso_shadow(bearing, float(trajectory.heading_rad[i]), hw)
-    gain *= 10.0 ** (-loss_db / 20.0)
-    if gain == 1.0 and extra == 0.0:
-        return paths
-    return replace(paths, length_m=paths.length_m + extra, gain=paths.gain * gain)
+    dist = np.sqrt(np.vecdot(d, d))
+    gain = np.ones(len(d))
+    if hw.piston_radius_m > 0:
+        cos_off = (axes @ d[:, :, None])[..., 0] / np.where(dist > 1e-6, dist, 1.0)[:, None]      # (n, k)
+        theta = np.arccos(np.clip(cos_off, -1.0, 1.0))     # off each tweeter's axis
+        piston = np.max(piston_directivity(theta, f_c_hz[:, None], hw.piston_radius_m, c, hw.piston_floor_db), axis=1)
+        gain = np.where(dist > 1e-6, gain * piston, gain)
+    bearing = np.arctan2(-d[:, 0], -d[:, 1])  # from the receiver towards the beacon, from north clockwise
+    extra, loss_db = torso_shadow(bearing, heading_rad, hw)
+    return gain * 10.0 ** (-loss_db / 20.0), extra
 
 
 def _first_path_db_spl(paths: PathSet, spec: ChirpSpec, source_level_db: float,

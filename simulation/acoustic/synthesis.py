@@ -38,7 +38,7 @@ from features.site import Site
 
 from simulation.acoustic.channel import ChannelConfig, PathSet, tail_model
 from simulation.acoustic.atmosphere import absorption_db_per_m, fresnel_number, maekawa_loss_db, speed_of_sound_m_s
-from simulation.acoustic.chirp import ChirpSpec, chirp_waveform
+from simulation.acoustic.chirp import ChirpSpec, chirp_length, chirp_waveform
 from simulation.acoustic.discharge import DischargeConfig, DischargeSources
 from simulation.site.geometry import boxes_array
 from simulation.rng import stream_rng
@@ -194,6 +194,7 @@ class ChirpRenderer:
         self.c = speed_of_sound_m_s(site.atmosphere.temperature_c)
         self.atmosphere = site.atmosphere
         self._alpha_cache: dict[int, np.ndarray] = {}
+        self._chirp_cache: dict[tuple, np.ndarray] = {}
 
     def _band(self, n_fft: int, spec: ChirpSpec, eta: float) -> tuple[int, int]:
         df = self.fs / n_fft
@@ -210,15 +211,35 @@ class ChirpRenderer:
     def render(self, paths: PathSet, spec: ChirpSpec, eta: float, first_sample: float, clutter: float,
                rng: np.random.Generator, level_scale: float) -> tuple[int, np.ndarray]:
         """Return (start sample, segment) of one emission as recorded (digital full-scale units)."""
+        return self.render_many([(paths, spec, eta, first_sample, clutter, rng, level_scale)])[0]
+
+    def render_many(self, emissions: list[tuple]) -> list[tuple[int, np.ndarray]]:
+        """(start sample, segment) of each emission given as (paths, spec, η, first_sample, clutter, rng,
+        level_scale), sample for sample what :meth:`render` gives it alone: the FFTs of equal length run as one
+        call over the rows (pocketfft transforms each row as it would alone)."""
+        plans = [self._plan(*e[:6]) for e in emissions]
+        tails = _by_length(_rfft_rows, [(p.n_fft, p.taps) for p in plans])
+        chirps = self._chirp_spectra([(e[1], e[2], p.n_fft) for e, p in zip(emissions, plans)])
+        spectra = []
+        for p, tail, chirp in zip(plans, tails, chirps):
+            h = p.h if tail is None else p.h + tail[p.k0:p.k1] * p.tail_gain
+            spectrum = np.zeros(p.n_fft // 2 + 1, complex)
+            spectrum[p.k0:p.k1] = chirp[p.k0:p.k1] * h
+            spectra.append((p.n_fft, spectrum))
+        segments = _by_length(_irfft_rows, spectra)
+        return [(p.start, seg * e[6]) for p, seg, e in zip(plans, segments, emissions)]
+
+    def _plan(self, paths: PathSet, spec: ChirpSpec, eta: float, first_sample: float, clutter: float,
+              rng: np.random.Generator) -> "_Plan":
+        """Everything of one emission but its FFTs: the discrete paths' H(f) on the band, the tail's taps."""
         fs, c = self.fs, self.c
-        chirp = chirp_waveform(spec, fs, eta)
         start = int(math.floor(first_sample)) - _PRE_SAMPLES
         rel = first_sample - start + (paths.length_m - paths.length_m[0]) / c * fs   # (p,) samples
         keep = rel - rel[0] <= self.cfg.max_excess_delay_s * fs
         tail = tail_model(clutter)
         tail_len = int(5.0 * tail.decay_ms * 1e-3 * fs)
         tail0 = rel[0] + tail.onset_ms * 1e-3 * fs
-        n_used = int(max(rel[keep].max(), tail0 + tail_len)) + len(chirp) + _POST_SAMPLES
+        n_used = int(max(rel[keep].max(), tail0 + tail_len)) + chirp_length(spec, fs, eta) + _POST_SAMPLES
         n_fft = sfft.next_fast_len(n_used, real=True)
         k0, k1 = self._band(n_fft, spec, eta)
         k = np.arange(k0, k1)
@@ -234,18 +255,69 @@ class ChirpRenderer:
         h = (g[:, None] * 10.0 ** (-loss_db / 20.0) * phase).sum(axis=0)
         # diffuse tail: Poisson arrivals, Gaussian amplitudes, envelope exp(−t/decay); E[Σa²] = level·(1/d²)
         n_taps = rng.poisson(tail.density_per_ms * 5.0 * tail.decay_ms)
-        if n_taps:
-            t_ms = rng.uniform(0.0, 5.0 * tail.decay_ms, n_taps)
-            level_db = tail.level_db + self.cfg.channel.tail_offset_db
-            e_target = 10.0 ** (level_db / 10.0) / max(paths.direct_m, 1e-3) ** 2
-            scale = math.sqrt(e_target / (tail.density_per_ms * tail.decay_ms / 2.0))
-            amp = rng.standard_normal(n_taps) * np.exp(-t_ms / tail.decay_ms) * scale
-            taps = np.zeros(n_fft)
-            np.add.at(taps, np.minimum((tail0 + t_ms * 1e-3 * fs).astype(int), n_fft - 1), amp)
-            h += sfft.rfft(taps)[k0:k1] * 10.0 ** (-alpha * paths.direct_m / 20.0)
-        spectrum = np.zeros(n_fft // 2 + 1, complex)
-        spectrum[k0:k1] = sfft.rfft(chirp, n_fft)[k0:k1] * h
-        return start, sfft.irfft(spectrum, n_fft) * level_scale
+        if not n_taps:
+            return _Plan(start, n_fft, k0, k1, h, None, None)
+        t_ms = rng.uniform(0.0, 5.0 * tail.decay_ms, n_taps)
+        level_db = tail.level_db + self.cfg.channel.tail_offset_db
+        e_target = 10.0 ** (level_db / 10.0) / max(paths.direct_m, 1e-3) ** 2
+        scale = math.sqrt(e_target / (tail.density_per_ms * tail.decay_ms / 2.0))
+        amp = rng.standard_normal(n_taps) * np.exp(-t_ms / tail.decay_ms) * scale
+        taps = np.bincount(np.minimum((tail0 + t_ms * 1e-3 * fs).astype(int), n_fft - 1), amp, n_fft)
+        return _Plan(start, n_fft, k0, k1, h, taps, 10.0 ** (-alpha * paths.direct_m / 20.0))
+
+    def _chirp_spectra(self, keys: list[tuple[ChirpSpec, float, int]]) -> list[np.ndarray]:
+        """rfft of the chirp heard with Doppler factor η, zero-padded to n_fft, for each (spec, η, n_fft); the
+        last few kept (a standing walker, η = 1, hears the same chirp frame after frame)."""
+        missing = [key for key in dict.fromkeys(keys) if key not in self._chirp_cache]
+        rows = []
+        for spec, eta, n_fft in missing:
+            x = np.zeros(n_fft)
+            w = chirp_waveform(spec, self.fs, eta)
+            x[:len(w)] = w
+            rows.append((n_fft, x))
+        new = dict(zip(missing, _by_length(_rfft_rows, rows)))
+        out = [new[key] if key in new else self._chirp_cache[key] for key in keys]
+        for key, spectrum in new.items():
+            self._chirp_cache[key] = spectrum
+            if len(self._chirp_cache) > 64:
+                self._chirp_cache.pop(next(iter(self._chirp_cache)))
+        return out
+
+
+@dataclass
+class _Plan:
+    """One emission ready for its FFTs: its first sample, FFT length, band bins [k0, k1), the discrete paths'
+    H on the band, the tail's taps (n_fft,) and their absorption on the band (None without taps)."""
+
+    start: int
+    n_fft: int
+    k0: int
+    k1: int
+    h: np.ndarray
+    taps: np.ndarray | None
+    tail_gain: np.ndarray | None
+
+
+def _rfft_rows(x: np.ndarray, n: int) -> np.ndarray:
+    return sfft.rfft(x, n, axis=-1)
+
+
+def _irfft_rows(x: np.ndarray, n: int) -> np.ndarray:
+    return sfft.irfft(x, n, axis=-1)
+
+
+def _by_length(transform, rows: list[tuple[int, np.ndarray | None]]) -> list[np.ndarray | None]:
+    """``transform(stack, n)`` over the rows of each length n at once; None rows stay None. Row order kept."""
+    out: list[np.ndarray | None] = [None] * len(rows)
+    by_n: dict[int, list[int]] = {}
+    for i, (n, x) in enumerate(rows):
+        if x is not None:
+            by_n.setdefault(n, []).append(i)
+    for n, idx in by_n.items():
+        result = transform(np.stack([rows[i][1] for i in idx]), n)
+        for j, i in enumerate(idx):
+            out[i] = result[j]
+    return out
 
 
 def _distance_to_boxes(p_en: np.ndarray, boxes: np.ndarray) -> np.ndarray:
@@ -305,7 +377,9 @@ class AmbientNoise:
             d = np.maximum(_distance_to_boxes(pos, self.tanks), 1.0)
             amp = np.interp(t_true, grid, _db_to_digital_rms(cfg.hum_db_spl_1m, cfg) * math.sqrt(2.0) / d)
             # 2·mains and harmonics (magnetostriction), −3 dB each: Im(z^h·e^{jφ_h}), z = e^{j2π·2f_m·t}
-            z = np.exp(2j * np.pi * 2.0 * cfg.mains_hz * t_true)
+            z = np.empty(n, complex)     # exp(j·2π·2f_m·t) as cos + j·sin (the same values, half the time)
+            y = (2.0 * np.pi * 2.0 * cfg.mains_hz) * t_true
+            z.real, z.imag = np.cos(y), np.sin(y)
             zh = np.ones(n, complex)
             hum = np.zeros(n)
             for h in range(4):

@@ -124,6 +124,69 @@ def _key_epochs(t_s: np.ndarray, p_en: np.ndarray, up_m: np.ndarray, move_m: flo
     return np.asarray(keys, int)
 
 
+def _risen_satellites(site, unix_s: np.ndarray, seed: int, cfg: gnss_signal.SignalConfig, n_boxes: int):
+    """The satellites above the in-view mask at some epoch: (sats, az, el (n, k) rad, per-satellite C/N0 offset
+    (k,) dB, and per satellite and box: NLOS reflection loss, porous loss (dB) and NLOS excess path (m), (k, m)).
+
+    The draws are made for the whole constellation, so a satellite's draws do not depend on which others rise;
+    the others never appear in any output.
+    """
+    sats = all_satellites()
+    k_all = len(sats)
+    az, el = azel(unix_s, site.origin, sats)
+    offset = cfg.sat_offset_sigma_db * stream_rng(seed, "gnss", "sat_offset").standard_normal(k_all)
+    refl = stream_rng(seed, "gnss", "nlos_loss").uniform(cfg.nlos_loss_min_db, cfg.nlos_loss_max_db, (k_all, n_boxes))
+    por = stream_rng(seed, "gnss", "porous_loss").uniform(cfg.porous_loss_min_db, cfg.porous_loss_max_db,
+                                                          (k_all, n_boxes))
+    excess = stream_rng(seed, "gnss", "nlos_excess").exponential(cfg.nlos_excess_mean_m, (k_all, n_boxes))
+    rises = np.flatnonzero((el > np.radians(cfg.in_view_mask_deg)).any(axis=0))
+    return (sats.select(rises), az[:, rises], el[:, rises], offset[rises], refl[rises], por[rises],
+            excess[rises])
+
+
+def _fading_power(traj: Trajectory, t: np.ndarray, dt: float, speed: np.ndarray, k_lin: np.ndarray, seed: int,
+                  cfg: gnss_signal.SignalConfig) -> np.ndarray:
+    """Received power re. the mean (n, k) of Rician fading with factors ``k_lin`` (n, k), averaged over each epoch
+    (epochs ``t`` (n,) s, ``dt`` apart; the walker's ``speed`` (n,) m/s).
+
+    The receiver averages power over the epoch, sampled fast enough for the walker's Doppler spread (n_sub ≤ 8
+    instants per epoch); the phase runs with the distance walked plus a floor Doppler.
+    """
+    n, k = k_lin.shape
+    f_max = float(np.max(speed, initial=0.0)) / cfg.wavelength_m + cfg.doppler_floor_hz
+    n_sub = int(min(8, max(1, np.ceil(2.0 * f_max * dt))))
+    sub = t[:, None] - dt + dt * (np.arange(n_sub) + 0.5)[None, :] / n_sub  # (n, n_sub) inside each epoch
+    walked = np.concatenate([[0.0], np.cumsum(0.5 * (traj.speed_m_s[1:] + traj.speed_m_s[:-1]) * np.diff(traj.t_s))])
+    path = np.interp(sub, traj.t_s, walked) + cfg.wavelength_m * cfg.doppler_floor_hz * sub
+    power = gnss_signal.rician_power(stream_rng(seed, "gnss", "fading"), path.ravel(),
+                                     np.repeat(k_lin, n_sub, axis=0), cfg.wavelength_m, cfg.n_sinusoids)
+    return power.reshape(n, n_sub, k).mean(axis=1)
+
+
+def _fixes(seed: int, sats, az: np.ndarray, el: np.ndarray, tracked: np.ndarray, est: np.ndarray,
+           reported: np.ndarray, blk, clutter: np.ndarray, speed: np.ndarray, dt: float, corrections: bool,
+           cfg: gnss_signal.SignalConfig, fix_cfg: gnss_fix.FixConfig, rx_offset_db: float, rtk_cfg: RtkConfig):
+    """The receiver's position solutions (:func:`simulation.gnss.fix.solve_fixes`) from the tracked satellites
+    (each array (n, k)): cycle slips, pseudorange errors, code/DGNSS/RTK fixes."""
+    n, k = tracked.shape
+    sys_idx = np.where(sats.system == SYSTEM_GPS, 0, 1)
+    # Cycle slips restart both the carrier smoothing of the code and the RTK engine's lock.
+    slip = gnss_fix.cycle_slips(stream_rng(seed, "gnss", "slips"), reported, blk.nlos, fix_cfg)
+    # A change of the arriving path (direct ↔ reflected, one reflector for another) moves the carrier by metres
+    # between two epochs, which no tracking loop follows: a cycle slip (the receiver re-locks on the new path).
+    switch = np.zeros((n, k), bool)
+    switch[1:] = blk.path_id[1:] != blk.path_id[:-1]
+    slip |= switch & tracked
+    untracked = ~tracked
+    reset = slip | untracked | np.vstack([np.ones((1, k), bool), untracked[:-1]])
+    errors = gnss_fix.pseudorange_errors(stream_rng(seed, "gnss", "errors"), el, np.where(tracked, est, np.nan),
+                                         blk.nlos, blk.nlos_extra_m, clutter, speed, dt, cfg.wavelength_m, fix_cfg,
+                                         reset=reset, specular=blk.specular)
+    return gnss_fix.solve_fixes(stream_rng(seed, "gnss", "rtk"), az, el, sys_idx, tracked, reported, errors,
+                                blk.nlos, dt, corrections, fix_cfg, slip=slip, wavelength_m=cfg.wavelength_m,
+                                receiver_offset_db=rx_offset_db, rtk_cfg=rtk_cfg)
+
+
 def simulate_gnss(site, traj: Trajectory, seed: int, corrections: bool = True, rate_hz: float = DEFAULT_RATE_HZ,
                   signal_cfg: gnss_signal.SignalConfig = gnss_signal.SignalConfig(),
                   fix_cfg: gnss_fix.FixConfig = gnss_fix.FixConfig(), receiver_seed: int | None = None,
@@ -153,22 +216,9 @@ def simulate_gnss(site, traj: Trajectory, seed: int, corrections: bool = True, r
     p_en = np.stack([east, north], axis=1)
 
     cfg = signal_cfg
-    sats = all_satellites()
-    k_all = len(sats)
-    az, el = azel(unix, site.origin, sats)
     boxes = boxes_array(site.layout)
     porous = np.array([b.porous for b in site.layout], bool)
-    m = boxes.shape[0]
-    # Per-satellite draws for the whole constellation, so a satellite's draws do not depend on which others rise.
-    offset = cfg.sat_offset_sigma_db * stream_rng(seed, "gnss", "sat_offset").standard_normal(k_all)
-    refl = stream_rng(seed, "gnss", "nlos_loss").uniform(cfg.nlos_loss_min_db, cfg.nlos_loss_max_db, (k_all, m))
-    por = stream_rng(seed, "gnss", "porous_loss").uniform(cfg.porous_loss_min_db, cfg.porous_loss_max_db, (k_all, m))
-    excess = stream_rng(seed, "gnss", "nlos_excess").exponential(cfg.nlos_excess_mean_m, (k_all, m))
-    # Work only on satellites above the in-view mask at some epoch: the others never appear in any output.
-    rises = np.flatnonzero((el > np.radians(cfg.in_view_mask_deg)).any(axis=0))
-    sats = sats.select(rises)
-    az, el = az[:, rises], el[:, rises]
-    offset, refl, por, excess = offset[rises], refl[rises], por[rises], excess[rises]
+    sats, az, el, offset, refl, por, excess = _risen_satellites(site, unix, seed, cfg, boxes.shape[0])
     k = len(sats)
 
     clutter = gnss_signal.clutter_index(p_en, boxes, porous, cfg.clutter_scale_m)
@@ -195,15 +245,7 @@ def simulate_gnss(site, traj: Trajectory, seed: int, corrections: bool = True, r
     # specular NLOS, Rayleigh for diffuse scattering; the receiver averages power over each epoch, sampled fast
     # enough for the walker's Doppler spread.
     k_lin = np.where(blk.nlos, blk.nlos_k_lin, 10.0 ** (k_db[:, None] / 10.0) * np.ones((1, k)))
-    f_max = float(np.max(speed, initial=0.0)) / cfg.wavelength_m + cfg.doppler_floor_hz
-    n_sub = int(min(8, max(1, np.ceil(2.0 * f_max * dt))))
-    sub = t[:, None] - dt + dt * (np.arange(n_sub) + 0.5)[None, :] / n_sub  # (n, n_sub) inside each epoch
-    walked = np.concatenate([[0.0], np.cumsum(0.5 * (traj.speed_m_s[1:] + traj.speed_m_s[:-1]) * np.diff(traj.t_s))])
-    path = np.interp(sub, traj.t_s, walked) + cfg.wavelength_m * cfg.doppler_floor_hz * sub
-    power = gnss_signal.rician_power(stream_rng(seed, "gnss", "fading"), path.ravel(),
-                                     np.repeat(k_lin, n_sub, axis=0), cfg.wavelength_m, cfg.n_sinusoids)
-    power = power.reshape(n, n_sub, k).mean(axis=1)
-    cn0_true = cn0_mean + 10.0 * np.log10(np.maximum(power, 1e-12))
+    cn0_true = cn0_mean + 10.0 * np.log10(np.maximum(_fading_power(traj, t, dt, speed, k_lin, seed, cfg), 1e-12))
 
     in_view = el > np.radians(cfg.in_view_mask_deg)
     est = gnss_signal.estimate_cn0(stream_rng(seed, "gnss", "estimator"), cn0_true, dt, cfg)
@@ -211,28 +253,15 @@ def simulate_gnss(site, traj: Trajectory, seed: int, corrections: bool = True, r
                                                           track_acquire_dbhz=cfg.track_acquire_dbhz + rx_threshold_db))
     reported = np.where(tracked, np.clip(np.rint(est), 0, 99), np.nan)
 
-    sys_idx = np.where(sats.system == SYSTEM_GPS, 0, 1)
-    # Cycle slips restart both the carrier smoothing of the code and the RTK engine's lock.
-    slip = gnss_fix.cycle_slips(stream_rng(seed, "gnss", "slips"), reported, blk.nlos, fix_cfg)
-    # A change of the arriving path (direct ↔ reflected, one reflector for another) moves the carrier by metres
-    # between two epochs, which no tracking loop follows: a cycle slip (the receiver re-locks on the new path).
-    switch = np.zeros((n, k), bool)
-    switch[1:] = blk.path_id[1:] != blk.path_id[:-1]
-    slip |= switch & tracked
-    untracked = ~tracked
-    reset = slip | untracked | np.vstack([np.ones((1, k), bool), untracked[:-1]])
-    errors = gnss_fix.pseudorange_errors(stream_rng(seed, "gnss", "errors"), el, np.where(tracked, est, np.nan),
-                                         blk.nlos, blk.nlos_extra_m, clutter, speed, dt, cfg.wavelength_m, fix_cfg,
-                                         reset=reset, specular=blk.specular)
-    fix = gnss_fix.solve_fixes(stream_rng(seed, "gnss", "rtk"), az, el, sys_idx, tracked, reported, errors,
-                               blk.nlos, dt, corrections, fix_cfg, slip=slip, wavelength_m=cfg.wavelength_m,
-                               receiver_offset_db=rx_offset_db, rtk_cfg=rtk_cfg)
+    fix = _fixes(seed, sats, az, el, tracked, est, reported, blk, clutter, speed, dt, corrections, cfg, fix_cfg,
+                 rx_offset_db, rtk_cfg)
     truth = np.stack([east, north, up], axis=1)
     return GnssSimulation(
         t_s=t, unix_s=unix, truth_enu_m=truth, fix_enu_m=truth + fix.error_enu_m, quality=fix.quality,
         n_used=fix.n_used, hdop=fix.hdop, vdop=fix.vdop, pdop=fix.pdop, system=sats.system, prn=sats.prn,
         az_rad=az, el_rad=el, in_view=in_view, tracked=tracked, used=fix.used, los=in_view & ~blk.nlos,
-        nlos=in_view & blk.nlos, blocked=in_view & blk.solid_blocked, cn0_open_dbhz=cn0_open, attenuation_db=attenuation, cn0_true_dbhz=cn0_true,
+        nlos=in_view & blk.nlos, blocked=in_view & blk.solid_blocked, cn0_open_dbhz=cn0_open,
+        attenuation_db=attenuation, cn0_true_dbhz=cn0_true,
         cn0_reported_dbhz=reported, receiver_offset_db=rx_offset_db, receiver_threshold_db=rx_threshold_db,
         specular=in_view & blk.specular, nlos_extra_m=np.where(in_view, blk.nlos_extra_m, 0.0), gst=fix.gst,
         code_error_m=fix.code_error_m)

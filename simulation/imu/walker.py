@@ -311,17 +311,11 @@ def _rot_body_to_ned(yaw: np.ndarray, pitch: np.ndarray, roll: np.ndarray) -> np
     return c
 
 
-def synthesise_imu(traj: Trajectory, site: Site, gait: Gait, steps: StepTruth, count: np.ndarray,
-                   rng: np.random.Generator, errors: SensorErrors = SensorErrors()) -> ImuSamples:
-    """Specific force, body rate and magnetic field of the waist device along ``traj``.
-
-    ``steps`` and ``count`` come from :func:`place_steps`; ``rng`` draws the
-    per-step excursion variability, the device's mounting tilt and yaw, and
-    the sensor errors.
-    """
-    t = np.asarray(traj.t_s, dtype=float)
-    n = len(t)
-    fs = traj.rate_hz
+def _pelvis_height(count: np.ndarray, steps: StepTruth, gait: Gait, rng: np.random.Generator,
+                   fs: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Pelvis height above its standing height z_up (m), the step excursion h_t (m), whether walking, and 2π·c,
+    each (n,) at the IMU rate, from the step count ``count`` (n,); draws each step's excursion variability."""
+    n = len(count)
     dt = 1.0 / fs
     # pelvis height z = h_k·(1 − cos 2πc)/2 over step k (inverted pendulum, Zijlstra & Hof 1997)
     n_steps = len(steps.step_length_m)
@@ -357,6 +351,44 @@ def synthesise_imu(traj: Trajectory, site: Site, gait: Gait, steps: StepTruth, c
         window[sl] = (1.0 - v) ** 2
         h_t[sl] = h_t[i - 1]
     z_up = h_t * 0.5 * (1.0 - np.cos(2.0 * np.pi * phase)) * window
+    return z_up, h_t, walking, two_pi_c
+
+
+def _sensor_errors(f_body: np.ndarray, gyro: np.ndarray, mag: np.ndarray, t: np.ndarray, dt: float,
+                   errors: SensorErrors, rng: np.random.Generator, warm_rng: np.random.Generator):
+    """The sensors' errors on the true specific force, body rate and field (each (n, 3)): turn-on biases,
+    warm-up drift through the temperature coefficients, the gyro's bias walk and scale error, soft and hard
+    iron, noise, range clipping. Returns (f_body, gyro, mag); f_body and gyro are changed in place."""
+    n = len(t)
+    d_temp = warmup_kelvin(t, errors, warm_rng)
+    f_body += (rng.normal(0.0, errors.acc_bias_m_s2, size=3)
+               + d_temp[:, None] * rng.normal(0.0, errors.acc_tc_m_s2_per_k, size=3)
+               + rng.normal(0.0, errors.acc_noise_m_s2, size=(n, 3)))
+    bias_g = (rng.normal(0.0, errors.gyro_bias_rad_s, size=3)
+              + d_temp[:, None] * rng.normal(0.0, errors.gyro_tc_rad_s_per_k, size=3)
+              + np.cumsum(rng.normal(0.0, errors.gyro_bias_walk_rad_s_sqrt_s * math.sqrt(dt), size=(n, 3)), axis=0))
+    gyro *= 1.0 + rng.normal(0.0, errors.gyro_scale_error, size=3)
+    gyro += bias_g + rng.normal(0.0, errors.gyro_noise_rad_s, size=(n, 3))
+    soft = rng.normal(0.0, errors.mag_soft_iron, size=(3, 3))
+    mag = mag @ (np.eye(3) + 0.5 * (soft + soft.T)).T + rng.normal(0.0, errors.mag_hard_iron_ut, size=3)
+    mag += rng.normal(0.0, errors.mag_noise_ut, size=(n, 3))
+    np.clip(f_body, -errors.acc_range_m_s2, errors.acc_range_m_s2, out=f_body)
+    np.clip(gyro, -errors.gyro_range_rad_s, errors.gyro_range_rad_s, out=gyro)
+    return f_body, gyro, mag
+
+
+def synthesise_imu(traj: Trajectory, site: Site, gait: Gait, steps: StepTruth, count: np.ndarray,
+                   rng: np.random.Generator, errors: SensorErrors = SensorErrors()) -> ImuSamples:
+    """Specific force, body rate and magnetic field of the waist device along ``traj``.
+
+    ``steps`` and ``count`` come from :func:`place_steps`; ``rng`` draws the
+    per-step excursion variability, the device's mounting tilt and yaw, and
+    the sensor errors.
+    """
+    t = np.asarray(traj.t_s, dtype=float)
+    fs = traj.rate_hz
+    dt = 1.0 / fs
+    z_up, h_t, walking, two_pi_c = _pelvis_height(count, steps, gait, rng, fs)
     a_up = np.gradient(np.gradient(z_up, dt), dt)
     envelope = np.clip(_smooth(walking.astype(float), 0.15 * fs), 0.0, 1.0)
     freq = np.gradient(count, dt)
@@ -405,21 +437,7 @@ def synthesise_imu(traj: Trajectory, site: Site, gait: Gait, steps: StepTruth, c
     # 50 Hz fields of the busbars (sampled, aliased, at the IMU rate), in the body frame
     mag = mag + np.einsum("nji,nj->ni", c_bn, mains_field_ned_ut(site, pos_ned, t, errors, mains_rng))
 
-    # sensor errors: turn-on biases, warm-up drift through the temperature coefficients, noise
-    d_temp = warmup_kelvin(t, errors, warm_rng)
-    f_body += (rng.normal(0.0, errors.acc_bias_m_s2, size=3)
-               + d_temp[:, None] * rng.normal(0.0, errors.acc_tc_m_s2_per_k, size=3)
-               + rng.normal(0.0, errors.acc_noise_m_s2, size=(n, 3)))
-    bias_g = (rng.normal(0.0, errors.gyro_bias_rad_s, size=3)
-              + d_temp[:, None] * rng.normal(0.0, errors.gyro_tc_rad_s_per_k, size=3)
-              + np.cumsum(rng.normal(0.0, errors.gyro_bias_walk_rad_s_sqrt_s * math.sqrt(dt), size=(n, 3)), axis=0))
-    gyro *= 1.0 + rng.normal(0.0, errors.gyro_scale_error, size=3)
-    gyro += bias_g + rng.normal(0.0, errors.gyro_noise_rad_s, size=(n, 3))
-    soft = rng.normal(0.0, errors.mag_soft_iron, size=(3, 3))
-    mag = mag @ (np.eye(3) + 0.5 * (soft + soft.T)).T + rng.normal(0.0, errors.mag_hard_iron_ut, size=3)
-    mag += rng.normal(0.0, errors.mag_noise_ut, size=(n, 3))
-    np.clip(f_body, -errors.acc_range_m_s2, errors.acc_range_m_s2, out=f_body)
-    np.clip(gyro, -errors.gyro_range_rad_s, errors.gyro_range_rad_s, out=gyro)
+    f_body, gyro, mag = _sensor_errors(f_body, gyro, mag, t, dt, errors, rng, warm_rng)
     return ImuSamples(t, f_body, gyro, mag, np.linalg.norm(dist, axis=1), float(mount_yaw))
 
 

@@ -11,12 +11,16 @@ therefore ``atan((height − z0) / t_in)``.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
+from numba import njit
 
 from features.site import Box
 
 __all__ = ["boxes_array", "footprint_entry", "horizon_elevation", "sky_blocked_fraction",
-           "ray_blockers", "segment_hits_boxes", "inside_boxes"]
+           "ray_blockers", "segment_hits_boxes", "segment_box_hits", "inside_boxes", "inverse_direction",
+           "footprint_slab"]
 
 
 def boxes_array(boxes) -> np.ndarray:
@@ -43,31 +47,50 @@ def footprint_entry(p_en: np.ndarray, az_rad: np.ndarray, boxes: np.ndarray) -> 
         Entry distance (0 when the origin is inside) and exit distance; ``t_in``
         is ``inf`` where the ray misses the footprint or the box lies behind.
     """
-    p = np.asarray(p_en, float)
+    p = np.ascontiguousarray(p_en, dtype=float).reshape(-1, 2)
     az = np.asarray(az_rad, float)
-    if az.ndim == 1:
-        az = az[None, :]
-    # A direction component of exactly 0 is nudged to 1e-12: the slab bounds
-    # then become ±1e12-scale numbers, which the min/max logic treats exactly
-    # like the infinite slab of a parallel ray (Williams et al. 2005).
-    de = np.sin(az)[..., None]
-    dn = np.cos(az)[..., None]
-    de = np.where(np.abs(de) < 1e-12, 1e-12, de)
-    dn = np.where(np.abs(dn) < 1e-12, 1e-12, dn)
-    inv_e = 1.0 / de
-    inv_n = 1.0 / dn
-    pe = p[:, 0][:, None, None]
-    pn = p[:, 1][:, None, None]
-    t1 = (boxes[:, 0] - pe) * inv_e
-    t2 = (boxes[:, 1] - pe) * inv_e
-    t3 = (boxes[:, 2] - pn) * inv_n
-    t4 = (boxes[:, 3] - pn) * inv_n
-    t_lo = np.maximum(np.minimum(t1, t2), np.minimum(t3, t4))
-    t_hi = np.minimum(np.maximum(t1, t2), np.maximum(t3, t4))
-    np.maximum(t_lo, 0.0, out=t_lo)
-    hit = t_hi >= t_lo
-    t_in = np.where(hit, t_lo, np.inf)
-    t_out = np.where(hit, t_hi, np.inf)
+    az = np.ascontiguousarray(az[None, :] if az.ndim == 1 else az)
+    if p.shape[0] == 1 and az.shape[0] > 1:       # one origin, rows of azimuths: broadcast as numpy would
+        p = np.repeat(p, az.shape[0], axis=0)
+    if az.shape[0] not in (1, p.shape[0]):
+        raise ValueError(f"az_rad of shape {az.shape} does not match {p.shape[0]} origins")
+    return _footprint_kernel(p, az, np.ascontiguousarray(boxes, dtype=float).reshape(-1, 5))
+
+
+@njit(cache=True)
+def inverse_direction(az_rad: float) -> tuple[float, float]:
+    """(1/sin az, 1/cos az) of a horizontal ray, a component of exactly 0 nudged to 1e-12: the slab bounds then
+    become ±1e12-scale numbers, which the min/max logic treats exactly like the infinite slab of a parallel ray
+    (Williams et al. 2005)."""
+    de, dn = math.sin(az_rad), math.cos(az_rad)
+    return 1.0 / (1e-12 if abs(de) < 1e-12 else de), 1.0 / (1e-12 if abs(dn) < 1e-12 else dn)
+
+
+@njit(cache=True)
+def footprint_slab(pe: float, pn: float, inv_e: float, inv_n: float, box: np.ndarray) -> tuple[float, float]:
+    """Entry and exit distances of the horizontal ray from (pe, pn) with inverse direction (inv_e, inv_n) (from
+    :func:`inverse_direction`) into the footprint of ``box`` (5,): 2-D slab test (Kay & Kajiya 1986); (inf, inf)
+    when it misses or the box lies behind, entry 0 when the origin is inside."""
+    t1, t2 = (box[0] - pe) * inv_e, (box[1] - pe) * inv_e
+    t3, t4 = (box[2] - pn) * inv_n, (box[3] - pn) * inv_n
+    t_lo = max(max(min(t1, t2), min(t3, t4)), 0.0)
+    t_hi = min(max(t1, t2), max(t3, t4))
+    if t_hi >= t_lo:
+        return t_lo, t_hi
+    return np.inf, np.inf
+
+
+@njit(cache=True)
+def _footprint_kernel(p: np.ndarray, az: np.ndarray, boxes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`footprint_entry` of origins p (n, 2), azimuths az (1 or n, k), boxes (m, 5): t_in, t_out (n, k, m)."""
+    n, k, m = p.shape[0], az.shape[1], boxes.shape[0]
+    t_in = np.empty((n, k, m))
+    t_out = np.empty((n, k, m))
+    for i in range(n):
+        for j in range(k):
+            inv_e, inv_n = inverse_direction(az[i if az.shape[0] > 1 else 0, j])
+            for b in range(m):
+                t_in[i, j, b], t_out[i, j, b] = footprint_slab(p[i, 0], p[i, 1], inv_e, inv_n, boxes[b])
     return t_in, t_out
 
 
@@ -164,27 +187,46 @@ def ray_blockers(p_en: np.ndarray, az_rad: np.ndarray, el_rad: np.ndarray, boxes
 
 
 def segment_hits_boxes(a_xyz: np.ndarray, b_xyz: np.ndarray, boxes: np.ndarray) -> np.ndarray:
-    """Whether 3-D segments a→b pass through boxes (ground to top), slab test in 3-D.
+    """Whether 3-D segments a→b pass through boxes (ground to top), slab test in 3-D (Kay & Kajiya 1986).
 
-    a_xyz, b_xyz : ndarray of shape (n, 3) (east, north, up). Returns bool (n, m).
+    a_xyz, b_xyz : ndarray of shape (n, 3) (east, north, up); boxes : (m, 5). Returns bool (n, m).
     Endpoints lying exactly on a face do not count as hits.
     """
-    a = np.asarray(a_xyz, float)[:, None, :]
-    d = np.asarray(b_xyz, float)[:, None, :] - a
-    lo = np.stack([boxes[:, 0], boxes[:, 2], np.zeros(len(boxes))], axis=-1)[None]
-    hi = np.stack([boxes[:, 1], boxes[:, 3], boxes[:, 4]], axis=-1)[None]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        inv = np.where(np.abs(d) > 1e-12, 1.0 / d, np.inf)
-        t1 = (lo - a) * inv
-        t2 = (hi - a) * inv
-    par = ~np.isfinite(inv)
-    inside = (a > lo) & (a < hi)
-    tmin = np.where(par, np.where(inside, -np.inf, np.inf), np.minimum(t1, t2))
-    tmax = np.where(par, np.where(inside, np.inf, -np.inf), np.maximum(t1, t2))
-    t_enter = tmin.max(axis=-1)
-    t_exit = tmax.min(axis=-1)
+    a = np.ascontiguousarray(a_xyz, dtype=float).reshape(-1, 3)
+    b = np.ascontiguousarray(b_xyz, dtype=float).reshape(-1, 3)
+    return segment_box_hits(a, b, np.ascontiguousarray(boxes, dtype=float).reshape(-1, 5))
+
+
+@njit(cache=True)
+def segment_box_hits(a: np.ndarray, b: np.ndarray, boxes: np.ndarray) -> np.ndarray:
+    """Slab test of every segment a[i]→b[i] (n, 3) against every box (m, 5); bool (n, m). Compiled: callable
+    from other compiled code with float arrays (:func:`segment_hits_boxes` converts any input).
+
+    Per axis k with direction d_k = b_k − a_k: entry/exit parameters (lo_k − a_k)/d_k and (hi_k − a_k)/d_k
+    (computed as products with 1/d_k); an axis with |d_k| ≤ 1e-12 is parallel and admits all t when a_k lies
+    strictly inside the slab, none otherwise. The segment hits when t_exit > t_enter + ε, t_exit > ε and
+    t_enter < 1 − ε (ε = 1e-9), i.e. it runs a positive length inside the box within t ∈ (0, 1).
+    """
+    n, m = a.shape[0], boxes.shape[0]
+    out = np.zeros((n, m), np.bool_)
     eps = 1e-9
-    return (t_exit > t_enter + eps) & (t_exit > eps) & (t_enter < 1.0 - eps)
+    for i in range(n):
+        for j in range(m):
+            t_enter, t_exit = -np.inf, np.inf
+            for k in range(3):
+                lo = boxes[j, 2 * k] if k < 2 else 0.0
+                hi = boxes[j, 2 * k + 1] if k < 2 else boxes[j, 4]
+                d = b[i, k] - a[i, k]
+                if abs(d) > 1e-12:
+                    inv = 1.0 / d
+                    t1 = (lo - a[i, k]) * inv
+                    t2 = (hi - a[i, k]) * inv
+                    t_enter = max(t_enter, min(t1, t2))
+                    t_exit = min(t_exit, max(t1, t2))
+                elif not (a[i, k] > lo and a[i, k] < hi):
+                    t_enter, t_exit = np.inf, -np.inf
+            out[i, j] = (t_exit > t_enter + eps) and (t_exit > eps) and (t_enter < 1.0 - eps)
+    return out
 
 
 def inside_boxes(p_en: np.ndarray, boxes: np.ndarray, margin_m: float = 0.0) -> np.ndarray:
