@@ -32,6 +32,11 @@ def fuse_information(x, P, active):
     """Master fusion of the active local filters: (x_g (n,), P_g (n, n)) from x (N, n), P (N, n, n), active (N,)
     bool — P_g⁻¹ = Σᵢ Pᵢ⁻¹, x_g = P_g Σᵢ Pᵢ⁻¹ xᵢ (Carlson 1990, eqs. 10–11)."""
     n = x.shape[1]
+    if np.sum(active) == 1:
+        # one local filter holds all the information (β = 1): the fusion is the identity
+        for i in range(x.shape[0]):
+            if active[i]:
+                return x[i].copy(), P[i].copy()
     info = np.zeros((n, n))
     y = np.zeros(n)
     for i in range(x.shape[0]):
