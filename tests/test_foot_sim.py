@@ -42,12 +42,13 @@ def test_error_free_foot_imu_integrates_back_to_its_trajectory(ctx):
     sign error in the body rate, gravity or the frame would leave it metres off within seconds."""
     imu, motion = simulate_foot_imu(ctx, 400.0, errors=NO_ERRORS)
     k = int(round(motion.rate_hz / 400.0))
-    pos_true = motion.pos_enu_m[::k][: len(imu.t_s)]
-    vel_true = np.gradient(motion.pos_enu_m, 1 / motion.rate_hz, axis=0)[::k][: len(imu.t_s)]
+    v_int = np.gradient(motion.pos_enu_m, 1 / motion.rate_hz, axis=0)
+    pos_true = np.column_stack([np.interp(imu.t_s, motion.t_s, motion.pos_enu_m[:, i]) for i in range(3)])
+    vel_true = np.column_stack([np.interp(imu.t_s, motion.t_s, v_int[:, i]) for i in range(3)])
     lat = math.radians(ctx.site.origin.lat_deg)
     w_ie = 7.2921151467e-5 * np.array([0.0, math.cos(lat), math.sin(lat)])
     j0 = max(int(np.argmin(motion.flat[::k])) - 40, 0)            # 0.1 s before the foot first moves
-    q = dcm_to_quat(motion.C_bn[j0 * k])
+    q = dcm_to_quat(motion.C_bn[(j0 + 1) * k])                  # the attitude at the sample's stamp
     p, v = pos_true[j0].copy(), vel_true[j0].copy()
     n = 4000                                                      # 10 s
     for j in range(j0 + 1, j0 + n):
@@ -102,3 +103,29 @@ def test_same_seed_same_file_and_the_reader_takes_it(ctx, tmp_path):
     assert write_imu_foot(replace(ctx, kind="survey")) == {}
     with pytest.raises(ConfigError, match="foot_imu_rate_hz"):
         write_imu_foot(replace(ctx, options={"foot_imu_rate_hz": 50}))
+
+
+def test_zupt_bounds_the_velocity_of_the_walking_foot(ctx):
+    """On the simulated walking foot (Ellipse2-A class errors, 100 Hz, a minute) the ZUPT filter keeps the
+    velocity error at the centimetre-per-second level everywhere, where the same strapdown without updates
+    drifts to metres per second; its stance velocity is the ZUPT's."""
+    from models.foot.ins import FootInsConfig, run_foot_ins
+
+    imu, motion = simulate_foot_imu(ctx, 100.0)
+    v_int = np.gradient(motion.pos_enu_m, 1 / motion.rate_hz, axis=0)
+    v_true = np.column_stack([np.interp(imu.t_s, motion.t_s, v_int[:, i]) for i in range(3)])
+    run = run_foot_ins(imu.t_s, imu.acc_m_s2, imu.gyro_rad_s, None, FootInsConfig(),
+                       yaw_rad=float(np.arctan2(motion.C_bn[0, 0, 0], motion.C_bn[0, 1, 0])),
+                       latitude_deg=ctx.site.origin.lat_deg)
+    # the speed error (heading errors, unobservable without the magnetometer here, rotate the velocity only)
+    dv = np.abs(np.linalg.norm(run.vel_m_s, axis=1) - np.linalg.norm(v_true, axis=1))
+    # measured: 99th percentile 0.055 m/s over the minute (0.40 m/s when the samples were stamped at the start
+    # of their interval instead of its end), stance speeds at the ZUPT's σ
+    assert np.percentile(dv, 99) < 0.1 and np.percentile(dv[-1000:], 99) < 0.1
+    assert np.percentile(np.linalg.norm(run.vel_m_s[run.stance], axis=1), 99) < 0.05
+    lat = math.radians(ctx.site.origin.lat_deg)
+    w_ie = 7.2921151467e-5 * np.array([0.0, math.cos(lat), math.sin(lat)])
+    q, v, p = run.quat[0].copy(), np.zeros(3), np.zeros(3)
+    for j in range(1, len(imu.t_s)):
+        q, v, p, _ = strapdown_step(q, v, p, imu.acc_m_s2[j], imu.gyro_rad_s[j], 0.01, GRAVITY_ENU_M_S2, w_ie)
+    assert np.linalg.norm(v - v_true[-1]) > 1.0

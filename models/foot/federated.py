@@ -2,7 +2,7 @@
 
 Carlson, N. A. (1990), "Federated square root filter for decentralized parallel processes", IEEE Trans.
 Aerosp. Electron. Syst. 26(3):517–525. N local filters share one error state (here the foot INS's); each
-processes its own sensor. The master fuses their estimates in information form (Carlson eqs. 10–11):
+processes its own sensor. The master fuses their estimates in information form:
 
     P_g⁻¹ = Σᵢ Pᵢ⁻¹,        x_g = P_g Σᵢ Pᵢ⁻¹ xᵢ
 
@@ -13,7 +13,7 @@ and then shares the fused information back by the factors βᵢ (Σ βᵢ = 1; t
 
 Splitting the prior and Q this way makes the local filters' errors uncorrelated, so the information sum is
 exact: with a reset after every local update ("fusion-reset" mode) the federated filter reproduces the
-centralised Kalman filter whatever the βᵢ (Carlson §IV). The βᵢ then set how much each local filter leans
+centralised Kalman filter whatever the βᵢ (Carlson 1990). The βᵢ then set how much each local filter leans
 on its own sensor between fusions and how wide its innovation gate is (its S = H P_g H'/βᵢ + R).
 """
 
@@ -30,7 +30,7 @@ __all__ = ["fuse_information", "share_information", "SharingFactors"]
 @njit(cache=True)
 def fuse_information(x, P, active):
     """Master fusion of the active local filters: (x_g (n,), P_g (n, n)) from x (N, n), P (N, n, n), active (N,)
-    bool — P_g⁻¹ = Σᵢ Pᵢ⁻¹, x_g = P_g Σᵢ Pᵢ⁻¹ xᵢ (Carlson 1990, eqs. 10–11)."""
+    bool — P_g⁻¹ = Σᵢ Pᵢ⁻¹, x_g = P_g Σᵢ Pᵢ⁻¹ xᵢ (Carlson 1990)."""
     n = x.shape[1]
     if np.sum(active) == 1:
         # one local filter holds all the information (β = 1): the fusion is the identity

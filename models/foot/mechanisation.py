@@ -10,7 +10,7 @@ Per sample k (interval Δt, specific force f_b, angular rate ω_b):
 
 1. attitude: q ← q ⊗ Δq(θ) with θ = (ω_b − Cᵀ ω_ie,n) Δt and Δq(θ) = (cos |θ|/2, sin(|θ|/2) θ/|θ|),
    the exact quaternion of a rotation vector held constant over the interval (Titterton & Weston 2004,
-   *Strapdown Inertial Navigation Technology*, 2nd ed., eqs. 11.25–11.27; Savage 1998, JGCD 21(1));
+   *Strapdown Inertial Navigation Technology*, 2nd ed., ch. 11; Savage 1998, JGCD 21(1));
 2. specific force to the local frame and gravity removed: a_n = C(q) f_b + g_n;
 3. velocity and position: v ← v + a_n Δt, p ← p + v Δt + ½ a_n Δt² (the OpenShoe navigation equations,
    Nilsson, Skog, Händel & Hari 2012, "Foot-mounted INS for everybody — an open-source embedded
@@ -19,7 +19,7 @@ Per sample k (interval Δt, specific force f_b, angular rate ω_b):
 
 The initial roll and pitch come from the mean specific force of a still spell (the accelerometer then
 reads −g in the body frame: leveling, Groves 2013, *Principles of GNSS, Inertial, and Multisensor
-Integrated Navigation Systems*, 2nd ed., eq. 5.101); the initial yaw from a tilt-compensated magnetic
+Integrated Navigation Systems*, 2nd ed., ch. 5); the initial yaw from a tilt-compensated magnetic
 heading when there is a magnetometer, else given.
 """
 
@@ -49,7 +49,7 @@ def quat_mul(p, q):
 @njit(cache=True)
 def quat_from_rotvec(theta):
     """Quaternion of the rotation vector θ (3,), rad: (cos |θ|/2, sin(|θ|/2) θ/|θ|) (Titterton & Weston
-    eq. 11.27); the first-order form (1, θ/2) normalised below 1e-12 rad."""
+    ch. 11); the first-order form (1, θ/2) normalised below 1e-12 rad."""
     a = math.sqrt(theta[0] ** 2 + theta[1] ** 2 + theta[2] ** 2)
     if a < 1e-12:
         q = np.array([1.0, 0.5 * theta[0], 0.5 * theta[1], 0.5 * theta[2]])
@@ -60,7 +60,7 @@ def quat_from_rotvec(theta):
 
 @njit(cache=True)
 def quat_to_dcm(q):
-    """Direction-cosine matrix C (3, 3) of the unit quaternion q: v_n = C v_b (Titterton & Weston eq. 3.63)."""
+    """Direction-cosine matrix C (3, 3) of the unit quaternion q: v_n = C v_b (Titterton & Weston ch. 3)."""
     w, x, y, z = q[0], q[1], q[2], q[3]
     C = np.empty((3, 3))
     C[0, 0] = w * w + x * x - y * y - z * z
@@ -133,7 +133,7 @@ def level_attitude(f_b: np.ndarray, yaw_rad: float = 0.0) -> np.ndarray:
     """Quaternion of a still IMU whose mean specific force is ``f_b`` (3,), with heading ``yaw_rad``.
 
     Roll and pitch level the body so that C f_b points up (an accelerometer at rest measures −g, i.e. +g·up
-    in ENU; Groves 2013 eq. 5.101); the yaw is the heading, rad from north clockwise, of the body's x axis
+    in ENU; Groves 2013 ch. 5); the yaw is the heading, rad from north clockwise, of the body's x axis
     (its horizontal projection; when x is near vertical, of the body's y axis minus 90°).
     """
     f = np.asarray(f_b, float)

@@ -1,7 +1,7 @@
 """Stance-phase (zero-velocity) detection on a foot-mounted IMU: the GLRT / SHOE detector, and step counting.
 
 The stance hypothesis detector of Skog, Händel, Nilsson & Rantakokko (2010), "Zero-velocity detection — an
-algorithm evaluation", IEEE Trans. Biomed. Eng. 57(11), eq. (9) — the SHOE (stance hypothesis optimal
+algorithm evaluation", IEEE Trans. Biomed. Eng. 57(11) — the SHOE (stance hypothesis optimal
 estimation) detector, the generalised likelihood-ratio test of "the IMU is still" against "it moves" with
 white Gaussian sensor noise:
 
@@ -55,7 +55,7 @@ class StanceConfig:
 
 
 def glrt_statistic(acc_m_s2: np.ndarray, gyro_rad_s: np.ndarray, cfg: StanceConfig = StanceConfig()) -> np.ndarray:
-    """The SHOE test statistic T(zₙ) of every window start n (Skog et al. 2010, eq. 9).
+    """The SHOE test statistic T(zₙ) of every window start n (Skog et al. 2010; module docstring).
 
     ``acc_m_s2``, ``gyro_rad_s`` : ndarray of shape (N, 3). Returns ndarray of shape (N − W + 1,).
     """

@@ -21,7 +21,7 @@ and forefoot rockers):
 
 The motion is built at an internal rate of at least 400 Hz (twice the output), differentiated (specific
 force f_b = Cᵀ(a_n − g_n), body rate from C_kᵀ Ċ), and block-averaged to the output rate as an IMU's
-decimation filter does. Earth rate is added to the gyro; the magnetometer reads the site's Earth field
+decimation filter does, each sample stamped at the end of its interval. Earth rate is added to the gyro; the magnetometer reads the site's Earth field
 (:func:`simulation.imu.magnetic.earth_field_ned_ut`) plus the steel disturbances at the foot.
 
 Sensor errors of an SBG Ellipse2-A class MEMS IMU (the seed paper's sensor; SBG Systems, *Ellipse 2 Series
@@ -264,7 +264,8 @@ def synthesise_foot_imu(motion: FootMotion, site: Site, out_rate_hz: float, rng:
     b_enu = np.column_stack([b_ned[1] + d_ned[:, 1], b_ned[0] + d_ned[:, 0], -(b_ned[2] + d_ned[:, 2])])
     m_b = np.einsum("nji,nj->ni", C, b_enu)
     f_b, w_b, m_b = _block_mean(f_b, k), _block_mean(w_b, k), _block_mean(m_b, k)
-    t = _block_mean(motion.t_s, k) - 0.5 * (k - 1) * dt
+    # a sample is the mean over its interval, stamped at the interval's end (the strapdown's convention)
+    t = _block_mean(motion.t_s, k) + 0.5 * (k + 1) * dt
     n, fs, odt = len(t), out_rate_hz, 1.0 / out_rate_hz
     # sensor errors: turn-on bias, in-run bias (Gauss–Markov), scale, white noise σ = N·√f_s, clipping
     f_b = (f_b * (1.0 + rng.normal(0.0, errors.scale_error, size=3)) + rng.normal(0.0, errors.acc_turn_on_m_s2, 3)
