@@ -233,16 +233,27 @@ def _run(dt, acc, gyro, mag, stance, head_ok, uwb_at, uwb_z, uwb_R, q0, p0, bg0,
     Rh = np.array([[r_head]])
     pending = False
     t_since = 0.0
+    i0 = 0
+    while not active[i0]:
+        i0 += 1
     for k in range(n):
         # the nominal INS: strapdown with the gyro bias removed
         q, v, p, f_n = strapdown_step(q, v, p, acc[k] - ba, gyro[k] - bg, dt[k], g_n, w_ie_n)
         C = quat_to_dcm(q)
         Phi, Q = _error_model(f_n, C, dt[k], qd * dt[k])
-        for i in range(3):
-            if active[i]:
-                # xᵢ = Φ xᵢ;  Pᵢ = Φ Pᵢ Φ' + Q/βᵢ   (Carlson: each local filter carries Q/βᵢ)
-                X[i] = Phi @ X[i]
-                Ps[i] = Phi @ Ps[i] @ Phi.T + Q / beta[i]
+        if not pending:
+            # every local filter holds the fused state (xᵢ = 0 after feedback, Pᵢ = P_g/βᵢ), so
+            # Φ (P_g/βᵢ) Φ' + Q/βᵢ = (Φ P_g Φ' + Q)/βᵢ: one propagation serves all of them
+            Pg = Phi @ (Ps[i0] * beta[i0]) @ Phi.T + Q
+            for i in range(3):
+                if active[i]:
+                    Ps[i] = Pg / beta[i]
+        else:
+            for i in range(3):
+                if active[i]:
+                    # xᵢ = Φ xᵢ;  Pᵢ = Φ Pᵢ Φ' + Q/βᵢ   (Carlson: each local filter carries Q/βᵢ)
+                    X[i] = Phi @ X[i]
+                    Ps[i] = Phi @ Ps[i] @ Phi.T + Q / beta[i]
         t_since += dt[k]
         if stance[k] and active[0]:
             # ZUPT (+ ZARU): ν = z − H xᵢ with z = −v̂ (; ω − b̂_g − Ĉᵀω_ie)
