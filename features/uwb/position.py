@@ -34,6 +34,7 @@ from dataclasses import dataclass
 from typing import Sequence
 
 import numpy as np
+from numba import njit
 
 from features.errors import ConfigError, UwbError
 from features.site import UwbAnchor
@@ -112,10 +113,6 @@ def bearing_rad(from_e, from_n, to_e, to_n):
     return np.arctan2(np.subtract(to_e, from_e), np.subtract(to_n, from_n))
 
 
-def _wrap(x):
-    return (np.asarray(x) + np.pi) % (2 * np.pi) - np.pi
-
-
 def uwb_epochs(log: UwbLog, epoch_s: float) -> list[np.ndarray]:
     """Row indices of each ranging round: consecutive rows within ``epoch_s`` of the round's first row,
     a round closed early when an anchor repeats. List of int arrays."""
@@ -131,20 +128,122 @@ def uwb_epochs(log: UwbLog, epoch_s: float) -> list[np.ndarray]:
     return out
 
 
-def _initial(anc: np.ndarray, r_h: np.ndarray, az_world: np.ndarray, use_az: np.ndarray) -> np.ndarray | None:
-    """Starting point: the mean polar point of the anchors with an angle, else the linearised ranges."""
-    if use_az.any():
-        pts = anc[use_az, :2] + r_h[use_az, None] * np.column_stack([np.sin(az_world[use_az]),
-                                                                    np.cos(az_world[use_az])])
-        return pts.mean(axis=0)
-    if len(anc) < 3:
-        return None
-    # Caffery (2000): |p − a_i|² − |p − a_k|² = r_i² − r_k²  →  2(a_k − a_i)·p = r_i² − r_k² − |a_i|² + |a_k|²
-    a, k = anc[:, :2], anc[-1, :2]
-    A = 2.0 * (k - a[:-1])
-    b = r_h[:-1] ** 2 - r_h[-1] ** 2 - np.sum(a[:-1] ** 2, axis=1) + np.sum(k ** 2)
-    sol, *_ = np.linalg.lstsq(A, b, rcond=None)
-    return sol
+@njit(cache=True)
+def _wrap1(x: float) -> float:
+    return (x + math.pi) % (2.0 * math.pi) - math.pi
+
+
+@njit(cache=True)
+def _solve_one(anc, bore, rng, az, sr, saz, tag_up, max_iter, tol):
+    """One round (k rows; ``az`` NaN where unused) → (ok, e, n, P00, P01, P11, rms). Compiled: a round is a
+    two-unknown problem, solved thousands of times per walk."""
+    k = rng.shape[0]
+    n_az = 0
+    for i in range(k):
+        if np.isfinite(az[i]):
+            n_az += 1
+    n_eq = k + n_az
+    fail = (False, np.nan, np.nan, np.nan, np.nan, np.nan, np.nan)
+    if n_eq < 2 or (n_az == 0 and k < 3):
+        return fail
+    dz = np.empty(k)
+    r_h = np.empty(k)
+    for i in range(k):
+        dz[i] = tag_up - anc[i, 2]
+        r_h[i] = math.sqrt(max(rng[i] * rng[i] - dz[i] * dz[i], 0.0))
+    # start: the mean polar point a + r_h·(sin φ, cos φ) of the anchors with an angle, else Caffery (2000):
+    # |p − a_i|² − |p − a_k|² = r_i² − r_k²  →  2(a_k − a_i)·p = r_i² − r_k² − |a_i|² + |a_k|², least squares
+    pe, pn = 0.0, 0.0
+    if n_az > 0:
+        for i in range(k):
+            if np.isfinite(az[i]):
+                phi = bore[i] + az[i]
+                pe += anc[i, 0] + r_h[i] * math.sin(phi)
+                pn += anc[i, 1] + r_h[i] * math.cos(phi)
+        pe /= n_az
+        pn /= n_az
+    else:
+        a00 = a01 = a11 = b0 = b1 = 0.0
+        ke, kn = anc[k - 1, 0], anc[k - 1, 1]
+        for i in range(k - 1):
+            x0, x1 = 2.0 * (ke - anc[i, 0]), 2.0 * (kn - anc[i, 1])
+            b = r_h[i] ** 2 - r_h[k - 1] ** 2 - anc[i, 0] ** 2 - anc[i, 1] ** 2 + ke ** 2 + kn ** 2
+            a00 += x0 * x0
+            a01 += x0 * x1
+            a11 += x1 * x1
+            b0 += x0 * b
+            b1 += x1 * b
+        det = a00 * a11 - a01 * a01
+        if abs(det) <= 1e-12 * max(a00 * a11, 1e-300):
+            return fail
+        pe, pn = (a11 * b0 - a01 * b1) / det, (a00 * b1 - a01 * b0) / det
+    n00 = n01 = n11 = 0.0
+    converged = False
+    for _ in range(max_iter):
+        # normal equations N = J'WJ, g = J'W(z − h(p)) of the range and bearing models
+        n00 = n01 = n11 = g0 = g1 = 0.0
+        for i in range(k):
+            de, dn = pe - anc[i, 0], pn - anc[i, 1]
+            d3 = max(math.sqrt(de * de + dn * dn + dz[i] * dz[i]), 1e-6)
+            w = 1.0 / (sr[i] * sr[i])
+            j0, j1, res = de / d3, dn / d3, rng[i] - d3
+            n00 += w * j0 * j0
+            n01 += w * j0 * j1
+            n11 += w * j1 * j1
+            g0 += w * j0 * res
+            g1 += w * j1 * res
+            if np.isfinite(az[i]):
+                d2h = max(de * de + dn * dn, 1e-6)
+                w = 1.0 / (saz[i] * saz[i])
+                j0, j1 = dn / d2h, -de / d2h
+                res = _wrap1(bore[i] + az[i] - math.atan2(de, dn))
+                n00 += w * j0 * j0
+                n01 += w * j0 * j1
+                n11 += w * j1 * j1
+                g0 += w * j0 * res
+                g1 += w * j1 * res
+        det = n00 * n11 - n01 * n01
+        # a near-singular N: the geometry does not fix the position (the cond(N) > 1e12 test for a 2×2)
+        if det <= 1e-12 * (n00 + n11) ** 2:
+            return fail
+        s0, s1 = (n11 * g0 - n01 * g1) / det, (n00 * g1 - n01 * g0) / det
+        pe += s0
+        pn += s1
+        if math.hypot(s0, s1) < tol:
+            converged = True
+            break
+    if not converged:
+        return fail
+    chi2 = 0.0
+    for i in range(k):
+        de, dn = pe - anc[i, 0], pn - anc[i, 1]
+        r = rng[i] - math.sqrt(de * de + dn * dn + dz[i] * dz[i])
+        chi2 += r * r / (sr[i] * sr[i])
+        if np.isfinite(az[i]):
+            r = _wrap1(bore[i] + az[i] - math.atan2(de, dn))
+            chi2 += r * r / (saz[i] * saz[i])
+    det = n00 * n11 - n01 * n01
+    dof = n_eq - 2
+    f = chi2 / dof if dof > 0 and chi2 / dof > 1.0 else 1.0
+    rms = math.sqrt(chi2 / dof) if dof > 0 else np.nan
+    return True, pe, pn, f * n11 / det, -f * n01 / det, f * n00 / det, rms
+
+
+@njit(cache=True)
+def _solve_rounds(starts, ends, use_az, anc, bore, rng, az, sr, saz, tag_up, max_iter, tol):
+    """Every round [starts[r], ends[r]) of the rows → (ok (n,), out (n, 6): e, n, P00, P01, P11, rms)."""
+    n = starts.shape[0]
+    ok = np.zeros(n, np.bool_)
+    out = np.full((n, 6), np.nan)
+    nan_az = np.full(az.shape[0], np.nan)
+    for r in range(n):
+        s, e = starts[r], ends[r]
+        a = az[s:e] if use_az[r] else nan_az[s:e]
+        res = _solve_one(anc[s:e], bore[s:e], rng[s:e], a, sr[s:e], saz[s:e], tag_up, max_iter, tol)
+        if res[0]:
+            ok[r] = True
+            out[r, 0], out[r, 1], out[r, 2], out[r, 3], out[r, 4], out[r, 5] = res[1:]
+    return ok, out
 
 
 def solve_round(anc: np.ndarray, boresight_rad: np.ndarray, range_m: np.ndarray, azimuth_rad: np.ndarray,
@@ -152,49 +251,16 @@ def solve_round(anc: np.ndarray, boresight_rad: np.ndarray, range_m: np.ndarray,
                 max_iter: int = 15, tol_m: float = 1e-4):
     """One round's horizontal position by weighted Gauss–Newton (module docstring).
 
-    anc : array of shape (k, 3), anchors' (east, north, up), m. ``azimuth_rad`` NaN where a row's angle is
-    not used. Returns ``(p (2,), cov (2, 2), rms)`` or ``None`` when the round cannot be solved
-    (too few equations, no convergence, singular geometry).
+    anc : array of shape (k, 3), anchors' (east, north, up), m; the other arrays of shape (k,), ``azimuth_rad``
+    NaN where a row's angle is not used. Returns ``(p (2,), cov (2, 2), rms)`` or ``None`` when the round
+    cannot be solved (too few equations, no convergence, singular geometry).
     """
-    use_az = np.isfinite(azimuth_rad)
-    n_eq = len(range_m) + int(use_az.sum())
-    if n_eq < 2 or (not use_az.any() and len(range_m) < 3):
+    f = np.ascontiguousarray
+    res = _solve_one(f(anc, float), f(boresight_rad, float), f(range_m, float), f(azimuth_rad, float),
+                     f(range_sigma_m, float), f(azimuth_sigma_rad, float), float(tag_up_m), int(max_iter), float(tol_m))
+    if not res[0]:
         return None
-    dz = tag_up_m - anc[:, 2]
-    r_h = np.sqrt(np.maximum(range_m ** 2 - dz ** 2, 0.0))
-    az_world = boresight_rad + np.where(use_az, azimuth_rad, 0.0)
-    p = _initial(anc, r_h, az_world, use_az)
-    if p is None or not np.all(np.isfinite(p)):
-        return None
-    w = np.concatenate([1.0 / range_sigma_m ** 2, 1.0 / azimuth_sigma_rad[use_az] ** 2])
-    for _ in range(max_iter):
-        de, dn = p[0] - anc[:, 0], p[1] - anc[:, 1]
-        d3 = np.sqrt(de ** 2 + dn ** 2 + dz ** 2)
-        d2h = np.maximum(de ** 2 + dn ** 2, 1e-6)
-        # residuals z − h(p) and Jacobian ∂h/∂p of the range and bearing models
-        res = np.concatenate([range_m - d3, _wrap(az_world - np.arctan2(de, dn))[use_az]])
-        J = np.vstack([np.column_stack([de / np.maximum(d3, 1e-6), dn / np.maximum(d3, 1e-6)]),
-                       np.column_stack([dn / d2h, -de / d2h])[use_az]])
-        JtW = J.T * w
-        N = JtW @ J
-        if np.linalg.cond(N) > 1e12:
-            return None
-        step = np.linalg.solve(N, JtW @ res)
-        p = p + step
-        if np.hypot(*step) < tol_m:
-            break
-    else:
-        return None
-    de, dn = p[0] - anc[:, 0], p[1] - anc[:, 1]
-    res = np.concatenate([range_m - np.sqrt(de ** 2 + dn ** 2 + dz ** 2),
-                          _wrap(az_world - np.arctan2(de, dn))[use_az]])
-    chi2 = float(np.sum(w * res ** 2))
-    dof = n_eq - 2
-    cov = np.linalg.inv(N)
-    rms = math.sqrt(chi2 / dof) if dof > 0 else math.nan
-    if dof > 0 and chi2 / dof > 1.0:
-        cov = cov * (chi2 / dof)
-    return p, 0.5 * (cov + cov.T), rms
+    return np.array(res[1:3]), np.array([[res[3], res[4]], [res[4], res[5]]]), res[6]
 
 
 def uwb_positions(log: UwbLog, anchors: Sequence[UwbAnchor], tag_up_m: float,
@@ -219,23 +285,28 @@ def uwb_positions(log: UwbLog, anchors: Sequence[UwbAnchor], tag_up_m: float,
     az_sigma = (math.radians(config.azimuth_sigma_deg) * scale
                 / np.maximum(np.cos(np.where(np.isfinite(az_rad), az_rad, 0.0)), config.max_cos_floor))
     rounds = uwb_epochs(log, config.epoch_s)
-    out = []
-    for idx in rounds:
-        k = len(idx)
-        if config.use_aoa == "never" or (config.use_aoa == "fallback" and k >= config.min_range_anchors):
-            if k < config.min_range_anchors:
-                continue
-            az = np.full(k, np.nan)
-        else:
-            az = az_rad[idx]
-        anc = table[row_anchor[idx]]
-        sol = solve_round(anc[:, :3], anc[:, 3], log.range_m[idx], az, config.range_sigma_m * scale[idx],
-                          az_sigma[idx], tag_up_m, config.max_iter, config.tol_m)
-        if sol is not None:
-            out.append((float(np.mean(log.t_s[idx])), sol, k, bool(np.isfinite(az).any())))
-    n = len(out)
-    return UwbFixes(t_s=np.array([o[0] for o in out]), east_m=np.array([o[1][0][0] for o in out]),
-                    north_m=np.array([o[1][0][1] for o in out]),
-                    cov_en=np.array([o[1][1] for o in out]).reshape(n, 2, 2),
-                    n_anchors=np.array([o[2] for o in out], dtype=int), used_aoa=np.array([o[3] for o in out], bool),
-                    rms_residual=np.array([o[1][2] for o in out]), n_rounds=len(rounds))
+    size = np.array([len(r) for r in rounds], int)
+    starts = np.array([r[0] for r in rounds], np.int64) if rounds else np.zeros(0, np.int64)
+    if config.use_aoa == "never":
+        use_az, keep = np.zeros(len(rounds), bool), size >= config.min_range_anchors
+    elif config.use_aoa == "fallback":
+        use_az, keep = size < config.min_range_anchors, np.ones(len(rounds), bool)
+    else:
+        use_az, keep = np.ones(len(rounds), bool), np.ones(len(rounds), bool)
+    anc = table[row_anchor]
+    ok, out = _solve_rounds(starts[keep], starts[keep] + size[keep], use_az[keep], np.ascontiguousarray(anc[:, :3]),
+                            np.ascontiguousarray(anc[:, 3]), np.ascontiguousarray(log.range_m, float),
+                            np.ascontiguousarray(az_rad, float), np.ascontiguousarray(config.range_sigma_m * scale),
+                            np.ascontiguousarray(az_sigma, float), float(tag_up_m), int(config.max_iter),
+                            float(config.tol_m))
+    kept = np.flatnonzero(keep)[ok]
+    out = out[ok]
+    if len(rounds):
+        t_mid = (np.add.reduceat(log.t_s, starts) / size)[kept]
+        has_az = (use_az & (np.add.reduceat(np.isfinite(az_rad).astype(int), starts) > 0))[kept]
+    else:
+        t_mid, has_az = np.zeros(0), np.zeros(0, bool)
+    cov = np.stack([np.column_stack([out[:, 2], out[:, 3]]), np.column_stack([out[:, 3], out[:, 4]])], axis=1)
+    return UwbFixes(t_s=t_mid.reshape(-1), east_m=out[:, 0].copy(), north_m=out[:, 1].copy(), cov_en=cov.reshape(-1, 2, 2),
+                    n_anchors=size[kept].astype(int), used_aoa=has_az.reshape(-1), rms_residual=out[:, 5].copy(),
+                    n_rounds=len(rounds))

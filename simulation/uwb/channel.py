@@ -15,8 +15,10 @@ reflections off the vertical faces of solid boxes); the radio is this package's
 with ``G_a`` the anchor's gain towards the tag (front or back lobe). A fire wall (0.4 m of concrete,
 ≈ 60 dB) and steel (no transmission) are not crossed: the first path is then the diffracted or reflected
 one, metres longer — the NLOS bias of ranging. A building is hollow: its two walls of
-:data:`~simulation.uwb.radio.BUILDING_WALL_M` are crossed. A diffuse tail (dense multipath) adds
-``DIFFUSE_BELOW_DB`` under the free-space power to the received total, not to any first path.
+:data:`~simulation.uwb.radio.BUILDING_WALL_M` are crossed. Every path arrives as a cluster: its ray and a
+dense tail of :data:`CLUSTER_TAIL_DB` re. the ray (Saleh & Valenzuela, IEEE JSAC 5(2), 1987; the
+clusters of the IEEE 802.15.4a model, Molisch et al., IEEE Trans. Antennas Propag. 54(11), 2006), which
+counts in the received total but not in the first path.
 
 The arrival direction at the anchor of a bent path (over/round an edge, off a wall) is off the tag's
 bearing by ≈ atan(√(2δ/d)) (the edge half-way, δ ≈ 2h²/d): a reflection from the reflecting box's side of
@@ -38,14 +40,14 @@ from simulation.uwb.radio import (ANCHOR_GAIN_DBI, BACK_LOBE_LOSS_DB, BUILDING_W
                                   LATTICE_LOSS_DB, TX_POWER_DBM, free_space_loss_db, knife_edge_loss_db, material,
                                   reflection_loss_db, slab_excess_path_m, slab_loss_db)
 
-__all__ = ["UwbScene", "build_uwb_scene", "UwbPaths", "uwb_paths", "segment_chords_m", "DIFFUSE_BELOW_DB",
+__all__ = ["UwbScene", "build_uwb_scene", "UwbPaths", "uwb_paths", "segment_chords_m", "CLUSTER_TAIL_DB",
            "PATH_DIRECT", "PATH_THROUGH", "PATH_BENT"]
 
-DIFFUSE_BELOW_DB = 8.0
-"""Dense-multipath power under the free-space power at the direct distance, dB: outdoor UWB channels carry
-a few dB of diffuse energy besides the resolved paths (IEEE 802.15.4a channel model, Molisch et al., IEEE
-Trans. Antennas Propag. 54(11), 2006, outdoor LOS cluster powers); it lowers the first-path/total ratio
-a DW3000 reports even in line of sight."""
+CLUSTER_TAIL_DB = -3.0
+"""Energy of a cluster's dense tail re. its first ray, dB. Set so that a lone line-of-sight cluster gives the
+first-path/received ratio the DW1000 reports in line of sight in ../shared/data/cir_uwb (LOS logs: median
+FSL − RSL −2.9 to −4.1 dB, −3.0 over the six; one cluster alone: −10·log10(1 + 10^(−0.3)) = −1.8 dB, the ground bounce and
+reflections lower it further). ``bench/bench_uwb.py`` prints both."""
 
 PATH_DIRECT, PATH_THROUGH, PATH_BENT = 0, 1, 2
 """Kinds of :class:`UwbPaths`: clear direct path, direct path through walls, any bent path (edge, wall, ground)."""
@@ -77,14 +79,13 @@ class UwbPaths:
 
     ``excess_m``: path length minus the straight-line distance; ``power_dbm``: received power without
     fading; ``kind``: :data:`PATH_DIRECT` / :data:`PATH_THROUGH` / :data:`PATH_BENT`; ``angle_off_rad``:
-    arrival direction at the anchor minus the tag's bearing. ``diffuse_dbm``: the dense-multipath power.
+    arrival direction at the anchor minus the tag's bearing.
     """
 
     excess_m: np.ndarray
     power_dbm: np.ndarray
     kind: np.ndarray
     angle_off_rad: np.ndarray
-    diffuse_dbm: float
     direct_m: float
 
 
@@ -171,5 +172,4 @@ def uwb_paths(scene: UwbScene, anchor_xyz, boresight_rad: float, tag_xyz) -> Uwb
         off.append(side * math.atan(math.sqrt(2.0 * ex / max(d, 0.1))))
     order = np.argsort(np.asarray(excess, float), kind="stable")
     return UwbPaths(excess_m=np.asarray(excess, float)[order], power_dbm=np.asarray(power, float)[order],
-                    kind=np.asarray(kind, int)[order], angle_off_rad=np.asarray(off, float)[order],
-                    diffuse_dbm=p0 - float(free_space_loss_db(d)) - DIFFUSE_BELOW_DB, direct_m=d)
+                    kind=np.asarray(kind, int)[order], angle_off_rad=np.asarray(off, float)[order], direct_m=d)

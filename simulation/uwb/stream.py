@@ -26,7 +26,7 @@ the straight-line distance exactly at the poll's time) gets a lognormal fade per
   DW1000/DW3000 arrays: a few degrees RMS in LOS after calibration (Dotlic et al., "Angle of arrival
   estimation using Decawave DW1000 integrated circuits", WPNC 2017; Qorvo DW3000 PDoA: ±5° typical);
 - **quality**: what the chip computes from its CIR: first-path power over received power, dB
-  (DW3000 User Manual §4.7), from the faded paths and the diffuse tail, + N(0, ``quality_noise_db``).
+  (DW3000 User Manual §4.7), from the faded paths and their clusters' tails, + N(0, ``quality_noise_db``).
 
 Installation (per site, from ``stream_rng(site seed, "uwb", "install")``, the same for every walk on a
 site): true anchor positions = surveyed ± ``survey_sigma_m`` per axis (a total-station / RTK survey),
@@ -47,7 +47,7 @@ from features.uwb.reader import UwbLog, write_uwb
 
 from simulation.rng import stream_rng
 from simulation.streams import StreamContext
-from simulation.uwb.channel import PATH_DIRECT, UwbPaths, build_uwb_scene, uwb_paths
+from simulation.uwb.channel import CLUSTER_TAIL_DB, PATH_DIRECT, UwbPaths, build_uwb_scene, uwb_paths
 from simulation.uwb.radio import (ANCHOR_GAIN_DBI, FIRST_PATH_DYNAMIC_DB, FIRST_PATH_FLOOR_DBM, SENSITIVITY_DBM,
                                   TX_POWER_DBM, free_space_loss_db)
 
@@ -147,7 +147,7 @@ def _wrap(x: float) -> float:
     return (x + math.pi) % (2 * math.pi) - math.pi
 
 
-def _measure(rng, paths: UwbPaths, d_m: float, cfg: UwbSimConfig):
+def _measure(rng, paths: UwbPaths, cfg: UwbSimConfig):
     """One poll: ``None`` (lost) or (first-path excess m, first kind, angle offset rad, fp margin dB, quality dB)."""
     p = paths.power_dbm + rng.normal(0.0, cfg.fading_db, len(paths.power_dbm))
     if not len(p) or not np.isfinite(p).any():
@@ -158,7 +158,8 @@ def _measure(rng, paths: UwbPaths, d_m: float, cfg: UwbSimConfig):
         return None
     found = np.flatnonzero(p >= max(FIRST_PATH_FLOOR_DBM, peak - FIRST_PATH_DYNAMIC_DB))
     i = int(found[0])
-    total = 10.0 * math.log10(float(np.sum(10.0 ** (p[np.isfinite(p)] / 10.0))) + 10.0 ** (paths.diffuse_dbm / 10.0))
+    # received total: every cluster's ray and its dense tail (simulation.uwb.channel.CLUSTER_TAIL_DB)
+    total = 10.0 * math.log10(float(np.sum(10.0 ** (p[np.isfinite(p)] / 10.0))) * (1.0 + 10.0 ** (CLUSTER_TAIL_DB / 10.0)))
     quality = min(p[i] - total + rng.normal(0.0, cfg.quality_noise_db), 0.0)
     return float(paths.excess_m[i]), int(paths.kind[i]), float(paths.angle_off_rad[i]), float(p[i] - SENSITIVITY_DBM), quality
 
@@ -194,7 +195,7 @@ def simulate_uwb(ctx: StreamContext, cfg: UwbSimConfig = UwbSimConfig()) -> tupl
             paths = cache.get(key)
             if paths is None:
                 paths = cache[key] = uwb_paths(scene, xyz[j], float(bore[j]), (e, n, u))
-            got = _measure(rng, paths, d, cfg)
+            got = _measure(rng, paths, cfg)
             if got is None:
                 continue
             excess, kind, off, fp_margin, quality = got
