@@ -401,6 +401,39 @@ def evaluate_section(walks, model_dir: Path, tmp: Path, walk_s: float) -> None:
           f"new-cluster run minus warm run: {times[2] - warm:.2f} s")
 
 
+# -- long walks in bounded memory (issue 25 item 3) --------------------------------------------------------------
+
+
+def memory_section(tmp: Path, model_dir: Path, base_s: float = 300.0, long_h: float = 8.0) -> None:
+    """Peak memory of ``envfuse run`` (default method) on a 10-minute and an ``long_h``-hour walk, each in a
+    fresh process (its VmHWM), and the long run's wall time and × real time beside the ``oaconvolve``
+    yardstick over the base walk's audio. Both walks are one simulated walk of ``base_s`` looped
+    (``tests/long_walk.py``: timestamps continued, audio appended block by block), so they differ in length
+    only. Target: the two peaks within 10 %."""
+    from simulation.walk import simulate_walk
+    from tests.long_walk import loop_walk, peak_rss_mib
+
+    base = simulate_walk(tmp / "site", tmp / "mem_base", seed=90, duration_s=base_s)
+    yard, yard_warm = oaconvolve_rate(base / "audio.wav")
+    lengths = {"10 min": round(600.0 / base_s), f"{long_h:g} h": round(long_h * 3600.0 / base_s)}
+    peaks = {}
+    for label, loops in lengths.items():
+        t0 = time.perf_counter()
+        walk = loop_walk(base, tmp / f"mem_{loops}", loops)
+        made = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        peaks[label] = peak_rss_mib(["run", str(walk), "--model", str(model_dir), "--out", str(tmp / f"{loops}.csv")])
+        wall = time.perf_counter() - t0
+        dur = loops * base_s
+        print(f"envfuse run, {label} walk ({loops} x {base_s:.0f} s, written in {made:.0f} s): peak RSS "
+              f"{peaks[label]:.0f} MiB, {wall:.0f} s wall, {dur / wall:,.0f}x real time (oaconvolve in the same run: "
+              f"first {yard:,.0f}x, best of 3 {yard_warm:,.0f}x; ratio {dur / wall / yard_warm:.3f})", flush=True)
+        for f in walk.iterdir():
+            f.unlink()
+    a, b = peaks.values()
+    print(f"peak memory {long_h:g} h / 10 min: {b / a:.3f} (target within 10 %)")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="2-minute walks, 4 walks")
@@ -409,7 +442,15 @@ def main() -> None:
     ap.add_argument("--evaluate-only", action="store_true",
                     help="2 training walks of 120 s, then only the evaluate figures (section 3)")
     ap.add_argument("--eval-walk-s", type=float, default=60.0, help="length of each of the 16 evaluated walks (s)")
+    ap.add_argument("--memory-only", action="store_true",
+                    help="2 training walks of 120 s, then only the peak memory of run on 10-minute and 8-hour walks")
+    ap.add_argument("--long-h", type=float, default=8.0, help="length of --memory-only's long walk, hours")
     args = ap.parse_args()
+    if args.memory_only:
+        with tempfile.TemporaryDirectory() as d:
+            walks, model_dir = build(Path(d), 120.0, 2)
+            memory_section(Path(d), model_dir, long_h=args.long_h)
+        return
     walk_s, n_walks = (120.0, 4) if args.quick else (600.0, 8)
     if args.breakdown_only:
         n_walks = 3

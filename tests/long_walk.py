@@ -16,6 +16,8 @@ from __future__ import annotations
 
 import datetime as dt
 import re
+import subprocess
+import sys
 import tomllib
 from functools import reduce
 from pathlib import Path
@@ -23,7 +25,7 @@ from pathlib import Path
 import numpy as np
 import soundfile as sf
 
-__all__ = ["loop_walk", "shift_nmea_line"]
+__all__ = ["loop_walk", "shift_nmea_line", "peak_rss_mib"]
 
 _TIME_FIELD = {"GGA": 1, "RMC": 1, "GST": 1, "GNS": 1, "ZDA": 1, "GLL": 5, "GBS": 1}
 """Index of the hhmmss.ss field in each timed sentence (after the address field)."""
@@ -147,3 +149,14 @@ def loop_walk(src: str | Path, dst: str | Path, n_loops: int) -> Path:
         fs = int(sf.info(str(src / meta["audio"]["file"])).samplerate)
         _loop_audio(src / meta["audio"]["file"], dst / meta["audio"]["file"], n_loops, round(period * fs))
     return dst
+
+
+def peak_rss_mib(args: list) -> float:
+    """Peak resident memory of ``envfuse ARGS`` in a child process, MiB: its ``VmHWM`` (proc(5)), the
+    high-water mark of its own address space. (Not ``ru_maxrss``: Linux keeps that across fork and execve, so a
+    child of a large pytest process reads the parent's peak.)"""
+    code = ("import sys; from pipeline.cli import main; rc = main(sys.argv[1:]); "
+            "print('HWM', [x for x in open('/proc/self/status') if x.startswith('VmHWM')][0].split()[1]); "
+            "sys.exit(rc)")
+    out = subprocess.run([sys.executable, "-c", code, *args], capture_output=True, text=True, check=True)
+    return int(out.stdout.split("HWM")[-1]) / 1024.0
