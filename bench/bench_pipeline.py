@@ -23,7 +23,20 @@
    all over 3 runs. ``envfuse evaluate`` as a user runs it: 0.78 forked against 0.72-0.73 spawned (its parent
    has only read the model, so each worker still pays the first walk's caches and lazy imports).
 
-Usage: ``python bench/bench_pipeline.py [--quick] [--evaluate-only]`` (``--quick``: 2-minute walks, 4 walks;
+4. **Long walks in bounded memory** (issue 25 item 3, :func:`memory_section`, ``--memory-only``): peak RSS
+   (VmHWM of a fresh process) of ``envfuse run`` (default method) on a 10-minute and an 8-hour walk, both one
+   simulated 300 s walk looped (``tests/long_walk.py``), and the 8-hour run's wall time and × real time
+   beside ``oaconvolve``.
+
+   Measured 2026-12-02 (``--memory-only``, machine shared, load 4-7): 10 min 297 MiB (13 s, 46x real time);
+   8 h 334 MiB (465 s, 62x real time; oaconvolve best of 3 824x, ratio 0.075); 8 h / 10 min **1.126**
+   (target 1.10: missed by the cut's extra length, 730 s of walk per segment against the 600 s walk fused
+   whole). Before this change (main at 0285a88, the same CLI on the demo walk 201/w0 looped, VmHWM): 10.5 min
+   329 MiB, 40.5 min 450 MiB, 4.0 MiB per minute of walk, so about 2.2 GiB projected for 8 hours (not run);
+   this branch on the same two walks: 296 and 327 MiB. An earlier run of this section without the fixed glibc
+   mmap threshold (walks/segments.py) read 303 / 367 MiB (1.21).
+
+Usage: ``python bench/bench_pipeline.py [--quick] [--evaluate-only] [--memory-only]`` (``--quick``: 2-minute walks, 4 walks;
 ``--evaluate-only``: 2 training walks of 120 s, then section 3 only).
 """
 
