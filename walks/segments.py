@@ -27,7 +27,13 @@ default S) is fused exactly as before, from its own folder. Memory is then bound
 each segment (``envfuse run`` writes its rows to the output's temporary file and keeps nothing).
 
 The price is at the seams: the filter restarts :data:`WARMUP_S` before each segment instead of carrying its
-state, and the whole-record statistics above are per cut. A walk holding a stream that cannot be cut by time
+state, and the whole-record statistics above are per cut. Measured on one simulated 21-minute walk (site 201
+of the demo, seed 77, ``adaptive_blind+lag``, against truth): fused whole, mean 0.120 m, p95 0.646 m, max
+1.85 m; in 600 s segments with 120 s warm-up, mean 0.268 m, p95 0.652 m, max 18.2 m (the second segment's
+filter, started at 480 s, stays 0.3 m off the whole-walk one from 900 s on and spikes at 1,140 s); with 60 s
+of warm-up, 10 m off for its first minute. On the looped 3-minute test walk in 60 s segments the tracks agree
+to 1e-8 m (median). Carrying the filter's state across the seam (and the readers' statistics) is what would
+remove this; it is not done here. A walk holding a stream that cannot be cut by time
 (a drive's pseudoranges or odometry, whose dead reckoning is fitted to the whole drive's fixes) is not
 segmented (:func:`plan_segments` says why).
 """
