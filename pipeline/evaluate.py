@@ -26,6 +26,7 @@ from pipeline.parallel import TaskFailure, map_walks
 from walks.inputs import WINDOW_S
 from walks.methods import method_names
 from walks.score import METRIC_COLUMNS, metric_rows, score, track_errors
+from walks.segments import SEGMENT_S
 
 __all__ = ["evaluate_walk", "evaluate", "summary_table", "pooled_rows", "load_model", "method_order", "NEES_NOTE",
            "bp_guard_line", "REPORT_PLOT_PREFIXES", "model_loads"]
@@ -64,14 +65,21 @@ def model_loads() -> int:
     return _LOADS["n"]
 
 
-def evaluate_walk(walk, model_dir: str, methods: tuple, force: bool = False) -> dict:
+def evaluate_walk(walk, model_dir: str, methods: tuple, force: bool = False, segment_s: float = SEGMENT_S) -> dict:
     """Run ``methods`` on one walk; returns {'walk', 'rows', 'skipped', 'series', ...} (series: per method the
-    error over time, for plots; kept small: every event of a filter, every fix of a source)."""
+    error over time, for plots; kept small: every event of a filter, every fix of a source). A walk longer than
+    ``segment_s`` is fused segment by segment (:mod:`pipeline.evaluate_segments`)."""
     from pipeline.site_map import class_map_for
-    from walks.fuse import fuse_walk
+    from walks.fuse import fuse_walk, walk_name
+    from walks.segments import plan_segments
 
     from features.errors import DataError
 
+    if plan_segments(walk, segment_s)[0] > 1:   # a long walk: segment by segment, memory bounded (pipeline.evaluate_segments)
+        from pipeline.evaluate_segments import evaluate_segmented
+
+        return evaluate_segmented(walk, load_model(model_dir), methods, class_map_for, force, walk_name(walk),
+                                  segment_s)
     fused = fuse_walk(walk, load_model(model_dir), methods, class_map_for=class_map_for, force=force)
     data, tracks = fused.data, fused.tracks
     if data.truth is None:

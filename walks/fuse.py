@@ -9,8 +9,9 @@ that names no sites applies anywhere), builds the filter inputs
 
 from __future__ import annotations
 
+import math
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
 
@@ -19,8 +20,13 @@ from models.fusion.model import FusionModel
 from walks.inputs import HOP_S, WINDOW_S, WalkInputs, walk_inputs
 from walks.methods import LAG_S, run_methods
 from walks.reader import WalkData, read_walk
+from walks.segments import SEGMENT_S, walk_cuts
+from walks.track import TrackWriter, track_rows
 
-__all__ = ["FusedWalk", "fuse_walk", "check_site", "check_windows", "walk_name"]
+__all__ = ["FusedWalk", "fuse_walk", "check_site", "check_windows", "walk_name", "RunSummary", "fuse_to_file"]
+
+ROWS_PER_WRITE = 20_000
+"""Track rows turned into text and written at a time by :func:`fuse_to_file`."""
 
 
 @dataclass
@@ -94,3 +100,71 @@ def fuse_walk(walk_dir: str | os.PathLike, model: FusionModel, methods=None, *, 
             raise
         raise DataError(f"{walk_dir}: {exc}") from None
     return FusedWalk(name, data, inputs, tracks, skipped)
+
+
+@dataclass
+class RunSummary:
+    """What :func:`fuse_to_file` wrote: ``n`` epochs, ``placed`` with a position, ``ood`` out of the classifier's
+    distribution, the readers' ``notes`` (each once), the ``segments`` fused and those ``skipped`` (why)."""
+
+    n: int = 0
+    placed: int = 0
+    ood: int = 0
+    notes: list = field(default_factory=list)
+    segments: int = 0
+    skipped: list = field(default_factory=list)
+
+
+def fuse_to_file(walk_dir: str | os.PathLike, model: FusionModel, method: str, path, fmt: str, *,
+                 properties: dict | None = None, lag_s: float | None = LAG_S, class_map_for: Callable | None = None,
+                 force: bool = False, segment_s: float = SEGMENT_S) -> RunSummary:
+    """``envfuse run``: one method's track of a walk written to ``path`` (the output's temporary file) in
+    ``fmt`` (``csv`` / ``geojson``), segment by segment (:mod:`walks.segments`) and a block of rows at a time,
+    so that memory does not grow with the walk. ``method``: a registered name, ``+rts`` / ``+lag`` for its
+    smoothed tracks (``lag_s``). A walk of one segment gives the bytes its whole-walk track gives.
+
+    A segment where the method cannot run (no fix in it, ...) is left out with its reason in ``skipped``
+    (``n`` is 0 when it ran on none).
+    """
+    base = method.split("+")[0]
+    out = RunSummary()
+    writer = TrackWriter(path, fmt, properties)
+    try:
+        for seg in walk_cuts(walk_dir, segment_s, workdir=os.path.dirname(os.path.abspath(path))):
+            where = str(walk_dir) if seg.own_from_s == -math.inf and seg.own_to_s == math.inf else \
+                f"{walk_dir} (segment {seg.index}: walk times {max(seg.own_from_s, 0):g}-{seg.own_to_s:g} s)"
+            try:
+                fused = fuse_walk(seg.directory, model, (base,), smooth=method.endswith("+rts"),
+                                  lag_s=lag_s if method.endswith("+lag") else None, class_map_for=class_map_for,
+                                  force=force, truth=False)
+            except EnvfuseError as exc:
+                raise type(exc)(str(exc).replace(str(seg.directory), where)) from None
+            out.segments += 1
+            out.notes += [n for n in fused.data.notes if n not in out.notes]
+            if method not in fused.tracks:
+                out.skipped.append((where, fused.skipped.get(base, "no output")))
+                continue
+            note = fused.tracks[method].info.get("note")
+            if note and f"{method}: {note}" not in out.notes:
+                out.notes.append(f"{method}: {note}")
+            _write_owned(writer, fused, fused.tracks[method], seg, out)
+            del fused
+    finally:
+        writer.close()
+    return out
+
+
+def _write_owned(writer: TrackWriter, fused: FusedWalk, track, seg, out: RunSummary) -> None:
+    """Write the epochs of ``track`` that ``seg`` owns, ROWS_PER_WRITE at a time; count them into ``out``."""
+    import numpy as np
+
+    own = np.flatnonzero(seg.owns(track.t_s))
+    for lo in range(0, own.size, ROWS_PER_WRITE):
+        keep = np.zeros(len(track), bool)
+        keep[own[lo:lo + ROWS_PER_WRITE]] = True
+        part = track if own.size == len(track) <= ROWS_PER_WRITE else track.take(keep)
+        rows = track_rows(part, fused.inputs)
+        writer.write(rows)
+        out.n += len(rows)
+        out.placed += int(np.sum(np.isfinite(part.east_m) & np.isfinite(part.north_m)))
+        out.ood += sum(r["ood"] for r in rows)

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 from dataclasses import dataclass, field
 from datetime import timedelta
 
@@ -21,7 +22,7 @@ import numpy as np
 from features.geodesy import enu_to_geodetic
 from features.schema import ENV_CLASSES
 
-__all__ = ["Track", "TRACK_COLUMNS", "track_rows", "track_text"]
+__all__ = ["Track", "TRACK_COLUMNS", "track_rows", "track_text", "TrackWriter"]
 
 TRACK_COLUMNS = ("t_s", "time_utc", "east_m", "north_m", "lat_deg", "lon_deg", "h_ell_m", "var_east_m2",
                  "cov_en_m2", "var_north_m2", "env_class", "class_probability", "ood", "nis", "bp_correction_m")
@@ -42,6 +43,16 @@ class Track:
 
     def __len__(self) -> int:
         return int(self.t_s.shape[0])
+
+    def take(self, keep: np.ndarray) -> "Track":
+        """The epochs where ``keep`` (bool, (m,)) holds, with the per-epoch arrays of ``info`` (``nis``,
+        ``bp_delta_m``, ``class_proba``, ...) cut alike; ``info`` entries that are not per-epoch (the filter
+        ``run``, shares) are dropped."""
+        keep = np.asarray(keep, bool)
+        n = len(self)
+        info = {k: v[keep] for k, v in self.info.items() if isinstance(v, np.ndarray) and v.shape[:1] == (n,)}
+        return Track(self.method, self.t_s[keep], self.east_m[keep], self.north_m[keep],
+                     None if self.cov_m2 is None else self.cov_m2[keep], info)
 
 
 def track_rows(track: Track, inputs, up_m: float = 0.0) -> list[dict]:
@@ -100,8 +111,80 @@ def track_text(rows: list[dict], fmt: str, properties: dict | None = None) -> st
             "geometry": {"type": "LineString",
                          "coordinates": [[round(r["lon_deg"], 9), round(r["lat_deg"], 9)] for r in rows]},
             "properties": dict(properties or {}, start_utc=rows[0]["time_utc"] if rows else None)}
-    points = [{"type": "Feature",
-               "geometry": {"type": "Point", "coordinates": [round(r["lon_deg"], 9), round(r["lat_deg"], 9)]},
-               "properties": {k: (None if isinstance(r[k], float) and math.isnan(r[k]) else r[k])
-                              for k in TRACK_COLUMNS if k not in ("lat_deg", "lon_deg")}} for r in rows]
+    points = [_point(r) for r in rows]
     return json.dumps({"type": "FeatureCollection", "features": [line] + points}, allow_nan=False) + "\n"
+
+
+class TrackWriter:
+    """:func:`track_text` written a block of rows at a time to ``path`` (the caller's temporary file): the same
+    bytes as ``track_text`` of all the rows at once, holding none of them. GeoJSON's LineString, which comes
+    before the points, is gathered in a side file beside ``path`` and the two joined by :meth:`close`.
+
+    >>> import tempfile, pathlib
+    >>> p = pathlib.Path(tempfile.mkdtemp()) / "t.csv"
+    >>> w = TrackWriter(p, "csv"); w.close(); p.read_text() == track_text([], "csv")
+    True
+    """
+
+    def __init__(self, path, fmt: str, properties: dict | None = None):
+        if fmt not in ("csv", "geojson"):
+            raise ValueError(f"track format must be 'csv' or 'geojson', got {fmt!r}")
+        self.path, self.fmt, self.properties = path, fmt, dict(properties or {})
+        self.n = 0
+        self._first_utc = None
+        self._fh = open(path, "w", encoding="utf-8")
+        if fmt == "csv":
+            self._fh.write(",".join(TRACK_COLUMNS) + "\n")
+        else:
+            self._line = open(f"{path}.line", "w+", encoding="utf-8")
+
+    def write(self, rows: list[dict]) -> None:
+        """Append ``rows`` (:func:`track_rows`)."""
+        if not rows:
+            return
+        if self.fmt == "csv":
+            self._fh.write("".join(",".join(_fmt(r[k]) for k in TRACK_COLUMNS) + "\n" for r in rows))
+        else:
+            if self.n == 0:
+                self._first_utc = rows[0]["time_utc"]
+            sep = ", " if self.n else ""
+            self._line.write(sep + ", ".join(json.dumps([round(r["lon_deg"], 9), round(r["lat_deg"], 9)])
+                                             for r in rows))
+            self._fh.write(", " + ", ".join(json.dumps(_point(r), allow_nan=False) for r in rows))
+        self.n += len(rows)
+
+    def close(self) -> None:
+        """Finish the file (GeoJSON: the LineString, then the points)."""
+        self._fh.close()
+        if self.fmt == "csv":
+            return
+        line = {"type": "Feature", "geometry": {"type": "LineString", "coordinates": []},
+                "properties": dict(self.properties, start_utc=self._first_utc)}
+        head, tail = json.dumps(line, allow_nan=False).split('"coordinates": []', 1)
+        points = f"{self.path}.points"
+        os.replace(self.path, points)
+        try:
+            with open(self.path, "w", encoding="utf-8") as out:
+                out.write('{"type": "FeatureCollection", "features": [' + head + '"coordinates": [')
+                self._line.seek(0)
+                _copy(self._line, out)
+                out.write("]" + tail)
+                with open(points, encoding="utf-8") as fh:
+                    _copy(fh, out)
+                out.write("]}\n")
+        finally:
+            self._line.close()
+            os.unlink(f"{self.path}.line")
+            os.unlink(points)
+
+
+def _copy(src, dst, block: int = 1 << 20) -> None:
+    while chunk := src.read(block):
+        dst.write(chunk)
+
+
+def _point(r: dict) -> dict:
+    return {"type": "Feature", "geometry": {"type": "Point", "coordinates": [round(r["lon_deg"], 9),
+                                                                             round(r["lat_deg"], 9)]},
+            "properties": {k: (None if isinstance(r[k], float) and math.isnan(r[k]) else r[k])
+                           for k in TRACK_COLUMNS if k not in ("lat_deg", "lon_deg")}}

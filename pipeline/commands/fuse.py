@@ -35,6 +35,7 @@ The environment class is still computed and written with every position (``env_c
 
 def register_top(sub) -> None:
     from walks.methods import method_names
+    from walks.segments import SEGMENT_S, WARMUP_S
 
     p = sub.add_parser(
         "run", help="fuse one walk into a track (CSV or GeoJSON)",
@@ -53,6 +54,9 @@ def register_top(sub) -> None:
     p.add_argument("--format", choices=("csv", "geojson"), default=None,
                    help="output format (default: from the suffix, .geojson or .json → GeoJSON, else CSV)")
     p.add_argument("--force", action="store_true", help="fuse a walk of a site the model was not trained on")
+    p.add_argument("--segment-s", type=float, default=SEGMENT_S,
+                   help=f"a longer walk is fused in segments of this much walk time, each with {WARMUP_S:g} s of "
+                        f"warm-up, so memory does not grow with the walk (default {SEGMENT_S:g}; walks.segments)")
     p.set_defaults(func=_run)
 
     p = sub.add_parser(
@@ -81,45 +85,43 @@ def register_top(sub) -> None:
 
 
 def _run(args) -> int:
-    import numpy as np
-
+    from features.fileio import atomic_path
     from pipeline.evaluate import load_model
     from pipeline.outputs import check_outputs, model_inputs, walk_files
     from pipeline.site_map import class_map_for
-    from walks.fuse import fuse_walk
-    from walks.track import track_rows, track_text
+    from walks.fuse import fuse_to_file
 
     check_outputs(walk_files(args.walk), {"--out": args.out}, sealed=model_inputs(args.model, "--model"))
     if not (args.walk / "walk.toml").is_file():
         raise ConfigError(f"{args.walk}: no walk.toml (expected a walk directory)")
     from walks.methods import LAG_S
 
-    base = args.method.split("+")[0]
     lag = LAG_S if args.lag_s is None else args.lag_s
     if not (lag >= 0 and lag < 3600):
         raise ConfigError(f"--lag-s must lie in [0, 3600), got {args.lag_s}")
-    fused = fuse_walk(args.walk, load_model(args.model), (base,), smooth=args.method.endswith("+rts"),
-                      lag_s=lag if args.method.endswith("+lag") else None, class_map_for=class_map_for,
-                      force=args.force, truth=False)
-    for note in fused.data.notes:
-        print(f"envfuse: note: {args.walk}: {note}", file=sys.stderr)
-    if args.method not in fused.tracks:
-        raise ConfigError(f"{args.walk}: method {args.method} cannot run: {fused.skipped.get(base, 'no output')}")
-    track = fused.tracks[args.method]
-    if track.info.get("note"):
-        print(f"envfuse: note: {args.walk}: {args.method}: {track.info['note']}", file=sys.stderr)
-    rows = track_rows(track, fused.inputs)
+    if not (args.segment_s >= 60 and args.segment_s < 1e6):
+        raise ConfigError(f"--segment-s must lie in [60, 1e6) s, got {args.segment_s}")
     fmt = args.format or ("geojson" if args.out.suffix.lower() in (".geojson", ".json") else "csv")
-    text = track_text(rows, fmt, {"walk": str(args.walk), "method": args.method})
-    atomic_write_text(args.out, text)
-    n = len(rows)
-    placed = int(np.sum(np.isfinite(track.east_m) & np.isfinite(track.north_m)))
-    ood = sum(r["ood"] for r in rows)
+    with atomic_path(args.out) as tmp:
+        done = fuse_to_file(args.walk, load_model(args.model), args.method, tmp, fmt,
+                            properties={"walk": str(args.walk), "method": args.method}, lag_s=lag,
+                            class_map_for=class_map_for, force=args.force, segment_s=args.segment_s)
+        for note in done.notes:
+            print(f"envfuse: note: {args.walk}: {note}", file=sys.stderr)
+        if done.n == 0 and done.skipped:
+            why = "; ".join(dict.fromkeys(why for _, why in done.skipped))
+            raise ConfigError(f"{args.walk}: method {args.method} cannot run: {why}")
+    for where, why in done.skipped:
+        print(f"envfuse: note: {where}: {args.method} cannot run there ({why}); its epochs are left out",
+              file=sys.stderr)
+    n, placed, ood = done.n, done.placed, done.ood
     parts = [f"{n} epochs"]
     if placed < n:
         parts.append(f"{n - placed} without a position")
     parts.append(f"{100 * ood / max(n, 1):.0f} % out of the environment model's training distribution"
                  + (" (their class is a guess)" if ood else ""))
+    if done.segments > 1:
+        parts.append(f"fused in {done.segments} segments of {args.segment_s:g} s")
     print(f"{args.walk}: {args.method}, {', '.join(parts)} -> {args.out}")
     if n and ood / n > 0.5:
         print(f"envfuse: warning: {args.walk}: {100 * ood / n:.0f} % of the track's epochs fall outside what the "

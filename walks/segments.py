@@ -1,0 +1,380 @@
+"""A long walk in segments: each cut to the files a device rotating its logs would have written, fused alone.
+
+Several of the walk readers take statistics over the whole recording by design — the NMEA time base is the
+median of every dated epoch's offset (robust to a cold start's bogus dates), the GNSS epoch interval the
+median step, the IMU's units and the magnetometer's disturbance gate the record's medians, the step
+detector a zero-phase filter (``sosfiltfilt``) over the whole signal — and the filters keep every event's
+state for the BP network's second pass and the smoothers. So a whole-walk read grows with the walk (about
+12 MiB of peak memory per minute on a simulated walk, 2.7 GiB projected for 8 hours: ``bench/bench_pipeline.py
+--memory-only``). Rather than give up those statistics, a walk longer than one segment is fused segment by
+segment:
+
+- segment *k* owns the walk times [k·S, (k+1)·S) (``segment_s`` S, default :data:`SEGMENT_S`); the first one
+  owns everything before S, the last everything after its start;
+- its files are cut from the walk's by time, streaming (a line or an audio block at a time, never a whole
+  file): NMEA sentences by the epoch they belong to (placed on the walk's time base from ``start_utc`` and the
+  times of day, midnight crossings counted), IMU and truth CSV rows by ``t_s``, audio samples by
+  ``[audio] start_s`` (the cut's ``start_s`` moved to its first sample, so the TDMA frame phase is unchanged);
+  the cut reaches :data:`WARMUP_S` before the segment (the filter starts there and has converged by the
+  segment's start; the readers' windows, trackers and IIR filters too) and :data:`TAIL_S` after it (the
+  fixed-lag smoother's 3 s, a step's split at the next fix, the last feature window);
+- the cut is fused by the unchanged pipeline (:func:`walks.fuse.fuse_walk`) and only the segment's own epochs
+  are kept.
+
+A walk that fits in one segment (every walk this project had run until issue 25: 10 minutes at most, at the
+default S) is fused exactly as before, from its own folder. Memory is then bounded by one cut's pipeline
+(S + :data:`WARMUP_S` + :data:`TAIL_S` of walk) whatever the walk's length, plus what the caller keeps of
+each segment (``envfuse run`` writes its rows to the output's temporary file and keeps nothing).
+
+The price is at the seams: the filter restarts :data:`WARMUP_S` before each segment instead of carrying its
+state, and the whole-record statistics above are per cut. Measured on one simulated 21-minute walk (site 201
+of the demo, seed 77, ``adaptive_blind+lag``, against truth): fused whole, mean 0.120 m, p95 0.646 m, max
+1.85 m; in 600 s segments with 120 s warm-up, mean 0.268 m, p95 0.652 m, max 18.2 m (the second segment's
+filter, started at 480 s, stays 0.3 m off the whole-walk one from 900 s on and spikes at 1,140 s); with 60 s
+of warm-up, 10 m off for its first minute. On the looped 3-minute test walk in 60 s segments the tracks agree
+to 1e-8 m (median). Carrying the filter's state across the seam (and the readers' statistics) is what would
+remove this; it is not done here. A walk holding a stream that cannot be cut by time
+(a drive's pseudoranges or odometry, whose dead reckoning is fitted to the whole drive's fixes) is not
+segmented (:func:`plan_segments` says why).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import re
+import shutil
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Iterator
+
+import soundfile as sf
+
+from features.errors import DataError
+from features.fileio import read_toml
+from features.walk import WalkInfo, load_walk
+
+__all__ = ["SEGMENT_S", "WARMUP_S", "TAIL_S", "Segment", "plan_segments", "walk_cuts"]
+
+SEGMENT_S = 600.0
+"""Walk time each segment owns, s: 10 minutes, the longest walk fused whole before issue 25."""
+
+WARMUP_S = 120.0
+"""Walk time a cut reaches before its segment, s: the filter's and the readers' warm-up (a filter started on
+RTK fixes settles within seconds; two minutes also covers an outage's re-convergence and the acoustic
+receiver's clock search)."""
+
+TAIL_S = 10.0
+"""Walk time a cut reaches after its segment, s: ≥ the fixed-lag smoother's lag (3 s), a step split at the
+following fix (≤ 0.6 s) and the last 2 s feature window."""
+
+CUTTABLE = frozenset(("gnss", "imu", "audio"))
+"""Streams a cut can hold (cut by time without changing what they mean)."""
+
+_TIME_FIELD = {"GGA": 1, "RMC": 1, "GST": 1, "GNS": 1, "ZDA": 1, "GLL": 5, "GBS": 1}
+"""Index of the hhmmss.ss field of each NMEA sentence that carries a time (after the address field)."""
+
+
+@dataclass(frozen=True)
+class Segment:
+    """Segment ``index`` owns walk times [``own_from_s``, ``own_to_s``) (±inf at the walk's ends); ``directory``
+    is its cut (a temporary walk folder), or the walk's own folder when the walk is one segment."""
+
+    index: int
+    own_from_s: float
+    own_to_s: float
+    directory: Path
+
+    def owns(self, t_s):
+        """Which of ``t_s`` (array) belong to this segment."""
+        return (t_s >= self.own_from_s) & (t_s < self.own_to_s)
+
+
+def plan_segments(walk_dir: str | os.PathLike, segment_s: float = SEGMENT_S) -> tuple[int, str]:
+    """(number of segments, why not more): 1 when the walk fits in one segment, holds a stream that cannot be
+    cut, or states no ``start_utc`` (its NMEA times of day cannot be placed)."""
+    if not (math.isfinite(segment_s) and segment_s > 0):
+        raise ValueError(f"segment_s must be a positive number of seconds, got {segment_s}")
+    walk = load_walk(walk_dir)
+    other = sorted(s for s, t in walk.streams.items() if t and s not in CUTTABLE)
+    if other:
+        return 1, f"its {', '.join(other)} stream cannot be cut by time"
+    if walk.streams.get("gnss") and walk.start_utc is None:
+        return 1, "walk.toml states no start_utc"
+    span = _span_s(walk)
+    n = max(1, math.ceil((span - TAIL_S) / segment_s)) if math.isfinite(span) else 1
+    return n, "" if n > 1 else "it fits in one segment"
+
+
+def _span_s(walk: WalkInfo) -> float:
+    """The walk's length: ``duration_s`` when stated, else its audio's or IMU's end (NaN without either)."""
+    if walk.duration_s:
+        return float(walk.duration_s)
+    ends = []
+    audio = walk.path("audio")
+    if audio is not None and audio.is_file() and audio.stat().st_size:
+        info = sf.info(str(audio))
+        ends.append(float(walk.streams["audio"].get("start_s", 0.0)) + info.frames / info.samplerate)
+    imu = walk.path("imu")
+    if imu is not None and imu.is_file() and imu.stat().st_size:
+        t = _last_csv_time(imu)
+        if t is not None:
+            ends.append(t)
+    return max(ends) if ends else math.nan
+
+
+def _last_csv_time(path: Path) -> float | None:
+    """``t_s`` of a CSV's last parseable row, read from its tail."""
+    with open(path, "rb") as fh:
+        fh.seek(0, os.SEEK_END)
+        fh.seek(max(0, fh.tell() - 4096))
+        for line in reversed(fh.read().splitlines()):
+            t = _csv_time(line)
+            if t is not None:
+                return t
+    return None
+
+
+def _csv_time(line: bytes) -> float | None:
+    try:
+        return float(line.split(b",", 1)[0])
+    except ValueError:
+        return None
+
+
+def walk_cuts(walk_dir: str | os.PathLike, segment_s: float = SEGMENT_S, *,
+              workdir: str | os.PathLike | None = None) -> Iterator[Segment]:
+    """The walk's segments in time order (module docstring), each cut written just before it is yielded and
+    deleted when the next is asked for. A walk of one segment yields its own folder."""
+    n, _ = plan_segments(walk_dir, segment_s)
+    if n == 1:
+        yield Segment(0, -math.inf, math.inf, Path(walk_dir))
+        return
+    walk = load_walk(walk_dir)
+    _fix_mmap_threshold()
+    with tempfile.TemporaryDirectory(prefix=".envfuse-segments.", dir=workdir) as tmp:
+        cutters = _cutters(walk)
+        for k in range(n):
+            own_from = -math.inf if k == 0 else k * segment_s
+            own_to = math.inf if k == n - 1 else (k + 1) * segment_s
+            lo = -math.inf if k == 0 else own_from - WARMUP_S
+            hi = math.inf if k == n - 1 else own_to + TAIL_S
+            next_lo = (k + 1) * segment_s - WARMUP_S
+            d = Path(tmp) / f"segment{k:04d}"
+            d.mkdir()
+            toml = {}
+            for name, cut in cutters.items():
+                toml.update(cut.write(d, lo, hi, next_lo))
+            _write_walk_toml(walk, d, toml)
+            yield Segment(k, own_from, own_to, d)
+            shutil.rmtree(d)
+        for cut in cutters.values():
+            cut.close()
+
+
+MMAP_THRESHOLD_BYTES = 128 * 1024
+"""glibc's initial ``M_MMAP_THRESHOLD`` (mallopt(3)), fixed for a segmented walk (:func:`_fix_mmap_threshold`)."""
+
+
+def _fix_mmap_threshold() -> None:
+    """Keep glibc serving blocks of ≥ 128 KiB (numpy arrays) from their own mappings, returned to the system when
+    freed. By default glibc raises this threshold to the size of any such block freed (up to 32 MiB, mallopt(3),
+    "dynamic mmap threshold"), so after the first segment the next one's arrays come from the heap, which
+    fragments and does not shrink: measured on a 40-minute walk, the peak of the later segments 365 MiB against
+    327 MiB with the threshold fixed. Setting it disables the adjustment for this process. No-op off glibc."""
+    import ctypes
+    import ctypes.util
+
+    name = ctypes.util.find_library("c")
+    if name is None:
+        return
+    try:
+        libc = ctypes.CDLL(name)
+        libc.mallopt(-3, MMAP_THRESHOLD_BYTES)   # M_MMAP_THRESHOLD = -3 (malloc.h)
+    except (OSError, AttributeError):
+        return
+
+
+def _cutters(walk: WalkInfo) -> dict:
+    out = {}
+    if walk.path("gnss") is not None and walk.path("gnss").is_file():
+        out["gnss"] = _NmeaCutter(walk.path("gnss"), walk)
+    if walk.path("imu") is not None and walk.path("imu").is_file():
+        out["imu"] = _CsvCutter(walk.path("imu"), "imu")
+    if (walk.directory / "truth.csv").is_file():
+        out["truth"] = _CsvCutter(walk.directory / "truth.csv", None)
+    if walk.path("audio") is not None and walk.path("audio").is_file():
+        out["audio"] = _AudioCutter(walk.path("audio"), float(walk.streams["audio"].get("start_s", 0.0)))
+    return out
+
+
+def _write_walk_toml(walk: WalkInfo, d: Path, changes: dict) -> None:
+    """The cut's walk.toml: the walk's, with the site's absolute path and the cut's ``[audio] start_s``."""
+    text = (walk.directory / "walk.toml").read_text()
+    raw = read_toml(walk.directory / "walk.toml")
+    site = (walk.directory / raw["site"]).resolve() if "site" in raw else None
+    if site is not None:
+        text = re.sub(r"^site\s*=.*$", lambda _: f"site = {_toml_str(str(site))}", text, count=1, flags=re.M)
+    if "audio_start_s" in changes:
+        text = _set_in_table(text, "audio", "start_s", repr(changes["audio_start_s"]))
+    (d / "walk.toml").write_text(text)
+
+
+def _toml_str(s: str) -> str:
+    return '"' + s.replace("\\", "\\\\").replace('"', '\\"') + '"'
+
+
+def _set_in_table(text: str, table: str, key: str, value: str) -> str:
+    """``key = value`` in ``[table]`` of a TOML text (added after the table's header when absent)."""
+    m = re.search(rf"^\[{table}\]\s*$", text, flags=re.M)
+    if m is None:
+        raise DataError(f"walk.toml has no [{table}] table")
+    nxt = re.search(r"^\[", text[m.end():], flags=re.M)
+    end = m.end() + (nxt.start() if nxt else len(text) - m.end())
+    body = text[m.end():end]
+    line = re.compile(rf"^{key}\s*=.*$", flags=re.M)
+    body = line.sub(lambda _: f"{key} = {value}", body, count=1) if line.search(body) else \
+        f"\n{key} = {value}" + body
+    return text[:m.end()] + body + text[end:]
+
+
+class _LineCutter:
+    """A text stream cut by the walk time of each line, read once from start to end over all the cuts: each
+    cut starts at the first line at or after the previous cut's ``next_lo``."""
+
+    def __init__(self, path: Path):
+        self.path = path
+        self.fh = open(path, "rb")
+        self.head = b""
+        self.resume = 0
+        self.resume_t = -math.inf
+
+    def line_time(self, line: bytes, current: float) -> float:
+        raise NotImplementedError
+
+    def write(self, d: Path, lo: float, hi: float, next_lo: float) -> dict:
+        self.fh.seek(self.resume)
+        pos, t = self.resume, self.resume_t
+        marked = False
+        with open(d / self.path.name, "wb") as out:
+            out.write(self.head)
+            while True:
+                line = self.fh.readline()
+                if not line:
+                    break
+                t = self.line_time(line, t)
+                if not marked and t >= next_lo:
+                    self.resume, self.resume_t, marked = pos, self.resume_before(t), True
+                pos += len(line)
+                if t >= hi:
+                    break
+                if t >= lo:
+                    out.write(line)
+        if not marked:
+            self.resume, self.resume_t = pos, t
+        return {}
+
+    def resume_before(self, t: float) -> float:
+        return -math.inf
+
+    def close(self) -> None:
+        self.fh.close()
+
+
+class _CsvCutter(_LineCutter):
+    """A CSV whose first column is ``t_s`` on the walk's time base (IMU, truth): its header (and the comment
+    lines before it) in every cut, each row by its ``t_s``; a row without a readable ``t_s`` goes with the row
+    before it (the reader judges it)."""
+
+    def __init__(self, path: Path, stream: str | None):
+        super().__init__(path)
+        head = []
+        while True:
+            line = self.fh.readline()
+            if not line:
+                break
+            head.append(line)
+            if line.strip() and not line.lstrip().startswith(b"#"):
+                break
+        self.head = b"".join(head)
+        self.resume = len(self.head)
+
+    def line_time(self, line: bytes, current: float) -> float:
+        t = _csv_time(line)
+        return current if t is None or not math.isfinite(t) else t
+
+
+class _NmeaCutter(_LineCutter):
+    """NMEA sentences by the walk time of the epoch they belong to (the last sentence carrying a time):
+    the time of day against ``start_utc``'s, a fall of more than 12 h counted as a midnight crossing."""
+
+    def __init__(self, path: Path, walk: WalkInfo):
+        super().__init__(path)
+        s = walk.start_utc
+        self.start_tod = s.hour * 3600 + s.minute * 60 + s.second + s.microsecond * 1e-6
+        self.first_tod = None
+        self.day = 0
+        self.prev_tod = None
+
+    def line_time(self, line: bytes, current: float) -> float:
+        if not line.startswith(b"$") or len(line) < 7:
+            return current
+        fields = line.split(b"*", 1)[0].split(b",")
+        i = _TIME_FIELD.get(fields[0][3:].decode("ascii", "replace"))
+        if i is None or len(fields) <= i or len(fields[i]) < 6:
+            return current
+        try:
+            f = fields[i]
+            tod = int(f[0:2]) * 3600 + int(f[2:4]) * 60 + float(f[4:])
+        except ValueError:
+            return current
+        if self.prev_tod is not None and tod < self.prev_tod - 43200:
+            self.day += 1
+        self.prev_tod = tod
+        rel = (tod - self.start_tod + 43200) % 86400 - 43200 + 86400 * self.day
+        return rel
+
+    def write(self, d: Path, lo: float, hi: float, next_lo: float) -> dict:
+        # the day count is that of the resume position: replay it from the state saved there
+        state = getattr(self, "_resume_state", (0, None))
+        self.day, self.prev_tod = state
+        out = super().write(d, lo, hi, next_lo)
+        return out
+
+    def resume_before(self, t: float) -> float:
+        self._resume_state = (self.day, self.prev_tod)
+        return -math.inf
+
+
+class _AudioCutter:
+    """The WAV's samples of walk times [lo, hi), copied block by block (``soundfile``), its format kept (RF64
+    past 4 GiB); the cut's ``[audio] start_s`` is its first sample's walk time."""
+
+    BLOCK = 1 << 18
+
+    def __init__(self, path: Path, start_s: float):
+        self.path, self.start_s = path, start_s
+        info = sf.info(str(path))
+        self.fs, self.n, self.subtype, self.channels = info.samplerate, info.frames, info.subtype, info.channels
+
+    def write(self, d: Path, lo: float, hi: float, next_lo: float) -> dict:
+        a0 = 0 if lo == -math.inf else min(self.n, max(0, round((lo - self.start_s) * self.fs)))
+        a1 = self.n if hi == math.inf else min(self.n, max(a0, round((hi - self.start_s) * self.fs)))
+        dtype = {"PCM_16": "int16", "PCM_32": "int32"}.get(self.subtype, "float32")
+        size = (a1 - a0) * self.channels * 4
+        with sf.SoundFile(str(self.path)) as src, \
+                sf.SoundFile(str(d / self.path.name), "w", samplerate=self.fs, channels=self.channels,
+                             subtype=self.subtype, format="WAV" if size < 2 ** 31 else "RF64") as out:
+            src.seek(a0)
+            left = a1 - a0
+            while left > 0:
+                x = src.read(min(self.BLOCK, left), dtype=dtype, always_2d=True)
+                if not len(x):
+                    break
+                out.write(x)
+                left -= len(x)
+        return {"audio_start_s": self.start_s + a0 / self.fs}
+
+    def close(self) -> None:
+        pass
