@@ -446,12 +446,13 @@ def evaluate_section(walks, model_dir: Path, tmp: Path, walk_s: float) -> None:
 # -- long walks in bounded memory (issue 25 item 3) --------------------------------------------------------------
 
 
-def memory_section(tmp: Path, model_dir: Path, base_s: float = 300.0, long_h: float = 8.0) -> None:
+def memory_section(tmp: Path, model_dir: Path, base_s: float = 300.0, long_h: float = 8.0,
+                   segment_s: float | None = None) -> None:
     """Peak memory of ``envfuse run`` (default method) on a 10-minute and an ``long_h``-hour walk, each in a
     fresh process (its VmHWM), and the long run's wall time and × real time beside the ``oaconvolve``
     yardstick over the base walk's audio. Both walks are one simulated walk of ``base_s`` looped
     (``tests/long_walk.py``: timestamps continued, audio appended block by block), so they differ in length
-    only. Target: the two peaks within 10 %."""
+    only. Target: the two peaks within 10 %. ``segment_s``: run's ``--segment-s`` (None: its default)."""
     from simulation.walk import simulate_walk
     from tests.long_walk import loop_walk, peak_rss_mib
 
@@ -464,7 +465,9 @@ def memory_section(tmp: Path, model_dir: Path, base_s: float = 300.0, long_h: fl
         walk = loop_walk(base, tmp / f"mem_{loops}", loops)
         made = time.perf_counter() - t0
         t0 = time.perf_counter()
-        peaks[label] = peak_rss_mib(["run", str(walk), "--model", str(model_dir), "--out", str(tmp / f"{loops}.csv")])
+        seg = [] if segment_s is None else ["--segment-s", f"{segment_s:g}"]
+        peaks[label] = peak_rss_mib(["run", str(walk), "--model", str(model_dir), "--out", str(tmp / f"{loops}.csv")]
+                                    + seg)
         wall = time.perf_counter() - t0
         dur = loops * base_s
         print(f"envfuse run, {label} walk ({loops} x {base_s:.0f} s, written in {made:.0f} s): peak RSS "
@@ -489,6 +492,7 @@ def main() -> None:
     ap.add_argument("--memory-only", action="store_true",
                     help="2 training walks of 120 s, then only the peak memory of run on 10-minute and 8-hour walks")
     ap.add_argument("--long-h", type=float, default=8.0, help="length of --memory-only's long walk, hours")
+    ap.add_argument("--segment-s", type=float, default=None, help="run's --segment-s in section 5 (default: run's)")
     args = ap.parse_args()
     if args.simulator_only:
         with tempfile.TemporaryDirectory() as d:
@@ -497,7 +501,7 @@ def main() -> None:
     if args.memory_only:
         with tempfile.TemporaryDirectory() as d:
             walks, model_dir = build(Path(d), 120.0, 2)
-            memory_section(Path(d), model_dir, long_h=args.long_h)
+            memory_section(Path(d), model_dir, long_h=args.long_h, segment_s=args.segment_s)
         return
     walk_s, n_walks = (120.0, 4) if args.quick else (600.0, 8)
     if args.breakdown_only:
@@ -519,7 +523,7 @@ def main() -> None:
         evaluate_section(eval_walks, model_dir, tmp, args.eval_walk_s)
         if not (args.evaluate_only or args.breakdown_only):     # every figure of issue 25 in one run
             simulator_section(tmp, walk_s)
-            memory_section(tmp, model_dir, long_h=args.long_h)
+            memory_section(tmp, model_dir, long_h=args.long_h, segment_s=args.segment_s)
 
 
 def timing_sections(walks, model_dir: Path, walk_s: float) -> None:
