@@ -253,6 +253,21 @@ class EnvironmentClassifier:
                 out[rows] = p / p.sum(axis=1, keepdims=True)
         return out
 
+    def answers(self, X) -> np.ndarray:
+        """True per window where a fitted sub-model answers (False: :meth:`predict_proba` gives the prior)."""
+        return self._route(np.atleast_2d(np.asarray(X, float))) >= 0
+
+    def fit_prior(self) -> np.ndarray:
+        """The class prior the probabilities were fitted under, shape (n_classes,): uniform over the classes
+        seen with ``class_weight="balanced"`` (each class weighted by the inverse of its share, so every class
+        carries the same total weight), else the training frequencies ``prior_``. Dividing a posterior by it
+        gives a scaled likelihood (:func:`models.temporal.scaled_likelihood`). A class never seen keeps 1
+        (its probability is ~0 anyway)."""
+        if self.class_weight != "balanced":
+            return np.where(self.prior_ > 0, self.prior_, 1.0)
+        seen = self.prior_ > 0
+        return np.where(seen, 1.0 / max(int(seen.sum()), 1), 1.0)
+
     def predict(self, X) -> np.ndarray:
         """Most probable class code per window, shape (n_windows,)."""
         return np.argmax(self.predict_proba(X), axis=1)

@@ -72,7 +72,9 @@ def evaluate_walk(walk, model_dir: str, methods: tuple, force: bool = False) -> 
 
     from features.errors import DataError
 
-    fused = fuse_walk(walk, load_model(model_dir), methods, class_map_for=class_map_for, force=force)
+    # the whole walk is at hand: the class HMM's smoothed (forward-backward) classes, not run's causal ones
+    fused = fuse_walk(walk, load_model(model_dir), methods, class_map_for=class_map_for, force=force,
+                      class_smoothing="forward_backward")
     data, tracks = fused.data, fused.tracks
     if data.truth is None:
         raise DataError(f"{walk}: no truth.csv, so no error to measure (evaluate scores tracks against truth; "

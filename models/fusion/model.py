@@ -15,6 +15,9 @@ A :class:`FusionModel` holds, for one substation family:
 - the BP networks: the parameter network and its environment-blind twin (:class:`models.bp_params.ParamNet`,
   ``adaptive`` / ``adaptive_blind``) and the literal position corrector (:class:`models.bp.BPCorrector`,
   ``adaptive_correction``), each or None,
+- the class HMM (:class:`models.temporal.ClassHMM`: transitions and dwell times of the environment class
+  counted on the training walks), which smooths the window classes along a walk, or None (a model saved
+  before it existed: the windows are then taken one by one, as they were),
 - metadata: the training walks and their hashes, the site names, versions.
 
 Saved as one bundle (:mod:`models.bundle`, kind ``"fusion"``): JSON parameters
@@ -36,6 +39,7 @@ from models.environment import EnvironmentClassifier
 from models.fusion.ekf import EkfConfig
 from models.fusion.context import ContextNoise
 from models.fusion.noise import FixedNoise, PerClassNoise, QualityNoise
+from models.temporal import ClassHMM
 
 __all__ = ["FusionModel", "save_fusion_model", "load_fusion_model"]
 
@@ -57,6 +61,7 @@ class FusionModel:
     tuning: dict = field(default_factory=dict)
     bp_params: ParamNet | None = None
     bp_params_blind: ParamNet | None = None
+    temporal: ClassHMM | None = None
 
     def adaptive_policy(self):
         """The adaptive methods' noise policy: R per class and GGA quality when the model has it, else per class."""
@@ -90,6 +95,9 @@ def save_fusion_model(model: FusionModel, path, overwrite: bool = False):
         params[key] = None
         if net is not None:
             params[key], arrays[key] = net.get_state()
+    params["temporal"] = None
+    if model.temporal is not None:
+        params["temporal"], arrays["temporal"] = model.temporal.get_state()
     return save_bundle(path, "fusion", params, arrays, meta=model.meta, overwrite=overwrite)
 
 
@@ -131,6 +139,10 @@ def load_fusion_model(path) -> FusionModel:
         ctx = ContextNoise.from_state(p["context"]) if p.get("context") else None
         ctx_blind = ContextNoise.from_state(p["context_blind"]) if p.get("context_blind") else None
         ekf = EkfConfig(**p["ekf"])
+        # a bundle written before the class HMM has no "temporal" entry: it loads, without smoothing
+        temporal = ClassHMM.from_state(p["temporal"], a["temporal"]) if p.get("temporal") else None
+        if temporal is not None and temporal.n_classes != k:
+            raise ValueError(f"the class HMM has {temporal.n_classes} classes, the classifier {k}")
         tuning = {str(m): {str(k): float(v) for k, v in kn.items()} for m, kn in p.get("tuning", {}).items()}
         for m, kn in tuning.items():
             if not all(math.isfinite(v) and v > 0 for v in kn.values()):
@@ -138,4 +150,5 @@ def load_fusion_model(path) -> FusionModel:
     except (KeyError, TypeError, ValueError, AttributeError) as exc:
         raise BundleError(f"{path}: the fusion model is inconsistent ({exc})") from None
     return FusionModel(classifier=clf, fixed=fixed, quality=q, per_class_map=per_map, per_class=per,
-                       context=ctx, context_blind=ctx_blind, ekf=ekf, bp=bp, meta=b.meta, tuning=tuning, **nets)
+                       context=ctx, context_blind=ctx_blind, ekf=ekf, bp=bp, meta=b.meta, tuning=tuning, temporal=temporal,
+                       **nets)
