@@ -189,7 +189,10 @@ class EnvironmentClassifier:
         constant = scale < 1e-12
         scale = np.where(constant, 1.0, scale)       # a constant feature carries no information: z = 0
         z = (X - mean) / scale
-        lr = LogisticRegression(C=self.C, max_iter=2000, class_weight=self.class_weight)
+        # Newton–Cholesky: the same convex optimum as lbfgs (probabilities within 0.022, lbfgs's tolerance) in
+        # 12 Newton steps instead of 236 quasi-Newton ones: 1.0 s against 44 s on four sites' 3,600 windows
+        # with pairwise products (105 inputs), on 2 loaded cores; eight sites took lbfgs 262 s (issue 27).
+        lr = LogisticRegression(C=self.C, max_iter=2000, class_weight=self.class_weight, solver="newton-cholesky")
         lr.fit(_expand(z, self.degree), y)
         coef = np.zeros((self.n_classes_, lr.coef_.shape[1]))
         intercept = np.full(self.n_classes_, -1e3)   # classes never seen: probability ~0
