@@ -15,7 +15,10 @@ Seeds: seed ``s`` draws, per held-out site, one order of the other sites (``nump
 and takes its first ``n`` — so the 2 sites are among the 4, the 4 among the 8, and a curve is not a new draw
 at every point. Scores are pooled over the held-out sites of one seed (a site has 2–12 heavy cells: per-site
 recall would be mostly 0, 50 or 100 %), then mean ± SD over seeds. ``far`` = cells at least ``--margin`` of
-blocked-sky share from a class boundary (10 % and 40 %); ``all`` = every labelled cell.
+blocked-sky share from a class boundary (10 % and 40 %); ``all`` = every labelled cell. Beside them (issue 27
+item 5, measured only): the residual SD of the classifier's continuous blocked-sky estimate
+(:meth:`models.environment.EnvironmentClassifier.occlusion`) on the held-out windows inside the ±``--margin``
+band around the class thresholds and outside it, in points of share.
 
 Usage: ``python bench/env_learning_curve.py --data /work/studies/standard/data --out /tmp/lc --seeds 0 1 2
 --plot /tmp/lc/learning_curve.png`` (``--library`` reuses a library holding every site of the split).
@@ -82,13 +85,16 @@ def evaluate(ts, sites: list[str], seeds, n_sites, densities, base, margin: floa
                         continue
                     p = clf.predict_proba(test.X)
                     cp, ct, cs = cell_predictions(test, p.argmax(1), p)
-                    out.setdefault(key, []).append((ct, cp, far_from_boundary(cs, margin)))
+                    resid = clf.occlusion(test.X) - test.share           # per window, share units
+                    out.setdefault(key, []).append((ct, cp, far_from_boundary(cs, margin), resid,
+                                                    ~far_from_boundary(test.share, margin)))
     return out
 
 
 def summarise(out, seeds, n_sites, densities):
-    """{(density, n): (mean (8,), sd (8,), failed fits)}: recall open / light / heavy and macro-F1 on far cells,
-    then on all cells, pooled over held-out sites per seed, mean and SD over seeds."""
+    """{(density, n): (mean (10,), sd (10,), failed fits)}: recall open / light / heavy and macro-F1 on far cells,
+    then on all cells, then the continuous estimate's residual SD on windows inside and outside the boundary
+    band; pooled over held-out sites per seed, mean and SD over seeds."""
     table = {}
     for dens in densities:
         for n in n_sites:
@@ -99,9 +105,10 @@ def summarise(out, seeds, n_sites, densities):
                 parts = [p for p in parts if p is not None]
                 if not parts:
                     continue
-                ct, cp, far = (np.concatenate(c) for c in zip(*parts))
+                ct, cp, far, resid, band = (np.concatenate(c) for c in zip(*parts))
                 ok = ct >= 0
-                per_seed.append(class_scores(ct[ok & far], cp[ok & far]) + class_scores(ct[ok], cp[ok]))
+                per_seed.append(class_scores(ct[ok & far], cp[ok & far]) + class_scores(ct[ok], cp[ok])
+                                + [float(np.nanstd(resid[band])), float(np.nanstd(resid[~band]))])
             v = np.array(per_seed, float)
             table[(dens, n)] = (np.nanmean(v, axis=0), np.nanstd(v, axis=0), failed)
     return table
@@ -126,7 +133,7 @@ def plot(path: Path, table, n_sites, densities, target: float) -> None:
             ax.axhline(100 * target, color="grey", ls="--", lw=1, label=f"target {100 * target:.0f} %")
         ax.set_xscale("log", base=2)
         ax.set_xticks(n_sites, [str(n) for n in n_sites])
-        ax.set_ylim(0, 102)
+        ax.set_ylim(30, 101)
         ax.set_title(title)
         ax.grid(alpha=0.3)
     for ax in axes[1]:
@@ -188,13 +195,15 @@ def main() -> None:
     print(f"held-out far cells open / light / heavy: {n_far[0]} / {n_far[1]} / {n_far[2]} (margin "
           f"{100 * args.margin:.0f} points)")
     hdr = " ".join(f"{h:>11s}" for h in ("open", "light", "heavy", "macro-F1"))
-    print(f"{'cells':>6s} {'capture':>7s} {'sites':>5s}   far: {hdr}   all: {hdr}  failed")
+    print(f"{'cells':>6s} {'capture':>7s} {'sites':>5s}   far: {hdr}   all: {hdr}  occlusion SD band / out, "
+          "points  failed")
     for dens in densities:
         for n in args.n_sites:
             m, s, failed = table[(dens, n)]
             cells = " ".join(f"{100 * a:5.1f}±{100 * b:4.1f}" for a, b in zip(m[:4], s[:4]))
-            alls = " ".join(f"{100 * a:5.1f}±{100 * b:4.1f}" for a, b in zip(m[4:], s[4:]))
-            print(f"{dens[0]:5g}m {dens[1]:6g}s {n:5d}   far: {cells}   all: {alls}  {failed}")
+            alls = " ".join(f"{100 * a:5.1f}±{100 * b:4.1f}" for a, b in zip(m[4:8], s[4:8]))
+            occ = " / ".join(f"{100 * a:4.1f}±{100 * b:3.1f}" for a, b in zip(m[8:], s[8:]))
+            print(f"{dens[0]:5g}m {dens[1]:6g}s {n:5d}   far: {cells}   all: {alls}  {occ}  {failed}")
     full = densities[0]
     best = max((n for n in args.n_sites if n <= 2), default=None)
     if best is not None:

@@ -109,7 +109,7 @@ from sklearn.preprocessing import StandardScaler
 from features.acoustic.cir import FEATURE_NAMES
 from features.acoustic.uwb import LabelledUwbFeatures, read_labelled_uwb
 from models.dpc import DensityPeakClustering
-from models.embedding import name_clusters, severity_scores, tsne_2d
+from models.embedding import EnvironmentEmbedding, name_clusters, severity_scores, tsne_2d
 
 UWB_CLASSES: tuple[str, ...] = ("LOS", "NLOS", "NDP NLOS")
 """Labels of the dataset, least to most severe (no direct path is the most obstructed)."""
@@ -121,8 +121,10 @@ rest) falls, and the mean excess delay (the power centroid's lag behind the firs
 the first path weakens against later paths (Rappaport, "Wireless Communications", eq. 5.35–5.36).
 Fixed before any clustering was run; no label is read to choose it."""
 
-METHODS: tuple[str, ...] = ("dpc", "tsne_dpc", "kmeans")
-"""DPC on the standardised 9 features; t-SNE (2-D) then DPC (the paper's route); K-means, k = 3."""
+METHODS: tuple[str, ...] = ("dpc", "tsne_dpc", "kmeans", "env_model")
+"""DPC on the standardised 9 features; t-SNE (2-D) then DPC (the paper's route); K-means, k = 3; and the
+environment model's own embedding (:class:`models.embedding.EnvironmentEmbedding`, issue 27: rows in a canonical
+order, the gaussian density on small sets), its clusters named here by the UWB severity like the others."""
 
 GROUPINGS: tuple[str, ...] = ("anchor", "tag", "file")
 """Groups held out by the supervised forest: the anchor (the primary split, "a new site"), the tag
@@ -182,6 +184,9 @@ def cluster_scope(X: np.ndarray, y: np.ndarray, files: np.ndarray, seed: int, ts
     out["tsne_dpc"] = _score(X, y, files, dpc.labels_, embedding=emb, dpc=dpc)
     km = KMeans(n_clusters=3, n_init=10, random_state=seed).fit(Z)
     out["kmeans"] = _score(X, y, files, km.labels_.astype(np.int64))
+    env = EnvironmentEmbedding(perplexity=min(30.0, (len(X) - 1) / 3.0), random_state=seed,
+                               feature_names=FEATURE_NAMES).fit(X)
+    out["env_model"] = _score(X, y, files, np.asarray(env.labels_, np.int64))
     return out
 
 
