@@ -179,7 +179,7 @@ class ClassHMM:
             raise ValueError("likelihood must be finite and non-negative")
         return b
 
-    def forward(self, likelihood, steps=None) -> np.ndarray:
+    def forward(self, likelihood, steps=None, prev=None) -> np.ndarray:
         """Filtered class probabilities P(q_t | x_1..x_t), shape (n_windows, n_classes).
 
         Rabiner (1989) eqs. 19–20 with the scaling of eq. 91: α̂_1 ∝ π ⊙ b_1,
@@ -190,19 +190,32 @@ class ClassHMM:
         likelihood : ndarray of shape (n_windows, n_classes)
             Scaled likelihoods per window (:func:`scaled_likelihood`).
         steps : ndarray of shape (n_windows,), optional
-            Hops from window t − 1 to t (entry 0 unused); default 1.
+            Hops from window t − 1 to t (entry 0 unused unless ``prev`` is given); default 1.
+        prev : ndarray of shape (n_classes,), optional
+            The filtered probabilities of the window before the first (the last row of the previous call):
+            a walk read in pieces is filtered piece by piece with the same result as at once; ``steps[0]``
+            is then the hops from that window to the first.
         """
-        return self._forward(self._check(likelihood), steps)[0]
+        return self._forward(self._check(likelihood), steps, prev)[0]
 
-    def _forward(self, b: np.ndarray, steps) -> tuple[np.ndarray, np.ndarray]:
+    def _forward(self, b: np.ndarray, steps, prev=None) -> tuple[np.ndarray, np.ndarray]:
         n = len(b)
         steps, mats = self._powers(steps, n)
+        if prev is not None:
+            prev = np.asarray(prev, float)
+            if prev.shape != self.startprob_.shape or not np.isclose(prev.sum(), 1.0) or np.any(prev < 0):
+                raise ValueError(f"prev must be a probability vector of {len(self.startprob_)} classes")
+            if n and steps[0] < 1:
+                raise ValueError("steps between windows must be >= 1 hop")
+            if n:
+                mats.setdefault(int(steps[0]), np.linalg.matrix_power(self.transmat_, int(steps[0])))
         alpha = np.empty_like(b)
         c = np.empty(n)
-        prev = self.startprob_
+        first = prev is None
+        prev = self.startprob_ if first else prev
         for t in range(n):
             # α_t(j) = [Σ_i α̂_{t−1}(i) a_ij] b_j(x_t)   (eq. 20; π for t = 1, eq. 19)
-            a = (prev if t == 0 else prev @ mats[int(steps[t])]) * b[t]
+            a = (prev if (t == 0 and first) else prev @ mats[int(steps[t])]) * b[t]
             c[t] = a.sum()
             alpha[t] = a / c[t]                             # α̂_t = α_t / c_t (eq. 91)
             prev = alpha[t]

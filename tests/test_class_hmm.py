@@ -152,3 +152,18 @@ def test_fit_prior_is_flat_for_a_balanced_classifier_and_the_frequencies_otherwi
     Xn = X[:3].copy()
     Xn[1] = np.nan
     assert bal.answers(Xn).tolist() == [True, False, True]
+
+
+def test_forward_in_pieces_equals_forward_at_once():
+    """A long walk read in chunks: the last filtered row of one chunk carries the state into the next."""
+    rng = np.random.default_rng(5)
+    h = _hmm([[0.9, 0.08, 0.02], [0.05, 0.9, 0.05], [0.02, 0.08, 0.9]], [0.5, 0.3, 0.2])
+    b = rng.random((25, 3))
+    steps = np.ones(25, int)
+    steps[12] = 3
+    whole = h.forward(b, steps)
+    first = h.forward(b[:10], steps[:10])
+    rest = h.forward(b[10:], steps[10:], prev=first[-1])
+    assert np.allclose(np.vstack([first, rest]), whole, atol=1e-14)
+    with pytest.raises(ValueError, match="probability vector"):
+        h.forward(b[10:], steps[10:], prev=np.array([1.0, 1.0, 0.0]))
