@@ -43,7 +43,7 @@ from features.schema import GNSS_FEATURES  # noqa: E402
 BOUNDS = (0.10, 0.40)
 
 
-def _scores(y_true, y_pred):
+def class_scores(y_true, y_pred):
     from sklearn.metrics import f1_score
 
     rec = [float(np.mean(y_pred[y_true == k] == k)) if np.any(y_true == k) else np.nan for k in range(3)]
@@ -51,7 +51,7 @@ def _scores(y_true, y_pred):
     return rec + [f1]
 
 
-def _cells(ts, pred_w, proba_w=None):
+def cell_predictions(ts, pred_w, proba_w=None):
     """Cell-level prediction: combined probabilities when given, else the windows' majority."""
     from models.environment import combine_windows
 
@@ -73,7 +73,7 @@ def _cells(ts, pred_w, proba_w=None):
     return np.array(cell_pred), np.array(cell_true), np.array(cell_share)
 
 
-def _far(share, margin):
+def far_from_boundary(share, margin):
     return np.min(np.abs(share[:, None] - np.array(BOUNDS)[None, :]), axis=1) >= margin
 
 
@@ -154,13 +154,13 @@ def study(all_ts, train_names, test_names, args) -> None:
 
     def add(mode, ts, pred_w, proba_w=None):
         ok = ts.label >= 0
-        far_w = _far(ts.share, args.margin)
+        far_w = far_from_boundary(ts.share, args.margin)
         for subset, sel in (("all", ok), ("far", ok & far_w)):
-            rows.setdefault((mode, "window", subset), []).append(_scores(ts.label[sel], pred_w[sel]))
-        cp, ct, cs = _cells(ts, pred_w, proba_w)
+            rows.setdefault((mode, "window", subset), []).append(class_scores(ts.label[sel], pred_w[sel]))
+        cp, ct, cs = cell_predictions(ts, pred_w, proba_w)
         okc = ct >= 0
-        for subset, sel in (("all", okc), ("far", okc & _far(cs, args.margin))):
-            rows.setdefault((mode, "cell", subset), []).append(_scores(ct[sel], cp[sel]))
+        for subset, sel in (("all", okc), ("far", okc & far_from_boundary(cs, args.margin))):
+            rows.setdefault((mode, "cell", subset), []).append(class_scores(ct[sel], cp[sel]))
 
     sup = EnvironmentClassifier().fit(train.X[train.label >= 0], train.label[train.label >= 0],
                                       share=train.share[train.label >= 0])

@@ -9,6 +9,8 @@ Which module to open for what:
   severity naming of clusters as open / light / heavy (``severity_scores``, ``name_clusters``).
 * ``models.environment`` — the online classifier (``EnvironmentClassifier``): one logistic
   sub-model per available modality, OOD flag, occlusion estimate, cell combination.
+* ``models.temporal`` — the environment class along a walk (``ClassHMM``): transitions counted on
+  training walks, causal forward and smoothed forward–backward recursions over the window classes.
 * ``models.fusion`` — event-driven fusion: event streams (steps, GNSS, acoustic, standing), the one
   compiled Kalman filter core, the EKF with heading-offset, step-scale and GNSS Gauss–Markov bias
   states, noise policies (fixed, quality, per class, VB-AKF) and the error model in context

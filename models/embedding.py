@@ -35,7 +35,7 @@ from features.gnss.features import FEATURE_COLUMNS as _GNSS_FEATURES
 from models.dpc import DensityPeakClustering
 
 __all__ = ["ENV_FEATURES", "ENV_CLASSES", "SEVERITY_WEIGHTS", "EnvironmentEmbedding", "tsne_2d", "tsne_backend",
-           "severity_scores", "name_clusters"]
+           "severity_scores", "name_clusters", "canonical_order", "density_kernel", "GAUSSIAN_BELOW_NEIGHBOURS"]
 
 ENV_FEATURES: tuple[str, ...] = tuple(_GNSS_FEATURES) + tuple(_CIR_FEATURES)
 """The 14 window features in library order (docs/design.md §5): 5 GNSS, then 9 acoustic CIR."""
@@ -49,6 +49,36 @@ SEVERITY_WEIGHTS: dict[str, float] = {
 """Sign (and weight) of each standardised feature in the severity score: GNSS attenuation,
 invisible ratio and DOP growth rise under blocking (docs/design.md §5 items 1, 4, 5), so does the
 acoustic delay spread τ_rms (item 7), and the Rician K (first path over the rest, item 10) falls."""
+
+
+GAUSSIAN_BELOW_NEIGHBOURS = 50
+"""With ``kernel="auto"``, density-peak clustering uses the gaussian kernel when the neighbour rule expects fewer
+than this many points within d_c (percent·(n − 1)/100: below 2,500 windows at the default 2 %). A cutoff count
+of a few tens has many ties among the densest points, which decide the centres."""
+
+
+def density_kernel(kernel: str, n: int, percent: float) -> str:
+    """The DPC kernel ``kernel`` means for ``n`` points ("auto": gaussian below :data:`GAUSSIAN_BELOW_NEIGHBOURS`
+    expected neighbours, cutoff above).
+
+    >>> density_kernel("auto", 900, 2.0), density_kernel("auto", 20_000, 2.0), density_kernel("cutoff", 90, 2.0)
+    ('gaussian', 'cutoff', 'cutoff')
+    """
+    if kernel != "auto":
+        return kernel
+    return "gaussian" if percent * (n - 1) / 100.0 < GAUSSIAN_BELOW_NEIGHBOURS else "cutoff"
+
+
+def canonical_order(X: np.ndarray) -> np.ndarray:
+    """Row indices of ``X`` (n, d) in lexicographic order of the rows (first column first; equal rows keep
+    their relative order, and are interchangeable), shape (n,): the same rows in any order give the same
+    sorted array.
+
+    >>> canonical_order(np.array([[2.0, 1.0], [1.0, 5.0], [1.0, 3.0]])).tolist()
+    [2, 1, 0]
+    """
+    X = np.asarray(X, float)
+    return np.lexsort(X.T[::-1]).astype(np.int64)
 
 
 def _opentsne_available() -> bool:
@@ -151,7 +181,13 @@ class EnvironmentEmbedding(ClusterMixin, BaseEstimator):
     ----------
     tsne : {"auto", "opentsne", "sklearn"}, default "auto"
     perplexity : float, default 30
-    kernel, percent, n_clusters, max_clusters :
+    kernel : {"auto", "cutoff", "gaussian"}, default "auto"
+        Density of :class:`models.dpc.DensityPeakClustering`. ``"auto"``: the gaussian kernel when the
+        neighbour rule expects fewer than :data:`GAUSSIAN_BELOW_NEIGHBOURS` points within d_c (a small
+        library: the cutoff count ρ is then a small integer, 0, 1, 2 on a 25-cell survey, and the decision
+        graph is mostly ties; Rodriguez & Laio 2014 estimate ρ with a Gaussian kernel on their small sets),
+        the cutoff count otherwise.
+    percent, n_clusters, max_clusters :
         Passed to :class:`models.dpc.DensityPeakClustering` (run on the 2-D embedding).
     feature_names : sequence of str or None, default None
         Column names of X, for the severity naming; None means :data:`ENV_FEATURES`.
@@ -169,13 +205,21 @@ class EnvironmentEmbedding(ClusterMixin, BaseEstimator):
     severity_ : ndarray of shape (n_clusters_,)
     cluster_classes_ : list of str, class name of each cluster
     classes_ : ndarray of str, shape (n_samples,), class name of each sample
+    rho_, delta_ : ndarray of shape (n_samples,), the decision graph (DPC's ρ and δ) per sample
+    centers_ : ndarray of shape (n_clusters_,), sample indices of the cluster centres
     tsne_seed_ : int
+    kernel_ : str, the density kernel used ("cutoff" or "gaussian")
+
+    The result does not depend on the order of the rows: they are embedded and clustered in a canonical
+    (lexicographic) order and the results put back in the caller's order, so a shuffled library gives the
+    same classes row for row (t-SNE's neighbour search and optimisation, and DPC's tie-breaking by index,
+    all depend on the order in which they meet the points).
     """
 
     _parameter_constraints: dict = {
         "tsne": [StrOptions({"auto", "opentsne", "sklearn"})],
         "perplexity": [Interval(Real, 0, None, closed="neither")],
-        "kernel": [StrOptions({"cutoff", "gaussian"})],
+        "kernel": [StrOptions({"auto", "cutoff", "gaussian"})],
         "percent": [Interval(Real, 0, 100, closed="right")],
         "n_clusters": [Interval(Integral, 1, None, closed="left"), None],
         "max_clusters": [Interval(Integral, 1, None, closed="left")],
@@ -184,7 +228,7 @@ class EnvironmentEmbedding(ClusterMixin, BaseEstimator):
         "n_jobs": [Integral],
     }
 
-    def __init__(self, *, tsne="auto", perplexity=30.0, kernel="cutoff", percent=2.0, n_clusters=None,
+    def __init__(self, *, tsne="auto", perplexity=30.0, kernel="auto", percent=2.0, n_clusters=None,
                  max_clusters=10, feature_names=None, random_state=None, n_jobs=1):
         self.tsne = tsne
         self.perplexity = perplexity
@@ -208,13 +252,21 @@ class EnvironmentEmbedding(ClusterMixin, BaseEstimator):
             raise ValueError(f"perplexity={self.perplexity} must be below the number of samples {len(X)}")
         rng = check_random_state(self.random_state)
         self.tsne_seed_ = int(rng.randint(np.iinfo(np.int32).max))
-        self.scaler_ = StandardScaler().fit(X)
-        Z = self.scaler_.transform(X)
-        self.embedding_ = tsne_2d(Z, backend=self.tsne, perplexity=self.perplexity,
-                                  random_state=self.tsne_seed_, n_jobs=self.n_jobs)
-        self.dpc_ = DensityPeakClustering(kernel=self.kernel, percent=self.percent, n_clusters=self.n_clusters,
-                                          max_clusters=self.max_clusters).fit(self.embedding_)
-        self.labels_ = self.dpc_.labels_
+        order = canonical_order(X)
+        Xs = X[order]
+        self.scaler_ = StandardScaler().fit(Xs)
+        Z = self.scaler_.transform(Xs)
+        emb = tsne_2d(Z, backend=self.tsne, perplexity=self.perplexity, random_state=self.tsne_seed_,
+                      n_jobs=self.n_jobs)
+        self.kernel_ = density_kernel(self.kernel, len(X), self.percent)
+        self.dpc_ = DensityPeakClustering(kernel=self.kernel_, percent=self.percent, n_clusters=self.n_clusters,
+                                          max_clusters=self.max_clusters).fit(emb)
+        inv = np.empty_like(order)
+        inv[order] = np.arange(len(order))
+        self.embedding_ = emb[inv]
+        self.labels_ = self.dpc_.labels_[inv]         # dpc_'s own attributes stay in the canonical order
+        self.rho_, self.delta_ = self.dpc_.rho_[inv], self.dpc_.delta_[inv]
+        self.centers_ = order[np.asarray(self.dpc_.centers_, np.int64)]
         self.n_clusters_ = self.dpc_.n_clusters_
         self.severity_ = severity_scores(X, self.labels_, names)
         self.cluster_classes_ = name_clusters(self.severity_)

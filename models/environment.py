@@ -189,7 +189,10 @@ class EnvironmentClassifier:
         constant = scale < 1e-12
         scale = np.where(constant, 1.0, scale)       # a constant feature carries no information: z = 0
         z = (X - mean) / scale
-        lr = LogisticRegression(C=self.C, max_iter=2000, class_weight=self.class_weight)
+        # Newton–Cholesky: the same convex optimum as lbfgs (probabilities within 0.022, lbfgs's tolerance) in
+        # 12 Newton steps instead of 236 quasi-Newton ones: 1.0 s against 44 s on four sites' 3,600 windows
+        # with pairwise products (105 inputs), on 2 loaded cores; eight sites took lbfgs 262 s (issue 27).
+        lr = LogisticRegression(C=self.C, max_iter=2000, class_weight=self.class_weight, solver="newton-cholesky")
         lr.fit(_expand(z, self.degree), y)
         coef = np.zeros((self.n_classes_, lr.coef_.shape[1]))
         intercept = np.full(self.n_classes_, -1e3)   # classes never seen: probability ~0
@@ -252,6 +255,21 @@ class EnvironmentClassifier:
                 p = np.exp(s)
                 out[rows] = p / p.sum(axis=1, keepdims=True)
         return out
+
+    def answers(self, X) -> np.ndarray:
+        """True per window where a fitted sub-model answers (False: :meth:`predict_proba` gives the prior)."""
+        return self._route(np.atleast_2d(np.asarray(X, float))) >= 0
+
+    def fit_prior(self) -> np.ndarray:
+        """The class prior the probabilities were fitted under, shape (n_classes,): uniform over the classes
+        seen with ``class_weight="balanced"`` (each class weighted by the inverse of its share, so every class
+        carries the same total weight), else the training frequencies ``prior_``. Dividing a posterior by it
+        gives a scaled likelihood (:func:`models.temporal.scaled_likelihood`). A class never seen keeps 1
+        (its probability is ~0 anyway)."""
+        if self.class_weight != "balanced":
+            return np.where(self.prior_ > 0, self.prior_, 1.0)
+        seen = self.prior_ > 0
+        return np.where(seen, 1.0 / max(int(seen.sum()), 1), 1.0)
 
     def predict(self, X) -> np.ndarray:
         """Most probable class code per window, shape (n_windows,)."""

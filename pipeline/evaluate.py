@@ -80,7 +80,10 @@ def evaluate_walk(walk, model_dir: str, methods: tuple, force: bool = False, seg
 
         return evaluate_segmented(walk, load_model(model_dir), methods, class_map_for, force, walk_name(walk),
                                   segment_s)
-    fused = fuse_walk(walk, load_model(model_dir), methods, class_map_for=class_map_for, force=force)
+    # the filters get the causal (forward) classes run gives them, not the HMM's forward-backward ones: evaluate
+    # scores the tracks run would write (a zero-latency filter fed classes from its future would be flattered)
+    fused = fuse_walk(walk, load_model(model_dir), methods, class_map_for=class_map_for, force=force,
+                      class_smoothing="forward")
     data, tracks = fused.data, fused.tracks
     if data.truth is None:
         raise DataError(f"{walk}: no truth.csv, so no error to measure (evaluate scores tracks against truth; "

@@ -61,6 +61,8 @@ def test_every_method_runs_and_the_device_aware_filter_follows_rtk(trained):
     assert rows[("adaptive_nobp", "all")]["median_m"] < 3 * max(gnss["median_m"], 0.01)
     for m in ("kf", "kf_quality", "adaptive_nobp"):
         assert 0.0 <= rows[(m, "all")]["nees_in_bounds"] <= 1.0
+    # train_fusion counted the class changes of its walk (issue 27): run's classes are the HMM's causal ones
+    assert model.temporal is not None and model.temporal.counts_.sum() >= 30
     # The class evidence is causal: nothing before the first window's end but the prior.
     assert np.allclose(inputs.classes.at(np.array([inputs.window_t_s[0] - 0.01]))[0], model.classifier.prior_)
 

@@ -58,6 +58,8 @@ def test_runtime_dependencies_are_imported_by_the_packages():
     assert "ahrs" not in runtime and "imufusion" not in runtime
     # issue 19: filterpy is the tests' reference, imported by no product module
     assert "filterpy" not in runtime and "filterpy" not in _imports(PACKAGES)
+    # issue 27: hmmlearn is the class HMM tests' reference, imported by no product module
+    assert "hmmlearn" not in runtime and "hmmlearn" not in _imports(PACKAGES)
 
 
 def test_comparison_yardsticks_are_an_optional_extra():

@@ -82,7 +82,7 @@ def cluster_windows(X: np.ndarray, *, method: str = "dpc", random_state: int = 0
                     n_clusters: int | None = None, max_windows: int = 20_000) -> ClusterResult:
     """Cluster the complete windows of ``X`` (n, 14) on :func:`cluster_columns` and name the clusters by
     severity."""
-    from models.embedding import EnvironmentEmbedding, name_clusters, severity_scores, tsne_backend
+    from models.embedding import EnvironmentEmbedding, canonical_order, name_clusters, severity_scores, tsne_backend
 
     X = np.asarray(X, float)
     if X.ndim != 2 or X.shape[1] != len(FEATURES):
@@ -95,6 +95,8 @@ def cluster_windows(X: np.ndarray, *, method: str = "dpc", random_state: int = 0
                         f"modality throughout); clustering needs at least {_MIN_WINDOWS}")
     rows = np.flatnonzero(complete)
     if rows.size > max_windows:
+        # drawn from the rows in canonical order: the same library in another row order gives the same subsample
+        rows = rows[canonical_order(X[rows][:, cols])]
         rows = np.sort(np.random.default_rng(random_state).choice(rows, size=max_windows, replace=False))
     sub = np.zeros(len(X), bool)
     sub[rows] = True
@@ -108,15 +110,18 @@ def cluster_windows(X: np.ndarray, *, method: str = "dpc", random_state: int = 0
         _label_rest(X, labels, complete & ~sub)
         backend = {"opentsne": "openTSNE", "sklearn": "scikit-learn"}[tsne_backend(emb.tsne)]
         return ClusterResult(labels, int(emb.n_clusters_), f"t-SNE + DPC ({backend})", embedding,
-                             emb.dpc_.rho_, emb.dpc_.delta_, np.asarray(emb.dpc_.centers_), sub)
+                             emb.rho_, emb.delta_, emb.centers_, sub)
     if method == "kmeans":
         from sklearn.cluster import KMeans
         from sklearn.preprocessing import StandardScaler
 
-        Z = StandardScaler().fit_transform(Xc)
+        order = canonical_order(Xc)                  # k-means++ draws by row index: canonical order
+        Z = StandardScaler().fit_transform(Xc[order])
         km = KMeans(n_clusters=n_clusters or 3, n_init=10, random_state=random_state).fit(Z)
-        named = name_clusters(severity_scores(Xc, km.labels_, names))
-        labels[sub] = [ENV_CLASSES.index(named[k]) for k in km.labels_]
+        km_labels = np.empty(len(order), np.int64)
+        km_labels[order] = km.labels_
+        named = name_clusters(severity_scores(Xc, km_labels, names))
+        labels[sub] = [ENV_CLASSES.index(named[k]) for k in km_labels]
         _label_rest(X, labels, complete & ~sub)
         return ClusterResult(labels, int(km.n_clusters), "K-means (k = 3)", clustered=sub)
     raise DataError(f"clustering method must be 'dpc' or 'kmeans', got {method!r}")
@@ -128,8 +133,11 @@ def _label_rest(X: np.ndarray, labels: np.ndarray, rest: np.ndarray) -> None:
         return
     from models.environment import EnvironmentClassifier
 
-    done = labels >= 0
+    from models.embedding import canonical_order
+
+    done = np.flatnonzero(labels >= 0)
     if len(np.unique(labels[done])) < 2:
         labels[rest] = int(np.bincount(labels[done]).argmax())
         return
+    done = done[canonical_order(X[done])]            # fitted in canonical order: independent of the row order
     labels[rest] = EnvironmentClassifier().fit(X[done], labels[done]).predict(X[rest])

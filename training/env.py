@@ -227,9 +227,31 @@ def naming_warnings(names: np.ndarray, share: np.ndarray, label: np.ndarray, n_w
         if agree < constant:
             out.append(f"the cluster names agree with the cells' map labels on {100 * agree:.0f} % of windows, less "
                        f"than naming every window the most common class ({100 * constant:.0f} %)")
+        out.extend(_class_warnings(names[known], lab[known]))
     if n_windows < SMALL_LIBRARY_WINDOWS:
         out.append(f"only {n_windows} windows: clusters and their severity names are fragile on a library this "
                    f"small (fewer than {SMALL_LIBRARY_WINDOWS}); check them with --plots")
+    return out
+
+
+def _class_warnings(names: np.ndarray, label: np.ndarray, min_windows: int = 10) -> list[str]:
+    """Per class, where the labelled windows disagree with the naming: a class named for windows that the labels
+    put mostly in another class, and classes the labels hold (at least ``min_windows`` windows) that no cluster
+    was named — too few clusters, or two named alike."""
+    out = []
+    for c in range(len(ENV_CLASSES)):
+        mine = label[names == c]
+        if mine.size >= min_windows:
+            counts = np.bincount(mine, minlength=len(ENV_CLASSES))
+            top = int(np.argmax(counts))
+            if top != c:
+                out.append(f"the windows named {ENV_CLASSES[c]!r} are {100 * counts[top] / mine.size:.0f} % "
+                           f"{ENV_CLASSES[top]!r} by the cells' map labels ({mine.size} labelled windows)")
+    held = [c for c in range(len(ENV_CLASSES)) if np.sum(label == c) >= min_windows]
+    missing = [ENV_CLASSES[c] for c in held if not np.any(names == c)]
+    if missing:
+        out.append(f"the labelled cells hold {', '.join(ENV_CLASSES[c] for c in held)} windows but no cluster was "
+                   f"named {' or '.join(missing)}: the clustering found fewer classes than the labels show")
     return out
 
 

@@ -42,6 +42,7 @@ from models.fusion.calibration import CalibrationConfig
 from models.fusion.ekf import EkfConfig
 from models.fusion.model import FusionModel
 from models.uwb_pdr import UwbNoisePrior, uwb_nees
+from training.temporal import fit_class_hmm
 from walks.inputs import WalkInputs, walk_inputs
 from walks.methods import adaptive_run, bp_features, parameter_rows, parameter_run, tuned
 from walks.reader import WalkData, read_walk
@@ -205,23 +206,31 @@ def train_fusion(walk_dirs: list, classifier: EnvironmentClassifier, *, bp: bool
                  bp_config: BPConfig = BPConfig(), ekf: EkfConfig = DEFAULT_EKF, meta: dict | None = None,
                  progress: Callable[[str], None] | None = None, noise_estimator: str = "median",
                  tune: bool = True, tune_evals: int = 60, class_map_for: Callable | None = None,
-                 calibrate: bool = True) -> FusionModel:
+                 calibrate: bool = True, smooth_classes: bool = True) -> FusionModel:
     """Fit a :class:`~models.fusion.model.FusionModel` on ``walk_dirs`` (each with truth.csv): the noise
     policies, then (``tune``) every filter method's knobs by its own error on the same walks
     (:mod:`training.tuning`, at most ``tune_evals`` passes each), then the BP network on the tuned
     ``adaptive_nobp``, then (``calibrate``) the covariance calibrators of the filters' tracks
     (:mod:`training.calibration`). ``noise_estimator``: :func:`models.fusion.noise.chi2_2_mean` (the median form by
     default: a few wrong RTK-fixed epochs would otherwise set the fixed UERE). ``class_map_for``: site →
-    :class:`~models.fusion.events.ClassMap`, so the map baseline can be tuned too (None: it keeps its fit)."""
+    :class:`~models.fusion.events.ClassMap`, so the map baseline can be tuned too (None: it keeps its fit).
+    ``smooth_classes``: fit the class HMM on the walks' truth classes (:func:`training.temporal.fit_class_hmm`) and
+    train on its causally smoothed classes; False: the windows one by one, as before it."""
     say = progress or (lambda line: None)
-    walks = []
+    read = []
     for w in walk_dirs:
         data = read_walk(w)
         if data.truth is None:
             raise DataError(f"{w}: a training walk needs truth.csv")
-        inputs = walk_inputs(data, classifier)
-        walks.append((str(w), data, inputs))
+        read.append((str(w), data))
         say(f"read {os.path.basename(str(w))}")
+    # the class HMM first: the noise per classifier class and the tuning see the causally smoothed classes
+    # that `run` will hand the filters
+    temporal = fit_class_hmm([d for _, d in read], classifier.n_classes_) if smooth_classes else None
+    if temporal is not None:
+        say("class HMM: mean dwell " + ", ".join(f"{c} {v:.0f} s" for c, v in zip(classifier.class_names,
+                                                                               temporal.dwell_s_)))
+    walks = [(n, d, walk_inputs(d, classifier, temporal, "forward")) for n, d in read]
     rows = [training_rows(d, i, n) for n, d, i in walks]
 
     def bp_data(model: FusionModel):
@@ -240,6 +249,7 @@ def train_fusion(walk_dirs: list, classifier: EnvironmentClassifier, *, bp: bool
     meta["training_walks"] = [n for n, _, _ in walks]
     meta["sites"] = sorted({d.site.name for _, d, _ in walks})
     model = fit_fusion_model(rows, classifier, None, ekf=ekf, meta=meta, noise_estimator=noise_estimator)
+    model.temporal = temporal
     if tune:
         from training.tuning import KNOBS, TuningWalk, tune_method
 

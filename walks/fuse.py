@@ -73,13 +73,15 @@ def check_windows(env_meta: dict, where: str) -> None:
 
 def fuse_walk(walk_dir: str | os.PathLike, model: FusionModel, methods=None, *, smooth: bool = True,
               lag_s: float | None = LAG_S, class_map_for: Callable | None = None, force: bool = False,
-              truth: bool = True) -> FusedWalk:
+              truth: bool = True, class_smoothing: str = "forward") -> FusedWalk:
     """Read ``walk_dir`` and run ``methods`` (default: all) on it with ``model``.
 
     ``class_map_for``: callable site → :class:`~models.fusion.events.ClassMap` or None, the site map of the
     map baseline (``kf_map``), called only when that method is asked for. ``smooth``: the filters' RTS tracks
     too; ``lag_s``: their fixed-lag tracks with that lag (None: none). ``truth=False``: leave ``truth.csv``
-    unread (``run``). A domain error raised past the read names the walk.
+    unread (``run``). ``class_smoothing``: how the model's class HMM smooths the window classes
+    (:data:`walks.inputs.CLASS_SMOOTHING`; ``"forward"``, causal, as ``run`` needs). A domain error raised past the
+    read names the walk.
     """
     name = walk_name(walk_dir)
     data = read_walk(walk_dir, truth=truth)
@@ -89,7 +91,7 @@ def fuse_walk(walk_dir: str | os.PathLike, model: FusionModel, methods=None, *, 
         why = "; ".join(data.notes) if data.notes else "walk.toml names no gnss, audio or imu stream"
         raise DataError(f"{walk_dir}: no usable stream to fuse ({why})")
     try:
-        inputs = walk_inputs(data, model.classifier)
+        inputs = walk_inputs(data, model.classifier, model.temporal, class_smoothing)
         want = methods
         class_at = None
         if class_map_for is not None and (want is None or "kf_map" in want):

@@ -8,7 +8,10 @@ between steps — and the online environment classifier's evidence over time. A 
 (:class:`~walks.reader.OdometryStream`) gives the steps instead, each with its own
 noise from the odometry's variances (:func:`_odometry_steps`).
 The classifier answers on each 2 s feature window only once the window is
-complete (its end time), so a filter never uses a class from the future.
+complete (its end time). With the fusion model's class HMM the window
+probabilities are smoothed along the walk (:func:`smooth_classes`):
+``forward`` (``run``) is causal, so a filter still never uses a class from the
+future; ``forward_backward`` (``evaluate``) uses the whole walk.
 """
 
 from __future__ import annotations
@@ -17,12 +20,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from features.errors import ConfigError
 from features.schema import ACOUSTIC_FEATURES, FEATURES, GNSS_FEATURES
 from models.fusion import AcousticEvents, ClassTrack, GnssEvents, StandIntervals, StepEvents, merge_events
 from models.fusion.events import EventStream
 from walks.reader import OdometryStream, WalkData
 
-__all__ = ["WalkInputs", "walk_inputs", "window_features", "split_steps", "gnss_events", "STAND_GAP_S",
+__all__ = ["WalkInputs", "walk_inputs", "smooth_classes", "CLASS_SMOOTHING", "window_features", "split_steps",
+           "gnss_events", "STAND_GAP_S",
            "TYPICAL_STEP_S", "WINDOW_S", "HOP_S"]
 
 STAND_GAP_S = 1.5
@@ -174,9 +179,36 @@ def _odometry_steps(r, fix_t: np.ndarray) -> tuple[StepEvents, StandIntervals]:
     return steps, StandIntervals(gap_start[still], gap_end[still])
 
 
-def walk_inputs(data: WalkData, classifier) -> WalkInputs:
+CLASS_SMOOTHING = ("none", "forward", "forward_backward")
+"""How the window classes are smoothed along a walk by the fusion model's class HMM
+(:class:`models.temporal.ClassHMM`): not at all, causally (``run``), or with the whole walk (``evaluate``)."""
+
+
+def smooth_classes(proba: np.ndarray, t_end_s: np.ndarray, answered: np.ndarray, classifier, temporal,
+                   smoothing: str) -> np.ndarray:
+    """The window probabilities (n, k) after the class HMM ``temporal``: ``"forward"`` filtered (causal: a
+    window's output uses no later window), ``"forward_backward"`` smoothed over the walk, ``"none"`` (or no
+    HMM) unchanged. ``answered`` (n,): windows some sub-model classified; the others are no evidence
+    (uniform likelihood). Windows further apart than one hop are joined by the matrix power."""
+    if smoothing not in CLASS_SMOOTHING:
+        raise ConfigError(f"class smoothing must be one of {CLASS_SMOOTHING}, got {smoothing!r}")
+    if temporal is None or smoothing == "none" or len(proba) == 0:
+        return proba
+    from models.temporal import scaled_likelihood
+
+    b = scaled_likelihood(proba, classifier.fit_prior())
+    b[~np.asarray(answered, bool)] = 1.0
+    steps = np.ones(len(proba), int)
+    steps[1:] = np.maximum(np.rint(np.diff(t_end_s) / temporal.hop_s_).astype(int), 1)
+    run = temporal.forward if smoothing == "forward" else temporal.forward_backward
+    return run(b, steps)
+
+
+def walk_inputs(data: WalkData, classifier, temporal=None, smoothing: str = "forward") -> WalkInputs:
     """Events and class evidence of one walk (see the module docstring); ``classifier``: the online
-    :class:`~models.environment.EnvironmentClassifier`."""
+    :class:`~models.environment.EnvironmentClassifier`; ``temporal``: the class HMM
+    (:class:`models.temporal.ClassHMM`, None: each window on its own) applied as ``smoothing``
+    (:func:`smooth_classes`)."""
     steps = gnss = acoustic = stands = None
     fix_t = np.concatenate([data.gnss.positions.t_s if data.gnss is not None else np.zeros(0),
                             data.acoustic.t_s if data.acoustic is not None else np.zeros(0)])
@@ -197,6 +229,7 @@ def walk_inputs(data: WalkData, classifier) -> WalkInputs:
     if len(t_end):
         proba = classifier.predict_proba(X)
         ood = classifier.is_ood(X)
+        proba = smooth_classes(proba, t_end, classifier.answers(X), classifier, temporal, smoothing)
     else:
         proba, ood = np.tile(classifier.prior_, (1, 1)), np.ones(1, bool)
         t_end = np.array([events.t_s[0]])

@@ -19,6 +19,9 @@ A :class:`FusionModel` holds, for one substation family:
   ``calibration``): what multiplies a track's reported covariance so its NEES holds (empty: raw covariances),
 - the UWB NLOS prior per class and its blind twin (:class:`models.uwb_pdr.UwbNoisePrior`,
   ``uwb_aoa_pdr_env`` / ``uwb_aoa_pdr_blind``), each None when no training walk had UWB,
+- the class HMM (:class:`models.temporal.ClassHMM`: transitions and dwell times of the environment class
+  counted on the training walks), which smooths the window classes along a walk, or None (a model saved
+  before it existed: the windows are then taken one by one, as they were),
 - metadata: the training walks and their hashes, the site names, versions.
 
 Saved as one bundle (:mod:`models.bundle`, kind ``"fusion"``): JSON parameters
@@ -42,6 +45,7 @@ from models.fusion.ekf import EkfConfig
 from models.fusion.context import ContextNoise
 from models.fusion.noise import FixedNoise, PerClassNoise, QualityNoise
 from models.uwb_pdr import UwbNoisePrior
+from models.temporal import ClassHMM
 
 __all__ = ["FusionModel", "save_fusion_model", "load_fusion_model"]
 
@@ -67,6 +71,7 @@ class FusionModel:
     """{track name: CovarianceCalibrator}, e.g. ``adaptive_blind+lag``."""
     uwb_prior: UwbNoisePrior | None = None
     uwb_prior_blind: UwbNoisePrior | None = None
+    temporal: ClassHMM | None = None
 
     def adaptive_policy(self):
         """The adaptive methods' noise policy: R per class and GGA quality when the model has it, else per class."""
@@ -110,6 +115,9 @@ def save_fusion_model(model: FusionModel, path, overwrite: bool = False):
             cp = {k: (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in cp.items()}
             params["calibration"][name] = cp
             arrays["calibration"].update({f"{name}/{k}": v for k, v in ca.items()})
+    params["temporal"] = None
+    if model.temporal is not None:
+        params["temporal"], arrays["temporal"] = model.temporal.get_state()
     return save_bundle(path, "fusion", params, arrays, meta=model.meta, overwrite=overwrite)
 
 
@@ -152,6 +160,10 @@ def load_fusion_model(path) -> FusionModel:
         ctx_blind = ContextNoise.from_state(p["context_blind"]) if p.get("context_blind") else None
         ekf = EkfConfig(**p["ekf"])
         uwb = {k: UwbNoisePrior.from_state(p[k]) if p.get(k) else None for k in ("uwb_prior", "uwb_prior_blind")}
+        # a bundle written before the class HMM has no "temporal" entry: it loads, without smoothing
+        temporal = ClassHMM.from_state(p["temporal"], a["temporal"]) if p.get("temporal") else None
+        if temporal is not None and temporal.n_classes != k:
+            raise ValueError(f"the class HMM has {temporal.n_classes} classes, the classifier {k}")
         tuning = {str(m): {str(k): float(v) for k, v in kn.items()} for m, kn in p.get("tuning", {}).items()}
         calibration = {}
         for name, cp in (p.get("calibration") or {}).items():     # a bundle from before calibration has none
@@ -165,4 +177,4 @@ def load_fusion_model(path) -> FusionModel:
         raise BundleError(f"{path}: the fusion model is inconsistent ({exc})") from None
     return FusionModel(classifier=clf, fixed=fixed, quality=q, per_class_map=per_map, per_class=per,
                        context=ctx, context_blind=ctx_blind, ekf=ekf, bp=bp, meta=b.meta, tuning=tuning,
-                       calibration=calibration, **nets, **uwb)
+                       calibration=calibration, temporal=temporal, **nets, **uwb)
