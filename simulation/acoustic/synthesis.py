@@ -298,11 +298,11 @@ def band_response(gain: np.ndarray, loss_db: np.ndarray, delay_samples: np.ndarr
     """
     n_paths, n_bins = loss_db.shape
     h = np.zeros(n_bins, np.complex128)
+    inv_n = 1.0 / n_fft
     for p in range(n_paths):
-        w = -2.0 * np.pi * delay_samples[p] / n_fft        # phase per bin, rad
         for j in range(n_bins):
             a = gain[p] * 10.0 ** (-loss_db[p, j] / 20.0)
-            theta = w * (k0 + j)
+            theta = -2.0 * np.pi * (delay_samples[p] * (k0 + j)) * inv_n     # rad; numpy's rounding order
             h[j] += complex(a * math.cos(theta), a * math.sin(theta))
     return h
 
@@ -311,29 +311,43 @@ _HUM_WEIGHTS = 10.0 ** (-3.0 * np.arange(4) / 20.0)
 """Amplitude of the hum's harmonics 2·f_m, 4·f_m, 6·f_m, 8·f_m re. the first: −3 dB each (an assumed spectrum)."""
 
 
+_HUM_BLOCK = 64
+"""Samples per exact sin/cos of the hum's phase; between them the phase advances by rotation (see hum_samples)."""
+
+
 @njit(cache=True)
-def hum_samples(t_s: np.ndarray, omega_rad_s: float, phase_rad: np.ndarray, weight: np.ndarray) -> np.ndarray:
-    """Transformer hum of unit amplitude at times ``t_s`` (n,): magnetostriction vibrates the core at twice the
-    mains frequency, so its sound lies at even multiples of f_m (IEC 60076-10:2016, transformer sound levels);
-    ω = 2π·2f_m and the lines h·ω, h = 1 … H::
+def hum_samples(t_s: np.ndarray, dt_s: float, omega_rad_s: float, phase_rad: np.ndarray,
+                weight: np.ndarray) -> np.ndarray:
+    """Transformer hum of unit amplitude at the evenly spaced times ``t_s`` (n,; spacing ``dt_s``):
+    magnetostriction vibrates the core at twice the mains frequency, so its sound lies at even multiples of
+    f_m (IEC 60076-10:2016, transformer sound levels); ω = 2π·2f_m and the lines h·ω, h = 1 … H::
 
         x(t) = Σ_h w_h · sin(h·ω·t + φ_h) = Σ_h w_h · Im(z^h · e^{jφ_h}),  z = e^{jωt}
 
-    phase_rad, weight : (H,). z^h by repeated complex multiplication, one sin/cos pair per sample.
+    phase_rad, weight : (H,). z = e^{jy}, y = ω·t as rounded, is evaluated with cos and sin once every
+    ``_HUM_BLOCK`` samples (y_b) and in between as e^{jy_b}·e^{jθ_i}·(1 + jε): θ_i = ω·i·dt from a table,
+    ε = (y − y_b) − θ_i the few-ulp residual of the rounded y (e^{jε} = 1 + jε to ε²/2 < 1e-19), so z agrees
+    with cos y + j·sin y to a few ulp (1e-15) at 16× fewer sin/cos. z^h by repeated complex multiplication.
     Returns (n,).
     """
     n = t_s.shape[0]
     out = np.empty(n)
     rot_re, rot_im = np.cos(phase_rad), np.sin(phase_rad)
-    for i in range(n):
-        y = omega_rad_s * t_s[i]
-        zr, zi = math.cos(y), math.sin(y)
-        hr, hi = 1.0, 0.0
-        acc = 0.0
-        for h in range(weight.shape[0]):
-            hr, hi = hr * zr - hi * zi, hr * zi + hi * zr
-            acc += weight[h] * (hr * rot_im[h] + hi * rot_re[h])
-        out[i] = acc
+    theta = omega_rad_s * dt_s * np.arange(_HUM_BLOCK)
+    step_re, step_im = np.cos(theta), np.sin(theta)
+    for b in range(0, n, _HUM_BLOCK):
+        y_b = omega_rad_s * t_s[b]
+        ar, ai = math.cos(y_b), math.sin(y_b)
+        for i in range(b, min(b + _HUM_BLOCK, n)):
+            eps = (omega_rad_s * t_s[i] - y_b) - theta[i - b]
+            sr, si = step_re[i - b] - eps * step_im[i - b], step_im[i - b] + eps * step_re[i - b]
+            zr, zi = ar * sr - ai * si, ar * si + ai * sr
+            hr, hi = 1.0, 0.0
+            acc = 0.0
+            for h in range(weight.shape[0]):
+                hr, hi = hr * zr - hi * zi, hr * zi + hi * zr
+                acc += weight[h] * (hr * rot_im[h] + hi * rot_re[h])
+            out[i] = acc
     return out
 
 
@@ -430,7 +444,8 @@ class AmbientNoise:
             d = np.maximum(_distance_to_boxes(pos, self.tanks), 1.0)
             amp = np.interp(t_true, grid, _db_to_digital_rms(cfg.hum_db_spl_1m, cfg) * math.sqrt(2.0) / d)
             # 2·mains and harmonics (magnetostriction), −3 dB each
-            out[:n] += amp * hum_samples(t_true, 2.0 * np.pi * 2.0 * cfg.mains_hz, self.hum_phase, _HUM_WEIGHTS)
+            out[:n] += amp * hum_samples(t_true, 1.0 / self.fs_true, 2.0 * np.pi * 2.0 * cfg.mains_hz,
+                                           self.hum_phase, _HUM_WEIGHTS)
         if cfg.corona_rate_hz > 0:
             t0 = self.true_start + b0 / self.fs_true
             up = float(np.interp(grid[1], self.traj.t_s, self.traj.up_m))
