@@ -285,6 +285,25 @@ class ChirpRenderer:
         return out
 
 
+_ROTATION_BLOCK = 16
+"""Bins (band_response) or samples (hum_samples) per exact sin/cos of a phase; rotation in between."""
+
+
+@njit(cache=True)
+def _rotation_table(step_rad: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """θ_i = step·i, cos θ_i, sin θ_i for i < _ROTATION_BLOCK (the in-block rotations of a linear phase)."""
+    theta = step_rad * np.arange(_ROTATION_BLOCK)
+    return theta, np.cos(theta), np.sin(theta)
+
+
+@njit(cache=True)
+def _rotated(ar: float, ai: float, theta: np.ndarray, c: np.ndarray, s: np.ndarray, i: int,
+             eps: float) -> tuple[float, float]:
+    """(a_r + j·a_i)·e^{j(θ_i + ε)} with e^{jε} = 1 + jε (ε a few ulp of a rounded phase: error ε²/2 < 1e-19)."""
+    sr, si = c[i] - eps * s[i], s[i] + eps * c[i]
+    return ar * sr - ai * si, ar * si + ai * sr
+
+
 @njit(cache=True)
 def band_response(gain: np.ndarray, loss_db: np.ndarray, delay_samples: np.ndarray, k0: int,
                   n_fft: int) -> np.ndarray:
@@ -293,26 +312,30 @@ def band_response(gain: np.ndarray, loss_db: np.ndarray, delay_samples: np.ndarr
 
         H[k] = Σ_p g_p · 10^(−L_p[k]/20) · exp(−j·2π·k·τ_p / n_fft)
 
-    gain : (p,); loss_db : (p, K); delay_samples : (p,). Returns (K,) complex. One pass over paths and bins
-    (compiled: numpy's form built three (p, K) temporaries per emission); the paths are summed in their order.
+    gain : (p,); loss_db : (p, K); delay_samples : (p,). Returns (K,) complex, the paths summed in their order.
+    Compiled, one pass (numpy's form built three (p, K) temporaries per emission). The phase θ = −2π·k·τ/n as
+    numpy rounds it: its cos and sin every ``_ROTATION_BLOCK`` bins, a rotation by the table's −2π·i·τ/n
+    corrected by the rounding residual in between (:func:`_rotated`); agrees with exp(jθ) to a few ulp.
     """
     n_paths, n_bins = loss_db.shape
     h = np.zeros(n_bins, np.complex128)
     inv_n = 1.0 / n_fft
+    ln10_20 = math.log(10.0) / 20.0
     for p in range(n_paths):
-        for j in range(n_bins):
-            a = gain[p] * 10.0 ** (-loss_db[p, j] / 20.0)
-            theta = -2.0 * np.pi * (delay_samples[p] * (k0 + j)) * inv_n     # rad; numpy's rounding order
-            h[j] += complex(a * math.cos(theta), a * math.sin(theta))
+        theta, c, s = _rotation_table(-2.0 * np.pi * delay_samples[p] * inv_n)
+        for b in range(0, n_bins, _ROTATION_BLOCK):
+            phi_b = -2.0 * np.pi * (delay_samples[p] * (k0 + b)) * inv_n
+            ar, ai = math.cos(phi_b), math.sin(phi_b)
+            for j in range(b, min(b + _ROTATION_BLOCK, n_bins)):
+                phi = -2.0 * np.pi * (delay_samples[p] * (k0 + j)) * inv_n
+                zr, zi = _rotated(ar, ai, theta, c, s, j - b, (phi - phi_b) - theta[j - b])
+                a = gain[p] * math.exp(-loss_db[p, j] * ln10_20)
+                h[j] += complex(a * zr, a * zi)
     return h
 
 
 _HUM_WEIGHTS = 10.0 ** (-3.0 * np.arange(4) / 20.0)
 """Amplitude of the hum's harmonics 2·f_m, 4·f_m, 6·f_m, 8·f_m re. the first: −3 dB each (an assumed spectrum)."""
-
-
-_HUM_BLOCK = 64
-"""Samples per exact sin/cos of the hum's phase; between them the phase advances by rotation (see hum_samples)."""
 
 
 @njit(cache=True)
@@ -324,24 +347,20 @@ def hum_samples(t_s: np.ndarray, dt_s: float, omega_rad_s: float, phase_rad: np.
 
         x(t) = Σ_h w_h · sin(h·ω·t + φ_h) = Σ_h w_h · Im(z^h · e^{jφ_h}),  z = e^{jωt}
 
-    phase_rad, weight : (H,). z = e^{jy}, y = ω·t as rounded, is evaluated with cos and sin once every
-    ``_HUM_BLOCK`` samples (y_b) and in between as e^{jy_b}·e^{jθ_i}·(1 + jε): θ_i = ω·i·dt from a table,
-    ε = (y − y_b) − θ_i the few-ulp residual of the rounded y (e^{jε} = 1 + jε to ε²/2 < 1e-19), so z agrees
-    with cos y + j·sin y to a few ulp (1e-15) at 16× fewer sin/cos. z^h by repeated complex multiplication.
-    Returns (n,).
+    phase_rad, weight : (H,). z = e^{jy}, y = ω·t as rounded: cos y and sin y every ``_ROTATION_BLOCK``
+    samples (y_b), in between e^{jy_b} rotated by the table's ω·i·dt and the rounding residual ε = (y − y_b) −
+    ω·i·dt (:func:`_rotated`), so z agrees with cos y + j·sin y to a few ulp (1e-15). z^h by repeated complex
+    multiplication. Returns (n,).
     """
     n = t_s.shape[0]
     out = np.empty(n)
     rot_re, rot_im = np.cos(phase_rad), np.sin(phase_rad)
-    theta = omega_rad_s * dt_s * np.arange(_HUM_BLOCK)
-    step_re, step_im = np.cos(theta), np.sin(theta)
-    for b in range(0, n, _HUM_BLOCK):
+    theta, c, s = _rotation_table(omega_rad_s * dt_s)
+    for b in range(0, n, _ROTATION_BLOCK):
         y_b = omega_rad_s * t_s[b]
         ar, ai = math.cos(y_b), math.sin(y_b)
-        for i in range(b, min(b + _HUM_BLOCK, n)):
-            eps = (omega_rad_s * t_s[i] - y_b) - theta[i - b]
-            sr, si = step_re[i - b] - eps * step_im[i - b], step_im[i - b] + eps * step_re[i - b]
-            zr, zi = ar * sr - ai * si, ar * si + ai * sr
+        for i in range(b, min(b + _ROTATION_BLOCK, n)):
+            zr, zi = _rotated(ar, ai, theta, c, s, i - b, (omega_rad_s * t_s[i] - y_b) - theta[i - b])
             hr, hi = 1.0, 0.0
             acc = 0.0
             for h in range(weight.shape[0]):
