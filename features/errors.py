@@ -1,6 +1,6 @@
 """Typed exceptions. The CLI maps every :class:`EnvfuseError` to one line on stderr."""
 
-__all__ = ["EnvfuseError", "ConfigError", "NmeaError", "AudioError", "ImuError", "DataError", "PseudorangeError"]
+__all__ = ["EnvfuseError", "ConfigError", "NmeaError", "AudioError", "ImuError", "DataError", "PseudorangeError", "UwbError"]
 
 
 class EnvfuseError(Exception):
@@ -30,3 +30,7 @@ class ImuError(DataError):
 class PseudorangeError(DataError):
     """A pseudorange / odometry / reference text file has a malformed line (named by file and line) or
     holds no usable record."""
+
+
+class UwbError(DataError):
+    """A UWB ranging log (``uwb.csv``) lacks its columns, has a malformed line or holds no usable row."""

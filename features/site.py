@@ -11,6 +11,10 @@ Format (docs/design.md §4)::
     [[beacons]]   id, east_m, north_m, up_m, slot  (optional f0_hz, f1_hz, chirp_duration_s)
     [[layout]]    kind, material, porous, east_min_m, east_max_m, north_min_m, north_max_m, height_m
     [[emi_zones]] east_m, north_m, radius_m, loss_db
+    [[uwb_anchors]] id, east_m, north_m, up_m, boresight_deg
+
+``uwb_anchors`` are UWB anchors as an installer surveyed them (positions to survey precision, the
+boresight of each anchor's PDoA antenna pair, degrees clockwise from north); a site without UWB omits them.
 
 ``layout`` and ``emi_zones`` describe a simulated site; only the simulator and
 the map-label baseline use them. A real site's ``site.toml`` omits them.
@@ -28,7 +32,7 @@ from features.errors import ConfigError
 from features.fileio import read_toml, write_toml
 
 __all__ = [
-    "Origin", "Atmosphere", "Grid", "AcousticConfig", "Beacon", "Box", "EmiZone", "Site",
+    "Origin", "Atmosphere", "Grid", "AcousticConfig", "Beacon", "Box", "EmiZone", "UwbAnchor", "Site",
     "load_site", "save_site", "ENV_CLASSES", "BOX_KINDS",
 ]
 
@@ -42,7 +46,7 @@ SLOT_REUSE_MIN_M = 145.0
 detection range, so no receiver hears two slot-mates (README, "Beacon protocol")."""
 
 _TOML_TABLE = {"Origin": "origin", "Atmosphere": "atmosphere", "Grid": "grid", "AcousticConfig": "acoustic",
-               "Beacon": "", "Box": "", "EmiZone": "", "Site": ""}
+               "Beacon": "", "Box": "", "EmiZone": "", "UwbAnchor": "", "Site": ""}
 """The site.toml table each dataclass is read from, so messages name the key the user wrote (entries of
 [[beacons]], [[layout]], [[emi_zones]] are named by the loader: "[[beacons]] #2 (id 7): east_m ...")."""
 
@@ -203,6 +207,29 @@ class EmiZone:
 
 
 @dataclass(frozen=True)
+class UwbAnchor:
+    """A UWB anchor as surveyed (ENU metres) with the boresight of its PDoA antenna pair.
+
+    ``boresight_deg`` is the azimuth of the array's normal, degrees clockwise from north (the navigation
+    convention of headings); the anchor measures a tag's angle of arrival relative to it
+    (:mod:`features.uwb.reader` states the sign).
+    """
+
+    id: int
+    east_m: float
+    north_m: float
+    up_m: float
+    boresight_deg: float = 0.0
+
+    def __post_init__(self):
+        _require_finite(self, "east_m", "north_m", "up_m", "boresight_deg")
+        if isinstance(self.id, bool) or not isinstance(self.id, int) or self.id < 0:
+            raise ConfigError(f"uwb anchor id must be a non-negative integer, got {self.id!r}")
+        if not -360.0 <= self.boresight_deg <= 360.0:
+            raise ConfigError(f"uwb anchor {self.id}: boresight_deg must lie in [-360, 360], got {self.boresight_deg}")
+
+
+@dataclass(frozen=True)
 class Site:
     """A substation: origin, grid, acoustic beacons and (simulated sites) layout."""
 
@@ -216,6 +243,7 @@ class Site:
     layout: tuple[Box, ...] = ()
     emi_zones: tuple[EmiZone, ...] = ()
     seed: int | None = None
+    uwb_anchors: tuple[UwbAnchor, ...] = ()
 
     def __post_init__(self):
         _require_finite(self, "device_height_m")
@@ -230,6 +258,9 @@ class Site:
             if b.slot >= self.acoustic.n_slots:
                 raise ConfigError(f"beacon {b.id} slot {b.slot} >= acoustic.n_slots {self.acoustic.n_slots}")
         _check_beacon_protocol(self.beacons, self.acoustic)
+        uwb_ids = [a.id for a in self.uwb_anchors]
+        if len(set(uwb_ids)) != len(uwb_ids):
+            raise ConfigError("uwb anchor ids must be unique")
 
     @functools.cached_property
     def beacon_by_id(self) -> dict:
@@ -252,6 +283,8 @@ class Site:
             out["layout"] = [asdict(b) for b in self.layout]
         if self.emi_zones:
             out["emi_zones"] = [asdict(z) for z in self.emi_zones]
+        if self.uwb_anchors:
+            out["uwb_anchors"] = [asdict(a) for a in self.uwb_anchors]
         return out
 
 
@@ -313,7 +346,8 @@ def site_from_dict(data: dict, where: str = "site.toml") -> Site:
         raise ConfigError(f"{where}: missing [origin] table (lat_deg, lon_deg, alt_m)")
     if "name" not in data:
         raise ConfigError(f"{where}: missing 'name'")
-    known = {"name", "device_height_m", "seed", "origin", "atmosphere", "grid", "acoustic", "beacons", "layout", "emi_zones"}
+    known = {"name", "device_height_m", "seed", "origin", "atmosphere", "grid", "acoustic", "beacons", "layout", "emi_zones",
+             "uwb_anchors"}
     unknown = set(data) - known
     if unknown:
         raise ConfigError(f"{where}: unknown key(s) {sorted(unknown)}")
@@ -338,6 +372,7 @@ def site_from_dict(data: dict, where: str = "site.toml") -> Site:
             layout=listed("layout", Box),
             emi_zones=listed("emi_zones", EmiZone),
             seed=data.get("seed"),
+            uwb_anchors=listed("uwb_anchors", UwbAnchor),
         )
     except ConfigError as exc:
         msg = str(exc)

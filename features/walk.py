@@ -91,7 +91,7 @@ class WalkInfo:
         return load_site((self.directory / self.site_ref).resolve())
 
 
-STREAMS = ("gnss", "audio", "imu", "gnss_pseudoranges", "odometry")
+STREAMS = ("gnss", "audio", "imu", "gnss_pseudoranges", "odometry", "uwb", "imu_foot")
 """Stream tables a ``walk.toml`` may hold, each with a ``file`` key."""
 
 _NEEDS_UTC = ("gnss", "audio")

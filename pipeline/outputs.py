@@ -34,7 +34,7 @@ KINDS = {
     "environment model": (re.compile(r"^(bundle\.json|[A-Za-z0-9_-]+\.safetensors)$"), "bundle.json"),
     "fusion model": (re.compile(r"^(bundle\.json|[A-Za-z0-9_-]+\.safetensors)$"), "bundle.json"),
     "walk": (re.compile(r"^(walk\.toml|gnss\.nmea|audio\.wav|imu\.csv|truth\.csv|audio_truth\.csv|truth_steps\.csv"
-                        r"|sources\.(png|pdf|svg))$"), "walk.toml"),
+                        r"|uwb\.csv|imu_foot\.csv|sources\.(png|pdf|svg))$"), "walk.toml"),
     "survey": (re.compile(r"^(site\.toml|site\.png|survey\.toml|cells)$"), "cells"),
     "site": (re.compile(r"^(site\.toml|site\.png)$"), "site.toml"),
     "report": (re.compile(r"^(metrics\.csv|[A-Za-z0-9_.+-]+\.png)$"), None),

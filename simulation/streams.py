@@ -88,6 +88,8 @@ STREAM_WRITERS: tuple[str, ...] = (
     "simulation.gnss.stream:write_gnss",
     "simulation.imu.stream:write_imu",
     "simulation.acoustic.stream:write_audio",
+    "simulation.uwb.stream:write_uwb_stream",
+    "simulation.imu.foot:write_imu_foot",
 )
 """Writers run in order for every walk and survey cell, as ``"module:function"``."""
 

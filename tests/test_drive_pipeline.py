@@ -55,7 +55,7 @@ def test_the_folder_says_which_streams_it_holds(slices):
 
     w = load_walk(slices / "test")
     assert walk_has(slices / "test") == {"gnss": False, "audio": False, "imu": False, "gnss_pseudoranges": True,
-                                         "odometry": True, "truth": True}
+                                         "odometry": True, "uwb": False, "imu_foot": False, "truth": True}
     assert w.start_utc is None and w.extra["source_t0_s"] == SPLIT_S
     assert sorted(w.streams["gnss_pseudoranges"]["corrections"]) == ["ionosphere", "satellite_clock", "troposphere"]
     assert w.load_site().name == "potsdamer" and not w.load_site().beacons

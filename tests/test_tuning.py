@@ -51,8 +51,11 @@ def test_every_filter_method_has_knobs_and_untunable_names_are_refused(untuned):
 
     filters = {n for n in method_names() if method(n).filter}
     # the BP's second passes run on their first pass's tuned knobs (adaptive_nobp's, its twin's); the seed
-    # paper's RTK/PDR EKF keeps the paper's published noise, its step model and heading tau fitted by graph_fit
-    assert filters - {"adaptive", "adaptive_blind", "ekf_rtk_pdr"} <= set(KNOBS)
+    # paper's RTK/PDR EKF keeps the paper's published noise, its step model and heading tau fitted by graph_fit;
+    # the uwb_aoa_pdr methods take R from the UWB solver's covariance (scaled by the fitted NLOS prior) and the
+    # PDR noise of models.uwb_pdr
+    assert filters - {"adaptive", "adaptive_blind", "ekf_rtk_pdr", "uwb_aoa_pdr", "uwb_aoa_pdr_env",
+                      "uwb_aoa_pdr_blind"} <= set(KNOBS)
     model, inputs = untuned
     with pytest.raises(KeyError):
         tune_method(model, "gnss", [TuningWalk.of(inputs)])

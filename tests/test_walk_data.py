@@ -42,7 +42,7 @@ def test_a_missing_stream_is_none(walk_dir, tmp_path):
     shutil.copytree(walk_dir, d)
     (d / "audio.wav").unlink()
     assert walk_has(d) == {"gnss": True, "audio": False, "imu": True, "gnss_pseudoranges": False, "odometry": False,
-                           "truth": True}
+                           "uwb": True, "imu_foot": True, "truth": True}
     partial = read_walk(d)
     assert partial.acoustic is None and partial.gnss is not None and partial.pdr is not None
 

@@ -12,7 +12,9 @@
    the context error model — white scale, Gauss–Markov bias and outlier
    prior per (predicted class, GGA quality) — and its environment-blind twin
    (``adaptive_nobp``, ``adaptive_nobp_blind``: :mod:`models.fusion.context`);
-5. the BP networks on the tuned ``adaptive_nobp`` runs of the training walks:
+5. the UWB NLOS prior per predicted class and its blind twin (:class:`models.uwb_pdr.UwbNoisePrior`,
+   from the UWB fixes' eᵀC⁻¹e against truth; walks with ``uwb.csv`` only);
+6. the BP networks on the tuned ``adaptive_nobp`` runs of the training walks:
    the parameter network that sets each fix's R (and its environment-blind
    twin), trained through the filter's update (:mod:`models.bp_params`), and
    the literal position corrector (target: truth − filter position,
@@ -39,6 +41,7 @@ from models.fusion.context import ContextNoise, ErrorSeries
 from models.fusion.calibration import CalibrationConfig
 from models.fusion.ekf import EkfConfig
 from models.fusion.model import FusionModel
+from models.uwb_pdr import UwbNoisePrior, uwb_nees
 from walks.inputs import WalkInputs, walk_inputs
 from walks.methods import adaptive_run, bp_features, parameter_rows, parameter_run, tuned
 from walks.reader import WalkData, read_walk
@@ -71,6 +74,8 @@ class WalkTraining:
     g_cov: np.ndarray = None
     a_t: np.ndarray = None
     g_gst: np.ndarray = None
+    u_nees: np.ndarray = None
+    u_pred_class: np.ndarray = None
 
     def error_series(self) -> tuple[ErrorSeries, ErrorSeries]:
         """The walk's GNSS and acoustic fixes as :class:`~models.fusion.context.ErrorSeries` (classes as predicted)."""
@@ -137,6 +142,11 @@ def fit_fusion_model(rows: list[WalkTraining], classifier: EnvironmentClassifier
                         context=fit_context(rows, classifier.n_classes_), context_blind=fit_context(rows, 1),
                         ekf=ekf, bp=None, meta=dict(meta or {}))
     model.meta["noise_estimator"] = noise_estimator
+    u = [r for r in rows if r.u_nees is not None and len(r.u_nees)]
+    if u:
+        nees, cls = np.concatenate([r.u_nees for r in u]), np.concatenate([r.u_pred_class for r in u])
+        model.uwb_prior = UwbNoisePrior(classifier.n_classes_).fit(nees, cls)
+        model.uwb_prior_blind = UwbNoisePrior(1).fit(nees, cls)
     if bp_data is not None:
         X, Y = bp_data(model)
         model.bp = BPCorrector(bp_config).fit(X, Y, progress=progress)
@@ -174,7 +184,15 @@ def training_rows(data: WalkData, inputs: WalkInputs, name: str) -> WalkTraining
         a = data.acoustic
         ok, a_err, a_mc, a_pc = against(a.t_s, a.east_m, a.north_m)
         a_cov, a_t = a.covariance_en_m2[ok], a.t_s[ok]
-    return WalkTraining(name, g_err, g_q, g_h, g_mc, g_pc, a_err, a_cov, a_mc, a_pc, g_t, g_cov, a_t, g_gst)
+    u_nees = u_pc = None
+    if data.uwb is not None:
+        from walks.uwb_methods import AOA_SOLVE
+
+        f = data.uwb.positions(AOA_SOLVE)
+        ok, u_err, _u_mc, u_pc = against(f.t_s, f.east_m, f.north_m)
+        u_nees = uwb_nees(u_err, f.cov_en[ok])
+    return WalkTraining(name, g_err, g_q, g_h, g_mc, g_pc, a_err, a_cov, a_mc, a_pc, g_t, g_cov, a_t, g_gst,
+                        u_nees, u_pc)
 
 
 DEFAULT_EKF = EkfConfig(outlier="huber")

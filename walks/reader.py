@@ -10,6 +10,8 @@ only the walk's files (as for a real device's log) and returns, per source:
   nine CIR feature windows, on the audio time base stated in ``walk.toml``
   (:func:`features.acoustic.timing.timing_from_walk`);
 - PDR: the detected steps (time, length, heading) and the dead-reckoned track;
+- UWB (``uwb.csv`` on a site with ``[[uwb_anchors]]``): the tag's ranging log and a position per ranging
+  round with its covariance (:class:`UwbStream`);
 - truth, when ``truth.csv`` is present (evaluation only: nothing above reads
   it; the PDR start comes from the first good GNSS fix, see :func:`pdr_start_from_gnss`).
 
@@ -58,14 +60,17 @@ from features.imu.steps import StepLengthModel
 from features.raw_tables import read_odometry_csv, read_pseudorange_csv
 from features.site import Site
 from features.errors import DataError
+from features.uwb.position import UwbFixes, UwbSolveConfig, uwb_positions
+from features.uwb.reader import UwbLog, read_uwb
 from features.vehicle.odometry import DeadReckoning, HeadingAlignment, OdometryConfig, odometry_dead_reckoning
 from features.walk import STREAMS, Truth, WalkInfo, load_walk, read_truth
 from models.graph.tight import RangeRows
 from walks.acoustic_ranges import range_rows
 
-__all__ = ["GnssStream", "AcousticStream", "PdrStream", "OdometryStream", "WalkData", "read_walk",
+__all__ = ["GnssStream", "AcousticStream", "PdrStream", "OdometryStream", "UwbStream", "WalkData", "read_walk",
            "WALK_SPEED_PRIOR_M_S", "walk_has", "pdr_start_from_gnss", "pdr_position_at", "read_gnss_stream",
-           "read_pseudorange_stream", "read_acoustic_stream", "read_pdr_stream", "read_odometry_stream"]
+           "read_pseudorange_stream", "read_acoustic_stream", "read_pdr_stream", "read_odometry_stream",
+           "read_uwb_stream"]
 
 SKIPPED_NOTE_SHARE = 0.05
 """A walk's note names the NMEA reader's skips when they exceed this share of the file's sentences."""
@@ -150,6 +155,24 @@ class OdometryStream:
 
 
 @dataclass(frozen=True)
+class UwbStream:
+    """UWB of a walk: the tag's ranging ``log`` (:class:`~features.uwb.reader.UwbLog`), the site's surveyed
+    ``anchors``, the tag's height ``tag_up_m`` (the site's device height) and ``fixes``, each round solved by
+    :func:`~features.uwb.position.uwb_positions` with the default settings (ranges where three or more
+    anchors answered, ranges and PDoA angles where one or two did). :meth:`positions` solves again with
+    other settings."""
+
+    log: UwbLog
+    anchors: tuple
+    tag_up_m: float
+    fixes: UwbFixes
+
+    def positions(self, config: UwbSolveConfig) -> UwbFixes:
+        """The rounds solved with ``config``."""
+        return uwb_positions(self.log, self.anchors, self.tag_up_m, config)
+
+
+@dataclass(frozen=True)
 class WalkData:
     """Every source of one walk; a stream the walk lacks is ``None``. ``pdr`` is a :class:`PdrStream` (IMU) or
     an :class:`OdometryStream` (a vehicle's odometry)."""
@@ -162,6 +185,8 @@ class WalkData:
     truth: Truth | None
     notes: tuple = ()
     """One line per stream the walk names but could not use (absent, empty or unusable file)."""
+    uwb: UwbStream | None = None
+    """The UWB tag's log and fixes (walks with ``uwb.csv`` on a site with ``[[uwb_anchors]]``), else None."""
 
 
 def read_walk(walk_dir: str | os.PathLike, *, site: Site | None = None, pdr_k: float | None = None,
@@ -207,11 +232,17 @@ def read_walk(walk_dir: str | os.PathLike, *, site: Site | None = None, pdr_k: f
     if pdr is None and not walk.streams.get("imu"):
         pdr = _optional(walk, "odometry",
                         lambda: read_odometry_stream(walk, gnss.positions if gnss is not None else None), notes)
-    return WalkData(walk=walk, site=site, gnss=gnss, acoustic=acoustic, pdr=pdr, truth=truth, notes=tuple(notes))
+    uwb = None
+    if site.uwb_anchors:
+        uwb = _optional(walk, "uwb", lambda: read_uwb_stream(walk, site), notes)
+    elif walk.path("uwb") is not None:
+        notes.append("uwb: the site lists no [[uwb_anchors]]; the walk is read without UWB")
+    return WalkData(walk=walk, site=site, gnss=gnss, acoustic=acoustic, pdr=pdr, truth=truth, notes=tuple(notes),
+                    uwb=uwb)
 
 
 _WHAT = {"gnss": "GNSS", "gnss_pseudoranges": "GNSS", "audio": "acoustic positions", "imu": "PDR",
-         "odometry": "odometry"}
+         "odometry": "odometry", "uwb": "UWB"}
 
 
 def _optional(walk: WalkInfo, stream: str, read, notes: list):
@@ -350,6 +381,15 @@ def read_pdr_stream(walk: WalkInfo, start_en: tuple[float, float], k: float | No
     cfg = PdrConfig(heading=heading) if k is None else PdrConfig(length=StepLengthModel(k=k), heading=heading)
     return PdrStream(result=run_pdr(imu, start_en[0], start_en[1], cfg), config=cfg, start_en_m=start_en, imu=imu,
                      repaired=imu.report.summary() if imu.report.n_defects else "")
+
+
+def read_uwb_stream(walk: WalkInfo, site: Site, config: UwbSolveConfig | None = None) -> UwbStream:
+    """The walk's ``uwb.csv`` and its rounds solved against the site's surveyed anchors (one
+    :class:`~features.errors.UwbError` when the log names an anchor the site does not list)."""
+    log = read_uwb(walk.path("uwb"))
+    anchors = tuple(site.uwb_anchors)
+    fixes = uwb_positions(log, anchors, site.device_height_m, config or UwbSolveConfig())
+    return UwbStream(log=log, anchors=anchors, tag_up_m=site.device_height_m, fixes=fixes)
 
 
 def walk_has(walk_dir: str | os.PathLike) -> dict:

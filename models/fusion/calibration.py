@@ -69,8 +69,8 @@ def running_mean(t_s: np.ndarray, t_values_s: np.ndarray, values: np.ndarray, wi
     """Mean of the finite ``values`` (k,) stamped ``t_values_s`` (k, non-decreasing) in (t − window_s, t] at each
     of ``t_s`` (m,); NaN where the window holds none.
 
-    >>> running_mean(np.array([1.0, 3.0]), np.array([0.0, 1.0, 2.5]), np.array([2.0, 4.0, np.nan]), 2.0)
-    array([3., 4.])
+    >>> running_mean(np.array([1.0, 3.0]), np.array([0.0, 1.0, 2.5]), np.array([2.0, 4.0, 6.0]), 2.0)
+    array([3., 6.])
     """
     v = np.asarray(values, float)
     good = np.isfinite(v)

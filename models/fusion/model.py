@@ -17,6 +17,8 @@ A :class:`FusionModel` holds, for one substation family:
   ``adaptive_correction``), each or None,
 - the covariance calibrators per track name (:class:`models.fusion.calibration.CovarianceCalibrator`,
   ``calibration``): what multiplies a track's reported covariance so its NEES holds (empty: raw covariances),
+- the UWB NLOS prior per class and its blind twin (:class:`models.uwb_pdr.UwbNoisePrior`,
+  ``uwb_aoa_pdr_env`` / ``uwb_aoa_pdr_blind``), each None when no training walk had UWB,
 - metadata: the training walks and their hashes, the site names, versions.
 
 Saved as one bundle (:mod:`models.bundle`, kind ``"fusion"``): JSON parameters
@@ -39,6 +41,7 @@ from models.fusion.calibration import CovarianceCalibrator
 from models.fusion.ekf import EkfConfig
 from models.fusion.context import ContextNoise
 from models.fusion.noise import FixedNoise, PerClassNoise, QualityNoise
+from models.uwb_pdr import UwbNoisePrior
 
 __all__ = ["FusionModel", "save_fusion_model", "load_fusion_model"]
 
@@ -62,6 +65,8 @@ class FusionModel:
     bp_params_blind: ParamNet | None = None
     calibration: dict = field(default_factory=dict)
     """{track name: CovarianceCalibrator}, e.g. ``adaptive_blind+lag``."""
+    uwb_prior: UwbNoisePrior | None = None
+    uwb_prior_blind: UwbNoisePrior | None = None
 
     def adaptive_policy(self):
         """The adaptive methods' noise policy: R per class and GGA quality when the model has it, else per class."""
@@ -84,7 +89,9 @@ def save_fusion_model(model: FusionModel, path, overwrite: bool = False):
               "per_class": {"combine": model.per_class.combine}, "per_class_map": {"combine": model.per_class_map.combine},
               "bp": None, "context": model.context.get_state() if model.context else None,
               "context_blind": model.context_blind.get_state() if model.context_blind else None,
-              "tuning": {m: {k: float(v) for k, v in kn.items()} for m, kn in model.tuning.items()}}
+              "tuning": {m: {k: float(v) for k, v in kn.items()} for m, kn in model.tuning.items()},
+              "uwb_prior": model.uwb_prior.get_state() if model.uwb_prior is not None else None,
+              "uwb_prior_blind": model.uwb_prior_blind.get_state() if model.uwb_prior_blind is not None else None}
     arrays = {"classifier": cls_arrays, "noise": _noise_arrays(model)}
     if model.bp is not None:
         bp_params, bp_arrays = model.bp.get_state()
@@ -144,6 +151,7 @@ def load_fusion_model(path) -> FusionModel:
         ctx = ContextNoise.from_state(p["context"]) if p.get("context") else None
         ctx_blind = ContextNoise.from_state(p["context_blind"]) if p.get("context_blind") else None
         ekf = EkfConfig(**p["ekf"])
+        uwb = {k: UwbNoisePrior.from_state(p[k]) if p.get(k) else None for k in ("uwb_prior", "uwb_prior_blind")}
         tuning = {str(m): {str(k): float(v) for k, v in kn.items()} for m, kn in p.get("tuning", {}).items()}
         calibration = {}
         for name, cp in (p.get("calibration") or {}).items():     # a bundle from before calibration has none
@@ -157,4 +165,4 @@ def load_fusion_model(path) -> FusionModel:
         raise BundleError(f"{path}: the fusion model is inconsistent ({exc})") from None
     return FusionModel(classifier=clf, fixed=fixed, quality=q, per_class_map=per_map, per_class=per,
                        context=ctx, context_blind=ctx_blind, ekf=ekf, bp=bp, meta=b.meta, tuning=tuning,
-                       calibration=calibration, **nets)
+                       calibration=calibration, **nets, **uwb)

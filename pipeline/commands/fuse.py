@@ -106,6 +106,8 @@ def _run(args) -> int:
     if args.method not in fused.tracks:
         raise ConfigError(f"{args.walk}: method {args.method} cannot run: {fused.skipped.get(base, 'no output')}")
     track = fused.tracks[args.method]
+    if track.info.get("note"):
+        print(f"envfuse: note: {args.walk}: {args.method}: {track.info['note']}", file=sys.stderr)
     rows = track_rows(track, fused.inputs)
     fmt = args.format or ("geojson" if args.out.suffix.lower() in (".geojson", ".json") else "csv")
     text = track_text(rows, fmt, {"walk": str(args.walk), "method": args.method})

@@ -36,6 +36,7 @@ from simulation.site.coverage import CoverageConfig, place_beacons
 from simulation.site.environment import class_map, classify_share
 from simulation.site.geometry import boxes_array, inside_boxes
 from simulation.rng import stream_rng
+from simulation.uwb.placement import place_uwb_anchors
 
 __all__ = ["LayoutConfig", "generate_site", "assign_slots"]
 
@@ -62,6 +63,7 @@ class LayoutConfig:
     max_attempts: int = 20
     cell_size_m: float = 5.0
     device_height_m: float = 1.0
+    uwb_anchors: bool = True  # a UWB anchor on every beacon pole / mount (simulation.uwb.placement)
 
     def __post_init__(self):
         if self.width_m[0] < 60 or self.depth_m[0] < 45:
@@ -306,6 +308,8 @@ def generate_site(seed: int, config: LayoutConfig | None = None) -> Site:
                                                      g.north_max_m, site.layout, cfg)
                 site = replace(site, beacons=beacons, acoustic=replace(site.acoustic, n_slots=n_slots,
                                                                        slot_s=cfg.slot_s))
+            if cfg.uwb_anchors:
+                site = replace(site, uwb_anchors=place_uwb_anchors(site))
             return site
     raise RuntimeError(f"no layout for seed {seed} reached min_class_share={cfg.min_class_share} "
                        f"in {cfg.max_attempts} attempts")

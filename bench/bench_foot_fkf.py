@@ -1,0 +1,193 @@
+"""``foot_ins_fkf`` against ``kf_quality`` per environment class on held-out simulated walks, and its speed per
+10-minute walk (issue 26, item 5 of the foot-INS work).
+
+Training: the fusion model (the ``kf_quality`` noise, no BP) and a supervised environment classifier fitted on
+``--n-train`` walks of site 3; test: ``--n-test`` walks of site 5, a site the model never saw. The foot method
+uses nothing the model learnt (its settings are fixed: :class:`models.foot.ins.FootInsConfig`); ``kf_quality``
+fuses GNSS and the acoustic fixes. Errors are horizontal, at each method's own epochs, per truth class
+(:func:`walks.score.track_errors`); the interval is a 95 % percentile bootstrap of the mean over walks
+(2 000 resamples of whole walks: epochs of one walk are not independent).
+
+Speed: one 600 s walk (GNSS, waist IMU, UWB and foot IMU; no audio, which the foot method does not read): the
+method's wall time (read ``imu_foot.csv``, read and solve ``uwb.csv``, the filter), best of 3, beside
+``scipy.signal.oaconvolve`` of 60 s of 48 kHz audio with a 480-tap kernel timed in the same run (the yardstick of
+bench/bench_audio.py), and the ratio.
+
+Measured (2 training walks of site 3, 3 test walks of site 5, 120 s each; this 2-core machine):
+
+    method        class   epochs  mean m   95% CI (walks)  median  p95 m
+    kf_quality    all       3817    0.07     [0.04, 0.10]    0.02   0.36
+    foot_ins_fkf  all       3600    0.20     [0.16, 0.28]    0.15   0.49
+    kf_quality    open      2289    0.05     [0.04, 0.05]    0.02   0.24
+    foot_ins_fkf  open      2173    0.19     [0.15, 0.24]    0.13   0.47
+    kf_quality    light      952    0.10     [0.03, 0.14]    0.03   0.55
+    foot_ins_fkf  light      716    0.29     [0.25, 0.31]    0.28   0.54
+    kf_quality    heavy      576    0.11     [0.02, 0.18]    0.05   0.38
+    foot_ins_fkf  heavy      711    0.14     [0.07, 0.30]    0.07   0.45
+
+    speed: 6.4 s per 10-minute walk (93x real time; oaconvolve 713x in the same run, ratio 7.6)
+
+Read with care: truth.csv is the waist device's position and foot_ins_fkf tracks the right ankle, which is
+0.19-0.27 m (mean; p95 0.40-0.48 m) from the waist on these walks (simulation/imu/foot.py's motion against
+the route) — about all of its error. kf_quality fuses mostly RTK-fixed GNSS here (centimetres in the open).
+
+Run: ``.venv/bin/python bench/bench_foot_fkf.py [--n-train 2 --n-test 3 --duration 120 --work DIR]``
+(simulates its walks into ``--work``, reusing any already there; prints tables; no assertions).
+"""
+
+from __future__ import annotations
+
+import os
+
+for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ[_var] = "1"
+
+import argparse
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+import scipy.signal
+
+from features.schema import ENV_CLASSES
+
+METHODS = ("kf_quality", "foot_ins_fkf")
+
+
+def _site(work: Path, seed: int) -> Path:
+    from features.site import save_site
+    from simulation.site.layout import generate_site
+
+    d = work / f"site{seed}"
+    if not (d / "site.toml").is_file():
+        d.mkdir(parents=True, exist_ok=True)
+        save_site(generate_site(seed), d / "site.toml")
+    return d
+
+
+def _walk(work: Path, site: Path, seed: int, duration_s: float, writers=None) -> Path:
+    from simulation.walk import simulate_walk
+
+    d = work / (f"{site.name}_w{seed}_{int(duration_s)}" + ("" if writers is None else "_noaudio"))
+    if (d / "walk.toml").is_file():
+        return d
+    kw = {} if writers is None else {"writers": writers}
+    return simulate_walk(site, d, seed=seed, duration_s=duration_s, progress=False, **kw)
+
+
+def _model(train_dirs):
+    from models.environment import EnvironmentClassifier
+    from training.filters import DEFAULT_EKF, fit_fusion_model, training_rows
+    from walks.inputs import walk_inputs, window_features
+    from walks.reader import read_walk
+
+    datas = [read_walk(d) for d in train_dirs]
+    feats = [window_features(d) for d in datas]
+    X = np.vstack([f[1] for f in feats])
+    y = np.concatenate([d.truth.class_at(f[0] - 1.0) for d, f in zip(datas, feats)])
+    clf = EnvironmentClassifier(min_samples=5).fit(X, y)
+    rows = [training_rows(d, walk_inputs(d, clf), f"train{i}") for i, d in enumerate(datas)]
+    return fit_fusion_model(rows, clf, None, ekf=DEFAULT_EKF)
+
+
+def _boot_ci(per_walk: list[float], n: int = 2000, seed: int = 0) -> tuple[float, float]:
+    v = np.asarray(per_walk, float)
+    if len(v) < 2:
+        return float("nan"), float("nan")
+    rng = np.random.default_rng(seed)
+    means = v[rng.integers(0, len(v), size=(n, len(v)))].mean(axis=1)
+    return float(np.percentile(means, 2.5)), float(np.percentile(means, 97.5))
+
+
+def accuracy(model, test_dirs) -> None:
+    from walks.inputs import walk_inputs
+    from walks.methods import run_methods
+    from walks.reader import read_walk
+    from walks.score import track_errors
+
+    pooled = {(m, c): [] for m in METHODS for c in ("all",) + ENV_CLASSES}
+    per_walk = {(m, c): [] for m in METHODS for c in ("all",) + ENV_CLASSES}
+    for d in test_dirs:
+        data = read_walk(d)
+        inputs = walk_inputs(data, model.classifier)
+        for m in METHODS:
+            t0 = time.perf_counter()
+            tracks, skipped = run_methods(model, inputs, (m,), smooth=False, lag_s=None)
+            dt = time.perf_counter() - t0
+            if m not in tracks:
+                print(f"{d.name}: {m} skipped: {skipped.get(m)}")
+                continue
+            te = track_errors(tracks[m], data.truth)
+            note = tracks[m].info.get("note", "")
+            print(f"{d.name}: {m:13s} {dt:6.2f} s  mean {te['err_m'].mean():.2f} m  {note}")
+            for k, c in [(None, "all")] + list(enumerate(ENV_CLASSES)):
+                sel = np.ones(len(te["err_m"]), bool) if k is None else te["cls"] == k
+                if sel.any():
+                    pooled[(m, c)].append(te["err_m"][sel])
+                    per_walk[(m, c)].append(float(te["err_m"][sel].mean()))
+    print(f"\n{'method':13s} {'class':6s} {'epochs':>7s} {'mean m':>7s} {'95% CI (walks)':>16s} {'median':>7s} "
+          f"{'p95 m':>6s}")
+    for c in ("all",) + ENV_CLASSES:
+        for m in METHODS:
+            if not pooled[(m, c)]:
+                continue
+            x = np.concatenate(pooled[(m, c)])
+            lo, hi = _boot_ci(per_walk[(m, c)])
+            print(f"{m:13s} {c:6s} {len(x):7d} {x.mean():7.2f} {f'[{lo:.2f}, {hi:.2f}]':>16s} {np.median(x):7.2f} "
+                  f"{np.percentile(x, 95):6.2f}")
+
+
+def speed(model, walk: Path) -> None:
+    from features.imu.foot import read_foot_imu
+    from walks.foot_methods import foot_ins_fkf
+    from walks.inputs import walk_inputs
+    from walks.methods import MethodContext
+    from walks.reader import read_walk
+
+    data = read_walk(walk)
+    inputs = walk_inputs(data, model.classifier)
+    dur = float(data.walk.duration_s)
+    best = np.inf
+    for _ in range(3):
+        t0 = time.perf_counter()
+        tr = foot_ins_fkf(MethodContext(model, inputs))
+        best = min(best, time.perf_counter() - t0)
+    imu = read_foot_imu(data.walk.path("imu_foot"))
+    x = np.random.default_rng(0).standard_normal(60 * 48_000).astype(np.float32)
+    h = np.random.default_rng(1).standard_normal(480).astype(np.float32)
+    yard = np.inf
+    for _ in range(3):
+        t0 = time.perf_counter()
+        scipy.signal.oaconvolve(x, h)
+        yard = min(yard, time.perf_counter() - t0)
+    per10 = best * 600.0 / dur
+    print(f"\nspeed: foot_ins_fkf on a {dur:.0f} s walk ({len(imu.t_s)} foot samples at {imu.rate_hz:.0f} Hz, "
+          f"{tr.info['note']}): {best:.2f} s best of 3 = {per10:.2f} s per 10-minute walk, {dur / best:.0f}x real "
+          f"time; oaconvolve 60 s of 48 kHz audio {yard * 1000:.1f} ms ({60 / yard:.0f}x real time); "
+          f"ratio method/oaconvolve per second of walk {(best / dur) / (yard / 60):.1f}")
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--n-train", type=int, default=2)
+    ap.add_argument("--n-test", type=int, default=3)
+    ap.add_argument("--duration", type=float, default=120.0)
+    ap.add_argument("--work", type=Path, default=Path(tempfile.gettempdir()) / "envfuse_bench_foot")
+    args = ap.parse_args(argv)
+    work = args.work
+    train_site, test_site = _site(work, 3), _site(work, 5)
+    train = [_walk(work, train_site, 100 + i, args.duration) for i in range(args.n_train)]
+    test = [_walk(work, test_site, 200 + i, args.duration) for i in range(args.n_test)]
+    model = _model(train)
+    accuracy(model, test)
+    long_walk = _walk(work, test_site, 300, 600.0, writers=("simulation.gnss.stream:write_gnss",
+                                                            "simulation.imu.stream:write_imu",
+                                                            "simulation.uwb.stream:write_uwb_stream",
+                                                            "simulation.imu.foot:write_imu_foot"))
+    speed(model, long_walk)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
