@@ -13,6 +13,7 @@ import math
 
 import numpy as np
 
+from simulation.acoustic.discharge import add_pulse_templates
 from simulation.acoustic.synthesis import band_response, hum_samples
 
 
@@ -75,3 +76,17 @@ def test_hum_samples_sample_by_sample_early_and_late():
     t = np.arange(40) / 400.0
     got = hum_samples(t, 1.0 / 400.0, omega, np.array([0.0]), np.array([1.0]))
     np.testing.assert_allclose(got, np.tile([0.0, 1.0, 0.0, -1.0], 10), rtol=0, atol=1e-12)
+
+
+def test_add_pulse_templates_rows_and_offsets_by_hand():
+    """Two overlapping pulses: sample ⌊pos⌋ takes template row ⌊frac(pos)·P⌋ times its amplitude; sums add."""
+    templates = np.arange(4 * 5, dtype=float).reshape(4, 5) + 1.0        # P = 4 fractions, 5 samples each
+    out = np.zeros(12)
+    add_pulse_templates(out, np.array([2.30, 4.80]), np.array([2.0, -1.0]), templates)
+    want = np.zeros(12)
+    want[2:7] += 2.0 * templates[1]          # frac 0.30 → row ⌊1.2⌋ = 1
+    want[4:9] += -1.0 * templates[3]         # frac 0.80 → row ⌊3.2⌋ = 3
+    np.testing.assert_array_equal(out, want)
+    # no pulse: nothing added
+    add_pulse_templates(out, np.zeros(0), np.zeros(0), templates)
+    np.testing.assert_array_equal(out, want)
