@@ -55,6 +55,14 @@
    Doppler factor, tail, inverse: ~0.7); the GNSS's RTK engine (per-epoch Python loop with small solves, ~0.6).
    Previous round (``simspeed``, under heavier load): main before it 13.98-14.81 s, after it 7.73-7.94 s.
 
+   Since then main (8385a81) writes two more streams, ``uwb.csv`` and ``imu_foot.csv`` (issue 26), and the same
+   walk costs more: ``simulate_walk`` alone, 3 alternated rounds (load 2.5-3.4), main 8385a81 CPU 9.36-9.73 s
+   (62-64×), this branch merged with it (and the corona pulses' templates added by a compiled loop) 8.59-8.84 s
+   (68-70×), ratio 1.10; every one of the 9 files byte-identical to main's for (site 5, seed 40) and (site 1,
+   seed 1). A cProfile of the branch: audio 5.3 s, UWB 3.4 s (``simulate_uwb``, a Python call per range:
+   37,084 calls of ``_measure``), GNSS 1.4 s, foot IMU 1.1 s (profiled seconds, inflated by the profiler; the
+   UWB stream is now the second cost and the next place to look for the 100× target).
+
 Usage: ``python bench/bench_pipeline.py [--quick] [--evaluate-only | --simulator-only]`` (``--quick``: 2-minute
 walks, 4 walks; ``--evaluate-only``: 2 training walks of 120 s, then section 3 only; ``--simulator-only``:
 section 4 only, with ``--quick`` on a 120 s walk).
