@@ -32,23 +32,36 @@
    block inside the audio renderer, so its writing is re-timed alone); ``oaconvolve`` over the walk's audio
    in the same run. Target ≥ 100× real time.
 
-   Measured 2026-12-02 on this 2-core VM while four other jobs ran (load average 6–10; ``oaconvolve``, ~1,800×
-   on a quiet machine, read 428–603× best of 3 in these runs, so wall clocks ran at a third to a half of speed
-   and the CPU time is the figure to compare). main and this branch alternated in fresh processes on the same
-   ``simulate_walk`` call (a 600 s walk; every file byte-identical between the two):
+   Measured 2026-12-02 (branch ``simspeed2``) on this 2-core VM shared with other jobs (load average 3.3-6.9;
+   the CPU time of one run moves by ±8 % with the load, so main and the branch alternated in fresh processes).
+   Before: main at 6ed79dc (the ``simspeed`` merge). After: the hum and each emission's band response H(f)
+   compiled (:func:`simulation.acoustic.synthesis.hum_samples`, :func:`~simulation.acoustic.synthesis.band_response`:
+   exact sin/cos once per 16 samples or bins and a rounding-corrected rotation between, the dB loss by exp),
+   the truth rows' band-centre absorption cached. Every file of a 600 s walk byte-identical to main's for
+   (site 5, seed 40) and (site 1, seed 1); inside, the hum within 1.6e-15 of main's (unit amplitude; ≤ 3e-17 of
+   full scale after its level) and H(f) within 5e-15 relative:
 
-   - this section's walk (site 5, seed 40), 3 rounds: main CPU 13.98–14.81 s (43× real time), branch
-     7.73–7.94 s (78×), ratio 1.89 by CPU and 1.88 by wall (medians); peak RSS 277 vs 287 MiB;
-   - ``bench/bench_walk.py``'s walk (site 1, seed 1), 2 rounds: main CPU 19.9–20.3 s (30×), branch 8.9–9.1 s
-     (67×), ratio 2.2 by CPU, 2.1 by wall; peak RSS 318–337 vs 331 MiB.
+   - ``simulate_walk`` alone, 4 alternated rounds (site 5, seed 40): main CPU 6.53-6.98 s (median 6.74 s, 89×
+     real time), branch 5.88-6.30 s (median 6.13 s, 98×), ratio 1.10;
+   - this section, a quieter round (load 3.3-4.0): main CPU 6.57 s (91×; audio 5.05 s, GNSS 0.91 s), branch
+     5.75 s (104×; audio 4.18 s, GNSS 1.01 s; oaconvolve 1,364× best of 3); a loaded round (load 5.8-6.9): main
+     6.98 s (86×; audio 5.32), branch 6.46 s (93×; audio 4.55, GNSS 1.05; oaconvolve 556× best of 3, ratio
+     0.092). Peak RSS 312-321 MiB both.
 
-   This section alone on the branch: CPU 7.17 s = 84× real time (wall 22.0 s = 27×, oaconvolve 569× best of 3
-   in the same run, ratio 0.048); per stream (CPU s): GNSS simulate_gnss 1.10, NMEA 0.10, IMU 0.15 + CSV 0.16,
-   audio 5.78 (104× alone; its WAV writing 0.03), truth.csv 0.09; main in the same section: CPU 13.38 s (45×),
-   audio 12.21, GNSS 1.23. Peak RSS 291 MiB (191 MiB after imports; main 295 / 205); the stream-by-stream
-   process 343 MiB (it keeps every stream's arrays). Target 100× not reached: the audio's floor with the same
-   numerics is its per-emission FFTs, phase ramps and per-place tail generators (SeedSequence) and the
-   ambient's 28.8 M samples of noise, hum and codec.
+   So the 100× target is met on a quiet machine and missed by 7 % under load. What is left, per 600 s walk (CPU
+   s, the branch): the ambient's Gaussian noise 0.45 (28.8 M draws from per-chunk generators; fixed by the seeds),
+   corona pulses 0.35, the codec's sosfilt 0.4, per emission the tail's generator (SeedSequence, 0.2), its
+   Python/numpy bookkeeping (~0.6: paths, hardware factors, Doppler, plan) and its three FFTs (chirp at its
+   Doppler factor, tail, inverse: ~0.7); the GNSS's RTK engine (per-epoch Python loop with small solves, ~0.6).
+   Previous round (``simspeed``, under heavier load): main before it 13.98-14.81 s, after it 7.73-7.94 s.
+
+   Since then main (8385a81) writes two more streams, ``uwb.csv`` and ``imu_foot.csv`` (issue 26), and the same
+   walk costs more: ``simulate_walk`` alone, 3 alternated rounds (load 2.5-3.4), main 8385a81 CPU 9.36-9.73 s
+   (62-64×), this branch merged with it (and the corona pulses' templates added by a compiled loop) 8.59-8.84 s
+   (68-70×), ratio 1.10; every one of the 9 files byte-identical to main's for (site 5, seed 40) and (site 1,
+   seed 1). A cProfile of the branch: audio 5.3 s, UWB 3.4 s (``simulate_uwb``, a Python call per range:
+   37,084 calls of ``_measure``), GNSS 1.4 s, foot IMU 1.1 s (profiled seconds, inflated by the profiler; the
+   UWB stream is now the second cost and the next place to look for the 100× target).
 
 5. **Long walks in bounded memory** (issue 25 item 3, :func:`memory_section`, ``--memory-only``): peak RSS
    (VmHWM of a fresh process) of ``envfuse run`` (default method) on a 10-minute and an 8-hour walk, both one

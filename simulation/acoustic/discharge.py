@@ -48,12 +48,13 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 
 from features.site import Site
 from simulation.acoustic.atmosphere import absorption_db_per_m
 from simulation.rng import stream_rng
 
-__all__ = ["DischargeConfig", "DischargeSources", "HV_KINDS", "pulse_template"]
+__all__ = ["DischargeConfig", "DischargeSources", "HV_KINDS", "add_pulse_templates", "pulse_template"]
 
 HV_KINDS = ("transformer", "gantry", "equipment")
 """Layout kinds that carry high voltage (and so discharge sources)."""
@@ -175,7 +176,19 @@ class DischargeSources:
         pos = (t_rx - t0_true_s) * fs_true - _LEAD            # the template's sample 0
         keep = (level >= floor_db_spl) & (pos >= 0) & (pos < len(out) - _N_TEMPLATE)
         amp = sign * 10.0 ** ((level - full_scale_db_spl) / 20.0) / math.sqrt(2.0)
-        for p, a in zip(pos[keep].tolist(), amp[keep].tolist()):
-            i = int(p)
-            out[i: i + _N_TEMPLATE] += a * self.templates[int((p - i) * _N_PHASES)]
+        add_pulse_templates(out, pos[keep], amp[keep], self.templates)
         return int(np.count_nonzero(keep))
+
+
+@njit(cache=True)
+def add_pulse_templates(out: np.ndarray, pos: np.ndarray, amp: np.ndarray, templates: np.ndarray) -> None:
+    """Add pulse q, ``amp[q]`` times the template of its fractional delay, at sample ``pos[q]`` of ``out``, in
+    place: sample i = ⌊pos⌋ takes ``templates[⌊(pos − i)·P⌋]`` (P = len(templates) tabulated fractions, each
+    row (P, n)). pos ≥ 0 and i + n ≤ len(out) (the caller keeps only such pulses). Compiled: a few hundred
+    pulses per chunk of audio; the same products and sums, in the same order, as slicing row by row."""
+    n_phases, n = templates.shape
+    for q in range(pos.shape[0]):
+        i = int(pos[q])
+        row = int((pos[q] - i) * n_phases)
+        for k in range(n):
+            out[i + k] += amp[q] * templates[row, k]

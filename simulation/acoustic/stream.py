@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import contextlib
 import csv
+import functools
 import heapq
 import io
 import itertools
@@ -393,12 +394,18 @@ def _hardware_factors(src: np.ndarray, rx: np.ndarray, axes: np.ndarray, f_c_hz:
     return gain * 10.0 ** (-loss_db / 20.0), extra
 
 
+@functools.lru_cache(maxsize=64)
+def _alpha_centre_db_per_m(spec: ChirpSpec, atmosphere) -> float:
+    """ISO 9613-1 α at a chirp's band centre (one per beacon band and air, not per emission)."""
+    return float(absorption_db_per_m(0.5 * (spec.f0_hz + spec.f1_hz), atmosphere))
+
+
 def _first_path_db_spl(paths: PathSet, spec: ChirpSpec, source_level_db: float,
                        renderer: ChirpRenderer) -> float:
     """Level of the first path at the band centre: SL + 20·log10(g) − α(f_c)·L − ΔL_Maekawa(f_c), dB SPL."""
     f_c = 0.5 * (spec.f0_hz + spec.f1_hz)
     level = (source_level_db + 20.0 * math.log10(max(float(paths.gain[0]), 1e-12))
-             - float(absorption_db_per_m(f_c, renderer.atmosphere)) * float(paths.length_m[0]))
+             - _alpha_centre_db_per_m(spec, renderer.atmosphere) * float(paths.length_m[0]))
     if paths.kind[0] == 3:
         level -= float(maekawa_loss_db(fresnel_number(paths.detour_m[0], f_c, renderer.c)))
     return level

@@ -32,6 +32,7 @@ from dataclasses import dataclass, field, fields
 
 import numpy as np
 import scipy.fft as sfft
+from numba import njit
 
 from features.errors import ConfigError
 from features.site import Site
@@ -44,7 +45,8 @@ from simulation.site.geometry import boxes_array
 from simulation.rng import stream_rng
 from simulation.streams import Trajectory
 
-__all__ = ["AudioConfig", "ChirpRenderer", "AmbientNoise", "detection_range_m", "CHUNK_SAMPLES"]
+__all__ = ["AudioConfig", "ChirpRenderer", "AmbientNoise", "detection_range_m", "CHUNK_SAMPLES", "band_response",
+           "hum_samples"]
 
 CHUNK_SAMPLES = 16384
 """Ambient noise is drawn per chunk of this many samples (block sizes must be multiples of it)."""
@@ -251,8 +253,7 @@ class ChirpRenderer:
         diff = kind == 3
         if diff.any():
             loss_db[diff] += maekawa_loss_db(fresnel_number(detour[diff, None], f[None, :], c))
-        phase = np.exp(-2j * np.pi * np.outer(rel[keep], k) / n_fft)
-        h = (g[:, None] * 10.0 ** (-loss_db / 20.0) * phase).sum(axis=0)
+        h = band_response(g, loss_db, rel[keep], k0, n_fft)
         # diffuse tail: Poisson arrivals, Gaussian amplitudes, envelope exp(−t/decay); E[Σa²] = level·(1/d²)
         n_taps = rng.poisson(tail.density_per_ms * 5.0 * tail.decay_ms)
         if not n_taps:
@@ -282,6 +283,91 @@ class ChirpRenderer:
             if len(self._chirp_cache) > 64:
                 self._chirp_cache.pop(next(iter(self._chirp_cache)))
         return out
+
+
+_ROTATION_BLOCK = 16
+"""Bins (band_response) or samples (hum_samples) per exact sin/cos of a phase; rotation in between."""
+
+
+@njit(cache=True)
+def _rotation_table(step_rad: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """θ_i = step·i, cos θ_i, sin θ_i for i < _ROTATION_BLOCK (the in-block rotations of a linear phase)."""
+    theta = step_rad * np.arange(_ROTATION_BLOCK)
+    return theta, np.cos(theta), np.sin(theta)
+
+
+@njit(cache=True)
+def _rotated(ar: float, ai: float, theta: np.ndarray, c: np.ndarray, s: np.ndarray, i: int,
+             eps: float) -> tuple[float, float]:
+    """(a_r + j·a_i)·e^{j(θ_i + ε)} with e^{jε} = 1 + jε (ε a few ulp of a rounded phase: error ε²/2 < 1e-19)."""
+    sr, si = c[i] - eps * s[i], s[i] + eps * c[i]
+    return ar * sr - ai * si, ar * si + ai * sr
+
+
+@njit(cache=True)
+def band_response(gain: np.ndarray, loss_db: np.ndarray, delay_samples: np.ndarray, k0: int,
+                  n_fft: int) -> np.ndarray:
+    """H on bins k0 … k0+K−1 of an n_fft grid of paths p with pressure gain g_p, frequency-dependent loss
+    L_p(f) (dB) and delay τ_p (samples), the sum of delayed, attenuated copies (the module docstring's Y(f))::
+
+        H[k] = Σ_p g_p · 10^(−L_p[k]/20) · exp(−j·2π·k·τ_p / n_fft)
+
+    gain : (p,); loss_db : (p, K); delay_samples : (p,). Returns (K,) complex, the paths summed in their order.
+    Compiled, one pass (numpy's form built three (p, K) temporaries per emission). The phase θ = −2π·k·τ/n as
+    numpy rounds it: its cos and sin every ``_ROTATION_BLOCK`` bins, a rotation by the table's −2π·i·τ/n
+    corrected by the rounding residual in between (:func:`_rotated`); agrees with exp(jθ) to a few ulp.
+    """
+    n_paths, n_bins = loss_db.shape
+    h = np.zeros(n_bins, np.complex128)
+    inv_n = 1.0 / n_fft
+    ln10_20 = math.log(10.0) / 20.0
+    for p in range(n_paths):
+        theta, c, s = _rotation_table(-2.0 * np.pi * delay_samples[p] * inv_n)
+        for b in range(0, n_bins, _ROTATION_BLOCK):
+            phi_b = -2.0 * np.pi * (delay_samples[p] * (k0 + b)) * inv_n
+            ar, ai = math.cos(phi_b), math.sin(phi_b)
+            for j in range(b, min(b + _ROTATION_BLOCK, n_bins)):
+                phi = -2.0 * np.pi * (delay_samples[p] * (k0 + j)) * inv_n
+                zr, zi = _rotated(ar, ai, theta, c, s, j - b, (phi - phi_b) - theta[j - b])
+                a = gain[p] * math.exp(-loss_db[p, j] * ln10_20)
+                h[j] += complex(a * zr, a * zi)
+    return h
+
+
+_HUM_WEIGHTS = 10.0 ** (-3.0 * np.arange(4) / 20.0)
+"""Amplitude of the hum's harmonics 2·f_m, 4·f_m, 6·f_m, 8·f_m re. the first: −3 dB each (an assumed spectrum)."""
+
+
+@njit(cache=True)
+def hum_samples(t_s: np.ndarray, dt_s: float, omega_rad_s: float, phase_rad: np.ndarray,
+                weight: np.ndarray) -> np.ndarray:
+    """Transformer hum of unit amplitude at the evenly spaced times ``t_s`` (n,; spacing ``dt_s``):
+    magnetostriction vibrates the core at twice the mains frequency, so its sound lies at even multiples of
+    f_m (IEC 60076-10:2016, transformer sound levels); ω = 2π·2f_m and the lines h·ω, h = 1 … H::
+
+        x(t) = Σ_h w_h · sin(h·ω·t + φ_h) = Σ_h w_h · Im(z^h · e^{jφ_h}),  z = e^{jωt}
+
+    phase_rad, weight : (H,). z = e^{jy}, y = ω·t as rounded: cos y and sin y every ``_ROTATION_BLOCK``
+    samples (y_b), in between e^{jy_b} rotated by the table's ω·i·dt and the rounding residual ε = (y − y_b) −
+    ω·i·dt (:func:`_rotated`), so z agrees with cos y + j·sin y to a few ulp (1e-15). z^h by repeated complex
+    multiplication. Returns (n,).
+    """
+    n = t_s.shape[0]
+    out = np.empty(n)
+    rot_re, rot_im = np.cos(phase_rad), np.sin(phase_rad)
+    theta, c, s = _rotation_table(omega_rad_s * dt_s)
+    for b in range(0, n, _ROTATION_BLOCK):
+        y_b = omega_rad_s * t_s[b]
+        ar, ai = math.cos(y_b), math.sin(y_b)
+        for i in range(b, min(b + _ROTATION_BLOCK, n)):
+            zr, zi = _rotated(ar, ai, theta, c, s, i - b, (omega_rad_s * t_s[i] - y_b) - theta[i - b])
+            hr, hi = 1.0, 0.0
+            acc = 0.0
+            for h in range(weight.shape[0]):
+                hr, hi = hr * zr - hi * zi, hr * zi + hi * zr
+                acc += weight[h] * (hr * rot_im[h] + hi * rot_re[h])
+            out[i] = acc
+    return out
 
 
 @dataclass
@@ -376,16 +462,9 @@ class AmbientNoise:
             t_true = self.true_start + (b0 + np.arange(n)) / self.fs_true
             d = np.maximum(_distance_to_boxes(pos, self.tanks), 1.0)
             amp = np.interp(t_true, grid, _db_to_digital_rms(cfg.hum_db_spl_1m, cfg) * math.sqrt(2.0) / d)
-            # 2·mains and harmonics (magnetostriction), −3 dB each: Im(z^h·e^{jφ_h}), z = e^{j2π·2f_m·t}
-            z = np.empty(n, complex)     # exp(j·2π·2f_m·t) as cos + j·sin (the same values, half the time)
-            y = (2.0 * np.pi * 2.0 * cfg.mains_hz) * t_true
-            z.real, z.imag = np.cos(y), np.sin(y)
-            zh = np.ones(n, complex)
-            hum = np.zeros(n)
-            for h in range(4):
-                zh *= z
-                hum += 10.0 ** (-3.0 * h / 20.0) * (zh * np.exp(1j * self.hum_phase[h])).imag
-            out[:n] += amp * hum
+            # 2·mains and harmonics (magnetostriction), −3 dB each
+            out[:n] += amp * hum_samples(t_true, 1.0 / self.fs_true, 2.0 * np.pi * 2.0 * cfg.mains_hz,
+                                           self.hum_phase, _HUM_WEIGHTS)
         if cfg.corona_rate_hz > 0:
             t0 = self.true_start + b0 / self.fs_true
             up = float(np.interp(grid[1], self.traj.t_s, self.traj.up_m))
