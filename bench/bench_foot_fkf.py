@@ -168,13 +168,176 @@ def speed(model, walk: Path) -> None:
           f"ratio method/oaconvolve per second of walk {(best / dur) / (yard / 60):.1f}")
 
 
+def _rebuilt_trajectory(site, wd: Path):
+    """The walk's trajectory rebuilt from its seed as :func:`simulation.walk.simulate_walk` draws it, and its
+    largest horizontal distance from the walk's ``truth.csv`` (bench/bench_uwb.py's check)."""
+    from features.fileio import read_toml
+    from features.walk import parse_utc, read_truth
+    from simulation.rng import stream_rng
+    from simulation.site.route import RouteConfig, plan_route, route_trajectory
+    from simulation.walk import device_height_m
+
+    meta = read_toml(wd / "walk.toml")
+    route = RouteConfig()
+    dur = float(meta["duration_s"])
+    poly, stops, speed = plan_route(site, stream_rng(int(meta["seed"]), "route"), dur, route)
+    traj = route_trajectory(poly, stops, speed, dur, parse_utc(meta["start_utc"]),
+                            device_height_m(site, int(meta["person"])), route)
+    truth = read_truth(wd)
+    te, tn, _ = traj.interp(truth.t_s)
+    return traj, meta, float(np.max(np.hypot(te - truth.east_m, tn - truth.north_m)))
+
+
+def _study_foot_walks(study: Path, out: Path, uwb_work: Path) -> tuple[list, dict]:
+    """The study's held-out walks with ``uwb.csv`` (bench/bench_uwb.py's linked copies in ``uwb_work``, built there
+    if absent) and ``imu_foot.csv`` added in ``out``: every file linked, ``imu_foot.csv`` simulated from the
+    rebuilt trajectory (within 1 cm of ``truth.csv``, else the walk is left out) and written temp + rename,
+    ``walk.toml`` written new with its ``[imu_foot]`` table; nothing is written where a file already is.
+    Returns ([(site id, walk dir)], split table)."""
+    import sys
+
+    from features.fileio import write_toml
+    from features.site import load_site
+    from simulation.imu.foot import IMU_FOOT_FILE, write_imu_foot
+    from simulation.streams import StreamContext
+
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    from bench_uwb import _is_test, _study_walks
+
+    walks, split = _study_walks(study, uwb_work)
+    (out / "sites").mkdir(parents=True, exist_ok=True)
+    held = []
+    for sid, dirs in walks.items():
+        link = out / "sites" / str(sid)
+        if not link.exists():
+            link.symlink_to((uwb_work / "sites" / str(sid)).resolve())
+        for src in dirs:
+            if not _is_test(split, sid, src):
+                continue
+            dst = out / "walks" / str(sid) / src.name
+            if not (dst / "walk.toml").is_file():
+                site = load_site(link / "site.toml")
+                traj, meta, dev = _rebuilt_trajectory(site, src)
+                if dev > 0.01:
+                    print(f"  {src}: rebuilt trajectory {dev:.2f} m off its truth.csv; left out")
+                    continue
+                dst.mkdir(parents=True, exist_ok=True)
+                for f in src.iterdir():
+                    if f.name != "walk.toml" and not (dst / f.name).exists():
+                        (dst / f.name).symlink_to(f.resolve())
+                if not (dst / IMU_FOOT_FILE).exists():
+                    # write_imu_foot writes temp + rename (features.fileio.atomic_write_text)
+                    meta.update(write_imu_foot(StreamContext(site=site, trajectory=traj, out_dir=dst,
+                                                             seed=int(meta["seed"]), kind="walk",
+                                                             person_seed=int(meta["person"]))))
+                write_toml(dst / "walk.toml", meta)
+            held.append((sid, dst))
+    return held, split
+
+
+STUDY_METHODS = ("kf_quality", "adaptive", "uwb_aoa_pdr", "foot_ins_fkf")
+
+
+def _walk_rows(models, wd: Path, sid: int) -> tuple[list[list[dict]], dict]:
+    """Metric rows of one walk per model seed (kf_quality and adaptive per seed's model; the others use no
+    learnt part and run once), the foot method's ankle track as ``foot_ankle``, and seconds per method."""
+    from walks.foot_methods import foot_ins_fkf
+    from walks.inputs import walk_inputs
+    from walks.methods import MethodContext, run_methods
+    from walks.reader import read_walk
+    from walks.score import score
+
+    data = read_walk(wd)
+    name = f"{sid}/{wd.name}"
+    per_seed, secs, once = [], {}, []
+    for s, model in enumerate(models):
+        inputs = walk_inputs(data, model.classifier)
+        learnt = ("kf_quality", "adaptive")
+        tracks, skipped = run_methods(model, inputs, learnt, smooth=False, lag_s=None)
+        rows = score(tracks, data, name)
+        if s == 0:
+            for m in ("uwb_aoa_pdr", "foot_ins_fkf"):
+                t0 = time.perf_counter()
+                tr, sk = run_methods(model, inputs, (m,), smooth=False, lag_s=None)
+                secs[m] = time.perf_counter() - t0
+                if m not in tr:
+                    print(f"  {name}: {m} skipped: {sk.get(m)}")
+                once += score(tr, data, name)
+            ankle = foot_ins_fkf(MethodContext(model, inputs), body=None)
+            once += score({"foot_ankle": ankle}, data, name)
+            for r in once:
+                r["site"] = str(sid)
+        for r in rows:
+            r["site"] = str(sid)
+        per_seed.append(rows + [dict(r) for r in once])
+    return per_seed, secs
+
+
+def section_study(args) -> None:
+    """``foot_ins_fkf`` (body; and its ankle track) beside ``kf_quality``, ``adaptive`` and ``uwb_aoa_pdr`` on a
+    study's held-out walks, per true class, with the site-level bootstrap interval of the paired difference
+    (:func:`pipeline.compare.compare`)."""
+    from models.fusion.model import load_fusion_model
+    from pipeline.compare import compare, walk_scores
+
+    study = Path(args.study)
+    held, split = _study_foot_walks(study, Path(args.work) / f"study_{study.name}",
+                                    Path(args.uwb_work) / f"study_{study.name}")
+    models = [load_fusion_model(d / "fusion_model") for d in sorted(study.glob("seed*")) if
+              (d / "fusion_model").is_dir()][: args.seeds]
+    by_seed = [[] for _ in models]
+    per10 = {}
+    for sid, wd in held:
+        t0 = time.perf_counter()
+        rows, secs = _walk_rows(models, wd, sid)
+        for s, r in enumerate(rows):
+            by_seed[s].append({"walk": f"{sid}/{wd.name}", "site": str(sid), "rows": r})
+        dur = float(split.get("walk_s", 300.0))
+        for m, v in secs.items():
+            per10.setdefault(m, []).append(v * 600.0 / dur)
+        print(f"  {sid}/{wd.name}: {time.perf_counter() - t0:.1f} s", flush=True)
+    scores = walk_scores(by_seed)
+    print(f"\nStudy {study.name}: {len(held)} held-out walks on {len({s for s, _ in held})} sites, {len(models)} model "
+          f"seeds (kf_quality, adaptive per seed; per-walk means averaged over seeds). Mean horizontal error, m "
+          f"(in brackets the median of the walks' medians, seed 0); "
+          f"Δ = Σ n ē_A / Σ n ē_B − 1 with its 95 % site-level bootstrap interval (pipeline/compare.py)")
+    methods = ("foot_ins_fkf", "foot_ankle", "uwb_aoa_pdr", "kf_quality", "adaptive")
+    for c in ("all",) + ENV_CLASSES:
+        line = [f"{c:6s}"]
+        for m in methods:
+            v, n = scores.mean_m.get((m, c)), scores.n.get((m, c))
+            if v is None:
+                continue
+            ok = np.isfinite(v) & (n > 0)
+            med = [r["median_m"] for res in by_seed[0] for r in res["rows"] if r["method"] == m and r["env_class"] == c]
+            line.append(f"{m} {np.sum(v[ok] * n[ok]) / np.sum(n[ok]):.3f} ({np.median(med):.3f})")
+        print("  ".join(line))
+    print()
+    for c in ("all",) + ENV_CLASSES:
+        for a, b in (("foot_ins_fkf", "foot_ankle"), ("foot_ins_fkf", "kf_quality"), ("foot_ins_fkf", "adaptive"),
+                     ("foot_ins_fkf", "uwb_aoa_pdr")):
+            cmp = compare(scores, a, b, c)
+            if cmp is not None:
+                print(f"  {cmp}")
+    for m, v in per10.items():
+        print(f"{m}: median {np.median(v):.2f} s per 10-minute walk over {len(v)} walks")
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--n-train", type=int, default=2)
     ap.add_argument("--n-test", type=int, default=3)
     ap.add_argument("--duration", type=float, default=120.0)
     ap.add_argument("--work", type=Path, default=Path(tempfile.gettempdir()) / "envfuse_bench_foot")
+    ap.add_argument("--study", type=Path, help="a benchmark study folder (data/, seed*/fusion_model): the held-out "
+                    "walks with imu_foot.csv added, foot_ins_fkf beside kf_quality, adaptive and uwb_aoa_pdr")
+    ap.add_argument("--uwb-work", type=Path, default=Path("/tmp/bench_uwb"),
+                    help="bench_uwb.py --study's work folder (its walks with uwb.csv; built there if absent)")
+    ap.add_argument("--seeds", type=int, default=3, help="model seeds of the study used for kf_quality/adaptive")
     args = ap.parse_args(argv)
+    if args.study:
+        section_study(args)
+        return 0
     work = args.work
     train_site, test_site = _site(work, 3), _site(work, 5)
     train = [_walk(work, train_site, 100 + i, args.duration) for i in range(args.n_train)]
