@@ -42,9 +42,10 @@ MIN_CHORD_M = 0.3
 """Two footfalls of the same foot closer than this (m) give no direction of travel (a stride is ≈ 1.4 m)."""
 
 LONG_SPELL = 2.0
-"""A stance spell longer than this many times the walk's median spell is a stop (the walker stands): it gets
-two anchors, half a median stance after its start and before its end, so the body stands still over it
-instead of drifting from the last footfall to the stop's middle."""
+"""A stance spell longer than this many times the walk's median spell is a stop (the walker stands): it is
+anchored from half a median stance after its start to half a stance before its end, every half stance, so
+the body stands over it (following the foot estimate's corrections) instead of drifting from the last
+footfall to the stop's middle."""
 
 
 @dataclass(frozen=True)
@@ -66,7 +67,7 @@ def mid_stance(t_s: np.ndarray, en_m: np.ndarray, stance: np.ndarray, rate_hz: f
                cfg: StanceConfig = StanceConfig()) -> tuple[np.ndarray, np.ndarray]:
     """Times (m,) and foot positions (m, 2) at the middle sample of every stance spell (after
     :func:`models.foot.stance.stance_spells` closes a heel strike's jolt and drops flickers); a stop
-    (:data:`LONG_SPELL`) gives two, half a median stance inside each of its ends."""
+    (:data:`LONG_SPELL`) gives one every half median stance from half a stance inside each of its ends."""
     spells = stance_spells(stance, rate_hz, cfg)
     if not len(spells):
         return np.zeros(0), np.zeros((0, 2))
@@ -77,8 +78,9 @@ def mid_stance(t_s: np.ndarray, en_m: np.ndarray, stance: np.ndarray, rate_hz: f
     for (a, b), d in zip(spells, dur):
         if d > LONG_SPELL * 2 * h:
             # a stop: the body arrives over the foot half a stance after foot-flat and leaves half a stance
-            # before toe-off, and stands there in between
-            idx += [a + h, b - 1 - h]
+            # before toe-off, and stands there in between — anchored every half stance, so that the body
+            # follows the corrections (UWB) the foot's estimate gets while it stands
+            idx += list(range(a + h, b - 1 - h, h)) + [b - 1 - h]
         else:
             idx.append((a + b - 1) // 2)
     idx = np.asarray(idx)
