@@ -14,6 +14,11 @@ three anchors are dropped, as in the seed paper), the declination ``walk.toml`` 
   ranges disagree: an NLOS range in the round) — or by its innovation, the χ²₂ gate of the local filter;
 * the UWB tag is worn on the body, the IMU at the ankle: the fix's covariance gets the foot's horizontal
   offset from the body, σ = :data:`FOOT_LEVER_SIGMA_M`, per axis;
+* the output is the body's (waist's) track, as truth and every other method give it: the foot's positions at
+  mid-stance, shifted by half the step width (:class:`models.foot.body.BodyFromFoot`, 8 cm assumed) across
+  the direction of travel, interpolated (:func:`models.foot.body.body_from_foot`); the side from
+  ``[imu_foot] placement``. On the held-out study walks this took the open-sky mean from 0.28–0.30 m (the
+  ankle) to 0.16–0.17 m (bench/bench_foot_fkf.py --study);
 * the start: the median of the UWB fixes of the first :data:`START_WINDOW_S`, else the track is anchored on the
   first good GNSS fix (:func:`walks.reader.pdr_start_from_gnss`, as PDR is);
 * skipped (:class:`~walks.methods.MethodSkipped`) on walks without ``imu_foot.csv`` or whose file the reader
