@@ -14,6 +14,11 @@ three anchors are dropped, as in the seed paper), the declination ``walk.toml`` 
   ranges disagree: an NLOS range in the round) — or by its innovation, the χ²₂ gate of the local filter;
 * the UWB tag is worn on the body, the IMU at the ankle: the fix's covariance gets the foot's horizontal
   offset from the body, σ = :data:`FOOT_LEVER_SIGMA_M`, per axis;
+* the output is the body's (waist's) track, as truth and every other method give it: the foot's positions at
+  mid-stance, shifted by half the step width (:class:`models.foot.body.BodyFromFoot`, 8 cm assumed) across
+  the direction of travel, interpolated (:func:`models.foot.body.body_from_foot`); the side from
+  ``[imu_foot] placement``. On the held-out study walks this took the open-sky mean from 0.28–0.30 m (the
+  ankle) to 0.16–0.17 m (bench/bench_foot_fkf.py --study);
 * the start: the median of the UWB fixes of the first :data:`START_WINDOW_S`, else the track is anchored on the
   first good GNSS fix (:func:`walks.reader.pdr_start_from_gnss`, as PDR is);
 * skipped (:class:`~walks.methods.MethodSkipped`) on walks without ``imu_foot.csv`` or whose file the reader
@@ -28,12 +33,14 @@ import numpy as np
 
 from features.errors import DataError
 from features.imu.foot import read_foot_imu
+from models.foot.body import BodyFromFoot, body_from_foot
+from models.foot.mechanisation import quat_to_dcm
 from models.foot.ins import FootInsConfig, UwbFixes, run_foot_ins
 from walks.methods import Method, MethodContext, MethodSkipped, register
 from walks.reader import pdr_start_from_gnss
 from walks.track import Track
 
-__all__ = ["foot_ins_fkf", "walk_uwb_fixes", "UWB_MAX_RMS", "FOOT_LEVER_SIGMA_M", "START_WINDOW_S", "TRACK_RATE_HZ"]
+__all__ = ["foot_ins_fkf", "foot_side", "walk_uwb_fixes", "UWB_MAX_RMS", "FOOT_LEVER_SIGMA_M", "START_WINDOW_S", "TRACK_RATE_HZ"]
 
 UWB_MAX_RMS = 3.0
 """A UWB round whose weighted residual RMS exceeds this (its ranges disagree by 3σ) is rejected before the filter."""
@@ -47,6 +54,12 @@ START_WINDOW_S = 2.0
 
 TRACK_RATE_HZ = 10.0
 """The track is written at this rate (every k-th INS sample), Hz."""
+
+
+def _first_stance(stance: np.ndarray) -> int:
+    """Index of the first stance sample (0 when none)."""
+    idx = np.flatnonzero(stance)
+    return int(idx[0]) if len(idx) else 0
 
 
 def walk_uwb_fixes(ctx: MethodContext) -> tuple[UwbFixes | None, str]:
@@ -74,8 +87,17 @@ def walk_uwb_fixes(ctx: MethodContext) -> tuple[UwbFixes | None, str]:
     return UwbFixes(np.asarray(fixes.t_s, float)[ok], en, cov), f"{ok.sum()} of {len(fixes)} UWB fixes passed quality"
 
 
-def foot_ins_fkf(ctx: MethodContext, cfg: FootInsConfig = FootInsConfig()) -> Track:
-    """The federated foot INS on one walk (module docstring)."""
+def foot_side(placement: str) -> int:
+    """+1 for a right foot, −1 for a left one, from ``walk.toml``'s ``[imu_foot] placement`` (e.g. "right
+    ankle"); a placement naming neither side is taken as the right (the seed paper's)."""
+    p = str(placement).lower()
+    return -1 if "left" in p and "right" not in p else 1
+
+
+def foot_ins_fkf(ctx: MethodContext, cfg: FootInsConfig = FootInsConfig(),
+                 body: BodyFromFoot | None = BodyFromFoot()) -> Track:
+    """The federated foot INS on one walk (module docstring); the track is the body's by the mid-stance rule
+    (:func:`models.foot.body.body_from_foot`, ``body``), or the foot's own with ``body=None``."""
     data = ctx.inputs.data
     path = data.walk.path("imu_foot")
     if path is None:
@@ -102,9 +124,19 @@ def foot_ins_fkf(ctx: MethodContext, cfg: FootInsConfig = FootInsConfig()) -> Tr
         t_fix, e_fix, n_fix = anchor
         east += e_fix - np.interp(t_fix, run.t_s, east)
         north += n_fix - np.interp(t_fix, run.t_s, north)
+    output = "foot"
+    if body is not None:
+        # fallback direction of travel: the foot's x axis (forward as strapped in the seed paper) in ENU
+        x_enu = quat_to_dcm(run.quat[_first_stance(run.stance)])[:, 0]
+        yaw = float(np.arctan2(x_enu[0], x_enu[1]))
+        side = foot_side(table.get("placement", "right ankle"))
+        en = body_from_foot(run.t_s, np.column_stack([east, north]), run.stance, imu.rate_hz,
+                            BodyFromFoot(body.step_width_m, side * body.side), cfg.stance, yaw)
+        east, north = en[:, 0], en[:, 1]
+        output = f"body by mid-stance (step width {body.step_width_m:.2f} m, {'right' if side > 0 else 'left'} foot)"
     filters = ["ZUPT-INS"] + (["UWB"] if run.active[1] else []) + (["heading"] if run.active[2] else [])
     beta = ", ".join(f"{b:.2f}" for b, a in zip(run.sharing, run.active) if a)
-    note = f"local filters {' + '.join(filters)} (beta {beta}); UWB: {uwb_note}"
+    note = f"local filters {' + '.join(filters)} (beta {beta}); UWB: {uwb_note}; output {output}"
     k = max(int(round(imu.rate_hz / TRACK_RATE_HZ)), 1)
     sl = slice(0, None, k)
     info = {"note": note, "strides": run.strides, "uwb_accepted_share":

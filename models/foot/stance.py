@@ -26,7 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["StanceConfig", "glrt_statistic", "detect_stance", "count_strides", "stance_segments"]
+__all__ = ["StanceConfig", "glrt_statistic", "detect_stance", "count_strides", "stance_segments", "stance_spells"]
 
 
 @dataclass(frozen=True)
@@ -110,7 +110,12 @@ def _cleaned(stance: np.ndarray, rate_hz: float, cfg: StanceConfig) -> np.ndarra
     return s
 
 
+def stance_spells(stance: np.ndarray, rate_hz: float, cfg: StanceConfig = StanceConfig()) -> np.ndarray:
+    """[start, stop) index pairs (n_spells, 2) of the stance spells after :func:`_cleaned` (gaps shorter than
+    ``min_swing_s`` closed, spells shorter than ``min_stance_s`` dropped): one per footfall."""
+    return stance_segments(_cleaned(stance, rate_hz, cfg))
+
+
 def count_strides(stance: np.ndarray, rate_hz: float, cfg: StanceConfig = StanceConfig()) -> int:
-    """Strides of the instrumented foot: swings between two stance spells (after :func:`_cleaned`)."""
-    runs = stance_segments(_cleaned(stance, rate_hz, cfg))
-    return max(len(runs) - 1, 0)
+    """Strides of the instrumented foot: swings between two stance spells (:func:`stance_spells`)."""
+    return max(len(stance_spells(stance, rate_hz, cfg)) - 1, 0)
