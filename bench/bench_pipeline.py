@@ -75,6 +75,10 @@
    329 MiB, 40.5 min 450 MiB, 4.0 MiB per minute of walk, so about 2.2 GiB projected for 8 hours (not run);
    this branch on the same two walks: 296 and 327 MiB. An earlier run of this section without the fixed glibc
    mmap threshold (walks/segments.py) read 303 / 367 MiB (1.21).
+   With run's default segment of an hour (set after the merge: seams cost accuracy), ``--memory-only --long-h
+   1.1`` on a quiet machine: 10 min 282 MiB (120x real time), 66 min (two segments, the first cut 3,610 s)
+   479 MiB (116x; oaconvolve best of 3 1,829x, ratio 0.063): ratio 1.70. Any longer walk is bounded by the same
+   one-hour cut; ``--segment-s 600`` gives the 1.126 above.
 
 Usage: ``python bench/bench_pipeline.py [--quick] [--evaluate-only | --simulator-only | --memory-only]``
 (``--quick``: 2-minute walks, 4 walks; ``--evaluate-only``: 2 training walks of 120 s, then section 3 only;
