@@ -3,7 +3,7 @@ federated Kalman filter (issue 26; seed paper by Chen, Zhang, Chen, Liu & Wang: 
 ankle, 100 Hz, Mini3s UWB, UWB dropped with fewer than three anchors). Registered on import (``walks/__init__``).
 
 What it reads (as a real crew's logs, never the simulator): ``imu_foot.csv``
-(:func:`features.imu.foot.read_foot_imu`), ``uwb.csv`` through the UWB helper's reader and range-only
+(:func:`features.imu.foot.read_foot_imu`), ``uwb.csv`` as :func:`walks.reader.read_walk` holds it, solved range-only
 multilateration (:func:`features.uwb.position.uwb_positions` with ``use_aoa="never"``: rounds with fewer than
 three anchors are dropped, as in the seed paper), the declination ``walk.toml`` states.
 
@@ -64,18 +64,18 @@ def _first_stance(stance: np.ndarray) -> int:
 
 def walk_uwb_fixes(ctx: MethodContext) -> tuple[UwbFixes | None, str]:
     """The walk's UWB fixes for the UWB local filter (quality-filtered, lever arm added), and a note."""
-    from features.uwb.position import UwbSolveConfig, uwb_positions
-    from features.uwb.reader import read_uwb
+    from features.uwb.position import UwbSolveConfig
 
     data = ctx.inputs.data
-    path = data.walk.path("uwb")
-    if path is None:
+    if data.walk.path("uwb") is None:
         return None, "no uwb.csv"
     if not data.site.uwb_anchors:
         return None, "uwb.csv but the site lists no [[uwb_anchors]]"
-    try:
-        fixes = uwb_positions(read_uwb(path), data.site.uwb_anchors, data.site.device_height_m,
-                              UwbSolveConfig(use_aoa="never"))
+    if data.uwb is None:            # read_walk refused the file and said why in its notes
+        why = next((n for n in data.notes if n.startswith("uwb")), "not readable")
+        return None, f"uwb.csv unusable ({why})"
+    try:                            # the log read_walk already holds, solved range-only (the seed paper's rule)
+        fixes = data.uwb.positions(UwbSolveConfig(use_aoa="never"))
     except DataError as exc:
         return None, f"uwb.csv unusable ({exc})"
     rms = np.nan_to_num(np.asarray(fixes.rms_residual, float), nan=0.0)
