@@ -36,6 +36,7 @@ from typing import Iterator
 
 import numpy as np
 import soundfile as sf
+from numba import njit
 
 from features.errors import ConfigError
 from features.fileio import atomic_path
@@ -368,9 +369,23 @@ class _Recorder:
             mixed = acc.pop_block() + np.concatenate(pieces)
             if self.codec is not None:
                 mixed = self.codec(mixed)
-            q = np.rint(mixed * 32767.0)
-            self.n_clipped += int(np.count_nonzero(np.abs(q) > 32767))
-            self.out.write(np.clip(q, -32768, 32767).astype(np.int16))
+            pcm, clipped = _to_pcm16(mixed)
+            self.n_clipped += clipped
+            self.out.write(pcm)
+
+
+@njit(cache=True)
+def _to_pcm16(x: np.ndarray) -> tuple[np.ndarray, int]:
+    """Full-scale floats to int16 PCM: round(x·32767) to the nearest (ties to even), clipped to the int16 range;
+    and how many samples were over full scale (|round(x·32767)| > 32767). One pass."""
+    out = np.empty(len(x), np.int16)
+    clipped = 0
+    for i in range(len(x)):
+        q = np.rint(x[i] * 32767.0)
+        if abs(q) > 32767.0:
+            clipped += 1
+        out[i] = np.int16(min(max(q, -32768.0), 32767.0))
+    return out, clipped
 
 
 def _hardware_factors(src: np.ndarray, rx: np.ndarray, axes: np.ndarray, f_c_hz: np.ndarray, c: float,
