@@ -37,6 +37,7 @@ boresight ± ``boresight_sigma_deg``, antenna delay and PDoA offset residuals. P
 from __future__ import annotations
 
 import math
+import struct
 import zlib
 from dataclasses import dataclass, fields
 
@@ -194,7 +195,13 @@ def simulate_uwb(ctx: StreamContext, cfg: UwbSimConfig = UwbSimConfig()) -> tupl
     scene = build_uwb_scene(site)
     rng = stream_rng(ctx.seed, "uwb")
     reach = _max_range_m()
+    # The channel is computed once per anchor, channel second and 0.5 m of ground, at the first poll there
+    # (``cache``; keys of past seconds are never met again, so it is emptied when the second changes); a walker
+    # standing still meets the same exact position second after second: ``uwb_paths`` is a function of it, and
+    # ``exact`` keeps the last few thousand (emptied when full — a bound on memory, not a change of output).
     cache: dict = {}
+    exact: dict = {}
+    tc_now = None
     heard_dbm = np.full(len(ids), -np.inf)       # the tag's memory: last first-path level per anchor
     heard_t = np.full(len(ids), -np.inf)
     rows, truth, faded, first, q_noise, sweep = [], [], [], [], [], 0
@@ -223,10 +230,19 @@ def simulate_uwb(ctx: StreamContext, cfg: UwbSimConfig = UwbSimConfig()) -> tupl
             if d > reach:
                 continue
             tc = round(t * cfg.channel_rate_hz)
+            if tc != tc_now:
+                cache.clear()
+                tc_now = tc
             key = (j, tc, round(e * 2.0), round(n * 2.0))
             paths = cache.get(key)
             if paths is None:
-                paths = cache[key] = uwb_paths(scene, xyz[j], float(bore[j]), (e, n, u))
+                here = (j, struct.pack("3d", e, n, u))          # the exact bits (−0.0 is not 0.0 here)
+                paths = exact.get(here)
+                if paths is None:
+                    if len(exact) >= 4096:
+                        exact.clear()
+                    paths = exact[here] = uwb_paths(scene, xyz[j], float(bore[j]), (e, n, u))
+                cache[key] = paths
             got = _measure(rng, paths, cfg)
             if got is None:
                 continue
