@@ -25,7 +25,7 @@
 
 4. **The simulator** (issue 25 item 2, :func:`simulator_section`): a 10-minute walk on the benchmark site
    (site seed 5, walk seed 40) simulated end to end by ``simulate_walk`` (every file: gnss.nmea, imu.csv,
-   truth_steps.csv, audio.wav, audio_truth.csv, truth.csv, walk.toml), each run in a fresh spawned process,
+   truth_steps.csv, audio.wav, audio_truth.csv, uwb.csv, imu_foot.csv, truth.csv, walk.toml), each run in a fresh spawned process,
    best of 2: × real time by wall clock and by the process's CPU time (the fairer clock on a shared machine);
    the peak resident set of that process (``ru_maxrss``) beside its resident set after the imports; then
    stream by stream (each stream's simulation and its file writing apart, CPU s; the WAV is written block by
@@ -581,6 +581,9 @@ def _simulator_child(site_dir: str, out_dir: str, duration_s: float, seed: int, 
     from simulation.gnss.stream import simulate_gnss, to_nmea_epochs
     from simulation.imu.stream import imu_csv_text, simulate_imu, truth_steps_csv_text
     from simulation.acoustic.stream import write_audio
+    from features.uwb.reader import write_uwb
+    from simulation.imu.foot import IMU_FOOT_FILE, foot_csv_text, simulate_foot_imu
+    from simulation.uwb.stream import UWB_FILE, simulate_uwb
     from simulation.rng import stream_rng
     from simulation.site.route import RouteConfig, plan_route, route_trajectory
     from simulation.streams import StreamContext
@@ -621,6 +624,15 @@ def _simulator_child(site_dir: str, out_dir: str, duration_s: float, seed: int, 
         lap("IMU: CSV text and files")
         write_audio(ctx)
         lap("audio: render_audio (WAV, CSV within)")
+        if site.uwb_anchors:
+            uwb_log, _ = simulate_uwb(ctx)
+            lap("UWB: simulate_uwb")
+            write_uwb(out / UWB_FILE, uwb_log)
+            lap("UWB: CSV text and file")
+        foot, _ = simulate_foot_imu(ctx)
+        lap("foot IMU: simulate_foot_imu")
+        atomic_write_text(out / IMU_FOOT_FILE, foot_csv_text(foot))
+        lap("foot IMU: CSV text and file")
         write_truth_csv(out / "truth.csv", site, traj)
         lap("truth.csv")
     wall, cpu = time.perf_counter() - t0, time.process_time() - c0

@@ -271,7 +271,8 @@ class _Emitter:
             if moved:
                 (gain,), (extra,) = self.hardware_factors(arr.t_e_s[j:j + 1], src[None], rx[None], [bid], [spec])
             if gain != 1.0 or extra != 0.0:
-                paths = replace(paths, length_m=paths.length_m + extra, gain=paths.gain * gain)
+                paths = PathSet(kind=paths.kind, length_m=paths.length_m + extra, gain=paths.gain * gain,
+                                detour_m=paths.detour_m, box=paths.box, direct_m=paths.direct_m, los=paths.los)
         t_a = t_e + paths.length_m[0] / c_e
         best_db = sl_db + 20.0 * math.log10(max(paths.gain.max(), 1e-12)) - alpha * paths.length_m[0]
         first_sample = (t_a - self.true_start) * self.fs_true
