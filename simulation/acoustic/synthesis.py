@@ -453,7 +453,8 @@ class AmbientNoise:
         rng = stream_rng(self.seed, "audio", "noise", k)
         click_len = self.discharges.template_len
         out = np.zeros(n + click_len)
-        out[:n] = rng.standard_normal(n) * self.noise_rms
+        rng.standard_normal(n, out=out[:n])          # drawn in place: the same values as into a new array
+        out[:n] *= self.noise_rms
         b0 = k * CHUNK_SAMPLES
         grid = self.true_start + (b0 + np.array([0.0, n / 2.0, float(n)])) / self.fs_true
         pos = np.column_stack([np.interp(grid, self.traj.t_s, self.traj.east_m),
@@ -463,8 +464,10 @@ class AmbientNoise:
             d = np.maximum(_distance_to_boxes(pos, self.tanks), 1.0)
             amp = np.interp(t_true, grid, _db_to_digital_rms(cfg.hum_db_spl_1m, cfg) * math.sqrt(2.0) / d)
             # 2·mains and harmonics (magnetostriction), −3 dB each
-            out[:n] += amp * hum_samples(t_true, 1.0 / self.fs_true, 2.0 * np.pi * 2.0 * cfg.mains_hz,
-                                           self.hum_phase, _HUM_WEIGHTS)
+            hum = hum_samples(t_true, 1.0 / self.fs_true, 2.0 * np.pi * 2.0 * cfg.mains_hz, self.hum_phase,
+                              _HUM_WEIGHTS)
+            hum *= amp
+            out[:n] += hum
         if cfg.corona_rate_hz > 0:
             t0 = self.true_start + b0 / self.fs_true
             up = float(np.interp(grid[1], self.traj.t_s, self.traj.up_m))
