@@ -48,8 +48,8 @@ from features.errors import ConfigError
 from features.site import Site
 from simulation.rng import stream_rng
 
-__all__ = ["HardwareConfig", "true_beacon_positions", "beacon_delays_s", "CodecFilter", "piston_directivity",
-           "beacon_axes", "torso_shadow"]
+__all__ = ["HardwareConfig", "true_beacon_positions", "beacon_delays_s", "CodecFilter", "sos_filter",
+           "piston_directivity", "beacon_axes", "torso_shadow"]
 
 
 @dataclass(frozen=True)

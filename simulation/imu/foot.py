@@ -167,12 +167,16 @@ def foot_motion(traj: Trajectory, strikes: np.ndarray, stride_s: float, rate_hz:
     # hs_prev + 0.3·(t_hs − hs_prev)), so footfall j's stance is written only up to where footfall j + 1's
     # phases write it again (its toe-off rocker; its swing for E, N, yaw, which the rocker keeps): index
     # ranges of the sorted grid (the first sample at or after a time) instead of masks over the whole walk.
-    d_prev = [max(h, t[0] - 1.0) for h in np.r_[-np.inf, strikes[:-1]]]
-    d_sw_all = [min(fg.swing * stride_s, 0.4 * (t_hs - p)) for t_hs, p in zip(strikes, d_prev)]
-    d_to_all = [min(fg.toe_rocker * stride_s, 0.3 * (t_hs - p)) for t_hs, p in zip(strikes, d_prev)]
+    hs_prev = [max(h, t[0] - 1.0) for h in np.r_[-np.inf, strikes[:-1]]]   # the previous heel strike (or t0 − 1 s)
+    d_sw_all = [min(fg.swing * stride_s, 0.4 * (t_hs - p)) for t_hs, p in zip(strikes, hs_prev)]
+    d_to_all = [min(fg.toe_rocker * stride_s, 0.3 * (t_hs - p)) for t_hs, p in zip(strikes, hs_prev)]
     t_sw0_all = [t_hs - d_sw for t_hs, d_sw in zip(strikes, d_sw_all)]
     t_to0_all = [t_sw0 - d_to for t_sw0, d_to in zip(t_sw0_all, d_to_all)]
-    at = lambda x: int(np.searchsorted(t, x, side="left"))      # noqa: E731 — first sample with t ≥ x
+
+    def at(x: float) -> int:
+        """Index of the first sample at or after time ``x`` (t is sorted)."""
+        return int(np.searchsorted(t, x, side="left"))
+
     for j, t_hs in enumerate(strikes):
         # swing into footfall j + 1 (footfall 0 is the initial stance)
         d_sw, d_to, t_sw0, t_to0 = d_sw_all[j], d_to_all[j], t_sw0_all[j], t_to0_all[j]
