@@ -25,8 +25,9 @@
 
 4. **The simulator** (issue 25 item 2, :func:`simulator_section`): a 10-minute walk on the benchmark site
    (site seed 5, walk seed 40) simulated end to end by ``simulate_walk`` (every file: gnss.nmea, imu.csv,
-   truth_steps.csv, audio.wav, audio_truth.csv, uwb.csv, imu_foot.csv, truth.csv, walk.toml), each run in a fresh spawned process,
-   best of 2: × real time by wall clock and by the process's CPU time (the fairer clock on a shared machine);
+   truth_steps.csv, audio.wav, audio_truth.csv, uwb.csv, imu_foot.csv, truth.csv, walk.toml), each run in a
+   fresh spawned process, best of 2: × real time by wall clock and by the process's CPU time (the fairer clock
+   on a shared machine);
    the peak resident set of that process (``ru_maxrss``) beside its resident set after the imports; then
    stream by stream (each stream's simulation and its file writing apart, CPU s; the WAV is written block by
    block inside the audio renderer, so its writing is re-timed alone); ``oaconvolve`` over the walk's audio

@@ -256,7 +256,8 @@ def simulate_uwb(ctx: StreamContext, cfg: UwbSimConfig = UwbSimConfig()) -> tupl
             rel = _wrap(true_rel + float(paths.angle_off_rad[i]) + pdoa[j])
             if abs(rel) > math.pi / 2:          # behind the array: its mirror image
                 rel = math.copysign(math.pi, rel) - rel
-            sig = (az_sigma * scale / max(math.cos(rel), 0.26) * (1.0 if kind == PATH_DIRECT else cfg.nlos_azimuth_factor))
+            sig = (az_sigma * scale / max(math.cos(rel), 0.26)
+                   * (1.0 if kind == PATH_DIRECT else cfg.nlos_azimuth_factor))
             az = min(max(rel + rng.normal(0.0, sig), -math.pi / 2), math.pi / 2)
             rows.append((t, ids[j], max(rng_m, 0.01), math.degrees(az)))
             truth.append((d, kind, math.degrees(true_rel)))
