@@ -79,6 +79,7 @@ class _Accumulator:
         self.n_total = n_total
         self.base = 0
         self.buf = np.zeros(4 * block)
+        self.used = 0           # buf[used:] is all zeros
 
     def add(self, start: int, seg: np.ndarray) -> None:
         lo, hi = max(start, self.base), min(start + len(seg), self.n_total)
@@ -88,12 +89,15 @@ class _Accumulator:
         if need > len(self.buf):
             self.buf = np.concatenate([self.buf, np.zeros(need - len(self.buf) + self.block)])
         self.buf[lo - self.base:hi - self.base] += seg[lo - start:hi - start]
+        self.used = max(self.used, need)
 
     def pop_block(self) -> np.ndarray:
         n = min(self.block, self.n_total - self.base)
         out = self.buf[:n].copy()
-        self.buf[:-n] = self.buf[n:]     # shift in place (numpy copies overlapping slices safely)
-        self.buf[-n:] = 0.0
+        m = max(self.used, n)
+        self.buf[:m - n] = self.buf[n:m]     # shift the written part in place (overlapping slices are safe)
+        self.buf[m - n:m] = 0.0
+        self.used = m - n
         self.base += n
         return out
 
