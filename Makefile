@@ -26,9 +26,14 @@ test: $(STAMP)
 	$(BIN)/lint-imports
 	$(BIN)/python -m pytest -n 2 -q
 
+# `make bench` prints the pipeline's speed and memory figures (every figure of issue 25, with the oaconvolve
+# yardstick, in one run: about 20 minutes); `make bench BENCH="bench/bench_audio.py --walk-only"` runs another.
+# The study benches (fusion_study, env_learning_curve, ...) take a built split: see their docstrings.
+BENCH ?= bench/bench_pipeline.py
+
 bench: $(STAMP)
 	$(BIN)/python -m pip install --quiet -e ".[compare]"
-	for f in bench/*.py; do $(BIN)/python $$f || exit 1; done
+	$(BIN)/python $(BENCH)
 
 clean:
 	rm -rf $(DEMO_DIR) .pytest_cache
