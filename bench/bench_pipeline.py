@@ -64,6 +64,26 @@
    37,084 calls of ``_measure``), GNSS 1.4 s, foot IMU 1.1 s (profiled seconds, inflated by the profiler; the
    UWB stream is now the second cost and the next place to look for the 100× target).
 
+   Third round (branch ``simspeed3``, 2026-12-02, machine heavily shared: load average 8.3-9.9 against 2.5-3.4
+   above, so every figure reads ~20 % slower than the same code on a quiet machine). Every file of five runs
+   byte-identical to main's (``cmp``): 600 s walks (site 5, seed 40) and (site 9, seed 41), a 30 s walk, a
+   120 s walk with ``acoustic_air`` / ``acoustic_hardware`` / Doppler off, a 10 s-per-cell survey (142 files).
+   What changed: the UWB stream (poll positions interpolated per block of rounds, the per-poll draws on Python
+   floats with the quality's received total computed for all rows at once, the channel of an exact position
+   computed once: a walker standing still polls it second after second, 9,602 channel computations → 3,295),
+   the foot IMU (footfall phases written over index ranges instead of whole-walk masks; the dipole field
+   summed over blocks of 4,096 positions: 3-4× faster, the same sums), the codec's biquads and the int16
+   conversion compiled (scipy's ``sosfilt`` operations in its order), the Hatch filter compiled, smaller
+   per-emission savings in the audio plan and the accumulator (``write_audio`` alone, 3 alternated rounds:
+   main 4.79-4.94 s, branch 4.34-4.55 s; the GNSS writer reads ~0.05 s slower only because numba's one-time
+   start, ~0.17 s, now falls in it, the first stream). ``simulate_walk`` alone, 3 alternated rounds
+   (site 5, seed 40; load 8.3-8.8): main CPU 11.06-11.34 s (53-54×), branch 8.62-8.74 s (69-70×), ratio 1.29.
+   This section (load 9.7-9.9): main 9.37 s (64×; audio 4.72, UWB 1.81, foot IMU 1.09, GNSS 0.99 s), branch
+   7.52 s (80×; audio 4.51, UWB 0.58, foot IMU 0.60, GNSS 1.03 s); peak RSS 410 / 416 MiB. The 100× target is
+   still missed: audio is 61 % of the walk, and what is left there is spread over 13,000 emissions (Python
+   and small-array numpy per emission, ~70 µs, the tail's generator, three FFTs) and the ambient's 28.8 M
+   Gaussian draws; the GNSS's RTK loop (small solves, LAPACK rounding) and scipy's import (~0.5 s) as before.
+
 5. **Long walks in bounded memory** (issue 25 item 3, :func:`memory_section`, ``--memory-only``): peak RSS
    (VmHWM of a fresh process) of ``envfuse run`` (default method) on a 10-minute and an 8-hour walk, both one
    simulated 300 s walk looped (``tests/long_walk.py``), and the 8-hour run's wall time and × real time
