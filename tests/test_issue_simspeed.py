@@ -219,3 +219,97 @@ def test_rendered_chirp_sample_by_sample_at_a_fractional_delay():
     assert err < 0.03
     shifted = np.roll(want, 1)
     assert np.sqrt(np.mean((seg - shifted) ** 2)) / np.sqrt(np.mean(want ** 2)) > 0.5
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# The UWB, foot-IMU and codec hot paths (the second speed pass)
+# ---------------------------------------------------------------------------------------------------------------
+
+def test_codec_biquads_equal_scipy_sosfilt_sample_for_sample_across_blocks():
+    """The compiled cascade against scipy's own sosfilt (an independent implementation): bit for bit, state
+    carried over uneven blocks; a 4th-order 22 kHz low-pass passes 17 kHz and stops 23.9 kHz."""
+    from scipy import signal
+    from simulation.acoustic.hardware import sos_filter
+    sos = signal.butter(4, 22_000.0, btype="low", fs=48_000.0, output="sos")
+    x = np.random.default_rng(3).standard_normal(30_001)
+    want, zf = signal.sosfilt(sos, x, zi=np.zeros((2, 2)))
+    zi = np.zeros((2, 2))
+    got = np.concatenate([sos_filter(sos, x[a:b], zi) for a, b in ((0, 1), (1, 9_999), (9_999, 30_001))])
+    assert np.array_equal(got, want) and np.array_equal(zi, zf)
+    t = np.arange(48_000) / 48_000.0
+    for f_hz, lo, hi in ((17_000.0, 0.95, 1.02), (23_900.0, 0.0, 0.35)):
+        y = sos_filter(sos, np.sin(2 * np.pi * f_hz * t), np.zeros((2, 2)))[4_800:]
+        assert lo < np.sqrt(2.0) * y.std() < hi
+
+
+def test_pcm16_rounds_ties_to_even_clips_and_counts_the_clipped():
+    from simulation.acoustic.stream import _to_pcm16
+    half = 0.5 / 32767.0
+    x = np.array([0.0, half, 3 * half, -half, -3 * half, 1.0, -1.0, 1.2, -1.2, 32767.5 / 32767.0, 0.25])
+    pcm, clipped = _to_pcm16(x)
+    assert pcm.dtype == np.int16
+    # 0.5 → 0, 1.5 → 2, −0.5 → 0, −1.5 → −2 (ties to even); ±1.2 and 32767.5 → 32768 over full scale
+    assert pcm.tolist() == [0, 0, 2, 0, -2, 32767, -32767, 32767, -32768, 32767, 8192]
+    assert clipped == 3
+
+
+def test_slab_chords_by_hand_oblique_parallel_and_missing():
+    from simulation.uwb.channel import segment_chords_m
+    boxes = np.array([[4.0, 6.0, -1.0, 1.0, 5.0],      # crossed along east: 2 m
+                      [4.0, 6.0, 2.0, 3.0, 5.0],       # beside the segment: 0
+                      [-1.0, 1.0, -1.0, 1.0, 0.5]])    # the segment starts inside it at 1 m height, above its top
+    got = segment_chords_m([0.0, 0.0, 1.0], [10.0, 0.0, 1.0], boxes)
+    assert got.tolist() == pytest.approx([2.0, 0.0, 0.0], abs=1e-12)
+    # oblique 3-4-5 segment (east 3, north 4 per 5 m) through a box spanning east 1.5–3: t 0.5–1 of a 5 m segment
+    got = segment_chords_m([0.0, 0.0, 1.0], [3.0, 4.0, 1.0], np.array([[1.5, 3.0, -10.0, 10.0, 2.0]]))
+    assert got.tolist() == pytest.approx([2.5], abs=1e-12)
+    # rising segment leaving through the top at 2 m: from t = 0 (inside) to t = 0.25 of a √(100 + 16) m segment
+    got = segment_chords_m([0.0, 0.0, 1.0], [10.0, 0.0, 5.0], np.array([[-1.0, 20.0, -1.0, 1.0, 2.0]]))
+    assert got.tolist() == pytest.approx([0.25 * math.sqrt(116.0)], abs=1e-12)
+
+
+def test_uwb_quality_of_rows_by_hand():
+    """First path over the received total with the clusters' tails: two paths of −80 and −86 dBm, the first
+    path the stronger (total −80 + 10·log10(1.2512 · 1.5012) = −77.262 dBm); a row of one path; a −inf path
+    counts for nothing; the result is at most 0 dB."""
+    from simulation.uwb.channel import CLUSTER_TAIL_DB
+    from simulation.uwb.stream import _quality_db
+    tail = 1.0 + 10.0 ** (CLUSTER_TAIL_DB / 10.0)
+    rows = [np.array([-80.0, -86.0]), np.array([-90.0]), np.array([-70.0, -np.inf, -73.0]), np.array([-75.0])]
+    got = _quality_db(rows, [0, 0, 0, 0], [0.1, 0.0, 0.0, 50.0])
+    want0 = -80.0 - 10.0 * math.log10((1e-8 + 10.0 ** -8.6) * tail) + 0.1
+    assert got[0] == pytest.approx(want0, abs=1e-12) and got[0] == pytest.approx(-2.738 + 0.1, abs=0.001)
+    assert got[1] == pytest.approx(-10.0 * math.log10(tail), abs=1e-12)
+    assert got[2] == pytest.approx(-70.0 - 10.0 * math.log10((1e-7 + 10.0 ** -7.3) * tail), abs=1e-12)
+    assert got[3] == 0.0
+    assert _quality_db([], [], []) == []
+
+
+def test_foot_bias_recursion_by_hand():
+    from simulation.imu.foot import _ar1
+    w = np.array([[9.0, 9.0, 9.0], [1.0, 0.0, -1.0], [0.5, 2.0, 0.0]])
+    x = _ar1(0.5, np.array([2.0, -4.0, 0.0]), w)
+    assert x.tolist() == [[2.0, -4.0, 0.0], [2.0, -2.0, -1.0], [1.5, 1.0, -0.5]]
+    assert _ar1(0.5, np.zeros(3), np.zeros((0, 3))).shape == (0, 3)
+
+
+def test_accumulator_blocks_equal_the_whole_recording_summed_at_once():
+    """Segments added anywhere ahead of the flush point (across block edges, past the buffer, clipped at the
+    recording's end) come out block by block as the same samples summed into one array; only the written part
+    of the buffer is shifted, so a stale sample would show here."""
+    from simulation.acoustic.stream import _Accumulator
+    n_total, block = 1_000, 64
+    rng = np.random.default_rng(4)
+    acc, whole, popped = _Accumulator(block, n_total), np.zeros(n_total), []
+    for start in sorted(rng.integers(-20, n_total + 20, 60).tolist()):
+        while acc.base + block <= start:                # the renderer flushes up to each emission
+            popped.append(acc.pop_block())
+        seg = rng.standard_normal(int(rng.integers(1, 400)))
+        acc.add(start, seg)
+        lo, hi = max(start, 0), min(start + len(seg), n_total)
+        if hi > lo:
+            whole[lo:hi] += seg[lo - start:hi - start]
+    while acc.base < n_total:
+        popped.append(acc.pop_block())
+    got = np.concatenate(popped)
+    assert len(got) == n_total and np.array_equal(got, whole)

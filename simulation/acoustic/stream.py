@@ -36,6 +36,7 @@ from typing import Iterator
 
 import numpy as np
 import soundfile as sf
+from numba import njit
 
 from features.errors import ConfigError
 from features.fileio import atomic_path
@@ -78,6 +79,7 @@ class _Accumulator:
         self.n_total = n_total
         self.base = 0
         self.buf = np.zeros(4 * block)
+        self.used = 0           # buf[used:] is all zeros
 
     def add(self, start: int, seg: np.ndarray) -> None:
         lo, hi = max(start, self.base), min(start + len(seg), self.n_total)
@@ -87,12 +89,15 @@ class _Accumulator:
         if need > len(self.buf):
             self.buf = np.concatenate([self.buf, np.zeros(need - len(self.buf) + self.block)])
         self.buf[lo - self.base:hi - self.base] += seg[lo - start:hi - start]
+        self.used = max(self.used, need)
 
     def pop_block(self) -> np.ndarray:
         n = min(self.block, self.n_total - self.base)
         out = self.buf[:n].copy()
-        self.buf[:-n] = self.buf[n:]     # shift in place (numpy copies overlapping slices safely)
-        self.buf[-n:] = 0.0
+        m = max(self.used, n)
+        self.buf[:m - n] = self.buf[n:m]     # shift the written part in place (overlapping slices are safe)
+        self.buf[m - n:m] = 0.0
+        self.used = m - n
         self.base += n
         return out
 
@@ -270,7 +275,8 @@ class _Emitter:
             if moved:
                 (gain,), (extra,) = self.hardware_factors(arr.t_e_s[j:j + 1], src[None], rx[None], [bid], [spec])
             if gain != 1.0 or extra != 0.0:
-                paths = replace(paths, length_m=paths.length_m + extra, gain=paths.gain * gain)
+                paths = PathSet(kind=paths.kind, length_m=paths.length_m + extra, gain=paths.gain * gain,
+                                detour_m=paths.detour_m, box=paths.box, direct_m=paths.direct_m, los=paths.los)
         t_a = t_e + paths.length_m[0] / c_e
         best_db = sl_db + 20.0 * math.log10(max(paths.gain.max(), 1e-12)) - alpha * paths.length_m[0]
         first_sample = (t_a - self.true_start) * self.fs_true
@@ -368,9 +374,23 @@ class _Recorder:
             mixed = acc.pop_block() + np.concatenate(pieces)
             if self.codec is not None:
                 mixed = self.codec(mixed)
-            q = np.rint(mixed * 32767.0)
-            self.n_clipped += int(np.count_nonzero(np.abs(q) > 32767))
-            self.out.write(np.clip(q, -32768, 32767).astype(np.int16))
+            pcm, clipped = _to_pcm16(mixed)
+            self.n_clipped += clipped
+            self.out.write(pcm)
+
+
+@njit(cache=True)
+def _to_pcm16(x: np.ndarray) -> tuple[np.ndarray, int]:
+    """Full-scale floats to int16 PCM: round(x·32767) to the nearest (ties to even), clipped to the int16 range;
+    and how many samples were over full scale (|round(x·32767)| > 32767). One pass."""
+    out = np.empty(len(x), np.int16)
+    clipped = 0
+    for i in range(len(x)):
+        q = np.rint(x[i] * 32767.0)
+        if abs(q) > 32767.0:
+            clipped += 1
+        out[i] = np.int16(min(max(q, -32768.0), 32767.0))
+    return out, clipped
 
 
 def _hardware_factors(src: np.ndarray, rx: np.ndarray, axes: np.ndarray, f_c_hz: np.ndarray, c: float,

@@ -27,6 +27,7 @@ Ambient sound (:class:`AmbientNoise`), drawn per fixed chunk of samples:
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field, fields
 
@@ -242,18 +243,21 @@ class ChirpRenderer:
         tail_len = int(5.0 * tail.decay_ms * 1e-3 * fs)
         tail0 = rel[0] + tail.onset_ms * 1e-3 * fs
         n_used = int(max(rel[keep].max(), tail0 + tail_len)) + chirp_length(spec, fs, eta) + _POST_SAMPLES
-        n_fft = sfft.next_fast_len(n_used, real=True)
+        n_fft = _fast_len(n_used)
         k0, k1 = self._band(n_fft, spec, eta)
-        k = np.arange(k0, k1)
-        f = k * fs / n_fft
         alpha = self._alpha(n_fft, k0, k1)
         # H(f) = Σ_p g_p · 10^(−(α(f)·L_p + ΔL_p(f))/20) · exp(−j2π k τ_p / n_fft)
-        g, length, detour, kind = paths.gain[keep], paths.length_m[keep], paths.detour_m[keep], paths.kind[keep]
+        if keep.all():      # most emissions: every path within the excess delay (often one path)
+            g, length, detour, kind, delay = paths.gain, paths.length_m, paths.detour_m, paths.kind, rel
+        else:
+            g, length, detour, kind, delay = (paths.gain[keep], paths.length_m[keep], paths.detour_m[keep],
+                                              paths.kind[keep], rel[keep])
         loss_db = alpha[None, :] * length[:, None]
         diff = kind == 3
         if diff.any():
+            f = np.arange(k0, k1) * fs / n_fft
             loss_db[diff] += maekawa_loss_db(fresnel_number(detour[diff, None], f[None, :], c))
-        h = band_response(g, loss_db, rel[keep], k0, n_fft)
+        h = band_response(g, loss_db, delay, k0, n_fft)
         # diffuse tail: Poisson arrivals, Gaussian amplitudes, envelope exp(−t/decay); E[Σa²] = level·(1/d²)
         n_taps = rng.poisson(tail.density_per_ms * 5.0 * tail.decay_ms)
         if not n_taps:
@@ -384,6 +388,12 @@ class _Plan:
     tail_gain: np.ndarray | None
 
 
+@functools.lru_cache(maxsize=4096)
+def _fast_len(n: int) -> int:
+    """``scipy.fft.next_fast_len(n, real=True)``, remembered (an emission's length recurs)."""
+    return sfft.next_fast_len(n, real=True)
+
+
 def _rfft_rows(x: np.ndarray, n: int) -> np.ndarray:
     return sfft.rfft(x, n, axis=-1)
 
@@ -453,7 +463,8 @@ class AmbientNoise:
         rng = stream_rng(self.seed, "audio", "noise", k)
         click_len = self.discharges.template_len
         out = np.zeros(n + click_len)
-        out[:n] = rng.standard_normal(n) * self.noise_rms
+        rng.standard_normal(n, out=out[:n])          # drawn in place: the same values as into a new array
+        out[:n] *= self.noise_rms
         b0 = k * CHUNK_SAMPLES
         grid = self.true_start + (b0 + np.array([0.0, n / 2.0, float(n)])) / self.fs_true
         pos = np.column_stack([np.interp(grid, self.traj.t_s, self.traj.east_m),
@@ -463,8 +474,10 @@ class AmbientNoise:
             d = np.maximum(_distance_to_boxes(pos, self.tanks), 1.0)
             amp = np.interp(t_true, grid, _db_to_digital_rms(cfg.hum_db_spl_1m, cfg) * math.sqrt(2.0) / d)
             # 2·mains and harmonics (magnetostriction), −3 dB each
-            out[:n] += amp * hum_samples(t_true, 1.0 / self.fs_true, 2.0 * np.pi * 2.0 * cfg.mains_hz,
-                                           self.hum_phase, _HUM_WEIGHTS)
+            hum = hum_samples(t_true, 1.0 / self.fs_true, 2.0 * np.pi * 2.0 * cfg.mains_hz, self.hum_phase,
+                              _HUM_WEIGHTS)
+            hum *= amp
+            out[:n] += hum
         if cfg.corona_rate_hz > 0:
             t0 = self.true_start + b0 / self.fs_true
             up = float(np.interp(grid[1], self.traj.t_s, self.traj.up_m))

@@ -60,6 +60,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 from scipy.signal import lfilter
 from scipy.stats import chi2
 
@@ -197,14 +198,25 @@ def hatch_smooth(err_m: np.ndarray, reset: np.ndarray, window: int) -> np.ndarra
     >>> hatch_smooth(e, r, 100)[:, 0].tolist()
     [1.0, 0.5, 0.3333333333333333, 3.0]
     """
+    return _hatch(np.ascontiguousarray(err_m, float), np.ascontiguousarray(reset, bool), float(window))
+
+
+@njit(cache=True)
+def _hatch(err_m: np.ndarray, reset: np.ndarray, window: float) -> np.ndarray:
+    """:func:`hatch_smooth`'s recursion, compiled (epoch by epoch, each satellite alone)."""
     n, k = err_m.shape
     out = np.empty((n, k))
     count = np.zeros(k)
     prev = np.zeros(k)
     for i in range(n):
-        count = np.where(reset[i], 1.0, np.minimum(count + 1.0, float(window)))
-        prev = np.where(reset[i], err_m[i], err_m[i] / count + (count - 1.0) / count * prev)
-        out[i] = prev
+        for j in range(k):
+            if reset[i, j]:
+                count[j] = 1.0
+                prev[j] = err_m[i, j]
+            else:
+                count[j] = min(count[j] + 1.0, window)
+                prev[j] = err_m[i, j] / count[j] + (count[j] - 1.0) / count[j] * prev[j]
+            out[i, j] = prev[j]
     return out
 
 

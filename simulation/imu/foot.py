@@ -46,6 +46,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 from scipy import ndimage
 
 from features.constants import GRAVITY_M_S2, OMEGA_EARTH_RAD_S
@@ -162,23 +163,35 @@ def foot_motion(traj: Trajectory, strikes: np.ndarray, stride_s: float, rate_hz:
     yaw = np.full(n, yaw_fl[0])
     flat = np.ones(n, bool)
     r_h, r_t = np.asarray(fg.r_heel), np.asarray(fg.r_toe)
-    hs_prev = -np.inf
+    # Footfall j's phases cover [t_to0, ∞) and footfall j + 1's start after its heel strike (t_to0 of j + 1 >
+    # hs_prev + 0.3·(t_hs − hs_prev)), so footfall j's stance is written only up to where footfall j + 1's
+    # phases write it again (its toe-off rocker; its swing for E, N, yaw, which the rocker keeps): index
+    # ranges of the sorted grid (the first sample at or after a time) instead of masks over the whole walk.
+    hs_prev = [max(h, t[0] - 1.0) for h in np.r_[-np.inf, strikes[:-1]]]   # the previous heel strike (or t0 − 1 s)
+    d_sw_all = [min(fg.swing * stride_s, 0.4 * (t_hs - p)) for t_hs, p in zip(strikes, hs_prev)]
+    d_to_all = [min(fg.toe_rocker * stride_s, 0.3 * (t_hs - p)) for t_hs, p in zip(strikes, hs_prev)]
+    t_sw0_all = [t_hs - d_sw for t_hs, d_sw in zip(strikes, d_sw_all)]
+    t_to0_all = [t_sw0 - d_to for t_sw0, d_to in zip(t_sw0_all, d_to_all)]
+
+    def at(x: float) -> int:
+        """Index of the first sample at or after time ``x`` (t is sorted)."""
+        return int(np.searchsorted(t, x, side="left"))
+
     for j, t_hs in enumerate(strikes):
         # swing into footfall j + 1 (footfall 0 is the initial stance)
-        d_sw = min(fg.swing * stride_s, 0.4 * (t_hs - max(hs_prev, t[0] - 1.0)))
-        d_to = min(fg.toe_rocker * stride_s, 0.3 * (t_hs - max(hs_prev, t[0] - 1.0)))
-        t_sw0 = t_hs - d_sw
-        t_to0 = t_sw0 - d_to
+        d_sw, d_to, t_sw0, t_to0 = d_sw_all[j], d_to_all[j], t_sw0_all[j], t_to0_all[j]
+        stop = at(t_to0_all[j + 1]) if j + 1 < len(strikes) else n     # the next footfall's phases from here
+        stop_en = at(t_sw0_all[j + 1]) if j + 1 < len(strikes) else n   # ... its swing
         a, b = pos_fl[j], pos_fl[j + 1]
         ya, yb = yaw_fl[j], yaw_fl[j + 1]
         # forefoot rocker about the toe of footfall j
-        m = (t >= t_to0) & (t < t_sw0)
+        m = slice(at(t_to0), at(t_sw0))
         th = fg.toe_off_pitch_rad * _minjerk((t[m] - t_to0) / d_to)
         f0, u0 = _rotate(r_t, th)
         # the ankle's forward offset from its flat position, its height
         pitch[m], fwd[m], up[m], flat[m] = th, f0 - r_t[0], u0, False
         # swing: ankle from the toe-off pose to the heel-strike pose of footfall j + 1
-        m = (t >= t_sw0) & (t < t_hs)
+        m = slice(at(t_sw0), at(t_hs))
         s = _minjerk((t[m] - t_sw0) / d_sw)
         f_to, u_to = _rotate(r_t, fg.toe_off_pitch_rad)
         f_hs, u_hs = _rotate(r_h, fg.heel_strike_pitch_rad)
@@ -193,15 +206,17 @@ def foot_motion(traj: Trajectory, strikes: np.ndarray, stride_s: float, rate_hz:
         fwd[m] = 0.0
         up[m] = u_to + (u_hs - u_to) * s + fg.clearance_m * 16.0 * s * s * (1 - s) ** 2
         flat[m] = False
-        # heel rocker of footfall j + 1, then flat on it
+        # heel rocker of footfall j + 1, then flat on it (until the next footfall's toe-off rocker)
         d_hr = fg.heel_rocker * stride_s
-        m = t >= t_hs
-        E[m], N[m], yaw[m], up[m], fwd[m], pitch[m], flat[m] = b[0], b[1], yb, r_h[1], 0.0, 0.0, True
-        m = (t >= t_hs) & (t < t_hs + d_hr)
+        i_hs = at(t_hs)
+        m = slice(i_hs, max(stop_en, i_hs))
+        E[m], N[m], yaw[m] = b[0], b[1], yb
+        m = slice(i_hs, max(stop, i_hs))
+        up[m], fwd[m], pitch[m], flat[m] = r_h[1], 0.0, 0.0, True
+        m = slice(i_hs, max(min(at(t_hs + d_hr), stop), i_hs))
         th = fg.heel_strike_pitch_rad * (1.0 - _minjerk((t[m] - t_hs) / d_hr))
         f0, u0 = _rotate(r_h, th)
         pitch[m], fwd[m], up[m], flat[m] = th, f0 - r_h[0], u0, False
-        hs_prev = t_hs
     dir_e, dir_n = np.sin(yaw), np.cos(yaw)
     pos = np.column_stack([E + fwd * dir_e, N + fwd * dir_n, up])
     # body FLU in ENU: x = forward pitched, y = left, z = x × y
@@ -230,10 +245,18 @@ def _gauss_markov(rng: np.random.Generator, n: int, dt: float, sigma: float, tau
     """(n, 3) first-order Gauss–Markov process of stationary σ and correlation time τ (Gelb 1974, ch. 3)."""
     phi = math.exp(-dt / tau_s)
     w = rng.normal(0.0, sigma * math.sqrt(1.0 - phi * phi), size=(n, 3))
-    x = np.empty((n, 3))
-    x[0] = rng.normal(0.0, sigma, size=3)
-    for k in range(1, n):
-        x[k] = phi * x[k - 1] + w[k]
+    return _ar1(phi, rng.normal(0.0, sigma, size=3), w)
+
+
+@njit(cache=True)
+def _ar1(phi: float, x0: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """x[0] = x0, x[k] = φ·x[k−1] + w[k] (k ≥ 1), per column of ``w`` (n, 3)."""
+    x = np.empty_like(w)
+    if len(w):
+        x[0] = x0
+    for k in range(1, len(w)):
+        for c in range(w.shape[1]):
+            x[k, c] = phi * x[k - 1, c] + w[k, c]
     return x
 
 

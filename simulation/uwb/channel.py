@@ -27,10 +27,12 @@ the straight line, a path round an obstruction from the other side (it passes th
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 
 from features.site import Site
 
@@ -101,17 +103,29 @@ def segment_chords_m(a_xyz, b_xyz, boxes: np.ndarray) -> np.ndarray:
     d = np.asarray(b_xyz, float) - a
     if len(boxes) == 0:
         return np.zeros(0)
-    lo = np.column_stack([boxes[:, 0], boxes[:, 2], np.zeros(len(boxes))])
-    hi = np.column_stack([boxes[:, 1], boxes[:, 3], boxes[:, 4]])
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t1 = (lo - a) / d
-        t2 = (hi - a) / d
-    par = np.abs(d) < 1e-12
-    inside = (a > lo) & (a < hi)
-    tmin = np.where(par, np.where(inside, -np.inf, np.inf), np.minimum(t1, t2)).max(axis=1)
-    tmax = np.where(par, np.where(inside, np.inf, -np.inf), np.maximum(t1, t2)).min(axis=1)
-    t = np.clip(np.minimum(tmax, 1.0) - np.maximum(tmin, 0.0), 0.0, None)
-    return t * float(np.linalg.norm(d))
+    return _slab_chords(a, d, np.asarray(boxes, float), float(np.linalg.norm(d)))
+
+
+@njit(cache=True)
+def _slab_chords(a: np.ndarray, d: np.ndarray, boxes: np.ndarray, length: float) -> np.ndarray:
+    """:func:`segment_chords_m` per box: along each axis the parameters t of the slab's two faces on a + t·d
+    (a segment parallel to an axis: all or nothing, by whether a lies strictly between the faces), the interval
+    shared by the three slabs, clipped to the segment [0, 1], times ``length`` = |d|."""
+    out = np.empty(len(boxes))
+    for b in range(len(boxes)):
+        tmin, tmax = -np.inf, np.inf
+        for ax in range(3):
+            lo = boxes[b, 2 * ax] if ax < 2 else 0.0
+            hi = boxes[b, 2 * ax + 1] if ax < 2 else boxes[b, 4]
+            if abs(d[ax]) < 1e-12:
+                inside = lo < a[ax] < hi
+                t_in, t_out = (-np.inf, np.inf) if inside else (np.inf, -np.inf)
+            else:
+                t1, t2 = (lo - a[ax]) / d[ax], (hi - a[ax]) / d[ax]
+                t_in, t_out = min(t1, t2), max(t1, t2)
+            tmin, tmax = max(tmin, t_in), min(tmax, t_out)
+        out[b] = max(min(tmax, 1.0) - max(tmin, 0.0), 0.0) * length
+    return out
 
 
 def _through(scene: UwbScene, chords: np.ndarray) -> tuple[float, float]:
@@ -125,6 +139,10 @@ def _through(scene: UwbScene, chords: np.ndarray) -> tuple[float, float]:
         if not math.isfinite(loss):
             return math.inf, math.inf
     return loss, excess
+
+
+_reflection_loss_db = functools.lru_cache(maxsize=None)(reflection_loss_db)
+"""reflection_loss_db per material, computed once (a site has a handful of materials)."""
 
 
 def _bend_sign(scene: UwbScene, anchor: np.ndarray, tag: np.ndarray, box: int) -> float:
@@ -148,26 +166,30 @@ def uwb_paths(scene: UwbScene, anchor_xyz, boresight_rad: float, tag_xyz) -> Uwb
     p0 = TX_POWER_DBM + gain
     chords = segment_chords_m(anchor, tag, scene.boxes)
     n_lattice = int(np.count_nonzero((chords > 1e-6) & scene.porous))
+    fspl_d = float(free_space_loss_db(d))
+    fspl = free_space_loss_db(geo.length_m).tolist()        # each path's, one call (the same values one by one)
+    edge = geo.kind == 3
+    knife = dict(zip(np.flatnonzero(edge).tolist(), knife_edge_loss_db(geo.detour_m[edge]).tolist()))
     excess, power, kind, off = [], [], [], []
     if geo.los:
-        excess.append(0.0), power.append(p0 - float(free_space_loss_db(d)) - n_lattice * LATTICE_LOSS_DB)
+        excess.append(0.0), power.append(p0 - fspl_d - n_lattice * LATTICE_LOSS_DB)
         kind.append(PATH_DIRECT), off.append(0.0)
     else:
         loss, extra = _through(scene, chords)
         if math.isfinite(loss):
-            excess.append(extra), power.append(p0 - float(free_space_loss_db(d)) - loss - n_lattice * LATTICE_LOSS_DB)
+            excess.append(extra), power.append(p0 - fspl_d - loss - n_lattice * LATTICE_LOSS_DB)
             kind.append(PATH_THROUGH), off.append(0.0)
-    for k, length, detour, box in zip(geo.kind, geo.length_m, geo.detour_m, geo.box):
+    for i, (k, length, box) in enumerate(zip(geo.kind.tolist(), geo.length_m.tolist(), geo.box.tolist())):
         if k == 0:
             continue
         if k == 3:
-            loss = float(knife_edge_loss_db(detour))
+            loss = knife[i]
         elif k == 1:
             loss = GROUND_REFLECTION_LOSS_DB
         else:
-            loss = reflection_loss_db(scene.materials[int(box)])
-        ex = max(float(length) - d, 0.0)
-        excess.append(ex), power.append(p0 - float(free_space_loss_db(length)) - loss), kind.append(PATH_BENT)
+            loss = _reflection_loss_db(scene.materials[int(box)])
+        ex = max(length - d, 0.0)
+        excess.append(ex), power.append(p0 - fspl[i] - loss), kind.append(PATH_BENT)
         side = 0.0 if k == 1 else _bend_sign(scene, anchor, tag, int(box)) * (1.0 if k == 2 else -1.0)
         off.append(side * math.atan(math.sqrt(2.0 * ex / max(d, 0.1))))
     order = np.argsort(np.asarray(excess, float), kind="stable")

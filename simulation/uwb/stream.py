@@ -37,6 +37,7 @@ boresight ± ``boresight_sigma_deg``, antenna delay and PDoA offset residuals. P
 from __future__ import annotations
 
 import math
+import struct
 import zlib
 from dataclasses import dataclass, fields
 
@@ -148,20 +149,41 @@ def _wrap(x: float) -> float:
 
 
 def _measure(rng, paths: UwbPaths, cfg: UwbSimConfig):
-    """One poll: ``None`` (lost) or (first-path excess m, first kind, angle offset rad, fp margin dB, quality dB)."""
+    """One poll: ``None`` (lost) or (first path's index, faded path powers dBm (p,), its quality noise dB).
+
+    The quality itself (first-path power over the received total) does not steer the polling and is computed
+    for every row at once by :func:`_quality_db`."""
     p = paths.power_dbm + rng.normal(0.0, cfg.fading_db, len(paths.power_dbm))
-    if not len(p) or not np.isfinite(p).any():
+    pl = p.tolist()
+    if not any(math.isfinite(v) for v in pl):
         return None
-    peak = float(np.nanmax(p))
+    peak = max(v for v in pl if v == v)                  # nanmax
     margin = peak - SENSITIVITY_DBM
     if margin < 0 or rng.random() < cfg.per_floor + 1.0 / (1.0 + 10.0 ** (margin / 3.0)):
         return None
-    found = np.flatnonzero(p >= max(FIRST_PATH_FLOOR_DBM, peak - FIRST_PATH_DYNAMIC_DB))
-    i = int(found[0])
-    # received total: every cluster's ray and its dense tail (simulation.uwb.channel.CLUSTER_TAIL_DB)
-    total = 10.0 * math.log10(float(np.sum(10.0 ** (p[np.isfinite(p)] / 10.0))) * (1.0 + 10.0 ** (CLUSTER_TAIL_DB / 10.0)))
-    quality = min(p[i] - total + rng.normal(0.0, cfg.quality_noise_db), 0.0)
-    return float(paths.excess_m[i]), int(paths.kind[i]), float(paths.angle_off_rad[i]), float(p[i] - SENSITIVITY_DBM), quality
+    floor = max(FIRST_PATH_FLOOR_DBM, peak - FIRST_PATH_DYNAMIC_DB)
+    i = next(k for k, v in enumerate(pl) if v >= floor)
+    return i, p, rng.normal(0.0, cfg.quality_noise_db)
+
+
+def _quality_db(p: list, first: list, noise: list) -> list:
+    """Per row: first-path power over the received total, dB — every cluster's ray and its dense tail
+    (:data:`simulation.uwb.channel.CLUSTER_TAIL_DB`) — plus its noise, at most 0; ``p`` the rows' faded path
+    powers (dBm arrays), ``first`` their first paths' indices."""
+    if not p:
+        return []
+    flat = np.concatenate(p)
+    finite = np.isfinite(flat)
+    lin = 10.0 ** (flat[finite] / 10.0)                  # one call: the same values row by row
+    ends = np.cumsum([len(row) for row in p])
+    counts = np.add.reduceat(finite.astype(int), ends - [len(row) for row in p])   # rows hold ≥ 1 path
+    stops = np.cumsum(counts).tolist()
+    tail = 1.0 + 10.0 ** (CLUSTER_TAIL_DB / 10.0)
+    out = []
+    for row, i, n, e, q in zip(p, first, counts.tolist(), stops, noise):
+        total = 10.0 * math.log10(float(np.sum(lin[e - n:e])) * tail)
+        out.append(min(float(row[i]) - total + q, 0.0))
+    return out
 
 
 def simulate_uwb(ctx: StreamContext, cfg: UwbSimConfig = UwbSimConfig()) -> tuple[UwbLog, UwbTruth]:
@@ -169,52 +191,81 @@ def simulate_uwb(ctx: StreamContext, cfg: UwbSimConfig = UwbSimConfig()) -> tupl
     site, traj = ctx.site, ctx.trajectory
     xyz, bore, delay, pdoa = _installation(site, cfg)
     ids = np.array([a.id for a in site.uwb_anchors], int)
+    xyz_rows = [tuple(row) for row in xyz.tolist()]
     scene = build_uwb_scene(site)
     rng = stream_rng(ctx.seed, "uwb")
     reach = _max_range_m()
+    # The channel is computed once per anchor, channel second and 0.5 m of ground, at the first poll there
+    # (``cache``; keys of past seconds are never met again, so it is emptied when the second changes); a walker
+    # standing still meets the same exact position second after second: ``uwb_paths`` is a function of it, and
+    # ``exact`` keeps the last few thousand (emptied when full — a bound on memory, not a change of output).
     cache: dict = {}
+    exact: dict = {}
+    tc_now = None
     heard_dbm = np.full(len(ids), -np.inf)       # the tag's memory: last first-path level per anchor
     heard_t = np.full(len(ids), -np.inf)
-    rows, truth, sweep = [], [], 0
+    rows, truth, faded, first, q_noise, sweep = [], [], [], [], [], 0
     t0, t1 = float(traj.t_s[0]), float(traj.t_s[-1])
-    for r, t_round in enumerate(np.arange(t0, t1 - cfg.max_per_round * cfg.slot_s, 1.0 / cfg.rate_hz)):
+    t_rounds = np.arange(t0, t1 - cfg.max_per_round * cfg.slot_s, 1.0 / cfg.rate_hz)
+    slots = np.arange(cfg.max_per_round) * cfg.slot_s
+    az_sigma = math.radians(cfg.azimuth_sigma_deg)
+    block = 1024                                 # rounds whose poll slots are interpolated at once
+    for r, t_round in enumerate(t_rounds):
+        if r % block == 0:                       # every slot's time and tag position (np.interp is elementwise)
+            t_slot = t_rounds[r:r + block, None] + slots
+            pos = [v.reshape(t_slot.shape).tolist() for v in traj.interp(t_slot.ravel())]
+            t_slot = t_slot.tolist()
         fresh = np.flatnonzero(t_round - heard_t <= 2.0)
         poll = fresh[np.argsort(-heard_dbm[fresh], kind="stable")][:cfg.max_per_round]
         if r % cfg.discovery_every == 0 or len(poll) < 3:   # discovery: the next anchors in turn
             window = (sweep + np.arange(cfg.max_per_round)) % len(ids)
             sweep += cfg.max_per_round
             poll = np.unique(window) if len(ids) > cfg.max_per_round else np.arange(len(ids))
+        rb = r % block
         for k, j in enumerate(sorted(poll.tolist())):
-            t = t_round + k * cfg.slot_s
-            e, n, u = (float(v[0]) for v in traj.interp(np.array([t])))
-            d = math.dist((e, n, u), xyz[j])
+            t = t_slot[rb][k]
+            e, n, u = pos[0][rb][k], pos[1][rb][k], pos[2][rb][k]
+            aj = xyz_rows[j]
+            d = math.dist((e, n, u), aj)
             if d > reach:
                 continue
             tc = round(t * cfg.channel_rate_hz)
+            if tc != tc_now:
+                cache.clear()
+                tc_now = tc
             key = (j, tc, round(e * 2.0), round(n * 2.0))
             paths = cache.get(key)
             if paths is None:
-                paths = cache[key] = uwb_paths(scene, xyz[j], float(bore[j]), (e, n, u))
+                here = (j, struct.pack("3d", e, n, u))          # the exact bits (−0.0 is not 0.0 here)
+                paths = exact.get(here)
+                if paths is None:
+                    if len(exact) >= 4096:
+                        exact.clear()
+                    paths = exact[here] = uwb_paths(scene, xyz[j], float(bore[j]), (e, n, u))
+                cache[key] = paths
             got = _measure(rng, paths, cfg)
             if got is None:
                 continue
-            excess, kind, off, fp_margin, quality = got
+            i, p, qn = got
+            kind = int(paths.kind[i])
+            fp_margin = float(p[i] - SENSITIVITY_DBM)
             heard_dbm[j], heard_t[j] = fp_margin, t
             scale = math.sqrt(1.0 + 10.0 ** (-fp_margin / 10.0))
-            rng_m = d + excess + delay[j] + rng.normal(0.0, cfg.range_sigma_m * scale)
-            true_rel = _wrap(math.atan2(e - xyz[j, 0], n - xyz[j, 1]) - bore[j])
-            rel = _wrap(true_rel + off + pdoa[j])
+            rng_m = d + float(paths.excess_m[i]) + delay[j] + rng.normal(0.0, cfg.range_sigma_m * scale)
+            true_rel = _wrap(math.atan2(e - aj[0], n - aj[1]) - bore[j])
+            rel = _wrap(true_rel + float(paths.angle_off_rad[i]) + pdoa[j])
             if abs(rel) > math.pi / 2:          # behind the array: its mirror image
                 rel = math.copysign(math.pi, rel) - rel
-            sig = (math.radians(cfg.azimuth_sigma_deg) * scale / max(math.cos(rel), 0.26)
+            sig = (az_sigma * scale / max(math.cos(rel), 0.26)
                    * (1.0 if kind == PATH_DIRECT else cfg.nlos_azimuth_factor))
-            az = float(np.clip(rel + rng.normal(0.0, sig), -math.pi / 2, math.pi / 2))
-            rows.append((t, ids[j], max(rng_m, 0.01), math.degrees(az), quality))
+            az = min(max(rel + rng.normal(0.0, sig), -math.pi / 2), math.pi / 2)
+            rows.append((t, ids[j], max(rng_m, 0.01), math.degrees(az)))
             truth.append((d, kind, math.degrees(true_rel)))
-    data = np.array(rows, float).reshape(-1, 5)
+            faded.append(p), first.append(i), q_noise.append(qn)
+    data = np.array(rows, float).reshape(-1, 4)
     tr = np.array(truth, float).reshape(-1, 3)
     log = UwbLog(t_s=data[:, 0], anchor=data[:, 1].astype(int), range_m=data[:, 2], azimuth_deg=data[:, 3],
-                 quality=data[:, 4])
+                 quality=np.array(_quality_db(faded, first, q_noise), float).reshape(-1))
     return log, UwbTruth(true_range_m=tr[:, 0], first_kind=tr[:, 1].astype(int), true_azimuth_deg=tr[:, 2])
 
 
