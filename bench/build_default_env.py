@@ -8,12 +8,15 @@ pairwise products) on every site's map labels, and writes the ``environment`` bu
 split, the library's hash and the code version in its metadata (:func:`training.default_env.build_default_model`).
 Every step is a pure function of the seeds, and what exists in ``--work`` is kept, so a rerun resumes.
 
-Cost (measured): 1.3 s of CPU per site layout, 24 s per survey of ~100 cells, 16 s to compute its features —
-about 41 s of one core per site.
+Cost (measured, CPU time): 1.3 s per site layout, 24 s per survey of ~100 cells, 16 s to compute its
+features on a first run; 17-26 s per site in total once warm (the shipped model's 24 sites: about 9 minutes of
+CPU, 35 minutes of wall time in two processes on 2 cores shared with a split build). N = 24: what fitted the
+time budget of issue 27's build; the learning curve still rises at 8 sites (bench/env_learning_curve.py), so a
+larger N is the first thing to try for a better default.
 
 Usage::
 
-    python bench/build_default_env.py --work /tmp/default_env --n-sites 32 \
+    python bench/build_default_env.py --work /tmp/default_env --n-sites 24 \
         --out training/data/default_env      # (--overwrite to replace the shipped one)
 """
 
@@ -30,7 +33,9 @@ sys.path.insert(0, str(ROOT))
 
 def simulate_sites(work: Path, sites, cell_size_m: float, capture_s: float, say=print, lib: Path | None = None) -> Path:
     """Sites and surveys of ``sites`` under ``work`` (``sites/<seed>``, ``surveys/<seed>``), features of each
-    added to ``work/library.sqlite``; returns the library path. What exists is kept."""
+    added to ``lib`` (default ``work/library.sqlite``) unless a ``work/library*.sqlite`` holds the site already;
+    returns the library path. What exists is kept (an interrupted feature build resumes by rerunning
+    :func:`fingerprints.survey.build_library` on that survey)."""
     from features.site import save_site
     from fingerprints.library import FingerprintLibrary
     from fingerprints.survey import build_library
@@ -38,10 +43,11 @@ def simulate_sites(work: Path, sites, cell_size_m: float, capture_s: float, say=
     from simulation.survey import simulate_survey
 
     lib = lib or work / "library.sqlite"
-    done = set()
-    if lib.is_file():
-        with FingerprintLibrary.open(lib, create=False) as fl:
-            done = set(fl.sites())
+    done = set()        # sites already in any library of the work directory (two builders may share it)
+    for other in sorted(set(work.glob("library*.sqlite")) | {lib}):
+        if other.is_file():
+            with FingerprintLibrary.open(other, create=False) as fl:
+                done |= set(fl.sites())
     for seed in sites:
         t0 = time.process_time()
         sdir, vdir = work / "sites" / str(seed), work / "surveys" / str(seed)
@@ -65,7 +71,7 @@ def main() -> None:
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--work", type=Path, required=True, help="where sites, surveys and the library are built")
-    ap.add_argument("--n-sites", type=int, default=32)
+    ap.add_argument("--n-sites", type=int, default=24)
     ap.add_argument("--first-seed", type=int, default=1001)
     ap.add_argument("--out", type=Path, default=None, help="the bundle to write (none: simulate only)")
     ap.add_argument("--overwrite", action="store_true")
