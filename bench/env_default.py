@@ -112,6 +112,7 @@ def evaluate(ts, sites, default, seeds, n_sites, ks, sigma, say=print):
                 mine = np.isin(test.cell, cells[draw[:k]])
                 rest = test.subset(~mine)
                 X, y, g = test.X[mine], test.label[mine], test.cell[mine]
+                add(f"default {k} c.o.", seed, held, *_score_cells(default, rest))   # the same cells, untuned
                 add(f"scratch {k} cells", seed, held, *_score_cells(_scratch(X, y), rest))
                 tuned, s = _tune(default, X, y, g, sigma)
                 sigmas.setdefault(f"tuned {k} cells", []).append(s)
