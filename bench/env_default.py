@@ -23,9 +23,52 @@ class boundary) and macro-F1 on all labelled cells, cells pooled over the held-o
 seeds`` and, in brackets, the 95 % bootstrap interval over held-out sites (sites resampled with replacement,
 their cells pooled over seeds; 1000 resamples).
 
-Measured: see the table at the end of this docstring (filled in from a run; the command is below it).
+Measured (the shipped default: 24 simulated sites, seeds 1001-1024; held out: the standard split's 11 sites as
+built for the fusion study, 10 m cells / 10 s captures, 723 / 167 / 71 far cells open / light / heavy; seeds
+0-2; one BLAS thread; 327 s CPU with σ by cross-validation, 70 s with σ fixed). Percent: mean ± SD over seeds
+[95 % bootstrap over held-out sites]; ``c.o.`` = the default alone on the cells the ``k``-cell runs score::
 
-Usage: ``python bench/env_default.py --data /work/studies/standard/data --out /tmp/envdef --seeds 0 1 2``
+    method            far open            far light           far heavy           macro-F1 (all cells)
+    default           95.6 [93.5, 97.3]   82.6 [76.4, 89.4]   91.5 [85.5, 97.1]   82.1 [79.0, 84.8]
+    scratch 1 site    91.8±0.4            67.7±1.8            70.9±5.4            72.3±0.8
+    scratch 2 sites   91.7±0.6 [88.9,94.6] 73.9±5.7 [66.9,81.1] 79.8±3.5 [74.2,85.5] 76.9±0.3 [75.3,78.5]
+    σ by cross-validation on the user's cells:
+    tuned 1 site      94.7±0.4            79.8±2.4            88.3±2.4            79.8±0.9
+    tuned 2 sites     95.6±0.1 [93.6,97.5] 81.8±0.7 [76.0,87.6] 88.7±2.3 [83.6,93.8] 81.1±0.3 [78.2,83.6]
+    tuned 5 cells     97.1±0.5            63.2±7.9            92.1±0.6            78.4±2.4
+    tuned 10 cells    96.3±0.2            77.0±1.8            90.0±5.7            81.4±0.8
+    tuned 20 cells    95.0±0.6            80.0±4.3            83.2±6.6            79.6±0.3
+    σ = 0.03 fixed (training.default_env.DEFAULT_SIGMA, the CLI's default):
+    tuned 1 site      95.1±0.3            81.0±1.0            86.4±2.4            79.8±0.2
+    tuned 2 sites     95.1±0.3 [92.8,97.1] 80.6±0.6 [73.6,87.1] 88.7±2.0 [83.1,94.8] 80.1±0.8 [77.5,82.6]
+    default 5 c.o.    95.4±0.1            82.8±0.9            91.6±0.8            82.2±0.3
+    scratch 5 cells   90.9±2.1            35.1±3.8            23.4±5.2            50.9±2.9
+    tuned 5 cells     95.4±0.1 [93.2,97.3] 83.0±1.7 [76.3,88.8] 91.6±1.8 [85.0,97.0] 82.0±0.5 [78.7,85.1]
+    default 10 c.o.   95.5±0.1            82.8±0.6            91.5±0.8            82.4±0.2
+    scratch 10 cells  93.9±0.8            49.4±2.6            36.4±13.7           60.6±2.8
+    tuned 10 cells    95.4±0.1            83.0±1.4            91.0±2.4            82.2±0.7
+    default 20 c.o.   95.5±0.1            82.5±1.5            91.3±0.8            82.4±0.6
+    scratch 20 cells  95.3±0.2            54.5±1.3            44.1±7.7            65.4±2.2
+    tuned 20 cells    95.1±0.4 [93.0,97.2] 84.5±2.7 [79.0,90.2] 86.4±4.0 [80.2,93.4] 81.6±0.2 [78.7,84.9]
+
+What it says. The shipped default, which has never seen any of these sites, beats what a user gets from their
+own one or two surveyed sites by 4 / 9 / 12 points (far open / light / heavy against two sites) and 5 points of
+macro-F1 — about what the learning curve's eight surveyed sites give (93.6 / 86.1 / 90.1 %, macro-F1 82.8 %) —
+and a handful of labelled cells alone is useless from scratch (light 35-55 %, heavy 23-44 %). Fine-tuning the
+default, however, shows **no held-out gain** on these simulated sites: on one or two other sites' surveys it
+costs 3-5 points of heavy, on 5-20 labelled cells of the site itself it is within the intervals of the default on
+the same cells (σ = 0.03: light +0.2 to +2.0, heavy 0 to −4.9 points). The held-out sites come from the same
+simulator as the default's 24, so there is no site-specific shift for the adaptation to correct: what the default
+gets wrong is cells whose features overlap another class's, which a few labels of the same site do not
+separate. The adaptation does correct a shifted site (tests/test_finetune.py: a synthetic site moved by 0.8 of a
+class step, accuracy from < 60 % to > 90 %) — the case of a real receiver or yard unlike the simulation, which
+this bench cannot show. σ by cross-validation over 5-10 cells is harmful (it often picks a loose prior: light
+63 % at 5 cells), hence the fixed default σ. The issue's target, 97 % per class on far cells with at most two
+surveyed sites, is not met: open 95.6 %, light 82.6 %, heavy 91.5 % with no survey at all (the default), and no
+fine-tuned variant is better than that within the intervals.
+
+Usage: ``python bench/env_default.py --data /work/studies/standard/data --out /tmp/envdef --seeds 0 1 2
+[--sigma 0.03]`` (``--library`` reuses a library of the split's 11 surveys).
 """
 
 from __future__ import annotations

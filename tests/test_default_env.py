@@ -91,7 +91,8 @@ def test_cli_default_copy_survey_map_and_finetune(library, tmp_path, capsys, no_
     assert "per-class accuracy against map labels" in capsys.readouterr().out
     # fine-tune on every labelled cell, sigma by cross-validation
     tuned = tmp_path / "tuned"
-    assert main(["train", "env", "--mode", "finetune", "--library", str(lib), "--out", str(tuned)]) == 0
+    assert main(["train", "env", "--mode", "finetune", "--library", str(lib), "--sigma", "cv",
+                 "--out", str(tuned)]) == 0
     text = capsys.readouterr().out
     assert "finetune of default" in text and "chosen by cross-validation" in text
     meta = json.loads((tuned / "bundle.json").read_text())["meta"]
@@ -113,6 +114,10 @@ def test_cli_default_copy_survey_map_and_finetune(library, tmp_path, capsys, no_
     assert main(args) == 0
     text = capsys.readouterr().out
     assert "of 5 cells" in text and "sigma 0.5 (given)" in text
+    # the default sigma
+    assert main(["train", "env", "--mode", "finetune", "--library", str(lib), "--out", str(tmp_path / "d")]) == 0
+    assert "sigma 0.03 (the default)" in capsys.readouterr().out
+    assert json.loads((tmp_path / "d" / "bundle.json").read_text())["meta"]["sigma_cv_logloss"] == {}
 
 
 def test_cli_finetune_refusals(library, tmp_path, capsys):
@@ -144,6 +149,10 @@ def test_cli_finetune_refusals(library, tmp_path, capsys):
     assert "takes no --library" in capsys.readouterr().err
     assert main(["train", "env", "--library", str(lib), "--sigma", "1", "--out", str(tmp_path / "m")]) == 2
     assert "--sigma applies to --mode finetune only" in capsys.readouterr().err
+    for bad in ("-1", "0", "inf", "auto"):
+        assert main(["train", "env", "--mode", "finetune", "--library", str(lib), "--sigma", bad,
+                     "--out", str(tmp_path / "m")]) == 2
+        assert "--sigma" in capsys.readouterr().err
     assert main(["train", "env", "--mode", "finetune", "--library", str(lib), "--cell", "E999N999",
                  "--out", str(tmp_path / "m")]) == 1
     assert "no such cell" in capsys.readouterr().err
