@@ -73,8 +73,8 @@ def test_default_classifies_an_unseen_site_sensibly(library):
     clf, _ = load_default_model()
     agree, n = _cell_agreement(clf, library[1])
     # site seed 3 (no default training site), 20 m cells of 4 s: a coarser survey than the default was trained on;
-    # the majority class of this survey is about 60 % of its cells, a coin 33 %
-    assert n >= 30 and agree >= 0.75, (agree, n)
+    # 25 of its 35 labelled cells are open (71 %: naming every cell open); the default gets 30 right (86 %)
+    assert n == 35 and agree >= 0.8, (agree, n)
 
 
 def test_cli_default_copy_survey_map_and_finetune(library, tmp_path, capsys, no_network):
@@ -101,7 +101,7 @@ def test_cli_default_copy_survey_map_and_finetune(library, tmp_path, capsys, no_
     from training.env import load_env_model
 
     clf, _ = load_env_model(tuned)
-    assert _cell_agreement(clf, lib)[0] >= 0.75
+    assert _cell_agreement(clf, lib)[0] >= 0.8           # in-sample now: at least the default's level
     # a handful of cells, a given sigma, from a model directory as base
     from training.env import training_set
 
