@@ -68,7 +68,8 @@ def load_default_model() -> tuple[EnvironmentClassifier, dict]:
 
 
 def resolve_env_model(spec) -> tuple[EnvironmentClassifier, dict]:
-    """An environment model by directory, or the shipped one for ``"default"`` (:data:`DEFAULT`)."""
+    """An environment model by directory, or the shipped one for ``"default"`` (:data:`DEFAULT`) — unless a
+    directory of that name exists, which is then read as the model directory it is."""
     if str(spec) == DEFAULT and not Path(str(spec)).exists():
         return load_default_model()
     return load_env_model(spec)
@@ -167,8 +168,3 @@ def finetune_env_model(base: EnvironmentClassifier, base_meta: dict, data: Train
             "class_counts": np.bincount(y, minlength=base.n_classes_).tolist(),
             "window_s": float(data.window_s), "hop_s": float(data.hop_s), "warnings": []}
     return clf, info
-
-
-def save_finetuned(clf: EnvironmentClassifier, path, info: dict, library=None, overwrite: bool = False) -> Path:
-    """Save a fine-tuned classifier as an ``environment`` bundle (as :func:`training.env.save_env_model`)."""
-    return save_env_model(clf, path, info, library=library, overwrite=overwrite)
