@@ -26,7 +26,8 @@ def register(sub) -> None:
                "--csv cells.csv")
     p.add_argument("survey", type=Path, metavar="SURVEY_DIR", help="survey directory (its site.toml names the site)")
     p.add_argument("--library", type=Path, required=True, help="fingerprint library holding the survey")
-    p.add_argument("--model", type=Path, required=True, help="environment model directory (train env)")
+    p.add_argument("--model", type=Path, required=True,
+                   help="environment model directory (train env), or 'default': the model shipped in envfuse")
     p.add_argument("--out", type=plot_path, required=True, help="plot to write (.png, .pdf or .svg)")
     p.add_argument("--csv", type=Path, default=None, help="also write one row per cell")
     p.set_defaults(func=_run)
@@ -40,17 +41,19 @@ def _run(args) -> int:
     from fingerprints.library import FingerprintLibrary
     from models.environment import combine_windows
     from pipeline.env_plots import confusion, plot_survey_map
-    from training.env import load_env_model, training_set
+    from training.default_env import resolve_env_model
+    from training.env import training_set
 
+    shipped = str(args.model) == "default" and not Path(str(args.model)).exists()
     survey_files, survey_cells = survey_inputs(args.survey)
     check_outputs({"--library": args.library, **survey_files}, {"--out": args.out, "--csv": args.csv},
-                  sealed={**survey_cells, **model_inputs(args.model, "--model")})
+                  sealed={**survey_cells, **({} if shipped else model_inputs(args.model, "--model"))})
     if not (args.survey / "site.toml").is_file():
         raise ConfigError(f"{args.survey}: not a survey directory (no site.toml)")
     if not args.library.is_file():
         raise ConfigError(f"--library {args.library}: no such file")
     site = load_site(args.survey / "site.toml")
-    clf, meta = load_env_model(args.model)
+    clf, meta = resolve_env_model(args.model)
     data = training_set(args.library, [site.name])
     proba = clf.predict_proba(data.X)
     ood = clf.is_ood(data.X)

@@ -18,16 +18,28 @@ def register(sub) -> None:
         description="Fit the online environment classifier from a fingerprint library: 'supervised' learns the "
                     "cells' map labels of the given sites; 'survey' clusters the library without labels "
                     "(t-SNE + density-peak clustering, clusters named by severity) and learns the clusters; "
-                    "'transfer' does the same on training sites for use on a new one.",
-        epilog="Example: envfuse train env --library fp.sqlite --site sim-0101 --site sim-0102 --out env_model")
-    src = p.add_mutually_exclusive_group(required=True)
+                    "'transfer' does the same on training sites for use on a new one; 'default' writes a copy of "
+                    "the model shipped in the package (trained on many simulated substations: for a user with no "
+                    "labelled survey; no --library); 'finetune' adapts a model (--base, the shipped one by default) "
+                    "to the labelled cells of your own survey (map labels of every cell, or of a handful: --cell).",
+        epilog="Examples: envfuse train env --library fp.sqlite --site sim-0101 --site sim-0102 --out env_model; "
+               "envfuse train env --mode default --out env_model; "
+               "envfuse train env --mode finetune --library fp.sqlite --site my-yard --out env_model")
+    src = p.add_mutually_exclusive_group()
     src.add_argument("--library", type=Path, help="fingerprint library (SQLite, from survey build)")
     src.add_argument("--walks", type=Path, nargs="+",
                      help="walk directories instead of a library: every 2 s window of each (a drive converted by "
                           "'convert smartloc' has no survey; --mode survey clusters its own windows)")
     p.add_argument("--site", action="append", default=None, help="site to fit on (repeat; default: every site)")
-    p.add_argument("--mode", choices=("supervised", "survey", "transfer"), default="supervised",
+    p.add_argument("--mode", choices=("supervised", "survey", "transfer", "default", "finetune"), default="supervised",
                    help="where the classes come from (default supervised)")
+    p.add_argument("--base", default="default",
+                   help="--mode finetune: the model to adapt, a model directory or 'default' (the shipped one)")
+    p.add_argument("--cell", action="append", default=None,
+                   help="--mode finetune: use only this labelled cell (repeat; default: every cell with a map label)")
+    p.add_argument("--sigma", type=_sigma, default=None,
+                   help="--mode finetune: prior SD of the weights around the base's, or 'cv' to choose it by "
+                        "cross-validation over the labelled cells (default 0.03, measured best on held-out sites)")
     p.add_argument("--seed", type=seed, default=0, help="seed of the embedding and clustering (default 0)")
     p.add_argument("--out", type=Path, required=True, help="model directory to write")
     p.add_argument("--plots", type=Path, default=None,
@@ -43,7 +55,8 @@ def register(sub) -> None:
         epilog="Example: envfuse train fusion --walks split/walks/101/w0 split/walks/101/w1 "
                "--env-model env_model --out fusion_model")
     p.add_argument("--walks", type=Path, nargs="+", required=True, help="training walk directories (with truth.csv)")
-    p.add_argument("--env-model", type=Path, required=True, help="environment model directory (train env)")
+    p.add_argument("--env-model", type=Path, required=True,
+                   help="environment model directory (train env), or 'default': the model shipped in envfuse")
     p.add_argument("--out", type=Path, required=True, help="model directory to write")
     p.add_argument("--no-bp", action="store_true", help="fit the noise only, no BP network")
     p.add_argument("--outlier", choices=("huber", "gate", "none"), default="huber",
@@ -53,6 +66,21 @@ def register(sub) -> None:
     p.add_argument("--seed", type=seed, default=0, help="seed of the BP network's training (default 0)")
     p.add_argument("--overwrite", action="store_true", help="replace an existing model directory")
     p.set_defaults(func=_run_fusion)
+
+
+def _sigma(text: str):
+    """--sigma: 'cv' or a positive number."""
+    import argparse
+
+    if text == "cv":
+        return text
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a positive number or 'cv', got {text!r}") from None
+    if not value > 0 or value == float("inf"):
+        raise argparse.ArgumentTypeError(f"must be a positive number or 'cv', got {text!r}")
+    return value
 
 
 ENV_PLOTS = ("decision_graph.png", "tsne_map.png", "confusion.png")
@@ -69,6 +97,14 @@ def _refuse_existing(out: Path, overwrite: bool, kind: str) -> None:
 
 def _run_env(args) -> int:
     from training.env import fit_env_model, save_env_model, training_set
+
+    if args.mode == "default":
+        return _run_env_default(args)
+    if args.library is None and args.walks is None:
+        raise UsageError(f"--mode {args.mode} needs --library or --walks (--mode default needs neither)")
+    for opt, value in (("--cell", args.cell), ("--sigma", args.sigma)):
+        if value is not None and args.mode != "finetune":
+            raise UsageError(f"{opt} applies to --mode finetune only")
 
     plots = {f"--plots {args.plots / n}": args.plots / n for n in ENV_PLOTS} if args.plots is not None else {}
     sealed = {f"--walks {w}": w for w in args.walks} if args.walks is not None else None
@@ -94,6 +130,8 @@ def _run_env(args) -> int:
             raise ConfigError(f"--library {args.library}: no such file")
         data = training_set(args.library, args.site)
     diag: dict = {}
+    if args.mode == "finetune":
+        return _run_env_finetune(args, data, diag)
     clf, info = fit_env_model(data, args.mode, random_state=args.seed, diagnostics=diag)
     for text in info.get("warnings", []):
         print(f"envfuse: warning: {text}", file=sys.stderr)
@@ -107,6 +145,69 @@ def _run_env(args) -> int:
     print(f"environment model ({args.mode}): {info['n_windows']} windows ({info['window_s']:g} s, hop "
           f"{info['hop_s']:g} s) of {info['n_cells']} cells on {', '.join(info['sites'])}; windows per class "
           f"open/light/heavy = {counts}; sub-models {', '.join(sorted(clf.submodels_))} -> {args.out}")
+    return 0
+
+
+def _run_env_default(args) -> int:
+    """``--mode default``: a copy of the shipped model in --out (it then works wherever a model folder does)."""
+    from training.default_env import load_default_model
+    from training.env import save_env_model
+
+    for opt, value in (("--library", args.library), ("--walks", args.walks), ("--site", args.site),
+                       ("--plots", args.plots), ("--cell", args.cell), ("--sigma", args.sigma)):
+        if value is not None:
+            raise UsageError(f"--mode default copies the shipped model and takes no {opt}")
+    check_outputs({}, {}, {"--out": args.out})
+    _refuse_existing(args.out, args.overwrite, "environment model")
+    clf, meta = load_default_model()
+    meta = dict(meta, copied_from="the default model shipped in envfuse (training/data/default_env)")
+    save_env_model(clf, args.out, meta, overwrite=args.overwrite)
+    seeds = meta.get("site_seeds", [])
+    print(f"environment model (default, shipped): supervised on {meta.get('n_sites')} simulated substations (site "
+          f"seeds {min(seeds)}-{max(seeds)}), {meta.get('n_windows')} windows; sub-models "
+          f"{', '.join(sorted(clf.submodels_))} -> {args.out}")
+    return 0
+
+
+def _run_env_finetune(args, data, diag: dict) -> int:
+    """``--mode finetune``: MAP adaptation of --base to the labelled windows (of --cell cells when given)."""
+    import numpy as np
+
+    from features.errors import DataError
+    from training.default_env import finetune_env_model, resolve_env_model
+    from training.env import save_env_model
+
+    if str(args.base) != "default" and Path(args.base).resolve() == args.out.resolve():
+        raise UsageError(f"--out {args.out} is the --base model; write the fine-tuned one elsewhere")
+    base, base_meta = resolve_env_model(args.base)
+    if abs(float(base_meta.get("window_s", data.window_s)) - data.window_s) > 1e-9 or \
+            abs(float(base_meta.get("hop_s", data.hop_s)) - data.hop_s) > 1e-9:
+        raise ConfigError(f"--base {args.base} was fitted on {base_meta.get('window_s')} s windows (hop "
+                          f"{base_meta.get('hop_s')} s) but the library's are {data.window_s:g} s (hop "
+                          f"{data.hop_s:g} s): rebuild the library with the base's windows")
+    if args.cell:
+        unknown = sorted(set(args.cell) - set(data.cell.tolist()))
+        if unknown:
+            raise ConfigError(f"--cell {', '.join(unknown)}: no such cell in the chosen data")
+        data = data.subset(np.isin(data.cell, args.cell))
+    if not (data.label >= 0).any():
+        raise DataError("fine-tuning needs labelled cells: none of the chosen cells has a map label")
+    from training.default_env import DEFAULT_SIGMA
+
+    clf, info = finetune_env_model(base, base_meta, data, DEFAULT_SIGMA if args.sigma is None else args.sigma)
+    info["base_model"] = str(args.base)
+    if args.walks is not None:
+        info["walks"] = [str(w) for w in args.walks]
+    diag["data"] = data
+    save_env_model(clf, args.out, info, library=args.library, overwrite=args.overwrite)
+    if args.plots is not None:
+        for png in _env_plots(clf, diag, args.plots):
+            print(f"plot -> {png}")
+    counts = "/".join(str(c) for c in info["class_counts"])
+    how = {None: "the default", "cv": "chosen by cross-validation"}.get(args.sigma, "given")
+    print(f"environment model (finetune of {args.base}): {info['n_windows']} labelled windows of {info['n_cells']} "
+          f"cells on {', '.join(info['sites'])}; windows per class open/light/heavy = {counts}; sigma "
+          f"{info['sigma']:g} ({how}) -> {args.out}")
     return 0
 
 
@@ -131,7 +232,6 @@ def _run_fusion(args) -> int:
     from models.fusion.model import save_fusion_model
     from models.fusion.noise import NoiseError
     from pipeline.outputs import model_inputs, refuse_repeated, walk_files
-    from training.env import load_env_model
     from training.filters import train_fusion
     from walks.fuse import check_windows
 
@@ -141,12 +241,15 @@ def _run_fusion(args) -> int:
     inputs = {}
     for w in args.walks:
         inputs.update(walk_files(w, f"training walk {w.name}"))
-    check_outputs(inputs, {}, {"--out": args.out}, model_inputs(args.env_model, "--env-model"))
+    shipped = str(args.env_model) == "default" and not args.env_model.exists()
+    check_outputs(inputs, {}, {"--out": args.out}, {} if shipped else model_inputs(args.env_model, "--env-model"))
     _refuse_existing(args.out, args.overwrite, "fusion model")
     for w in args.walks:
         if not (w / "walk.toml").is_file():
             raise ConfigError(f"--walks {w}: no walk.toml (expected a walk directory)")
-    clf, env_meta = load_env_model(args.env_model)
+    from training.default_env import resolve_env_model
+
+    clf, env_meta = resolve_env_model(args.env_model)
     check_windows(env_meta, f"--env-model {args.env_model}")
     from models.fusion.ekf import EkfConfig
 
