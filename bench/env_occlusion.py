@@ -21,12 +21,46 @@ Bounds (what the features can hold, not estimators a user could run):
 
 - ``ceiling`` — gradient boosting fitted on the test sites themselves, 5-fold cross-validation grouped by cell:
   no site shift, a flexible model, every test site seen — an optimistic ceiling of the 14 features;
+- ``ceiling+`` — the same fitted on every site of the split (training and test sites, 5 folds grouped by cell),
+  scored on the test sites' windows: more data, still no site shift;
 - ``sky floor`` — the share of the satellites actually in view during the capture (from the cell's NMEA sky,
   elevation ≥ the mask) that the site's solid structures hide (the site's skyline from
   :func:`simulation.site.geometry.horizon_elevation`), mapped to the share by isotonic regression, cell-grouped
   5-fold: what a receiver that knew exactly which of its ~21 satellites are blocked could say. The label weighs the
   whole day's satellite passes; a 10 s capture sees one instant of them, so this gap no feature of the capture
   can close.
+
+Measured (the standard split as built for the fusion study: training sites 101-106, test sites 201-205, 10 m
+cells / 10 s captures, 4,536 test windows in 504 cells, 684 windows in the band; seeds 0-4; 124 s of CPU, one
+BLAS thread); residual SD, points of share, mean ± SD over seeds [90 % bootstrap interval over test sites]::
+
+    estimator  sites  window band         window out          cell band           cell out
+    ridge      2      7.5±0.4 [6.1, 8.7]  6.2±0.3 [5.7, 6.7]  7.0±0.5 [5.5, 8.2]  5.7±0.3 [5.2, 6.2]
+    new        2      7.3±0.8 [5.8, 8.7]  5.3±0.3 [4.8, 6.0]  6.9±0.8 [5.4, 8.3]  5.0±0.3 [4.5, 5.8]
+    ridge      6      7.4     [5.1, 8.8]  5.5     [4.8, 6.0]  6.9     [4.6, 8.3]  5.1     [4.4, 5.6]
+    new        6      7.5     [5.3, 8.8]  5.0     [4.4, 5.8]  7.0     [4.8, 8.2]  4.7     [4.0, 5.5]
+    ceiling    -      7.0     [6.2, 7.9]  5.1     [4.7, 5.5]  6.6     [5.6, 7.5]  4.8     [4.3, 5.3]
+    ceiling+   -      6.7     [5.7, 7.5]  4.7     [4.4, 5.1]  6.3     [5.2, 7.0]  4.4     [3.9, 4.9]
+    sky floor  -      5.6     [4.6, 6.5]  4.3     [3.7, 4.9]  5.6     [4.6, 6.5]  4.3     [3.7, 4.9]
+
+    test walks (``--walks``; moving, truth share at the window centre; 4,485 windows with both modalities,
+    710 in the band), per window, band / out:  2 sites ridge 11.9±1.1 / 9.2±0.4, new 10.9±1.1 / 8.7±0.4;
+                                               6 sites ridge 10.8 / 8.2, new 11.8 / 8.2
+    later_days split (the five walked sites' own surveys 28 days earlier train the model; walks only):
+                                               ridge 8.4 / 10.3, new 7.0 / 9.8
+
+Reading. The ≤ 3-point target is out of reach, and not for want of a model: even a receiver that knew exactly
+which of its satellites the structures hide (``sky floor``) misses the label by 5.6 points in the band and 4.3
+out of it, because the label weighs a whole day of satellite passes and a capture sees ~21 satellites at one
+instant. The 14 features see less than that (flexible boosting on the test sites' own cells, ``ceiling``, 7.0 /
+5.1; with every site's cells, ``ceiling+``, 6.7 / 4.7), and the estimate on sites nobody tuned on comes within
+0.5 points of it. Averaging a cell's windows gains only 0.3-0.5: the error is the cell's, not the window's
+(leave-one-site-out on the training sites: 2.0 points between the windows of one capture, 5.3 between cells of
+a site, 3.4 between sites in the band). The fractional-logit net replaced the ridge for what it gains out of the
+band (0.5-0.9 points on surveys) and for an estimate that stays in (0, 1) unclipped; in the band it is level
+with the ridge within the seeds' spread, on surveys and along walks (one fit, six sites, is a point worse
+there, the two-site draws a point better). A target a capture can meet would be the blocked share of the
+satellites in view (the sky floor's own quantity), not the day-weighted one.
 
 Usage: ``python bench/env_occlusion.py --data /work/studies/standard/data --library LIB --out /tmp/occ
 --seeds 0 1 2 3 4 --plot /tmp/occ/occlusion.png`` (``--library``: a library of the split's sites, built into
@@ -224,7 +258,8 @@ def main() -> None:
             raise SystemExit("the test walks hold no window with both modalities and a true share")
     with threadpool_limits(1):
         for n in args.n_sites:
-            for seed in args.seeds:
+            # every seed draws the same sites when all train, and the fit is deterministic: one fit
+            for seed in (args.seeds if n < len(sp.train_sites) else args.seeds[:1]):
                 order = np.random.default_rng(seed).permutation(len(sp.train_sites))
                 chosen = [name_of[sp.train_sites[j]] for j in order[:n]]
                 tr = ts.subset(np.isin(ts.site, chosen) & (ts.label >= 0))
@@ -244,7 +279,7 @@ def main() -> None:
                         r = e - walks.share
                         walk_res.setdefault((n, name), []).append([float(np.std(r[wb])), float(np.std(r[~wb]))])
     if held_out:
-        table = surveys_table(args, sp, layout, name_of, test, keys, res, parts, scatter)
+        table = surveys_table(args, sp, layout, name_of, ts, test, keys, res, parts, scatter)
     else:
         table = {}
         print(f"split {sp.name}: the test sites' surveys trained the model; only the test walks are held out")
@@ -261,15 +296,21 @@ def main() -> None:
     print(f"cpu time {time.process_time() - t0:.0f} s")
 
 
-def surveys_table(args, sp, layout, name_of, test, keys, res, parts, scatter) -> dict:
+def surveys_table(args, sp, layout, name_of, ts, test, keys, res, parts, scatter) -> dict:
     """Add the bounds to ``res``/``parts``, print the held-out survey table, draw the plot; the table as a dict."""
     from sklearn.ensemble import HistGradientBoostingRegressor
     from sklearn.isotonic import IsotonicRegression
     from threadpoolctl import threadpool_limits
 
     with threadpool_limits(1):
-        ceil = np.clip(grouped_cv(test.X, test.share, keys, lambda: HistGradientBoostingRegressor(
-            max_iter=300, learning_rate=0.05, random_state=0)), 0, 1)
+        def boost():
+            return HistGradientBoostingRegressor(max_iter=300, learning_rate=0.05, random_state=0)
+
+        ceil = np.clip(grouped_cv(test.X, test.share, keys, boost), 0, 1)
+        # the same over every site of the split (training sites too), cell-grouped; its test-site windows kept
+        all_keys = np.char.add(np.char.add(ts.site.astype(str), "/"), ts.cell.astype(str))
+        pooled = np.clip(grouped_cv(ts.X, ts.share, all_keys, boost), 0, 1)
+        ceil_all = pooled[np.isin(ts.site, [name_of[s] for s in sp.test_sites])]    # test's rows, in its order
         sky = {}
         for s in sp.test_sites:
             sky.update({f"{name_of[s]}/{c}": v for c, v in sky_share(layout.survey_dir(s)).items()})
@@ -278,7 +319,7 @@ def surveys_table(args, sp, layout, name_of, test, keys, res, parts, scatter) ->
         floor = np.full(len(inst), np.nan)
         floor[ok] = grouped_cv(inst[ok, None], test.share[ok], keys[ok],
                                lambda: _Iso(IsotonicRegression(out_of_bounds="clip")))
-    bounds = {"ceiling": ceil, "sky floor": floor}
+    bounds = {"ceiling": ceil, "ceiling+": ceil_all, "sky floor": floor}
     for name, e in bounds.items():
         ok = np.isfinite(e)
         r = e[ok] - test.share[ok]
@@ -289,7 +330,8 @@ def surveys_table(args, sp, layout, name_of, test, keys, res, parts, scatter) ->
     print(f"split {sp.name}: trained on n of {len(sp.train_sites)} training sites (seeds {args.seeds} draw which), "
           f"scored on the {len(sp.test_sites)} test sites' {len(test)} windows / {len(set(keys.tolist()))} cells "
           f"({int(nb.sum())} windows in the ±{100 * args.margin:.0f}-point band)")
-    print("residual SD, points of share: mean ± SD over seeds [90 % bootstrap interval over test sites]")
+    print("residual SD, points of share: mean ± SD over seeds [90 % bootstrap interval over test sites]; "
+          f"with all {len(sp.train_sites)} training sites one fit (the same sites whatever the seed; a seeded fit)")
     print(f"{'estimator':>12s} {'sites':>5s}  {'window band':>22s} {'window out':>22s} {'cell band':>22s} "
           f"{'cell out':>22s}")
     table = {}
