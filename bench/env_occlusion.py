@@ -56,9 +56,10 @@ instant. The 14 features see less than that (flexible boosting on the test sites
 5.1; with every site's cells, ``ceiling+``, 6.7 / 4.7), and the estimate on sites nobody tuned on comes within
 0.5-0.8 points of it in the band and reaches it out of the band. Averaging a cell's windows gains only 0.2-0.4:
 the error is the cell's, not the window's (leave-one-site-out on the training sites: 2.0 points between the
-windows of one capture, 5.3 between cells of a site, 3.4 between sites in the band). The fractional-logit net replaced the ridge for what it gains out of the
-band (0.7-0.9 points on surveys, 0.6 along walks) and for an estimate that stays in (0, 1) unclipped; in the
-band it is level with the ridge within the seeds' spread on surveys, and level or a point better along walks.
+windows of one capture, 5.3 between cells of a site, 3.4 between sites in the band). The fractional-logit net
+replaced the ridge for what it gains out of the band (0.7-0.9 points on surveys, 0.6 along walks) and for an
+estimate that stays in (0, 1) unclipped; in the band it is level with the ridge within the seeds' spread on
+surveys, and level or a point better along walks.
 A target a capture can meet would be the blocked share of the satellites in view (the sky floor's own
 quantity), not the day-weighted one.
 
