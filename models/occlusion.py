@@ -33,7 +33,9 @@ ridge followed by isotonic calibration on out-of-site predictions 6.53 / 5.14; t
 on degree-2 inputs (α = 10) 6.55 / 5.33; one tanh layer of 8, α = 1, single initialisations 6.13-6.76 /
 4.70-4.81 (seed 0, 1, 2), their five-member average 6.47 / 4.64 (6.30 / 4.56 stopped at 100 L-BFGS iterations:
 the default); α = 3: 6.60 / 4.59; 16 units,
-α = 3: 6.52 / 4.58; a second layer or 32 units did not help (6.58 / 4.63). Out of band the net gains 0.7 points
+α = 3: 6.52 / 4.58; a second layer or 32 units did not help (6.58 / 4.63); the classifier's class
+log-probabilities beside the features made it worse (6.53 / 5.01; alone 8.03 / 6.26): fitted on the same
+training windows, they are surer there than on a new site. Out of band the net gains 0.7 points
 on the ridge; in the band, where the classes are decided, nothing tried gains more than 0.1-0.2: the error
 there is the cell's (5.3 points between cells of one site, 3.4 between sites, 2.0 between the windows of one
 capture), and ``bench/env_occlusion.py`` shows why no model of these features closes it.
