@@ -41,7 +41,10 @@ sites to eight at 10 m), and open stays near 93 % whatever is done; the cell spa
 capture length (20 m cells cost 12-15 points of light and heavy at two sites, 4 s captures 2-6); the issue's
 target, 97 % per class on far cells with at most two sites, is not met (92.0 / 74.4 / 80.0 %), nor with eight.
 The continuous blocked-sky estimate misses its ≤ 3-point target everywhere (5-14 points), worst in the band
-around the class thresholds where it matters.
+around the class thresholds where it matters. (Those occlusion figures are of the ridge estimate the classifier
+had then; its fractional-logit replacement, and why 3 points is out of reach of a 10 s capture — the blocked
+share of the satellites actually in view already misses the day-weighted share by 5-6 points in the band — are
+in ``bench/env_occlusion.py``.)
 
 Usage: ``python bench/env_learning_curve.py --data /work/studies/standard/data --out /tmp/lc --seeds 0 1 2
 --plot /tmp/lc/learning_curve.png`` (``--library`` reuses a library holding every site of the split).

@@ -9,6 +9,8 @@ Which module to open for what:
   severity naming of clusters as open / light / heavy (``severity_scores``, ``name_clusters``).
 * ``models.environment`` — the online classifier (``EnvironmentClassifier``): one logistic
   sub-model per available modality, OOD flag, occlusion estimate, cell combination.
+* ``models.occlusion`` — the continuous blocked-sky share (``OcclusionRegressor``): fractional logit
+  through a small tanh network, averaged over initialisations; the classifier fits one per sub-model.
 * ``models.temporal`` — the environment class along a walk (``ClassHMM``): transitions counted on
   training walks, causal forward and smoothed forward–backward recursions over the window classes.
 * ``models.fusion`` — event-driven fusion: event streams (steps, GNSS, acoustic, standing), the one

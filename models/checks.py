@@ -76,9 +76,19 @@ def check_classifier(clf) -> None:
         prec = check_covariances(f"{where} precision", m["precision"], n_in)
         del prec, coef
         check_finite(f"{where} ood_threshold", m["ood_threshold"])
-        if "share_coef" in m:
+        if "share_coef" in m:                       # bundles saved before the fractional-logit estimate
             check_finite(f"{where} share_coef", m["share_coef"], (None,))
             check_finite(f"{where} share_intercept", m["share_intercept"])
+        share = {key[len("share."):]: v for key, v in m.items() if key.startswith("share.")}
+        if share:
+            from models.occlusion import OcclusionRegressor
+
+            try:
+                reg = OcclusionRegressor.from_arrays(share)     # shapes consistent, values finite, scales > 0
+            except (KeyError, ValueError) as exc:
+                raise ValueError(f"{where} share estimator: {exc}") from None
+            if reg.mean_.shape != (n_in,):
+                raise ValueError(f"{where} share estimator takes {reg.mean_.shape[0]} inputs, the sub-model {n_in}")
 
 
 def check_bp(bp) -> None:

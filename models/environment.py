@@ -32,8 +32,11 @@ test over the library measured 280 µs per window and grew with the library;
 this one does not, and a bundle keeps no training windows.
 
 Continuous occlusion. Where training windows carry the blocked-sky share, a
-ridge regression on the same inputs estimates it (clipped to [0, 1]); the
-fusion filter can use it as a soft input beside the class.
+fractional-logit network on the same standardised inputs estimates it, in
+(0, 1) by construction (:class:`models.occlusion.OcclusionRegressor`); the
+fusion filter can use it as a soft input beside the class. Bundles saved
+before it hold a ridge regression on the expanded inputs (``share_coef``,
+``share_intercept``; clipped to [0, 1]) and still answer with it.
 
 Cells. :func:`combine_windows` gives a cell the class of its windows'
 combined probabilities (the product of window likelihoods, i.e. the sum of
@@ -45,11 +48,15 @@ from __future__ import annotations
 import numpy as np
 
 from features.schema import ENV_CLASSES, FEATURES, modality_columns
+from models.occlusion import OcclusionRegressor
 
 __all__ = ["EnvironmentClassifier", "combine_windows", "availability", "SUBMODELS"]
 
 SUBMODELS = ("both", "gnss", "acoustic")
 """Sub-model names, by the modalities a window has."""
+
+SHARE_PREFIX = "share."
+"""Key prefix, in a sub-model's arrays, of the blocked-sky share estimator's state."""
 
 _COLUMNS = {"both": tuple(range(len(FEATURES))), "gnss": modality_columns("gnss"),
             "acoustic": modality_columns("acoustic")}
@@ -101,7 +108,8 @@ class EnvironmentClassifier:
         Training class frequencies.
     submodels_ : dict
         Per sub-model name: ``mean``, ``scale``, ``coef``, ``intercept``, ``class_mean`` and ``precision``
-        (the OOD Gaussians), ``ood_threshold``, and ``share_coef``/``share_intercept`` when shares were given.
+        (the OOD Gaussians), ``ood_threshold``, and the share estimator's arrays (``share.mean``, ``share.w0``, ...;
+        ``share_coef``/``share_intercept`` in bundles saved before it) when shares were given.
     """
 
     def __init__(self, *, C: float = 1.0, degree: int = 2, ood_quantile: float = 0.995,
@@ -182,7 +190,7 @@ class EnvironmentClassifier:
     def _fit_one(self, X: np.ndarray, y: np.ndarray, share) -> dict:
         # Imported here: prediction is numpy alone, and importing scikit-learn costs every evaluate
         # worker about 0.4 s of start-up (more where scipy.stats is not loaded yet).
-        from sklearn.linear_model import LogisticRegression, Ridge
+        from sklearn.linear_model import LogisticRegression
 
         mean = X.mean(axis=0)
         scale = X.std(axis=0)
@@ -217,8 +225,8 @@ class EnvironmentClassifier:
         out = {"mean": mean, "scale": scale, "coef": coef, "intercept": intercept, "class_mean": centres,
                "precision": precision, "ood_threshold": np.array(float(np.quantile(score, self.ood_quantile)))}
         if share is not None and np.isfinite(share).all():
-            r = Ridge(alpha=1.0).fit(_expand(z, self.degree), share)
-            out["share_coef"], out["share_intercept"] = r.coef_, np.array(float(r.intercept_))
+            _, share_arrays = OcclusionRegressor().fit(z, share).get_state()
+            out.update({f"{SHARE_PREFIX}{k}": v for k, v in share_arrays.items()})
         return out
 
     # -- prediction ------------------------------------------------------------------------------
@@ -296,7 +304,13 @@ class EnvironmentClassifier:
         for i, name in enumerate(SUBMODELS):
             rows = route == i
             m = self.submodels_.get(name)
-            if rows.any() and m is not None and "share_coef" in m:
+            if not rows.any() or m is None:
+                continue
+            if f"{SHARE_PREFIX}w0" in m:
+                reg = OcclusionRegressor.from_arrays({k[len(SHARE_PREFIX):]: v for k, v in m.items()
+                                                      if k.startswith(SHARE_PREFIX)})
+                out[rows] = reg.predict(self._z(name, X[rows]))
+            elif "share_coef" in m:                  # a bundle saved before the fractional-logit estimate
                 est = _expand(self._z(name, X[rows]), self.degree) @ m["share_coef"] + float(m["share_intercept"])
                 out[rows] = np.clip(est, 0.0, 1.0)
         return out
