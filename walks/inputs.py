@@ -16,7 +16,7 @@ future; ``forward_backward`` (``evaluate``) uses the whole walk.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -46,7 +46,9 @@ HOP_S = 1.0
 @dataclass(frozen=True)
 class WalkInputs:
     """A walk ready for the filters: ``events``; the classifier's evidence ``classes`` at window ends
-    ``window_t_s`` (n,), with the window features ``window_X`` (n, 14) and ``window_ood`` (n,)."""
+    ``window_t_s`` (n,), with the window features ``window_X`` (n, 14) and ``window_ood`` (n,); ``resume``: by
+    filter method name, the state its run over the previous segment of a long walk ended the segment in
+    (:class:`~models.fusion.ekf.FilterResume`, :mod:`walks.segments`), empty for a walk fused whole."""
 
     data: WalkData
     events: EventStream
@@ -54,6 +56,7 @@ class WalkInputs:
     window_X: np.ndarray
     classes: ClassTrack
     window_ood: np.ndarray
+    resume: dict = field(default_factory=dict)
 
     def ood_at(self, t_s: np.ndarray) -> np.ndarray:
         """Whether the window in force at each of ``t_s`` (m,) was out of the classifier's distribution (m,);

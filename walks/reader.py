@@ -53,7 +53,7 @@ from features.gnss.nmea import epochs_on_time_base, read_nmea
 from features.gnss.positions import GnssPositions, fixes_to_enu
 from features.gnss.sat_features import pseudorange_features
 from features.gnss.wls import WlsConfig, solve_epochs, wls_positions
-from features.imu.heading import HeadingConfig
+from features.imu.heading import HeadingConfig, HeadingState
 from features.imu.pdr import PdrConfig, PdrResult, run_pdr
 from features.imu.reader import ImuData, read_imu_csv
 from features.imu.steps import StepLengthModel
@@ -190,7 +190,8 @@ class WalkData:
 
 
 def read_walk(walk_dir: str | os.PathLike, *, site: Site | None = None, pdr_k: float | None = None,
-              audio_positions: PositionConfig | None = None, truth: bool = True) -> WalkData:
+              audio_positions: PositionConfig | None = None, truth: bool = True,
+              heading_start: HeadingState | None = None) -> WalkData:
     """Read a walk directory once: GNSS, acoustic and PDR streams and the truth when present.
 
     ``site`` overrides the site named in ``walk.toml``; ``pdr_k`` the step-length
@@ -200,7 +201,8 @@ def read_walk(walk_dir: str | os.PathLike, *, site: Site | None = None, pdr_k: f
 
     The PDR track is anchored on data, never on truth: at the first good GNSS
     fix (:func:`pdr_start_from_gnss`), else at the origin. ``truth=False`` leaves ``truth.csv`` unread
-    (``run`` needs none).
+    (``run`` needs none). ``heading_start``: the heading filter's state before the IMU's first sample, from
+    the read of the preceding part of the walk (a long walk's segments, :mod:`walks.segments`).
     """
     walk = load_walk(walk_dir)
     site = walk.load_site() if site is None else site
@@ -214,7 +216,7 @@ def read_walk(walk_dir: str | os.PathLike, *, site: Site | None = None, pdr_k: f
         acoustic = _optional(walk, "audio", lambda: read_acoustic_stream(walk, site, audio_positions), notes)
     elif walk.path("audio") is not None:
         notes.append("audio: the site has no beacons; the walk is read without acoustic positions")
-    pdr = _optional(walk, "imu", lambda: read_pdr_stream(walk, (0.0, 0.0), pdr_k), notes)
+    pdr = _optional(walk, "imu", lambda: read_pdr_stream(walk, (0.0, 0.0), pdr_k, heading_start), notes)
     if gnss is not None and gnss.skipped_share > SKIPPED_NOTE_SHARE:
         notes.append(f"gnss: {walk.streams['gnss']['file']}: {100 * gnss.skipped_share:.0f} % of the sentences "
                      f"skipped ({gnss.nmea_summary})")
@@ -373,13 +375,15 @@ def read_acoustic_stream(walk: WalkInfo, site: Site, positions: PositionConfig |
                           analysis=res, timing=timing, ranges=ranges)
 
 
-def read_pdr_stream(walk: WalkInfo, start_en: tuple[float, float], k: float | None) -> PdrStream:
-    """The walk's IMU through PDR from ``start_en`` (m); ``k`` the Weinberg constant (None: the default)."""
+def read_pdr_stream(walk: WalkInfo, start_en: tuple[float, float], k: float | None,
+                    heading_start: HeadingState | None = None) -> PdrStream:
+    """The walk's IMU through PDR from ``start_en`` (m); ``k`` the Weinberg constant (None: the default);
+    ``heading_start``: the heading filter's state before the first sample (:func:`read_walk`)."""
     imu = read_imu_csv(walk.path("imu"))
     decl = float(walk.streams["imu"].get("declination_deg", 0.0))
     heading = HeadingConfig(declination_rad=np.radians(decl))
     cfg = PdrConfig(heading=heading) if k is None else PdrConfig(length=StepLengthModel(k=k), heading=heading)
-    return PdrStream(result=run_pdr(imu, start_en[0], start_en[1], cfg), config=cfg, start_en_m=start_en, imu=imu,
+    return PdrStream(result=run_pdr(imu, start_en[0], start_en[1], cfg, heading_start), config=cfg, start_en_m=start_en, imu=imu,
                      repaired=imu.report.summary() if imu.report.n_defects else "")
 
 

@@ -82,12 +82,14 @@ _TIME_FIELD = {"GGA": 1, "RMC": 1, "GST": 1, "GNS": 1, "ZDA": 1, "GLL": 5, "GBS"
 @dataclass(frozen=True)
 class Segment:
     """Segment ``index`` owns walk times [``own_from_s``, ``own_to_s``) (±inf at the walk's ends); ``directory``
-    is its cut (a temporary walk folder), or the walk's own folder when the walk is one segment."""
+    is its cut (a temporary walk folder), or the walk's own folder when the walk is one segment;
+    ``next_from_s`` the walk time the next segment's cut starts at (inf for the last)."""
 
     index: int
     own_from_s: float
     own_to_s: float
     directory: Path
+    next_from_s: float = math.inf
 
     def owns(self, t_s):
         """Which of ``t_s`` (array) belong to this segment."""
@@ -152,7 +154,7 @@ def walk_cuts(walk_dir: str | os.PathLike, segment_s: float = SEGMENT_S, *,
     deleted when the next is asked for. A walk of one segment yields its own folder."""
     n, _ = plan_segments(walk_dir, segment_s)
     if n == 1:
-        yield Segment(0, -math.inf, math.inf, Path(walk_dir))
+        yield Segment(0, -math.inf, math.inf, Path(walk_dir), math.inf)
         return
     walk = load_walk(walk_dir)
     _fix_mmap_threshold()
@@ -170,7 +172,7 @@ def walk_cuts(walk_dir: str | os.PathLike, segment_s: float = SEGMENT_S, *,
             for name, cut in cutters.items():
                 toml.update(cut.write(d, lo, hi, next_lo))
             _write_walk_toml(walk, d, toml)
-            yield Segment(k, own_from, own_to, d)
+            yield Segment(k, own_from, own_to, d, math.inf if k == n - 1 else next_lo)
             shutil.rmtree(d)
         for cut in cutters.values():
             cut.close()

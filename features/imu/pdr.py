@@ -31,7 +31,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from features.fileio import atomic_write_text
-from features.imu.heading import HeadingConfig, HeadingResult, estimate_heading
+from features.imu.heading import HeadingConfig, HeadingResult, HeadingState, estimate_heading
 from features.imu.reader import ImuData
 from features.imu.steps import StepDetectorConfig, StepLengthModel, Steps, detect_steps
 
@@ -93,11 +93,13 @@ def dead_reckon(step_length_m: np.ndarray, heading_rad: np.ndarray, start_east_m
 
 
 def run_pdr(imu: ImuData, start_east_m: float = 0.0, start_north_m: float = 0.0,
-            config: PdrConfig = PdrConfig()) -> PdrResult:
-    """The whole PDR path on repaired IMU data (see module docstring)."""
+            config: PdrConfig = PdrConfig(), heading_start: HeadingState | None = None) -> PdrResult:
+    """The whole PDR path on repaired IMU data (see module docstring); ``heading_start``: the heading filter's
+    state before the first sample, from a run over the record's preceding samples
+    (:meth:`~features.imu.heading.HeadingResult.state_at`)."""
     steps = detect_steps(imu.acc_m_s2, imu.rate_hz, imu.t_s, imu.valid, config.detector)
     length = config.length.predict(steps)
-    heading = estimate_heading(imu.acc_m_s2, imu.gyro_rad_s, imu.mag_ut, imu.rate_hz, config.heading)
+    heading = estimate_heading(imu.acc_m_s2, imu.gyro_rad_s, imu.mag_ut, imu.rate_hz, config.heading, heading_start)
     if heading is None:
         nan = np.full(len(steps), np.nan)
         return PdrResult(steps.t_s, length, nan, nan.copy(), nan.copy(), steps, None)
