@@ -15,15 +15,14 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Callable
 
-from features.errors import ConfigError, DataError, EnvfuseError
 import numpy as np
 
-from features.imu.heading import HeadingState
+from features.errors import ConfigError, DataError, EnvfuseError
 from models.fusion.ekf import FilterRun
 from models.fusion.model import FusionModel
 from walks.inputs import HOP_S, WINDOW_S, WalkInputs, walk_inputs
 from walks.methods import LAG_S, run_methods
-from walks.reader import WalkData, read_walk
+from walks.reader import ReaderStates, WalkData, read_walk
 from walks.segments import SEGMENT_S, walk_cuts
 from walks.track import TrackWriter, track_rows
 
@@ -46,10 +45,12 @@ class FusedWalk:
     results: dict = field(default_factory=dict)
     """Every method's raw result by name, the first passes included (:func:`walks.methods.run_methods`)."""
 
-    def handover(self, t_s: float, next_from_s: float) -> "Handover":
+    def handover(self, t_s: float, states_from_s: float) -> "Handover":
         """What the next segment of a long walk resumes from (``fuse_walk(resume=...)``): each filter's state
-        before walk time ``t_s`` (the next segment's start; :meth:`~models.fusion.ekf.FilterRun.state_before`) and
-        the heading filter's after the last IMU sample before ``next_from_s`` (the next cut's start)."""
+        before walk time ``t_s`` (the next segment's start; :meth:`~models.fusion.ekf.FilterRun.state_before`),
+        the heading filter's after the last IMU sample before ``states_from_s`` and the acoustic receiver's that
+        the read kept from then on (``fuse_walk(keep_states_from_s=states_from_s)``;
+        :attr:`walks.segments.Segment.states_from_s`)."""
         filters = {}
         for name, res in self.results.items():
             if isinstance(res, FilterRun) and res.mode_proba is None:
@@ -59,21 +60,21 @@ class FusedWalk:
         heading = None
         pdr = self.data.pdr
         if getattr(pdr, "imu", None) is not None and pdr.result.heading is not None:
-            i = int(np.searchsorted(pdr.imu.t_s, next_from_s, side="left")) - 1
+            i = int(np.searchsorted(pdr.imu.t_s, states_from_s, side="left")) - 1
             if i >= 0:
-                heading = pdr.result.heading.state_at(i)
-        return Handover(filters, heading)
+                heading = pdr.result.heading.state_at(i, float(pdr.imu.t_s[i]))
+        receiver = self.data.acoustic.analysis.receiver_state if self.data.acoustic is not None else None
+        return Handover(filters, ReaderStates(heading, receiver))
 
 
 @dataclass(frozen=True)
 class Handover:
     """What a segment of a long walk hands the next (:mod:`walks.segments`): ``filters``, by filter method name,
     the state (:class:`~models.fusion.ekf.FilterResume`) each resumes from at the segment's start, and
-    ``heading``, the PDR heading filter's state (:class:`~features.imu.heading.HeadingState`) before the cut's
-    first IMU sample (None without one)."""
+    ``readers``, the readers' states the cut is read from (:class:`~walks.reader.ReaderStates`)."""
 
     filters: dict = field(default_factory=dict)
-    heading: HeadingState | None = None
+    readers: ReaderStates = ReaderStates()
 
 
 def walk_name(walk_dir: str | os.PathLike) -> str:
@@ -108,19 +109,22 @@ def check_windows(env_meta: dict, where: str) -> None:
 
 def fuse_walk(walk_dir: str | os.PathLike, model: FusionModel, methods=None, *, smooth: bool = True,
               lag_s: float | None = LAG_S, class_map_for: Callable | None = None, force: bool = False,
-              truth: bool = True, class_smoothing: str = "forward", resume: "Handover | None" = None) -> FusedWalk:
+              truth: bool = True, class_smoothing: str = "forward", resume: "Handover | None" = None,
+              keep_states_from_s: float = math.inf) -> FusedWalk:
     """Read ``walk_dir`` and run ``methods`` (default: all) on it with ``model``.
 
     ``class_map_for``: callable site → :class:`~models.fusion.events.ClassMap` or None, the site map of the
     map baseline (``kf_map``), called only when that method is asked for. ``smooth``: the filters' RTS tracks
     too; ``lag_s``: their fixed-lag tracks with that lag (None: none). ``truth=False``: leave ``truth.csv``
     unread (``run``). ``class_smoothing``: how the model's class HMM smooths the window classes
-    (:data:`walks.inputs.CLASS_SMOOTHING`; ``"forward"``, causal, as ``run`` needs). ``resume``: the filter states
-    the previous segment of a long walk handed over (:meth:`FusedWalk.handover`; :mod:`walks.segments`). A domain
+    (:data:`walks.inputs.CLASS_SMOOTHING`; ``"forward"``, causal, as ``run`` needs). ``resume``: the filter and reader
+    states the previous segment of a long walk handed over (:meth:`FusedWalk.handover`; :mod:`walks.segments`);
+    ``keep_states_from_s``: the next segment's cut's start (:func:`walks.reader.read_walk`). A domain
     error raised past the read names the walk.
     """
     name = walk_name(walk_dir)
-    data = read_walk(walk_dir, truth=truth, heading_start=None if resume is None else resume.heading)
+    data = read_walk(walk_dir, truth=truth, resume=None if resume is None else resume.readers,
+                     keep_states_from_s=keep_states_from_s)
     check_site(model, data.site.name, str(walk_dir), force)
     check_windows(model.meta.get("env_meta", {}), "the model's environment classifier")
     if data.gnss is None and data.acoustic is None and data.pdr is None:
@@ -179,10 +183,11 @@ def fuse_to_file(walk_dir: str | os.PathLike, model: FusionModel, method: str, p
             try:
                 fused = fuse_walk(seg.directory, model, (base,), smooth=method.endswith("+rts"),
                                   lag_s=lag_s if method.endswith("+lag") else None, class_map_for=class_map_for,
-                                  force=force, truth=False, resume=resume)
+                                  force=force, truth=False, resume=resume,
+                                  keep_states_from_s=seg.states_from_s)
             except EnvfuseError as exc:
                 raise type(exc)(str(exc).replace(str(seg.directory), where)) from None
-            resume = fused.handover(seg.own_to_s, seg.next_from_s)
+            resume = fused.handover(seg.own_to_s, seg.states_from_s)
             out.segments += 1
             out.notes += [n for n in fused.data.notes if n not in out.notes]
             if method not in fused.tracks:

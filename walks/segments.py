@@ -55,7 +55,7 @@ from features.errors import DataError
 from features.fileio import read_toml
 from features.walk import WalkInfo, load_walk
 
-__all__ = ["SEGMENT_S", "WARMUP_S", "TAIL_S", "Segment", "plan_segments", "walk_cuts"]
+__all__ = ["SEGMENT_S", "WARMUP_S", "TAIL_S", "RESUME_AFTER_S", "Segment", "plan_segments", "walk_cuts"]
 
 SEGMENT_S = 3600.0
 """Walk time each segment owns by default, s: an hour. Shorter segments bound memory tighter (600 s: 334 MiB
@@ -71,6 +71,12 @@ receiver's clock search)."""
 TAIL_S = 10.0
 """Walk time a cut reaches after its segment, s: ≥ the fixed-lag smoother's lag (3 s), a step split at the
 following fix (≤ 0.6 s) and the last 2 s feature window."""
+
+RESUME_AFTER_S = 10.0
+"""Walk time after its cut's start at which the readers resume the states handed over, s: the acoustic
+receiver's audio buffers (a frame of envelope history and the search lead; frames last about a second) are full
+by then and the PDR heading's zero-phase low-pass filters (0.3 Hz on the specific force, 1 Hz on the
+magnetometer) have forgotten the cut's edge (their transients decay within a few seconds)."""
 
 CUTTABLE = frozenset(("gnss", "imu", "audio", "uwb", "imu_foot"))
 """Streams a cut can hold (cut by time without changing what they mean)."""
@@ -90,6 +96,12 @@ class Segment:
     own_to_s: float
     directory: Path
     next_from_s: float = math.inf
+
+    @property
+    def states_from_s(self) -> float:
+        """Walk time from which this segment's read keeps the readers' states for the next segment: the next
+        cut's start + :data:`RESUME_AFTER_S` (inf for the last segment)."""
+        return self.next_from_s + RESUME_AFTER_S
 
     def owns(self, t_s):
         """Which of ``t_s`` (array) belong to this segment."""

@@ -125,6 +125,8 @@ class HeadingState:
     static_bias_rad_s: float
     intensity_ref: float
     dip_ref_rad: float
+    t_s: float = math.nan
+    """Time of the sample the state follows (the record's time base; NaN: not stated)."""
 
 
 @dataclass(frozen=True)
@@ -145,14 +147,14 @@ class HeadingResult:
     intensity_ref: float = math.nan
     dip_ref_rad: float = math.nan
 
-    def state_at(self, i: int) -> HeadingState:
-        """The run's state after sample ``i``; the gate's offset from the last undisturbed sample at or before it
-        (the first sample when none)."""
+    def state_at(self, i: int, t_s: float = math.nan) -> HeadingState:
+        """The run's state after sample ``i`` (at time ``t_s``); the gate's offset from the last undisturbed
+        sample at or before it (the first sample when none)."""
         good = np.flatnonzero(~self.mag_disturbed[:i + 1])
         g = int(good[-1]) if good.size else 0
         offset = float(wrap_pi(self.mag_only[g] - self.gyro_only[g]))
         return HeadingState(float(self.fused[i]), float(self.gyro_bias_rad_s[i]), float(self.gyro_only[i]), offset,
-                            self.static_bias_rad_s, self.intensity_ref, self.dip_ref_rad)
+                            self.static_bias_rad_s, self.intensity_ref, self.dip_ref_rad, float(t_s))
 
 
 def _lowpass(x: np.ndarray, cutoff_hz: float, rate_hz: float) -> np.ndarray:
@@ -276,12 +278,14 @@ def _inconsistent_with_gyro(mag_unwrapped: np.ndarray, gyro_heading: np.ndarray,
 
 def estimate_heading(acc_m_s2: np.ndarray, gyro_rad_s: np.ndarray | None, mag_ut: np.ndarray | None,
                      rate_hz: float, config: HeadingConfig = HeadingConfig(),
-                     start: HeadingState | None = None) -> HeadingResult | None:
+                     start: HeadingState | None = None, start_index: int = 0) -> HeadingResult | None:
     """Gyro-only, magnetometer-only and complementary heading, per sample (see module docstring).
 
     Without gyro and magnetometer there is no heading (returns None); with only
     one of them, ``fused`` is that one (gyro from ``config.initial_heading_rad``). ``start``: the state a run
-    over the record's preceding samples ended in (the record's start statistics come from it too).
+    over the record's preceding samples reached after the sample before ``start_index`` (the record's start
+    statistics come from it too); the headings resume from it there, and the samples before it, where the
+    low-pass filters settle, have none (NaN).
     """
     if gyro_rad_s is None and mag_ut is None:
         return None
@@ -289,7 +293,6 @@ def estimate_heading(acc_m_s2: np.ndarray, gyro_rad_s: np.ndarray | None, mag_ut
     n = len(acc)
     nan = np.full(n, np.nan)
     down = down_in_body(acc, rate_hz, config.gravity_lowpass_hz)
-    dt = 1.0 / rate_hz
     mag_psi = nan
     disturbed = np.zeros(n, bool)
     if mag_ut is not None:
@@ -311,17 +314,34 @@ def estimate_heading(acc_m_s2: np.ndarray, gyro_rad_s: np.ndarray | None, mag_ut
     if start is None:
         n_static = _static_start(acc, gyro, rate_hz, config.static_start_s)
         bias0 = float(np.mean(r[:n_static])) if n_static else 0.0
+        out = _integrate(r, None if mag_ut is None else mag_psi, disturbed, rate_hz, config, bias0, None)
+        return HeadingResult(*out, bias0, *ref)
+    j = int(start_index)
+    out = _integrate(r[j:], None if mag_ut is None else mag_psi[j:], disturbed[j:], rate_hz, config,
+                     start.static_bias_rad_s, start)
+    fused, gyro_only, _, flags, bias = (np.concatenate([np.full(j, np.nan if x.dtype != bool else False), x])
+                                        for x in out)
+    return HeadingResult(fused, gyro_only, mag_psi, disturbed | flags, bias, start.static_bias_rad_s, *ref)
+
+
+def _integrate(r: np.ndarray, mag_psi: np.ndarray | None, disturbed: np.ndarray, rate_hz: float,
+               config: HeadingConfig, bias0: float, start: HeadingState | None) -> tuple:
+    """(fused, gyro_only, mag_only, disturbed, bias) from the yaw rate ``r`` and the magnetometer heading
+    ``mag_psi`` (None without one), gated by ``disturbed``: the gyro heading, the gate and the complementary
+    filter, from the record's start (``start`` None) or from the state ``start``."""
+    n = len(r)
+    dt = 1.0 / rate_hz
+    if start is None:
         # ψ_g relative to the first sample
         psi_rel = np.r_[0.0, np.cumsum((r[1:] - bias0) * dt)]
     else:
-        bias0 = start.static_bias_rad_s
         # ψ_g relative to the sample before the first (the state's)
         psi_rel = np.cumsum((r - bias0) * dt)
-    if mag_ut is None:
+    if mag_psi is None:
         psi_g = (config.initial_heading_rad if start is None else start.gyro_rad) + psi_rel
-        return HeadingResult(wrap_pi(psi_g), wrap_pi(psi_g), nan, disturbed, np.full(n, bias0), bias0, *ref)
+        return wrap_pi(psi_g), wrap_pi(psi_g), np.full(n, np.nan), disturbed, np.full(n, bias0)
     m_unw = np.unwrap(mag_psi)
-    disturbed |= _inconsistent_with_gyro(m_unw, psi_rel, rate_hz, config)
+    disturbed = disturbed | _inconsistent_with_gyro(m_unw, psi_rel, rate_hz, config)
     if start is None:
         n0 = max(int(round(config.static_start_s * rate_hz)), 1)
         good0 = ~disturbed[:n0]
@@ -350,7 +370,7 @@ def estimate_heading(acc_m_s2: np.ndarray, gyro_rad_s: np.ndarray | None, mag_ut
     else:
         psi, bias = complementary_heading(r, m_gated, rate_hz, config.kp_per_s, config.ki_per_s2, start.bias_rad_s,
                                           start.fused_rad + _branch(m_gated[0] - start.fused_rad))
-    return HeadingResult(wrap_pi(psi), wrap_pi(psi_g), mag_psi, disturbed, bias, bias0, *ref)
+    return wrap_pi(psi), wrap_pi(psi_g), mag_psi, disturbed, bias
 
 
 def _branch(delta_rad: float) -> float:
