@@ -146,13 +146,19 @@ class HeadingResult:
     static_bias_rad_s: float = 0.0
     intensity_ref: float = math.nan
     dip_ref_rad: float = math.nan
+    start_gate_offset_rad: float = math.nan
+    """The gate offset the run resumed from (:class:`HeadingState`), NaN for a run from the record's start."""
 
     def state_at(self, i: int, t_s: float = math.nan) -> HeadingState:
         """The run's state after sample ``i`` (at time ``t_s``); the gate's offset from the last undisturbed
-        sample at or before it (the first sample when none)."""
-        good = np.flatnonzero(~self.mag_disturbed[:i + 1])
-        g = int(good[-1]) if good.size else 0
-        offset = float(wrap_pi(self.mag_only[g] - self.gyro_only[g]))
+        sample at or before it with a heading (else the offset this run resumed from, else the first sample's)."""
+        good = np.flatnonzero(~self.mag_disturbed[:i + 1] & np.isfinite(self.gyro_only[:i + 1]))
+        if good.size:
+            offset = float(wrap_pi(self.mag_only[good[-1]] - self.gyro_only[good[-1]]))
+        elif math.isfinite(self.start_gate_offset_rad):
+            offset = self.start_gate_offset_rad
+        else:
+            offset = float(wrap_pi(self.mag_only[0] - self.gyro_only[0]))
         return HeadingState(float(self.fused[i]), float(self.gyro_bias_rad_s[i]), float(self.gyro_only[i]), offset,
                             self.static_bias_rad_s, self.intensity_ref, self.dip_ref_rad, float(t_s))
 
@@ -321,7 +327,8 @@ def estimate_heading(acc_m_s2: np.ndarray, gyro_rad_s: np.ndarray | None, mag_ut
                      start.static_bias_rad_s, start)
     fused, gyro_only, _, flags, bias = (np.concatenate([np.full(j, np.nan if x.dtype != bool else False), x])
                                         for x in out)
-    return HeadingResult(fused, gyro_only, mag_psi, disturbed | flags, bias, start.static_bias_rad_s, *ref)
+    return HeadingResult(fused, gyro_only, mag_psi, disturbed | flags, bias, start.static_bias_rad_s, *ref,
+                         start.gate_offset_rad)
 
 
 def _integrate(r: np.ndarray, mag_psi: np.ndarray | None, disturbed: np.ndarray, rate_hz: float,
@@ -360,7 +367,8 @@ def _integrate(r: np.ndarray, mag_psi: np.ndarray | None, disturbed: np.ndarray,
         lg = np.maximum(last_good, 0)
         gated = m_unw[lg] + (psi_g - psi_g[lg])
         if before.any():
-            offset = start.gate_offset_rad + _branch(m_unw[0] - psi_g[0] - start.gate_offset_rad)
+            offset = start.gate_offset_rad if math.isfinite(start.gate_offset_rad) else m_unw[0] - psi_g[0]
+            offset += _branch(m_unw[0] - psi_g[0] - offset)
             gated = np.where(before, offset + psi_g, gated)
         m_gated = np.where(disturbed, gated, m_unw)
         if start is None:
