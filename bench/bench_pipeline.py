@@ -100,6 +100,11 @@
    1.1`` on a quiet machine: 10 min 282 MiB (120x real time), 66 min (two segments, the first cut 3,610 s)
    479 MiB (116x; oaconvolve best of 3 1,829x, ratio 0.063): ratio 1.70. Any longer walk is bounded by the same
    one-hour cut; ``--segment-s 600`` gives the 1.126 above.
+   With the filters and readers resumed across the seams (branch seams; run's default segment then 300 s, so
+   a 10-minute walk is two segments and every cut at most 430 s), ``--memory-only --segment-s 300`` on a
+   machine at load 5-7: 10 min 338 MiB, 8 h 341 MiB (1,919 s wall, 15x real time; oaconvolve best of 3 301x,
+   ratio 0.050): 8 h / 10 min **1.009**; ``--long-h 2`` in an earlier run: 350 / 341 MiB (0.975; its 10-minute
+   process compiled the changed numba core).
 
 Usage: ``python bench/bench_pipeline.py [--quick] [--evaluate-only | --simulator-only | --memory-only]``
 (``--quick``: 2-minute walks, 4 walks; ``--evaluate-only``: 2 training walks of 120 s, then section 3 only;

@@ -35,8 +35,11 @@ def evaluate_segmented(walk, model, methods, class_map_for, force: bool, name: s
     truth_parts, window_parts, notes, skipped = [], [], [], {}
     shares = {"bp_disabled_share": [], "bp_guard_share": []}
     site = None
+    resume = None
     for seg in walk_cuts(walk, segment_s):
-        fused = fuse_walk(seg.directory, model, methods, class_map_for=class_map_for, force=force)
+        fused = fuse_walk(seg.directory, model, methods, class_map_for=class_map_for, force=force, resume=resume,
+                          keep_states_from_s=seg.states_from_s)
+        resume = fused.handover(seg.own_to_s, seg.states_from_s)
         data = fused.data
         if data.truth is None:
             raise DataError(f"{walk}: no truth.csv, so no error to measure (evaluate scores tracks against truth; "

@@ -15,6 +15,7 @@ from walks import fuse as fuse_module
 from walks.fuse import fuse_to_file, fuse_walk
 from walks.inputs import window_features
 from walks.reader import read_walk
+from features.imu.heading import GATE_REFERENCE_S
 from walks.segments import TAIL_S, WARMUP_S, plan_segments, walk_cuts
 from walks.track import TrackWriter, track_rows, track_text
 
@@ -71,6 +72,8 @@ def test_cuts_own_every_sample_and_line_once(looped, tmp_path):
         t = np.array([float(r.split(",")[0]) for r in rows])
         lo = -math.inf if seg.index == 0 else seg.own_from_s - WARMUP_S
         hi = math.inf if seg.index == n - 1 else seg.own_to_s + TAIL_S
+        if seg.index == 0:
+            hi = max(hi, GATE_REFERENCE_S)     # the first cut holds the heading gate's reference span
         assert t.min() >= lo and t.max() < hi
         owned += [r for r, tk in zip(rows, t) if seg.own_from_s <= tk < seg.own_to_s]
         # audio: the cut's samples are the walk's from its start_s on, sample for sample
@@ -112,15 +115,20 @@ def test_a_walk_of_one_segment_gives_todays_track_in_any_row_block(model, walk_d
         assert done.segments == 1 and out.read_text() == want
 
 
-def test_segments_stay_close_to_the_whole_walk_track(model, looped, tmp_path):
-    """A 3-minute walk fused in 60 s segments against the same walk fused whole: the same epochs away from
-    the seams, positions within centimetres where the filters agree (the whole-record statistics and the
-    filter's restart 120 s before each segment are what differs)."""
-    walk = looped[3]
+def test_segments_give_the_whole_walk_track(model, looped, tmp_path, monkeypatch):
+    """The 5-minute looped walk fused in 90 s segments (40 s of warm-up: cuts of at most 140 s after the first,
+    which reaches the heading gate's 300 s reference span) against the same walk fused whole: every epoch at
+    the same time, and positions equal to round-off where every filter and reader resumed what the previous
+    segment handed over (walks/segments.py); restarted afresh at each seam instead (the state before issue 25's
+    hand-over, emulated by dropping it) the segments are centimetres to metres off."""
+    from walks import segments
+
+    monkeypatch.setattr(segments, "WARMUP_S", 40.0)
+    walk = looped[5]
     whole, seg = tmp_path / "whole.csv", tmp_path / "seg.csv"
     fuse_to_file(walk, model, "adaptive_blind+lag", whole, "csv", segment_s=1e6)
-    done = fuse_to_file(walk, model, "adaptive_blind+lag", seg, "csv", segment_s=60.0)
-    assert done.segments == 3
+    done = fuse_to_file(walk, model, "adaptive_blind+lag", seg, "csv", segment_s=90.0)
+    assert done.segments == 4
 
     def load(p):
         a = np.genfromtxt(p, delimiter=",", names=True, dtype=None, encoding="utf-8")
@@ -128,14 +136,24 @@ def test_segments_stay_close_to_the_whole_walk_track(model, looped, tmp_path):
 
     ta, ea, na = load(whole)
     tb, eb, nb = load(seg)
-    assert np.all(np.diff(tb) >= 0) and np.all(np.diff(ta) >= 0)  # segments in order (events may share a time)
-    assert abs(len(tb) - len(ta)) < 0.05 * len(ta)
-    # the events' times differ a little (steps are split at the fixes, the acoustic fixes are per frame): the
-    # segmented track against the whole one at its times
-    d = np.hypot(eb - np.interp(tb, ta, ea), nb - np.interp(tb, ta, na))
-    print("segmented vs whole, m: median", np.nanmedian(d), "p95", np.nanpercentile(d, 95), "max", np.nanmax(d))
-    # measured: median 1e-8 m, p95 3e-6 m, max 0.035 m (site 3, seed 11, looped 3 times)
-    assert np.nanmedian(d) < 1e-4 and np.nanpercentile(d, 95) < 0.01
+    assert len(ta) == len(tb) and np.max(np.abs(ta - tb)) < 1e-3   # the CSV's millisecond times
+    d = np.hypot(eb - ea, nb - na)
+    print("segmented vs whole, m: median", np.median(d), "p95", np.percentile(d, 95), "max", np.max(d))
+    assert np.max(d) < SEAM_TOLERANCE_M, np.max(d)
+    # without the hand-over (each segment's filters and readers started afresh at its cut's start)
+    monkeypatch.setattr(fuse_module.FusedWalk, "handover", lambda self, t_s, states_from_s: None)
+    fresh = tmp_path / "fresh.csv"
+    fuse_to_file(walk, model, "adaptive_blind+lag", fresh, "csv", segment_s=90.0)
+    tc, ec, nc = load(fresh)
+    dc = np.hypot(ec - np.interp(tc, ta, ea), nc - np.interp(tc, ta, na))
+    print("restarted segments vs whole, m: median", np.median(dc), "max", np.max(dc))
+    assert np.max(dc) > 100 * SEAM_TOLERANCE_M
+
+
+SEAM_TOLERANCE_M = 1e-4
+"""Largest distance allowed between the segmented and the whole-walk track, m (the CSV writes millimetres, so
+this is "equal as written"). On the 21-minute walk of walks/segments.py's docstring the segments agree to 6.4e-8 m
+at 600 s; at 300 s a round-off flip in the receiver's float32 matched filter gave 0.022 m once."""
 
 
 GROWTH_BOUND_MIB = 12.0
@@ -147,8 +165,9 @@ Fused whole (a regression that reads the whole walk again: ``--segment-s 1e5``) 
 
 def test_evaluate_scores_a_long_walk_segment_by_segment_as_it_scores_it_whole(looped, model_dir):
     """evaluate's per-walk task on the 3-minute walk in 60 s segments against the same walk whole: every
-    method scored, the same number of epochs within 5 %, mean errors within 10 % (they differ at the seams),
-    and each metric row equal to the metric of its own series (hand check: mean, median, max of the errors)."""
+    method scored, the same number of epochs within 5 %, mean errors within 10 % (the filters agree to
+    round-off across the seams, but the first cut holds the whole 3 minutes here: this checks the scoring), and
+    each metric row equal to the metric of its own series (hand check: mean, median, max of the errors)."""
     from pipeline.evaluate import evaluate_walk
 
     methods = ("gnss", "pdr", "kf_quality", "adaptive_blind")

@@ -11,15 +11,18 @@ from __future__ import annotations
 
 import math
 import os
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Callable
 
+import numpy as np
+
 from features.errors import ConfigError, DataError, EnvfuseError
+from models.fusion.ekf import FilterRun
 from models.fusion.model import FusionModel
 from walks.inputs import HOP_S, WINDOW_S, WalkInputs, walk_inputs
 from walks.methods import LAG_S, run_methods
-from walks.reader import WalkData, read_walk
+from walks.reader import ReaderStates, WalkData, read_walk
 from walks.segments import SEGMENT_S, walk_cuts
 from walks.track import TrackWriter, track_rows
 
@@ -39,6 +42,39 @@ class FusedWalk:
     inputs: WalkInputs
     tracks: dict
     skipped: dict
+    results: dict = field(default_factory=dict)
+    """Every method's raw result by name, the first passes included (:func:`walks.methods.run_methods`)."""
+
+    def handover(self, t_s: float, states_from_s: float) -> "Handover":
+        """What the next segment of a long walk resumes from (``fuse_walk(resume=...)``): each filter's state
+        before walk time ``t_s`` (the next segment's start; :meth:`~models.fusion.ekf.FilterRun.state_before`),
+        the heading filter's after the last IMU sample before ``states_from_s`` and the acoustic receiver's that
+        the read kept from then on (``fuse_walk(keep_states_from_s=states_from_s)``;
+        :attr:`walks.segments.Segment.states_from_s`)."""
+        filters = {}
+        for name, res in self.results.items():
+            if isinstance(res, FilterRun) and res.mode_proba is None:
+                state = res.state_before(t_s)
+                if state is not None:
+                    filters[name] = state
+        heading = None
+        pdr = self.data.pdr
+        if getattr(pdr, "imu", None) is not None and pdr.result.heading is not None:
+            i = int(np.searchsorted(pdr.imu.t_s, states_from_s, side="left")) - 1
+            if i >= 0:
+                heading = pdr.result.heading.state_at(i, float(pdr.imu.t_s[i]))
+        receiver = self.data.acoustic.analysis.receiver_state if self.data.acoustic is not None else None
+        return Handover(filters, ReaderStates(heading, receiver))
+
+
+@dataclass(frozen=True)
+class Handover:
+    """What a segment of a long walk hands the next (:mod:`walks.segments`): ``filters``, by filter method name,
+    the state (:class:`~models.fusion.ekf.FilterResume`) each resumes from at the segment's start, and
+    ``readers``, the readers' states the cut is read from (:class:`~walks.reader.ReaderStates`)."""
+
+    filters: dict = field(default_factory=dict)
+    readers: ReaderStates = ReaderStates()
 
 
 def walk_name(walk_dir: str | os.PathLike) -> str:
@@ -73,18 +109,22 @@ def check_windows(env_meta: dict, where: str) -> None:
 
 def fuse_walk(walk_dir: str | os.PathLike, model: FusionModel, methods=None, *, smooth: bool = True,
               lag_s: float | None = LAG_S, class_map_for: Callable | None = None, force: bool = False,
-              truth: bool = True, class_smoothing: str = "forward") -> FusedWalk:
+              truth: bool = True, class_smoothing: str = "forward", resume: "Handover | None" = None,
+              keep_states_from_s: float = math.inf) -> FusedWalk:
     """Read ``walk_dir`` and run ``methods`` (default: all) on it with ``model``.
 
     ``class_map_for``: callable site → :class:`~models.fusion.events.ClassMap` or None, the site map of the
     map baseline (``kf_map``), called only when that method is asked for. ``smooth``: the filters' RTS tracks
     too; ``lag_s``: their fixed-lag tracks with that lag (None: none). ``truth=False``: leave ``truth.csv``
     unread (``run``). ``class_smoothing``: how the model's class HMM smooths the window classes
-    (:data:`walks.inputs.CLASS_SMOOTHING`; ``"forward"``, causal, as ``run`` needs). A domain error raised past the
-    read names the walk.
+    (:data:`walks.inputs.CLASS_SMOOTHING`; ``"forward"``, causal, as ``run`` needs). ``resume``: the filter and reader
+    states the previous segment of a long walk handed over (:meth:`FusedWalk.handover`; :mod:`walks.segments`);
+    ``keep_states_from_s``: the next segment's cut's start (:func:`walks.reader.read_walk`). A domain
+    error raised past the read names the walk.
     """
     name = walk_name(walk_dir)
-    data = read_walk(walk_dir, truth=truth)
+    data = read_walk(walk_dir, truth=truth, resume=None if resume is None else resume.readers,
+                     keep_states_from_s=keep_states_from_s)
     check_site(model, data.site.name, str(walk_dir), force)
     check_windows(model.meta.get("env_meta", {}), "the model's environment classifier")
     if data.gnss is None and data.acoustic is None and data.pdr is None:
@@ -92,16 +132,20 @@ def fuse_walk(walk_dir: str | os.PathLike, model: FusionModel, methods=None, *, 
         raise DataError(f"{walk_dir}: no usable stream to fuse ({why})")
     try:
         inputs = walk_inputs(data, model.classifier, model.temporal, class_smoothing)
+        if resume is not None and resume.filters:
+            inputs = replace(inputs, resume=dict(resume.filters))
         want = methods
         class_at = None
         if class_map_for is not None and (want is None or "kf_map" in want):
             class_at = class_map_for(data.site)
-        tracks, skipped = run_methods(model, inputs, want, smooth=smooth, class_at=class_at, lag_s=lag_s)
+        results: dict = {}
+        tracks, skipped = run_methods(model, inputs, want, smooth=smooth, class_at=class_at, lag_s=lag_s,
+                                      results=results)
     except EnvfuseError as exc:
         if str(walk_dir) in str(exc):
             raise
         raise DataError(f"{walk_dir}: {exc}") from None
-    return FusedWalk(name, data, inputs, tracks, skipped)
+    return FusedWalk(name, data, inputs, tracks, skipped, results)
 
 
 @dataclass
@@ -131,6 +175,7 @@ def fuse_to_file(walk_dir: str | os.PathLike, model: FusionModel, method: str, p
     base = method.split("+")[0]
     out = RunSummary()
     writer = TrackWriter(path, fmt, properties)
+    resume = None
     try:
         for seg in walk_cuts(walk_dir, segment_s, workdir=os.path.dirname(os.path.abspath(path))):
             where = str(walk_dir) if seg.own_from_s == -math.inf and seg.own_to_s == math.inf else \
@@ -138,9 +183,11 @@ def fuse_to_file(walk_dir: str | os.PathLike, model: FusionModel, method: str, p
             try:
                 fused = fuse_walk(seg.directory, model, (base,), smooth=method.endswith("+rts"),
                                   lag_s=lag_s if method.endswith("+lag") else None, class_map_for=class_map_for,
-                                  force=force, truth=False)
+                                  force=force, truth=False, resume=resume,
+                                  keep_states_from_s=seg.states_from_s)
             except EnvfuseError as exc:
                 raise type(exc)(str(exc).replace(str(seg.directory), where)) from None
+            resume = fused.handover(seg.own_to_s, seg.states_from_s)
             out.segments += 1
             out.notes += [n for n in fused.data.notes if n not in out.notes]
             if method not in fused.tracks:
@@ -158,7 +205,6 @@ def fuse_to_file(walk_dir: str | os.PathLike, model: FusionModel, method: str, p
 
 def _write_owned(writer: TrackWriter, fused: FusedWalk, track, seg, out: RunSummary) -> None:
     """Write the epochs of ``track`` that ``seg`` owns, ROWS_PER_WRITE at a time; count them into ``out``."""
-    import numpy as np
 
     own = np.flatnonzero(seg.owns(track.t_s))
     for lo in range(0, own.size, ROWS_PER_WRITE):

@@ -16,7 +16,7 @@ future; ``forward_backward`` (``evaluate``) uses the whole walk.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -46,7 +46,9 @@ HOP_S = 1.0
 @dataclass(frozen=True)
 class WalkInputs:
     """A walk ready for the filters: ``events``; the classifier's evidence ``classes`` at window ends
-    ``window_t_s`` (n,), with the window features ``window_X`` (n, 14) and ``window_ood`` (n,)."""
+    ``window_t_s`` (n,), with the window features ``window_X`` (n, 14) and ``window_ood`` (n,); ``resume``: by
+    filter method name, the state its run over the previous segment of a long walk ended the segment in
+    (:class:`~models.fusion.ekf.FilterResume`, :mod:`walks.segments`), empty for a walk fused whole."""
 
     data: WalkData
     events: EventStream
@@ -54,6 +56,7 @@ class WalkInputs:
     window_X: np.ndarray
     classes: ClassTrack
     window_ood: np.ndarray
+    resume: dict = field(default_factory=dict)
 
     def ood_at(self, t_s: np.ndarray) -> np.ndarray:
         """Whether the window in force at each of ``t_s`` (m,) was out of the classifier's distribution (m,);
@@ -153,11 +156,17 @@ def gnss_events(p) -> GnssEvents:
                       hdop=np.where(p.hdop_assumed, np.nan, p.hdop), gst_sigma_m=gst)
 
 
-def _stands(step_t: np.ndarray) -> StandIntervals:
+def _stands(step_t: np.ndarray, end_s: float) -> StandIntervals:
+    """Standing between steps more than :data:`STAND_GAP_S` apart, and after the last step when the record
+    (``end_s``, its last IMU sample) goes on for more than that: a stop is standing whether or not a step
+    follows it in the record (so a long walk's cut that ends in a stop stands where the whole walk does)."""
     if step_t.size < 2:
         return StandIntervals(np.zeros(0), np.zeros(0))
     gaps = np.flatnonzero(np.diff(step_t) > STAND_GAP_S)
-    return StandIntervals(step_t[gaps] + 0.5, step_t[gaps + 1] - 0.5)
+    start, end = step_t[gaps] + 0.5, step_t[gaps + 1] - 0.5
+    if end_s - step_t[-1] > STAND_GAP_S:
+        start, end = np.r_[start, step_t[-1] + 0.5], np.r_[end, end_s]
+    return StandIntervals(start, end)
 
 
 def _odometry_steps(r, fix_t: np.ndarray) -> tuple[StepEvents, StandIntervals]:
@@ -217,7 +226,8 @@ def walk_inputs(data: WalkData, classifier, temporal=None, smoothing: str = "for
     elif data.pdr is not None and len(data.pdr.result):
         r = data.pdr.result
         ok = np.isfinite(r.heading_rad) & np.isfinite(r.step_length_m)
-        stands = _stands(r.t_s[ok])
+        end = data.pdr.imu.t_s[-1] if data.pdr.imu is not None and len(data.pdr.imu.t_s) else r.t_s[-1]
+        stands = _stands(r.t_s[ok], float(end))
         steps = StepEvents(*split_steps(r.t_s[ok], r.step_length_m[ok], r.heading_rad[ok], fix_t))
     if data.gnss is not None and len(data.gnss.positions):
         gnss = gnss_events(data.gnss.positions)

@@ -146,14 +146,17 @@ def filter_track(run: FilterRun, name: str, inputs: WalkInputs) -> Track:
 
 
 def run_methods(model: FusionModel, inputs: WalkInputs, methods=None, smooth: bool = True,
-                class_at: ClassMap | None = None, lag_s: float | None = LAG_S) -> tuple[dict, dict]:
+                class_at: ClassMap | None = None, lag_s: float | None = LAG_S,
+                results: dict | None = None) -> tuple[dict, dict]:
     """Run ``methods`` (default: every registered one) on one walk: ({name: Track}, {name: reason skipped});
     filter methods also give ``<name>+rts`` when ``smooth`` and ``<name>+lag`` (fixed-lag, ``lag_s``) unless
-    ``lag_s`` is None."""
+    ``lag_s`` is None. ``results``: a dict filled with every method's raw result computed on the way, the
+    first passes the asked methods build on included (a long walk hands their filter states to its next
+    segment)."""
     names = method_names() if methods is None else tuple(methods)
     for n in names:
         method(n)
-    ctx = MethodContext(model, inputs, class_at)
+    ctx = MethodContext(model, inputs, class_at, {} if results is None else results)
     tracks, skipped = {}, {}
     for n in names:
         m = method(n)
@@ -213,6 +216,14 @@ def _pdr(ctx: MethodContext) -> Track:
 # -- filters --------------------------------------------------------------------------------------------------
 
 
+def _resume(inputs: WalkInputs, name: str):
+    """The state the run of filter ``name`` over the previous segment of a long walk handed over (None for a walk
+    fused whole): the run continues from it at the segment's start (:mod:`walks.segments`). ``aekf`` resumes
+    its position, heading and scale states but restarts its variational noise estimate; ``imm`` does not
+    resume (its mode probabilities and per-mode states are not handed over)."""
+    return inputs.resume.get(name)
+
+
 def tuned(model: FusionModel, name: str) -> tuple:
     """(EkfConfig, scales) of method ``name``: the model's filter settings and noise with the knobs the method
     was tuned to on the training walks (:mod:`training.tuning`; all 1 when untuned): ``q_walk`` multiplies the
@@ -226,19 +237,21 @@ def tuned(model: FusionModel, name: str) -> tuple:
 
 def _kf(ctx: MethodContext) -> FilterRun:
     cfg, scales = tuned(ctx.model, "kf")
-    return EventEKF(cfg, ctx.model.fixed, "kf", scales).run(ctx.events())
+    return EventEKF(cfg, ctx.model.fixed, "kf", scales).run(ctx.events(), resume=_resume(ctx.inputs, "kf"))
 
 
 def _kf_quality(ctx: MethodContext) -> FilterRun:
     cfg, scales = tuned(ctx.model, "kf_quality")
-    return EventEKF(cfg, ctx.model.quality, "kf_quality", scales).run(ctx.events())
+    return EventEKF(cfg, ctx.model.quality, "kf_quality", scales).run(ctx.events(),
+                                                                    resume=_resume(ctx.inputs, "kf_quality"))
 
 
 def _kf_map(ctx: MethodContext) -> FilterRun:
     if ctx.class_at is None:
         raise MethodSkipped("no map of the site (a simulated site's layout gives one)")
     cfg, scales = tuned(ctx.model, "kf_map")
-    return EventEKF(cfg, ctx.model.per_class_map, "kf_map", scales).run(ctx.events(), class_at=ctx.class_at)
+    return EventEKF(cfg, ctx.model.per_class_map, "kf_map", scales).run(ctx.events(), class_at=ctx.class_at,
+                                                                        resume=_resume(ctx.inputs, "kf_map"))
 
 
 def _aekf(ctx: MethodContext) -> FilterRun:
@@ -246,7 +259,7 @@ def _aekf(ctx: MethodContext) -> FilterRun:
     vb = VBAdaptiveNoise(gnss_sigma_m=float(np.sqrt(np.trace(rg) / 2)),
                          acoustic_sigma_m=float(np.sqrt(np.trace(ra) / 2)))
     cfg, scales = tuned(ctx.model, "aekf")
-    return EventEKF(cfg, vb, "aekf", scales).run(ctx.events())
+    return EventEKF(cfg, vb, "aekf", scales).run(ctx.events(), resume=_resume(ctx.inputs, "aekf"))
 
 
 def _imm(ctx: MethodContext) -> FilterRun:
@@ -265,11 +278,13 @@ def adaptive_run(model: FusionModel, inputs: WalkInputs, method_name: str = "ada
     if blind:
         if model.context_blind is None:
             raise MethodSkipped("the model has no environment-blind context model (trained before it existed)")
-        return EventEKF(replace(cfg, outlier="mixture"), model.context_blind, method_name, scales).run(ev)
+        return EventEKF(replace(cfg, outlier="mixture"), model.context_blind, method_name, scales).run(
+            ev, resume=_resume(inputs, method_name))
     policy = model.adaptive_policy()
     if isinstance(policy, ContextNoise):
         cfg = replace(cfg, outlier="mixture")
-    return EventEKF(cfg, policy, method_name, scales).run(ev, classes=inputs.classes)
+    return EventEKF(cfg, policy, method_name, scales).run(ev, classes=inputs.classes,
+                                                          resume=_resume(inputs, method_name))
 
 
 def _adaptive_nobp(ctx: MethodContext) -> FilterRun:
@@ -327,7 +342,7 @@ def parameter_run(model: FusionModel, inputs: WalkInputs, first: FilterRun, blin
     if isinstance(policy, ContextNoise):
         cfg = replace(cfg, outlier="mixture")
     run = EventEKF(cfg, policy, name, scales).run(inputs.events, classes=None if blind else inputs.classes,
-                                                  r_scale_event=scale)
+                                                  r_scale_event=scale, resume=_resume(inputs, name))
     run.info["bp_log_scale"] = np.where(fix, log_s, np.nan)
     run.info["bp_guard_share"] = float(ood[fix].mean()) if fix.any() else 0.0
     return run

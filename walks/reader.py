@@ -38,6 +38,7 @@ without it, exactly as without the file, and :attr:`WalkData.notes` says which a
 from __future__ import annotations
 
 import dataclasses
+import math
 import os
 from dataclasses import dataclass
 from pathlib import Path
@@ -53,7 +54,8 @@ from features.gnss.nmea import epochs_on_time_base, read_nmea
 from features.gnss.positions import GnssPositions, fixes_to_enu
 from features.gnss.sat_features import pseudorange_features
 from features.gnss.wls import WlsConfig, solve_epochs, wls_positions
-from features.imu.heading import HeadingConfig
+from features.acoustic.tracking import ReceiverState
+from features.imu.heading import HeadingConfig, HeadingState
 from features.imu.pdr import PdrConfig, PdrResult, run_pdr
 from features.imu.reader import ImuData, read_imu_csv
 from features.imu.steps import StepLengthModel
@@ -67,7 +69,7 @@ from features.walk import STREAMS, Truth, WalkInfo, load_walk, read_truth
 from models.graph.tight import RangeRows
 from walks.acoustic_ranges import range_rows
 
-__all__ = ["GnssStream", "AcousticStream", "PdrStream", "OdometryStream", "UwbStream", "WalkData", "read_walk",
+__all__ = ["ReaderStates", "GnssStream", "AcousticStream", "PdrStream", "OdometryStream", "UwbStream", "WalkData", "read_walk",
            "WALK_SPEED_PRIOR_M_S", "walk_has", "pdr_start_from_gnss", "pdr_position_at", "read_gnss_stream",
            "read_pseudorange_stream", "read_acoustic_stream", "read_pdr_stream", "read_odometry_stream",
            "read_uwb_stream"]
@@ -173,6 +175,16 @@ class UwbStream:
 
 
 @dataclass(frozen=True)
+class ReaderStates:
+    """The readers' states a cut of a long walk resumes from (:func:`read_walk`, :mod:`walks.segments`):
+    ``heading``, the PDR heading filter's before the cut's first IMU sample; ``receiver``, the acoustic
+    receiver's before one of its frames. None: that reader starts afresh."""
+
+    heading: HeadingState | None = None
+    receiver: ReceiverState | None = None
+
+
+@dataclass(frozen=True)
 class WalkData:
     """Every source of one walk; a stream the walk lacks is ``None``. ``pdr`` is a :class:`PdrStream` (IMU) or
     an :class:`OdometryStream` (a vehicle's odometry)."""
@@ -190,7 +202,8 @@ class WalkData:
 
 
 def read_walk(walk_dir: str | os.PathLike, *, site: Site | None = None, pdr_k: float | None = None,
-              audio_positions: PositionConfig | None = None, truth: bool = True) -> WalkData:
+              audio_positions: PositionConfig | None = None, truth: bool = True,
+              resume: "ReaderStates | None" = None, keep_states_from_s: float = math.inf) -> WalkData:
     """Read a walk directory once: GNSS, acoustic and PDR streams and the truth when present.
 
     ``site`` overrides the site named in ``walk.toml``; ``pdr_k`` the step-length
@@ -201,6 +214,11 @@ def read_walk(walk_dir: str | os.PathLike, *, site: Site | None = None, pdr_k: f
     The PDR track is anchored on data, never on truth: at the first good GNSS
     fix (:func:`pdr_start_from_gnss`), else at the origin. ``truth=False`` leaves ``truth.csv`` unread
     (``run`` needs none).
+
+    A long walk read in cuts (:mod:`walks.segments`): ``resume``, the readers' states the read of the
+    preceding cut kept (:class:`ReaderStates`), and ``keep_states_from_s``, the walk time from which this read
+    keeps them for the next cut: the acoustic receiver's state before its first frame from then on
+    (``acoustic.analysis.receiver_state``; the PDR heading's is taken from its per-sample record).
     """
     walk = load_walk(walk_dir)
     site = walk.load_site() if site is None else site
@@ -211,10 +229,12 @@ def read_walk(walk_dir: str | os.PathLike, *, site: Site | None = None, pdr_k: f
         gnss = _optional(walk, "gnss_pseudoranges", lambda: read_pseudorange_stream(walk, site), notes)
     acoustic = None
     if site.beacons:
-        acoustic = _optional(walk, "audio", lambda: read_acoustic_stream(walk, site, audio_positions), notes)
+        acoustic = _optional(walk, "audio", lambda: read_acoustic_stream(walk, site, audio_positions,
+                                                                          resume and resume.receiver,
+                                                                          keep_states_from_s), notes)
     elif walk.path("audio") is not None:
         notes.append("audio: the site has no beacons; the walk is read without acoustic positions")
-    pdr = _optional(walk, "imu", lambda: read_pdr_stream(walk, (0.0, 0.0), pdr_k), notes)
+    pdr = _optional(walk, "imu", lambda: read_pdr_stream(walk, (0.0, 0.0), pdr_k, resume and resume.heading), notes)
     if gnss is not None and gnss.skipped_share > SKIPPED_NOTE_SHARE:
         notes.append(f"gnss: {walk.streams['gnss']['file']}: {100 * gnss.skipped_share:.0f} % of the sentences "
                      f"skipped ({gnss.nmea_summary})")
@@ -355,15 +375,18 @@ def read_odometry_stream(walk: WalkInfo, fixes: GnssPositions | None,
     return OdometryStream(result=dr, alignment=align, config=cfg)
 
 
-def read_acoustic_stream(walk: WalkInfo, site: Site, positions: PositionConfig | None) -> AcousticStream:
-    """The walk's audio through the acoustic receiver: fixes with covariance and the nine CIR windows."""
+def read_acoustic_stream(walk: WalkInfo, site: Site, positions: PositionConfig | None,
+                         resume: ReceiverState | None = None, keep_state_from_s: float = math.inf) -> AcousticStream:
+    """The walk's audio through the acoustic receiver: fixes with covariance and the nine CIR windows
+    (``resume``, ``keep_state_from_s``: :func:`read_walk`)."""
     require_beacon_band(walk.path("audio"), min(b.f0_hz if b.f0_hz is not None else site.acoustic.f0_hz
                                                 for b in site.beacons))
     timing = timing_from_walk(walk, site)
     if positions is None:
         positions = PositionConfig(max_clock_offset_s=timing.start_uncertainty_s + 0.05,
                                    motion_speed_m_s=WALK_SPEED_PRIOR_M_S)
-    res = analyse_audio(walk.path("audio"), site, timing, positions=positions, keep_frames=True)
+    res = analyse_audio(walk.path("audio"), site, timing, positions=positions, keep_frames=True, resume=resume,
+                        keep_state_from_s=keep_state_from_s)
     # the frames' ranges kept compactly (56 bytes per range), the frames themselves dropped
     ranges = range_rows(res.frames, res.fixes, site, positions)
     res = dataclasses.replace(res, frames=None)
@@ -373,13 +396,15 @@ def read_acoustic_stream(walk: WalkInfo, site: Site, positions: PositionConfig |
                           analysis=res, timing=timing, ranges=ranges)
 
 
-def read_pdr_stream(walk: WalkInfo, start_en: tuple[float, float], k: float | None) -> PdrStream:
-    """The walk's IMU through PDR from ``start_en`` (m); ``k`` the Weinberg constant (None: the default)."""
+def read_pdr_stream(walk: WalkInfo, start_en: tuple[float, float], k: float | None,
+                    heading_start: HeadingState | None = None) -> PdrStream:
+    """The walk's IMU through PDR from ``start_en`` (m); ``k`` the Weinberg constant (None: the default);
+    ``heading_start``: the heading filter's state before the first sample (:func:`read_walk`)."""
     imu = read_imu_csv(walk.path("imu"))
     decl = float(walk.streams["imu"].get("declination_deg", 0.0))
     heading = HeadingConfig(declination_rad=np.radians(decl))
     cfg = PdrConfig(heading=heading) if k is None else PdrConfig(length=StepLengthModel(k=k), heading=heading)
-    return PdrStream(result=run_pdr(imu, start_en[0], start_en[1], cfg), config=cfg, start_en_m=start_en, imu=imu,
+    return PdrStream(result=run_pdr(imu, start_en[0], start_en[1], cfg, heading_start), config=cfg, start_en_m=start_en, imu=imu,
                      repaired=imu.report.summary() if imu.report.n_defects else "")
 
 

@@ -1,41 +1,61 @@
-"""A long walk in segments: each cut to the files a device rotating its logs would have written, fused alone.
+"""A long walk in segments: each cut to the files a device rotating its logs would have written, fused alone,
+and each resuming what the previous one's filters and readers reached, so the segments give the whole walk's
+track.
 
-Several of the walk readers take statistics over the whole recording by design — the NMEA time base is the
-median of every dated epoch's offset (robust to a cold start's bogus dates), the GNSS epoch interval the
-median step, the IMU's units and the magnetometer's disturbance gate the record's medians, the step
-detector a zero-phase filter (``sosfiltfilt``) over the whole signal — and the filters keep every event's
-state for the BP network's second pass and the smoothers. So a whole-walk read grows with the walk (about
-12 MiB of peak memory per minute on a simulated walk, 2.7 GiB projected for 8 hours: ``bench/bench_pipeline.py
---memory-only``). Rather than give up those statistics, a walk longer than one segment is fused segment by
-segment:
+A whole-walk read grows with the walk (about 12 MiB of peak memory per minute on a simulated walk, 2.7 GiB
+projected for 8 hours: ``bench/bench_pipeline.py --memory-only``): the filters keep every event's state for the
+BP network's second pass and the smoothers, the readers every sample. So a walk longer than one segment is fused
+segment by segment:
 
 - segment *k* owns the walk times [k·S, (k+1)·S) (``segment_s`` S, default :data:`SEGMENT_S`); the first one
   owns everything before S, the last everything after its start;
 - its files are cut from the walk's by time, streaming (a line or an audio block at a time, never a whole
   file): NMEA sentences by the epoch they belong to (placed on the walk's time base from ``start_utc`` and the
-  times of day, midnight crossings counted), IMU and truth CSV rows by ``t_s``, audio samples by
+  times of day, midnight crossings counted), IMU, UWB, foot-IMU and truth CSV rows by ``t_s``, audio samples by
   ``[audio] start_s`` (the cut's ``start_s`` moved to its first sample, so the TDMA frame phase is unchanged);
-  the cut reaches :data:`WARMUP_S` before the segment (the filter starts there and has converged by the
-  segment's start; the readers' windows, trackers and IIR filters too) and :data:`TAIL_S` after it (the
-  fixed-lag smoother's 3 s, a step's split at the next fix, the last feature window);
-- the cut is fused by the unchanged pipeline (:func:`walks.fuse.fuse_walk`) and only the segment's own epochs
-  are kept.
+  the cut reaches :data:`WARMUP_S` before the segment and :data:`TAIL_S` after it (the fixed-lag smoother's
+  3 s, a step's split at the next fix, the last feature window); the first cut reaches at least the heading
+  gate's reference span (:data:`features.imu.heading.GATE_REFERENCE_S`);
+- the cut is fused by the pipeline (:func:`walks.fuse.fuse_walk`) with what the previous segment handed over
+  (:meth:`walks.fuse.FusedWalk.handover`), and only the segment's own epochs are kept:
 
-A walk that fits in one segment (every walk this project had run until issue 25: 10 minutes at most, at the
-default S) is fused exactly as before, from its own folder. Memory is then bounded by one cut's pipeline
-(S + :data:`WARMUP_S` + :data:`TAIL_S` of walk) whatever the walk's length, plus what the caller keeps of
-each segment (``envfuse run`` writes its rows to the output's temporary file and keeps nothing).
+  * every EKF (``kf``, ``kf_quality``, ``kf_map``, the ``adaptive`` family and both passes of the BP ones)
+    resumes at the segment's first event from its posterior x, P (bias states included) after the last event
+    before it (:class:`models.fusion.ekf.FilterResume`); the cut's earlier events are its warm-up, so the
+    per-event quantities derived from their neighbours (time since the previous event, standing time, the GNSS
+    bias resets on a quality change or a gap) are the whole walk's;
+  * the acoustic receiver resumes its tracker (lock, two-state clock filter, air estimate, acquisition memory)
+    at its first frame :data:`RESUME_AFTER_S` into the cut, once its audio buffers are full
+    (:class:`features.acoustic.tracking.ReceiverState`);
+  * the PDR heading filter resumes its heading, gyro bias, gyro-only heading and gate offset
+    :data:`RESUME_AFTER_S` into the cut, after its low-pass filters' transients, with the record's start
+    statistics (turn-on bias, gate reference field) of the walk
+    (:class:`features.imu.heading.HeadingState`);
+  * the rest is local in time and has settled within the warm-up: GNSS fixes (the NMEA time base and epoch
+    interval are medians that agree on a steady log), steps (a 2nd-order zero-phase filter, bouts of seconds),
+    feature windows, the class HMM's forward probabilities.
 
-The price is at the seams: the filter restarts :data:`WARMUP_S` before each segment instead of carrying its
-state, and the whole-record statistics above are per cut. Measured on one simulated 21-minute walk (site 201
-of the demo, seed 77, ``adaptive_blind+lag``, against truth): fused whole, mean 0.120 m, p95 0.646 m, max
-1.85 m; in 600 s segments with 120 s warm-up, mean 0.268 m, p95 0.652 m, max 18.2 m (the second segment's
-filter, started at 480 s, stays 0.3 m off the whole-walk one from 900 s on and spikes at 1,140 s); with 60 s
-of warm-up, 10 m off for its first minute. On the looped 3-minute test walk in 60 s segments the tracks agree
-to 1e-8 m (median). Carrying the filter's state across the seam (and the readers' statistics) is what would
-remove this; it is not done here. A walk holding a stream that cannot be cut by time
-(a drive's pseudoranges or odometry, whose dead reckoning is fitted to the whole drive's fixes) is not
-segmented (:func:`plan_segments` says why).
+A walk that fits in one segment is fused exactly as before, from its own folder. Memory is bounded by one cut's
+pipeline (S + :data:`WARMUP_S` + :data:`TAIL_S` of walk) whatever the walk's length, plus what the caller keeps
+of each segment (``envfuse run`` writes its rows to the output's temporary file and keeps nothing).
+
+Measured (simulated 21-minute walks, site 201 of the demo split, ``adaptive_blind+lag``): seed 77 in 600 s
+segments equals the whole walk's track within 6.4e-8 m at every epoch; in 300 s segments median 1.7e-7 m, max
+0.022 m (mean error against truth 0.120 m either way). Seed 78 in 300 s segments: GNSS, PDR and heading equal
+(heading within 5e-8 rad) but the acoustic fixes are not: median 2e-6 m, p95 0.032 m, max 1.07 m from the whole
+track (mean error 0.502 against 0.496 m whole, max 16.44 m both), one segment holding 7 fixes more. The
+receiver's tracker is resumed exactly, but the matched filter's float32 FFT blocks (and its decimation and the
+impulse blanker's segments) are aligned on the cut's first sample, not the walk's: a round-off difference at
+one detection near a threshold (285 s into seed 77) perturbs a fix by 3e-4 m, which the receiver's filters
+carry and shrink, or (seed 78, 456 s) flips a tracking decision. Aligning the cuts' audio on the blocks'
+common period would remove this; it is not done. Before the states were handed
+over (the filter restarted 120 s before each segment, the readers' whole-record statistics taken per cut) the
+same walk in 600 s segments had a mean error of 0.268 m and a maximum of 18.2 m against 0.120 and 1.85 m whole.
+
+Not resumed: ``imm`` (its per-mode states and probabilities), ``aekf``'s variational noise estimate (its x and
+P are), the ``+rts`` smoother (over its cut), ``pdr`` (dead-reckoned from the cut's first fix), the foot and
+UWB methods. A walk holding a stream that cannot be cut by time (a drive's pseudoranges or odometry, whose dead
+reckoning is fitted to the whole drive's fixes) is not segmented (:func:`plan_segments` says why).
 """
 
 from __future__ import annotations
@@ -52,25 +72,31 @@ from typing import Iterator
 import soundfile as sf
 
 from features.errors import DataError
+from features.imu.heading import GATE_REFERENCE_S
 from features.fileio import read_toml
 from features.walk import WalkInfo, load_walk
 
-__all__ = ["SEGMENT_S", "WARMUP_S", "TAIL_S", "Segment", "plan_segments", "walk_cuts"]
+__all__ = ["SEGMENT_S", "WARMUP_S", "TAIL_S", "RESUME_AFTER_S", "Segment", "plan_segments", "walk_cuts"]
 
-SEGMENT_S = 3600.0
-"""Walk time each segment owns by default, s: an hour. Shorter segments bound memory tighter (600 s: 334 MiB
-for an 8-hour walk against 297 MiB for a 10-minute one) but every seam costs accuracy (a 21-minute walk in
-600 s segments: mean error 0.120 → 0.268 m, max 1.85 → 18.2 m), so a walk of up to an hour is fused whole, as
-before, and ``--segment-s`` trades the two."""
+SEGMENT_S = 300.0
+"""Walk time each segment owns by default, s: with the filters and readers resumed across the seams they cost
+nothing measurable, so the segment is short and the peak memory of a long walk that of one cut of 430 s: a
+10-minute walk (two segments) and a 2-hour one peak within 3 % of each other (``bench/bench_pipeline.py
+--memory-only``)."""
 
 WARMUP_S = 120.0
-"""Walk time a cut reaches before its segment, s: the filter's and the readers' warm-up (a filter started on
-RTK fixes settles within seconds; two minutes also covers an outage's re-convergence and the acoustic
-receiver's clock search)."""
+"""Walk time a cut reaches before its segment, s: what is not handed over settles in it (the class HMM, step
+bouts, feature windows; the readers resume :data:`RESUME_AFTER_S` into it)."""
 
 TAIL_S = 10.0
 """Walk time a cut reaches after its segment, s: ≥ the fixed-lag smoother's lag (3 s), a step split at the
 following fix (≤ 0.6 s) and the last 2 s feature window."""
+
+RESUME_AFTER_S = 10.0
+"""Walk time after its cut's start at which the readers resume the states handed over, s: the acoustic
+receiver's audio buffers (a frame of envelope history and the search lead; frames last about a second) are full
+by then and the PDR heading's zero-phase low-pass filters (0.3 Hz on the specific force, 1 Hz on the
+magnetometer) have forgotten the cut's edge (their transients decay within a few seconds)."""
 
 CUTTABLE = frozenset(("gnss", "imu", "audio", "uwb", "imu_foot"))
 """Streams a cut can hold (cut by time without changing what they mean)."""
@@ -82,12 +108,20 @@ _TIME_FIELD = {"GGA": 1, "RMC": 1, "GST": 1, "GNS": 1, "ZDA": 1, "GLL": 5, "GBS"
 @dataclass(frozen=True)
 class Segment:
     """Segment ``index`` owns walk times [``own_from_s``, ``own_to_s``) (±inf at the walk's ends); ``directory``
-    is its cut (a temporary walk folder), or the walk's own folder when the walk is one segment."""
+    is its cut (a temporary walk folder), or the walk's own folder when the walk is one segment;
+    ``next_from_s`` the walk time the next segment's cut starts at (inf for the last)."""
 
     index: int
     own_from_s: float
     own_to_s: float
     directory: Path
+    next_from_s: float = math.inf
+
+    @property
+    def states_from_s(self) -> float:
+        """Walk time from which this segment's read keeps the readers' states for the next segment: the next
+        cut's start + :data:`RESUME_AFTER_S` (inf for the last segment)."""
+        return self.next_from_s + RESUME_AFTER_S
 
     def owns(self, t_s):
         """Which of ``t_s`` (array) belong to this segment."""
@@ -152,7 +186,7 @@ def walk_cuts(walk_dir: str | os.PathLike, segment_s: float = SEGMENT_S, *,
     deleted when the next is asked for. A walk of one segment yields its own folder."""
     n, _ = plan_segments(walk_dir, segment_s)
     if n == 1:
-        yield Segment(0, -math.inf, math.inf, Path(walk_dir))
+        yield Segment(0, -math.inf, math.inf, Path(walk_dir), math.inf)
         return
     walk = load_walk(walk_dir)
     _fix_mmap_threshold()
@@ -163,6 +197,8 @@ def walk_cuts(walk_dir: str | os.PathLike, segment_s: float = SEGMENT_S, *,
             own_to = math.inf if k == n - 1 else (k + 1) * segment_s
             lo = -math.inf if k == 0 else own_from - WARMUP_S
             hi = math.inf if k == n - 1 else own_to + TAIL_S
+            if k == 0:
+                hi = max(hi, GATE_REFERENCE_S)      # the heading gate's reference field, as the whole walk's
             next_lo = (k + 1) * segment_s - WARMUP_S
             d = Path(tmp) / f"segment{k:04d}"
             d.mkdir()
@@ -170,7 +206,7 @@ def walk_cuts(walk_dir: str | os.PathLike, segment_s: float = SEGMENT_S, *,
             for name, cut in cutters.items():
                 toml.update(cut.write(d, lo, hi, next_lo))
             _write_walk_toml(walk, d, toml)
-            yield Segment(k, own_from, own_to, d)
+            yield Segment(k, own_from, own_to, d, math.inf if k == n - 1 else next_lo)
             shutil.rmtree(d)
         for cut in cutters.values():
             cut.close()

@@ -73,7 +73,7 @@ from numba import njit
 
 from features.acoustic.positions import AcousticFix, PositionConfig
 from features.acoustic.timing import AudioTiming, ChirpDetection, SearchWindow, frame_phase_s, speed_of_sound_m_s
-from features.acoustic.tracking import ClockPositionTracker, acquisition_windows, frame_fix
+from features.acoustic.tracking import ClockPositionTracker, ReceiverState, acquisition_windows, frame_fix
 from features.acoustic.audio import CLIP_LEVEL, AudioBlock, audio_info, count_clipped, iter_audio_blocks
 from features.acoustic.cir import CirFeatures, analyse_cirs, first_arrivals
 from features.constants import AUDIO_FS_HZ
@@ -202,13 +202,15 @@ def max_site_range_m(site: Site) -> float:
 
 @dataclass(frozen=True)
 class FrameResult:
-    """One TDMA frame: the chirps detected in it and the position fix (None if none)."""
+    """One TDMA frame: the chirps detected in it and the position fix (None if none); ``receiver_state`` the
+    receiver's state before this frame when it was asked to keep it (:func:`detect_frames`), else None."""
 
     frame: int
     frame_start_s: float
     detections: tuple
     fix: AcousticFix | None
     tracking: bool
+    receiver_state: ReceiverState | None = None
 
 
 class _Stream:
@@ -259,7 +261,8 @@ class _Stream:
 
 def detect_frames(path: str | os.PathLike, site: Site, timing: AudioTiming,
                   config: DetectorConfig = DetectorConfig(), stats: AudioStats | None = None,
-                  positions: PositionConfig | None = None) -> Iterator[FrameResult]:
+                  positions: PositionConfig | None = None, resume: ReceiverState | None = None,
+                  keep_state_from_s: float = math.inf) -> Iterator[FrameResult]:
     """Stream ``path`` frame by frame: the chirps detected in each TDMA frame and its fix.
 
     Per frame, in order (each step a method of :class:`_FrameDetector`):
@@ -279,6 +282,11 @@ def detect_frames(path: str | os.PathLike, site: Site, timing: AudioTiming,
     whatever the file length. ``stats`` (optional) receives per-bin sample
     counts, clipping and energy for window flags. ``positions`` defaults to a
     clock-offset bound of the stated start uncertainty plus 50 ms.
+
+    A long walk read in cuts (``walks/segments.py``): ``resume``, the state a run over the preceding cut kept,
+    replaces the tracker's before its frame (the frames before it are the cut's warm-up: the audio buffers
+    fill); ``keep_state_from_s``: the first frame starting at or after this walk time carries the receiver's
+    state before it (:attr:`FrameResult.receiver_state`), for the next cut.
     """
     if not site.beacons:
         return
@@ -292,7 +300,7 @@ def detect_frames(path: str | os.PathLike, site: Site, timing: AudioTiming,
     if positions is None:
         positions = PositionConfig(max_clock_offset_s=timing.start_uncertainty_s + 0.05)
     det = _FrameDetector(path, site, timing, config, stats, positions, n_total)
-    yield from det.frames()
+    yield from det.frames(resume, keep_state_from_s)
 
 
 @njit(cache=True)
@@ -474,12 +482,14 @@ class _FrameDetector:
         self.max_width_taps = [max(3, int(math.ceil(max(_MAX_PEAK_WIDTH_S, 6.0 / s.bandwidth_hz) * fs / dec)))
                                for s in unique]
         self.pending_cirs: list = []  # (frame list index, detection index, template, cir row, search start, noise power)
-        self.held: list = []          # frames waiting for their CIR features: [k, start, detections, fix, tracking]
+        self.held: list = []          # frames waiting for their CIR features: [k, start, detections, fix, tracking, state]
 
     # -- the frame loop ------------------------------------------------------------------------
 
-    def frames(self) -> Iterator[FrameResult]:
-        """Every TDMA frame that can hold a chirp of the recording, in order."""
+    def frames(self, resume: ReceiverState | None = None, keep_state_from_s: float = math.inf
+               ) -> Iterator[FrameResult]:
+        """Every TDMA frame that can hold a chirp of the recording, in order (``resume``, ``keep_state_from_s``:
+        :func:`detect_frames`)."""
         site, timing, tracker, stream, fs = self.site, self.timing, self.tracker, self.stream, self.fs
         frame_s = site.acoustic.frame_s
         u = timing.start_uncertainty_s
@@ -490,13 +500,18 @@ class _FrameDetector:
             if frame_start - u > end_s:
                 yield from self.release()
                 return
+            if resume is not None and k == resume.frame:
+                self.tracker = tracker = resume.tracker.resumed(timing)
+            kept = None
+            if frame_start >= keep_state_from_s:
+                kept, keep_state_from_s = ReceiverState(k, tracker.resumed(tracker.timing)), math.inf
             detections, tracking = self.detect_frame(k, frame_start)
             fix = tracker.frame_done(frame_start, detections, self.bandwidth)
             earlier = tracker.take_confirmed_tentative()
             held = self.held
             if earlier is not None and held and held[-1][3] is None:
                 held[-1][3] = earlier          # the acquisition fix this frame confirmed
-            held.append([k, frame_start, detections, fix, tracking])
+            held.append([k, frame_start, detections, fix, tracking, kept])
             if len(held) >= _FEATURE_BATCH_FRAMES:
                 yield from self.release()
             next_lo = int(math.floor((frame_start + frame_s - u - 0.05 - timing.start_s) * fs))
@@ -529,8 +544,8 @@ class _FrameDetector:
     def release(self) -> Iterator[FrameResult]:
         """Compute the held frames' features and yield them."""
         self.flush_features(self.held)
-        for k_, start_, dets_, fix_, tracking_ in self.held:
-            yield FrameResult(k_, start_, tuple(sorted(dets_, key=lambda d: d.tx_s)), fix_, tracking_)
+        for k_, start_, dets_, fix_, tracking_, kept_ in self.held:
+            yield FrameResult(k_, start_, tuple(sorted(dets_, key=lambda d: d.tx_s)), fix_, tracking_, kept_)
         self.held.clear()
 
     # -- detect ---------------------------------------------------------------------------------

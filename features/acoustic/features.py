@@ -137,16 +137,20 @@ class AudioAnalysis:
     duration_s: float
     truncated: bool
     frames: list | None = None
+    receiver_state: object = None
+    """The receiver's state kept for a later cut of the recording (``keep_state_from_s``), else None."""
 
 
 def analyse_audio(path: str | os.PathLike, site: Site, timing: AudioTiming,
                   detector: DetectorConfig = DetectorConfig(), windows: WindowConfig = WindowConfig(),
-                  positions: PositionConfig | None = None, keep_frames: bool = False) -> AudioAnalysis:
+                  positions: PositionConfig | None = None, keep_frames: bool = False, resume=None,
+                  keep_state_from_s: float = math.inf) -> AudioAnalysis:
     """Stream ``path`` once: feature windows and per-frame acoustic positions.
 
     ``positions``: solver settings (default: see :func:`features.acoustic.detection.detect_frames`).
     ``keep_frames`` also returns every :class:`~features.acoustic.detection.FrameResult`
-    (for evaluation; memory then grows with the file).
+    (for evaluation; memory then grows with the file). ``resume``, ``keep_state_from_s``: a recording read in
+    cuts (:func:`~features.acoustic.detection.detect_frames`); the state kept is the result's ``receiver_state``.
     """
     stats = AudioStats(bin_s=0.1, n_samples=[], n_clipped=[], sum_sq=[])
     bins = _HopBins()
@@ -154,7 +158,10 @@ def analyse_audio(path: str | os.PathLike, site: Site, timing: AudioTiming,
     n_det = 0
     kept = [] if keep_frames else None
     clock_s = 0.0          # the receiver clock offset (stated − true) of the latest fix: chirps go to windows by true time
-    for frame in detect_frames(path, site, timing, detector, stats, positions):
+    receiver_state = None
+    for frame in detect_frames(path, site, timing, detector, stats, positions, resume, keep_state_from_s):
+        if frame.receiver_state is not None:
+            receiver_state = frame.receiver_state
         if kept is not None:
             kept.append(frame)
         if frame.fix is not None:
@@ -168,7 +175,7 @@ def analyse_audio(path: str | os.PathLike, site: Site, timing: AudioTiming,
             fixes.append(frame.fix)
     bins.flush()
     rows = _window_rows(bins, stats, timing, windows)
-    return AudioAnalysis(rows, fixes, n_det, stats.duration_s, stats.truncated, kept)
+    return AudioAnalysis(rows, fixes, n_det, stats.duration_s, stats.truncated, kept, receiver_state)
 
 
 def _window_rows(bins: _HopBins, stats: AudioStats, timing: AudioTiming, cfg: WindowConfig) -> list[dict]:

@@ -18,8 +18,10 @@ the per-frame fix in :mod:`features.acoustic.frame_fix`; :func:`frame_fix` and
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -31,7 +33,7 @@ from features.acoustic.positions import AcousticFix, PositionConfig
 from features.acoustic.timing import AudioTiming, ChirpDetection, SearchWindow
 from features.site import Site
 
-__all__ = ["ClockPositionTracker", "frame_fix", "acquisition_windows"]
+__all__ = ["ClockPositionTracker", "ReceiverState", "frame_fix", "acquisition_windows"]
 
 
 class ClockPositionTracker(HoughAcquisition):
@@ -99,6 +101,9 @@ class ClockPositionTracker(HoughAcquisition):
     def __init__(self, site: Site, timing: AudioTiming, fs_hz: float, c: float, r_max: float,
                  positions: PositionConfig, range_lag_s: dict | None = None):
         self.site, self.timing, self.fs, self.c, self.r_max = site, timing, fs_hz, c, r_max
+        # the recording's start, from which the clock's drift bound grows (kept when a cut of the recording
+        # resumes this tracker: its own timing then starts later, :meth:`resumed`)
+        self.clock_origin_s = timing.start_s
         # Beacon id -> the chirp's range–Doppler lag (ChirpSpec.range_doppler_lag_s): see frame_fix.
         self.range_lag_s = range_lag_s
         self.positions = positions
@@ -134,6 +139,13 @@ class ClockPositionTracker(HoughAcquisition):
         self._tentative_clock_aided = False
         self._air: AirState | None = None                  # the air estimate (features.acoustic.air)
         self.mirror_refused = 0                            # re-acquisition fixes refused as ambiguous
+
+    def resumed(self, timing: AudioTiming) -> "ClockPositionTracker":
+        """A copy of this tracker for a later cut of the same recording whose samples start at ``timing``'s
+        ``start_s`` (the clock's drift bound still grows from the recording's start)."""
+        other = copy.deepcopy(self)
+        other.timing = timing
+        return other
 
     def tracking_at(self, t_s: float) -> bool:
         return self.last_fix is not None and t_s - self.last_fix.t_s <= self.track_timeout_s
@@ -178,7 +190,7 @@ class ClockPositionTracker(HoughAcquisition):
 
     def _clock_plausible(self, fix: AcousticFix) -> bool:
         """|δ| within the stated start uncertainty, plus 5 ms and the drift allowed since the start."""
-        bound = self.timing.start_uncertainty_s + 5e-3 + self.max_drift_ppm * 1e-6 * abs(fix.t_s - self.timing.start_s)
+        bound = self.timing.start_uncertainty_s + 5e-3 + self.max_drift_ppm * 1e-6 * abs(fix.t_s - self.clock_origin_s)
         return abs(fix.clock_offset_s) <= bound
 
     def _continues(self, fix: AcousticFix, last: AcousticFix,
@@ -412,3 +424,15 @@ class ClockPositionTracker(HoughAcquisition):
             return True
         t0, d0 = self._clock_anchor
         return abs(fix.clock_offset_s - d0) <= self.max_drift_ppm * 1e-6 * abs(fix.t_s - t0) + 1e-3
+
+
+@dataclass(frozen=True)
+class ReceiverState:
+    """The acoustic receiver's tracking state before TDMA frame ``frame`` (absolute: frame starts are
+    ``frame_phase_s + frame·frame_s`` on the walk's time base whatever the cut): a copy of its ``tracker`` (lock,
+    two-state clock filter, air estimate, acquisition memory). A run over a later cut of the same recording
+    resumes from it at that frame (:func:`features.acoustic.detection.detect_frames`), so that from there on it
+    detects and solves what the run over the whole recording does (a long walk's segments)."""
+
+    frame: int
+    tracker: ClockPositionTracker

@@ -23,13 +23,21 @@ accelerometer reads specific force (≈ −g·down at rest).
   Restricted to yaw with an unwrapped ψ_m this is a linear time-invariant
   system, so it runs as two IIR filters (``scipy.signal.lfilter``, compiled)
   instead of a per-sample loop.
-- Magnetic disturbance gate: where the field's intensity departs from the
-  record's median by more than 5 % or its dip by more than 3° (steel,
+- Magnetic disturbance gate: where the field's intensity departs from its
+  median over the record's first :data:`GATE_REFERENCE_S` by more than 5 % or its
+  dip by more than 3° (steel,
   transformers), the magnetometer heading is replaced by the gyro-propagated
   heading from the last undisturbed sample, so the filter coasts on the gyro
   there (the idea of imufusion's magnetic rejection, Madgwick 2020). A second
   gate flags spells where the magnetometer heading turns while the gyro does
   not (quasi-static field test, see :func:`_inconsistent_with_gyro`).
+- Resuming: every quantity above is either local in time (the low-pass filters'
+  transients last seconds) or a state (ψ, b, the gyro heading, the gate's
+  offset) or a statistic of the record's start (the turn-on bias, the gate's
+  reference field), so a record cut into pieces is run piece by piece from
+  the :class:`HeadingState` the previous piece reached (:meth:`HeadingResult.state_at`)
+  and gives the headings of the whole record (a long walk's segments,
+  ``walks/segments.py``), up to the low-pass transients at the piece's start.
 
 Why not a library: ``ahrs.filters.Mahony`` runs a Python loop (≈ 20 µs per
 sample here, 500× real time at 100 Hz); ``imufusion.Ahrs`` is compiled C but
@@ -48,7 +56,7 @@ from scipy import ndimage, signal
 
 from features.errors import ConfigError
 
-__all__ = ["HeadingConfig", "HeadingResult", "down_in_body", "yaw_rate", "magnetic_heading",
+__all__ = ["HeadingConfig", "HeadingResult", "HeadingState", "GATE_REFERENCE_S", "down_in_body", "yaw_rate", "magnetic_heading",
            "complementary_heading", "estimate_heading", "imufusion_heading", "wrap_pi"]
 
 
@@ -95,12 +103,39 @@ class HeadingConfig:
             raise ConfigError("declination_rad and initial_heading_rad must be finite")
 
 
+GATE_REFERENCE_S = 300.0
+"""Span of the record's start whose median intensity and dip are the gate's undisturbed field, s: a statistic of
+the walk's first minutes rather than of the whole record, so that a long walk read in pieces has the same gate
+(the field of a site varies by far less than the gate's 5 % and 3° between its start and later)."""
+
+
+@dataclass(frozen=True)
+class HeadingState:
+    """Where a heading run stood after one sample (:meth:`HeadingResult.state_at`), what a run over the samples
+    that follow resumes from (:func:`estimate_heading`'s ``start``): the complementary filter's heading
+    ``fused_rad`` and bias ``bias_rad_s``, the gyro-only heading ``gyro_rad``, the gate's magnetometer − gyro
+    heading at the last undisturbed sample ``gate_offset_rad`` (NaN without magnetometer), and the record's
+    start statistics: the turn-on bias ``static_bias_rad_s`` and the gate's reference ``intensity_ref`` (the
+    field's intensity, the magnetometer's unit) and ``dip_ref_rad``."""
+
+    fused_rad: float
+    bias_rad_s: float
+    gyro_rad: float
+    gate_offset_rad: float
+    static_bias_rad_s: float
+    intensity_ref: float
+    dip_ref_rad: float
+    t_s: float = math.nan
+    """Time of the sample the state follows (the record's time base; NaN: not stated)."""
+
+
 @dataclass(frozen=True)
 class HeadingResult:
     """Per-sample headings, rad from true north clockwise, shape (n,) each (NaN where unavailable).
 
     ``fused`` (complementary), ``gyro_only``, ``mag_only``; ``mag_disturbed``
-    bool (n,); ``gyro_bias_rad_s`` (n,) the filter's yaw-rate bias estimate.
+    bool (n,); ``gyro_bias_rad_s`` (n,) the filter's yaw-rate bias estimate; the record's start statistics the
+    run used: ``static_bias_rad_s`` (the turn-on bias removed), the gate's ``intensity_ref`` and ``dip_ref_rad``.
     """
 
     fused: np.ndarray
@@ -108,6 +143,24 @@ class HeadingResult:
     mag_only: np.ndarray
     mag_disturbed: np.ndarray
     gyro_bias_rad_s: np.ndarray
+    static_bias_rad_s: float = 0.0
+    intensity_ref: float = math.nan
+    dip_ref_rad: float = math.nan
+    start_gate_offset_rad: float = math.nan
+    """The gate offset the run resumed from (:class:`HeadingState`), NaN for a run from the record's start."""
+
+    def state_at(self, i: int, t_s: float = math.nan) -> HeadingState:
+        """The run's state after sample ``i`` (at time ``t_s``); the gate's offset from the last undisturbed
+        sample at or before it with a heading (else the offset this run resumed from, else the first sample's)."""
+        good = np.flatnonzero(~self.mag_disturbed[:i + 1] & np.isfinite(self.gyro_only[:i + 1]))
+        if good.size:
+            offset = float(wrap_pi(self.mag_only[good[-1]] - self.gyro_only[good[-1]]))
+        elif math.isfinite(self.start_gate_offset_rad):
+            offset = self.start_gate_offset_rad
+        else:
+            offset = float(wrap_pi(self.mag_only[0] - self.gyro_only[0]))
+        return HeadingState(float(self.fused[i]), float(self.gyro_bias_rad_s[i]), float(self.gyro_only[i]), offset,
+                            self.static_bias_rad_s, self.intensity_ref, self.dip_ref_rad, float(t_s))
 
 
 def _lowpass(x: np.ndarray, cutoff_hz: float, rate_hz: float) -> np.ndarray:
@@ -161,18 +214,18 @@ def _mahony_yaw_tf(kp: float, ki: float, dt: float):
 
 
 def complementary_heading(rate_rad_s: np.ndarray, mag_heading_unwrapped: np.ndarray, rate_hz: float,
-                          kp_per_s: float, ki_per_s2: float, initial_bias_rad_s: float = 0.0
-                          ) -> tuple[np.ndarray, np.ndarray]:
+                          kp_per_s: float, ki_per_s2: float, initial_bias_rad_s: float = 0.0,
+                          initial_heading_rad: float | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Run the yaw Mahony filter; returns (heading unwrapped, bias), each shape (n,).
 
-    Starts at ψ₀ = ψ_m,0 and b₀ = ``initial_bias_rad_s``; the linear system is
-    fed deviations from that fixed point, so zero initial filter state is exact.
+    Starts at ψ₀ = ``initial_heading_rad`` (default ψ_m,0) and b₀ = ``initial_bias_rad_s`` before the first
+    sample; the linear system is fed deviations from that fixed point, so zero initial filter state is exact.
     """
     dt = 1.0 / rate_hz
     nr, nm, nrb, nmb, den = _mahony_yaw_tf(kp_per_s, ki_per_s2, dt)
     r = np.asarray(rate_rad_s, float) - initial_bias_rad_s
     m = np.asarray(mag_heading_unwrapped, float)
-    m0 = m[0]
+    m0 = m[0] if initial_heading_rad is None else float(initial_heading_rad)
     psi = signal.lfilter(nr, den, r) + signal.lfilter(nm, den, m - m0) + m0
     bias = signal.lfilter(nrb, den, r) + signal.lfilter(nmb, den, m - m0) + initial_bias_rad_s
     return psi, bias
@@ -230,11 +283,15 @@ def _inconsistent_with_gyro(mag_unwrapped: np.ndarray, gyro_heading: np.ndarray,
 
 
 def estimate_heading(acc_m_s2: np.ndarray, gyro_rad_s: np.ndarray | None, mag_ut: np.ndarray | None,
-                     rate_hz: float, config: HeadingConfig = HeadingConfig()) -> HeadingResult | None:
+                     rate_hz: float, config: HeadingConfig = HeadingConfig(),
+                     start: HeadingState | None = None, start_index: int = 0) -> HeadingResult | None:
     """Gyro-only, magnetometer-only and complementary heading, per sample (see module docstring).
 
     Without gyro and magnetometer there is no heading (returns None); with only
-    one of them, ``fused`` is that one (gyro from ``config.initial_heading_rad``).
+    one of them, ``fused`` is that one (gyro from ``config.initial_heading_rad``). ``start``: the state a run
+    over the record's preceding samples reached after the sample before ``start_index`` (the record's start
+    statistics come from it too); the headings resume from it there, and the samples before it, where the
+    low-pass filters settle, have none (NaN).
     """
     if gyro_rad_s is None and mag_ut is None:
         return None
@@ -242,41 +299,91 @@ def estimate_heading(acc_m_s2: np.ndarray, gyro_rad_s: np.ndarray | None, mag_ut
     n = len(acc)
     nan = np.full(n, np.nan)
     down = down_in_body(acc, rate_hz, config.gravity_lowpass_hz)
-    dt = 1.0 / rate_hz
     mag_psi = nan
     disturbed = np.zeros(n, bool)
     if mag_ut is not None:
         mag_f = _lowpass(np.asarray(mag_ut, float), config.mag_lowpass_hz, rate_hz)
         mag_psi, intensity, dip = magnetic_heading(mag_f, down, config.declination_rad)
-        disturbed = ((np.abs(intensity / np.median(intensity) - 1.0) > config.gate_intensity_frac)
-                     | (np.abs(dip - np.median(dip)) > config.gate_dip_rad))
+        if start is None:
+            n_ref = max(int(round(GATE_REFERENCE_S * rate_hz)), 1)
+            ref = (float(np.median(intensity[:n_ref])), float(np.median(dip[:n_ref])))
+        else:
+            ref = (start.intensity_ref, start.dip_ref_rad)
+        disturbed = ((np.abs(intensity / ref[0] - 1.0) > config.gate_intensity_frac)
+                     | (np.abs(dip - ref[1]) > config.gate_dip_rad))
+    else:
+        ref = (math.nan, math.nan)
     if gyro_rad_s is None:
-        return HeadingResult(mag_psi, nan, mag_psi, disturbed, nan)
+        return HeadingResult(mag_psi, nan, mag_psi, disturbed, nan, 0.0, *ref)
     gyro = np.asarray(gyro_rad_s, float)
     r = yaw_rate(gyro, down)
-    n_static = _static_start(acc, gyro, rate_hz, config.static_start_s)
-    bias0 = float(np.mean(r[:n_static])) if n_static else 0.0
-    if mag_ut is None:
-        psi_g = config.initial_heading_rad + np.r_[0.0, np.cumsum((r[1:] - bias0) * dt)]
-        return HeadingResult(wrap_pi(psi_g), wrap_pi(psi_g), nan, disturbed, np.full(n, bias0))
+    if start is None:
+        n_static = _static_start(acc, gyro, rate_hz, config.static_start_s)
+        bias0 = float(np.mean(r[:n_static])) if n_static else 0.0
+        out = _integrate(r, None if mag_ut is None else mag_psi, disturbed, rate_hz, config, bias0, None)
+        return HeadingResult(*out, bias0, *ref)
+    j = int(start_index)
+    out = _integrate(r[j:], None if mag_ut is None else mag_psi[j:], disturbed[j:], rate_hz, config,
+                     start.static_bias_rad_s, start)
+    fused, gyro_only, _, flags, bias = (np.concatenate([np.full(j, np.nan if x.dtype != bool else False), x])
+                                        for x in out)
+    return HeadingResult(fused, gyro_only, mag_psi, disturbed | flags, bias, start.static_bias_rad_s, *ref,
+                         start.gate_offset_rad)
+
+
+def _integrate(r: np.ndarray, mag_psi: np.ndarray | None, disturbed: np.ndarray, rate_hz: float,
+               config: HeadingConfig, bias0: float, start: HeadingState | None) -> tuple:
+    """(fused, gyro_only, mag_only, disturbed, bias) from the yaw rate ``r`` and the magnetometer heading
+    ``mag_psi`` (None without one), gated by ``disturbed``: the gyro heading, the gate and the complementary
+    filter, from the record's start (``start`` None) or from the state ``start``."""
+    n = len(r)
+    dt = 1.0 / rate_hz
+    if start is None:
+        # ψ_g relative to the first sample
+        psi_rel = np.r_[0.0, np.cumsum((r[1:] - bias0) * dt)]
+    else:
+        # ψ_g relative to the sample before the first (the state's)
+        psi_rel = np.cumsum((r - bias0) * dt)
+    if mag_psi is None:
+        psi_g = (config.initial_heading_rad if start is None else start.gyro_rad) + psi_rel
+        return wrap_pi(psi_g), wrap_pi(psi_g), np.full(n, np.nan), disturbed, np.full(n, bias0)
     m_unw = np.unwrap(mag_psi)
-    psi_rel = np.r_[0.0, np.cumsum((r[1:] - bias0) * dt)]
-    disturbed |= _inconsistent_with_gyro(m_unw, psi_rel, rate_hz, config)
-    n0 = max(int(round(config.static_start_s * rate_hz)), 1)
-    good0 = ~disturbed[:n0]
-    psi0 = float(np.mean(m_unw[:n0][good0])) if good0.any() else float(m_unw[0])
-    psi_g = psi0 + np.r_[0.0, np.cumsum((r[1:] - bias0) * dt)]
+    disturbed = disturbed | _inconsistent_with_gyro(m_unw, psi_rel, rate_hz, config)
+    if start is None:
+        n0 = max(int(round(config.static_start_s * rate_hz)), 1)
+        good0 = ~disturbed[:n0]
+        psi0 = float(np.mean(m_unw[:n0][good0])) if good0.any() else float(m_unw[0])
+    else:
+        psi0 = start.gyro_rad
+    psi_g = psi0 + psi_rel
     # gate: inside disturbed spells follow the gyro from the last good magnetometer heading
     m_gated = m_unw.copy()
-    m_gated[0] = psi0
+    if start is None:
+        m_gated[0] = psi0
     if disturbed.any():
         idx = np.arange(n)
-        last_good = np.maximum.accumulate(np.where(~disturbed, idx, 0))
-        m_gated = np.where(disturbed, m_unw[last_good] + (psi_g - psi_g[last_good]), m_unw)
-        m_gated[0] = psi0 if disturbed[0] else m_gated[0]
-    m_gated[0] = psi0
-    psi, bias = complementary_heading(r, m_gated, rate_hz, config.kp_per_s, config.ki_per_s2, bias0)
-    return HeadingResult(wrap_pi(psi), wrap_pi(psi_g), mag_psi, disturbed, bias)
+        last_good = np.maximum.accumulate(np.where(~disturbed, idx, -1 if start is not None else 0))
+        before = last_good < 0          # a spell that began before this piece: the state's offset, on m_unw's branch
+        lg = np.maximum(last_good, 0)
+        gated = m_unw[lg] + (psi_g - psi_g[lg])
+        if before.any():
+            offset = start.gate_offset_rad if math.isfinite(start.gate_offset_rad) else m_unw[0] - psi_g[0]
+            offset += _branch(m_unw[0] - psi_g[0] - offset)
+            gated = np.where(before, offset + psi_g, gated)
+        m_gated = np.where(disturbed, gated, m_unw)
+        if start is None:
+            m_gated[0] = psi0
+    if start is None:
+        psi, bias = complementary_heading(r, m_gated, rate_hz, config.kp_per_s, config.ki_per_s2, bias0)
+    else:
+        psi, bias = complementary_heading(r, m_gated, rate_hz, config.kp_per_s, config.ki_per_s2, start.bias_rad_s,
+                                          start.fused_rad + _branch(m_gated[0] - start.fused_rad))
+    return wrap_pi(psi), wrap_pi(psi_g), mag_psi, disturbed, bias
+
+
+def _branch(delta_rad: float) -> float:
+    """The multiple of 2π nearest ``delta_rad``: what puts an angle on another's unwrapped branch."""
+    return 2.0 * math.pi * round(float(delta_rad) / (2.0 * math.pi))
 
 
 def imufusion_heading(acc_m_s2: np.ndarray, gyro_rad_s: np.ndarray, mag_ut: np.ndarray, rate_hz: float,

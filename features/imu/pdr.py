@@ -31,7 +31,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from features.fileio import atomic_write_text
-from features.imu.heading import HeadingConfig, HeadingResult, estimate_heading
+from features.imu.heading import HeadingConfig, HeadingResult, HeadingState, estimate_heading
 from features.imu.reader import ImuData
 from features.imu.steps import StepDetectorConfig, StepLengthModel, Steps, detect_steps
 
@@ -72,11 +72,18 @@ class PdrResult:
 
 
 def step_heading(heading_rad: np.ndarray, steps: Steps) -> np.ndarray:
-    """Circular mean of the per-sample heading over each step's samples, rad, shape (n_steps,)."""
+    """Circular mean of the per-sample heading over each step's samples, rad, shape (n_steps,); NaN for a step
+    with a sample without heading (a resumed heading's first samples, :func:`run_pdr`)."""
     if len(steps) == 0:
         return np.zeros(0)
-    z = np.r_[0.0, np.cumsum(np.exp(1j * np.asarray(heading_rad, float)))]
-    return np.angle(z[steps.window_end] - z[steps.window_start])
+    h = np.asarray(heading_rad, float)
+    bad = ~np.isfinite(h)
+    z = np.r_[0.0, np.cumsum(np.where(bad, 0.0, np.exp(1j * np.where(bad, 0.0, h))))]
+    psi = np.angle(z[steps.window_end] - z[steps.window_start])
+    if bad.any():
+        nbad = np.r_[0, np.cumsum(bad)]
+        psi[nbad[steps.window_end] > nbad[steps.window_start]] = np.nan
+    return psi
 
 
 def dead_reckon(step_length_m: np.ndarray, heading_rad: np.ndarray, start_east_m: float = 0.0,
@@ -93,11 +100,15 @@ def dead_reckon(step_length_m: np.ndarray, heading_rad: np.ndarray, start_east_m
 
 
 def run_pdr(imu: ImuData, start_east_m: float = 0.0, start_north_m: float = 0.0,
-            config: PdrConfig = PdrConfig()) -> PdrResult:
-    """The whole PDR path on repaired IMU data (see module docstring)."""
+            config: PdrConfig = PdrConfig(), heading_start: HeadingState | None = None) -> PdrResult:
+    """The whole PDR path on repaired IMU data (see module docstring); ``heading_start``: the heading filter's
+    state after the sample at its ``t_s``, from a run over the record up to there
+    (:meth:`~features.imu.heading.HeadingResult.state_at`): the headings resume from it at the next sample
+    (the steps before have none)."""
     steps = detect_steps(imu.acc_m_s2, imu.rate_hz, imu.t_s, imu.valid, config.detector)
     length = config.length.predict(steps)
-    heading = estimate_heading(imu.acc_m_s2, imu.gyro_rad_s, imu.mag_ut, imu.rate_hz, config.heading)
+    j = 0 if heading_start is None else int(np.searchsorted(imu.t_s, heading_start.t_s + 0.5 / imu.rate_hz))
+    heading = estimate_heading(imu.acc_m_s2, imu.gyro_rad_s, imu.mag_ut, imu.rate_hz, config.heading, heading_start, j)
     if heading is None:
         nan = np.full(len(steps), np.nan)
         return PdrResult(steps.t_s, length, nan, nan.copy(), nan.copy(), steps, None)

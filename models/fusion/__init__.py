@@ -38,7 +38,7 @@ Which filter and policy each method of :mod:`walks.methods` builds:
 """
 
 from models.fusion.consistency import chi2_bounds, in_bounds_share, nees, nis_summary
-from models.fusion.ekf import EkfConfig, EventEKF, FilterError, FilterRun
+from models.fusion.ekf import EkfConfig, EventEKF, FilterError, FilterResume, FilterRun
 from models.fusion.events import (ACOUSTIC, GNSS, KIND_NAMES, STEP, AcousticEvents, ClassMap, ClassTrack, EventError,
                                   EventStream, GnssEvents, StandIntervals, StepEvents, merge_events)
 from models.fusion.imm import IMMFilter
@@ -49,7 +49,7 @@ from models.fusion.smoother import SmoothedTrack, fixed_lag_smooth, rts_smooth
 __all__ = [
     "STEP", "GNSS", "ACOUSTIC", "KIND_NAMES", "StepEvents", "GnssEvents", "AcousticEvents", "StandIntervals",
     "ClassTrack", "ClassMap", "EventStream", "merge_events", "EventError",
-    "EkfConfig", "EventEKF", "FilterRun", "FilterError", "IMMFilter",
+    "EkfConfig", "EventEKF", "FilterRun", "FilterResume", "FilterError", "IMMFilter",
     "FixedNoise", "QualityNoise", "PerClassNoise", "ContextNoise", "VBAdaptiveNoise", "NoiseError",
     "second_moment_m2", "SmoothedTrack", "rts_smooth", "fixed_lag_smooth", "nees", "chi2_bounds", "in_bounds_share", "nis_summary",
 ]

@@ -343,7 +343,8 @@ def _vb_update(x, P, z, H, s, alpha, beta, cap, rho, n_iter, outlier, gate_nis, 
 def run_ekf_events(kind, avail, z, length_m, heading_rad, phi, q, h_idx, H, x0, P0, sl2, sp2, outlier, gate_nis,
                    huber_k, joseph, consider, noise_mode, r_event, eps_event, kappa_event, r_table, map_grid, map_geo,
                    vb_alpha, vb_beta, vb_cap, vb_rho, vb_n_iter, x_prior, P_prior, F_rec, x_post, P_post, nu_rec,
-                   S_rec, K_rec, R_rec, nis_rec, w_rec, updated, accepted):
+                   S_rec, K_rec, R_rec, nis_rec, w_rec, updated, accepted, restart, x_restart,
+                   P_restart):
     """Filter m events once, writing the records in place (shapes: see :class:`~models.fusion.ekf.FilterRun`).
 
     Per event: ``kind`` (m,) step/GNSS/acoustic code, ``avail`` (m,) a fix may update, ``z`` (m, 2),
@@ -353,12 +354,17 @@ def run_ekf_events(kind, avail, z, length_m, heading_rad, phi, q, h_idx, H, x0, 
     ``r_event`` (m, 2, 2); or ``r_table`` (3, n_classes, 2, 2) per kind and class with the map ``map_grid``,
     ``map_geo``; or the VB-AKF state ``vb_alpha``, ``vb_beta``, ``vb_cap`` (3, 2), updated in place. With
     ``outlier`` = :data:`MIXTURE`, ``eps_event`` and ``kappa_event`` (m,) give each fix's outlier prior and
-    variance ratio.
+    variance ratio. ``restart`` ≥ 0 (−1: none): the posterior before event ``restart`` is replaced by ``x_restart`` (n,),
+    ``P_restart`` (n, n) — the filter resumed from another run's state there (a long walk's previous segment,
+    :class:`~models.fusion.ekf.FilterResume`); the events before it are filtered from ``x0``, ``P0`` as usual.
     """
     m = kind.shape[0]
     x = x0.copy()
     P = P0.copy()
     for k in range(m):
+        if k == restart:
+            x = x_restart.copy()
+            P = P_restart.copy()
         # 1. x = Φ x;  P = Φ P Φ' + Q_Δt
         time_update(x, P, phi[k], q[k])
         if kind[k] == STEP_KIND:

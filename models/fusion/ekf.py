@@ -56,7 +56,7 @@ import numpy as np
 from features.errors import EnvfuseError
 from models.fusion.events import GNSS, STEP, EventStream
 
-__all__ = ["EkfConfig", "FilterRun", "EventEKF", "FilterError", "empty_records", "initial_state", "time_noise",
+__all__ = ["EkfConfig", "FilterRun", "FilterResume", "EventEKF", "FilterError", "empty_records", "initial_state", "time_noise",
            "measurement_models", "step_variances", "OUTLIER_CODES"]
 
 
@@ -117,6 +117,18 @@ class EkfConfig:
         return -2.0 * math.log1p(-self.gate_prob)
 
 
+@dataclass(frozen=True)
+class FilterResume:
+    """A filter's posterior ``x`` (n,), ``P`` (n, n) after its last event before walk time ``t_s``
+    (:meth:`FilterRun.state_before`): what a run over a later piece of the same event stream (a long walk's next
+    segment, :mod:`walks.segments`) restarts from at its first event at or after ``t_s``, so that from there on
+    it is the run over the whole stream."""
+
+    t_s: float
+    x: np.ndarray
+    P: np.ndarray
+
+
 @dataclass
 class FilterRun:
     """Everything a filter run produced, one row per event of the stream (m events, n states).
@@ -170,6 +182,11 @@ class FilterRun:
     def pos_cov_m2(self) -> np.ndarray:
         """Posterior position covariance, (m, 2, 2)."""
         return self.P[:, :2, :2]
+
+    def state_before(self, t_s: float) -> FilterResume | None:
+        """The posterior after the last event before ``t_s`` (None when no event precedes it)."""
+        i = int(np.searchsorted(self.t_s, t_s, side="left")) - 1
+        return None if i < 0 else FilterResume(float(t_s), self.x[i].copy(), self.P[i].copy())
 
 
 def empty_records(m: int, n: int) -> dict:
@@ -274,6 +291,19 @@ def measurement_models(stream: EventStream, cfg: EkfConfig, spec=None) -> tuple[
     return np.stack([h, hg]), shares.astype(np.int64)
 
 
+def _restart(stream: EventStream, resume: FilterResume | None, x0: np.ndarray, P0: np.ndarray) -> tuple:
+    """(event index, x, P) the core restarts from: ``resume`` at the stream's first event at or after its time,
+    or (−1, x0, P0) without one (or when no event follows it)."""
+    if resume is None:
+        return -1, x0, P0
+    if resume.x.shape != x0.shape or resume.P.shape != P0.shape:
+        raise FilterError(f"cannot resume a filter of {x0.shape[0]} states from one of {resume.x.shape[0]}")
+    i = int(np.searchsorted(stream.t_s, resume.t_s, side="left"))
+    if i >= len(stream):
+        return -1, x0, P0
+    return i, np.asarray(resume.x, float), np.asarray(resume.P, float)
+
+
 class EventEKF:
     """The event-driven EKF with one noise policy (:mod:`models.fusion.noise`, :mod:`models.fusion.adaptive`).
 
@@ -294,7 +324,7 @@ class EventEKF:
         self.scales = scales
 
     def run(self, stream: EventStream, x0_en=None, classes=None, class_at=None, x0=None, P0=None,
-            r_scale_event: np.ndarray | None = None) -> FilterRun:
+            r_scale_event: np.ndarray | None = None, resume: FilterResume | None = None) -> FilterRun:
         """Filter the whole stream once.
 
         ``x0_en``: (2,) initial east/north (default: the first available fix); ``x0``/``P0``: full prior;
@@ -302,6 +332,8 @@ class EventEKF:
         :class:`~models.fusion.events.ClassMap`, for per-class noise. ``scales`` (at construction):
         ``{"gnss", "acoustic", "bias"}`` multipliers of the policy's R and bias variance (a method's tuning);
         ``r_scale_event`` (m,): a further multiplier of each event's R (the BP parameter network's).
+        ``resume``: the state of a run of this filter over an earlier piece of the stream; the events from
+        ``resume.t_s`` on continue from it (those before are filtered from the prior as usual, a warm-up).
         """
         from models.fusion import core
         from models.fusion.noise import FixedNoise
@@ -333,13 +365,14 @@ class EventEKF:
         kappa = spec.kappa_event if spec.kappa_event is not None else np.ones(m)
         rec = empty_records(m, n)
         sl2, sp2 = step_variances(stream, cfg)
+        restart, x_r, P_r = _restart(stream, resume, x, P)
         core.run_ekf_events(stream.kind.astype(np.int64), stream.available, stream.z_m, stream.step_length_m,
                             stream.heading_rad, phi, q, h_idx, H, x, P, sl2, sp2, OUTLIER_CODES[cfg.outlier], cfg.gate_nis, cfg.huber_k,
                             cfg.joseph, consider, spec.mode, spec.r_event, np.asarray(eps, float),
                             np.asarray(kappa, float), spec.r_table, spec.map_grid, spec.map_geo, spec.vb_alpha,
                             spec.vb_beta, spec.vb_cap, spec.vb_rho, spec.vb_n_iter, rec["x_prior"], rec["P_prior"],
                             rec["F"], rec["x"], rec["P"], rec["nu"], rec["S"], rec["K"], rec["R"], rec["nis"],
-                            rec["weight"], rec["updated"], rec["accepted"])
+                            rec["weight"], rec["updated"], rec["accepted"], restart, x_r, P_r)
         # a gated fix leaves no gain
         rec["K"][rec["updated"] & ~rec["accepted"]] = np.nan
         return FilterRun(self.method, stream.t_s, stream.kind, x.copy(), P.copy(), available=stream.available, **rec)

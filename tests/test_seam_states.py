@@ -1,0 +1,97 @@
+"""The states a long walk's segment hands the next (issue 25 item 3, walks/segments.py): a filter, the PDR heading
+and the standing intervals resumed on a later piece of a record give what the run over the whole record gives."""
+
+import math
+
+import numpy as np
+import pytest
+
+from features.imu.heading import HeadingConfig, estimate_heading
+from models.fusion import EventEKF, FilterError, FilterResume, GnssEvents, StepEvents, merge_events
+from models.fusion.noise import FixedNoise
+from walks.inputs import _stands
+
+
+def _stream(seed: int, t0: float = 0.0):
+    """Steps every 0.5 s heading east, GNSS fixes every 1 s with 1 m noise (a fixed seed), from ``t0`` on."""
+    rng = np.random.default_rng(seed)
+    ts = np.arange(0.5, 60.0, 0.5)
+    tg = np.arange(0.0, 60.0, 1.0)
+    east = 0.7 * np.floor(tg / 0.5) + rng.normal(0, 1, tg.size)
+    north = rng.normal(0, 1, tg.size)
+    s, g = ts >= t0, tg >= t0
+    return merge_events(StepEvents(ts[s], np.full(s.sum(), 0.7), np.full(s.sum(), math.pi / 2)),
+                        GnssEvents.from_sigma(tg[g], east[g], north[g], np.ones(g.sum())))
+
+
+def test_a_filter_resumed_on_a_later_piece_of_the_stream_is_the_whole_run_from_there():
+    """The whole stream filtered once against its piece from 20 s (warm-up from 20 s, resumed at 30 s with the
+    whole run's posterior before 30 s): the same x and P at every event from 30 s, to rounding; before 30 s the
+    piece is its own run (different)."""
+    whole_ev = _stream(3)
+    piece_ev = _stream(3, t0=20.0)
+    ekf = EventEKF(noise=FixedNoise(1.0, 0.5))
+    whole = ekf.run(whole_ev)
+    state = whole.state_before(30.0)
+    i = int(np.searchsorted(whole.t_s, 30.0)) - 1
+    assert state.t_s == 30.0 and np.array_equal(state.x, whole.x[i]) and whole.t_s[i] < 30.0 <= whole.t_s[i + 1]
+    piece = ekf.run(piece_ev, resume=state)
+    w = whole.t_s >= 30.0
+    p = piece.t_s >= 30.0
+    assert np.array_equal(whole.t_s[w], piece.t_s[p])
+    np.testing.assert_allclose(piece.x[p], whole.x[w], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(piece.P[p], whole.P[w], rtol=0, atol=1e-12)
+    fresh = ekf.run(piece_ev)                              # not resumed: started from the piece's first fix
+    assert np.max(np.abs(fresh.x[p][:, :2] - whole.x[w][:, :2])) > 1e-3
+    # a resume past the piece's last event changes nothing; a state of another size is refused
+    assert np.array_equal(ekf.run(piece_ev, resume=FilterResume(99.0, state.x, state.P)).x, fresh.x)
+    with pytest.raises(FilterError, match="cannot resume"):
+        ekf.run(piece_ev, resume=FilterResume(30.0, np.zeros(6), np.eye(6)))
+
+
+def _imu(n: int, rate_hz: float, seed: int):
+    """A level body turning slowly (yaw rate 0.2·sin(0.05 t) rad/s), gyro bias 0.01 rad/s with noise, the
+    horizontal field of 20 µT north with 40 µT down, a steel disturbance (field +30 %) over samples 5,000-9,000."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(n) / rate_hz
+    rate = 0.2 * np.sin(0.05 * t)
+    psi = np.cumsum(rate) / rate_hz
+    acc = np.tile([0.0, 0.0, -9.81], (n, 1)) + rng.normal(0, 0.05, (n, 3))
+    gyro = np.zeros((n, 3))
+    gyro[:, 2] = rate + 0.01 + rng.normal(0, 0.002, n)
+    # the field in the body frame (x forward, y right, z down): north component rotated by −ψ
+    mag = np.column_stack([20 * np.cos(psi), -20 * np.sin(psi), np.full(n, 40.0)]) + rng.normal(0, 0.2, (n, 3))
+    mag[5000:9000] *= 1.3
+    return acc, gyro, mag
+
+
+def test_the_heading_resumed_from_its_state_is_the_whole_records_heading():
+    """Headings of a 200 s record at 100 Hz against its piece from sample 6,000 (inside the disturbed spell: the
+    gate's offset comes from the state) resumed at sample 7,000 from the whole run's state after 6,999: equal to
+    1e-7 rad after the resume (the low-pass transients of the piece's first 10 s are gone), NaN before it."""
+    rate = 100.0
+    acc, gyro, mag = _imu(20_000, rate, 4)
+    cfg = HeadingConfig()
+    whole = estimate_heading(acc, gyro, mag, rate, cfg)
+    assert whole.mag_disturbed[5200:8800].all() and whole.mag_disturbed[12000:].mean() < 0.05
+    state = whole.state_at(6999, 69.99)
+    piece = estimate_heading(acc[6000:], gyro[6000:], mag[6000:], rate, cfg, state, 1000)
+    assert np.isnan(piece.fused[:1000]).all()
+    d = np.angle(np.exp(1j * (piece.fused[1000:] - whole.fused[7000:])))
+    assert np.max(np.abs(d)) < 1e-7          # measured 4.4e-9: round-off of the two cumulative sums
+    np.testing.assert_allclose(piece.gyro_bias_rad_s[1000:], whole.gyro_bias_rad_s[7000:], rtol=0, atol=1e-10)
+    # the record's start statistics travel with the state: the gate's reference is the first 300 s median
+    assert piece.intensity_ref == whole.intensity_ref == pytest.approx(math.hypot(20, 40), rel=0.01)
+    # started afresh the piece is off by the gyro bias it has not learnt (hundredths of a radian)
+    fresh = estimate_heading(acc[6000:], gyro[6000:], mag[6000:], rate, cfg)
+    assert np.max(np.abs(np.angle(np.exp(1j * (fresh.fused[1000:] - whole.fused[7000:]))))) > 1e-3
+
+
+def test_a_stop_at_the_end_of_the_record_is_standing():
+    """Steps at 0, 0.5, 1 and 5 s in a record ending at 10 s: standing 1.5-4.5 s (between steps, as before) and
+    5.5-10 s (after the last step, to the record's end); a record ending 1 s after its last step: no second."""
+    st = _stands(np.array([0.0, 0.5, 1.0, 5.0]), 10.0)
+    np.testing.assert_allclose(st.start_s, [1.5, 5.5])
+    np.testing.assert_allclose(st.end_s, [4.5, 10.0])
+    st = _stands(np.array([0.0, 0.5, 1.0, 5.0]), 6.0)
+    np.testing.assert_allclose(st.start_s, [1.5])
