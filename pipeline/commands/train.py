@@ -22,7 +22,7 @@ def register(sub) -> None:
                     "the model shipped in the package (trained on many simulated substations: for a user with no "
                     "labelled survey; no --library); 'finetune' adapts a model (--base, the shipped one by default) "
                     "to the labelled cells of your own survey (map labels of every cell, or of a handful: --cell).",
-        epilog="Examples: envfuse train env --library fp.sqlite --site sim-0101 --site sim-0102 --out env_model; "
+        epilog="Example: envfuse train env --library fp.sqlite --site sim-0101 --site sim-0102 --out env_model; "
                "envfuse train env --mode default --out env_model; "
                "envfuse train env --mode finetune --library fp.sqlite --site my-yard --out env_model")
     src = p.add_mutually_exclusive_group()
