@@ -349,6 +349,46 @@ def _envelope_maxima(seg: np.ndarray, gamma: float, strong_level: float, dec: in
 
 
 @njit(cache=True)
+def _noise_scales(seg: np.ndarray) -> np.ndarray:
+    """Rayleigh scale σ = q₂₅ / sqrt(−2 ln 0.75) of each row of the envelope ``seg`` (n_templates, L ≥ 1),
+    float32, from every 4th output (neighbours are correlated over ~1/B anyway, and it is 4× cheaper); shape
+    (n_templates,).
+
+    Digital silence (exact zero samples: a muted or not yet started input) is not noise: its envelope is 0, or
+    float32 round-off of the FFT blocks it shares with sound (below :data:`_SILENCE_REL` of the loudest output).
+    Left in, it pulled the quantile to ~0, the SNR to 126–3000 dB, and let the first noise after it pass for
+    chirps (issue 12, item 4). So when any row's quartile is not above that fraction of its largest output,
+    every row's quartile is taken over its outputs above it (0 when there are none).
+
+    >>> (_noise_scales(np.array([[0.0, 9, 9, 9, 1, 9, 9, 9, 2, 9, 9, 9, 3, 9, 9, 9]], np.float32))
+    ...  * _RAYLEIGH_Q25).round(12).tolist()
+    [1.0]
+    """
+    n_t, n = seg.shape
+    m = (n + 3) // 4
+    k = m // 4
+    q25 = np.empty(n_t)
+    peak = np.empty(n_t)
+    silent = False
+    for t in range(n_t):
+        sub = seg[t, ::4].copy()
+        q25[t] = np.float64(np.partition(sub, k)[k])
+        peak[t] = np.float64(sub.max())
+        if not q25[t] > _SILENCE_REL * peak[t]:
+            silent = True
+    if not silent:
+        return q25 / _RAYLEIGH_Q25
+    out = np.zeros(n_t)
+    for t in range(n_t):
+        sub = seg[t, ::4]
+        level = np.float32(_SILENCE_REL * peak[t])          # compared in float32, as numpy compares the row
+        nz = sub[sub > level]
+        if len(nz):
+            out[t] = np.float64(np.partition(nz, len(nz) // 4)[len(nz) // 4]) / _RAYLEIGH_Q25
+    return out
+
+
+@njit(cache=True)
 def _thresholds(width: np.ndarray, bandwidth_hz: np.ndarray, sigma: np.ndarray, fs: float,
                 log_inv_p_fa: float) -> np.ndarray:
     """Detection threshold γ of each window (module docstring): γ = σ·sqrt(2·(ln max(N, 1) + ln(1/p_fa))),
@@ -684,25 +724,7 @@ class _FrameDetector:
         _, seg = stream.env_range(j_lo, j_hi)
         if seg.shape[1] == 0:
             return np.zeros(bank.n_templates)
-        # Every 4th output: neighbours are correlated over ~1/B anyway, and it is 4× cheaper.
-        sub = seg[:, ::4]
-        k = sub.shape[1] // 4
-        # One partition gives the quartile and the largest (for the silence test below).
-        part = np.partition(sub, (k, sub.shape[1] - 1), axis=1)
-        q25 = part[:, k].astype(float)
-        peak = part[:, -1].tolist()
-        if all(q > _SILENCE_REL * m for q, m in zip(q25.tolist(), peak)):
-            return q25 / _RAYLEIGH_Q25
-        # Digital silence (exact zero samples: a muted or not yet started input) is not noise: its
-        # envelope is 0, or float32 round-off of the FFT blocks it shares with sound (below 1e-6 of
-        # the loudest output). Left in, it pulled the quantile to ~0, the SNR to 126–3000 dB, and
-        # let the first noise after it pass for chirps (issue 12, item 4).
-        out = np.zeros(sub.shape[0])
-        for t, row in enumerate(sub):
-            nz = row[row > _SILENCE_REL * peak[t]]
-            if len(nz):
-                out[t] = float(np.partition(nz, len(nz) // 4)[len(nz) // 4]) / _RAYLEIGH_Q25
-        return out
+        return _noise_scales(seg)
 
     def thresholds(self, windows: list[SearchWindow], sigmas: list) -> np.ndarray:
         """Detection threshold γ of each window of ``windows`` (:func:`_thresholds`; module docstring), ``sigmas``
