@@ -137,15 +137,64 @@ def test_short_walk_fix_rate_and_error(short_walk):
     assert all(int(f["n_beacons"]) >= 4 for f in fixes)
 
 
-def test_top_stable_equals_a_stable_sort_of_all_votes():
-    """The vote's top-k selection (a partition) must rank exactly as the stable full sort it replaced."""
-    from features.acoustic.acquisition import _top_stable
+def _vote_reference(pe, pn, bi, rho, bpos, tol, arrivals, h, c, n_best):
+    """The vote as numpy wrote it before it was compiled (issue 25): a global searchsorted over the rows
+    offset apart, a stable sort of every count, Python sets for the distinct beacons and arrivals."""
+    r = np.sqrt((pe[:, None] - bpos[None, :, 0]) ** 2 + (pn[:, None] - bpos[None, :, 1]) ** 2
+                + (h - bpos[None, :, 2]) ** 2)
+    delta = (rho[None, :] - r) / c
+    order = np.argsort(delta, axis=1)
+    sorted_delta = np.take_along_axis(delta, order, axis=1)
+    offset = 2.0 * (np.abs(delta).max() + tol + 1.0)
+    flat = (sorted_delta + offset * np.arange(len(pe))[:, None]).ravel()
+    count = np.searchsorted(flat, flat + tol, side="right") - np.arange(flat.size)
+    top = np.argsort(-count, kind="stable")[:n_best]
+    hyps = []
+    beacon_of, arrival_of = bi.tolist(), np.round(arrivals, 4).tolist()
+    for f, n in zip(top.tolist(), count[top].tolist()):
+        row, k = divmod(f, delta.shape[1])
+        m = order[row, k: k + n].tolist()
+        n_distinct = min(len({beacon_of[i] for i in m}), len({arrival_of[i] for i in m}))
+        first, last = sorted_delta[row, k], sorted_delta[row, k + n - 1]
+        hyps.append((n_distinct, float(first), row, order[row, k: k + n], float(last - first)))
+    hyps.sort(key=lambda v: (-v[0], v[4], v[1]))
+    return [(n, d, (float(pe[row]), float(pn[row])), delta[row, members]) for n, d, row, members, _ in hyps]
+
+
+def test_compiled_vote_equals_the_numpy_vote():
+    """The compiled vote (two-pointer counts, counting-sort top-k, compiled recount) ranks exactly as the numpy
+    vote it replaced, on random grids with echoes (several candidates per beacon), one arrival in two beacons'
+    windows, and many tied counts."""
+    from features.acoustic.acquisition import HoughAcquisition
 
     rng = np.random.default_rng(0)
-    for _ in range(200):
-        votes = rng.integers(0, 8, int(rng.integers(1, 3000)))     # many ties, as vote counts have
-        k = int(rng.integers(1, 500))
-        assert _top_stable(votes, k).tolist() == np.argsort(-votes, kind="stable")[:k].tolist()
+
+    class _Fake:
+        pass
+
+    for trial in range(30):
+        n_beacons = int(rng.integers(4, 12))
+        beacons = np.column_stack([rng.uniform(0, 60, n_beacons), rng.uniform(0, 60, n_beacons),
+                                   rng.uniform(2, 5, n_beacons)])
+        bi = np.sort(rng.integers(0, n_beacons, int(rng.integers(5, 80))))
+        truth, clock = rng.uniform(0, 60, 2), rng.uniform(-0.05, 0.05)
+        ranges = np.hypot(truth[0] - beacons[bi, 0], truth[1] - beacons[bi, 1])
+        rho = ranges + C * clock + np.where(rng.random(len(bi)) < 0.5, 0.0, rng.uniform(0, 20, len(bi)))
+        arrivals = rng.uniform(0, 1, len(bi))
+        arrivals[1::7] = arrivals[0::7][: len(arrivals[1::7])]          # one arrival in two windows
+        step = float(rng.choice([1.0, 4.0]))
+        ee, nn = np.meshgrid(np.arange(0, 60 + step, step), np.arange(0, 60 + step, step))
+        tol = step * math.sqrt(2.0) / C + 5e-4
+        fake = _Fake()
+        fake.site, fake.c = _Fake(), C
+        fake.site.device_height_m = 1.2
+        n_best = int(rng.choice([200, 400]))
+        got = HoughAcquisition._vote(fake, ee.ravel(), nn.ravel(), bi, rho, beacons[bi], tol, arrivals, n_best=n_best)
+        want = _vote_reference(ee.ravel(), nn.ravel(), bi, rho, beacons[bi], tol, arrivals, 1.2, C, n_best)
+        assert len(got) == len(want) == min(n_best, ee.size * len(bi))
+        for g, w in zip(got, want):
+            assert g[:3] == w[:3]
+            assert np.array_equal(g[3], w[3])
 
 
 def _candidates(site, frame_start, east, north, clock_s):

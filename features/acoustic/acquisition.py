@@ -17,6 +17,7 @@ import math
 import statistics
 
 import numpy as np
+from numba import njit
 
 from features.acoustic.positions import AcousticFix, BeaconRange, chi2_limit, least_squares_fix, solve_position
 from features.acoustic.timing import AudioTiming, SearchWindow
@@ -174,11 +175,7 @@ class HoughAcquisition:
         b = self.site.beacons
         bpos = np.array([[b[i].east_m, b[i].north_m, b[i].up_m] for i in bi])
         tol = step / math.sqrt(2.0) + 3.0 * c * sigma_d + 0.3
-        r = np.sqrt((ee[:, None] - bpos[None, :, 0]) ** 2 + (nn[:, None] - bpos[None, :, 1]) ** 2
-                    + (h - bpos[None, :, 2]) ** 2)
-        agree = np.abs(rng_m[None, :] - r) <= tol                   # (n_points, n_candidates)
-        starts = np.flatnonzero(np.r_[True, bi[1:] != bi[:-1]])
-        votes = np.logical_or.reduceat(agree, starts, axis=1).sum(axis=1)   # distinct beacons per point
+        votes = _range_votes(ee, nn, bpos, float(h), rng_m, bi, float(tol))
         order = np.argsort(-votes, kind="stable")
         seeds: list = []
         for k in order[:400].tolist():
@@ -295,12 +292,13 @@ class HoughAcquisition:
         """Each beacon's earliest candidate within ``tol`` of δ = d0 at ``point``; one arrival, one beacon."""
         r = np.sqrt((point[0] - bpos[:, 0]) ** 2 + (point[1] - bpos[:, 1]) ** 2
                     + (self.site.device_height_m - bpos[:, 2]) ** 2)
-        delta = (rho - r) / self.c
+        err = np.abs((rho - r) / self.c - d0)
         chosen = {}
-        for k, i in enumerate(bi):
+        for k in np.flatnonzero(err <= self.tolerance_s).tolist():
             # Within the tolerance, the earliest candidate: echoes come later.
-            if abs(delta[k] - d0) <= self.tolerance_s and (i not in chosen or items[k][2] < chosen[i][0]):
-                chosen[i] = (items[k][2], abs(delta[k] - d0))
+            i, t = int(bi[k]), items[k][2]
+            if i not in chosen or t < chosen[i][0]:
+                chosen[i] = (t, float(err[k]))
         # One arrival belongs to one beacon: where two beacons took the same arrival (within
         # 1 ms), the one whose δ fits the vote better keeps it.
         kept = {}
@@ -338,64 +336,165 @@ class HoughAcquisition:
         """Hypotheses (distinct beacons, anchor δ, (east, north), δ of the agreeing) best first.
 
         Candidates agreeing with an anchor's δ within [δ, δ + tol] are counted
-        for all (point, anchor) pairs at once — each row sorted, then one global
-        searchsorted on rows offset far apart — and the ``n_best`` largest counts
+        for all (point, anchor) pairs at once — each row sorted, then counted by one
+        compiled sweep (:func:`_agreement_counts`) — and the ``n_best`` largest counts
         are recounted as distinct beacons (a beacon's echoes must not vote twice)
         using distinct arrivals (one arrival heard in several beacons' windows
-        must not vote for each of them).
+        must not vote for each of them), :func:`_ranked_hypotheses`.
         """
-        r = np.sqrt((pe[:, None] - bpos[None, :, 0]) ** 2 + (pn[:, None] - bpos[None, :, 1]) ** 2
-                    + (self.site.device_height_m - bpos[None, :, 2]) ** 2)
-        delta = (rho[None, :] - r) / self.c                      # (n_points, n_candidates)
+        delta = _implied_offsets(pe, pn, bpos, float(self.site.device_height_m), rho, float(self.c))
         order = np.argsort(delta, axis=1)
         sorted_delta = np.take_along_axis(delta, order, axis=1)
         offset = 2.0 * (np.abs(delta).max() + tol + 1.0)
-        flat = (sorted_delta + offset * np.arange(len(pe))[:, None]).ravel()
-        hi = np.searchsorted(flat, flat + tol, side="right")
-        count = hi - np.arange(flat.size)
-        top = _top_stable(count, n_best)
-        hyps = []
-        n_cand = delta.shape[1]
-        beacon_of = bi.tolist()
-        arrival_of = np.round(arrivals, 4).tolist()
-        for f, n in zip(top.tolist(), count[top].tolist()):
-            row, k = divmod(f, n_cand)
-            members = order[row, k: k + n]
-            m = members.tolist()
-            # Distinct beacons, but one physical arrival cannot serve two beacons.
-            n_distinct = min(len({beacon_of[i] for i in m}), len({arrival_of[i] for i in m}))
-            first, last = sorted_delta[row, k], sorted_delta[row, k + n - 1]
-            hyps.append((n_distinct, float(first), row, members, float(last - first)))
+        count = _agreement_counts(sorted_delta, offset, tol)
         # Among equal counts the tightest agreement first: a hypothesis that is only just within
         # the tolerance is usually a chance alignment (ordering by smallest δ instead buried
         # the true one under chance alignments whenever the clock offset was positive).
-        hyps.sort(key=lambda h: (-h[0], h[4], h[1]))
-        return [(n, d, (float(pe[row]), float(pn[row])), delta[row, members]) for n, d, row, members, _ in hyps]
+        n_distinct, first, rows, ks, ns = _ranked_hypotheses(sorted_delta, order, count, np.asarray(bi, dtype=np.int64),
+                                                             np.round(arrivals, 4), n_best)
+        east, north = pe[rows].tolist(), pn[rows].tolist()
+        return [(n, d, (e, nn), sorted_delta[row, k: k + m]) for n, d, e, nn, row, k, m in
+                zip(n_distinct.tolist(), first.tolist(), east, north, rows.tolist(), ks.tolist(), ns.tolist())]
+
+
+@njit(cache=True)
+def _range_votes(ee: np.ndarray, nn: np.ndarray, bpos: np.ndarray, h: float, rng_m: np.ndarray, bi: np.ndarray,
+                 tol: float) -> np.ndarray:
+    """Votes of the clock-aided re-acquisition (:meth:`HoughAcquisition._acquire_with_clock`): at each grid point
+    (``ee``, ``nn``), how many distinct beacons ``bi`` (sorted) have a candidate range ``rng_m`` within ``tol`` of
+    ‖p − s_b‖ (beacon at ``bpos`` (n, 3), the device at height ``h``); shape (n_points,).
+
+    >>> _range_votes(np.array([0.0, 10.0]), np.array([0.0, 0.0]), np.array([[3.0, 4.0, 1.0]] * 3), 1.0,
+    ...              np.array([5.0, 5.1, 9.0]), np.array([0, 0, 1]), 0.2).tolist()
+    [1, 0]
+    """
+    votes = np.zeros(ee.shape[0], dtype=np.int64)
+    n = rng_m.shape[0]
+    for p in range(ee.shape[0]):
+        k = 0
+        while k < n:
+            beacon, agree = bi[k], False
+            while k < n and bi[k] == beacon:
+                if not agree:
+                    de, dn, du = ee[p] - bpos[k, 0], nn[p] - bpos[k, 1], h - bpos[k, 2]
+                    agree = abs(rng_m[k] - math.sqrt(de * de + dn * dn + du * du)) <= tol
+                k += 1
+            votes[p] += agree
+    return votes
+
+
+@njit(cache=True)
+def _implied_offsets(pe: np.ndarray, pn: np.ndarray, bpos: np.ndarray, h: float, rho: np.ndarray,
+                     c: float) -> np.ndarray:
+    """δ = (ρ − ‖p − s_b‖)/c of each candidate (pseudorange ``rho``, beacon at ``bpos`` (n, 3)) at each grid point
+    (``pe``, ``pn``; the device at height ``h``): the clock offset the candidate implies there; (n_points, n).
+
+    >>> _implied_offsets(np.array([3.0]), np.array([4.0]), np.array([[0.0, 0.0, 1.0]]), 1.0, np.array([15.0]),
+    ...                  2.0).tolist()
+    [[5.0]]
+    """
+    out = np.empty((pe.shape[0], rho.shape[0]))
+    for p in range(pe.shape[0]):
+        for i in range(rho.shape[0]):
+            de, dn, du = pe[p] - bpos[i, 0], pn[p] - bpos[i, 1], h - bpos[i, 2]
+            out[p, i] = (rho[i] - math.sqrt(de * de + dn * dn + du * du)) / c
+    return out
+
+
+@njit(cache=True)
+def _agreement_counts(sorted_delta: np.ndarray, offset: float, tol: float) -> np.ndarray:
+    """For each (point, anchor) of the vote, flattened row-major: how many candidates of the point's row lie
+    within [δ, δ + tol] of the anchor's δ (the anchor included); ``sorted_delta`` (n_points, n_candidates), each
+    row ascending. The comparison is made, as it was by a global ``searchsorted`` over the flattened rows, on
+    δ + ``offset``·row (rows ``offset`` apart never meet), so that the counts are those of that search to the bit;
+    a two-pointer sweep per row (the upper end only moves forward) instead of a binary search per anchor.
+
+    >>> _agreement_counts(np.array([[0.0, 0.1, 0.25, 0.3], [0.0, 1.0, 1.05, 2.0]]), 10.0, 0.2).tolist()
+    [2, 3, 2, 1, 1, 2, 1, 1]
+    """
+    n_points, n = sorted_delta.shape
+    count = np.empty(n_points * n, dtype=np.int64)
+    for row in range(n_points):
+        base = offset * np.float64(row)
+        j = 0
+        for k in range(n):
+            limit = (sorted_delta[row, k] + base) + tol
+            if j < k:
+                j = k
+            while j < n and sorted_delta[row, j] + base <= limit:
+                j += 1
+            count[row * n + k] = j - k
+    return count
+
+
+@njit(cache=True)
+def _ranked_hypotheses(sorted_delta: np.ndarray, order: np.ndarray, count: np.ndarray, beacon_of: np.ndarray,
+                       arrival_of: np.ndarray, n_best: int):
+    """The ``n_best`` (point, anchor) pairs of largest ``count`` (ties in index order, as a stable sort of
+    −count), each recounted as min(distinct beacons ``beacon_of``, distinct arrivals ``arrival_of``) of its
+    members ``order[row, k : k + count]``, then ranked by (most distinct, smallest spread of δ, smallest δ),
+    ties kept in that order: (n_distinct, anchor δ, row, k, count), each of shape (≤ n_best,).
+
+    >>> sd = np.array([[0.0, 0.1, 0.2], [0.0, 0.05, 0.5]])
+    >>> [a.tolist() for a in _ranked_hypotheses(sd, np.array([[0, 1, 2], [0, 2, 1]]), np.array([3, 2, 1, 2, 1, 1]),
+    ...                                         np.array([0, 1, 2]), np.array([1.0, 2.0, 3.0]), 3)]
+    [[3, 2, 2], [0.0, 0.0, 0.1], [0, 1, 0], [0, 0, 1], [3, 2, 2]]
+    """
+    n_cand = sorted_delta.shape[1]
+    m = min(n_best, count.shape[0])
+    # Stable top-m by count (a counting sort: counts are at most n_candidates).
+    top_count = 0
+    for f in range(count.shape[0]):
+        if count[f] > top_count:
+            top_count = count[f]
+    top = np.empty(m, dtype=np.int64)
+    filled = 0
+    for value in range(top_count, -1, -1):
+        if filled == m:
+            break
+        for f in range(count.shape[0]):
+            if count[f] == value:
+                top[filled] = f
+                filled += 1
+                if filled == m:
+                    break
+    n_distinct = np.empty(m, dtype=np.int64)
+    first = np.empty(m)
+    spread = np.empty(m)
+    rows = np.empty(m, dtype=np.int64)
+    ks = np.empty(m, dtype=np.int64)
+    ns = np.empty(m, dtype=np.int64)
+    for a in range(m):
+        f = top[a]
+        row, k = f // n_cand, f % n_cand
+        n = count[f]
+        beacons = 0
+        arrivals = 0
+        for i in range(k, k + n):
+            bi, ti = beacon_of[order[row, i]], arrival_of[order[row, i]]
+            new_b, new_t = True, True
+            for j in range(k, i):
+                if beacon_of[order[row, j]] == bi:
+                    new_b = False
+                if arrival_of[order[row, j]] == ti:
+                    new_t = False
+            beacons += new_b
+            arrivals += new_t
+        n_distinct[a] = min(beacons, arrivals)
+        first[a] = sorted_delta[row, k]
+        spread[a] = sorted_delta[row, k + n - 1] - sorted_delta[row, k]
+        rows[a], ks[a], ns[a] = row, k, n
+    # Lexicographic (−n_distinct, spread, first) by stable sorts from the last key to the first.
+    rank = np.argsort(first, kind="mergesort")
+    rank = rank[np.argsort(spread[rank], kind="mergesort")]
+    rank = rank[np.argsort(-n_distinct[rank], kind="mergesort")]
+    return n_distinct[rank], first[rank], rows[rank], ks[rank], ns[rank]
 
 
 def _inside(x, site: Site, margin_m: float = 5.0) -> bool:
     g = site.grid
     return (g.east_min_m - margin_m <= x[0] <= g.east_max_m + margin_m
             and g.north_min_m - margin_m <= x[1] <= g.north_max_m + margin_m)
-
-
-def _top_stable(values: np.ndarray, k: int) -> np.ndarray:
-    """Indices of the ``k`` largest ``values``, largest first, ties in index order.
-
-    Equals ``np.argsort(-values, kind="stable")[:k]`` but costs a partition, not a
-    sort of every (grid point, anchor) pair of the vote.
-
-    >>> _top_stable(np.array([3, 1, 3, 2, 3, 0]), 2).tolist()
-    [0, 2]
-    """
-    n = len(values)
-    if k >= n:
-        return np.argsort(-values, kind="stable")
-    kth = np.partition(values, n - k)[n - k]          # the k-th largest value
-    above = np.flatnonzero(values > kth)
-    tied = np.flatnonzero(values == kth)[: k - len(above)]
-    chosen = np.concatenate([above, tied])
-    return chosen[np.lexsort((chosen, -values[chosen]))]
 
 
 def acquisition_windows(windows: list[SearchWindow], candidates, tracker: HoughAcquisition, timing: AudioTiming,

@@ -357,6 +357,184 @@ def _envelope_maxima(seg: np.ndarray, gamma: float, strong_level: float, dec: in
 
 
 @njit(cache=True)
+def _noise_scales(seg: np.ndarray) -> np.ndarray:
+    """Rayleigh scale σ = q₂₅ / sqrt(−2 ln 0.75) of each row of the envelope ``seg`` (n_templates, L ≥ 1),
+    float32, from every 4th output (neighbours are correlated over ~1/B anyway, and it is 4× cheaper); shape
+    (n_templates,).
+
+    Digital silence (exact zero samples: a muted or not yet started input) is not noise: its envelope is 0, or
+    float32 round-off of the FFT blocks it shares with sound (below :data:`_SILENCE_REL` of the loudest output).
+    Left in, it pulled the quantile to ~0, the SNR to 126–3000 dB, and let the first noise after it pass for
+    chirps (issue 12, item 4). So when any row's quartile is not above that fraction of its largest output,
+    every row's quartile is taken over its outputs above it (0 when there are none).
+
+    >>> (_noise_scales(np.array([[0.0, 9, 9, 9, 1, 9, 9, 9, 2, 9, 9, 9, 3, 9, 9, 9]], np.float32))
+    ...  * _RAYLEIGH_Q25).round(12).tolist()
+    [1.0]
+    """
+    n_t, n = seg.shape
+    m = (n + 3) // 4
+    k = m // 4
+    q25 = np.empty(n_t)
+    peak = np.empty(n_t)
+    silent = False
+    for t in range(n_t):
+        sub = seg[t, ::4].copy()
+        q25[t] = np.float64(np.partition(sub, k)[k])
+        peak[t] = np.float64(sub.max())
+        if not q25[t] > _SILENCE_REL * peak[t]:
+            silent = True
+    if not silent:
+        return q25 / _RAYLEIGH_Q25
+    out = np.zeros(n_t)
+    for t in range(n_t):
+        sub = seg[t, ::4]
+        level = np.float32(_SILENCE_REL * peak[t])          # compared in float32, as numpy compares the row
+        nz = sub[sub > level]
+        if len(nz):
+            out[t] = np.float64(np.partition(nz, len(nz) // 4)[len(nz) // 4]) / _RAYLEIGH_Q25
+    return out
+
+
+@njit(cache=True)
+def _thresholds(width: np.ndarray, bandwidth_hz: np.ndarray, sigma: np.ndarray, fs: float,
+                log_inv_p_fa: float) -> np.ndarray:
+    """Detection threshold γ of each window (module docstring): γ = σ·sqrt(2·(ln max(N, 1) + ln(1/p_fa))),
+    N = W·B cells in a window ``width`` samples long, at least 1e-9; shape (n,).
+
+    A 0.1 s window at 6 kHz (N = 600, p_fa = 1e-6): sqrt(2·(6.3969 + 13.8155)) = 6.358 σ.
+
+    >>> round(float(_thresholds(np.array([4800]), np.array([6000.0]), np.array([1.0]), 48000.0,
+    ...                         -math.log(1e-6))[0]), 3)
+    6.358
+    """
+    out = np.empty(width.shape[0])
+    for k in range(width.shape[0]):
+        n_cells = width[k] / fs * bandwidth_hz[k]
+        gamma = sigma[k] * math.sqrt(2.0 * (math.log(n_cells if n_cells > 1.0 else 1.0) + log_inv_p_fa))
+        out[k] = gamma if gamma > 1e-9 else 1e-9
+    return out
+
+
+@njit(cache=True)
+def _assign(jj: np.ndarray, hh: np.ndarray, t_off: np.ndarray, tmpl: np.ndarray, j_lo: np.ndarray, j_hi: np.ndarray,
+            gamma: np.ndarray, associated: np.ndarray, expected: np.ndarray, has_expected: np.ndarray, dec: int,
+            delay: int, gap: float, echo: float) -> tuple[np.ndarray, np.ndarray]:
+    """The assignment of :meth:`_FrameDetector.assign_arrivals`, compiled: (window index, chirp start) of each
+    claim, in the order claimed; shapes (n_claims,).
+
+    Window k (template ``tmpl[k]``, decimated range ``[j_lo[k], j_hi[k])``, threshold ``gamma[k]``) takes from
+    the frame's maxima of its template (``jj[t_off[t]:t_off[t + 1]]``, ascending, heights ``hh``) the peaks above
+    its threshold, as chirp starts ``dec·j − delay``; an unassociated window its strongest only (the first of the
+    largest). Windows with a peak are taken associated first, each group in window order. When no two first
+    peaks of one template lie within ``gap`` samples, each window keeps its first; otherwise up to four rounds:
+    each pending window takes its first peak that is not within [−gap, echo] of an arrival claimed in an earlier
+    round; a rival within ``gap`` taken in this round keeps it unless both are associated and the newcomer's
+    ``expected`` arrival (where ``has_expected``) lies strictly nearer; the loser waits for the next round.
+
+    Two windows see the same arrival (starts 4·10 − 0 = 40 and 4·12 = 48, gap 10): the second, associated and
+    predicted at 41, takes it from the first (predicted at 60), which then takes its next peak, 120:
+
+    >>> [a.tolist() for a in _assign(np.array([10, 12, 30]), np.array([5.0, 6.0, 5.0], np.float32), np.array([0, 3]),
+    ...     np.zeros(2, np.int64), np.array([0, 11]), np.array([40, 13]), np.array([1.0, 1.0]), np.array([True, True]),
+    ...     np.array([60, 41]), np.array([True, True]), 4, 0, 10.0, 5.0)]
+    [[1, 0], [48, 120]]
+    """
+    n = tmpl.shape[0]
+    # Each window's candidate starts, flattened (window k's at [c_off[k], c_off[k + 1])).
+    c_off = np.zeros(n + 1, dtype=np.int64)
+    cand = np.empty(jj.shape[0] * n if n else 0, dtype=np.int64)
+    m = 0
+    for k in range(n):
+        lo, hi = t_off[tmpl[k]], t_off[tmpl[k] + 1]
+        best = -1
+        for i in range(lo + np.searchsorted(jj[lo:hi], j_lo[k]), lo + np.searchsorted(jj[lo:hi], j_hi[k])):
+            if np.float64(hh[i]) > gamma[k]:
+                if associated[k]:
+                    cand[m] = dec * jj[i] - delay
+                    m += 1
+                elif best < 0 or hh[i] > hh[best]:
+                    best = i
+        if best >= 0:
+            cand[m] = dec * jj[best] - delay
+            m += 1
+        c_off[k + 1] = m
+    pending = np.empty(n, dtype=np.int64)
+    n_pending = 0
+    for group in (True, False):
+        for k in range(n):
+            if associated[k] == group and c_off[k + 1] > c_off[k]:
+                pending[n_pending] = k
+                n_pending += 1
+    first = np.empty(n_pending, dtype=np.int64)
+    for a in range(n_pending):
+        first[a] = cand[c_off[pending[a]]]
+    # The common case: no two windows' first peaks are one arrival; each window keeps its own.
+    by = np.argsort(first, kind="mergesort")
+    by = by[np.argsort(tmpl[pending[by]], kind="mergesort")]
+    clash = False
+    for a in range(n_pending - 1):
+        u, v = pending[by[a]], pending[by[a + 1]]
+        if tmpl[u] == tmpl[v] and not first[by[a + 1]] - first[by[a]] > gap:
+            clash = True
+            break
+    if not clash:
+        return pending[:n_pending].copy(), first
+    claim_w = np.empty(n, dtype=np.int64)
+    claim_s = np.empty(n, dtype=np.int64)
+    n_claims = 0
+    taken_w = np.empty(n, dtype=np.int64)
+    taken_s = np.empty(n, dtype=np.int64)
+    losers = np.empty(n, dtype=np.int64)
+    for _ in range(4):                       # a few rounds of re-assignment settle every case seen
+        n_taken = 0
+        n_losers = 0
+        for a in range(n_pending):
+            w = pending[a]
+            t = tmpl[w]
+            # Nor the echoes and tail of a claimed arrival (up to ``echo`` after it).
+            sp = 0
+            found = False
+            for i in range(c_off[w], c_off[w + 1]):
+                free = True
+                for c in range(n_claims):
+                    if tmpl[claim_w[c]] == t and -gap <= cand[i] - claim_s[c] <= echo:
+                        free = False
+                        break
+                if free:
+                    sp, found = cand[i], True
+                    break
+            if not found:
+                continue
+            rival = -1
+            for r in range(n_taken):
+                if tmpl[taken_w[r]] == t and abs(sp - taken_s[r]) <= gap:
+                    rival = r
+                    break
+            if rival < 0:
+                taken_w[n_taken], taken_s[n_taken] = w, sp
+                n_taken += 1
+                continue
+            w2 = taken_w[rival]
+            cost_w = abs(sp - expected[w]) if has_expected[w] else 0
+            cost_w2 = abs(sp - expected[w2]) if has_expected[w2] else 0
+            if associated[w] and associated[w2] and cost_w < cost_w2:
+                taken_w[rival], taken_s[rival] = w, sp
+                losers[n_losers] = w2
+            else:
+                losers[n_losers] = w
+            n_losers += 1
+        claim_w[n_claims: n_claims + n_taken] = taken_w[:n_taken]
+        claim_s[n_claims: n_claims + n_taken] = taken_s[:n_taken]
+        n_claims += n_taken
+        if n_losers == 0:
+            break
+        pending[:n_losers] = losers[:n_losers]
+        n_pending = n_losers
+    return claim_w[:n_claims].copy(), claim_s[:n_claims].copy()
+
+
+@njit(cache=True)
 def _compressed(rows: np.ndarray, centre: int, main_taps: int, max_width_taps: int, noise_power: float) -> np.ndarray:
     """Whether each envelope row of ``rows`` (k, L) (a CIR's first taps, decimated) around tap ``centre`` is a
     compressed chirp: the −6 dB width of its peak at most ``max_width_taps``, and at least
@@ -527,18 +705,21 @@ class _FrameDetector:
             return [], tracking
         self.stream.ensure(max(w.hi for w in windows) + self.span + self.bank.kernel_len + self.dec)
         sigmas = self.noise_scales(windows).tolist()
-        self.prepare_maxima(windows, sigmas)
+        gammas = self.thresholds(windows, sigmas)
+        self.prepare_maxima(windows, gammas)
         if not tracking and tracker.skip_acquisition():
             windows = [w._replace(associated=False) for w in windows]
         elif not tracking:
-            windows = self.acquire(windows, sigmas)
-        found = self.assign_arrivals(windows, sigmas)
+            windows = self.acquire(windows, gammas)
+            gammas = self.thresholds(windows, sigmas)
+        found = self.assign_arrivals(windows, gammas)
         return (self.time_arrivals(found, sigmas, k, len(self.held)) if found else []), tracking
 
-    def acquire(self, windows: list[SearchWindow], sigmas: list) -> list[SearchWindow]:
-        """Without a lock: windows narrowed by a vote over candidate arrivals (see the tracker)."""
-        template_of = self.template_of
-        return acquisition_windows(windows, lambda w: self.candidates(w, sigmas[template_of[w.beacon_index]]),
+    def acquire(self, windows: list[SearchWindow], gammas: np.ndarray) -> list[SearchWindow]:
+        """Without a lock: windows narrowed by a vote over candidate arrivals (see the tracker); ``gammas`` the
+        windows' thresholds."""
+        gamma_of = dict(zip(map(id, windows), gammas.tolist()))
+        return acquisition_windows(windows, lambda w: self.candidates(w, gamma_of[id(w)]),
                                    self.tracker, self.timing, self.fs, self.lead)
 
     def release(self) -> Iterator[FrameResult]:
@@ -558,130 +739,84 @@ class _FrameDetector:
         _, seg = stream.env_range(j_lo, j_hi)
         if seg.shape[1] == 0:
             return np.zeros(bank.n_templates)
-        # Every 4th output: neighbours are correlated over ~1/B anyway, and it is 4× cheaper.
-        sub = seg[:, ::4]
-        k = sub.shape[1] // 4
-        # One partition gives the quartile and the largest (for the silence test below).
-        part = np.partition(sub, (k, sub.shape[1] - 1), axis=1)
-        q25 = part[:, k].astype(float)
-        peak = part[:, -1].tolist()
-        if all(q > _SILENCE_REL * m for q, m in zip(q25.tolist(), peak)):
-            return q25 / _RAYLEIGH_Q25
-        # Digital silence (exact zero samples: a muted or not yet started input) is not noise: its
-        # envelope is 0, or float32 round-off of the FFT blocks it shares with sound (below 1e-6 of
-        # the loudest output). Left in, it pulled the quantile to ~0, the SNR to 126–3000 dB, and
-        # let the first noise after it pass for chirps (issue 12, item 4).
-        out = np.zeros(sub.shape[0])
-        for t, row in enumerate(sub):
-            nz = row[row > _SILENCE_REL * peak[t]]
-            if len(nz):
-                out[t] = float(np.partition(nz, len(nz) // 4)[len(nz) // 4]) / _RAYLEIGH_Q25
-        return out
+        return _noise_scales(seg)
 
-    def gamma_of(self, w: SearchWindow, sigma: float) -> float:
-        """Detection threshold γ of window ``w`` (see the module docstring)."""
-        n_cells = (w.hi - w.lo) / self.fs * self.bandwidth_of[w.beacon_index]
-        gamma = sigma * math.sqrt(2.0 * (math.log(n_cells if n_cells > 1.0 else 1.0) + self.log_inv_p_fa))
-        return gamma if gamma > 1e-9 else 1e-9
+    def thresholds(self, windows: list[SearchWindow], sigmas: list) -> np.ndarray:
+        """Detection threshold γ of each window of ``windows`` (:func:`_thresholds`; module docstring), ``sigmas``
+        the noise scale per template; shape (len(windows),)."""
+        template_of, bandwidth_of = self.template_of, self.bandwidth_of
+        return _thresholds(np.array([w.hi - w.lo for w in windows], dtype=np.int64),
+                           np.array([bandwidth_of[w.beacon_index] for w in windows], dtype=float),
+                           np.array([sigmas[template_of[w.beacon_index]] for w in windows], dtype=float),
+                           self.fs, self.log_inv_p_fa)
 
-    def prepare_maxima(self, windows: list[SearchWindow], sigmas: list) -> None:
-        """Envelope maxima of the whole frame, once per template, for :func:`peaks` to slice.
+    def prepare_maxima(self, windows: list[SearchWindow], gammas: np.ndarray) -> None:
+        """Envelope maxima of the whole frame, once per template, for the windows to slice.
 
         Windows overlap, and a local maximum is one whatever window looks at it, so the
-        maxima above the lowest threshold of the frame are found once, and the sidelobe
-        guard (a maximum within one chirp length of one 25 dB stronger is dropped, so
+        maxima above the lowest threshold of the frame (``gammas``: each window's) are found once,
+        and the sidelobe guard (a maximum within one chirp length of one 25 dB stronger is dropped, so
         that the range sidelobes, −34.6 dB, of a strong arrival never pass for an earlier
-        one) applied once, instead of per window. Kept as Python lists: each window
-        then takes its slice by bisection at no numpy call's cost.
+        one) applied once, instead of per window. Kept as arrays (decimated indices, float32 heights)
+        that :func:`_assign` and :meth:`peaks` search by bisection.
         """
-        maxima, template_of, delay, dec, bank, gamma_of = (self.maxima, self.template_of, self.delay, self.dec,
-                                                            self.bank, self.gamma_of)
+        maxima, template_of, delay, dec, bank = self.maxima, self.template_of, self.delay, self.dec, self.bank
         maxima.clear()
-        for t in {template_of[w.beacon_index] for w in windows}:
-            mine = [w for w in windows if template_of[w.beacon_index] == t]
+        tmpl = [template_of[w.beacon_index] for w in windows]
+        gammas = gammas.tolist()
+        for t in set(tmpl):
+            mine = [w for w, tw in zip(windows, tmpl) if tw == t]
             j_lo = -(-(min(w.lo for w in mine) + delay) // dec)
             j_hi = (max(w.hi for w in mine) + delay) // dec + 1
             j_first, seg = self.stream.env_range(j_lo, j_hi)
             seg = seg[t]
-            gamma = min(gamma_of(w, sigmas[t]) for w in mine)
+            gamma = min(g for g, tw in zip(gammas, tmpl) if tw == t)
             if len(seg) < 3:
-                maxima[t] = ([], [])
+                maxima[t] = (np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.float32))
                 continue
             idx = _envelope_maxima(seg, gamma, gamma * _SIDELOBE_GUARD, dec, bank.template_len)
-            maxima[t] = ((j_first + idx).tolist(), seg[idx].tolist())
+            maxima[t] = (j_first + idx, seg[idx])
 
-    def peaks(self, w: SearchWindow, sigma: float) -> tuple[list, list]:
-        """Chirp-start indices (ascending) and heights of envelope maxima in ``w`` above its threshold γ.
+    def peaks(self, w: SearchWindow, gamma: float) -> tuple[list, list]:
+        """Chirp-start indices (ascending) and heights of envelope maxima in ``w`` above its threshold ``gamma``.
 
         Sliced from the frame's maxima (:func:`prepare_maxima`).
         """
         delay, dec = self.delay, self.dec
         jj, hh = self.maxima[self.template_of[w.beacon_index]]
-        a = bisect.bisect_left(jj, -(-(w.lo + delay) // dec))
-        b = bisect.bisect_left(jj, (w.hi + delay) // dec + 1, a)
-        gamma = self.gamma_of(w, sigma)
-        starts, heights = [], []
-        for j, h in zip(jj[a:b], hh[a:b]):
-            if h > gamma:
-                starts.append(dec * j - delay)     # chirp starts (StreamingMatchedFilter.chirp_start)
-                heights.append(h)
-        return starts, heights
+        a = int(np.searchsorted(jj, -(-(w.lo + delay) // dec)))
+        b = max(a, int(np.searchsorted(jj, (w.hi + delay) // dec + 1)))
+        heights = hh[a:b].astype(np.float64)
+        above = heights > gamma
+        return (dec * jj[a:b][above] - delay).tolist(), heights[above].tolist()   # chirp starts (StreamingMatchedFilter.chirp_start)
 
-    def assign_arrivals(self, windows: list[SearchWindow], sigmas: list) -> list[tuple[SearchWindow, int]]:
+    def assign_arrivals(self, windows: list[SearchWindow], gammas: np.ndarray) -> list[tuple[SearchWindow, int]]:
         """(window, chirp start) of the chirps located in a frame, one physical arrival per window.
 
         Windows overlap (slots are 0.1 s apart, an NLOS arrival may come late), so one arrival
         can fall into several. Associated windows come first: an arrival belongs to its beacon
         before it can be claimed, for features only, by an unassociated window. Among tracked
         windows an arrival goes to the window whose predicted arrival it matches best; a window
-        that loses it takes its next peak that is not the echo of a claimed one. Arrivals of different chirp templates
-        (frequency-divided beacons) never collide.
+        that loses it takes its next peak that is not the echo of a claimed one (up to ``_ECHO_SPAN_S``
+        after it). Arrivals of different chirp templates (frequency-divided beacons) never collide.
+        ``gammas``: each window's threshold. The rounds run compiled over the whole frame (:func:`_assign`).
         """
-        fs, template_of, peaks = self.fs, self.template_of, self.peaks
-        gap, echo = 0.001 * fs, _ECHO_SPAN_S * fs
-        claims: list[tuple[SearchWindow, int]] = []
-        cands = {}
-        for w in windows:
-            starts, heights = peaks(w, sigmas[template_of[w.beacon_index]])
-            if starts:
-                # An unassociated window reports its strongest peak only (features, not a range).
-                cands[id(w)] = starts if w.associated else [starts[heights.index(max(heights))]]
-
-        def cost(w, sp):
-            return abs(sp - w.expected) if w.expected is not None else 0
-
-        pending = sorted([w for w in windows if id(w) in cands], key=lambda w: not w.associated)
-        # The common case: no two windows' first peaks are one arrival; each window keeps its own.
-        firsts = sorted((template_of[w.beacon_index], cands[id(w)][0]) for w in pending)
-        if all(t1 != t2 or s2 - s1 > gap for (t1, s1), (t2, s2) in zip(firsts, firsts[1:])):
-            return [(w, cands[id(w)][0]) for w in pending]
-        for _ in range(4):                       # a few rounds of re-assignment settle every case seen
-            taken: list[tuple[SearchWindow, int]] = []
-            losers = []
-            for w in pending:
-                t = template_of[w.beacon_index]
-                # Nor the echoes and tail of a claimed arrival (up to _ECHO_SPAN_S after it).
-                options = [sp for sp in cands[id(w)] if all(not -gap <= sp - f <= echo for w2, f in claims
-                                                               if template_of[w2.beacon_index] == t)]
-                if not options:
-                    continue
-                sp = options[0]
-                rival = next((k for k, (w2, f) in enumerate(taken)
-                              if template_of[w2.beacon_index] == t and abs(sp - f) <= gap), None)
-                if rival is None:
-                    taken.append((w, sp))
-                    continue
-                w2, _ = taken[rival]
-                if w.associated and w2.associated and cost(w, sp) < cost(w2, sp):
-                    taken[rival] = (w, sp)
-                    losers.append(w2)
-                else:
-                    losers.append(w)
-            claims.extend(taken)
-            if not losers:
-                break
-            pending = losers
-        return claims
+        if not windows:
+            return []
+        template_of, delay, dec, maxima = self.template_of, self.delay, self.dec, self.maxima
+        n_t = self.bank.n_templates
+        empty = np.zeros(0, dtype=np.int64)
+        jj = np.concatenate([maxima[t][0] if t in maxima else empty for t in range(n_t)])
+        hh = np.concatenate([maxima[t][1] if t in maxima else empty.astype(np.float32) for t in range(n_t)])
+        t_off = np.cumsum([0] + [len(maxima[t][0]) if t in maxima else 0 for t in range(n_t)])
+        claim_w, claim_s = _assign(
+            jj, hh, t_off, np.array([template_of[w.beacon_index] for w in windows], dtype=np.int64),
+            np.array([-(-(w.lo + delay) // dec) for w in windows], dtype=np.int64),
+            np.array([(w.hi + delay) // dec + 1 for w in windows], dtype=np.int64), gammas,
+            np.array([w.associated for w in windows]),
+            np.array([0 if w.expected is None else w.expected for w in windows], dtype=np.int64),
+            np.array([w.expected is not None for w in windows]), dec, delay, 0.001 * self.fs, _ECHO_SPAN_S * self.fs)
+        return [(windows[k], sp) for k, sp in zip(claim_w.tolist(), claim_s.tolist())]
 
     def cir_rows(self, t: int, j_a: list) -> tuple[np.ndarray, list]:
         """Decimated envelope rows ``[j, j + cir_taps)`` of template ``t`` for each ``j`` of ``j_a``
@@ -750,16 +885,16 @@ class _FrameDetector:
                 dets[i] = ChirpDetection(*d[:5], CirFeatures(*f), d[6])
         pending_cirs.clear()
 
-    def candidates(self, w: SearchWindow, sigma: float, max_candidates: int = 12) -> list[float]:
+    def candidates(self, w: SearchWindow, gamma: float, max_candidates: int = 12) -> list[float]:
         """Stated arrival times of candidate first arrivals in ``w`` (acquisition).
 
         Maxima within ``_ECHO_SPAN_S`` after a stronger one are taken for its echoes
         and tail and left out, so that weak arrivals of far beacons, separate in
         time, are not crowded out by the echoes of near ones; of the rest, the
-        strongest ``max_candidates``.
+        strongest ``max_candidates``; ``gamma`` the window's threshold.
         """
         fs = self.fs
-        starts, heights = self.peaks(w, sigma)
+        starts, heights = self.peaks(w, gamma)
         if not starts:
             return []
         starts, heights = np.array(starts), np.array(heights)

@@ -74,33 +74,28 @@ _MAX_LS_HOLE = 160
 """Holes longer than this many samples are filled by a straight line instead of the AR least squares."""
 
 
-@njit(cache=True, inline="always")
-def _quantised(x: float) -> int:
-    """|x| in units of 2^-24, rounded: integers, so that the sliding sums of :func:`_decide` are exact."""
-    return np.int64(abs(x) * 16777216.0 + 0.5)
-
-
 @njit(cache=True)
-def _decide(e: np.ndarray, start: int, stop: int, wh: int, g: int, ratio: float, hold: int, hold_left: int):
-    """Impulse mask of ``e[start:stop]`` (the prediction error; ``g + wh`` samples of ``e`` exist on either
-    side of the range), the hold carried over, and the number of holes opened.
+def _decide(q: np.ndarray, start: int, stop: int, wh: int, g: int, ratio: float, hold: int, hold_left: int):
+    """Impulse mask of ``q[start:stop]`` (|e| of the prediction error in units of 2⁻²⁴, :func:`_quantised_error`;
+    ``g + wh`` samples of ``q`` exist on either side of the range), the hold carried over, and the number of holes
+    opened.
 
     The reference of sample i is Σ|e| over the ``wh`` samples before i − g and after i + g, kept as two
     sliding sums of integers (exact, whatever the order they are formed in)."""
     left = np.int64(0)
     right = np.int64(0)
     for j in range(start - g - wh, start - g):
-        left += _quantised(e[j])
+        left += q[j]
     for j in range(start + g + 1, start + g + 1 + wh):
-        right += _quantised(e[j])
+        right += q[j]
     mask = np.zeros(stop - start, dtype=np.bool_)
     opened = 0
     for i in range(start, stop):
         if i > start:
-            left += _quantised(e[i - g - 1]) - _quantised(e[i - g - wh - 1])
-            right += _quantised(e[i + g + wh]) - _quantised(e[i + g])
-        q = _quantised(e[i])
-        if q > 0 and float(q * 2 * wh) > ratio * float(left + right):
+            left += q[i - g - 1] - q[i - g - wh - 1]
+            right += q[i + g + wh] - q[i + g]
+        qi = q[i]
+        if qi > 0 and float(qi * 2 * wh) > ratio * float(left + right):
             if hold_left == 0:
                 opened += 1
             hold_left = hold + 1
@@ -111,23 +106,35 @@ def _decide(e: np.ndarray, start: int, stop: int, wh: int, g: int, ratio: float,
 
 
 @njit(cache=True)
-def _prediction_error_filter(x: np.ndarray, order: int) -> np.ndarray:
-    """c = [1, −a₁, …, −a_p] of the AR(p) model of ``x`` (autocorrelation method over a Hann window, with a
-    1e-9 white-noise correction so that a pure tone stays regular; Levinson–Durbin recursion, Makhoul 1975
-    eqs. 38–40); shape (p + 1,). All zeros (use the second difference) when ``x`` is (nearly) silent or when
-    the second difference's output power, 6r₀ − 8r₁ + 2r₂, is within :data:`_AR_GAIN` of what it makes of
-    white noise at the model's prediction-error power (6·E): noise and hum alone, the common case, then cost
-    3 taps instead of p + 1."""
+def _hann(n: int) -> np.ndarray:
+    """The Hann window w[i] = ½ − ½·cos(2πi/(n − 1)) of the AR fit (:func:`_prediction_error_filter`); shape (n,)."""
+    w = np.empty(n)
+    for i in range(n):
+        w[i] = 0.5 - 0.5 * math.cos(2.0 * math.pi * i / (n - 1))
+    return w
+
+
+@njit(cache=True)
+def _prediction_error_filter(x: np.ndarray, order: int, window: np.ndarray) -> np.ndarray:
+    """c = [1, −a₁, …, −a_p] of the AR(p) model of ``x`` (autocorrelation method over the Hann ``window``
+    (:func:`_hann` of ``len(x)``), with a 1e-9 white-noise correction so that a pure tone stays regular;
+    Levinson–Durbin recursion, Makhoul 1975 eqs. 38–40); shape (p + 1,). All zeros (use the second difference)
+    when ``x`` is (nearly) silent or when the second difference's output power, 6r₀ − 8r₁ + 2r₂, is within
+    :data:`_AR_GAIN` of what it makes of white noise at the model's prediction-error power (6·E): noise and hum
+    alone, the common case, then cost 3 taps instead of p + 1."""
     n = x.shape[0]
     w = np.empty(n)
     for i in range(n):
-        w[i] = x[i] * (0.5 - 0.5 * math.cos(2.0 * math.pi * i / (n - 1)))
+        w[i] = x[i] * window[i]
+    # r_k = Σ_i w_i·w_{i+k}, each sum in ascending i; the lags advance together (independent accumulators).
     r = np.zeros(order + 1)
-    for k in range(order + 1):
-        acc = 0.0
-        for i in range(n - k):
-            acc += w[i] * w[i + k]
-        r[k] = acc
+    for i in range(n - order):
+        wi = w[i]
+        for k in range(order + 1):
+            r[k] += wi * w[i + k]
+    for i in range(n - order, n):
+        for k in range(n - i):
+            r[k] += w[i] * w[i + k]
     c = np.zeros(order + 1)
     if not r[0] > 1e-20 * n:
         return c
@@ -167,6 +174,34 @@ def _residual(x: np.ndarray, c: np.ndarray, lo: int, hi: int) -> np.ndarray:
             for n in range(lo, hi):
                 e[n - lo] += ck * x[n - k]
     return e
+
+
+@njit(cache=True)
+def _prediction_error_filters(x: np.ndarray, offsets: np.ndarray, n: int, order: int, window: np.ndarray) -> np.ndarray:
+    """:func:`_prediction_error_filter` of ``x[o : o + n]`` for each ``o`` of ``offsets``; shape (len(offsets), p + 1)."""
+    out = np.empty((offsets.shape[0], order + 1))
+    for j in range(offsets.shape[0]):
+        out[j] = _prediction_error_filter(x[offsets[j]: offsets[j] + n], order, window)
+    return out
+
+
+@njit(cache=True)
+def _quantised_error(x: np.ndarray, coefs: np.ndarray, first_seg: int, segment: int, x_pos: int, lo: int,
+                     hi: int) -> np.ndarray:
+    """|e| in units of 2⁻²⁴, rounded (integers, so that the sliding sums of :func:`_decide` are exact), of the
+    prediction error at stream positions [lo, hi), each segment of ``segment`` samples through its own filter
+    ``coefs[seg − first_seg]`` (:func:`_residual`); ``x[i]`` is the sample at stream position ``x_pos + i``.
+    Shape (hi − lo,), int64."""
+    q = np.empty(hi - lo, dtype=np.int64)
+    pos = lo
+    while pos < hi:
+        seg = pos // segment
+        stop = min(hi, (seg + 1) * segment)
+        e = _residual(x, coefs[seg - first_seg], pos - x_pos, stop - x_pos)
+        for i in range(stop - pos):
+            q[pos - lo + i] = np.int64(abs(e[i]) * 16777216.0 + 0.5)
+        pos = stop
+    return q
 
 
 def _ar_fill(x: np.ndarray, a: int, b: int, c: np.ndarray) -> np.ndarray:
@@ -211,6 +246,7 @@ class ImpulseBlanker:
         self._lag = self.g + self.wh + self.order      # samples read beyond the last decided one
         self._second_difference = np.zeros(self.order + 1)
         self._second_difference[:3] = (1.0, -2.0, 1.0)
+        self._window = _hann(self.segment // 4)
         # The stream so far from ``_buf_pos``: p + context zeros stand before its start.
         self._reach = self.g + self.wh + 2 * self.order + 2
         self._buf = np.zeros(self._reach, dtype=np.float32)
@@ -248,35 +284,32 @@ class ImpulseBlanker:
             self._end += len(x)
             # Segments completed by this block: their models serve the segment after each.
             s = self.segment
-            for j in range(max(0, (self._end - len(x)) // s), self._end // s):
-                lo = j * s - self._buf_pos
-                if lo >= 0 and j + 1 not in self._filters:
-                    # A quarter of the segment is plenty for p + 1 lags, and four times cheaper.
-                    c = _prediction_error_filter(self._buf[lo: lo + s // 4], self.order)
+            done = [j for j in range(max(0, (self._end - len(x)) // s), self._end // s)
+                    if j * s - self._buf_pos >= 0 and j + 1 not in self._filters]
+            if done:
+                # A quarter of the segment is plenty for p + 1 lags, and four times cheaper.
+                offsets = np.array([j * s - self._buf_pos for j in done], dtype=np.int64)
+                for j, c in zip(done, _prediction_error_filters(self._buf, offsets, s // 4, self.order, self._window)):
                     self._filters[j + 1] = c if c[0] == 1.0 else None
 
     def _filter_of(self, seg: int) -> np.ndarray:
         f = self._filters.get(seg)
         return self._second_difference if f is None else f
 
-    def _error(self, lo: int, hi: int) -> np.ndarray:
-        """Prediction error e at stream positions [lo, hi), each segment through its own model."""
-        out = np.empty(hi - lo)
+    def _quantised_error(self, lo: int, hi: int) -> np.ndarray:
+        """Quantised |e| of the prediction error at stream positions [lo, hi), each segment through its own
+        model (:func:`_quantised_error`)."""
         s = self.segment
-        pos = lo
-        while pos < hi:
-            stop = min(hi, (pos // s + 1) * s)
-            out[pos - lo: stop - lo] = _residual(self._buf, self._filter_of(pos // s), pos - self._buf_pos,
-                                                 stop - self._buf_pos)
-            pos = stop
-        return out
+        first = lo // s
+        coefs = np.array([self._filter_of(j) for j in range(first, (hi - 1) // s + 1)])
+        return _quantised_error(self._buf, coefs, first, s, self._buf_pos, lo, hi)
 
     def _decide_until(self, stop: int) -> None:
         if stop <= self._dec:
             return
         margin = self.g + self.wh
-        e = self._error(self._dec - margin, stop + margin)
-        mask, self._hold_left, opened = _decide(e, margin, margin + stop - self._dec, self.wh, self.g, self.ratio,
+        q = self._quantised_error(self._dec - margin, stop + margin)
+        mask, self._hold_left, opened = _decide(q, margin, margin + stop - self._dec, self.wh, self.g, self.ratio,
                                                 self.hold, self._hold_left)
         if self.pre and opened:
             # The ``pre`` samples before each hole's start belong to it (the impulse's first samples).
