@@ -25,7 +25,9 @@ Prints, in Markdown, and writes ``<out>/study.json``:
 Usage: ``python bench/fusion_study.py --split standard --out /tmp/std --seeds 0 1 2``; a replicate on other
 layouts: ``--train-sites 111 112 113 114 115 116 --test-sites 211 212 213 214 215``. ``--reports-only`` re-reads a
 finished study's per-walk ``seed*/report/metrics.csv`` and prints the claim and sanity tables again (no fitting,
-no oracles). ``study.json`` keeps every walk's rows (``walks``), so any other pair can be compared later.
+no oracles). ``--class-smoothing none`` trains and evaluates on the windows' classes one by one instead of the
+class HMM's causal ones (the twin ``bench/env_fusion_gain.py`` compares). ``study.json`` keeps every walk's rows
+(``walks``), so any other pair can be compared later.
 """
 
 from __future__ import annotations
@@ -215,7 +217,8 @@ def main() -> None:
     scores = walk_scores([results[s]["results"] for s in args.seeds])
     methods = method_order({m for p in pooled.values() for (m, _) in p})
     sp = layout.split
-    doc = {"split": sp.name, "class_smoothing": args.class_smoothing, "train_sites": list(sp.train_sites), "test_sites": list(sp.test_sites),
+    doc = {"split": sp.name, "class_smoothing": args.class_smoothing, "train_sites": list(sp.train_sites),
+           "test_sites": list(sp.test_sites),
            "walks_per_site": sp.walks_per_site, "walk_s": sp.walk_s, "seeds": args.seeds, "table": [],
            "claims": [], "sanity": [], "bp": {}, "tuning": results[args.seeds[0]]["tuning_report"]}
     print(f"\n## {sp.name}: train sites {list(sp.train_sites)}, test sites {list(sp.test_sites)}"
