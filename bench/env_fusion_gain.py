@@ -59,7 +59,8 @@ def run_arm(layout, library: Path, out: Path, arm: str, seed: int, workers: int,
         return
     t0 = time.process_time()
     fit_and_evaluate(layout, library, out, seed=seed, workers=workers, bp_members=bp_members, plots=False,
-                     say=lambda line: print(f"  {arm} seed {seed}: {line}", flush=True), meta={"seed": seed},
+                     say=lambda line: print(f"  [{time.strftime('%H:%M:%S')}, {time.process_time() - t0:5.0f} s CPU] "
+                                            f"{arm} seed {seed}: {line}", flush=True), meta={"seed": seed},
                      class_smoothing=arm)
     print(f"  {arm} seed {seed}: done, {time.process_time() - t0:.0f} s CPU in this process", flush=True)
 
@@ -204,6 +205,8 @@ def main() -> None:
     ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
     ap.add_argument("--workers", type=int, default=1)
     ap.add_argument("--bp-members", type=int, default=5, help="BP ensemble members (the study's 5)")
+    ap.add_argument("--arms", nargs="+", default=list(ARMS), choices=ARMS,
+                    help="the arms to fit here (two processes may share --out, one arm each)")
     ap.add_argument("--fb-rts", action="store_true", help="also the forward arm's models with forward–backward "
                                                           "classes, RTS tracks only")
     ap.add_argument("--tables-only", action="store_true", help="print the tables from what is in --out")
@@ -223,10 +226,10 @@ def main() -> None:
                     build_library(layout.survey_dir(site), tmp, progress=False)
                 tmp.rename(library)
             for seed in args.seeds:          # seed by seed, both arms: a cut-short run still has paired seeds
-                for arm in ARMS:
+                for arm in args.arms:
                     run_arm(layout, library, args.out / arm / f"seed{seed}", arm, seed, args.workers,
                             args.bp_members)
-                if args.fb_rts:
+                if args.fb_rts and "forward" in args.arms:
                     run_fb(layout, args.out, seed, args.workers)
                 print(f"[{time.perf_counter() - t0:6.0f} s wall] seed {seed} done", flush=True)
         seeds = [s for s in args.seeds if all((args.out / a / f"seed{s}" / "report" / "metrics.csv").is_file()
