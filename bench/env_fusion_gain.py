@@ -7,7 +7,8 @@ Two arms on a built split, each over the same model seeds, the same environment 
 - ``none`` (the twin with the ingredient removed): every window on its own in training and evaluation alike,
   so the filters' tuning is fitted on the classes they then get.
 
-Optionally (``--fb-rts``) the ``forward`` arm's models are evaluated again with the forward–backward classes
+Optionally (``--arms fb_rts``, once the ``forward`` arm's models exist) they are evaluated again with the
+forward–backward classes
 (the whole walk), scored for the ``+rts`` tracks only: an RTS smoother uses the walk's future anyway, so an
 offline user may hand it the smoothed classes; its tuning was fitted on forward classes (labelled so).
 
@@ -69,12 +70,19 @@ def run_fb(layout, out: Path, seed: int, workers: int) -> None:
     """The ``forward`` arm's model of ``seed`` on the test walks with forward–backward classes (filters only)."""
     from pipeline.evaluate import evaluate
 
+    from features.errors import EnvfuseError
+
     report = out / FB / f"seed{seed}" / "report"
     if (report / "metrics.csv").is_file():
         return
+    model = out / "forward" / f"seed{seed}" / "fusion_model"
+    if not (model / "bundle.json").is_file():
+        raise EnvfuseError(f"{model}: no forward-arm model of seed {seed} to evaluate with forward–backward classes")
+    t0 = time.process_time()
     bases = ("adaptive_nobp", "adaptive", "adaptive_nobp_blind", "adaptive_blind", "imm")
-    evaluate(layout.test_walks, out / "forward" / f"seed{seed}" / "fusion_model", report, methods=bases,
-             workers=workers, progress=False, plots=False, force=True, class_smoothing="forward_backward")
+    evaluate(layout.test_walks, model, report, methods=bases, workers=workers, progress=False, plots=False,
+             force=True, class_smoothing="forward_backward")
+    print(f"  {FB} seed {seed}: done, {time.process_time() - t0:.0f} s CPU", flush=True)
 
 
 def merged_scores(out: Path, arms: list[str], seeds: list[int]):
@@ -205,10 +213,9 @@ def main() -> None:
     ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
     ap.add_argument("--workers", type=int, default=1)
     ap.add_argument("--bp-members", type=int, default=5, help="BP ensemble members (the study's 5)")
-    ap.add_argument("--arms", nargs="+", default=list(ARMS), choices=ARMS,
-                    help="the arms to fit here (two processes may share --out, one arm each)")
-    ap.add_argument("--fb-rts", action="store_true", help="also the forward arm's models with forward–backward "
-                                                          "classes, RTS tracks only")
+    ap.add_argument("--arms", nargs="+", default=list(ARMS), choices=ARMS + (FB,),
+                    help="the arms to run here (processes may share --out, one arm each); fb_rts: the forward "
+                         "arm's models (fitted already) with forward–backward classes, RTS tracks only")
     ap.add_argument("--tables-only", action="store_true", help="print the tables from what is in --out")
     args = ap.parse_args()
     try:
@@ -227,13 +234,21 @@ def main() -> None:
                 tmp.rename(library)
             for seed in args.seeds:          # seed by seed, both arms: a cut-short run still has paired seeds
                 for arm in args.arms:
-                    run_arm(layout, library, args.out / arm / f"seed{seed}", arm, seed, args.workers,
-                            args.bp_members)
-                if args.fb_rts and "forward" in args.arms:
-                    run_fb(layout, args.out, seed, args.workers)
+                    if arm == FB:
+                        run_fb(layout, args.out, seed, args.workers)
+                    else:
+                        run_arm(layout, library, args.out / arm / f"seed{seed}", arm, seed, args.workers,
+                                args.bp_members)
                 print(f"[{time.perf_counter() - t0:6.0f} s wall] seed {seed} done", flush=True)
         seeds = [s for s in args.seeds if all((args.out / a / f"seed{s}" / "report" / "metrics.csv").is_file()
                                               for a in ARMS)]
+        if not seeds and not args.tables_only:
+            from env_along_walk import walk_windows
+
+            for w in layout.test_walks:              # the class-accuracy table's windows, read once for later
+                walk_windows(w, args.out / "windows")
+            print(f"no seed with both arms evaluated yet in {args.out}: tables later (--tables-only)")
+            return
         if not seeds:
             raise EnvfuseError(f"{args.out}: no seed with both arms evaluated")
         arms = list(ARMS) + ([FB] if all((args.out / FB / f"seed{s}" / "report" / "metrics.csv").is_file()
