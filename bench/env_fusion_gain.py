@@ -8,9 +8,9 @@ Two arms on a built split, each over the same model seeds, the same environment 
   so the filters' tuning is fitted on the classes they then get.
 
 Optionally (``--arms fb_rts``, once the ``forward`` arm's models exist) they are evaluated again with the
-forward–backward classes
-(the whole walk), scored for the ``+rts`` tracks only: an RTS smoother uses the walk's future anyway, so an
-offline user may hand it the smoothed classes; its tuning was fitted on forward classes (labelled so).
+forward–backward classes (the whole walk), scored for the ``+rts`` tracks only: an RTS smoother uses the walk's
+future anyway, so an offline user may hand it the smoothed classes; its tuning was fitted on forward classes
+(labelled so).
 
 Printed (Markdown) and written to ``<out>/gain.json``: per method and class the pooled mean horizontal error of
 each arm and Δ = ratio of pooled means − 1 (forward against none; negative: smoothing helps) with a 95 %
