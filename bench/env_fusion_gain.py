@@ -51,8 +51,10 @@ BLIND = ("kf", "kf_quality", "aekf", "adaptive_nobp_blind", "adaptive_blind", "f
 MODES = ("none", "forward", "forward_backward")
 
 
-def run_arm(layout, library: Path, out: Path, arm: str, seed: int, workers: int, bp_members: int) -> None:
-    """Fit and evaluate one arm with one seed into ``out`` (kept when its report is already there)."""
+def run_arm(layout, library: Path, out: Path, arm: str, seed: int, workers: int, bp_members: int,
+            methods=None) -> None:
+    """Fit and evaluate one arm with one seed into ``out`` (kept when its report is already there); ``methods``:
+    the ones evaluated (default: every registered one)."""
     from pipeline.benchmark import fit_and_evaluate
 
     if (out / "report" / "metrics.csv").is_file():
@@ -62,7 +64,7 @@ def run_arm(layout, library: Path, out: Path, arm: str, seed: int, workers: int,
     fit_and_evaluate(layout, library, out, seed=seed, workers=workers, bp_members=bp_members, plots=False,
                      say=lambda line: print(f"  [{time.strftime('%H:%M:%S')}, {time.process_time() - t0:5.0f} s CPU] "
                                             f"{arm} seed {seed}: {line}", flush=True), meta={"seed": seed},
-                     class_smoothing=arm)
+                     class_smoothing=arm, methods=methods)
     print(f"  {arm} seed {seed}: done, {time.process_time() - t0:.0f} s CPU in this process", flush=True)
 
 
@@ -91,13 +93,17 @@ def merged_scores(out: Path, arms: list[str], seeds: list[int]):
 
     from pipeline.compare import walk_scores
 
+    reports = {(arm, s): results_from_reports(out / arm, [s])[0] for arm in arms for s in seeds}
+    # a method enters when every seed of its arm evaluated it (the graph methods may be left out of later seeds)
+    have = {arm: set.intersection(*({r["method"] for res in reports[(arm, s)] for r in res["rows"]} for s in seeds))
+            for arm in arms}
     by_seed = []
     for s in seeds:
         walks: dict = {}
         for arm in arms:
-            for res in results_from_reports(out / arm, [s])[0]:
+            for res in reports[(arm, s)]:
                 w = walks.setdefault(res["walk"], {"walk": res["walk"], "site": res["site"], "rows": []})
-                w["rows"] += [{**r, "method": f"{r['method']}@{arm}"} for r in res["rows"]]
+                w["rows"] += [{**r, "method": f"{r['method']}@{arm}"} for r in res["rows"] if r["method"] in have[arm]]
         by_seed.append([walks[k] for k in sorted(walks)])
     return walk_scores(by_seed)
 
@@ -216,6 +222,8 @@ def main() -> None:
     ap.add_argument("--arms", nargs="+", default=list(ARMS), choices=ARMS + (FB,),
                     help="the arms to run here (processes may share --out, one arm each); fb_rts: the forward "
                          "arm's models (fitted already) with forward–backward classes, RTS tracks only")
+    ap.add_argument("--methods", nargs="+", default=None,
+                    help="the methods evaluated in both arms (default: every one; the tables keep those every seed has)")
     ap.add_argument("--tables-only", action="store_true", help="print the tables from what is in --out")
     args = ap.parse_args()
     try:
@@ -238,7 +246,7 @@ def main() -> None:
                         run_fb(layout, args.out, seed, args.workers)
                     else:
                         run_arm(layout, library, args.out / arm / f"seed{seed}", arm, seed, args.workers,
-                                args.bp_members)
+                                args.bp_members, args.methods)
                 print(f"[{time.perf_counter() - t0:6.0f} s wall] seed {seed} done", flush=True)
         seeds = [s for s in args.seeds if all((args.out / a / f"seed{s}" / "report" / "metrics.csv").is_file()
                                               for a in ARMS)]
