@@ -15,7 +15,8 @@ future anyway, so an offline user may hand it the smoothed classes; its tuning w
 Printed (Markdown) and written to ``<out>/gain.json``: per method and class the pooled mean horizontal error of
 each arm and Δ = ratio of pooled means − 1 (forward against none; negative: smoothing helps) with a 95 %
 interval from a bootstrap over test sites (:func:`pipeline.compare.compare`, per-walk means first averaged over
-the seeds); the class-blind twins are the sanity check (their inputs hold no class, so Δ ≈ 0). Then the
+the seeds); kind ``class``: the method takes the classifier's classes, ``map``: the site map's, ``blind``: none
+— the blind ones (the twins among them) are the sanity check: their inputs hold no class, so Δ = 0. Then the
 per-window class accuracy along the held-out walks (each window alone / forward / forward–backward), the gain
 in points with the same site bootstrap.
 
@@ -46,8 +47,8 @@ FB = "fb_rts"
 """The ``forward`` arm's models evaluated with forward–backward classes (``+rts`` tracks only)."""
 CLASS_AWARE = ("imm", "adaptive_nobp", "adaptive", "adaptive_correction", "fg_env", "uwb_aoa_pdr_env")
 """Methods whose inputs hold the classifier's classes (their ``+lag`` / ``+rts`` tracks too)."""
-BLIND = ("kf", "kf_quality", "aekf", "adaptive_nobp_blind", "adaptive_blind", "fg_blind", "gnss", "acoustic", "pdr")
-"""Methods that never see a class: identical between the arms up to the shared training's randomness."""
+MAP = ("kf_map",)
+"""Methods that take the site map's class, not the classifier's."""
 MODES = ("none", "forward", "forward_backward")
 
 
@@ -121,7 +122,7 @@ def gain_table(scores, arms: list[str]) -> list[dict]:
     print("|---|---|" + "---|" * len(CLASSES))
     for m in method_order(names):
         base = m.split("+")[0]
-        kind = "class" if base in CLASS_AWARE else "blind" if base in BLIND else "other"
+        kind = "class" if base in CLASS_AWARE else "map" if base in MAP else "blind"
         cells = []
         for c in CLASSES:
             cmp = compare(scores, f"{m}@forward", f"{m}@none", c)
