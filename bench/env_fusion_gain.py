@@ -41,6 +41,12 @@ points), forward–backward 83.2 % (+1.5 [+1.0, +1.9]): the causal HMM does not 
 yet the filters gain from its steadier probabilities: the argmax class changes 2.39 times a minute against 5.04
 for the windows alone (truth 2.01; forward–backward 1.65).
 
+``later_days`` (five sites, test walks four weeks after the training walks; seeds 0, 1): adaptive all −13.8 %
+[−30.8, −1.2], open −61.0 % [−78.6, −24.5] (0.06 against 0.15 m), light −1.0 % [−20.8, +12.0], heavy +3.6 %
+[−1.3, +7.3]; adaptive_nobp all −8.5 % [−18.3, −0.1]; imm worse with the HMM in open (+15.5 % [+11.9, +17.7]),
+better in heavy (−2.3 % [−4.0, −0.7]); 31 blind and map rows +0.0 %. Accuracy 70.0 / 70.3 / 70.6 % (window /
+forward / forward–backward), changes per minute 5.63 / 3.11 / 2.35 (truth 2.15).
+
 Usage: ``python bench/env_fusion_gain.py --data /work/studies/standard/data --out /work/studies/envgain/standard
 --seeds 0 1 2 --workers 1``
 """
