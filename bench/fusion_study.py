@@ -25,7 +25,9 @@ Prints, in Markdown, and writes ``<out>/study.json``:
 Usage: ``python bench/fusion_study.py --split standard --out /tmp/std --seeds 0 1 2``; a replicate on other
 layouts: ``--train-sites 111 112 113 114 115 116 --test-sites 211 212 213 214 215``. ``--reports-only`` re-reads a
 finished study's per-walk ``seed*/report/metrics.csv`` and prints the claim and sanity tables again (no fitting,
-no oracles). ``study.json`` keeps every walk's rows (``walks``), so any other pair can be compared later.
+no oracles). ``--class-smoothing none`` trains and evaluates on the windows' classes one by one instead of the
+class HMM's causal ones (the twin ``bench/env_fusion_gain.py`` compares). ``study.json`` keeps every walk's rows
+(``walks``), so any other pair can be compared later.
 """
 
 from __future__ import annotations
@@ -53,8 +55,10 @@ SANITY = ("adaptive_blind+lag", "adaptive+lag", "adaptive")
 (:data:`pipeline.commands.fuse.DEFAULT_METHOD`), the class-aware one at the same lag, and the zero-latency one."""
 
 
-def run_seed(layout, library: Path, out: Path, seed: int, env_mode: str, workers: int | None) -> dict:
-    """Fit both models with ``seed``, evaluate the test walks and add the oracles' rows per walk."""
+def run_seed(layout, library: Path, out: Path, seed: int, env_mode: str, workers: int | None,
+             class_smoothing: str = "forward") -> dict:
+    """Fit both models with ``seed``, evaluate the test walks and add the oracles' rows per walk
+    (``class_smoothing``: the class HMM's, in training and evaluation, :func:`pipeline.benchmark.fit_and_evaluate`)."""
     from fusion_oracle import oracle_results
 
     from pipeline.benchmark import fit_and_evaluate
@@ -62,7 +66,7 @@ def run_seed(layout, library: Path, out: Path, seed: int, env_mode: str, workers
 
     res = fit_and_evaluate(layout, library, out, env_mode=env_mode, seed=seed, workers=workers,
                            say=lambda line: print(f"  seed {seed}: {line}", flush=True), progress=True,
-                           plots=seed == 0, meta={"seed": seed})
+                           plots=seed == 0, meta={"seed": seed}, class_smoothing=class_smoothing)
     model = load_model(out / "fusion_model")
     oracles = {o["walk"]: o for o in oracle_results(model, layout.train_walks, layout.test_walks)}
     for r in res["results"]:
@@ -170,6 +174,7 @@ def main() -> None:
     from pipeline.compare import compare, walk_scores
     from pipeline.evaluate import method_order
     from simulation.split import SPLITS, build_split
+    from walks.inputs import CLASS_SMOOTHING
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--split", default="standard", choices=sorted(SPLITS))
@@ -180,6 +185,9 @@ def main() -> None:
     ap.add_argument("--train-sites", type=int, nargs="+", default=None,
                     help="site seeds to train on instead of the split's (a replicate with other layouts)")
     ap.add_argument("--test-sites", type=int, nargs="+", default=None, help="site seeds to test on instead")
+    ap.add_argument("--class-smoothing", default="forward", choices=CLASS_SMOOTHING,
+                    help="the class HMM's smoothing of the window classes in training and evaluation (default: "
+                         "forward, what run does; none: each window on its own)")
     ap.add_argument("--reports-only", action="store_true",
                     help="re-read a finished study's seed*/report/metrics.csv: the claim and sanity tables again")
     args = ap.parse_args()
@@ -201,19 +209,22 @@ def main() -> None:
         build_library(layout.survey_dir(site), library, progress=False)
     results = {}
     for seed in args.seeds:
-        results[seed] = run_seed(layout, library, args.out / f"seed{seed}", seed, args.env_mode, args.workers)
+        results[seed] = run_seed(layout, library, args.out / f"seed{seed}", seed, args.env_mode, args.workers,
+                                 args.class_smoothing)
         print(f"[{time.perf_counter() - t0:6.0f} s] seed {seed}: evaluated {len(results[seed]['results'])} walks",
               flush=True)
     pooled = {s: _pooled(r["results"]) for s, r in results.items()}
     scores = walk_scores([results[s]["results"] for s in args.seeds])
     methods = method_order({m for p in pooled.values() for (m, _) in p})
     sp = layout.split
-    doc = {"split": sp.name, "train_sites": list(sp.train_sites), "test_sites": list(sp.test_sites),
+    doc = {"split": sp.name, "class_smoothing": args.class_smoothing, "train_sites": list(sp.train_sites),
+           "test_sites": list(sp.test_sites),
            "walks_per_site": sp.walks_per_site, "walk_s": sp.walk_s, "seeds": args.seeds, "table": [],
            "claims": [], "sanity": [], "bp": {}, "tuning": results[args.seeds[0]]["tuning_report"]}
     print(f"\n## {sp.name}: train sites {list(sp.train_sites)}, test sites {list(sp.test_sites)}"
           f"{' (test walks four weeks later)' if sp.later_days else ''}, {sp.walks_per_site} walks × "
-          f"{sp.walk_s:.0f} s per site; model seeds {args.seeds}; env mode {args.env_mode}\n")
+          f"{sp.walk_s:.0f} s per site; model seeds {args.seeds}; env mode {args.env_mode}; class smoothing "
+          f"{args.class_smoothing}\n")
     print("Horizontal error, m: mean / median / p95 / max (mean over seeds), NEES share in the 95 % bounds\n")
     print("| method | class | n | mean | median | p95 | max | NEES in bounds |")
     print("|---|---|---|---|---|---|---|---|")

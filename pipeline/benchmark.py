@@ -31,10 +31,13 @@ __all__ = ["run_benchmark", "fit_and_evaluate"]
 
 def fit_and_evaluate(layout, library: Path, out: Path, *, env_mode: str = "supervised", seed: int = 0,
                      workers: int | None = None, bp_members: int = 5, say: Callable[[str], None] = print,
-                     progress: bool = False, plots: bool = True, meta: dict | None = None) -> dict:
+                     progress: bool = False, plots: bool = True, meta: dict | None = None,
+                     class_smoothing: str = "forward", methods=None) -> dict:
     """Steps 3–5 on a built split: the environment model on the training sites' windows of ``library``
     (by name, whatever else a reused library may hold), the fusion model on the training walks, every
-    method on the test walks; models and report written under ``out``."""
+    method (or ``methods``) on the test walks; models and report written under ``out``. ``class_smoothing``: the
+    class HMM's smoothing of the window classes in training and evaluation alike
+    (:data:`walks.inputs.CLASS_SMOOTHING`; ``"forward"``, what ``run`` does, by default)."""
     from features.site import load_site
 
     sp = layout.split
@@ -49,13 +52,14 @@ def fit_and_evaluate(layout, library: Path, out: Path, *, env_mode: str = "super
 
     model = train_fusion(layout.train_walks, clf, bp_config=BPConfig(seed=seed, n_members=bp_members),
                          meta={"split": sp.name, "env_mode": env_mode, "env_meta": info, **(meta or {})},
-                         class_map_for=class_map_for, progress=lambda line: say(f"  {line}"))
+                         class_map_for=class_map_for, progress=lambda line: say(f"  {line}"),
+                         class_smoothing=class_smoothing)
     save_fusion_model(model, out / "fusion_model", overwrite=True)
     say(f"fusion model: {len(layout.train_walks)} training walks on sites {list(sp.train_sites)}")
     # The model names its training sites (so 'run' and 'evaluate' guard other sites later); here it is applied
     # to the held-out sites on purpose: that is the point of the split.
-    return evaluate(layout.test_walks, out / "fusion_model", out / "report", workers=workers, progress=progress,
-                    plots=plots, force=True)
+    return evaluate(layout.test_walks, out / "fusion_model", out / "report", methods=methods, workers=workers,
+                    progress=progress, plots=plots, force=True, class_smoothing=class_smoothing)
 
 
 def run_benchmark(split: str, out: str | os.PathLike, *, env_mode: str = "supervised", workers: int | None = None,

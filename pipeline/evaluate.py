@@ -23,7 +23,7 @@ import numpy as np
 from features.errors import ConfigError
 from features.fileio import atomic_write_text
 from pipeline.parallel import TaskFailure, map_walks
-from walks.inputs import WINDOW_S
+from walks.inputs import CLASS_SMOOTHING, WINDOW_S
 from walks.methods import method_names
 from walks.score import METRIC_COLUMNS, metric_rows, score, track_errors
 from walks.segments import SEGMENT_S
@@ -65,10 +65,13 @@ def model_loads() -> int:
     return _LOADS["n"]
 
 
-def evaluate_walk(walk, model_dir: str, methods: tuple, force: bool = False, segment_s: float = SEGMENT_S) -> dict:
+def evaluate_walk(walk, model_dir: str, methods: tuple, force: bool = False, segment_s: float = SEGMENT_S,
+                  class_smoothing: str = "forward") -> dict:
     """Run ``methods`` on one walk; returns {'walk', 'rows', 'skipped', 'series', ...} (series: per method the
     error over time, for plots; kept small: every event of a filter, every fix of a source). A walk longer than
-    ``segment_s`` is fused segment by segment (:mod:`pipeline.evaluate_segments`)."""
+    ``segment_s`` is fused segment by segment (:mod:`pipeline.evaluate_segments`, causal classes only).
+    ``class_smoothing``: the classes handed to the filters (:data:`walks.inputs.CLASS_SMOOTHING`; ``"forward"``,
+    what ``run`` gives them, unless a study measures another)."""
     from pipeline.site_map import class_map_for
     from walks.fuse import fuse_walk, walk_name
     from walks.segments import plan_segments
@@ -78,12 +81,16 @@ def evaluate_walk(walk, model_dir: str, methods: tuple, force: bool = False, seg
     if plan_segments(walk, segment_s)[0] > 1:   # a long walk: segment by segment, memory bounded (pipeline.evaluate_segments)
         from pipeline.evaluate_segments import evaluate_segmented
 
+        if class_smoothing != "forward":
+            raise ConfigError(f"{walk}: a walk longer than {segment_s:g} s is evaluated segment by segment, with the "
+                              f"causal ('forward') classes only, not {class_smoothing!r}")
+
         return evaluate_segmented(walk, load_model(model_dir), methods, class_map_for, force, walk_name(walk),
                                   segment_s)
-    # the filters get the causal (forward) classes run gives them, not the HMM's forward-backward ones: evaluate
-    # scores the tracks run would write (a zero-latency filter fed classes from its future would be flattered)
+    # by default the filters get the causal (forward) classes run gives them, not the HMM's forward-backward ones:
+    # evaluate scores the tracks run would write (a zero-latency filter fed classes from its future is flattered)
     fused = fuse_walk(walk, load_model(model_dir), methods, class_map_for=class_map_for, force=force,
-                      class_smoothing="forward")
+                      class_smoothing=class_smoothing)
     data, tracks = fused.data, fused.tracks
     if data.truth is None:
         raise DataError(f"{walk}: no truth.csv, so no error to measure (evaluate scores tracks against truth; "
@@ -178,9 +185,9 @@ def _csv_text(rows: list[dict]) -> str:
 
 def evaluate(walks: list, model_dir: str | os.PathLike, report_dir: str | os.PathLike, methods=None,
              workers: int | None = None, scheduler: str | None = None, force: bool = False,
-             progress: bool = True, plots: bool = True) -> dict:
+             progress: bool = True, plots: bool = True, class_smoothing: str = "forward") -> dict:
     """Evaluate ``methods`` (default: every registered one) on ``walks``; writes ``metrics.csv`` and the plots
-    into ``report_dir``.
+    into ``report_dir``. ``class_smoothing``: the window classes the filters get (:func:`evaluate_walk`).
 
     A walk whose task fails (any error, here or on a worker) is named in ``failures`` and left out; the
     others' report is written. An existing report is replaced consistently: its ``metrics.csv`` is removed
@@ -188,12 +195,14 @@ def evaluate(walks: list, model_dir: str | os.PathLike, report_dir: str | os.Pat
     written last (atomically) — so a report with a ``metrics.csv`` is always a complete one.
     """
     methods = method_names() if methods is None else tuple(methods)
+    if class_smoothing not in CLASS_SMOOTHING:
+        raise ConfigError(f"class smoothing must be one of {', '.join(CLASS_SMOOTHING)}, got {class_smoothing!r}")
     load_model(model_dir)                  # a damaged model fails here, once, before any worker starts
     report = Path(report_dir)
     if report.exists() and not report.is_dir():
         raise ConfigError(f"--report {report} exists and is not a directory")
-    results = map_walks(evaluate_walk, [str(w) for w in walks], str(model_dir), tuple(methods), force,
-                        workers=workers, scheduler=scheduler, progress=progress, desc="evaluate")
+    results = map_walks(evaluate_walk, [str(w) for w in walks], str(model_dir), tuple(methods), force, SEGMENT_S,
+                        class_smoothing, workers=workers, scheduler=scheduler, progress=progress, desc="evaluate")
     failures = [r for r in results if isinstance(r, TaskFailure)]
     ok = [r for r in results if not isinstance(r, TaskFailure)]
     report.mkdir(parents=True, exist_ok=True)

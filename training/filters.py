@@ -32,7 +32,7 @@ from typing import Callable
 
 import numpy as np
 
-from features.errors import DataError
+from features.errors import ConfigError, DataError
 from models.bp import BPConfig, BPCorrector
 from models.bp_params import OneStep, ParamNet, ParamNetConfig
 from models.environment import EnvironmentClassifier
@@ -43,7 +43,7 @@ from models.fusion.ekf import EkfConfig
 from models.fusion.model import FusionModel
 from models.uwb_pdr import UwbNoisePrior, uwb_nees
 from training.temporal import fit_class_hmm
-from walks.inputs import WalkInputs, walk_inputs
+from walks.inputs import CLASS_SMOOTHING, WalkInputs, walk_inputs
 from walks.methods import adaptive_run, bp_features, parameter_rows, parameter_run, tuned
 from walks.reader import WalkData, read_walk
 
@@ -206,7 +206,8 @@ def train_fusion(walk_dirs: list, classifier: EnvironmentClassifier, *, bp: bool
                  bp_config: BPConfig = BPConfig(), ekf: EkfConfig = DEFAULT_EKF, meta: dict | None = None,
                  progress: Callable[[str], None] | None = None, noise_estimator: str = "median",
                  tune: bool = True, tune_evals: int = 60, class_map_for: Callable | None = None,
-                 calibrate: bool = True, smooth_classes: bool = True) -> FusionModel:
+                 calibrate: bool = True, smooth_classes: bool = True,
+                 class_smoothing: str = "forward") -> FusionModel:
     """Fit a :class:`~models.fusion.model.FusionModel` on ``walk_dirs`` (each with truth.csv): the noise
     policies, then (``tune``) every filter method's knobs by its own error on the same walks
     (:mod:`training.tuning`, at most ``tune_evals`` passes each), then the BP network on the tuned
@@ -215,7 +216,13 @@ def train_fusion(walk_dirs: list, classifier: EnvironmentClassifier, *, bp: bool
     default: a few wrong RTK-fixed epochs would otherwise set the fixed UERE). ``class_map_for``: site →
     :class:`~models.fusion.events.ClassMap`, so the map baseline can be tuned too (None: it keeps its fit).
     ``smooth_classes``: fit the class HMM on the walks' truth classes (:func:`training.temporal.fit_class_hmm`) and
-    train on its causally smoothed classes; False: the windows one by one, as before it."""
+    train on its causally smoothed classes; False: the windows one by one, as before it. ``class_smoothing``: how
+    that HMM smooths the classes every training step sees (:data:`walks.inputs.CLASS_SMOOTHING`): ``"forward"``
+    (causal, what ``run`` hands the filters) by default; ``"none"`` fits the noise, tuning, BP and calibration on
+    the windows one by one (the twin that measures what the smoothing gains, ``bench/env_fusion_gain.py``); it is
+    recorded in the model's ``meta["class_smoothing"]``."""
+    if class_smoothing not in CLASS_SMOOTHING:
+        raise ConfigError(f"class smoothing must be one of {', '.join(CLASS_SMOOTHING)}, got {class_smoothing!r}")
     say = progress or (lambda line: None)
     read = []
     for w in walk_dirs:
@@ -230,7 +237,7 @@ def train_fusion(walk_dirs: list, classifier: EnvironmentClassifier, *, bp: bool
     if temporal is not None:
         say("class HMM: mean dwell " + ", ".join(f"{c} {v:.0f} s" for c, v in zip(classifier.class_names,
                                                                                temporal.dwell_s_)))
-    walks = [(n, d, walk_inputs(d, classifier, temporal, "forward")) for n, d in read]
+    walks = [(n, d, walk_inputs(d, classifier, temporal, class_smoothing)) for n, d in read]
     rows = [training_rows(d, i, n) for n, d, i in walks]
 
     def bp_data(model: FusionModel):
@@ -247,6 +254,7 @@ def train_fusion(walk_dirs: list, classifier: EnvironmentClassifier, *, bp: bool
 
     meta = dict(meta or {})
     meta["training_walks"] = [n for n, _, _ in walks]
+    meta["class_smoothing"] = class_smoothing if temporal is not None else "none"
     meta["sites"] = sorted({d.site.name for _, d, _ in walks})
     model = fit_fusion_model(rows, classifier, None, ekf=ekf, meta=meta, noise_estimator=noise_estimator)
     model.temporal = temporal
