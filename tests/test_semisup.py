@@ -201,3 +201,22 @@ def test_cli_semisupervised_bad_inputs(library, tmp_path, capsys):
     assert "--cell applies to --mode finetune and --mode survey only" in capsys.readouterr().err
     assert not (tmp_path / "m").exists()
     assert ENV_CLASSES == ("open", "light", "heavy")
+
+
+def test_a_class_no_labelled_cell_holds_is_seeded_by_its_severity_named_cluster():
+    """Seeds of open and light only: the unlabelled cluster the severity order names heavy seeds heavy (the
+    fallback of the naming); without the fallback no window can be heavy."""
+    from training.clustering import cluster_windows
+
+    X, truth = synthetic_library(450, seed=3)
+    clusters = cluster_windows(X, random_state=0)
+    rng = np.random.default_rng(1)
+    seed_label = np.full(len(X), -1)
+    for c in (0, 1):
+        seed_label[rng.choice(np.flatnonzero(truth == c), 5, replace=False)] = c
+    labels, _, warnings = seeded_labels(X, seed_label, clusters)
+    assert np.mean(labels[truth == 2] == 2) > 0.9 and np.mean(labels == truth) > 0.9
+    assert any("named 'heavy' by severity seed that class" in w for w in warnings)
+    labels, _, warnings = seeded_labels(X, seed_label, clusters, fallback=False)
+    assert not np.any(labels == 2)
+    assert any("no labelled cell is heavy: the model cannot learn that class" in w for w in warnings)

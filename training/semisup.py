@@ -126,7 +126,8 @@ def name_by_seeds(cluster: np.ndarray, severity_class: np.ndarray, seed_label: n
 
 
 def seeded_labels(X: np.ndarray, seed_label: np.ndarray, clusters, *, space: str = "features",
-                  n_neighbors: int = N_NEIGHBORS, alpha: float = ALPHA) -> tuple[np.ndarray, np.ndarray, list[str]]:
+                  n_neighbors: int = N_NEIGHBORS, alpha: float = ALPHA,
+                  fallback: bool = True) -> tuple[np.ndarray, np.ndarray, list[str]]:
     """The semi-supervised classes of the windows ``X`` (n, 14): (propagated labels (n,), cluster names by the
     seeds (n,), warnings).
 
@@ -135,6 +136,10 @@ def seeded_labels(X: np.ndarray, seed_label: np.ndarray, clusters, *, space: str
     embedding is the graph's space when ``space="embedding"``). Propagation runs over the windows the clustering
     used (complete rows of :func:`training.clustering.cluster_columns`); the other labelled windows keep their
     map label, the rest −1.
+
+    ``fallback``: a class no labelled cell holds is seeded by the windows of the clusters that hold no labelled
+    window and that the severity order names that class (the severity naming as the fallback of (a)); without
+    such a cluster the class cannot be learnt, and a warning says so.
     """
     from sklearn.preprocessing import StandardScaler
 
@@ -167,13 +172,24 @@ def seeded_labels(X: np.ndarray, seed_label: np.ndarray, clusters, *, space: str
 
         Xr = X[rows][:, cols]
         Z = StandardScaler().fit(Xr[canonical_order(Xr)]).transform(Xr)
-    out = np.where(y >= 0, y, -1)
-    out[rows] = propagate_labels(Z, y[rows], n_neighbors=n_neighbors, alpha=alpha)[0]
-    warnings = []
-    missing = [ENV_CLASSES[c] for c in range(len(ENV_CLASSES)) if c not in present]
+    cl = clusters.clusters if clusters.clusters is not None else np.full(len(X), -1)
+    named, warnings = name_by_seeds(cl, clusters.labels, y)
+    seeds = y.copy()
+    unseeded = np.isin(cl, np.unique(cl[(cl >= 0) & (y >= 0)]), invert=True) & (cl >= 0)
+    missing = []
+    for c in range(len(ENV_CLASSES)):
+        if c in present:
+            continue
+        extra = rows & unseeded & (named == c)
+        if fallback and extra.any():
+            seeds[extra] = c
+            warnings.append(f"no labelled cell is {ENV_CLASSES[c]!r}: the {int(extra.sum())} windows of the "
+                            f"unlabelled cluster(s) named {ENV_CLASSES[c]!r} by severity seed that class")
+        else:
+            missing.append(ENV_CLASSES[c])
     if missing:
         warnings.append(f"no labelled cell is {' or '.join(missing)}: the model cannot learn "
                         f"{'that class' if len(missing) == 1 else 'those classes'} (label a cell of each class)")
-    cl = clusters.clusters if clusters.clusters is not None else np.full(len(X), -1)
-    named, name_warn = name_by_seeds(cl, clusters.labels, y)
-    return out, named, warnings + name_warn
+    out = np.where(y >= 0, y, -1)
+    out[rows] = propagate_labels(Z, seeds[rows], n_neighbors=n_neighbors, alpha=alpha)[0]
+    return out, named, warnings
