@@ -8,7 +8,9 @@ Modes (docs/design.md §1, issue 13):
 ``survey``
     the site's own library is clustered without labels (standardise → t-SNE →
     density-peak clustering, clusters named by severity) and the classifier
-    learns those clusters — the paper's way of meeting a new substation;
+    learns those clusters — the paper's way of meeting a new substation; with a few labelled cells
+    (``seeds``, ``--cell``) semi-supervised: their map labels name the clusters and are spread to the other
+    windows before the classifier learns them (:mod:`training.semisup`);
 ``transfer``
     the same clustering on the training sites' libraries, the classifier then
     applied to a new site.
