@@ -17,7 +17,9 @@ def register(sub) -> None:
         "env", help="environment model from a fingerprint library",
         description="Fit the online environment classifier from a fingerprint library: 'supervised' learns the "
                     "cells' map labels of the given sites; 'survey' clusters the library without labels "
-                    "(t-SNE + density-peak clustering, clusters named by severity) and learns the clusters; "
+                    "(t-SNE + density-peak clustering, clusters named by severity) and learns the clusters (with --cell: "
+                    "semi-supervised, those labelled cells name the clusters and their labels are spread to the "
+                    "other windows); "
                     "'transfer' does the same on training sites for use on a new one; 'default' writes a copy of "
                     "the model shipped in the package (trained on many simulated substations: for a user with no "
                     "labelled survey; no --library); 'finetune' adapts a model (--base, the shipped one by default) "
@@ -25,8 +27,8 @@ def register(sub) -> None:
         epilog="Example: envfuse train env --library fp.sqlite --site sim-0101 --site sim-0102 --out env_model; "
                "envfuse train env --mode default --out env_model; "
                "envfuse train env --mode finetune --library fp.sqlite --site my-yard --out env_model; "
-               "envfuse train env --mode survey --library fp.sqlite --site my-yard --cell c0003 --cell c0017 "
-               "--cell c0042 --out env_model")
+               "envfuse train env --mode survey --library fp.sqlite --site my-yard --cell E001N002 --cell E004N007 "
+               "--cell E010N003 --out env_model")
     src = p.add_mutually_exclusive_group()
     src.add_argument("--library", type=Path, help="fingerprint library (SQLite, from survey build)")
     src.add_argument("--walks", type=Path, nargs="+",
