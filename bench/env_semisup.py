@@ -110,12 +110,14 @@ def _fit(X, labels):
         return _Constant(labels[ok])
 
 
-def evaluate(ts, sites, default, seeds, ks, sigma, say=print):
+def evaluate(ts, sites, default, seeds, ks, sigma, say=print, n_neighbors=None, alpha=None):
     """{method: {seed: [(site, cell true, cell pred, cell share), ...]}}."""
     from models.finetune import finetune
     from training.clustering import cluster_windows
-    from training.semisup import seeded_labels
+    from training.semisup import ALPHA, N_NEIGHBORS, seeded_labels
 
+    n_neighbors = N_NEIGHBORS if n_neighbors is None else n_neighbors
+    alpha = ALPHA if alpha is None else alpha
     res: dict = {}
 
     def add(method, seed, site, ct, cp, cs):
@@ -144,7 +146,8 @@ def evaluate(ts, sites, default, seeds, ks, sigma, say=print):
                 else:
                     for space, m, fb in (("features", "spread-f", True), ("embedding", "spread-e", True),
                                          ("features", "spread-f no fallback", False)):
-                        spread, named, _ = seeded_labels(test.X, seed_label, clusters, space=space, fallback=fb)
+                        spread, named, _ = seeded_labels(test.X, seed_label, clusters, space=space, fallback=fb,
+                                                         n_neighbors=n_neighbors, alpha=alpha)
                         add(f"{m} {k}", seed, held, *_score_cells(_fit(test.X, spread), rest))
                         if m == "spread-f":
                             add(f"named {k}", seed, held, *_score_cells(_fit(test.X, named), rest))
@@ -166,6 +169,10 @@ def main() -> None:
     ap.add_argument("--cells", type=int, nargs="+", default=[5, 10, 20])
     ap.add_argument("--margin", type=float, default=0.03)
     ap.add_argument("--sites", nargs="+", default=None, help="site names (default: every site)")
+    ap.add_argument("--n-neighbors", type=int, default=None,
+                    help="k of the propagation's kNN graph (default training.semisup.N_NEIGHBORS)")
+    ap.add_argument("--alpha", type=float, default=None,
+                    help="label spreading's clamping factor (default training.semisup.ALPHA)")
     args = ap.parse_args()
     t0 = time.process_time()
     default, meta = load_default_model()
@@ -175,7 +182,7 @@ def main() -> None:
 
     with threadpool_limits(1):
         res = evaluate(ts, sites, default, args.seeds, args.cells, DEFAULT_SIGMA,
-                       say=lambda line: print(line, flush=True))
+                       say=lambda line: print(line, flush=True), n_neighbors=args.n_neighbors, alpha=args.alpha)
     table = summarise(res, args.margin)
     n_far = np.zeros(3, int)
     for p in res[f"survey c.o. {args.cells[0]}"][args.seeds[0]]:

@@ -9,7 +9,7 @@ import pytest
 from features.errors import DataError
 from features.schema import ENV_CLASSES
 from pipeline.cli import main
-from training.semisup import name_by_seeds, propagate_labels, seeded_labels
+from training.semisup import ALPHA, N_NEIGHBORS, name_by_seeds, propagate_labels, seeded_labels
 
 from .env_synth import synthetic_library
 
@@ -98,7 +98,7 @@ def test_propagation_recovers_a_class_without_a_density_peak():
     recall = [np.mean(labels[truth == c] == c) for c in range(3)]
     assert recall[1] > 0.8 and min(recall) > 0.8
     # the same as scikit-learn's LabelSpreading called directly (same parameters; this data has no kNN ties)
-    ref = LabelSpreading(kernel="knn", n_neighbors=7, alpha=0.2, max_iter=1000, tol=1e-6).fit(Z, y)
+    ref = LabelSpreading(kernel="knn", n_neighbors=N_NEIGHBORS, alpha=ALPHA, max_iter=1000, tol=1e-6).fit(Z, y)
     assert np.mean(ref.transduction_ == labels) > 0.99
     # independent of the row order
     perm = np.random.default_rng(3).permutation(len(Z))
