@@ -17,11 +17,11 @@ who knows the class of a handful of cells gives two things here:
     clusters the severity order names that class (the naming's fallback, carried into the propagation).
 
 Measured (``bench/env_semisup.py``, the standard split's 11 sites, 5 / 10 / 20 random labelled cells, 3 seeds,
-scored on each site's other cells): against the unsupervised survey mode, far light recall 6 → 34 / 51 / 60 %,
-macro-F1 45 → 52 / 60 / 65 %, but far heavy 100 → 24 / 34 / 37 % (the severity-named heavy clusters hold more
+scored on each site's other cells): against the unsupervised survey mode, far light recall 6 → 35 / 53 / 61 %,
+macro-F1 45 → 54 / 63 / 67 %, but far heavy 100 → 35 / 42 / 47 % (the severity-named heavy clusters hold more
 light windows than heavy ones, and the labelled cells rename them); spreading on the t-SNE plane instead of the
-features loses 7-10 points of macro-F1. Level with a classifier fitted on the same cells alone; the shipped
-default fine-tuned on them (``--mode finetune``) is far better on these simulated sites (macro-F1 82 %).
+features is level (1-3 points of macro-F1 behind). Level with a classifier fitted on the same cells alone; the
+shipped default fine-tuned on them (``--mode finetune``) is far better on these simulated sites (macro-F1 82 %).
 
 The classifier then learns the propagated labels as the survey mode learns its clusters. Rows are put in canonical
 order before the graph is built (:func:`models.embedding.canonical_order`), so the result does not depend on the
