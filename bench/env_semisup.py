@@ -7,7 +7,8 @@ drawn at random per seed (not stratified: a draw may miss a class, as a user's m
 and every method is scored on the site's *other* cells:
 
 ``survey c.o. k``
-    on the cells the ``k``-cell draw leaves: the unsupervised survey mode (t-SNE + density peaks, clusters named by severity; no label), its classifier;
+    on the cells the ``k``-cell draw leaves: the unsupervised survey mode (t-SNE + density peaks, clusters named
+    by severity; no label), its classifier;
 ``named k``
     the same clusters named by the labelled windows inside them (:func:`training.semisup.name_by_seeds`; severity
     only where a cluster holds none), its classifier;

@@ -17,9 +17,9 @@ def register(sub) -> None:
         "env", help="environment model from a fingerprint library",
         description="Fit the online environment classifier from a fingerprint library: 'supervised' learns the "
                     "cells' map labels of the given sites; 'survey' clusters the library without labels "
-                    "(t-SNE + density-peak clustering, clusters named by severity) and learns the clusters (with --cell: "
-                    "semi-supervised, those labelled cells name the clusters and their labels are spread to the "
-                    "other windows); "
+                    "(t-SNE + density-peak clustering, clusters named by severity) and learns the clusters "
+                    "(with --cell: semi-supervised, those labelled cells name the clusters and their labels are "
+                    "spread to the other windows); "
                     "'transfer' does the same on training sites for use on a new one; 'default' writes a copy of "
                     "the model shipped in the package (trained on many simulated substations: for a user with no "
                     "labelled survey; no --library); 'finetune' adapts a model (--base, the shipped one by default) "
