@@ -44,7 +44,8 @@ _MIN_WINDOWS = 40
 class ClusterResult:
     """``labels`` (n,) class codes (−1: not clustered), ``n_clusters`` found before naming, ``method``,
     ``embedding`` (n, 2) for DPC (NaN rows where not clustered) or None, ``rho``/``delta``/``centers`` of
-    the DPC decision graph (over the clustered rows) or None."""
+    the DPC decision graph (over the clustered rows) or None, ``clusters`` (n,) the cluster index of each
+    window before naming (−1: not clustered, or labelled by the classifier beyond ``max_windows``)."""
 
     labels: np.ndarray
     n_clusters: int
@@ -54,6 +55,7 @@ class ClusterResult:
     delta: np.ndarray | None = None
     centers: np.ndarray | None = None
     clustered: np.ndarray | None = None
+    clusters: np.ndarray | None = None
 
 
 def cluster_columns(X: np.ndarray) -> tuple[int, ...]:
@@ -105,12 +107,14 @@ def cluster_windows(X: np.ndarray, *, method: str = "dpc", random_state: int = 0
     if method == "dpc":
         emb = EnvironmentEmbedding(random_state=random_state, n_clusters=n_clusters, feature_names=names).fit(Xc)
         labels[sub] = [ENV_CLASSES.index(c) for c in emb.classes_]
+        clusters = np.full(len(X), -1)
+        clusters[sub] = emb.labels_
         embedding = np.full((len(X), 2), np.nan)
         embedding[sub] = emb.embedding_
         _label_rest(X, labels, complete & ~sub)
         backend = {"opentsne": "openTSNE", "sklearn": "scikit-learn"}[tsne_backend(emb.tsne)]
         return ClusterResult(labels, int(emb.n_clusters_), f"t-SNE + DPC ({backend})", embedding,
-                             emb.rho_, emb.delta_, emb.centers_, sub)
+                             emb.rho_, emb.delta_, emb.centers_, sub, clusters)
     if method == "kmeans":
         from sklearn.cluster import KMeans
         from sklearn.preprocessing import StandardScaler
@@ -122,8 +126,10 @@ def cluster_windows(X: np.ndarray, *, method: str = "dpc", random_state: int = 0
         km_labels[order] = km.labels_
         named = name_clusters(severity_scores(Xc, km_labels, names))
         labels[sub] = [ENV_CLASSES.index(named[k]) for k in km_labels]
+        clusters = np.full(len(X), -1)
+        clusters[sub] = km_labels
         _label_rest(X, labels, complete & ~sub)
-        return ClusterResult(labels, int(km.n_clusters), "K-means (k = 3)", clustered=sub)
+        return ClusterResult(labels, int(km.n_clusters), "K-means (k = 3)", clustered=sub, clusters=clusters)
     raise DataError(f"clustering method must be 'dpc' or 'kmeans', got {method!r}")
 
 

@@ -8,7 +8,9 @@ Modes (docs/design.md §1, issue 13):
 ``survey``
     the site's own library is clustered without labels (standardise → t-SNE →
     density-peak clustering, clusters named by severity) and the classifier
-    learns those clusters — the paper's way of meeting a new substation;
+    learns those clusters — the paper's way of meeting a new substation; with a few labelled cells
+    (``seeds``, ``--cell``) semi-supervised: their map labels name the clusters and are spread to the other
+    windows before the classifier learns them (:mod:`training.semisup`);
 ``transfer``
     the same clustering on the training sites' libraries, the classifier then
     applied to a new site.
@@ -143,18 +145,31 @@ def walk_training_set(walk_dirs, t_range_s: tuple[float, float] | None = None) -
 
 def fit_env_model(data: TrainingSet, mode: str = "supervised", *, random_state: int = 0,
                   classifier: EnvironmentClassifier | None = None,
-                  diagnostics: dict | None = None) -> tuple[EnvironmentClassifier, dict]:
+                  diagnostics: dict | None = None, seeds: np.ndarray | None = None,
+                  space: str = "features") -> tuple[EnvironmentClassifier, dict]:
     """Fit the classifier of ``mode`` on ``data``; returns it and a summary of what it was fitted on.
+
+    ``seeds`` (bool, shape (len(data),), ``mode="survey"`` only): the windows whose map labels name and shape
+    the clusters — the semi-supervised survey mode (:mod:`training.semisup`; ``space``: where the labels are
+    propagated, ``"features"`` or ``"embedding"``); the classifier then learns the propagated labels.
 
     ``diagnostics`` (a dict, optional) receives ``data`` (the windows used) and, in the clustering
     modes, ``clusters`` (:class:`training.clustering.ClusterResult`) — for the plots.
     """
     if mode not in MODES:
         raise ConfigError(f"mode must be one of {MODES}, got {mode!r}")
+    if seeds is not None:
+        seeds = np.asarray(seeds, bool)
+        if mode != "survey":
+            raise ConfigError(f"labelled seed cells apply to mode 'survey' only, not {mode!r}")
+        if seeds.shape != (len(data),):
+            raise ConfigError(f"seeds must have shape ({len(data)},), got {seeds.shape}")
     usable = np.isfinite(data.X).any(axis=1)
     if usable.sum() < 30:
         raise DataError(f"only {int(usable.sum())} windows have any feature; the environment model needs at least 30")
     data = data.subset(usable)
+    if seeds is not None:
+        seeds = seeds[usable]
     const = [FEATURES[j] for j in range(len(FEATURES))
              if np.isfinite(data.X[:, j]).any() and np.nanstd(data.X[:, j]) < 1e-12]
     clf = classifier or EnvironmentClassifier()
@@ -175,15 +190,33 @@ def fit_env_model(data: TrainingSet, mode: str = "supervised", *, random_state: 
         result = cluster_windows(data.X, random_state=random_state)
         if diagnostics is not None:
             diagnostics["clusters"] = result
-        ok = result.labels >= 0
-        labels, X = result.labels[ok], data.X[ok]
+        info = {}
+        if seeds is None:
+            classes = result.labels
+        else:
+            from training.semisup import seeded_labels
+
+            seed_label = np.where(seeds, data.label, -1)
+            classes, named, seed_warn = seeded_labels(data.X, seed_label, result, space=space)
+            info = {"seed_cells": int(len(set(zip(data.site[seeds].tolist(), data.cell[seeds].tolist())))),
+                    "seed_windows": int(np.sum(seed_label >= 0)),
+                    "seed_class_counts": np.bincount(seed_label[seed_label >= 0], minlength=len(ENV_CLASSES)).tolist(),
+                    "propagation": f"label spreading (kNN) on the {space}", "seed_warnings": seed_warn}
+            if diagnostics is not None:
+                diagnostics["named_clusters"] = named
+        ok = classes >= 0
+        labels, X = classes[ok], data.X[ok]
         if np.unique(labels).size < 2:
             raise DataError(f"the clustering found {np.unique(labels).size} cluster in {len(data)} windows: an "
                             "environment model needs at least two classes (a larger or more varied library, or "
                             "--mode supervised with map labels)")
         share = None            # map shares are for evaluation only in the unsupervised modes
-        info = {"labels": "clusters", "n_clusters": int(result.n_clusters), "embedding": result.method}
-        info["warnings"] = naming_warnings(labels, data.share[ok], data.label[ok], len(data))
+        info.update({"labels": "clusters" if seeds is None else "propagated from labelled cells",
+                     "n_clusters": int(result.n_clusters), "embedding": result.method})
+        if seeds is None:
+            info["warnings"] = naming_warnings(labels, data.share[ok], data.label[ok], len(data))
+        else:
+            info["warnings"] = info.pop("seed_warnings")
     clf.fit(X, labels, share=share)
     if diagnostics is not None:
         diagnostics["data"] = data

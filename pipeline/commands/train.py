@@ -5,7 +5,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from features.errors import ConfigError
+from features.errors import ConfigError, DataError
 from pipeline.args import UsageError, seed
 from pipeline.outputs import check_outputs, check_replaceable
 
@@ -17,14 +17,18 @@ def register(sub) -> None:
         "env", help="environment model from a fingerprint library",
         description="Fit the online environment classifier from a fingerprint library: 'supervised' learns the "
                     "cells' map labels of the given sites; 'survey' clusters the library without labels "
-                    "(t-SNE + density-peak clustering, clusters named by severity) and learns the clusters; "
+                    "(t-SNE + density-peak clustering, clusters named by severity) and learns the clusters "
+                    "(with --cell: semi-supervised, those labelled cells name the clusters and their labels are "
+                    "spread to the other windows); "
                     "'transfer' does the same on training sites for use on a new one; 'default' writes a copy of "
                     "the model shipped in the package (trained on many simulated substations: for a user with no "
                     "labelled survey; no --library); 'finetune' adapts a model (--base, the shipped one by default) "
                     "to the labelled cells of your own survey (map labels of every cell, or of a handful: --cell).",
         epilog="Example: envfuse train env --library fp.sqlite --site sim-0101 --site sim-0102 --out env_model; "
                "envfuse train env --mode default --out env_model; "
-               "envfuse train env --mode finetune --library fp.sqlite --site my-yard --out env_model")
+               "envfuse train env --mode finetune --library fp.sqlite --site my-yard --out env_model; "
+               "envfuse train env --mode survey --library fp.sqlite --site my-yard --cell E001N002 --cell E004N007 "
+               "--cell E010N003 --out env_model")
     src = p.add_mutually_exclusive_group()
     src.add_argument("--library", type=Path, help="fingerprint library (SQLite, from survey build)")
     src.add_argument("--walks", type=Path, nargs="+",
@@ -36,7 +40,9 @@ def register(sub) -> None:
     p.add_argument("--base", default="default",
                    help="--mode finetune: the model to adapt, a model directory or 'default' (the shipped one)")
     p.add_argument("--cell", action="append", default=None,
-                   help="--mode finetune: use only this labelled cell (repeat; default: every cell with a map label)")
+                   help="--mode finetune: use only this labelled cell (repeat; default: every cell with a map label); "
+                        "--mode survey: semi-supervised, the map labels of these cells name the clusters and are "
+                        "spread to the other windows (label spreading), and the classifier learns the spread labels")
     p.add_argument("--sigma", type=_sigma, default=None,
                    help="--mode finetune: prior SD of the weights around the base's, or 'cv' to choose it by "
                         "cross-validation over the labelled cells (default 0.03, measured best on held-out sites)")
@@ -102,9 +108,10 @@ def _run_env(args) -> int:
         return _run_env_default(args)
     if args.library is None and args.walks is None:
         raise UsageError(f"--mode {args.mode} needs --library or --walks (--mode default needs neither)")
-    for opt, value in (("--cell", args.cell), ("--sigma", args.sigma)):
-        if value is not None and args.mode != "finetune":
-            raise UsageError(f"{opt} applies to --mode finetune only")
+    if args.sigma is not None and args.mode != "finetune":
+        raise UsageError("--sigma applies to --mode finetune only")
+    if args.cell is not None and args.mode not in ("finetune", "survey"):
+        raise UsageError("--cell applies to --mode finetune and --mode survey only")
 
     plots = {f"--plots {args.plots / n}": args.plots / n for n in ENV_PLOTS} if args.plots is not None else {}
     sealed = {f"--walks {w}": w for w in args.walks} if args.walks is not None else None
@@ -132,7 +139,14 @@ def _run_env(args) -> int:
     diag: dict = {}
     if args.mode == "finetune":
         return _run_env_finetune(args, data, diag)
-    clf, info = fit_env_model(data, args.mode, random_state=args.seed, diagnostics=diag)
+    seeds = None
+    if args.cell:
+        seeds = _chosen_cells(args.cell, data)
+        unlabelled = sorted(set(data.cell[seeds & (data.label < 0)].tolist()))
+        if unlabelled:
+            raise DataError(f"--cell {', '.join(unlabelled)}: no map label in the library; the semi-supervised "
+                            "survey mode needs labelled cells (give the cell a map label, or leave it out)")
+    clf, info = fit_env_model(data, args.mode, random_state=args.seed, diagnostics=diag, seeds=seeds)
     for text in info.get("warnings", []):
         print(f"envfuse: warning: {text}", file=sys.stderr)
     if args.walks is not None:
@@ -142,6 +156,10 @@ def _run_env(args) -> int:
         for png in _env_plots(clf, diag, args.plots):
             print(f"plot -> {png}")
     counts = "/".join(str(c) for c in info["class_counts"])
+    if seeds is not None:
+        print(f"semi-supervised: {info['seed_cells']} labelled cells ({info['seed_windows']} windows, open/light/heavy "
+              f"= {'/'.join(str(c) for c in info['seed_class_counts'])}) named {info['n_clusters']} clusters; "
+              f"labels spread to the other windows by {info['propagation']}")
     print(f"environment model ({args.mode}): {info['n_windows']} windows ({info['window_s']:g} s, hop "
           f"{info['hop_s']:g} s) of {info['n_cells']} cells on {', '.join(info['sites'])}; windows per class "
           f"open/light/heavy = {counts}; sub-models {', '.join(sorted(clf.submodels_))} -> {args.out}")
@@ -171,9 +189,6 @@ def _run_env_default(args) -> int:
 
 def _run_env_finetune(args, data, diag: dict) -> int:
     """``--mode finetune``: MAP adaptation of --base to the labelled windows (of --cell cells when given)."""
-    import numpy as np
-
-    from features.errors import DataError
     from training.default_env import finetune_env_model, resolve_env_model
     from training.env import save_env_model
 
@@ -186,10 +201,7 @@ def _run_env_finetune(args, data, diag: dict) -> int:
                           f"{base_meta.get('hop_s')} s) but the library's are {data.window_s:g} s (hop "
                           f"{data.hop_s:g} s): rebuild the library with the base's windows")
     if args.cell:
-        unknown = sorted(set(args.cell) - set(data.cell.tolist()))
-        if unknown:
-            raise ConfigError(f"--cell {', '.join(unknown)}: no such cell in the chosen data")
-        data = data.subset(np.isin(data.cell, args.cell))
+        data = data.subset(_chosen_cells(args.cell, data))
     if not (data.label >= 0).any():
         raise DataError("fine-tuning needs labelled cells: none of the chosen cells has a map label")
     from training.default_env import DEFAULT_SIGMA
@@ -209,6 +221,16 @@ def _run_env_finetune(args, data, diag: dict) -> int:
           f"cells on {', '.join(info['sites'])}; windows per class open/light/heavy = {counts}; sigma "
           f"{info['sigma']:g} ({how}) -> {args.out}")
     return 0
+
+
+def _chosen_cells(cells: list, data):
+    """The windows (bool, shape (len(data),)) of the --cell cells; a cell the chosen data lacks is refused."""
+    import numpy as np
+
+    unknown = sorted(set(cells) - set(data.cell.tolist()))
+    if unknown:
+        raise ConfigError(f"--cell {', '.join(unknown)}: no such cell in the chosen data")
+    return np.isin(data.cell, cells)
 
 
 def _env_plots(clf, diag: dict, out: Path) -> list:
