@@ -51,6 +51,27 @@ def walk_dir(site_dir, tmp_path_factory) -> Path:
 
 
 @pytest.fixture(scope="session")
+def model_and_walk(walk_dir):
+    """A fusion model fitted on ``walk_dir`` with its class HMM (the classifier on the walk's truth classes, the
+    filters on the HMM's forward classes), and the read walk; shared by the class-smoothing tests, which do not
+    change it."""
+    from models.environment import EnvironmentClassifier
+    from training.filters import DEFAULT_EKF, fit_fusion_model, training_rows
+    from training.temporal import fit_class_hmm
+    from walks.inputs import walk_inputs, window_features
+    from walks.reader import read_walk
+
+    data = read_walk(walk_dir)
+    t, X = window_features(data)
+    clf = EnvironmentClassifier(min_samples=5).fit(X, data.truth.class_at(t - 1.0))
+    hmm = fit_class_hmm([data], clf.n_classes_)
+    inputs = walk_inputs(data, clf, hmm, "forward")
+    model = fit_fusion_model([training_rows(data, inputs, "w11")], clf, None, ekf=DEFAULT_EKF)
+    model.temporal = hmm
+    return model, data
+
+
+@pytest.fixture(scope="session")
 def survey_dir(site_dir, tmp_path_factory) -> Path:
     """A coarse survey: 10 m cells, 10 s captures, every registered stream."""
     from simulation.survey import simulate_survey

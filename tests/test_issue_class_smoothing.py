@@ -7,10 +7,9 @@ import numpy as np
 import pytest
 
 from models.bundle import BundleError
-from models.environment import EnvironmentClassifier
 from models.fusion.model import load_fusion_model, save_fusion_model
 from models.temporal import ClassHMM
-from walks.inputs import smooth_classes, walk_inputs, window_features
+from walks.inputs import smooth_classes, walk_inputs
 
 
 class _Stub:
@@ -36,22 +35,6 @@ def test_smooth_classes_divides_by_the_prior_joins_gaps_and_skips_unanswered_win
 
     with pytest.raises(ConfigError, match="class smoothing must be one of"):
         smooth_classes(proba, t_end, answered, _Stub(), h, "viterbi")
-
-
-@pytest.fixture(scope="module")
-def model_and_walk(walk_dir):
-    from training.filters import DEFAULT_EKF, fit_fusion_model, training_rows
-    from training.temporal import fit_class_hmm
-    from walks.reader import read_walk
-
-    data = read_walk(walk_dir)
-    t, X = window_features(data)
-    clf = EnvironmentClassifier(min_samples=5).fit(X, data.truth.class_at(t - 1.0))
-    hmm = fit_class_hmm([data], clf.n_classes_)
-    inputs = walk_inputs(data, clf, hmm, "forward")
-    model = fit_fusion_model([training_rows(data, inputs, "w11")], clf, None, ekf=DEFAULT_EKF)
-    model.temporal = hmm
-    return model, data
 
 
 def test_fit_class_hmm_counts_the_walks_truth_classes(model_and_walk):

@@ -10,27 +10,10 @@ import numpy as np
 import pytest
 
 from features.errors import ConfigError
-from models.environment import EnvironmentClassifier
 from models.fusion.model import save_fusion_model
-from walks.inputs import walk_inputs, window_features
+from walks.inputs import window_features
 
 ROOT = Path(__file__).resolve().parents[1]
-
-
-@pytest.fixture(scope="module")
-def model_and_walk(walk_dir):
-    from training.filters import DEFAULT_EKF, fit_fusion_model, training_rows
-    from training.temporal import fit_class_hmm
-    from walks.reader import read_walk
-
-    data = read_walk(walk_dir)
-    t, X = window_features(data)
-    clf = EnvironmentClassifier(min_samples=5).fit(X, data.truth.class_at(t - 1.0))
-    hmm = fit_class_hmm([data], clf.n_classes_)
-    model = fit_fusion_model([training_rows(data, walk_inputs(data, clf, hmm, "forward"), "w11")], clf, None,
-                             ekf=DEFAULT_EKF)
-    model.temporal = hmm
-    return model, data
 
 
 def test_evaluate_hands_the_filters_the_classes_asked_for_and_the_blind_twin_ignores_them(model_and_walk, walk_dir,
