@@ -120,6 +120,19 @@ def _tune(default, X, y, groups, sigma):
     return finetune(default, X, y, s), s
 
 
+def labelled_draws(test, seed: int, site_index: int, ks):
+    """(k, mine, rest) for each ``k`` of ``ks`` below the site's cell count: the windows of the first ``k`` cells of
+    one random order of the site's cells (``numpy.random.default_rng([seed, site_index, 7])``, so the 5 cells are
+    among the 10 and the 10 among the 20), as a mask over ``test``, and the site's other windows. The one draw
+    every bench of "a handful of labelled cells" scores (this one, ``bench/env_semisup.py``)."""
+    cells = np.array(sorted(set(test.cell.tolist())))
+    draw = np.random.default_rng([seed, site_index, 7]).permutation(len(cells))
+    for k in ks:
+        if k < len(cells):
+            mine = np.isin(test.cell, cells[draw[:k]])
+            yield k, mine, test.subset(~mine)
+
+
 def evaluate(ts, sites, default, seeds, n_sites, ks, sigma, say=print):
     """{method: {seed: [(site, cell true, cell pred, cell share), ...]}} and the σ chosen per method."""
     res: dict = {}
@@ -135,7 +148,6 @@ def evaluate(ts, sites, default, seeds, n_sites, ks, sigma, say=print):
         for seed in seeds:
             add("default", seed, held, ct, cp, cs)
         others = [s for s in sites if s != held]
-        cells = np.array(sorted(set(test.cell.tolist())))
         for seed in seeds:
             t0 = time.process_time()
             order = np.random.default_rng([seed, i]).permutation(len(others))
@@ -148,12 +160,7 @@ def evaluate(ts, sites, default, seeds, n_sites, ks, sigma, say=print):
                 tuned, s = _tune(default, X, y, groups, sigma)
                 sigmas.setdefault(f"tuned {n} site{'s' * (n > 1)}", []).append(s)
                 add(f"tuned {n} site{'s' * (n > 1)}", seed, held, *_score_cells(tuned, test))
-            draw = np.random.default_rng([seed, i, 7]).permutation(len(cells))
-            for k in ks:
-                if k >= len(cells):
-                    continue
-                mine = np.isin(test.cell, cells[draw[:k]])
-                rest = test.subset(~mine)
+            for k, mine, rest in labelled_draws(test, seed, i, ks):
                 X, y, g = test.X[mine], test.label[mine], test.cell[mine]
                 add(f"default {k} c.o.", seed, held, *_score_cells(default, rest))   # the same cells, untuned
                 add(f"scratch {k} cells", seed, held, *_score_cells(_scratch(X, y), rest))

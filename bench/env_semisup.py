@@ -100,7 +100,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from bench.env_default import _Constant, _score_cells, summarise  # noqa: E402
+from bench.env_default import _Constant, _score_cells, labelled_draws, summarise  # noqa: E402
 from bench.env_study import cell_predictions, far_from_boundary  # noqa: E402
 
 
@@ -135,14 +135,8 @@ def evaluate(ts, sites, default, seeds, ks, sigma, say=print, n_neighbors=None, 
         test = ts.subset((ts.site == held) & (ts.label >= 0))
         clusters = cluster_windows(test.X, random_state=0)
         survey = _fit(test.X, clusters.labels)
-        cells = np.array(sorted(set(test.cell.tolist())))
         for seed in seeds:
-            draw = np.random.default_rng([seed, i, 7]).permutation(len(cells))
-            for k in ks:
-                if k >= len(cells):
-                    continue
-                mine = np.isin(test.cell, cells[draw[:k]])
-                rest = test.subset(~mine)
+            for k, mine, rest in labelled_draws(test, seed, i, ks):
                 X, y = test.X[mine], test.label[mine]
                 add(f"survey c.o. {k}", seed, held, *_score_cells(survey, rest))
                 seed_label = np.where(mine, test.label, -1)
