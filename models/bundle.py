@@ -86,15 +86,21 @@ def save_bundle(path: str | os.PathLike, kind: str, params: dict, arrays: dict, 
     """
     from safetensors.numpy import save_file
 
-    path = Path(path)
+    path = given = Path(path)
     if path.exists() and not overwrite:
         raise BundleError(f"{path} exists; pass overwrite to replace it")
     if path.exists() and not path.is_dir():
         raise BundleError(f"{path} exists and is not a directory")
+    if path.is_symlink():
+        # a link to a model folder: the folder it points to is replaced and the link kept (as for file outputs)
+        path = path.resolve()
     if path.exists():
         _check_replaceable(path, kind)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}.", suffix=".partial", dir=path.parent))
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}.", suffix=".partial", dir=path.parent))
+    except OSError as exc:
+        raise BundleError(f"cannot write {given}: {exc.strerror or exc}") from None
     mask = _umask()
     try:
         hashes = {}
@@ -118,17 +124,26 @@ def save_bundle(path: str | os.PathLike, kind: str, params: dict, arrays: dict, 
         os.chmod(tmp, 0o777 & ~mask)
         if path.exists():
             old = path.with_name(f".{path.name}.old")
-            if old.exists():
+            if old.is_symlink() or old.is_file():
+                old.unlink()                # left by an older envfuse, which moved a link here
+            elif old.exists():
                 shutil.rmtree(old)
             os.replace(path, old)
-            os.replace(tmp, path)
-            shutil.rmtree(old)
+            try:
+                os.replace(tmp, path)
+            except OSError:
+                os.replace(old, path)       # the old model back in place: nothing is lost
+                raise
+            shutil.rmtree(old, ignore_errors=True)
         else:
             os.replace(tmp, path)
+    except OSError as exc:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise BundleError(f"cannot write {given}: {exc.strerror or exc}") from None
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
-    return path
+    return given
 
 
 def _umask() -> int:
@@ -195,7 +210,10 @@ def load_bundle(path: str | os.PathLike, kind: str) -> Bundle:
     path = Path(path)
     doc_path = path / "bundle.json"
     if not path.is_dir():
-        raise BundleError(f"{path}: not a model directory")
+        hint = ("; 'default' names the environment model shipped in envfuse, not a fusion model: fit one with "
+                "'envfuse train fusion --walks ... --env-model default --out MODEL'"
+                if kind == "fusion" and path.name == "default" and not path.exists() else "")
+        raise BundleError(f"{path}: not a model directory{hint}")
     if not doc_path.is_file():
         raise BundleError(f"{path}: no bundle.json (not an envfuse model, or an incomplete one)")
     if not _within(doc_path, path):

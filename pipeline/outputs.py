@@ -26,7 +26,7 @@ from pathlib import Path
 from pipeline.args import UsageError
 
 __all__ = ["check_outputs", "check_replaceable", "directory_kind", "walk_files", "survey_inputs", "model_inputs",
-           "refuse_repeated", "KINDS"]
+           "refuse_repeated", "shipped_or_directory", "plural", "check_writable", "KINDS"]
 
 _HIDDEN = re.compile(r"^\.")
 
@@ -146,6 +146,48 @@ def survey_inputs(survey_dir: str | os.PathLike, label: str = "SURVEY_DIR") -> t
 def model_inputs(model_dir: str | os.PathLike, label: str) -> dict:
     """The sealed directory of a model bundle (every file in it is input)."""
     return {label: Path(model_dir)}
+
+
+def shipped_or_directory(spec, option: str) -> Path | None:
+    """None when ``spec`` names the environment model shipped in envfuse (the word ``default``), else the model
+    directory it names. A file or folder called ``default`` in the working directory is read as the model folder
+    the user may mean (as before the shipped model existed) and said on stderr, so that neither reading is
+    silent; the same rule as :func:`training.default_env.resolve_env_model`."""
+    import sys
+
+    from training.default_env import DEFAULT
+
+    if str(spec) != DEFAULT:
+        return Path(spec)
+    if not Path(DEFAULT).exists():
+        return None
+    print(f"envfuse: note: {option} default: ./{DEFAULT} exists in the working directory and is read as the model "
+          f"folder it names, not as the model shipped in envfuse; to use the shipped one, run from another "
+          f"directory or rename ./{DEFAULT}", file=sys.stderr)
+    return Path(DEFAULT)
+
+
+def check_writable(path: str | os.PathLike, option: str) -> None:
+    """Refuse (:class:`~features.errors.EnvfuseError`, exit 1) an output whose folder cannot be written, before
+    the work that would fill it: a temporary entry is made and removed in its nearest existing folder (a
+    permission test by ``os.access`` says yes to root on a read-only or immutable folder; trying does not)."""
+    import tempfile
+
+    from features.errors import EnvfuseError
+
+    parent = Path(os.path.abspath(path)).parent
+    while not parent.exists() and parent != parent.parent:
+        parent = parent.parent
+    try:
+        probe = tempfile.mkdtemp(prefix=".envfuse-write-test.", dir=parent)
+    except OSError as exc:
+        raise EnvfuseError(f"cannot write {option} {path}: {parent}: {exc.strerror or exc}") from None
+    os.rmdir(probe)
+
+
+def plural(n: int, noun: str) -> str:
+    """``"1 cell"``, ``"3 cells"``."""
+    return f"{n} {noun}" + ("" if n == 1 else "s")
 
 
 def refuse_repeated(paths, option: str) -> None:

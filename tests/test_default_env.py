@@ -172,3 +172,106 @@ def test_train_fusion_and_run_with_the_shipped_model(walk_dir, tmp_path, capsys)
     assert main(["run", str(walk_dir), "--model", str(fm), "--method", "kf", "--out", str(tmp_path / "t.csv")]) == 0
     rows = list(csv.DictReader(open(tmp_path / "t.csv")))
     assert len(rows) > 30 and {r["env_class"] for r in rows} <= {"open", "light", "heavy"}
+
+
+def test_cli_finetune_refuses_what_it_would_silently_get_wrong(library, tmp_path, capsys, monkeypatch):
+    """The bad-input tour's findings: each case once produced a silent wrong model, a traceback or a model
+    written where it must not be."""
+    from training.env import training_set
+
+    survey, lib = library
+    ts = training_set(lib)
+    labelled = {c: int(ts.label[ts.cell == c][0]) for c in sorted(set(ts.cell.tolist()))}
+    open_cells = [c for c, k in labelled.items() if k == 0][:5]
+    assert len(open_cells) == 5
+    ft = ["train", "env", "--mode", "finetune", "--library", str(lib)]
+    out = tmp_path / "m"
+
+    def cells(names):
+        return [a for c in names for a in ("--cell", c)]
+
+    # sigma far outside any prior the weights could mean: a usage error, not an overflow (was exit 3)
+    for bad in ("1e-300", "1e300", "nan"):
+        assert main(ft + ["--sigma", bad, "--out", str(out)]) == 2
+        assert "from 1e-06 to 1e+06" in capsys.readouterr().err or bad == "nan"
+    # an unlabelled cell named with --cell is refused, not dropped (was: 'of 1 cells', exit 0)
+    import sqlite3
+
+    lib_u = tmp_path / "unlabelled.sqlite"
+    shutil.copy(lib, lib_u)
+    with sqlite3.connect(lib_u) as con:
+        con.execute("UPDATE cells SET map_label = NULL WHERE cell_id = ?", (open_cells[4],))
+    assert main(["train", "env", "--mode", "finetune", "--library", str(lib_u)] + cells(open_cells[3:5])
+                + ["--out", str(out)]) == 1
+    assert f"--cell {open_cells[4]}: no map label" in capsys.readouterr().err
+    # cross-validation on one class (or one cell) has nothing to tell priors apart (was: sigma 3, light -18 points)
+    assert main(ft + cells(open_cells) + ["--sigma", "cv", "--out", str(out)]) == 2
+    assert "at least two classes" in capsys.readouterr().err
+    assert main(ft + cells(open_cells[:1]) + ["--sigma", "cv", "--out", str(out)]) == 2
+    assert "only 1 labelled cell" in capsys.readouterr().err
+    # one class with a given sigma: fitted, with a warning
+    assert main(ft + cells(open_cells) + ["--out", str(out)]) == 0
+    cap = capsys.readouterr()
+    assert "every labelled cell is open" in cap.err and "of 5 cells" in cap.out
+    assert not out.with_name("m").joinpath("confusion.png").exists()
+    # options a mode does not use are refused, not ignored
+    assert main(["train", "env", "--mode", "default", "--base", str(out), "--out", str(tmp_path / "d")]) == 2
+    assert "takes no --base" in capsys.readouterr().err
+    assert main(["train", "env", "--mode", "default", "--seed", "5", "--out", str(tmp_path / "d")]) == 2
+    assert "takes no --seed" in capsys.readouterr().err
+    assert main(["train", "env", "--library", str(lib), "--base", str(out), "--out", str(tmp_path / "d")]) == 2
+    assert "--base applies to --mode finetune only" in capsys.readouterr().err
+    assert main(ft + ["--seed", "1", "--out", str(tmp_path / "d")]) == 2
+    assert "takes no --seed" in capsys.readouterr().err
+    # nothing is written inside the base model, nor plots into any model folder
+    assert main(ft + ["--base", str(out), "--plots", str(out), "--out", str(tmp_path / "d")]) == 2
+    assert "lies inside the input --base" in capsys.readouterr().err
+    assert main(ft + ["--base", str(out), "--out", str(out / "sub")]) == 2
+    assert "--base" in capsys.readouterr().err
+    assert main(ft + ["--plots", str(out), "--out", str(tmp_path / "d")]) == 2
+    assert "is a model folder" in capsys.readouterr().err
+    assert sorted(p.name for p in out.iterdir()) == ["bundle.json", "classifier.safetensors"]
+    assert not (tmp_path / "d").exists()
+    # a folder called 'default' in the working directory: an omitted --base still means the shipped model;
+    # '--base default' reads the folder, and says so
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "default").mkdir()
+    assert main(ft + cells(open_cells[:2]) + ["--out", str(tmp_path / "e")]) == 0
+    cap = capsys.readouterr()
+    assert "finetune of default" in cap.out and "note" not in cap.err
+    assert main(ft + ["--base", "default", "--out", str(tmp_path / "f")]) == 1
+    err = capsys.readouterr().err
+    assert "./default exists in the working directory" in err and "no bundle.json" in err
+
+
+def test_cli_walks_given_twice_count_once(walk_dir, tmp_path, capsys):
+    assert main(["train", "env", "--mode", "finetune", "--walks", str(walk_dir), str(walk_dir),
+                 "--out", str(tmp_path / "m")]) == 2
+    assert "given twice" in capsys.readouterr().err
+
+
+def test_survey_map_maps_the_survey_it_is_given(library, site_dir, tmp_path, capsys):
+    """A library may hold another survey of the same site: its cells are not this survey's (the tour mapped 54
+    cells of another survey for a 15-cell one), and a library of other windows is refused as fine-tune does."""
+    from fingerprints.survey import SurveyConfig, build_library
+    from simulation.survey import simulate_survey
+
+    survey, lib = library
+    other = simulate_survey(site_dir, tmp_path / "other", seed=11, cell_size_m=50.0, capture_s=2.0, progress=False)
+    assert main(["survey", "map", str(other), "--library", str(lib), "--model", "default",
+                 "--out", str(tmp_path / "a.png")]) == 1
+    err = capsys.readouterr().err
+    assert "does not hold survey" in err and ("no windows of its cells" in err or "other captures" in err)
+    assert not (tmp_path / "a.png").exists()
+    # its own library, of 1 s windows: the shipped model (2 s windows) is refused on it
+    lib1 = tmp_path / "one.sqlite"
+    build_library(other, lib1, SurveyConfig(window_s=1.0, hop_s=0.5), progress=False)
+    assert main(["survey", "map", str(other), "--library", str(lib1), "--model", "default",
+                 "--out", str(tmp_path / "b.png")]) == 1
+    assert "fitted on 2 s windows (hop 1 s) but the library's are 1 s (hop 0.5 s)" in capsys.readouterr().err
+    # the survey the library does hold is mapped, all of its cells and no other
+    from fingerprints.survey import survey_cell_dirs
+
+    assert main(["survey", "map", str(survey), "--library", str(lib), "--model", "default",
+                 "--out", str(tmp_path / "c.png")]) == 0
+    assert f": {len(survey_cell_dirs(survey))} cells," in capsys.readouterr().out

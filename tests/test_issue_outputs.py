@@ -201,3 +201,17 @@ def test_report_plot_to_stdout(walk_dir, capsysbinary):
     assert main(["report", "walk", str(walk_dir), "--out", "-"]) == 0
     cap = capsysbinary.readouterr()
     assert cap.out.startswith(b"\x89PNG") and b"horizontal error" in cap.err
+
+
+def test_check_writable_tries_the_folder_before_the_work(tmp_path):
+    """(``train fusion`` fitted for minutes, then found it could not write.) A path under a file is refused with
+    the option named; a new folder under a writable one passes and nothing is left behind."""
+    from features.errors import EnvfuseError
+    from pipeline.outputs import check_writable
+
+    blocker = tmp_path / "file"
+    blocker.write_text("x")
+    with pytest.raises(EnvfuseError, match=r"cannot write --out .*file/model: "):
+        check_writable(blocker / "model", "--out")
+    check_writable(tmp_path / "new" / "deeper" / "model", "--out")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["file"]

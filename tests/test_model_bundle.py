@@ -86,3 +86,33 @@ def test_environment_classifier_through_a_bundle(tmp_path):
     again = EnvironmentClassifier.from_state(b.params, b.arrays["classifier"])
     assert np.array_equal(again.predict_proba(X), clf.predict_proba(X))
     assert np.array_equal(again.is_ood(X + 3.0), clf.is_ood(X + 3.0)) and clf.is_ood(X + 30.0).all()
+
+
+def test_overwrite_through_a_link_replaces_its_target_and_keeps_the_link(tmp_path):
+    """(The bad-input tour: overwriting through a link wrote the model, then failed on rmtree of the link and
+    left every later overwrite of that name failing.)"""
+    real = save_bundle(tmp_path / "real", "fusion", {"v": 1}, _arrays())
+    link = tmp_path / "link"
+    link.symlink_to(real, target_is_directory=True)
+    for v in (2, 3):
+        assert save_bundle(link, "fusion", {"v": v}, _arrays(), overwrite=True) == link
+        assert link.is_symlink() and load_bundle(real, "fusion").params == {"v": v}
+    # a link left as '.link.old' by the older code does not block the next overwrite
+    (tmp_path / ".real.old").symlink_to(real, target_is_directory=True)
+    save_bundle(link, "fusion", {"v": 4}, _arrays(), overwrite=True)
+    assert load_bundle(link, "fusion").params == {"v": 4}
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["link", "real"]
+
+
+def test_unwritable_folder_is_one_line_naming_the_output(tmp_path):
+    blocker = tmp_path / "file"
+    blocker.write_text("not a folder")
+    with pytest.raises(BundleError, match=r"^cannot write .*file/m: ") as err:
+        save_bundle(blocker / "m", "fusion", {}, _arrays())
+    assert ".partial" not in str(err.value)
+
+
+def test_default_as_a_fusion_model_says_what_default_is(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(BundleError, match="names the environment model shipped in envfuse, not a fusion model"):
+        load_bundle("default", "fusion")

@@ -25,13 +25,13 @@ from pathlib import Path
 
 import numpy as np
 
-from features.errors import DataError
+from features.errors import ConfigError, DataError
 from models.environment import EnvironmentClassifier
 from training.env import TrainingSet, fit_env_model, load_env_model, save_env_model, training_set
 
 __all__ = ["DEFAULT_CELL_M", "DEFAULT_CAPTURE_S", "DEFAULT_MODEL_DIR", "DEFAULT", "default_sites",
            "default_model_path", "load_default_model", "build_default_model", "finetune_env_model",
-           "resolve_env_model", "concat_sets", "DEFAULT_SIGMA"]
+           "resolve_env_model", "concat_sets", "DEFAULT_SIGMA", "check_library_windows"]
 
 DEFAULT_CELL_M = 10.0
 """Survey cell size of the default model's training sites (the ``standard`` split's)."""
@@ -73,6 +73,18 @@ def resolve_env_model(spec) -> tuple[EnvironmentClassifier, dict]:
     if str(spec) == DEFAULT and not Path(str(spec)).exists():
         return load_default_model()
     return load_env_model(spec)
+
+
+def check_library_windows(meta: dict, data: TrainingSet, where: str) -> None:
+    """Refuse (:class:`~features.errors.ConfigError`) a model fitted on feature windows other than a library's
+    (its probabilities describe another statistic: a 1 s window's spread is not a 2 s one's). A model that
+    states no window predates the check and was fitted on the only windows there were then (2 s, hop 1 s)."""
+    window, hop = float(meta.get("window_s", 2.0)), float(meta.get("hop_s", 1.0))
+    if abs(window - data.window_s) > 1e-9 or abs(hop - data.hop_s) > 1e-9:
+        raise ConfigError(f"{where} was fitted on {window:g} s windows (hop {hop:g} s) but the library's are "
+                          f"{data.window_s:g} s (hop {data.hop_s:g} s): rebuild the library with "
+                          f"'survey build --window-s {window:g} --hop-s {hop:g} --replace', or use a model fitted on "
+                          f"the library's windows")
 
 
 def _git_commit() -> str:

@@ -7,7 +7,7 @@ from pathlib import Path
 
 from features.errors import ConfigError
 from pipeline.args import plot_path
-from pipeline.outputs import check_outputs, model_inputs, survey_inputs
+from pipeline.outputs import check_outputs, model_inputs, shipped_or_directory, survey_inputs
 
 GROUP = "survey"
 
@@ -33,6 +33,43 @@ def register(sub) -> None:
     p.set_defaults(func=_run)
 
 
+def _survey_cells_in(survey: Path, library: Path, site_name: str) -> list[str]:
+    """The ids of ``survey``'s cells, each checked to be the capture the library holds under its id (same start
+    time and position): a library may hold another survey of the same site, whose cells must not be mapped as
+    this one's. Refused (:class:`~features.errors.DataError`) when a cell is missing or another capture."""
+    from features.errors import DataError
+    from features.walk import load_walk
+    from fingerprints.library import FingerprintLibrary
+    from fingerprints.survey import survey_cell_dirs
+
+    with FingerprintLibrary.open(library, create=False) as lib:
+        stored = {str(c["cell_id"]): c for c in lib.cells(site_name)}
+    ids, missing, other = [], [], []
+    for d in survey_cell_dirs(survey):
+        w = load_walk(d)
+        cid = str(w.extra.get("id", d.name))
+        ids.append(cid)
+        c = stored.get(cid)
+        if c is None:
+            missing.append(cid)
+            continue
+        start = w.start_utc.isoformat().replace("+00:00", "Z") if w.start_utc is not None else ""
+        east, north = w.extra.get("east_m"), w.extra.get("north_m")
+        if (start and str(c["start_utc"]) and str(c["start_utc"]) != start) or \
+                (isinstance(east, (int, float)) and abs(float(c["east_m"]) - east) > 1e-6) or \
+                (isinstance(north, (int, float)) and abs(float(c["north_m"]) - north) > 1e-6):
+            other.append(cid)
+    if missing or other:
+        def few(names):
+            return ", ".join(names[:5]) + (f" and {len(names) - 5} more" if len(names) > 5 else "")
+        what = (f"has no windows of its cells {few(missing)}" if missing else
+                f"holds other captures under the ids of its cells {few(other)} (another survey of "
+                f"{site_name}: other start times or positions)")
+        raise DataError(f"--library {library} {what}, so it does not hold survey {survey}: build it into the "
+                        f"library first ('envfuse survey build {survey} --library LIBRARY')")
+    return ids
+
+
 def _run(args) -> int:
     import numpy as np
 
@@ -41,20 +78,22 @@ def _run(args) -> int:
     from fingerprints.library import FingerprintLibrary
     from models.environment import combine_windows
     from pipeline.env_plots import confusion, plot_survey_map
-    from training.default_env import resolve_env_model
-    from training.env import training_set
+    from training.default_env import check_library_windows, load_default_model
+    from training.env import load_env_model, training_set
 
-    shipped = str(args.model) == "default" and not Path(str(args.model)).exists()
+    model_dir = shipped_or_directory(args.model, "--model")
     survey_files, survey_cells = survey_inputs(args.survey)
     check_outputs({"--library": args.library, **survey_files}, {"--out": args.out, "--csv": args.csv},
-                  sealed={**survey_cells, **({} if shipped else model_inputs(args.model, "--model"))})
+                  sealed={**survey_cells, **({} if model_dir is None else model_inputs(model_dir, "--model"))})
     if not (args.survey / "site.toml").is_file():
         raise ConfigError(f"{args.survey}: not a survey directory (no site.toml)")
     if not args.library.is_file():
         raise ConfigError(f"--library {args.library}: no such file")
     site = load_site(args.survey / "site.toml")
-    clf, meta = resolve_env_model(args.model)
+    clf, meta = load_default_model() if model_dir is None else load_env_model(model_dir)
     data = training_set(args.library, [site.name])
+    check_library_windows(meta, data, f"--model {args.model}")
+    data = data.subset(np.isin(data.cell, _survey_cells_in(args.survey, args.library, site.name)))
     proba = clf.predict_proba(data.X)
     ood = clf.is_ood(data.X)
     occ = clf.occlusion(data.X)

@@ -7,7 +7,8 @@ from pathlib import Path
 
 from features.errors import ConfigError, DataError
 from pipeline.args import UsageError, seed
-from pipeline.outputs import check_outputs, check_replaceable
+from pipeline.outputs import (check_outputs, check_replaceable, check_writable, directory_kind, model_inputs, plural,
+                              refuse_repeated, shipped_or_directory)
 
 GROUP = "train"
 
@@ -37,8 +38,9 @@ def register(sub) -> None:
     p.add_argument("--site", action="append", default=None, help="site to fit on (repeat; default: every site)")
     p.add_argument("--mode", choices=("supervised", "survey", "transfer", "default", "finetune"), default="supervised",
                    help="where the classes come from (default supervised)")
-    p.add_argument("--base", default="default",
-                   help="--mode finetune: the model to adapt, a model directory or 'default' (the shipped one)")
+    p.add_argument("--base", default=None,
+                   help="--mode finetune: the model to adapt, a model directory or 'default' (the shipped one; "
+                        "also when --base is left out)")
     p.add_argument("--cell", action="append", default=None,
                    help="--mode finetune: use only this labelled cell (repeat; default: every cell with a map label); "
                         "--mode survey: semi-supervised, the map labels of these cells name the clusters and are "
@@ -46,7 +48,9 @@ def register(sub) -> None:
     p.add_argument("--sigma", type=_sigma, default=None,
                    help="--mode finetune: prior SD of the weights around the base's, or 'cv' to choose it by "
                         "cross-validation over the labelled cells (default 0.03, measured best on held-out sites)")
-    p.add_argument("--seed", type=seed, default=0, help="seed of the embedding and clustering (default 0)")
+    p.add_argument("--seed", type=seed, default=None,
+                   help="seed of the embedding, clustering and fits (default 0; --mode default and finetune "
+                        "draw nothing and take none)")
     p.add_argument("--out", type=Path, required=True, help="model directory to write")
     p.add_argument("--plots", type=Path, default=None,
                    help="directory for PNGs: decision graph and t-SNE map (clustering modes), confusion matrix")
@@ -74,8 +78,14 @@ def register(sub) -> None:
     p.set_defaults(func=_run_fusion)
 
 
+SIGMA_RANGE = (1e-6, 1e6)
+"""--sigma's accepted range. The weights are those of standardised features (the shipped model's are of order
+1), so 1e-6 is already the base unchanged to the last printed digit and 1e6 the data alone; beyond, σ² under- or
+overflows in the prior term."""
+
+
 def _sigma(text: str):
-    """--sigma: 'cv' or a positive number."""
+    """--sigma: 'cv' or a positive number in :data:`SIGMA_RANGE`."""
     import argparse
 
     if text == "cv":
@@ -84,8 +94,9 @@ def _sigma(text: str):
         value = float(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"expected a positive number or 'cv', got {text!r}") from None
-    if not value > 0 or value == float("inf"):
-        raise argparse.ArgumentTypeError(f"must be a positive number or 'cv', got {text!r}")
+    lo, hi = SIGMA_RANGE
+    if not lo <= value <= hi:
+        raise argparse.ArgumentTypeError(f"must be 'cv' or a number from {lo:g} to {hi:g}, got {text!r}")
     return value
 
 
@@ -112,13 +123,28 @@ def _run_env(args) -> int:
         raise UsageError("--sigma applies to --mode finetune only")
     if args.cell is not None and args.mode not in ("finetune", "survey"):
         raise UsageError("--cell applies to --mode finetune and --mode survey only")
+    if args.base is not None and args.mode != "finetune":
+        raise UsageError(f"--base applies to --mode finetune only (the model to adapt); --mode {args.mode} fits "
+                         "from the library alone")
+    if args.seed is not None and args.mode == "finetune":
+        raise UsageError("--mode finetune draws nothing at random and takes no --seed")
+    if args.walks is not None:
+        refuse_repeated(args.walks, "--walks")
+    base_dir = None if args.mode != "finetune" or args.base is None else shipped_or_directory(args.base, "--base")
 
     plots = {f"--plots {args.plots / n}": args.plots / n for n in ENV_PLOTS} if args.plots is not None else {}
     sealed = {f"--walks {w}": w for w in args.walks} if args.walks is not None else None
+    if base_dir is not None:
+        sealed = dict(sealed or {}, **model_inputs(base_dir, "--base"))
     check_outputs({"--library": args.library}, plots, {"--out": args.out}, sealed)
     _refuse_existing(args.out, args.overwrite, "environment model")
+    check_writable(args.out, "--out")
     if args.plots is not None and args.plots.exists() and not args.plots.is_dir():
         raise UsageError(f"--plots {args.plots} exists and is not a directory")
+    if args.plots is not None and args.plots.is_dir() and directory_kind(args.plots) in ("environment model",
+                                                                                         "fusion model"):
+        raise UsageError(f"--plots {args.plots} is a model folder, which holds its model only (a PNG in it would "
+                         "stop it being replaced or checked as a model); name another directory")
     if args.plots is not None and (args.plots.resolve() == args.out.resolve() or args.out.resolve() in
                                    args.plots.resolve().parents):
         raise UsageError(f"--plots {args.plots} lies inside the model folder --out {args.out}: a model folder holds "
@@ -138,7 +164,7 @@ def _run_env(args) -> int:
         data = training_set(args.library, args.site)
     diag: dict = {}
     if args.mode == "finetune":
-        return _run_env_finetune(args, data, diag)
+        return _run_env_finetune(args, data, diag, base_dir)
     seeds = None
     if args.cell:
         seeds = _chosen_cells(args.cell, data)
@@ -146,7 +172,8 @@ def _run_env(args) -> int:
         if unlabelled:
             raise DataError(f"--cell {', '.join(unlabelled)}: no map label in the library; the semi-supervised "
                             "survey mode needs labelled cells (give the cell a map label, or leave it out)")
-    clf, info = fit_env_model(data, args.mode, random_state=args.seed, diagnostics=diag, seeds=seeds)
+    clf, info = fit_env_model(data, args.mode, random_state=0 if args.seed is None else args.seed, diagnostics=diag,
+                              seeds=seeds)
     for text in info.get("warnings", []):
         print(f"envfuse: warning: {text}", file=sys.stderr)
     if args.walks is not None:
@@ -161,7 +188,7 @@ def _run_env(args) -> int:
               f"= {'/'.join(str(c) for c in info['seed_class_counts'])}) named {info['n_clusters']} clusters; "
               f"labels spread to the other windows by {info['propagation']}")
     print(f"environment model ({args.mode}): {info['n_windows']} windows ({info['window_s']:g} s, hop "
-          f"{info['hop_s']:g} s) of {info['n_cells']} cells on {', '.join(info['sites'])}; windows per class "
+          f"{info['hop_s']:g} s) of {plural(info['n_cells'], 'cell')} on {', '.join(info['sites'])}; windows per class "
           f"open/light/heavy = {counts}; sub-models {', '.join(sorted(clf.submodels_))} -> {args.out}")
     return 0
 
@@ -172,7 +199,8 @@ def _run_env_default(args) -> int:
     from training.env import save_env_model
 
     for opt, value in (("--library", args.library), ("--walks", args.walks), ("--site", args.site),
-                       ("--plots", args.plots), ("--cell", args.cell), ("--sigma", args.sigma)):
+                       ("--plots", args.plots), ("--cell", args.cell), ("--sigma", args.sigma),
+                       ("--base", args.base), ("--seed", args.seed)):
         if value is not None:
             raise UsageError(f"--mode default copies the shipped model and takes no {opt}")
     check_outputs({}, {}, {"--out": args.out})
@@ -187,27 +215,43 @@ def _run_env_default(args) -> int:
     return 0
 
 
-def _run_env_finetune(args, data, diag: dict) -> int:
-    """``--mode finetune``: MAP adaptation of --base to the labelled windows (of --cell cells when given)."""
-    from training.default_env import finetune_env_model, resolve_env_model
-    from training.env import save_env_model
+def _run_env_finetune(args, data, diag: dict, base_dir: Path | None) -> int:
+    """``--mode finetune``: MAP adaptation of --base (``base_dir``; None: the shipped model) to the labelled
+    windows (of --cell cells when given)."""
+    from models.finetune import SIGMA_GRID
+    from training.default_env import DEFAULT_SIGMA, check_library_windows, finetune_env_model, load_default_model
+    from training.env import load_env_model, save_env_model
 
-    if str(args.base) != "default" and Path(args.base).resolve() == args.out.resolve():
-        raise UsageError(f"--out {args.out} is the --base model; write the fine-tuned one elsewhere")
-    base, base_meta = resolve_env_model(args.base)
-    if abs(float(base_meta.get("window_s", data.window_s)) - data.window_s) > 1e-9 or \
-            abs(float(base_meta.get("hop_s", data.hop_s)) - data.hop_s) > 1e-9:
-        raise ConfigError(f"--base {args.base} was fitted on {base_meta.get('window_s')} s windows (hop "
-                          f"{base_meta.get('hop_s')} s) but the library's are {data.window_s:g} s (hop "
-                          f"{data.hop_s:g} s): rebuild the library with the base's windows")
+    base_name = "default" if args.base is None else str(args.base)
+    base, base_meta = load_default_model() if base_dir is None else load_env_model(base_dir)
+    check_library_windows(base_meta, data, f"--base {base_name}")
     if args.cell:
         data = data.subset(_chosen_cells(args.cell, data))
+        unlabelled = sorted(set(data.cell[data.label < 0].tolist()))
+        if unlabelled:
+            raise DataError(f"--cell {', '.join(unlabelled)}: no map label in the library; fine-tuning learns "
+                            "from labelled cells only (give the cell a map label, or leave it out)")
     if not (data.label >= 0).any():
         raise DataError("fine-tuning needs labelled cells: none of the chosen cells has a map label")
-    from training.default_env import DEFAULT_SIGMA
-
+    labelled = data.label >= 0
+    n_classes = len(set(data.label[labelled].tolist()))
+    n_cells = len(set(zip(data.site[labelled].tolist(), data.cell[labelled].tolist())))
+    if args.sigma == "cv" and (n_cells < 2 or n_classes < 2):
+        why = (f"only {plural(n_cells, 'labelled cell')}" if n_cells < 2 else
+               f"every labelled cell is {_class_name(data.label[labelled][0])}")
+        raise UsageError(f"--sigma cv needs labelled cells of at least two classes to cross-validate ({why}); "
+                         f"give --sigma (default {DEFAULT_SIGMA:g}) or label more cells")
+    if n_classes < 2:
+        print(f"envfuse: warning: every labelled cell is {_class_name(data.label[labelled][0])}: fine-tuning on "
+              "one class pulls the model towards it and the other classes' recall can only fall; label cells of "
+              "each class you expect on the site", file=sys.stderr)
     clf, info = finetune_env_model(base, base_meta, data, DEFAULT_SIGMA if args.sigma is None else args.sigma)
-    info["base_model"] = str(args.base)
+    if args.sigma == "cv" and info["sigma"] == max(SIGMA_GRID):
+        print(f"envfuse: warning: cross-validation chose sigma {info['sigma']:g}, the loosest prior of its grid "
+              f"({', '.join(f'{g:g}' for g in SIGMA_GRID)}): the labelled cells pull far from the base (few cells, "
+              f"a site unlike the base's, or labels of few classes); check the map on cells you did not label, "
+              f"or give --sigma (default {DEFAULT_SIGMA:g})", file=sys.stderr)
+    info["base_model"] = base_name
     if args.walks is not None:
         info["walks"] = [str(w) for w in args.walks]
     diag["data"] = data
@@ -217,10 +261,18 @@ def _run_env_finetune(args, data, diag: dict) -> int:
             print(f"plot -> {png}")
     counts = "/".join(str(c) for c in info["class_counts"])
     how = {None: "the default", "cv": "chosen by cross-validation"}.get(args.sigma, "given")
-    print(f"environment model (finetune of {args.base}): {info['n_windows']} labelled windows of {info['n_cells']} "
-          f"cells on {', '.join(info['sites'])}; windows per class open/light/heavy = {counts}; sigma "
-          f"{info['sigma']:g} ({how}) -> {args.out}")
+    if info["sigma"] == 0:
+        how += ": the base unchanged"
+    print(f"environment model (finetune of {base_name}): {info['n_windows']} labelled windows of "
+          f"{plural(info['n_cells'], 'cell')} on {', '.join(info['sites'])}; windows per class open/light/heavy = "
+          f"{counts}; sigma {info['sigma']:g} ({how}) -> {args.out}")
     return 0
+
+
+def _class_name(code) -> str:
+    from features.site import ENV_CLASSES
+
+    return ENV_CLASSES[int(code)]
 
 
 def _chosen_cells(cells: list, data):
@@ -263,15 +315,17 @@ def _run_fusion(args) -> int:
     inputs = {}
     for w in args.walks:
         inputs.update(walk_files(w, f"training walk {w.name}"))
-    shipped = str(args.env_model) == "default" and not args.env_model.exists()
-    check_outputs(inputs, {}, {"--out": args.out}, {} if shipped else model_inputs(args.env_model, "--env-model"))
+    env_dir = shipped_or_directory(args.env_model, "--env-model")
+    check_outputs(inputs, {}, {"--out": args.out}, {} if env_dir is None else model_inputs(env_dir, "--env-model"))
     _refuse_existing(args.out, args.overwrite, "fusion model")
+    check_writable(args.out, "--out")                # before minutes of fitting, not after
     for w in args.walks:
         if not (w / "walk.toml").is_file():
             raise ConfigError(f"--walks {w}: no walk.toml (expected a walk directory)")
-    from training.default_env import resolve_env_model
+    from training.default_env import load_default_model
+    from training.env import load_env_model
 
-    clf, env_meta = resolve_env_model(args.env_model)
+    clf, env_meta = load_default_model() if env_dir is None else load_env_model(env_dir)
     check_windows(env_meta, f"--env-model {args.env_model}")
     from models.fusion.ekf import EkfConfig
 
@@ -292,7 +346,7 @@ def _run_fusion(args) -> int:
     for text in default_noise_warnings(model):
         print(f"envfuse: warning: {text}", file=sys.stderr)
     save_fusion_model(model, args.out, overwrite=args.overwrite)
-    print(f"fusion model: {len(args.walks)} training walks on {', '.join(model.meta['sites'])}; "
+    print(f"fusion model: {plural(len(args.walks), 'training walk')} on {', '.join(model.meta['sites'])}; "
           f"BP {'on' if model.bp is not None else 'off'} -> {args.out}")
     return 0
 
