@@ -192,14 +192,15 @@ def walk_cuts(walk_dir: str | os.PathLike, segment_s: float = SEGMENT_S, *,
     _fix_mmap_threshold()
     with tempfile.TemporaryDirectory(prefix=".envfuse-segments.", dir=workdir) as tmp:
         cutters = _cutters(walk)
+        align = _audio_grid(walk)
         for k in range(n):
             own_from = -math.inf if k == 0 else k * segment_s
             own_to = math.inf if k == n - 1 else (k + 1) * segment_s
-            lo = -math.inf if k == 0 else own_from - WARMUP_S
+            lo = -math.inf if k == 0 else align(own_from - WARMUP_S)
             hi = math.inf if k == n - 1 else own_to + TAIL_S
             if k == 0:
                 hi = max(hi, GATE_REFERENCE_S)      # the heading gate's reference field, as the whole walk's
-            next_lo = (k + 1) * segment_s - WARMUP_S
+            next_lo = align((k + 1) * segment_s - WARMUP_S)
             d = Path(tmp) / f"segment{k:04d}"
             d.mkdir()
             toml = {}
@@ -210,6 +211,51 @@ def walk_cuts(walk_dir: str | os.PathLike, segment_s: float = SEGMENT_S, *,
             shutil.rmtree(d)
         for cut in cutters.values():
             cut.close()
+
+
+def audio_cut_period(fs_in_hz: int) -> int:
+    """Input samples between the audio samples a cut may start at, so that the acoustic reader processes every
+    sample of the cut in the same blocks, impulse-blanker segments and decimation phase as in the whole walk
+    (and hence gives the same float32 round-off; the blocks of :func:`features.acoustic.audio.iter_audio_blocks`
+    start at the file's first sample): the least common multiple of the read block
+    (:attr:`features.acoustic.detection.DetectorConfig.block_s`, a whole number of resampling periods), the
+    blanker's segment (:class:`features.acoustic.impulses.ImpulseBlanker`) and the matched filter's decimation
+    (4), in output samples, taken back to input samples. 1,536,000 samples (32 s) at 48 kHz."""
+    from fractions import Fraction
+
+    from features.acoustic.detection import DetectorConfig
+    from features.acoustic.impulses import ImpulseBlanker
+
+    cfg = DetectorConfig()
+    ratio = Fraction(int(cfg.fs_hz), int(fs_in_hz))
+    period = ratio.denominator
+    block_in = max(period, int(round(cfg.block_s * fs_in_hz / period)) * period)
+    block_out = int(block_in * ratio)
+    grid_out = math.lcm(block_out, ImpulseBlanker(float(cfg.fs_hz)).segment, MATCHED_FILTER_DECIMATION)
+    return block_in * (grid_out // block_out)
+
+
+MATCHED_FILTER_DECIMATION = 4
+"""Decimation of the acoustic reader's matched-filter envelopes
+(:class:`features.acoustic.matched_filter.StreamingMatchedFilter`'s default)."""
+
+
+def _audio_grid(walk: WalkInfo):
+    """The function moving a cut's start back to the last walk time at or before it whose audio sample lies on
+    :func:`audio_cut_period`'s grid counted from the WAV's first sample (identity without audio): the cut's
+    warm-up grows by less than one period (32 s at 48 kHz)."""
+    audio = walk.path("audio")
+    if audio is None or not audio.is_file() or not audio.stat().st_size:
+        return lambda t: t
+    fs = sf.info(str(audio)).samplerate
+    step = audio_cut_period(fs)
+    start = float(walk.streams["audio"].get("start_s", 0.0))
+
+    def align(t: float) -> float:
+        i = math.floor((t - start) * fs / step + 1e-9) * step
+        return start + max(i, 0) / fs
+
+    return align
 
 
 MMAP_THRESHOLD_BYTES = 128 * 1024
