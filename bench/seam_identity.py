@@ -86,6 +86,8 @@ def main(argv=None) -> int:
     ap.add_argument("--model", required=True)
     ap.add_argument("--segment-s", type=float, default=300.0)
     ap.add_argument("--warmup-s", type=float, default=None)
+    ap.add_argument("--tail-s", type=float, default=None, help="walks.segments.TAIL_S")
+    ap.add_argument("--resume-after-s", type=float, default=None, help="walks.segments.RESUME_AFTER_S")
     ap.add_argument("--methods", default=None, help="comma-separated (default: every registered one)")
     ap.add_argument("--no-handover", action="store_true")
     args = ap.parse_args(argv)
@@ -95,8 +97,9 @@ def main(argv=None) -> int:
     from walks import segments
     from walks.fuse import fuse_walk
 
-    if args.warmup_s is not None:
-        segments.WARMUP_S = args.warmup_s
+    for name, v in (("WARMUP_S", args.warmup_s), ("TAIL_S", args.tail_s), ("RESUME_AFTER_S", args.resume_after_s)):
+        if v is not None:
+            setattr(segments, name, v)
     model = load_model(args.model)
     methods = None if args.methods is None else tuple(args.methods.split(","))
     for walk in args.walks:
@@ -108,6 +111,7 @@ def main(argv=None) -> int:
         seg = segmented(walk, model, methods, args.segment_s, not args.no_handover, class_map_for)
         c2 = time.process_time()
         print(f"\n{walk}: segments of {args.segment_s:g} s, warm-up {segments.WARMUP_S:g} s, "
+              f"tail {segments.TAIL_S:g} s, resume after {segments.RESUME_AFTER_S:g} s, "
               f"hand-over {'off' if args.no_handover else 'on'}; CPU whole {c1 - c0:.1f} s, segmented {c2 - c1:.1f} s")
         print(f"{'track':28s} {'matched':>8s} {'whole-only':>10s} {'seg-only':>9s} {'nan-1side':>9s} "
               f"{'max m':>10s} {'median m':>10s} {'worst at s':>10s}")

@@ -363,7 +363,9 @@ class EventEKF:
         ``{"gnss", "acoustic", "bias"}`` multipliers of the policy's R and bias variance (a method's tuning);
         ``r_scale_event`` (m,): a further multiplier of each event's R (the BP parameter network's).
         ``resume``: the state of a run of this filter over an earlier piece of the stream; the events from
-        ``resume.t_s`` on continue from it (those before are filtered from the prior as usual, a warm-up).
+        ``resume.t_s`` on continue from it (those before are filtered from the prior as usual, a warm-up),
+        the VB-AKF's noise estimate included (a state without one, e.g. another filter's, restarts the
+        estimate from the policy's prior there).
         """
         from models.fusion import core
         from models.fusion.noise import FixedNoise
@@ -400,9 +402,7 @@ class EventEKF:
         # the VB-AKF's α, β: recorded after every event, and resumed with x and P
         vb_rec = (np.empty((m, 3, 2)), np.empty((m, 3, 2))) if vb else (np.empty((0, 3, 2)), np.empty((0, 3, 2)))
         va_r, vbt_r = spec.vb_alpha.copy(), spec.vb_beta.copy()
-        if vb and restart >= 0:
-            if resume.vb_alpha is None or resume.vb_beta is None:
-                raise FilterError("cannot resume a variational-Bayes filter from a state without its noise estimate")
+        if vb and restart >= 0 and resume.vb_alpha is not None and resume.vb_beta is not None:
             va_r, vbt_r = np.asarray(resume.vb_alpha, float), np.asarray(resume.vb_beta, float)
         core.run_ekf_events(stream.kind.astype(np.int64), stream.available, stream.z_m, stream.step_length_m,
                             stream.heading_rad, phi, q, h_idx, H, x, P, sl2, sp2, OUTLIER_CODES[cfg.outlier], cfg.gate_nis, cfg.huber_k,
