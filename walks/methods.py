@@ -242,7 +242,7 @@ def _resume(inputs: WalkInputs, name: str):
     fused whole): the run continues from it at the segment's start (:mod:`walks.segments`), with everything
     the filter carries from event to event (``aekf``'s variational noise estimate, ``imm``'s per-mode states
     and mode probabilities: :class:`~models.fusion.ekf.FilterResume`)."""
-    return inputs.resume.get(name)
+    return getattr(inputs, "resume", {}).get(name)
 
 
 def tuned(model: FusionModel, name: str) -> tuple:

@@ -52,7 +52,12 @@ def _uwb_aoa_pdr(ctx: MethodContext):
 
     steps, start = _pdr_of(ctx, "uwb_aoa_pdr")
     fixes = _fixes(ctx)
-    return UwbPdrFilter(method="uwb_aoa_pdr").run(steps, start, fixes, resume=ctx.inputs.resume.get("uwb_aoa_pdr"))
+    return UwbPdrFilter(method="uwb_aoa_pdr").run(steps, start, fixes, resume=_resume_of(ctx, "uwb_aoa_pdr"))
+
+
+def _resume_of(ctx: MethodContext, name: str):
+    """The state filter ``name`` resumes from (a long walk's previous segment's), None for a walk fused whole."""
+    return getattr(ctx.inputs, "resume", {}).get(name)
 
 
 def _pdr_of(ctx: MethodContext, name: str):
@@ -68,7 +73,7 @@ def _pdr_of(ctx: MethodContext, name: str):
     if pdr is None or not len(pdr.result.t_s):
         raise MethodSkipped("no steps (the walk has no usable imu.csv)")
     r = pdr.result
-    if name in ctx.inputs.resume:
+    if _resume_of(ctx, name) is not None:
         ok = np.isfinite(r.heading_rad) & np.isfinite(r.step_length_m)
         e, n = dead_reckon(r.step_length_m[ok], r.heading_rad[ok])
         r = SimpleNamespace(t_s=r.t_s[ok], step_length_m=r.step_length_m[ok], heading_rad=r.heading_rad[ok],
@@ -89,7 +94,7 @@ def _with_prior(name: str, blind: bool):
         if prior is None:
             raise MethodSkipped("the model has no UWB prior (no training walk had uwb.csv)")
         scale = prior.r_scale(np.ones((len(fixes), 1)) if blind else ctx.inputs.classes.at(fixes.t_s))
-        return UwbPdrFilter(method=name).run(steps, start, fixes, r_scale=scale, resume=ctx.inputs.resume.get(name))
+        return UwbPdrFilter(method=name).run(steps, start, fixes, r_scale=scale, resume=_resume_of(ctx, name))
     return build
 
 
