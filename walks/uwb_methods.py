@@ -70,15 +70,16 @@ def _pdr_of(ctx: MethodContext, name: str):
     from features.imu.pdr import dead_reckon
 
     pdr = ctx.inputs.data.pdr
-    if pdr is None or not len(pdr.result.t_s):
-        raise MethodSkipped("no steps (the walk has no usable imu.csv)")
-    r = pdr.result
-    if _resume_of(ctx, name) is not None:
+    if pdr is not None and _resume_of(ctx, name) is not None:
+        r = pdr.result            # a cut without a step (the walker stands through it) keeps p_PDR still
         ok = np.isfinite(r.heading_rad) & np.isfinite(r.step_length_m)
         e, n = dead_reckon(r.step_length_m[ok], r.heading_rad[ok])
         r = SimpleNamespace(t_s=r.t_s[ok], step_length_m=r.step_length_m[ok], heading_rad=r.heading_rad[ok],
                             east_m=e, north_m=n)
         return r, (0.0, 0.0)
+    if pdr is None or not len(pdr.result.t_s):
+        raise MethodSkipped("no steps (the walk has no usable imu.csv)")
+    r = pdr.result
     if not np.isfinite(r.east_m).any():
         raise MethodSkipped("no PDR track (the IMU has no heading sensors)")
     return r, pdr.start_en_m
