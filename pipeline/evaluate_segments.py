@@ -10,7 +10,8 @@ is O(walk length) by what ``evaluate`` reports (exact medians and 95th percentil
 CDFs); everything else is bounded by one segment's pipeline.
 
 Methods that are whole-walk by nature are run per segment here: a ``+rts`` track is the RTS smoother over
-its segment's cut (warm-up and tail included), not over the whole walk.
+its segment's cut (warm-up and tail included), not over the whole walk: what that loses near a seam is measured
+in :mod:`walks.segments`.
 """
 
 from __future__ import annotations

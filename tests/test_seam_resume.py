@@ -8,7 +8,8 @@ import math
 import numpy as np
 import pytest
 
-from models.fusion import ClassTrack, EventEKF, FilterError, FilterResume, GnssEvents, IMMFilter, StepEvents, merge_events
+from models.fusion import (ClassTrack, EventEKF, FilterError, FilterResume, GnssEvents, IMMFilter, StepEvents,
+                           merge_events)
 from models.fusion.noise import PerClassNoise, VBAdaptiveNoise
 from models.temporal import ClassHMM
 from walks.inputs import ClassResume, smooth_classes
