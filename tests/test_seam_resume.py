@@ -225,3 +225,19 @@ def test_a_walk_in_segments_gives_every_resumed_methods_whole_track(model_and_wa
     # round-off on this walk (adaptive_nobp equal either way); test_class_hmm_resumes_its_forward_probabilities
     # shows where it matters
     assert old["adaptive_nobp"] < FILTER_SEAM_TOL_M
+
+
+def test_fg_ins_is_skipped_on_a_cut_without_a_step_heading():
+    """A long walk's last cut where the walker stands throughout (seed 78 of walks/segments.py's table, 1,056 s
+    on) has steps none: ``fg_ins`` says so (MethodSkipped) where it raised numpy's 'array of sample points is
+    empty' from its keyframe yaw interpolation, failing the whole evaluate."""
+    from types import SimpleNamespace
+
+    from walks.graph_methods import _fg_ins
+    from walks.methods import MethodContext, MethodSkipped
+
+    pdr = SimpleNamespace(imu=SimpleNamespace(gyro_rad_s=np.zeros((10, 3))),
+                          result=SimpleNamespace(t_s=np.zeros(0), heading_rad=np.zeros(0)))
+    ctx = MethodContext(model=None, inputs=SimpleNamespace(data=SimpleNamespace(pdr=pdr)))
+    with pytest.raises(MethodSkipped, match="no step with a heading"):
+        _fg_ins(ctx)
