@@ -38,7 +38,7 @@ import numpy as np
 
 from features.uwb.position import UwbFixes
 from models.fusion.core import kalman_update
-from models.fusion.ekf import OUTLIER_CODES, FilterError, FilterRun, empty_records
+from models.fusion.ekf import OUTLIER_CODES, FilterError, FilterResume, FilterRun, empty_records
 from models.fusion.events import STEP
 
 __all__ = ["UwbPdrConfig", "UwbPdrFilter", "UWB_FIX", "pdr_track_at", "UwbNoisePrior", "uwb_nees"]
@@ -155,7 +155,12 @@ class UwbPdrFilter:
         self.config = config
         self.method = method
 
-    def run(self, steps, start_en, fixes: UwbFixes, r_scale=None, gate_prob=None) -> FilterRun:
+    def run(self, steps, start_en, fixes: UwbFixes, r_scale=None, gate_prob=None,
+            resume: FilterResume | None = None) -> FilterRun:
+        """``resume``: the state of a run over an earlier piece of the same walk (a long walk's previous segment,
+        :meth:`FilterRun.state_before`): from its time on the filter continues from that run's corrected
+        position p̂ and P after its last event, δx = p_PDR(t) − p̂ on this run's PDR track (whose start may
+        differ: only its increments enter), and its count of fixes gated in a row."""
         cfg = self.config or UwbPdrConfig()
         if len(fixes) == 0:
             raise FilterError("no UWB fix to start the filter from")
@@ -182,7 +187,16 @@ class UwbPdrFilter:
         P = fixes.cov_en[0] * scale[0]
         x0, P0 = p0 - dx, P.copy()
         t_prev, rejected, n_reset = t0, 0, 0
+        restart = -1 if resume is None else int(np.searchsorted(t, resume.t_s, side="left"))
+        if resume is not None and resume.P.shape != (2, 2):
+            raise FilterError(f"cannot resume the UWB/PDR filter from a state of {resume.x.shape[0]} states")
+        rejected_rec = np.zeros(m, np.int64)
         for k in range(m):
+            if k == restart:
+                # δx = p_PDR(t) − p̂ at the handed state's last event, on this run's PDR track
+                pr = pdr_track_at(np.array([resume.event_t_s]), st, steps.east_m, steps.north_m, start_en)
+                dx = np.array([pr[0][0], pr[1][0]]) - np.asarray(resume.x, float)
+                P, rejected, t_prev = np.asarray(resume.P, float).copy(), int(resume.rejected_in_row), resume.event_t_s
             P = P + np.eye(2) * cfg.q_m2_s * max(t[k] - t_prev, 0.0)
             t_prev = t[k]
             p_pdr = np.array([pe[k], pn[k]])
@@ -215,7 +229,9 @@ class UwbPdrFilter:
                         dx, P, rejected = z.copy(), R.copy(), 0
                         n_reset += 1
             rec["x"][k], rec["P"][k] = p_pdr - dx, P
+            rejected_rec[k] = rejected
         run = FilterRun(self.method, t, kind, x0, P0, available=kind == UWB_FIX, **rec)
+        run.info["rejected_in_row"] = rejected_rec
         run.info["n_uwb_fixes"] = n_fix
         run.info["n_resets"] = n_reset
         run.info["uwb_accepted_share"] = float(rec["accepted"][kind == UWB_FIX].mean()) if n_fix else 0.0

@@ -10,7 +10,8 @@ is O(walk length) by what ``evaluate`` reports (exact medians and 95th percentil
 CDFs); everything else is bounded by one segment's pipeline.
 
 Methods that are whole-walk by nature are run per segment here: a ``+rts`` track is the RTS smoother over
-its segment's cut (warm-up and tail included), not over the whole walk.
+its segment's cut (warm-up and tail included), not over the whole walk: what that loses near a seam is measured
+in :mod:`walks.segments`.
 """
 
 from __future__ import annotations
@@ -20,7 +21,7 @@ import numpy as np
 from features.errors import DataError
 from walks.inputs import WINDOW_S
 from walks.score import metric_rows, track_errors
-from walks.segments import SEGMENT_S, walk_cuts
+from walks.segments import SEGMENT_S
 
 __all__ = ["evaluate_segmented"]
 
@@ -29,17 +30,13 @@ def evaluate_segmented(walk, model, methods, class_map_for, force: bool, name: s
                        segment_s: float = SEGMENT_S) -> dict:
     """:func:`pipeline.evaluate.evaluate_walk`'s result for a walk fused in segments of ``segment_s`` (module
     docstring); ``name``: the walk's report name."""
-    from walks.fuse import fuse_walk
+    from walks.fuse import fuse_in_segments
 
     parts: dict = {}
     truth_parts, window_parts, notes, skipped = [], [], [], {}
     shares = {"bp_disabled_share": [], "bp_guard_share": []}
     site = None
-    resume = None
-    for seg in walk_cuts(walk, segment_s):
-        fused = fuse_walk(seg.directory, model, methods, class_map_for=class_map_for, force=force, resume=resume,
-                          keep_states_from_s=seg.states_from_s)
-        resume = fused.handover(seg.own_to_s, seg.states_from_s)
+    for seg, fused in fuse_in_segments(walk, model, methods, segment_s, class_map_for=class_map_for, force=force):
         data = fused.data
         if data.truth is None:
             raise DataError(f"{walk}: no truth.csv, so no error to measure (evaluate scores tracks against truth; "

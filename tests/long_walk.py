@@ -119,11 +119,13 @@ def _loop_audio(src: Path, dst: Path, n_loops: int, n_frames: int, block: int = 
                     left -= len(x)
 
 
-def loop_walk(src: str | Path, dst: str | Path, n_loops: int) -> Path:
+def loop_walk(src: str | Path, dst: str | Path, n_loops: int, extra: tuple = ()) -> Path:
     """Write ``dst``, a walk of ``n_loops`` back-to-back copies of the walk folder ``src`` (module docstring).
 
     The source's ``duration_s`` is the period; its streams must hold nothing after it (a simulated walk's
-    don't). The site is referred to by its absolute path. Returns ``dst``.
+    don't). The site is referred to by its absolute path. ``extra``: further CSV streams whose first column is
+    ``t_s`` to loop (``"uwb"``, ``"imu_foot"``); the others named in ``walk.toml`` are left out of it. Returns
+    ``dst``.
     """
     src, dst = Path(src), Path(dst)
     meta = tomllib.loads((src / "walk.toml").read_text())
@@ -133,7 +135,12 @@ def loop_walk(src: str | Path, dst: str | Path, n_loops: int) -> Path:
     site = (src / meta["site"]).resolve()
     text = re.sub(r'^site = ".*"$', f'site = "{site}"', text, count=1, flags=re.M)
     text = re.sub(r"^duration_s = .*$", f"duration_s = {n_loops * period!r}", text, count=1, flags=re.M)
+    for stream in ("uwb", "imu_foot"):
+        if stream in meta and stream not in extra:     # a table without its file: drop it
+            text = re.sub(rf"^\[{stream}\]\n(?:[^\[\n][^\n]*\n|\n)*", "", text, flags=re.M)
     (dst / "walk.toml").write_text(text)
+    for stream in extra:
+        _shift_csv(src / meta[stream]["file"], dst / meta[stream]["file"], n_loops, period)
     if "gnss" in meta:
         lines = (src / meta["gnss"]["file"]).read_text().splitlines(keepends=True)
         inside = _nmea_inside(lines, period)

@@ -20,13 +20,14 @@ import numpy as np
 from features.errors import ConfigError, DataError, EnvfuseError
 from models.fusion.ekf import FilterRun
 from models.fusion.model import FusionModel
-from walks.inputs import HOP_S, WINDOW_S, WalkInputs, walk_inputs
-from walks.methods import LAG_S, run_methods
+from walks.inputs import HOP_S, WINDOW_S, ClassResume, WalkInputs, class_state_before, walk_inputs
+from walks.methods import LAG_S, run_methods, track_state_before
 from walks.reader import ReaderStates, WalkData, read_walk
 from walks.segments import SEGMENT_S, walk_cuts
 from walks.track import TrackWriter, track_rows
 
-__all__ = ["FusedWalk", "fuse_walk", "check_site", "check_windows", "walk_name", "RunSummary", "fuse_to_file"]
+__all__ = ["FusedWalk", "fuse_walk", "check_site", "check_windows", "walk_name", "RunSummary", "fuse_to_file",
+           "fuse_in_segments", "segmented_tracks"]
 
 ROWS_PER_WRITE = 20_000
 """Track rows turned into text and written at a time by :func:`fuse_to_file`."""
@@ -53,10 +54,9 @@ class FusedWalk:
         :attr:`walks.segments.Segment.states_from_s`)."""
         filters = {}
         for name, res in self.results.items():
-            if isinstance(res, FilterRun) and res.mode_proba is None:
-                state = res.state_before(t_s)
-                if state is not None:
-                    filters[name] = state
+            state = res.state_before(t_s) if isinstance(res, FilterRun) else track_state_before(name, res, t_s)
+            if state is not None:
+                filters[name] = state
         heading = None
         pdr = self.data.pdr
         if getattr(pdr, "imu", None) is not None and pdr.result.heading is not None:
@@ -64,17 +64,19 @@ class FusedWalk:
             if i >= 0:
                 heading = pdr.result.heading.state_at(i, float(pdr.imu.t_s[i]))
         receiver = self.data.acoustic.analysis.receiver_state if self.data.acoustic is not None else None
-        return Handover(filters, ReaderStates(heading, receiver))
+        return Handover(filters, ReaderStates(heading, receiver), class_state_before(self.inputs, t_s))
 
 
 @dataclass(frozen=True)
 class Handover:
     """What a segment of a long walk hands the next (:mod:`walks.segments`): ``filters``, by filter method name,
     the state (:class:`~models.fusion.ekf.FilterResume`) each resumes from at the segment's start, and
-    ``readers``, the readers' states the cut is read from (:class:`~walks.reader.ReaderStates`)."""
+    ``readers``, the readers' states the cut is read from (:class:`~walks.reader.ReaderStates`); ``classes``,
+    the class HMM's forward state (:class:`~walks.inputs.ClassResume`, None without a window)."""
 
     filters: dict = field(default_factory=dict)
     readers: ReaderStates = ReaderStates()
+    classes: ClassResume | None = None
 
 
 def walk_name(walk_dir: str | os.PathLike) -> str:
@@ -131,7 +133,8 @@ def fuse_walk(walk_dir: str | os.PathLike, model: FusionModel, methods=None, *, 
         why = "; ".join(data.notes) if data.notes else "walk.toml names no gnss, audio or imu stream"
         raise DataError(f"{walk_dir}: no usable stream to fuse ({why})")
     try:
-        inputs = walk_inputs(data, model.classifier, model.temporal, class_smoothing)
+        inputs = walk_inputs(data, model.classifier, model.temporal, class_smoothing,
+                             None if resume is None else resume.classes)
         if resume is not None and resume.filters:
             inputs = replace(inputs, resume=dict(resume.filters))
         want = methods
@@ -146,6 +149,35 @@ def fuse_walk(walk_dir: str | os.PathLike, model: FusionModel, methods=None, *, 
             raise
         raise DataError(f"{walk_dir}: {exc}") from None
     return FusedWalk(name, data, inputs, tracks, skipped, results)
+
+
+def fuse_in_segments(walk_dir: str | os.PathLike, model: FusionModel, methods=None, segment_s: float = SEGMENT_S,
+                     *, workdir: str | os.PathLike | None = None, **fuse_kw):
+    """The segments of a long walk fused one after the other, each resuming what the previous one handed over
+    (:mod:`walks.segments`, :meth:`FusedWalk.handover`): yields (:class:`~walks.segments.Segment`,
+    :class:`FusedWalk`) in time order, the cut deleted once the next is asked for. ``fuse_kw``: as
+    :func:`fuse_walk`. A walk of one segment yields its whole-walk fusion."""
+    resume = None
+    for seg in walk_cuts(walk_dir, segment_s, workdir=workdir):
+        fused = fuse_walk(seg.directory, model, methods, resume=resume, keep_states_from_s=seg.states_from_s,
+                          **fuse_kw)
+        resume = fused.handover(seg.own_to_s, seg.states_from_s)
+        yield seg, fused
+        del fused        # one segment's pipeline at a time (the caller drops its reference too)
+
+
+def segmented_tracks(walk_dir: str | os.PathLike, model: FusionModel, methods=None, segment_s: float = SEGMENT_S,
+                     **fuse_kw) -> dict:
+    """Every track of a walk fused in segments (:func:`fuse_in_segments`) as ``{name: (t_s, east_m, north_m)}``,
+    each the concatenation of the epochs its segments own: what the whole walk's ``fuse_walk(...).tracks`` give,
+    for comparing the two (bench/seam_identity.py). Holds every epoch: for measuring, not for long runs."""
+    parts: dict = {}
+    for seg, fused in fuse_in_segments(walk_dir, model, methods, segment_s, **fuse_kw):
+        for name, tr in fused.tracks.items():
+            k = seg.owns(tr.t_s)
+            parts.setdefault(name, []).append((tr.t_s[k], tr.east_m[k], tr.north_m[k]))
+        del fused
+    return {name: tuple(np.concatenate(c) for c in zip(*p)) for name, p in parts.items()}
 
 
 @dataclass

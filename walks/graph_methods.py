@@ -140,6 +140,8 @@ def _fg_ins(ctx: MethodContext) -> Track:
     imu = getattr(pdr, "imu", None)          # a drive's odometry stream has none
     if imu is None or imu.gyro_rad_s is None:
         raise MethodSkipped("no IMU with a gyro on this walk")
+    if not np.isfinite(pdr.result.heading_rad).any():       # a walk (or a long walk's cut) standing still
+        raise MethodSkipped("no step with a heading to orient the INS keyframes by")
     ev = ctx.events()
     start = ctx.result("fg_batch")
     cfg = InsConfig(gnss_width=ctx.model.ekf.huber_k, acoustic_width=ctx.model.ekf.huber_k)

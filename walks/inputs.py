@@ -26,9 +26,8 @@ from models.fusion import AcousticEvents, ClassTrack, GnssEvents, StandIntervals
 from models.fusion.events import EventStream
 from walks.reader import OdometryStream, WalkData
 
-__all__ = ["WalkInputs", "walk_inputs", "smooth_classes", "CLASS_SMOOTHING", "window_features", "split_steps",
-           "gnss_events", "STAND_GAP_S",
-           "TYPICAL_STEP_S", "WINDOW_S", "HOP_S"]
+__all__ = ["WalkInputs", "walk_inputs", "smooth_classes", "ClassResume", "class_state_before", "CLASS_SMOOTHING",
+           "window_features", "split_steps", "gnss_events", "STAND_GAP_S", "TYPICAL_STEP_S", "WINDOW_S", "HOP_S"]
 
 STAND_GAP_S = 1.5
 """A gap between steps longer than this is standing (from 0.5 s after the last step to 0.5 s before the next)."""
@@ -193,12 +192,37 @@ CLASS_SMOOTHING = ("none", "forward", "forward_backward")
 (:class:`models.temporal.ClassHMM`): not at all, causally (``run``), or with the whole walk (``evaluate``)."""
 
 
+@dataclass(frozen=True)
+class ClassResume:
+    """The class HMM's forward state a long walk's segment hands the next (:mod:`walks.segments`): the filtered
+    probabilities ``proba`` (k,) of the window ending at ``t_end_s``, the last window ending before the next
+    segment's start."""
+
+    t_end_s: float
+    proba: np.ndarray
+
+
+def class_state_before(inputs: "WalkInputs", t_s: float) -> ClassResume | None:
+    """The forward class probabilities of the last window of ``inputs`` ending before ``t_s`` (None: no window
+    ends before it)."""
+    i = int(np.searchsorted(inputs.window_t_s, t_s, side="left")) - 1
+    if i < 0:
+        return None
+    return ClassResume(float(inputs.window_t_s[i]), inputs.classes.proba[1 + i].copy())
+
+
 def smooth_classes(proba: np.ndarray, t_end_s: np.ndarray, answered: np.ndarray, classifier, temporal,
-                   smoothing: str) -> np.ndarray:
+                   smoothing: str, resume: ClassResume | None = None) -> np.ndarray:
     """The window probabilities (n, k) after the class HMM ``temporal``: ``"forward"`` filtered (causal: a
     window's output uses no later window), ``"forward_backward"`` smoothed over the walk, ``"none"`` (or no
     HMM) unchanged. ``answered`` (n,): windows some sub-model classified; the others are no evidence
-    (uniform likelihood). Windows further apart than one hop are joined by the matrix power."""
+    (uniform likelihood). Windows further apart than one hop are joined by the matrix power.
+
+    ``resume`` (``"forward"`` only): the filtered probabilities a run over the walk up to the window ending at
+    ``resume.t_end_s`` reached (:func:`class_state_before`, a long walk's previous segment): that window takes
+    them and the windows after it are filtered on from them (Rabiner 1989 eq. 20 from α̂ of that window), so
+    from there on they are the whole walk's; the windows before it are filtered from the start distribution
+    as usual (a warm-up)."""
     if smoothing not in CLASS_SMOOTHING:
         raise ConfigError(f"class smoothing must be one of {CLASS_SMOOTHING}, got {smoothing!r}")
     if temporal is None or smoothing == "none" or len(proba) == 0:
@@ -207,17 +231,33 @@ def smooth_classes(proba: np.ndarray, t_end_s: np.ndarray, answered: np.ndarray,
 
     b = scaled_likelihood(proba, classifier.fit_prior())
     b[~np.asarray(answered, bool)] = 1.0
+    t_end_s = np.asarray(t_end_s, float)
     steps = np.ones(len(proba), int)
     steps[1:] = np.maximum(np.rint(np.diff(t_end_s) / temporal.hop_s_).astype(int), 1)
-    run = temporal.forward if smoothing == "forward" else temporal.forward_backward
-    return run(b, steps)
+    if smoothing == "forward_backward":
+        return temporal.forward_backward(b, steps)
+    if resume is None:
+        return temporal.forward(b, steps)
+    # windows up to the handed one: the warm-up; the handed one takes the state; the rest filter on from it
+    j = int(np.searchsorted(t_end_s, resume.t_end_s + 1e-6, side="left"))
+    out = np.empty_like(b)
+    if j:
+        out[:j] = temporal.forward(b[:j], steps[:j])
+        if abs(t_end_s[j - 1] - resume.t_end_s) < 1e-6:
+            out[j - 1] = resume.proba
+    if j < len(b):
+        later = steps[j:].copy()
+        later[0] = max(int(np.rint((t_end_s[j] - resume.t_end_s) / temporal.hop_s_)), 1)
+        out[j:] = temporal.forward(b[j:], later, prev=np.asarray(resume.proba, float))
+    return out
 
 
-def walk_inputs(data: WalkData, classifier, temporal=None, smoothing: str = "forward") -> WalkInputs:
+def walk_inputs(data: WalkData, classifier, temporal=None, smoothing: str = "forward",
+                class_resume: ClassResume | None = None) -> WalkInputs:
     """Events and class evidence of one walk (see the module docstring); ``classifier``: the online
     :class:`~models.environment.EnvironmentClassifier`; ``temporal``: the class HMM
     (:class:`models.temporal.ClassHMM`, None: each window on its own) applied as ``smoothing``
-    (:func:`smooth_classes`)."""
+    (:func:`smooth_classes`, resumed from ``class_resume``: a long walk's previous segment's)."""
     steps = gnss = acoustic = stands = None
     fix_t = np.concatenate([data.gnss.positions.t_s if data.gnss is not None else np.zeros(0),
                             data.acoustic.t_s if data.acoustic is not None else np.zeros(0)])
@@ -239,7 +279,7 @@ def walk_inputs(data: WalkData, classifier, temporal=None, smoothing: str = "for
     if len(t_end):
         proba = classifier.predict_proba(X)
         ood = classifier.is_ood(X)
-        proba = smooth_classes(proba, t_end, classifier.answers(X), classifier, temporal, smoothing)
+        proba = smooth_classes(proba, t_end, classifier.answers(X), classifier, temporal, smoothing, class_resume)
     else:
         proba, ood = np.tile(classifier.prior_, (1, 1)), np.ones(1, bool)
         t_end = np.array([events.t_s[0]])

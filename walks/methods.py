@@ -46,8 +46,8 @@ from typing import Callable
 import numpy as np
 
 from models.bp import bp_inputs
-from models.fusion import (ClassMap, ContextNoise, EventEKF, FilterRun, IMMFilter, VBAdaptiveNoise, fixed_lag_smooth,
-                           rts_smooth)
+from models.fusion import (ClassMap, ContextNoise, EventEKF, FilterResume, FilterRun, IMMFilter, VBAdaptiveNoise,
+                           fixed_lag_smooth, rts_smooth)
 from models.fusion.model import FusionModel
 from walks.calibrate import calibrate_tracks
 from walks.inputs import WalkInputs
@@ -55,7 +55,7 @@ from walks.track import Track
 
 __all__ = ["Method", "MethodContext", "MethodSkipped", "register", "unregister", "method", "method_names",
            "run_methods", "bp_features", "adaptive_run", "tuned", "filter_track", "LAG_S", "parameter_rows",
-           "parameter_run", "window_at"]
+           "parameter_run", "window_at", "track_state_before"]
 
 
 class MethodSkipped(Exception):
@@ -200,6 +200,9 @@ def _acoustic(ctx: MethodContext) -> Track:
 
 
 def _pdr(ctx: MethodContext) -> Track:
+    """Dead reckoning from the first fix; resumed (a long walk's later segment): the steps from the handed
+    state's time on are dead-reckoned from the position the previous segment's track reached
+    (:func:`track_state_before`), the earlier ones of the cut (its warm-up) from the cut's first fix."""
     from features.imu.pdr import dead_reckon
 
     pdr, ev = ctx.inputs.data.pdr, ctx.inputs.events
@@ -210,7 +213,25 @@ def _pdr(ctx: MethodContext) -> Track:
     r = pdr.result
     start = ev.z_m[np.flatnonzero(ev.available)[0]]
     e, n = dead_reckon(r.step_length_m, r.heading_rad, float(start[0]), float(start[1]))
+    resume = _resume(ctx.inputs, "pdr")
+    if resume is not None:
+        j = int(np.searchsorted(r.t_s, resume.t_s, side="left"))
+        e[j:], n[j:] = dead_reckon(r.step_length_m[j:], r.heading_rad[j:], float(resume.x[0]), float(resume.x[1]))
     return Track("pdr", r.t_s, e, n, None)
+
+
+def track_state_before(name: str, track, t_s: float) -> FilterResume | None:
+    """What a method whose result is a plain track hands the next segment of a long walk at walk time ``t_s``
+    (:meth:`walks.fuse.FusedWalk.handover`): ``pdr``'s position after its last step before ``t_s`` (``x`` =
+    (east, north), P empty; dead reckoning carries nothing else); None for the others (fixes alone, or a
+    method that does not resume)."""
+    if name != "pdr" or not isinstance(track, Track):
+        return None
+    i = int(np.searchsorted(track.t_s, t_s, side="left")) - 1
+    if i < 0 or not (np.isfinite(track.east_m[i]) and np.isfinite(track.north_m[i])):
+        return None
+    return FilterResume(float(t_s), np.array([track.east_m[i], track.north_m[i]]), np.zeros((0, 0)),
+                        event_t_s=float(track.t_s[i]))
 
 
 # -- filters --------------------------------------------------------------------------------------------------
@@ -218,10 +239,10 @@ def _pdr(ctx: MethodContext) -> Track:
 
 def _resume(inputs: WalkInputs, name: str):
     """The state the run of filter ``name`` over the previous segment of a long walk handed over (None for a walk
-    fused whole): the run continues from it at the segment's start (:mod:`walks.segments`). ``aekf`` resumes
-    its position, heading and scale states but restarts its variational noise estimate; ``imm`` does not
-    resume (its mode probabilities and per-mode states are not handed over)."""
-    return inputs.resume.get(name)
+    fused whole): the run continues from it at the segment's start (:mod:`walks.segments`), with everything
+    the filter carries from event to event (``aekf``'s variational noise estimate, ``imm``'s per-mode states
+    and mode probabilities: :class:`~models.fusion.ekf.FilterResume`)."""
+    return getattr(inputs, "resume", {}).get(name)
 
 
 def tuned(model: FusionModel, name: str) -> tuple:
@@ -264,7 +285,8 @@ def _aekf(ctx: MethodContext) -> FilterRun:
 
 def _imm(ctx: MethodContext) -> FilterRun:
     cfg, scales = tuned(ctx.model, "imm")
-    return IMMFilter(ctx.model.per_class, cfg, scales=scales).run(ctx.events(), classes=ctx.inputs.classes)
+    return IMMFilter(ctx.model.per_class, cfg, scales=scales).run(ctx.events(), classes=ctx.inputs.classes,
+                                                                  resume=_resume(ctx.inputs, "imm"))
 
 
 def adaptive_run(model: FusionModel, inputs: WalkInputs, method_name: str = "adaptive_nobp", blind: bool = False):

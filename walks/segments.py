@@ -13,49 +13,88 @@ segment by segment:
   file): NMEA sentences by the epoch they belong to (placed on the walk's time base from ``start_utc`` and the
   times of day, midnight crossings counted), IMU, UWB, foot-IMU and truth CSV rows by ``t_s``, audio samples by
   ``[audio] start_s`` (the cut's ``start_s`` moved to its first sample, so the TDMA frame phase is unchanged);
-  the cut reaches :data:`WARMUP_S` before the segment and :data:`TAIL_S` after it (the fixed-lag smoother's
-  3 s, a step's split at the next fix, the last feature window); the first cut reaches at least the heading
-  gate's reference span (:data:`features.imu.heading.GATE_REFERENCE_S`);
+  the cut reaches :data:`WARMUP_S` before the segment, moved back to the acoustic reader's block grid
+  (:func:`audio_cut_period`, 32 s at 48 kHz), and :data:`TAIL_S` after it (the fixed-lag smoother's 3 s, a
+  step's split at the next fix, the last feature window); the first cut reaches at least the heading gate's
+  reference span (:data:`features.imu.heading.GATE_REFERENCE_S`);
 - the cut is fused by the pipeline (:func:`walks.fuse.fuse_walk`) with what the previous segment handed over
   (:meth:`walks.fuse.FusedWalk.handover`), and only the segment's own epochs are kept:
 
-  * every EKF (``kf``, ``kf_quality``, ``kf_map``, the ``adaptive`` family and both passes of the BP ones)
-    resumes at the segment's first event from its posterior x, P (bias states included) after the last event
-    before it (:class:`models.fusion.ekf.FilterResume`); the cut's earlier events are its warm-up, so the
-    per-event quantities derived from their neighbours (time since the previous event, standing time, the GNSS
-    bias resets on a quality change or a gap) are the whole walk's;
+  * every filter resumes at the segment's first event from what it carried after the last event before it
+    (:class:`models.fusion.ekf.FilterResume`): the EKFs (``kf``, ``kf_quality``, ``kf_map``, the ``adaptive``
+    family and both passes of the BP ones) their posterior x, P (bias states included); ``aekf`` also its
+    variational-Bayes noise estimate α, β; ``imm`` its modes' x, P and their probabilities; the UWB/PDR filters
+    (``uwb_aoa_pdr`` and its twins) their corrected position, P and count of fixes gated in a row, on the cut's
+    own PDR increments. The cut's earlier events are the warm-up, so the per-event quantities derived from
+    their neighbours (time since the previous event, standing time, the GNSS bias resets on a quality change
+    or a gap) are the whole walk's;
+  * ``pdr`` dead-reckons the segment's steps on from the position the previous segment's track reached;
+  * the class HMM's forward probabilities take, at the cut's window that ended last before the segment, the
+    whole walk's value there (:class:`walks.inputs.ClassResume`), and filter on from it;
   * the acoustic receiver resumes its tracker (lock, two-state clock filter, air estimate, acquisition memory)
     at its first frame :data:`RESUME_AFTER_S` into the cut, once its audio buffers are full
-    (:class:`features.acoustic.tracking.ReceiverState`);
+    (:class:`features.acoustic.tracking.ReceiverState`); since the cut's audio starts on the reader's block
+    grid, every later sample passes the same read blocks, impulse-blanker segments and matched-filter
+    decimation phase as in the whole walk, so the matched filter's float32 round-off is the same;
   * the PDR heading filter resumes its heading, gyro bias, gyro-only heading and gate offset
     :data:`RESUME_AFTER_S` into the cut, after its low-pass filters' transients, with the record's start
     statistics (turn-on bias, gate reference field) of the walk
     (:class:`features.imu.heading.HeadingState`);
   * the rest is local in time and has settled within the warm-up: GNSS fixes (the NMEA time base and epoch
     interval are medians that agree on a steady log), steps (a 2nd-order zero-phase filter, bouts of seconds),
-    feature windows, the class HMM's forward probabilities.
+    feature windows.
 
 A walk that fits in one segment is fused exactly as before, from its own folder. Memory is bounded by one cut's
-pipeline (S + :data:`WARMUP_S` + :data:`TAIL_S` of walk) whatever the walk's length, plus what the caller keeps
-of each segment (``envfuse run`` writes its rows to the output's temporary file and keeps nothing).
+pipeline (S + :data:`WARMUP_S` + up to 32 s + :data:`TAIL_S` of walk) whatever the walk's length, plus what the
+caller keeps of each segment (``envfuse run`` writes its rows to the output's temporary file and keeps nothing).
 
-Measured (simulated 21-minute walks, site 201 of the demo split, ``adaptive_blind+lag``): seed 77 in 600 s
-segments equals the whole walk's track within 6.4e-8 m at every epoch; in 300 s segments median 1.7e-7 m, max
-0.022 m (mean error against truth 0.120 m either way). Seed 78 in 300 s segments: GNSS, PDR and heading equal
-(heading within 5e-8 rad) but the acoustic fixes are not: median 2e-6 m, p95 0.032 m, max 1.07 m from the whole
-track (mean error 0.502 against 0.496 m whole, max 16.44 m both), one segment holding 7 fixes more. The
-receiver's tracker is resumed exactly, but the matched filter's float32 FFT blocks (and its decimation and the
-impulse blanker's segments) are aligned on the cut's first sample, not the walk's: a round-off difference at
-one detection near a threshold (285 s into seed 77) perturbs a fix by 3e-4 m, which the receiver's filters
-carry and shrink, or (seed 78, 456 s) flips a tracking decision. Aligning the cuts' audio on the blocks'
-common period would remove this; it is not done. Before the states were handed
-over (the filter restarted 120 s before each segment, the readers' whole-record statistics taken per cut) the
-same walk in 600 s segments had a mean error of 0.268 m and a maximum of 18.2 m against 0.120 and 1.85 m whole.
+What a segment cannot have: the future past its cut. A ``+rts`` track is the RTS smoother over its cut, i.e. at
+an owned epoch t the whole walk's smoother with the data after the cut's end (at least :data:`TAIL_S` after t)
+left out: a fixed-lag smoother of lag ≥ own end − t + :data:`TAIL_S`. What it loses is largest at the last
+epochs before a seam (the heading offset and step scale, near-constant states, carry the later fixes' evidence
+back over the whole walk): measured below (seed 77: 0.02-0.06 m at the seams' last epochs, medians 1e-6 to
+3e-4 m). A longer tail does not bound it tighter: with 30 s (``bench/seam_identity.py --tail-s 30``) seed 77
+reads 0.008 / 0.045 / 0.084 m for ``kf_quality`` / ``aekf`` / ``imm`` against 0.022 / 0.025 / 0.059 m at 10 s,
+the loss being that of whichever fixes lie past the cut. The UWB/PDR filters' ``+lag`` also loses, at a seam, a step that
+ends after the cut when the walker stands across the seam for longer than the tail (their PDR track spreads a
+step over the time since the previous one, a stop included: :func:`models.uwb_pdr.pdr_track_at`).
 
-Not resumed: ``imm`` (its per-mode states and probabilities), ``aekf``'s variational noise estimate (its x and
-P are), the ``+rts`` smoother (over its cut), ``pdr`` (dead-reckoned from the cut's first fix), the foot and
-UWB methods. A walk holding a stream that cannot be cut by time (a drive's pseudoranges or odometry, whose dead
-reckoning is fitted to the whole drive's fixes) is not segmented (:func:`plan_segments` says why).
+Measured (``bench/seam_identity.py``: simulated 21-minute walks, site 201 of the demo split and its model, 300 s
+segments, largest distance from the whole walk's track at the same epoch over every owned epoch):
+
+=====================  ============  ============  ============  ============
+track                  seed 77       (before)      seed 78       (before)
+=====================  ============  ============  ============  ============
+acoustic fixes         8.0e-11       0.0030 (a)    8.0e-11 (b)   0.0065 (a)
+kf_quality             1.0e-7        0.040         0.71 (b)      0.58
+aekf                   7.2e-8        0.39          0.53 (b)      5.75
+imm                    0.015 (c)     0.16          1.2 (b)       3.0
+adaptive_nobp_blind    1.5e-7        0.032         1.2 (b)       1.11
+adaptive               0.13 (c)      0.13          0.18 (b)      0.18
+pdr                    2.6e-6 (d)    5.6 (e)       5.0e-6 (d)    175 (e)
+uwb_aoa_pdr            0.051 (f)     skipped (e)   23.6 (f)      23.6 (e)
+kf_quality+rts         0.022         0.030         1.0           0.98
+aekf+rts               0.025         0.30          1.8           2.8
+imm+rts                0.059         0.11          0.69          0.96
+=====================  ============  ============  ============  ============
+
+``envfuse run --method adaptive_blind+lag`` on seed 77 (300 s segments) writes positions within 1.0e-7 m of the
+whole walk's (main: 0.024 m), peak memory 302.8 MiB against main's 300.3 MiB (the cuts up to 32 s longer), CPU
+14.2 against 14.0 s. (before: main at the start of this change; the ``adaptive_nobp+rts``, ``kf+rts`` and ``adaptive+rts`` rows read
+like the other ``+rts`` ones, median 1e-6 to 5e-4 m.) (a) the cut's float32 blocks not on the walk's: 324 of 841
+(seed 78: 716 of 1091) fixes at times that differ by 1 µs to 0.4 ms; (b) one acoustic fix of seed 78 (342.83 s)
+the segmented read does not give, every other fix equal to 8e-11 m: the filters move by up to 0.7 m after it
+(their medians are 4e-10 m); (c) three feature windows of seed 77 (1137-1139 s) whose CIR features differ (one
+chirp's, its SNR by 0.1-1 dB; the same chirps detected, every fix equal): the class probabilities there differ
+by 0.04 and the class-aware filters by up to 0.15 m (the blind twins by 1.5e-7 m); (d) the resumed heading
+agrees to 3-5e-8 rad, not to round-off, and dead reckoning accumulates it; (e) before, the steps of a later cut
+before its heading resumed had no heading, and ``pdr`` (NaN after them) and the UWB filter (skipped; on seed 78
+restarted at each seam, and skipped in the last segment, which holds no step) did not survive a seam; (f) seed 77 median 5e-8 m; on seed 78 the filter gates most fixes (125 resets over the walk) and
+the heading's 3e-8 rad grows to a flipped gate decision at 932 s. A walk holding a stream that cannot be cut by
+time (a drive's pseudoranges or odometry, whose dead reckoning is fitted to the whole drive's fixes) is not
+segmented (:func:`plan_segments` says why). Not resumed: ``foot_ins_fkf`` (its strapdown INS and local filters,
+:mod:`models.foot`; its 10 Hz track is also sampled from the cut's first IMU sample) and the factor-graph
+methods (``fg_*``, :mod:`walks.graph_methods`; within 0.008-0.08 m at 300 s segments on seed 77).
 """
 
 from __future__ import annotations
@@ -80,13 +119,14 @@ __all__ = ["SEGMENT_S", "WARMUP_S", "TAIL_S", "RESUME_AFTER_S", "Segment", "plan
 
 SEGMENT_S = 300.0
 """Walk time each segment owns by default, s: with the filters and readers resumed across the seams they cost
-nothing measurable, so the segment is short and the peak memory of a long walk that of one cut of 430 s: a
-10-minute walk (two segments) and a 2-hour one peak within 3 % of each other (``bench/bench_pipeline.py
---memory-only``)."""
+nothing measurable, so the segment is short and the peak memory of a long walk that of one cut of 430 s (up to
+462 s since the cuts start on the acoustic reader's 32 s block grid): a 10-minute walk (two segments) and a
+2-hour one peak within 3 % of each other (``bench/bench_pipeline.py --memory-only``, measured before the grid)."""
 
 WARMUP_S = 120.0
-"""Walk time a cut reaches before its segment, s: what is not handed over settles in it (the class HMM, step
-bouts, feature windows; the readers resume :data:`RESUME_AFTER_S` into it)."""
+"""Walk time a cut reaches before its segment (then moved back to the audio block grid, :func:`audio_cut_period`),
+s: what is not handed over settles in it (step bouts, feature windows; the readers resume
+:data:`RESUME_AFTER_S` into it, the filters and the class HMM at the segment's start)."""
 
 TAIL_S = 10.0
 """Walk time a cut reaches after its segment, s: ≥ the fixed-lag smoother's lag (3 s), a step split at the
@@ -192,14 +232,15 @@ def walk_cuts(walk_dir: str | os.PathLike, segment_s: float = SEGMENT_S, *,
     _fix_mmap_threshold()
     with tempfile.TemporaryDirectory(prefix=".envfuse-segments.", dir=workdir) as tmp:
         cutters = _cutters(walk)
+        align = _audio_grid(walk)
         for k in range(n):
             own_from = -math.inf if k == 0 else k * segment_s
             own_to = math.inf if k == n - 1 else (k + 1) * segment_s
-            lo = -math.inf if k == 0 else own_from - WARMUP_S
+            lo = -math.inf if k == 0 else align(own_from - WARMUP_S)
             hi = math.inf if k == n - 1 else own_to + TAIL_S
             if k == 0:
                 hi = max(hi, GATE_REFERENCE_S)      # the heading gate's reference field, as the whole walk's
-            next_lo = (k + 1) * segment_s - WARMUP_S
+            next_lo = align((k + 1) * segment_s - WARMUP_S)
             d = Path(tmp) / f"segment{k:04d}"
             d.mkdir()
             toml = {}
@@ -210,6 +251,52 @@ def walk_cuts(walk_dir: str | os.PathLike, segment_s: float = SEGMENT_S, *,
             shutil.rmtree(d)
         for cut in cutters.values():
             cut.close()
+
+
+def audio_cut_period(fs_in_hz: int) -> int:
+    """Input samples between the audio samples a cut may start at, so that the acoustic reader processes every
+    sample of the cut in the same blocks, impulse-blanker segments and decimation phase as in the whole walk
+    (and hence gives the same float32 round-off; the blocks of :func:`features.acoustic.audio.iter_audio_blocks`
+    start at the file's first sample): the least common multiple of the read block
+    (:attr:`features.acoustic.detection.DetectorConfig.block_s`, a whole number of resampling periods), the
+    blanker's segment (:class:`features.acoustic.impulses.ImpulseBlanker`) and the matched filter's decimation
+    (4), in output samples, taken back to input samples. 1,536,000 samples (32 s) at 48 kHz."""
+    from fractions import Fraction
+
+    from features.acoustic.detection import DetectorConfig
+    from features.acoustic.impulses import ImpulseBlanker
+
+    cfg = DetectorConfig()
+    ratio = Fraction(int(cfg.fs_hz), int(fs_in_hz))
+    period = ratio.denominator
+    block_in = max(period, int(round(cfg.block_s * fs_in_hz / period)) * period)
+    block_out = int(block_in * ratio)
+    grid_out = math.lcm(block_out, ImpulseBlanker(float(cfg.fs_hz)).segment, MATCHED_FILTER_DECIMATION)
+    return block_in * (grid_out // block_out)
+
+
+MATCHED_FILTER_DECIMATION = 4
+"""Decimation of the acoustic reader's matched-filter envelopes
+(:class:`features.acoustic.matched_filter.StreamingMatchedFilter`'s default)."""
+
+
+def _audio_grid(walk: WalkInfo):
+    """The function moving a cut's start back to the last walk time at or before it whose audio sample lies on
+    :func:`audio_cut_period`'s grid counted from the WAV's first sample (identity without audio): the cut's
+    warm-up grows by less than one period (32 s at 48 kHz). A start moved back to the WAV's first sample (or
+    before it) is −inf: that cut holds the walk from its start, as the whole walk's read does."""
+    audio = walk.path("audio")
+    if audio is None or not audio.is_file() or not audio.stat().st_size:
+        return lambda t: t
+    fs = sf.info(str(audio)).samplerate
+    step = audio_cut_period(fs)
+    start = float(walk.streams["audio"].get("start_s", 0.0))
+
+    def align(t: float) -> float:
+        i = math.floor((t - start) * fs / step + 1e-9) * step
+        return start + i / fs if i > 0 else -math.inf     # from the audio's first sample: from the walk's start
+
+    return align
 
 
 MMAP_THRESHOLD_BYTES = 128 * 1024

@@ -50,31 +50,52 @@ def _uwb(ctx: MethodContext) -> Track:
 def _uwb_aoa_pdr(ctx: MethodContext):
     from models.uwb_pdr import UwbPdrFilter
 
-    pdr = _pdr_of(ctx)
+    steps, start = _pdr_of(ctx, "uwb_aoa_pdr")
     fixes = _fixes(ctx)
-    return UwbPdrFilter(method="uwb_aoa_pdr").run(pdr.result, pdr.start_en_m, fixes)
+    return UwbPdrFilter(method="uwb_aoa_pdr").run(steps, start, fixes, resume=_resume_of(ctx, "uwb_aoa_pdr"))
 
 
-def _pdr_of(ctx: MethodContext):
+def _resume_of(ctx: MethodContext, name: str):
+    """The state filter ``name`` resumes from (a long walk's previous segment's), None for a walk fused whole."""
+    return getattr(ctx.inputs, "resume", {}).get(name)
+
+
+def _pdr_of(ctx: MethodContext, name: str):
+    """(the PDR steps, its start) the filter ``name`` runs on: the reader's dead-reckoned track, or, when the
+    filter resumes a long walk's previous segment (its cut's steps before the heading resumed have none), the
+    steps with a heading dead-reckoned from the origin (the filter takes only the track's increments then:
+    :meth:`models.uwb_pdr.UwbPdrFilter.run`)."""
+    from types import SimpleNamespace
+
+    from features.imu.pdr import dead_reckon
+
     pdr = ctx.inputs.data.pdr
+    if pdr is not None and _resume_of(ctx, name) is not None:
+        r = pdr.result            # a cut without a step (the walker stands through it) keeps p_PDR still
+        ok = np.isfinite(r.heading_rad) & np.isfinite(r.step_length_m)
+        e, n = dead_reckon(r.step_length_m[ok], r.heading_rad[ok])
+        r = SimpleNamespace(t_s=r.t_s[ok], step_length_m=r.step_length_m[ok], heading_rad=r.heading_rad[ok],
+                            east_m=e, north_m=n)
+        return r, (0.0, 0.0)
     if pdr is None or not len(pdr.result.t_s):
         raise MethodSkipped("no steps (the walk has no usable imu.csv)")
-    if not np.isfinite(pdr.result.east_m).any():
+    r = pdr.result
+    if not np.isfinite(r.east_m).any():
         raise MethodSkipped("no PDR track (the IMU has no heading sensors)")
-    return pdr
+    return r, pdr.start_en_m
 
 
 def _with_prior(name: str, blind: bool):
     def build(ctx: MethodContext):
         from models.uwb_pdr import UwbPdrFilter
 
-        pdr = _pdr_of(ctx)
+        steps, start = _pdr_of(ctx, name)
         fixes = _fixes(ctx)
         prior = getattr(ctx.model, "uwb_prior_blind" if blind else "uwb_prior", None)
         if prior is None:
             raise MethodSkipped("the model has no UWB prior (no training walk had uwb.csv)")
         scale = prior.r_scale(np.ones((len(fixes), 1)) if blind else ctx.inputs.classes.at(fixes.t_s))
-        return UwbPdrFilter(method=name).run(pdr.result, pdr.start_en_m, fixes, r_scale=scale)
+        return UwbPdrFilter(method=name).run(steps, start, fixes, r_scale=scale, resume=_resume_of(ctx, name))
     return build
 
 

@@ -344,7 +344,7 @@ def run_ekf_events(kind, avail, z, length_m, heading_rad, phi, q, h_idx, H, x0, 
                    huber_k, joseph, consider, noise_mode, r_event, eps_event, kappa_event, r_table, map_grid, map_geo,
                    vb_alpha, vb_beta, vb_cap, vb_rho, vb_n_iter, x_prior, P_prior, F_rec, x_post, P_post, nu_rec,
                    S_rec, K_rec, R_rec, nis_rec, w_rec, updated, accepted, restart, x_restart,
-                   P_restart):
+                   P_restart, vb_alpha_restart, vb_beta_restart, vb_alpha_rec, vb_beta_rec):
     """Filter m events once, writing the records in place (shapes: see :class:`~models.fusion.ekf.FilterRun`).
 
     Per event: ``kind`` (m,) step/GNSS/acoustic code, ``avail`` (m,) a fix may update, ``z`` (m, 2),
@@ -357,14 +357,21 @@ def run_ekf_events(kind, avail, z, length_m, heading_rad, phi, q, h_idx, H, x0, 
     variance ratio. ``restart`` ≥ 0 (−1: none): the posterior before event ``restart`` is replaced by ``x_restart`` (n,),
     ``P_restart`` (n, n) — the filter resumed from another run's state there (a long walk's previous segment,
     :class:`~models.fusion.ekf.FilterResume`); the events before it are filtered from ``x0``, ``P0`` as usual.
+    With the VB-AKF, ``vb_alpha_restart``, ``vb_beta_restart`` (3, 2) replace its α, β there too (the noise
+    estimate the other run had reached), and ``vb_alpha_rec``, ``vb_beta_rec`` (m, 3, 2) record α, β after
+    every event (size 0 for the other noise modes: not recorded).
     """
     m = kind.shape[0]
     x = x0.copy()
     P = P0.copy()
+    record_vb = noise_mode == R_VB and vb_alpha_rec.shape[0] == m
     for k in range(m):
         if k == restart:
             x = x_restart.copy()
             P = P_restart.copy()
+            if noise_mode == R_VB:
+                vb_alpha[:, :] = vb_alpha_restart
+                vb_beta[:, :] = vb_beta_restart
         # 1. x = Φ x;  P = Φ P Φ' + Q_Δt
         time_update(x, P, phi[k], q[k])
         if kind[k] == STEP_KIND:
@@ -403,6 +410,9 @@ def run_ekf_events(kind, avail, z, length_m, heading_rad, phi, q, h_idx, H, x0, 
                 x, P = xn, Pn
         x_post[k] = x
         P_post[k] = P
+        if record_vb:
+            vb_alpha_rec[k] = vb_alpha
+            vb_beta_rec[k] = vb_beta
 
 
 @njit(cache=True)

@@ -122,11 +122,25 @@ class FilterResume:
     """A filter's posterior ``x`` (n,), ``P`` (n, n) after its last event before walk time ``t_s``
     (:meth:`FilterRun.state_before`): what a run over a later piece of the same event stream (a long walk's next
     segment, :mod:`walks.segments`) restarts from at its first event at or after ``t_s``, so that from there on
-    it is the run over the whole stream."""
+    it is the run over the whole stream.
+
+    What else the filter carries from event to event, when it has it: ``vb_alpha``, ``vb_beta`` (3, 2) the
+    variational-Bayes noise estimate (:class:`~models.fusion.noise.VBAdaptiveNoise`, ``aekf``); ``mode_x``
+    (M, n), ``mode_P`` (M, n, n), ``mode_proba`` (M,) the per-mode states and mode probabilities of the IMM
+    (:class:`~models.fusion.imm.IMMFilter`); ``rejected_in_row`` the fixes gated in a row before it (the UWB
+    filter's reset count, :class:`models.uwb_pdr.UwbPdrFilter`); ``event_t_s`` the time of the event the state
+    follows."""
 
     t_s: float
     x: np.ndarray
     P: np.ndarray
+    vb_alpha: np.ndarray | None = None
+    vb_beta: np.ndarray | None = None
+    mode_x: np.ndarray | None = None
+    mode_P: np.ndarray | None = None
+    mode_proba: np.ndarray | None = None
+    event_t_s: float = math.nan
+    rejected_in_row: int = 0
 
 
 @dataclass
@@ -138,7 +152,10 @@ class FilterRun:
     per update (NaN elsewhere): ``nu`` (m, 2) innovation, ``S`` (m, 2, 2), ``K`` (m, n, 2) gain,
     ``R`` (m, 2, 2) noise used, ``nis`` (m,), ``weight`` (m,) Huber weight (1 full, 0 rejected);
     ``updated`` (m,) bool: an available fix was processed; ``accepted`` (m,) bool: it changed the state;
-    ``mode_proba`` (m, n_modes) for multiple-model runs, else None.
+    ``mode_proba`` (m, n_modes) for multiple-model runs, else None; ``mode_x`` (m, n_modes, n), ``mode_P``
+    (m, n_modes, n, n) their per-mode posteriors; ``vb_alpha``, ``vb_beta`` (m, 3, 2) the VB-AKF's noise
+    estimate after each event (None for other filters). These are what :meth:`state_before` hands a run over a
+    later piece of the stream besides x and P.
     """
 
     method: str
@@ -162,6 +179,10 @@ class FilterRun:
     available: np.ndarray
     mode_proba: np.ndarray | None = None
     info: dict = field(default_factory=dict)
+    mode_x: np.ndarray | None = None
+    mode_P: np.ndarray | None = None
+    vb_alpha: np.ndarray | None = None
+    vb_beta: np.ndarray | None = None
 
     def __len__(self) -> int:
         return int(self.t_s.shape[0])
@@ -186,7 +207,16 @@ class FilterRun:
     def state_before(self, t_s: float) -> FilterResume | None:
         """The posterior after the last event before ``t_s`` (None when no event precedes it)."""
         i = int(np.searchsorted(self.t_s, t_s, side="left")) - 1
-        return None if i < 0 else FilterResume(float(t_s), self.x[i].copy(), self.P[i].copy())
+        if i < 0:
+            return None
+
+        def row(a):
+            return None if a is None else a[i].copy()
+
+        rejected = self.info.get("rejected_in_row")
+        return FilterResume(float(t_s), self.x[i].copy(), self.P[i].copy(), row(self.vb_alpha), row(self.vb_beta),
+                            row(self.mode_x), row(self.mode_P), row(self.mode_proba), float(self.t_s[i]),
+                            0 if rejected is None else int(rejected[i]))
 
 
 def empty_records(m: int, n: int) -> dict:
@@ -333,7 +363,9 @@ class EventEKF:
         ``{"gnss", "acoustic", "bias"}`` multipliers of the policy's R and bias variance (a method's tuning);
         ``r_scale_event`` (m,): a further multiplier of each event's R (the BP parameter network's).
         ``resume``: the state of a run of this filter over an earlier piece of the stream; the events from
-        ``resume.t_s`` on continue from it (those before are filtered from the prior as usual, a warm-up).
+        ``resume.t_s`` on continue from it (those before are filtered from the prior as usual, a warm-up),
+        the VB-AKF's noise estimate included (a state without one, e.g. another filter's, restarts the
+        estimate from the policy's prior there).
         """
         from models.fusion import core
         from models.fusion.noise import FixedNoise
@@ -366,13 +398,20 @@ class EventEKF:
         rec = empty_records(m, n)
         sl2, sp2 = step_variances(stream, cfg)
         restart, x_r, P_r = _restart(stream, resume, x, P)
+        vb = spec.mode == core.R_VB
+        # the VB-AKF's α, β: recorded after every event, and resumed with x and P
+        vb_rec = (np.empty((m, 3, 2)), np.empty((m, 3, 2))) if vb else (np.empty((0, 3, 2)), np.empty((0, 3, 2)))
+        va_r, vbt_r = spec.vb_alpha.copy(), spec.vb_beta.copy()
+        if vb and restart >= 0 and resume.vb_alpha is not None and resume.vb_beta is not None:
+            va_r, vbt_r = np.asarray(resume.vb_alpha, float), np.asarray(resume.vb_beta, float)
         core.run_ekf_events(stream.kind.astype(np.int64), stream.available, stream.z_m, stream.step_length_m,
                             stream.heading_rad, phi, q, h_idx, H, x, P, sl2, sp2, OUTLIER_CODES[cfg.outlier], cfg.gate_nis, cfg.huber_k,
                             cfg.joseph, consider, spec.mode, spec.r_event, np.asarray(eps, float),
                             np.asarray(kappa, float), spec.r_table, spec.map_grid, spec.map_geo, spec.vb_alpha,
                             spec.vb_beta, spec.vb_cap, spec.vb_rho, spec.vb_n_iter, rec["x_prior"], rec["P_prior"],
                             rec["F"], rec["x"], rec["P"], rec["nu"], rec["S"], rec["K"], rec["R"], rec["nis"],
-                            rec["weight"], rec["updated"], rec["accepted"], restart, x_r, P_r)
+                            rec["weight"], rec["updated"], rec["accepted"], restart, x_r, P_r, va_r, vbt_r, *vb_rec)
         # a gated fix leaves no gain
         rec["K"][rec["updated"] & ~rec["accepted"]] = np.nan
-        return FilterRun(self.method, stream.t_s, stream.kind, x.copy(), P.copy(), available=stream.available, **rec)
+        return FilterRun(self.method, stream.t_s, stream.kind, x.copy(), P.copy(), available=stream.available,
+                         vb_alpha=vb_rec[0] if vb else None, vb_beta=vb_rec[1] if vb else None, **rec)

@@ -41,7 +41,8 @@ import numpy as np
 from numba import njit
 
 from models.fusion.core import STEP_KIND, inv2, kalman_update, mm, mmt, predict_step, time_update
-from models.fusion.ekf import (OUTLIER_CODES, EkfConfig, FilterError, FilterRun, empty_records, initial_state,
+from models.fusion.ekf import (OUTLIER_CODES, EkfConfig, FilterError, FilterResume, FilterRun, empty_records,
+                               initial_state,
                                measurement_models, step_variances, time_noise)
 from models.fusion.events import ACOUSTIC, GNSS, ClassTrack, EventStream
 
@@ -132,9 +133,13 @@ def _mode_updates(xs, Ps, z, H, R_modes, cbar, xp, Pp, outlier, gate_nis, huber_
 @njit(cache=True)
 def _imm_events(kind, avail, z, length_m, heading_rad, dt, phi, q, h_idx, H, x0, P0, sl2, sp2, outlier, gate_nis,
                 huber_k, joseph, r_table, mu0, switch_rate_hz, rows, proba_w, x_prior, P_prior, F_rec, x_post, P_post,
-                nu_rec, S_rec, K_rec, R_rec, nis_rec, w_rec, updated, accepted, mode_p):
+                nu_rec, S_rec, K_rec, R_rec, nis_rec, w_rec, updated, accepted, mode_p, mode_x, mode_P, restart,
+                xs_restart, Ps_restart, mu_restart):
     """The IMM over m events, records written in place; ``r_table`` (3, M, 2, 2) per event kind and mode,
-    ``rows`` (m,) the class-track row in force (−1: no evidence), ``proba_w`` (n_rows, M) = p^w."""
+    ``rows`` (m,) the class-track row in force (−1: no evidence), ``proba_w`` (n_rows, M) = p^w. ``mode_x``
+    (m, M, n), ``mode_P`` (m, M, n, n) record each mode's posterior. ``restart`` ≥ 0 (−1: none): before event
+    ``restart`` the modes' states and probabilities are replaced by ``xs_restart`` (M, n), ``Ps_restart``
+    (M, n, n), ``mu_restart`` (M,) (another run's, :class:`~models.fusion.ekf.FilterResume`)."""
     m = kind.shape[0]
     M = mu0.shape[0]
     n = x0.shape[0]
@@ -146,6 +151,10 @@ def _imm_events(kind, avail, z, length_m, heading_rad, dt, phi, q, h_idx, H, x0,
     mu = mu0.copy()
     off_share = 1.0 / max(M - 1, 1)
     for k in range(m):
+        if k == restart:
+            xs = xs_restart.copy()
+            Ps = Ps_restart.copy()
+            mu = mu_restart.copy()
         # 1. mixing over the elapsed time (identity when Δt = 0)
         stay = math.exp(-switch_rate_hz * dt[k])
         if stay < 1.0:
@@ -178,6 +187,8 @@ def _imm_events(kind, avail, z, length_m, heading_rad, dt, phi, q, h_idx, H, x0,
         # 5. combination
         x_post[k], P_post[k] = _moments(mu, xs, Ps)
         mode_p[k] = mu
+        mode_x[k] = xs
+        mode_P[k] = Ps
 
 
 class IMMFilter:
@@ -198,8 +209,12 @@ class IMMFilter:
         self.method = method
         self.scales = scales
 
-    def run(self, stream: EventStream, x0_en=None, classes: ClassTrack | None = None, x0=None, P0=None) -> FilterRun:
-        """Filter the stream; the result's ``mode_proba`` (m, M) holds the posterior mode probabilities."""
+    def run(self, stream: EventStream, x0_en=None, classes: ClassTrack | None = None, x0=None, P0=None,
+            resume: FilterResume | None = None) -> FilterRun:
+        """Filter the stream; the result's ``mode_proba`` (m, M) holds the posterior mode probabilities,
+        ``mode_x``, ``mode_P`` each mode's posterior. ``resume``: the state of a run of this filter over an
+        earlier piece of the stream (:meth:`FilterRun.state_before`: its modes' states and probabilities); the
+        events from ``resume.t_s`` on continue from it (those before are filtered from the prior, a warm-up)."""
         cfg = self.config or EkfConfig()
         if not hasattr(self.noise, "R_gnss_"):
             self.noise.fit()
@@ -225,11 +240,31 @@ class IMMFilter:
             rows, proba_w = np.full(m, -1, np.int64), np.ones((1, M))
         rec = empty_records(m, n)
         mode_p = np.empty((m, M))
+        mode_x, mode_P = np.empty((m, M, n)), np.empty((m, M, n, n))
+        restart, xs_r, Ps_r, mu_r = _restart_modes(stream, resume, M, n)
         sl2, sp2 = step_variances(stream, cfg)
         _imm_events(stream.kind.astype(np.int64), stream.available, stream.z_m, stream.step_length_m,
                     stream.heading_rad, stream.dt_s, phi, q, h_idx, H, x, P, sl2, sp2, OUTLIER_CODES[cfg.outlier], cfg.gate_nis, cfg.huber_k, cfg.joseph,
                     table, mu, float(self.switch_rate_hz), rows, proba_w, rec["x_prior"], rec["P_prior"], rec["F"],
                     rec["x"], rec["P"], rec["nu"], rec["S"], rec["K"], rec["R"], rec["nis"], rec["weight"],
-                    rec["updated"], rec["accepted"], mode_p)
+                    rec["updated"], rec["accepted"], mode_p, mode_x, mode_P, restart, xs_r, Ps_r, mu_r)
         return FilterRun(self.method, stream.t_s, stream.kind, x.copy(), P.copy(), available=stream.available,
-                         mode_proba=mode_p, **rec)
+                         mode_proba=mode_p, mode_x=mode_x, mode_P=mode_P, **rec)
+
+
+def _restart_modes(stream: EventStream, resume: FilterResume | None, M: int, n: int) -> tuple:
+    """(event index, modes' x (M, n), P (M, n, n), μ (M,)) the IMM restarts from: ``resume``'s at the stream's
+    first event at or after its time, or index −1 (placeholders) without one or when no event follows it."""
+    none = (-1, np.zeros((M, n)), np.zeros((M, n, n)), np.full(M, 1.0 / M))
+    if resume is None:
+        return none
+    if resume.mode_x is None or resume.mode_P is None or resume.mode_proba is None:
+        raise FilterError("cannot resume an IMM from a state without its modes (a single-model filter's)")
+    if resume.mode_x.shape != (M, n) or resume.mode_P.shape != (M, n, n) or resume.mode_proba.shape != (M,):
+        raise FilterError(f"cannot resume an IMM of {M} modes and {n} states from one of shape "
+                          f"{resume.mode_x.shape}")
+    i = int(np.searchsorted(stream.t_s, resume.t_s, side="left"))
+    if i >= len(stream):
+        return none
+    return (i, np.asarray(resume.mode_x, float), np.asarray(resume.mode_P, float),
+            np.asarray(resume.mode_proba, float))
