@@ -50,7 +50,7 @@ from simulation.acoustic.hardware import (CodecFilter, HardwareConfig, beacon_ax
                                          piston_directivity, torso_shadow, true_beacon_positions)
 from simulation.acoustic.chirp import ChirpSpec, beacon_chirp, emission_times_s
 from simulation.progress import Progress
-from simulation.rng import stream_rng
+from simulation.rng import stream_rng, stream_rngs
 from simulation.streams import StreamContext, Trajectory
 
 __all__ = ["AudioConfig", "AudioResult", "render_audio", "write_audio", "detection_range_m"]
@@ -197,7 +197,16 @@ class _Emitter:
                    + self.hardware.emission_jitter_s * self.jitter_rng.standard_normal(len(batch)))
         arr = self.arrivals(t_e, src, bids, [e[4] for e in batch])
         heard = [self.prepare(arr, j, e[1], src[j], e[4]) for j, e in enumerate(batch)]
-        segments = iter(self.renderer.render_many([got[0] for got in heard if got is not None]))
+        emissions = [got[0] for got in heard if got is not None]
+        if emissions:
+            # the tail realisation belongs to the place (1 cm grid): a static receiver hears the same tail every
+            # frame, a walker (≥ 1 m between a beacon's chirps, ≫ λ/2 ≈ 8 mm) an independent one
+            rx = np.array([got[4] for got in heard if got is not None])
+            keys = np.column_stack([[bids[j] for j, got in enumerate(heard) if got is not None],
+                                    np.rint(rx * 100.0).astype(np.int64) + 10**8])
+            rngs = stream_rngs(self.seed, ("audio", "tail"), keys)
+            emissions = [(*e[:5], rng, e[6]) for e, rng in zip(emissions, rngs)]
+        segments = iter(self.renderer.render_many(emissions))
         for j, (t_s, bid, _, beacon, spec) in enumerate(batch):
             self.n_emissions += 1
             bar.set(int(min(max(float(t_e[j]) - self.true_start, 0.0), self.trajectory.duration_s)))
@@ -256,7 +265,8 @@ class _Emitter:
 
     def prepare(self, arr: _Arrivals, j: int, bid: int, src: np.ndarray, spec: ChirpSpec):
         """(the renderer's arguments, paths, t_a, first_sample, rx, η) of emission ``j`` of the batch ``arr``, or
-        None when it cannot be heard (below the noise even in free field, no path, outside the recording)."""
+        None when it cannot be heard (below the noise even in free field, no path, outside the recording). The
+        arguments' tail generator is None: :meth:`render_batch` seeds the batch's at once."""
         trajectory, cfg = self.trajectory, self.cfg
         sl_db, noise_floor_db, fs = self.sl_db, self.noise_floor_db, cfg.fs_hz
         if not arr.heard[j]:
@@ -291,10 +301,7 @@ class _Emitter:
         cell = (int(math.floor(rx[0])), int(math.floor(rx[1])))      # clutter on a 1 m grid
         if cell not in self.clutter_cache:
             self.clutter_cache[cell] = clutter_index(self.scene, np.array([cell[0] + 0.5, cell[1] + 0.5]))
-        # the tail realisation belongs to the place (1 cm grid): a static receiver hears the same tail every
-        # frame, a walker (≥ 1 m between a beacon's chirps, ≫ λ/2 ≈ 8 mm) an independent one
-        rng = stream_rng(self.seed, "audio", "tail", bid, *(int(round(x_m * 100.0)) + 10**8 for x_m in rx))
-        return ((paths, spec, eta, first_sample, self.clutter_cache[cell], rng, self.level_scale), paths, t_a,
+        return ((paths, spec, eta, first_sample, self.clutter_cache[cell], None, self.level_scale), paths, t_a,
                 first_sample, rx, eta)
 
 
