@@ -47,7 +47,7 @@ from simulation.rng import stream_rng
 from simulation.streams import Trajectory
 
 __all__ = ["AudioConfig", "ChirpRenderer", "AmbientNoise", "detection_range_m", "CHUNK_SAMPLES", "band_response",
-           "hum_samples"]
+           "hum_samples", "add_hum", "interp_like_numpy"]
 
 CHUNK_SAMPLES = 16384
 """Ambient noise is drawn per chunk of this many samples (block sizes must be multiples of it)."""
@@ -418,6 +418,59 @@ def hum_samples(t_s: np.ndarray, dt_s: float, omega_rad_s: float, phase_rad: np.
     return out
 
 
+@njit(cache=True)
+def interp_like_numpy(x: np.ndarray, xp: np.ndarray, fp: np.ndarray) -> np.ndarray:
+    """``numpy.interp(x, xp, fp)`` for a short ascending ``xp`` (≤ 4 points, where numpy searches linearly) and
+    more x than xp, value for value as numpy's ``arr_interp`` computes it: the slopes (fp[j+1] − fp[j]) /
+    (xp[j+1] − xp[j]) first, then slope·(x − xp[j]) + fp[j] on [xp[j], xp[j+1]), fp[j] at xp[j] and at the
+    last point, the end values beyond the ends. x : (n,); xp, fp : (m,), 2 ≤ m ≤ 4. Returns (n,)."""
+    m = xp.shape[0]
+    slopes = np.empty(m - 1)
+    for j in range(m - 1):
+        slopes[j] = (fp[j + 1] - fp[j]) / (xp[j + 1] - xp[j])
+    out = np.empty(x.shape[0])
+    for i in range(x.shape[0]):
+        v = x[i]
+        if v != v:                  # NaN stays NaN
+            y = v
+        elif v > xp[m - 1]:
+            y = fp[m - 1]
+        elif v < xp[0]:
+            y = fp[0]
+        else:
+            j = 0
+            while j + 1 < m and v >= xp[j + 1]:
+                j += 1
+            if j == m - 1 or xp[j] == v:
+                y = fp[j]
+            else:
+                y = slopes[j] * (v - xp[j]) + fp[j]
+                if y != y:          # numpy tries the other end, then a flat segment's value
+                    y = slopes[j] * (v - xp[j + 1]) + fp[j + 1]
+                    if y != y and fp[j] == fp[j + 1]:
+                        y = fp[j]
+        out[i] = y
+    return out
+
+
+@njit(cache=True)
+def add_hum(out: np.ndarray, n: int, true_start_s: float, first_sample: int, fs_true: float, grid_s: np.ndarray,
+            amp_grid: np.ndarray, omega_rad_s: float, phase_rad: np.ndarray, weight: np.ndarray) -> None:
+    """Add transformer hum to device samples ``first_sample`` … +n−1 held in ``out[:n]``: the samples' true
+    times t_i = true_start + (first_sample + i)/fs_true, the unit-amplitude hum there (:func:`hum_samples`)
+    times its amplitude interpolated linearly over ``grid_s`` (≤ 4 times, ascending) through ``amp_grid``
+    (:func:`interp_like_numpy`). Compiled: numpy's form built the times, the amplitudes and the product as
+    chunk-long arrays, each a pass over memory.
+    """
+    t_s = np.empty(n)
+    for i in range(n):
+        t_s[i] = true_start_s + (first_sample + i) / fs_true
+    hum = hum_samples(t_s, 1.0 / fs_true, omega_rad_s, phase_rad, weight)
+    amp = interp_like_numpy(t_s, grid_s, amp_grid)
+    for i in range(n):
+        out[i] += hum[i] * amp[i]
+
+
 @dataclass
 class _Plan:
     """One emission ready for its FFTs: its first sample, FFT length, band bins [k0, k1), the discrete paths'
@@ -589,14 +642,11 @@ class AmbientNoise:
         pos = np.column_stack([np.interp(grid, self.traj.t_s, self.traj.east_m),
                                np.interp(grid, self.traj.t_s, self.traj.north_m)])
         if self.tanks.shape[0] and cfg.hum_db_spl_1m > -np.inf:
-            t_true = self.true_start + (b0 + np.arange(n)) / self.fs_true
             d = np.maximum(_distance_to_boxes(pos, self.tanks), 1.0)
-            amp = np.interp(t_true, grid, _db_to_digital_rms(cfg.hum_db_spl_1m, cfg) * math.sqrt(2.0) / d)
-            # 2·mains and harmonics (magnetostriction), −3 dB each
-            hum = hum_samples(t_true, 1.0 / self.fs_true, 2.0 * np.pi * 2.0 * cfg.mains_hz, self.hum_phase,
-                              _HUM_WEIGHTS)
-            hum *= amp
-            out[:n] += hum
+            # 2·mains and harmonics (magnetostriction), −3 dB each, falling 1/r from the nearest tank
+            add_hum(out, n, self.true_start, b0, self.fs_true, grid,
+                    _db_to_digital_rms(cfg.hum_db_spl_1m, cfg) * math.sqrt(2.0) / d, 2.0 * np.pi * 2.0 * cfg.mains_hz,
+                    self.hum_phase, _HUM_WEIGHTS)
         if cfg.corona_rate_hz > 0:
             t0 = self.true_start + b0 / self.fs_true
             up = float(np.interp(grid[1], self.traj.t_s, self.traj.up_m))
