@@ -43,7 +43,7 @@ from simulation.acoustic.atmosphere import absorption_db_per_m, fresnel_number, 
 from simulation.acoustic.chirp import ChirpSpec, chirp_length, chirp_waveform
 from simulation.acoustic.discharge import DischargeConfig, DischargeSources
 from simulation.site.geometry import boxes_array
-from simulation.rng import stream_rng
+from simulation.rng import stream_rng, stream_rngs
 from simulation.streams import Trajectory
 
 __all__ = ["AudioConfig", "ChirpRenderer", "AmbientNoise", "detection_range_m", "CHUNK_SAMPLES", "band_response",
@@ -628,11 +628,15 @@ class AmbientNoise:
                 site.atmosphere.temperature_c))
         # Pulses more than 10 dB below the in-band noise are not rendered (they are drawn all the same).
         self.pulse_floor_db_spl = cfg.inband_noise_db_spl - 10.0
+        self._rngs: dict[int, np.random.Generator] = {}
 
     def chunk(self, k: int, n: int) -> np.ndarray:
         """Ambient samples of chunk ``k`` (device samples k·CHUNK_SAMPLES …), length ``n`` plus click overhang."""
         cfg, fs = self.cfg, self.cfg.fs_hz
-        rng = stream_rng(self.seed, "audio", "noise", k)
+        if k not in self._rngs:     # the next chunks' generators seeded at once (they are met in order)
+            self._rngs = dict(zip(range(k, k + 64), stream_rngs(self.seed, ("audio", "noise"),
+                                                               np.arange(k, k + 64)[:, None])))
+        rng = self._rngs.pop(k)
         click_len = self.discharges.template_len
         out = np.zeros(n + click_len)
         rng.standard_normal(n, out=out[:n])          # drawn in place: the same values as into a new array
