@@ -295,23 +295,40 @@ class ChirpRenderer:
         h = band_responses(np.concatenate([p.gain for p in paths]), length, rel, keep, kind == 3, first_of, n_paths,
                            np.concatenate(alphas), k0, k1, n_fft, barrier_db)
         h_end = np.cumsum(k1 - k0)
-        plans = []
+        # diffuse tail: Poisson arrivals, Gaussian amplitudes, envelope exp(−t/decay); E[Σa²] = level·(1/d²); the
+        # draws from each emission's generator, the arithmetic over all taps of the batch at once
+        drawn, t_ms, z, scale = [], [], [], []
         for j, (e, p, tail) in enumerate(zip(emissions, paths, tails)):
-            h_j, alpha = h[h_end[j] - (k1[j] - k0[j]):h_end[j]], alphas[j]
-            # diffuse tail: Poisson arrivals, Gaussian amplitudes, envelope exp(−t/decay); E[Σa²] = level·(1/d²)
             rng = e[5]
             n_taps = rng.poisson(tail.density_per_ms * 5.0 * tail.decay_ms)
             if not n_taps:
-                plans.append(_Plan(int(start[j]), int(n_fft[j]), int(k0[j]), int(k1[j]), h_j, None, None))
                 continue
-            t_ms = rng.uniform(0.0, 5.0 * tail.decay_ms, n_taps)
+            t_ms.append(rng.uniform(0.0, 5.0 * tail.decay_ms, n_taps))
             level_db = tail.level_db + cfg.channel.tail_offset_db
             e_target = 10.0 ** (level_db / 10.0) / max(p.direct_m, 1e-3) ** 2
-            scale = math.sqrt(e_target / (tail.density_per_ms * tail.decay_ms / 2.0))
-            amp = rng.standard_normal(n_taps) * np.exp(-t_ms / tail.decay_ms) * scale
-            taps = (np.minimum((tail0[j] + t_ms * 1e-3 * fs).astype(int), n_fft[j] - 1), amp)
-            plans.append(_Plan(int(start[j]), int(n_fft[j]), int(k0[j]), int(k1[j]), h_j, taps,
-                               10.0 ** (-alpha * p.direct_m / 20.0)))
+            scale.append(math.sqrt(e_target / (tail.density_per_ms * tail.decay_ms / 2.0)))
+            z.append(rng.standard_normal(n_taps))
+            drawn.append(j)
+        if drawn:
+            n_taps = np.array([len(t) for t in t_ms])
+            of_tap = np.repeat(np.array(drawn), n_taps)
+            t_ms = np.concatenate(t_ms)
+            amp = np.concatenate(z) * np.exp(-t_ms / decay[of_tap]) * np.repeat(np.array(scale), n_taps)
+            sample = np.minimum((tail0[of_tap] + t_ms * 1e-3 * fs).astype(int), n_fft[of_tap] - 1)
+            n_band = (k1 - k0)[drawn]
+            direct = np.array([paths[j].direct_m for j in drawn])
+            tail_gain = 10.0 ** (-np.concatenate([alphas[j] for j in drawn]) * np.repeat(direct, n_band) / 20.0)
+            tap_end, gain_end = np.cumsum(n_taps).tolist(), np.cumsum(n_band).tolist()
+        plans, at_drawn = [], 0
+        for j in range(m):
+            h_j = h[h_end[j] - (k1[j] - k0[j]):h_end[j]]
+            taps = gain = None
+            if at_drawn < len(drawn) and drawn[at_drawn] == j:
+                t0, t1 = (tap_end[at_drawn - 1] if at_drawn else 0), tap_end[at_drawn]
+                g0, g1 = (gain_end[at_drawn - 1] if at_drawn else 0), gain_end[at_drawn]
+                taps, gain = (sample[t0:t1], amp[t0:t1]), tail_gain[g0:g1]
+                at_drawn += 1
+            plans.append(_Plan(int(start[j]), int(n_fft[j]), int(k0[j]), int(k1[j]), h_j, taps, gain))
         return plans
 
     def _chirp_spectra(self, keys: list[tuple[ChirpSpec, float, int]]) -> list[np.ndarray]:
