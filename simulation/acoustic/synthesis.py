@@ -415,23 +415,24 @@ def hum_samples(t_s: np.ndarray, dt_s: float, omega_rad_s: float, phase_rad: np.
     phase_rad, weight : (H,). z = e^{jy}, y = ω·t as rounded: cos y and sin y every ``_ROTATION_BLOCK``
     samples (y_b), in between e^{jy_b} rotated by the table's ω·i·dt and the rounding residual ε = (y − y_b) −
     ω·i·dt (:func:`_rotated`), so z agrees with cos y + j·sin y to a few ulp (1e-15). z^h by repeated complex
-    multiplication. Returns (n,).
+    multiplication. Two passes, each sample's operations in the same order: z of every sample, then the
+    harmonics one after another over all samples (a loop the compiler vectorises: twice as fast).
     """
     n = t_s.shape[0]
-    out = np.empty(n)
     rot_re, rot_im = np.cos(phase_rad), np.sin(phase_rad)
     theta, c, s = _rotation_table(omega_rad_s * dt_s)
+    zr, zi = np.empty(n), np.empty(n)
     for b in range(0, n, _ROTATION_BLOCK):
         y_b = omega_rad_s * t_s[b]
         ar, ai = math.cos(y_b), math.sin(y_b)
         for i in range(b, min(b + _ROTATION_BLOCK, n)):
-            zr, zi = _rotated(ar, ai, theta, c, s, i - b, (omega_rad_s * t_s[i] - y_b) - theta[i - b])
-            hr, hi = 1.0, 0.0
-            acc = 0.0
-            for h in range(weight.shape[0]):
-                hr, hi = hr * zr - hi * zi, hr * zi + hi * zr
-                acc += weight[h] * (hr * rot_im[h] + hi * rot_re[h])
-            out[i] = acc
+            zr[i], zi[i] = _rotated(ar, ai, theta, c, s, i - b, (omega_rad_s * t_s[i] - y_b) - theta[i - b])
+    hr, hi, out = np.ones(n), np.zeros(n), np.zeros(n)      # z^h, h = 0 first; the sum over h
+    for h in range(weight.shape[0]):
+        w, pr, pi = weight[h], rot_re[h], rot_im[h]
+        for i in range(n):
+            hr[i], hi[i] = hr[i] * zr[i] - hi[i] * zi[i], hr[i] * zi[i] + hi[i] * zr[i]
+            out[i] += w * (hr[i] * pi + hi[i] * pr)
     return out
 
 
