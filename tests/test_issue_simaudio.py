@@ -1,4 +1,5 @@
-"""Issue 25 item 2, the audio stream's batches: seeds mixed for a batch of emissions at once, against numpy.
+"""Issue 25 item 2, the audio stream's batches: seeds mixed for a batch of emissions at once (against numpy's
+SeedSequence), numpy's interp compiled, the fused hum, a group's taps and band, H of a batch, CSV text by blocks.
 
 The files a seeded walk writes were compared byte for byte with main's (sha256 of every file of five walks and a
 survey on five sites; the branch's report).
@@ -9,6 +10,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from simulation.acoustic.synthesis import (add_hum, band_response, band_responses, band_rows, interp_like_numpy,
+                                           scatter_taps)
+from simulation.imu.stream import csv_rows
 from simulation.rng import seed_words, stream_rng, stream_rngs
 
 
@@ -39,3 +43,89 @@ def test_stream_rngs_draw_what_stream_rng_draws():
     assert a.random() != b.random()
     with pytest.raises(ValueError, match="non-negative"):
         stream_rngs(1, ("audio", "tail"), np.array([[1, -2, 3, 4]]))
+
+
+def test_interp_like_numpy_by_hand_and_against_numpy():
+    xp, fp = np.array([0.0, 1.0, 3.0]), np.array([0.0, 10.0, 20.0])
+    x = np.array([-1.0, 0.0, 0.5, 1.0, 2.0, 3.0, 4.0, np.nan])
+    got = interp_like_numpy(x, xp, fp)
+    # by hand: left end, the grid points, 10·0.5, 10 + 5·1, the right end beyond; NaN stays NaN
+    np.testing.assert_array_equal(got[:7], [0.0, 0.0, 5.0, 10.0, 15.0, 20.0, 20.0])
+    assert np.isnan(got[7])
+    rs = np.random.default_rng(4)
+    for m in (2, 3, 4):
+        xp = np.sort(rs.uniform(10.0, 11.0, m))
+        fp = rs.uniform(1e-3, 2e-3, m)
+        x = np.concatenate([xp, rs.uniform(9.9, 11.1, 5000)])
+        assert np.array_equal(interp_like_numpy(x, xp, fp), np.interp(x, xp, fp))   # bit for bit
+
+
+def test_add_hum_is_the_hum_times_its_interpolated_amplitude_added():
+    """One line of unit weight at phase 0 is sin(ωt) (100 Hz at 400 Hz: 0, 1, 0, −1, ...), its amplitude rising
+    linearly from 1 to 3 over the chunk, added to what the samples held."""
+    fs, n, first = 400.0, 40, 80                        # samples 80 … 119: t = 0.2 … 0.4975 s
+    out = np.full(n + 3, 0.5)
+    grid = np.array([0.2, 0.2 + n / 2 / fs, 0.2 + n / fs])
+    add_hum(out, n, 0.0, first, fs, grid, np.array([1.0, 2.0, 3.0]), 2 * np.pi * 100.0, np.array([0.0]),
+            np.array([1.0]))
+    t = (first + np.arange(n)) / fs
+    want = 0.5 + np.tile([0.0, 1.0, 0.0, -1.0], n // 4) * (1.0 + 2.0 * (t - 0.2) / (n / fs))
+    np.testing.assert_allclose(out[:n], want, rtol=0, atol=1e-12)
+    np.testing.assert_array_equal(out[n:], 0.5)         # nothing beyond the chunk
+
+
+def test_scatter_taps_sums_coinciding_taps_row_by_row():
+    taps = np.zeros((2, 6))
+    scatter_taps(taps, np.array([0, 1, 0, 1, 1]), np.array([2, 5, 2, 0, 5]), np.array([1.0, 2.0, 0.25, -3.0, 4.0]))
+    np.testing.assert_array_equal(taps, [[0, 0, 1.25, 0, 0, 0], [-3.0, 0, 0, 0, 0, 6.0]])
+    # as numpy.bincount with weights gives a row alone
+    assert np.array_equal(taps[1], np.bincount([5, 0, 5], [2.0, -3.0, 4.0], 6))
+
+
+def test_band_rows_by_hand():
+    """Row 0: bins 1-2, H alone; row 1: bins 2-4, H + T·g. Columns from bin u0 = 1."""
+    k0, k1 = np.array([1, 2]), np.array([3, 5])
+    h = np.array([1 + 1j, 2.0, 3j, 4.0, -1.0])
+    tail = np.zeros((1, 6), complex)
+    tail[0, 2:5] = [1 + 2j, -2.0, 0.5j]
+    got = band_rows(1, 5, k0, k1, h, tail, np.array([-1, 0]), np.array([2.0, 0.5, 4.0]))
+    want = np.array([[1 + 1j, 2.0, 0.0, 0.0], [0.0, 3j + (2 + 4j), 4.0 - 1.0, -1.0 + 2j]])
+    np.testing.assert_array_equal(got, want)
+
+
+def test_band_responses_equal_band_response_of_each_emission():
+    """Two emissions: the first with a path beyond the excess delay (dropped) and a diffracted path (its barrier
+    loss added), the second a single path; each against band_response with the loss built as numpy builds it."""
+    gain = np.array([0.9, 0.5, 0.3, 1.0])
+    length = np.array([10.0, 12.0, 60.0, 7.0])
+    delay = np.array([64.3, 75.9, 310.0, 64.8])
+    keep = np.array([True, True, False, True])
+    diffracted = np.array([False, True, False, False])
+    k0, k1, n_fft = np.array([3, 5]), np.array([9, 8]), np.array([64, 32])
+    alpha = np.array([0.5, 0.6, 0.7, 0.8, 0.9, 1.0, 1.1, 1.2, 1.3])     # 6 bins, then 3
+    barrier = np.array([5.0, 5.5, 6.0, 6.5, 7.0, 7.5])                # path 1 on emission 0's 6 bins
+    got = band_responses(gain, length, delay, keep, diffracted, np.array([0, 3]), np.array([3, 1]), alpha, k0, k1,
+                         n_fft, barrier)
+    loss0 = alpha[None, :6] * length[:2, None]
+    loss0[1] += barrier
+    want0 = band_response(gain[:2], loss0, delay[:2], 3, 64)
+    want1 = band_response(gain[3:], alpha[None, 6:] * length[3:, None], delay[3:], 5, 32)
+    assert np.array_equal(got, np.concatenate([want0, want1]))
+    # and H itself by hand at bin 3 of emission 0: Σ g·10^(−L/20)·e^(−j2π·3·τ/64)
+    by_hand = sum(g * 10 ** (-(a * L + b) / 20) * np.exp(-2j * np.pi * 3 * tau / 64)
+                  for g, a, L, b, tau in ((0.9, 0.5, 10.0, 0.0, 64.3), (0.5, 0.5, 12.0, 5.0, 75.9)))
+    assert abs(got[0] - by_hand) < 1e-14        # the phase by rotation: a few ulp (band_response)
+
+
+def test_csv_rows_equal_numpy_savetxt():
+    import io
+    rs = np.random.default_rng(5)
+    data = rs.standard_normal((9001, 4)) * 100.0
+    data[3, 1], data[4, 2], data[5, 0], data[6, 3] = -0.0, np.nan, np.inf, -4e-9
+    fmt = ["%.2f", "%.5f", "%.6f", "%.3f"]
+    buf = io.StringIO()
+    np.savetxt(buf, data, delimiter=",", fmt=fmt)
+    assert csv_rows(data, fmt, block_rows=1000) == buf.getvalue()
+    assert csv_rows(data[:0], fmt) == ""
+    with pytest.raises(ValueError, match="4 formats"):
+        csv_rows(data[:, :3], fmt)

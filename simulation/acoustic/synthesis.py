@@ -588,10 +588,6 @@ def _rfft_rows(x: np.ndarray, n: int) -> np.ndarray:
     return sfft.rfft(x, n, axis=-1)
 
 
-def _irfft_rows(x: np.ndarray, n: int) -> np.ndarray:
-    return sfft.irfft(x, n, axis=-1)
-
-
 def _by_length(transform, rows: list[tuple[int, np.ndarray | None]]) -> list[np.ndarray | None]:
     """``transform(stack, n)`` over the rows of each length n at once; None rows stay None. Row order kept."""
     out: list[np.ndarray | None] = [None] * len(rows)
