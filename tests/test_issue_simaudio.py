@@ -129,3 +129,35 @@ def test_csv_rows_equal_numpy_savetxt():
     assert csv_rows(data[:0], fmt) == ""
     with pytest.raises(ValueError, match="4 formats"):
         csv_rows(data[:, :3], fmt)
+
+
+def test_render_many_gives_each_emission_what_it_gets_alone():
+    """Four emissions, two of one FFT length (a tail each, one diffracted path), one longer, one of another band
+    and Doppler factor: rendered together each equals its render alone, sample for sample (no row given another's
+    taps, band or chirp); nothing to render gives nothing."""
+    from features.site import Beacon, Origin, Site
+    from simulation.acoustic.channel import PathSet
+    from simulation.acoustic.chirp import ChirpSpec
+    from simulation.acoustic.synthesis import AudioConfig, ChirpRenderer
+
+    site = Site(name="t", origin=Origin(31.0, 118.0), beacons=(Beacon(1, 0.0, 0.0, 3.0, 0),))
+    renderer = ChirpRenderer(site, AudioConfig())
+
+    def paths(lengths, kinds):
+        n = len(lengths)
+        return PathSet(kind=np.array(kinds), length_m=np.array(lengths), gain=np.linspace(1.0, 0.5, n),
+                       detour_m=np.where(np.array(kinds) == 3, 0.4, 0.0), box=np.full(n, -1), direct_m=lengths[0],
+                       los=True)
+
+    a, b = ChirpSpec(17_000.0, 23_000.0, 0.010, 0.2), ChirpSpec(18_000.0, 21_000.0, 0.008, 0.3)
+    args = [(paths([12.0, 13.5], [0, 3]), a, 1.002, 4000.25, 0.3, 1, 1.0),
+            (paths([12.1, 12.9], [0, 1]), a, 1.001, 9000.75, 0.35, 2, 0.5),
+            (paths([30.0, 55.0], [0, 2]), a, 0.998, 20000.5, 0.9, 3, 1.0),
+            (paths([8.0], [0]), b, 1.0, 100.0, 0.0, 4, 2.0)]
+    together = renderer.render_many([(*e[:5], np.random.default_rng(e[5]), e[6]) for e in args])
+    assert len({len(seg) for _, seg in together}) >= 2          # more than one FFT length in the batch
+    for (start, seg), e in zip(together, args):
+        alone_start, alone = renderer.render(*e[:5], np.random.default_rng(e[5]), e[6])
+        assert start == alone_start and np.array_equal(seg, alone)
+        assert np.abs(seg).max() > 0
+    assert renderer.render_many([]) == []

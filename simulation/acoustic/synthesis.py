@@ -222,6 +222,8 @@ class ChirpRenderer:
         go as one group: their tails' taps scattered into one matrix, their spectra assembled on the band by one
         compiled pass (:func:`band_rows`), each FFT one call over the rows (pocketfft transforms each row as it
         would alone)."""
+        if not emissions:
+            return []
         plans = self._plans(emissions)
         chirps = self._chirp_spectra([(e[1], e[2], p.n_fft) for e, p in zip(emissions, plans)])
         by_n: dict[int, list[int]] = {}
