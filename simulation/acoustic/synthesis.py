@@ -199,12 +199,6 @@ class ChirpRenderer:
         self._alpha_cache: dict[int, np.ndarray] = {}
         self._chirp_cache: dict[tuple, np.ndarray] = {}
 
-    def _band(self, n_fft: int, spec: ChirpSpec, eta: float) -> tuple[int, int]:
-        df = self.fs / n_fft
-        k0 = max(0, int(math.floor((spec.f0_hz * eta - 2000.0) / df)))
-        k1 = min(n_fft // 2, int(math.ceil((spec.f1_hz * eta + 2000.0) / df)))
-        return k0, k1 + 1
-
     def _alpha(self, n_fft: int, k0: int, k1: int) -> np.ndarray:
         """ISO 9613-1 α (dB/m) on bins k0..k1 of an n_fft grid; cached per n_fft (a handful of fast lengths)."""
         if n_fft not in self._alpha_cache:
@@ -283,8 +277,10 @@ class ChirpRenderer:
         n_used = np.maximum(last, tail0 + tail_len).astype(np.int64) + _chirp_lengths(specs, fs, eta) + _POST_SAMPLES
         n_fft = np.array([_fast_len(int(n)) for n in n_used])
         df = fs / n_fft
-        k0 = np.maximum(0, np.floor((np.array([s.f0_hz for s in specs]) * eta - 2000.0) / df).astype(np.int64))
-        k1 = np.minimum(n_fft // 2, np.ceil((np.array([s.f1_hz for s in specs]) * eta + 2000.0) / df).astype(np.int64)) + 1
+        # the band, 2 kHz beyond the chirp's as heard: bins k0 … k1 − 1
+        f0, f1 = np.array([s.f0_hz for s in specs]), np.array([s.f1_hz for s in specs])
+        k0 = np.maximum(0, np.floor((f0 * eta - 2000.0) / df).astype(np.int64))
+        k1 = np.minimum(n_fft // 2, np.ceil((f1 * eta + 2000.0) / df).astype(np.int64)) + 1
         alphas = [self._alpha(int(n), int(a), int(b)) for n, a, b in zip(n_fft, k0, k1)]
         # H(f) = Σ_p g_p · 10^(−(α(f)·L_p + ΔL_p(f))/20) · exp(−j2π k τ_p / n_fft), over the kept paths
         kind = np.concatenate([p.kind for p in paths])
@@ -648,7 +644,7 @@ class AmbientNoise:
 
     def chunk(self, k: int, n: int) -> np.ndarray:
         """Ambient samples of chunk ``k`` (device samples k·CHUNK_SAMPLES …), length ``n`` plus click overhang."""
-        cfg, fs = self.cfg, self.cfg.fs_hz
+        cfg = self.cfg
         if k not in self._rngs:     # the next chunks' generators seeded at once (they are met in order)
             self._rngs = dict(zip(range(k, k + 64), stream_rngs(self.seed, ("audio", "noise"),
                                                                np.arange(k, k + 64)[:, None])))
