@@ -207,10 +207,14 @@ class _Emitter:
             rngs = stream_rngs(self.seed, ("audio", "tail"), keys)
             emissions = [(*e[:5], rng, e[6]) for e, rng in zip(emissions, rngs)]
         segments = iter(self.renderer.render_many(emissions))
+        # audio seconds done, and the device sample up to which the recorder may write, at each emission
+        done_s = np.minimum(np.maximum(t_e - self.true_start, 0.0), self.trajectory.duration_s).astype(int).tolist()
+        flush_at = ((t_e - self.true_start) * self.fs_true - _PRE_SAMPLES - 2).tolist()
         for j, (t_s, bid, _, beacon, spec) in enumerate(batch):
             self.n_emissions += 1
-            bar.set(int(min(max(float(t_e[j]) - self.true_start, 0.0), self.trajectory.duration_s)))
-            recorder.flush_until((float(t_e[j]) - self.true_start) * self.fs_true - _PRE_SAMPLES - 2)
+            bar.set(done_s[j])
+            if flush_at[j] >= recorder.next_due:
+                recorder.flush_until(flush_at[j])
             if heard[j] is None:
                 continue
             start, seg = next(segments)
@@ -387,6 +391,13 @@ class _Recorder:
         self.carry = np.zeros(0)
         self.n_clipped = 0
 
+    @property
+    def next_due(self) -> float:
+        """The device sample at which the next block ends (inf when all are written): flush_until writes
+        nothing before it."""
+        acc = self.acc
+        return acc.base + min(acc.block, self.n_total - acc.base) if acc.base < self.n_total else math.inf
+
     def flush_until(self, sample: float) -> None:
         """Write every block that ends at or before device sample ``sample``."""
         acc, n_total = self.acc, self.n_total
@@ -467,14 +478,15 @@ class _TruthWriter:
               "direct_m", "los", "rx_east_m", "rx_north_m", "rx_up_m", "first_path_db_spl", "doppler")
 
     def __init__(self, stream):
-        self._w = csv.writer(stream, lineterminator="\n")
-        self._w.writerow(self.HEADER)
+        self._stream = stream
+        csv.writer(stream, lineterminator="\n").writerow(self.HEADER)
 
     def row(self, beacon_id, slot, emit_t_s, arrival_t_s, arrival_sample, first_path, first_path_m, direct_m, los,
             rx, level_db_spl, doppler) -> None:
-        self._w.writerow([beacon_id, slot, f"{emit_t_s:.9f}", f"{arrival_t_s:.9f}", f"{arrival_sample:.3f}",
-                          first_path, f"{first_path_m:.4f}", f"{direct_m:.4f}", los, f"{rx[0]:.3f}", f"{rx[1]:.3f}",
-                          f"{rx[2]:.3f}", f"{level_db_spl:.1f}", f"{doppler:.6f}"])
+        """One row, as ``csv.writer`` writes it (no field holds a comma, quote or newline: none is quoted)."""
+        self._stream.write(f"{beacon_id},{slot},{emit_t_s:.9f},{arrival_t_s:.9f},{arrival_sample:.3f},{first_path},"
+                           f"{first_path_m:.4f},{direct_m:.4f},{los},{rx[0]:.3f},{rx[1]:.3f},{rx[2]:.3f},"
+                           f"{level_db_spl:.1f},{doppler:.6f}\n")
 
 
 def write_audio(ctx: StreamContext) -> dict:
