@@ -10,9 +10,13 @@ free-field level could not rise out of the noise are skipped. Samples are
 summed in a rolling buffer and written block by block, so memory stays
 bounded for any length of walk. Emissions go in batches of 128: their first
 look (true emission instant, effective speed of sound, arrival fixed point,
-walker position, free-field screen, tweeter and torso factors) is computed over
-the batch at once, and their FFTs of equal length run as one call; every draw
-and every sample is what one emission at a time gives (issue 25 item 2).
+walker position, free-field screen, tweeter and torso factors), their arrival,
+level and Doppler factor, the seeds of their tails' generators
+(:func:`simulation.rng.stream_rngs`) and their plans (band, FFT length, H(f),
+the tails' arithmetic) are computed over the batch at once, and the emissions of
+equal FFT length are rendered as one group; every draw and every sample is what
+one emission at a time gives (issue 25 item 2: the files of a seeded walk are
+byte-identical to those of the per-emission code).
 
 The receiver: its recording starts at ``start_s + U(−u, u)`` on the walk's time
 base (stated ``start_s``, stated uncertainty ``u``), its sample clock runs
