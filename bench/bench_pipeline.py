@@ -99,7 +99,11 @@
    each: main CPU 7.28 / 6.95 s (82.4× / 86.3×; audio 4.30 / 4.02 s), branch 6.21 / 5.81 s (96.6× / 103.3×,
    wall 102.5× in the quieter round; audio 3.16 / 2.98 s, IMU CSV 0.17 → 0.10 s, foot-IMU CSV 0.16 → 0.10 s);
    peak RSS 368-369 MiB main, 360-374 MiB branch. ``write_audio`` alone, alternated: main 4.29-4.45 s, branch
-   3.33-3.38 s (−23 %). So 100× is met on a quieter machine and missed by ~3 % under load. What is left, per
+   3.33-3.38 s (−23 %). Two more alternated rounds on the final branch: load 3.5-3.8, main 7.04 s (85.3×),
+   branch 6.41 s (93.6×); load 1.2-1.4 (quiet), main 6.70 s (89.6×; audio 3.90 s, per-stream sum 6.50 s),
+   branch 5.92 s (101.4×, wall 100.7×; audio 3.11 s, per-stream sum 5.55 s = 108×), peak RSS 369 / 360 MiB.
+   Over the five alternated pairs main's median is 7.23 s (83×), the branch's 6.21 s (97×): ratio 1.13-1.18
+   in every pair. So 100× is met on a quiet machine and missed by ~3 % under load. What is left, per
    600 s walk: the ambient's 28.8 M Gaussian draws (~0.35 s), the emissions' FFTs (13,049 emissions, 40.8 M
    samples each way, ~0.45 s), corona pulses, codec and hum (~0.15 s each), the per-emission Python left
    (paths, the tails' draws from each emission's own generator, truth rows: ~0.5 s); the UWB per-poll loop
