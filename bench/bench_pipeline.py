@@ -102,8 +102,8 @@
    3.33-3.38 s (−23 %). Two more alternated rounds on the final branch: load 3.5-3.8, main 7.04 s (85.3×),
    branch 6.41 s (93.6×); load 1.2-1.4 (quiet), main 6.70 s (89.6×; audio 3.90 s, per-stream sum 6.50 s),
    branch 5.92 s (101.4×, wall 100.7×; audio 3.11 s, per-stream sum 5.55 s = 108×), peak RSS 369 / 360 MiB.
-   Over the five alternated pairs main's median is 7.23 s (83×), the branch's 6.21 s (97×): ratio 1.13-1.18
-   in every pair. So 100× is met on a quiet machine and missed by ~3 % under load. What is left, per
+   Over the six alternated pairs (the first two a commit or two earlier) main's median is 7.14 s (84×), the
+   branch's 6.22 s (96×): ratio 1.10-1.20 pair by pair. So 100× is met on a quiet machine and missed by ~3 % under load. What is left, per
    600 s walk: the ambient's 28.8 M Gaussian draws (~0.35 s), the emissions' FFTs (13,049 emissions, 40.8 M
    samples each way, ~0.45 s), corona pulses, codec and hum (~0.15 s each), the per-emission Python left
    (paths, the tails' draws from each emission's own generator, truth rows: ~0.5 s); the UWB per-poll loop
