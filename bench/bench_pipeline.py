@@ -84,6 +84,32 @@
    and small-array numpy per emission, ~70 µs, the tail's generator, three FFTs) and the ambient's 28.8 M
    Gaussian draws; the GNSS's RTK loop (small solves, LAPACK rounding) and scipy's import (~0.5 s) as before.
 
+   Fourth round (branch ``simaudio``, 2026-12-02, load average 2.6-4.7). The audio stream's emissions are
+   handled a batch of 128 at a time: the tails' generators seeded at once (numpy's SeedSequence mixing
+   compiled, :func:`simulation.rng.stream_rngs`: 1.5 µs a generator instead of 13.5 µs, the same draws), each
+   emission's arrival, level and Doppler factor, its band, FFT length and H(f) (one compiled pass) and the tails'
+   arithmetic as arrays over the batch, and the emissions of one FFT length rendered as a group (taps scattered
+   into one matrix, the spectra assembled on the band by a compiled pass, numpy's complex product kept); the
+   hum's times, amplitude (numpy's ``interp`` compiled value for value) and sum fused, its harmonics loop
+   vectorised by the compiler (same operations per sample); the ambient chunks' generators seeded 64 at a
+   time; the IMU and foot-IMU CSV text formatted a block of rows per ``%`` (savetxt's text). Every file of
+   eight cases sha256-identical to main's (229a5f6): 600 s (site 5, seed 40), 300 s (1, 1), 300 s (9, 41), 200 s
+   (2, 5), 20 s (5, 40), 7 s (6, 8), 120 s with ``acoustic_air`` / ``acoustic_hardware`` / Doppler off (3, 7) and
+   a survey of site 4 (25 m cells, 8 s each): 168 files. This section, main and branch alternated, two rounds
+   each: main CPU 7.28 / 6.95 s (82.4× / 86.3×; audio 4.30 / 4.02 s), branch 6.21 / 5.81 s (96.6× / 103.3×,
+   wall 102.5× in the quieter round; audio 3.16 / 2.98 s, IMU CSV 0.17 → 0.10 s, foot-IMU CSV 0.16 → 0.10 s);
+   peak RSS 368-369 MiB main, 360-374 MiB branch. ``write_audio`` alone, alternated: main 4.29-4.45 s, branch
+   3.33-3.38 s (−23 %). Two more alternated rounds on the final branch: load 3.5-3.8, main 7.04 s (85.3×),
+   branch 6.41 s (93.6×); load 1.2-1.4 (quiet), main 6.70 s (89.6×; audio 3.90 s, per-stream sum 6.50 s),
+   branch 5.92 s (101.4×, wall 100.7×; audio 3.11 s, per-stream sum 5.55 s = 108×), peak RSS 369 / 360 MiB.
+   Over the six alternated pairs (the first two a commit or two earlier) main's median is 7.14 s (84×), the
+   branch's 6.22 s (96×): ratio 1.10-1.20 pair by pair. So 100× is met on a quiet machine and missed by ~3 % under load. What is left, per
+   600 s walk: the ambient's 28.8 M Gaussian draws (~0.35 s), the emissions' FFTs (13,049 emissions, 40.8 M
+   samples each way, ~0.45 s), corona pulses, codec and hum (~0.15 s each), the per-emission Python left
+   (paths, the tails' draws from each emission's own generator, truth rows: ~0.5 s); the UWB per-poll loop
+   (0.6 s: one generator's chain of draws whose order depends on each outcome; a leaner ``_measure`` measured
+   no gain and was not kept) and the GNSS's RTK loop.
+
 5. **Long walks in bounded memory** (issue 25 item 3, :func:`memory_section`, ``--memory-only``): peak RSS
    (VmHWM of a fresh process) of ``envfuse run`` (default method) on a 10-minute and an 8-hour walk, both one
    simulated 300 s walk looped (``tests/long_walk.py``), and the 8-hour run's wall time and × real time

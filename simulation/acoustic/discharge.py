@@ -161,7 +161,7 @@ class DischargeSources:
         m1 = np.ceil((w * (t1_true_s - delay) + self.phase0 - 0.5 * math.pi) / math.pi).astype(int)
         n_half = np.maximum(m1 - m0, 0)
         src = np.repeat(np.arange(len(d)), n_half)
-        m = np.concatenate([np.arange(a, b) for a, b in zip(m0.tolist(), m1.tolist())]) if len(d) else np.zeros(0)
+        m = m0[src] + (np.arange(len(src)) - (np.cumsum(n_half) - n_half)[src])  # m0 … m1−1 of each source
         counts = rng.poisson(cfg.rate_hz * 0.5 / cfg.mains_hz, size=len(src))
         total = int(counts.sum())
         if total == 0:

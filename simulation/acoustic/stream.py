@@ -10,9 +10,13 @@ free-field level could not rise out of the noise are skipped. Samples are
 summed in a rolling buffer and written block by block, so memory stays
 bounded for any length of walk. Emissions go in batches of 128: their first
 look (true emission instant, effective speed of sound, arrival fixed point,
-walker position, free-field screen, tweeter and torso factors) is computed over
-the batch at once, and their FFTs of equal length run as one call; every draw
-and every sample is what one emission at a time gives (issue 25 item 2).
+walker position, free-field screen, tweeter and torso factors), their arrival,
+level and Doppler factor, the seeds of their tails' generators
+(:func:`simulation.rng.stream_rngs`) and their plans (band, FFT length, H(f),
+the tails' arithmetic) are computed over the batch at once, and the emissions of
+equal FFT length are rendered as one group; every draw and every sample is what
+one emission at a time gives (issue 25 item 2: the files of a seeded walk are
+byte-identical to those of the per-emission code).
 
 The receiver: its recording starts at ``start_s + U(−u, u)`` on the walk's time
 base (stated ``start_s``, stated uncertainty ``u``), its sample clock runs
@@ -50,7 +54,7 @@ from simulation.acoustic.hardware import (CodecFilter, HardwareConfig, beacon_ax
                                          piston_directivity, torso_shadow, true_beacon_positions)
 from simulation.acoustic.chirp import ChirpSpec, beacon_chirp, emission_times_s
 from simulation.progress import Progress
-from simulation.rng import stream_rng
+from simulation.rng import stream_rng, stream_rngs
 from simulation.streams import StreamContext, Trajectory
 
 __all__ = ["AudioConfig", "AudioResult", "render_audio", "write_audio", "detection_range_m"]
@@ -196,12 +200,25 @@ class _Emitter:
             t_e = (t_sched + np.array([self.delays[bid] for bid in bids])
                    + self.hardware.emission_jitter_s * self.jitter_rng.standard_normal(len(batch)))
         arr = self.arrivals(t_e, src, bids, [e[4] for e in batch])
-        heard = [self.prepare(arr, j, e[1], src[j], e[4]) for j, e in enumerate(batch)]
-        segments = iter(self.renderer.render_many([got[0] for got in heard if got is not None]))
+        heard = self.prepare(arr, bids, src, [e[4] for e in batch])
+        emissions = [got[0] for got in heard if got is not None]
+        if emissions:
+            # the tail realisation belongs to the place (1 cm grid): a static receiver hears the same tail every
+            # frame, a walker (≥ 1 m between a beacon's chirps, ≫ λ/2 ≈ 8 mm) an independent one
+            rx = np.array([got[4] for got in heard if got is not None])
+            keys = np.column_stack([[bids[j] for j, got in enumerate(heard) if got is not None],
+                                    np.rint(rx * 100.0).astype(np.int64) + 10**8])
+            rngs = stream_rngs(self.seed, ("audio", "tail"), keys)
+            emissions = [(*e[:5], rng, e[6]) for e, rng in zip(emissions, rngs)]
+        segments = iter(self.renderer.render_many(emissions))
+        # audio seconds done, and the device sample up to which the recorder may write, at each emission
+        done_s = np.minimum(np.maximum(t_e - self.true_start, 0.0), self.trajectory.duration_s).astype(int).tolist()
+        flush_at = ((t_e - self.true_start) * self.fs_true - _PRE_SAMPLES - 2).tolist()
         for j, (t_s, bid, _, beacon, spec) in enumerate(batch):
             self.n_emissions += 1
-            bar.set(int(min(max(float(t_e[j]) - self.true_start, 0.0), self.trajectory.duration_s)))
-            recorder.flush_until((float(t_e[j]) - self.true_start) * self.fs_true - _PRE_SAMPLES - 2)
+            bar.set(done_s[j])
+            if flush_at[j] >= recorder.next_due:
+                recorder.flush_until(flush_at[j])
             if heard[j] is None:
                 continue
             start, seg = next(segments)
@@ -213,8 +230,10 @@ class _Emitter:
                           paths.direct_m, int(paths.los), rx,
                           _first_path_db_spl(paths, spec, self.sl_db, self.renderer), eta)
 
-    def paths_at(self, bid: int, src: np.ndarray, rx: np.ndarray) -> PathSet:
-        key = (bid, *np.round(rx, 4).tolist())
+    def paths_at(self, bid: int, src: np.ndarray, rx: np.ndarray, rx_key: list | None = None) -> PathSet:
+        """The channel's paths from beacon ``bid`` at ``src`` to ``rx``, remembered by ``rx`` rounded to 0.1 mm
+        (``rx_key``: ``np.round(rx, 4).tolist()``, when the caller has it)."""
+        key = (bid, *(np.round(rx, 4).tolist() if rx_key is None else rx_key))
         if key not in self.path_cache:
             if len(self.path_cache) > 512:
                 self.path_cache.clear()
@@ -254,48 +273,66 @@ class _Emitter:
         return _hardware_factors(src, rx, np.array([self.axes[bid] for bid in bids]), f_c, self.renderer.c,
                                  traj.heading_rad[i], self.hardware)
 
-    def prepare(self, arr: _Arrivals, j: int, bid: int, src: np.ndarray, spec: ChirpSpec):
-        """(the renderer's arguments, paths, t_a, first_sample, rx, η) of emission ``j`` of the batch ``arr``, or
-        None when it cannot be heard (below the noise even in free field, no path, outside the recording)."""
-        trajectory, cfg = self.trajectory, self.cfg
+    def prepare(self, arr: _Arrivals, bids: list[int], src: np.ndarray, specs: list[ChirpSpec]) -> list:
+        """Per emission of the batch ``arr``: (the renderer's arguments, paths, t_a, first_sample, rx, η), or None
+        when it cannot be heard (below the noise even in free field, no path, outside the recording). The
+        arguments' tail generator is None: :meth:`render_batch` seeds the batch's at once. The paths per
+        emission; arrival, level, first sample and Doppler factor as arrays over the emissions with paths (each
+        value by the operations one emission alone would take)."""
+        trajectory, cfg, c = self.trajectory, self.cfg, self.c
         sl_db, noise_floor_db, fs = self.sl_db, self.noise_floor_db, cfg.fs_hz
-        if not arr.heard[j]:
-            return None
-        t_e, c_e, rx, alpha = float(arr.t_e_s[j]), float(arr.c_m_s[j]), arr.rx[j], self.alpha_min[spec]
-        paths = self.paths_at(bid, src, rx)
-        moved = bool(len(paths) and float(arr.speed_m_s[j]) * (paths.length_m[0] - float(arr.d_m[j])) / c_e > 0.005)
-        if moved:
-            # a detour delays the arrival long enough for the walker to move: look again there
-            rx = _positions_at(trajectory, np.array([t_e + paths.length_m[0] / c_e]))[0]
-            paths = self.paths_at(bid, src, rx)
-        if len(paths) == 0:
-            return None
-        if arr.hardware is not None:
-            gain, extra = arr.hardware[0][j], arr.hardware[1][j]
+        out: list = [None] * len(bids)
+        live, live_paths, live_rx = [], [], []
+        rx_keys = np.round(arr.rx, 4).tolist()
+        for j in np.flatnonzero(arr.heard).tolist():
+            bid, spec, rx = bids[j], specs[j], arr.rx[j]
+            c_e = float(arr.c_m_s[j])
+            paths = self.paths_at(bid, src[j], rx, rx_keys[j])
+            moved = bool(len(paths) and float(arr.speed_m_s[j]) * (paths.length_m[0] - float(arr.d_m[j])) / c_e
+                         > 0.005)
             if moved:
-                (gain,), (extra,) = self.hardware_factors(arr.t_e_s[j:j + 1], src[None], rx[None], [bid], [spec])
-            if gain != 1.0 or extra != 0.0:
-                paths = PathSet(kind=paths.kind, length_m=paths.length_m + extra, gain=paths.gain * gain,
-                                detour_m=paths.detour_m, box=paths.box, direct_m=paths.direct_m, los=paths.los)
-        t_a = t_e + paths.length_m[0] / c_e
-        best_db = sl_db + 20.0 * math.log10(max(paths.gain.max(), 1e-12)) - alpha * paths.length_m[0]
+                # a detour delays the arrival long enough for the walker to move: look again there
+                rx = _positions_at(trajectory, np.array([float(arr.t_e_s[j]) + paths.length_m[0] / c_e]))[0]
+                paths = self.paths_at(bid, src[j], rx)
+            if len(paths) == 0:
+                continue
+            if arr.hardware is not None:
+                gain, extra = arr.hardware[0][j], arr.hardware[1][j]
+                if moved:
+                    (gain,), (extra,) = self.hardware_factors(arr.t_e_s[j:j + 1], src[j][None], rx[None], [bid],
+                                                              [spec])
+                if gain != 1.0 or extra != 0.0:
+                    paths = PathSet(kind=paths.kind, length_m=paths.length_m + extra, gain=paths.gain * gain,
+                                    detour_m=paths.detour_m, box=paths.box, direct_m=paths.direct_m, los=paths.los)
+            live.append(j), live_paths.append(paths), live_rx.append(rx)
+        if not live:
+            return out
+        idx = np.array(live)
+        first_m = np.array([paths.length_m[0] for paths in live_paths])
+        alpha = np.array([self.alpha_min[specs[j]] for j in live])
+        t_a = arr.t_e_s[idx] + first_m / arr.c_m_s[idx]
+        log_gain = np.array([math.log10(max(paths.gain.max(), 1e-12)) for paths in live_paths])
+        best_db = sl_db + 20.0 * log_gain - alpha * first_m
         first_sample = (t_a - self.true_start) * self.fs_true
-        if best_db < noise_floor_db - cfg.skip_margin_db or not -fs <= first_sample < self.n_total:
-            return None
-        eta = 1.0
+        rx = np.array(live_rx)
+        eta = np.ones(len(live))
         if cfg.doppler:       # moving observer: η = 1 + v·u/c, u the unit vector to the beacon
-            u = (src - rx) / max(np.linalg.norm(src - rx), 1e-6)
-            v = np.array([np.interp(t_a, trajectory.t_s, self.v_east), np.interp(t_a, trajectory.t_s, self.v_north),
-                          0.0])
-            eta = 1.0 + float(v @ u) / self.c
-        cell = (int(math.floor(rx[0])), int(math.floor(rx[1])))      # clutter on a 1 m grid
-        if cell not in self.clutter_cache:
-            self.clutter_cache[cell] = clutter_index(self.scene, np.array([cell[0] + 0.5, cell[1] + 0.5]))
-        # the tail realisation belongs to the place (1 cm grid): a static receiver hears the same tail every
-        # frame, a walker (≥ 1 m between a beacon's chirps, ≫ λ/2 ≈ 8 mm) an independent one
-        rng = stream_rng(self.seed, "audio", "tail", bid, *(int(round(x_m * 100.0)) + 10**8 for x_m in rx))
-        return ((paths, spec, eta, first_sample, self.clutter_cache[cell], rng, self.level_scale), paths, t_a,
-                first_sample, rx, eta)
+            d = src[idx] - rx
+            u = d / np.maximum(_norms(d), 1e-6)[:, None]
+            v = np.column_stack([np.interp(t_a, trajectory.t_s, self.v_east),
+                                 np.interp(t_a, trajectory.t_s, self.v_north), np.zeros(len(live))])
+            eta = 1.0 + np.vecdot(v, u) / c
+        floor_db = noise_floor_db - cfg.skip_margin_db
+        for r, j in enumerate(live):
+            if best_db[r] < floor_db or not -fs <= first_sample[r] < self.n_total:
+                continue
+            cell = (int(math.floor(rx[r, 0])), int(math.floor(rx[r, 1])))      # clutter on a 1 m grid
+            if cell not in self.clutter_cache:
+                self.clutter_cache[cell] = clutter_index(self.scene, np.array([cell[0] + 0.5, cell[1] + 0.5]))
+            paths, fs_r, eta_r = live_paths[r], float(first_sample[r]), float(eta[r])
+            out[j] = ((paths, specs[j], eta_r, fs_r, self.clutter_cache[cell], None, self.level_scale), paths,
+                      float(t_a[r]), fs_r, live_rx[r], eta_r)
+        return out
 
 
 def render_audio(site: Site, trajectory: Trajectory, seed: int, wav_path,
@@ -357,6 +394,13 @@ class _Recorder:
         self.next_chunk = 0
         self.carry = np.zeros(0)
         self.n_clipped = 0
+
+    @property
+    def next_due(self) -> float:
+        """The device sample at which the next block ends (inf when all are written): flush_until writes
+        nothing before it."""
+        acc = self.acc
+        return acc.base + min(acc.block, self.n_total - acc.base) if acc.base < self.n_total else math.inf
 
     def flush_until(self, sample: float) -> None:
         """Write every block that ends at or before device sample ``sample``."""
@@ -438,14 +482,15 @@ class _TruthWriter:
               "direct_m", "los", "rx_east_m", "rx_north_m", "rx_up_m", "first_path_db_spl", "doppler")
 
     def __init__(self, stream):
-        self._w = csv.writer(stream, lineterminator="\n")
-        self._w.writerow(self.HEADER)
+        self._stream = stream
+        csv.writer(stream, lineterminator="\n").writerow(self.HEADER)
 
     def row(self, beacon_id, slot, emit_t_s, arrival_t_s, arrival_sample, first_path, first_path_m, direct_m, los,
             rx, level_db_spl, doppler) -> None:
-        self._w.writerow([beacon_id, slot, f"{emit_t_s:.9f}", f"{arrival_t_s:.9f}", f"{arrival_sample:.3f}",
-                          first_path, f"{first_path_m:.4f}", f"{direct_m:.4f}", los, f"{rx[0]:.3f}", f"{rx[1]:.3f}",
-                          f"{rx[2]:.3f}", f"{level_db_spl:.1f}", f"{doppler:.6f}"])
+        """One row, as ``csv.writer`` writes it (no field holds a comma, quote or newline: none is quoted)."""
+        self._stream.write(f"{beacon_id},{slot},{emit_t_s:.9f},{arrival_t_s:.9f},{arrival_sample:.3f},{first_path},"
+                           f"{first_path_m:.4f},{direct_m:.4f},{los},{rx[0]:.3f},{rx[1]:.3f},{rx[2]:.3f},"
+                           f"{level_db_spl:.1f},{doppler:.6f}\n")
 
 
 def write_audio(ctx: StreamContext) -> dict:

@@ -43,11 +43,11 @@ from simulation.acoustic.atmosphere import absorption_db_per_m, fresnel_number, 
 from simulation.acoustic.chirp import ChirpSpec, chirp_length, chirp_waveform
 from simulation.acoustic.discharge import DischargeConfig, DischargeSources
 from simulation.site.geometry import boxes_array
-from simulation.rng import stream_rng
+from simulation.rng import stream_rng, stream_rngs
 from simulation.streams import Trajectory
 
 __all__ = ["AudioConfig", "ChirpRenderer", "AmbientNoise", "detection_range_m", "CHUNK_SAMPLES", "band_response",
-           "hum_samples"]
+           "hum_samples", "add_hum", "interp_like_numpy"]
 
 CHUNK_SAMPLES = 16384
 """Ambient noise is drawn per chunk of this many samples (block sizes must be multiples of it)."""
@@ -199,12 +199,6 @@ class ChirpRenderer:
         self._alpha_cache: dict[int, np.ndarray] = {}
         self._chirp_cache: dict[tuple, np.ndarray] = {}
 
-    def _band(self, n_fft: int, spec: ChirpSpec, eta: float) -> tuple[int, int]:
-        df = self.fs / n_fft
-        k0 = max(0, int(math.floor((spec.f0_hz * eta - 2000.0) / df)))
-        k1 = min(n_fft // 2, int(math.ceil((spec.f1_hz * eta + 2000.0) / df)))
-        return k0, k1 + 1
-
     def _alpha(self, n_fft: int, k0: int, k1: int) -> np.ndarray:
         """ISO 9613-1 α (dB/m) on bins k0..k1 of an n_fft grid; cached per n_fft (a handful of fast lengths)."""
         if n_fft not in self._alpha_cache:
@@ -218,57 +212,122 @@ class ChirpRenderer:
 
     def render_many(self, emissions: list[tuple]) -> list[tuple[int, np.ndarray]]:
         """(start sample, segment) of each emission given as (paths, spec, η, first_sample, clutter, rng,
-        level_scale), sample for sample what :meth:`render` gives it alone: the FFTs of equal length run as one
-        call over the rows (pocketfft transforms each row as it would alone)."""
-        plans = [self._plan(*e[:6]) for e in emissions]
-        tails = _by_length(_rfft_rows, [(p.n_fft, p.taps) for p in plans])
+        level_scale), sample for sample what :meth:`render` gives it alone. The emissions of equal FFT length
+        go as one group: their tails' taps scattered into one matrix, their spectra assembled on the band by one
+        compiled pass (:func:`band_rows`), each FFT one call over the rows (pocketfft transforms each row as it
+        would alone)."""
+        if not emissions:
+            return []
+        plans = self._plans(emissions)
         chirps = self._chirp_spectra([(e[1], e[2], p.n_fft) for e, p in zip(emissions, plans)])
-        spectra = []
-        for p, tail, chirp in zip(plans, tails, chirps):
-            h = p.h if tail is None else p.h + tail[p.k0:p.k1] * p.tail_gain
-            spectrum = np.zeros(p.n_fft // 2 + 1, complex)
-            spectrum[p.k0:p.k1] = chirp[p.k0:p.k1] * h
-            spectra.append((p.n_fft, spectrum))
-        segments = _by_length(_irfft_rows, spectra)
-        return [(p.start, seg * e[6]) for p, seg, e in zip(plans, segments, emissions)]
+        by_n: dict[int, list[int]] = {}
+        for i, p in enumerate(plans):
+            by_n.setdefault(p.n_fft, []).append(i)
+        out: list = [None] * len(plans)
+        for n_fft, idx in by_n.items():
+            group = [plans[i] for i in idx]
+            k0 = np.array([p.k0 for p in group])
+            k1 = np.array([p.k1 for p in group])
+            with_tail = [r for r, p in enumerate(group) if p.taps is not None]
+            tail_row = np.full(len(group), -1)
+            tail_row[with_tail] = np.arange(len(with_tail))
+            taps = np.zeros((len(with_tail), n_fft))
+            if with_tail:
+                tails = [group[r] for r in with_tail]
+                scatter_taps(taps, np.repeat(np.arange(len(tails)), [len(p.taps[0]) for p in tails]),
+                             np.concatenate([p.taps[0] for p in tails]), np.concatenate([p.taps[1] for p in tails]))
+                tail_spectra = sfft.rfft(taps, n_fft, axis=-1)
+                tail_gain = np.concatenate([p.tail_gain for p in tails])
+            else:
+                tail_spectra, tail_gain = np.zeros((0, n_fft // 2 + 1), complex), np.zeros(0)
+            # Y = S_η · (H + T·10^(−α·d/20)) over the bins any row's band covers (zero elsewhere)
+            u0, u1 = int(k0.min()), int(k1.max())
+            x = band_rows(u0, u1, k0, k1, np.concatenate([p.h for p in group]), tail_spectra, tail_row, tail_gain)
+            y = np.zeros((len(group), n_fft // 2 + 1), complex)
+            np.multiply(np.stack([chirps[i][u0:u1] for i in idx]), x, out=y[:, u0:u1])
+            segments = sfft.irfft(y, n_fft, axis=-1)
+            for r, i in enumerate(idx):
+                out[i] = (group[r].start, segments[r] * emissions[i][6])
+        return out
 
-    def _plan(self, paths: PathSet, spec: ChirpSpec, eta: float, first_sample: float, clutter: float,
-              rng: np.random.Generator) -> "_Plan":
-        """Everything of one emission but its FFTs: the discrete paths' H(f) on the band, the tail's taps."""
-        fs, c = self.fs, self.c
-        start = int(math.floor(first_sample)) - _PRE_SAMPLES
-        rel = first_sample - start + (paths.length_m - paths.length_m[0]) / c * fs   # (p,) samples
-        keep = rel - rel[0] <= self.cfg.max_excess_delay_s * fs
-        tail = tail_model(clutter)
-        tail_len = int(5.0 * tail.decay_ms * 1e-3 * fs)
-        tail0 = rel[0] + tail.onset_ms * 1e-3 * fs
-        n_used = int(max(rel[keep].max(), tail0 + tail_len)) + chirp_length(spec, fs, eta) + _POST_SAMPLES
-        n_fft = _fast_len(n_used)
-        k0, k1 = self._band(n_fft, spec, eta)
-        alpha = self._alpha(n_fft, k0, k1)
-        # H(f) = Σ_p g_p · 10^(−(α(f)·L_p + ΔL_p(f))/20) · exp(−j2π k τ_p / n_fft)
-        if keep.all():      # most emissions: every path within the excess delay (often one path)
-            g, length, detour, kind, delay = paths.gain, paths.length_m, paths.detour_m, paths.kind, rel
-        else:
-            g, length, detour, kind, delay = (paths.gain[keep], paths.length_m[keep], paths.detour_m[keep],
-                                              paths.kind[keep], rel[keep])
-        loss_db = alpha[None, :] * length[:, None]
-        diff = kind == 3
-        if diff.any():
-            f = np.arange(k0, k1) * fs / n_fft
-            loss_db[diff] += maekawa_loss_db(fresnel_number(detour[diff, None], f[None, :], c))
-        h = band_response(g, loss_db, delay, k0, n_fft)
-        # diffuse tail: Poisson arrivals, Gaussian amplitudes, envelope exp(−t/decay); E[Σa²] = level·(1/d²)
-        n_taps = rng.poisson(tail.density_per_ms * 5.0 * tail.decay_ms)
-        if not n_taps:
-            return _Plan(start, n_fft, k0, k1, h, None, None)
-        t_ms = rng.uniform(0.0, 5.0 * tail.decay_ms, n_taps)
-        level_db = tail.level_db + self.cfg.channel.tail_offset_db
-        e_target = 10.0 ** (level_db / 10.0) / max(paths.direct_m, 1e-3) ** 2
-        scale = math.sqrt(e_target / (tail.density_per_ms * tail.decay_ms / 2.0))
-        amp = rng.standard_normal(n_taps) * np.exp(-t_ms / tail.decay_ms) * scale
-        taps = np.bincount(np.minimum((tail0 + t_ms * 1e-3 * fs).astype(int), n_fft - 1), amp, n_fft)
-        return _Plan(start, n_fft, k0, k1, h, taps, 10.0 ** (-alpha * paths.direct_m / 20.0))
+    def _plans(self, emissions: list[tuple]) -> list["_Plan"]:
+        """Everything of each emission (paths, spec, η, first_sample, clutter, rng, ...) but its FFTs: the
+        discrete paths' H(f) on the band, the tail's taps. The emissions' scalars and paths as arrays over the
+        batch (each value by the operations one emission alone would take), H by one compiled pass
+        (:func:`band_responses`), the tails' draws from each emission's own generator in its order."""
+        fs, c, cfg = self.fs, self.c, self.cfg
+        m = len(emissions)
+        paths = [e[0] for e in emissions]
+        specs = [e[1] for e in emissions]
+        eta = np.array([e[2] for e in emissions], float)
+        first = np.array([e[3] for e in emissions], float)
+        tails = [tail_model(e[4]) for e in emissions]
+        onset, decay = np.array([t.onset_ms for t in tails]), np.array([t.decay_ms for t in tails])
+        n_paths = np.array([len(p) for p in paths])
+        at = np.repeat(np.arange(m), n_paths)                        # the emission of each path
+        first_of = np.cumsum(n_paths) - n_paths                      # each emission's first path
+        length = np.concatenate([p.length_m for p in paths])
+        start = np.floor(first).astype(np.int64) - _PRE_SAMPLES
+        rel = (first - start)[at] + (length - length[first_of][at]) / c * fs      # (Σp,) samples
+        rel0 = rel[first_of]
+        keep = rel - rel0[at] <= cfg.max_excess_delay_s * fs
+        tail_len = (5.0 * decay * 1e-3 * fs).astype(np.int64)
+        tail0 = rel0 + onset * 1e-3 * fs
+        last = np.maximum.reduceat(np.where(keep, rel, -np.inf), first_of)
+        n_used = np.maximum(last, tail0 + tail_len).astype(np.int64) + _chirp_lengths(specs, fs, eta) + _POST_SAMPLES
+        n_fft = np.array([_fast_len(int(n)) for n in n_used])
+        df = fs / n_fft
+        # the band, 2 kHz beyond the chirp's as heard: bins k0 … k1 − 1
+        f0, f1 = np.array([s.f0_hz for s in specs]), np.array([s.f1_hz for s in specs])
+        k0 = np.maximum(0, np.floor((f0 * eta - 2000.0) / df).astype(np.int64))
+        k1 = np.minimum(n_fft // 2, np.ceil((f1 * eta + 2000.0) / df).astype(np.int64)) + 1
+        alphas = [self._alpha(int(n), int(a), int(b)) for n, a, b in zip(n_fft, k0, k1)]
+        # H(f) = Σ_p g_p · 10^(−(α(f)·L_p + ΔL_p(f))/20) · exp(−j2π k τ_p / n_fft), over the kept paths
+        kind = np.concatenate([p.kind for p in paths])
+        diffracted = np.flatnonzero(keep & (kind == 3))
+        detour = np.concatenate([p.detour_m for p in paths])
+        # ΔL of each kept diffracted path on its emission's band, one after another
+        fresnel = [fresnel_number(detour[i], np.arange(k0[at[i]], k1[at[i]]) * fs / n_fft[at[i]], c)
+                   for i in diffracted.tolist()]
+        barrier_db = maekawa_loss_db(np.concatenate(fresnel)) if fresnel else np.zeros(0)
+        h = band_responses(np.concatenate([p.gain for p in paths]), length, rel, keep, kind == 3, first_of, n_paths,
+                           np.concatenate(alphas), k0, k1, n_fft, barrier_db)
+        h_end = np.cumsum(k1 - k0)
+        # diffuse tail: Poisson arrivals, Gaussian amplitudes, envelope exp(−t/decay); E[Σa²] = level·(1/d²); the
+        # draws from each emission's generator, the arithmetic over all taps of the batch at once
+        drawn, t_ms, z, scale = [], [], [], []
+        for j, (e, p, tail) in enumerate(zip(emissions, paths, tails)):
+            rng = e[5]
+            n_taps = rng.poisson(tail.density_per_ms * 5.0 * tail.decay_ms)
+            if not n_taps:
+                continue
+            t_ms.append(rng.uniform(0.0, 5.0 * tail.decay_ms, n_taps))
+            level_db = tail.level_db + cfg.channel.tail_offset_db
+            e_target = 10.0 ** (level_db / 10.0) / max(p.direct_m, 1e-3) ** 2
+            scale.append(math.sqrt(e_target / (tail.density_per_ms * tail.decay_ms / 2.0)))
+            z.append(rng.standard_normal(n_taps))
+            drawn.append(j)
+        if drawn:
+            n_taps = np.array([len(t) for t in t_ms])
+            of_tap = np.repeat(np.array(drawn), n_taps)
+            t_ms = np.concatenate(t_ms)
+            amp = np.concatenate(z) * np.exp(-t_ms / decay[of_tap]) * np.repeat(np.array(scale), n_taps)
+            sample = np.minimum((tail0[of_tap] + t_ms * 1e-3 * fs).astype(int), n_fft[of_tap] - 1)
+            n_band = (k1 - k0)[drawn]
+            direct = np.array([paths[j].direct_m for j in drawn])
+            tail_gain = 10.0 ** (-np.concatenate([alphas[j] for j in drawn]) * np.repeat(direct, n_band) / 20.0)
+            tap_end, gain_end = np.cumsum(n_taps).tolist(), np.cumsum(n_band).tolist()
+        plans, at_drawn = [], 0
+        for j in range(m):
+            h_j = h[h_end[j] - (k1[j] - k0[j]):h_end[j]]
+            taps = gain = None
+            if at_drawn < len(drawn) and drawn[at_drawn] == j:
+                t0, t1 = (tap_end[at_drawn - 1] if at_drawn else 0), tap_end[at_drawn]
+                g0, g1 = (gain_end[at_drawn - 1] if at_drawn else 0), gain_end[at_drawn]
+                taps, gain = (sample[t0:t1], amp[t0:t1]), tail_gain[g0:g1]
+                at_drawn += 1
+            plans.append(_Plan(int(start[j]), int(n_fft[j]), int(k0[j]), int(k1[j]), h_j, taps, gain))
+        return plans
 
     def _chirp_spectra(self, keys: list[tuple[ChirpSpec, float, int]]) -> list[np.ndarray]:
         """rfft of the chirp heard with Doppler factor η, zero-padded to n_fft, for each (spec, η, n_fft); the
@@ -354,38 +413,167 @@ def hum_samples(t_s: np.ndarray, dt_s: float, omega_rad_s: float, phase_rad: np.
     phase_rad, weight : (H,). z = e^{jy}, y = ω·t as rounded: cos y and sin y every ``_ROTATION_BLOCK``
     samples (y_b), in between e^{jy_b} rotated by the table's ω·i·dt and the rounding residual ε = (y − y_b) −
     ω·i·dt (:func:`_rotated`), so z agrees with cos y + j·sin y to a few ulp (1e-15). z^h by repeated complex
-    multiplication. Returns (n,).
+    multiplication. Two passes, each sample's operations in the same order: z of every sample, then the
+    harmonics one after another over all samples (a loop the compiler vectorises: twice as fast).
     """
     n = t_s.shape[0]
-    out = np.empty(n)
     rot_re, rot_im = np.cos(phase_rad), np.sin(phase_rad)
     theta, c, s = _rotation_table(omega_rad_s * dt_s)
+    zr, zi = np.empty(n), np.empty(n)
     for b in range(0, n, _ROTATION_BLOCK):
         y_b = omega_rad_s * t_s[b]
         ar, ai = math.cos(y_b), math.sin(y_b)
         for i in range(b, min(b + _ROTATION_BLOCK, n)):
-            zr, zi = _rotated(ar, ai, theta, c, s, i - b, (omega_rad_s * t_s[i] - y_b) - theta[i - b])
-            hr, hi = 1.0, 0.0
-            acc = 0.0
-            for h in range(weight.shape[0]):
-                hr, hi = hr * zr - hi * zi, hr * zi + hi * zr
-                acc += weight[h] * (hr * rot_im[h] + hi * rot_re[h])
-            out[i] = acc
+            zr[i], zi[i] = _rotated(ar, ai, theta, c, s, i - b, (omega_rad_s * t_s[i] - y_b) - theta[i - b])
+    hr, hi, out = np.ones(n), np.zeros(n), np.zeros(n)      # z^h, h = 0 first; the sum over h
+    for h in range(weight.shape[0]):
+        w, pr, pi = weight[h], rot_re[h], rot_im[h]
+        for i in range(n):
+            hr[i], hi[i] = hr[i] * zr[i] - hi[i] * zi[i], hr[i] * zi[i] + hi[i] * zr[i]
+            out[i] += w * (hr[i] * pi + hi[i] * pr)
     return out
+
+
+@njit(cache=True)
+def interp_like_numpy(x: np.ndarray, xp: np.ndarray, fp: np.ndarray) -> np.ndarray:
+    """``numpy.interp(x, xp, fp)`` for a short ascending ``xp`` (≤ 4 points, where numpy searches linearly) and
+    more x than xp, value for value as numpy's ``arr_interp`` computes it: the slopes (fp[j+1] − fp[j]) /
+    (xp[j+1] − xp[j]) first, then slope·(x − xp[j]) + fp[j] on [xp[j], xp[j+1]), fp[j] at xp[j] and at the
+    last point, the end values beyond the ends. x : (n,); xp, fp : (m,), 2 ≤ m ≤ 4. Returns (n,)."""
+    m = xp.shape[0]
+    slopes = np.empty(m - 1)
+    for j in range(m - 1):
+        slopes[j] = (fp[j + 1] - fp[j]) / (xp[j + 1] - xp[j])
+    out = np.empty(x.shape[0])
+    for i in range(x.shape[0]):
+        v = x[i]
+        if v != v:                  # NaN stays NaN
+            y = v
+        elif v > xp[m - 1]:
+            y = fp[m - 1]
+        elif v < xp[0]:
+            y = fp[0]
+        else:
+            j = 0
+            while j + 1 < m and v >= xp[j + 1]:
+                j += 1
+            if j == m - 1 or xp[j] == v:
+                y = fp[j]
+            else:
+                y = slopes[j] * (v - xp[j]) + fp[j]
+                if y != y:          # numpy tries the other end, then a flat segment's value
+                    y = slopes[j] * (v - xp[j + 1]) + fp[j + 1]
+                    if y != y and fp[j] == fp[j + 1]:
+                        y = fp[j]
+        out[i] = y
+    return out
+
+
+@njit(cache=True)
+def add_hum(out: np.ndarray, n: int, true_start_s: float, first_sample: int, fs_true: float, grid_s: np.ndarray,
+            amp_grid: np.ndarray, omega_rad_s: float, phase_rad: np.ndarray, weight: np.ndarray) -> None:
+    """Add transformer hum to device samples ``first_sample`` … +n−1 held in ``out[:n]``: the samples' true
+    times t_i = true_start + (first_sample + i)/fs_true, the unit-amplitude hum there (:func:`hum_samples`)
+    times its amplitude interpolated linearly over ``grid_s`` (≤ 4 times, ascending) through ``amp_grid``
+    (:func:`interp_like_numpy`). Compiled: numpy's form built the times, the amplitudes and the product as
+    chunk-long arrays, each a pass over memory.
+    """
+    t_s = np.empty(n)
+    for i in range(n):
+        t_s[i] = true_start_s + (first_sample + i) / fs_true
+    hum = hum_samples(t_s, 1.0 / fs_true, omega_rad_s, phase_rad, weight)
+    amp = interp_like_numpy(t_s, grid_s, amp_grid)
+    for i in range(n):
+        out[i] += hum[i] * amp[i]
 
 
 @dataclass
 class _Plan:
     """One emission ready for its FFTs: its first sample, FFT length, band bins [k0, k1), the discrete paths'
-    H on the band, the tail's taps (n_fft,) and their absorption on the band (None without taps)."""
+    H on the band, the tail's taps (sample indices, amplitudes; each (n_taps,)) and their absorption on the band
+    (None without taps)."""
 
     start: int
     n_fft: int
     k0: int
     k1: int
     h: np.ndarray
-    taps: np.ndarray | None
+    taps: tuple[np.ndarray, np.ndarray] | None
     tail_gain: np.ndarray | None
+
+
+@njit(cache=True)
+def scatter_taps(taps: np.ndarray, row: np.ndarray, sample: np.ndarray, amplitude: np.ndarray) -> None:
+    """taps[row[i], sample[i]] += amplitude[i] for every i in order (``numpy.bincount`` with weights, row by
+    row: coinciding taps summed in the order drawn). taps : (m, n); row, sample, amplitude : (n_taps,)."""
+    for i in range(row.shape[0]):
+        taps[row[i], sample[i]] += amplitude[i]
+
+
+@njit(cache=True)
+def band_rows(u0: int, u1: int, k0: np.ndarray, k1: np.ndarray, h: np.ndarray, tail_spectra: np.ndarray,
+              tail_row: np.ndarray, tail_gain: np.ndarray) -> np.ndarray:
+    """The channel of each emission of a group on bins u0 … u1−1 (every row's band within them), zero off a
+    row's band: row r, bins k0[r] … k1[r]−1, is H_r[k] + T_r[k]·g_r[k] (the discrete paths' response, the
+    tail's spectrum times its absorption), or H_r alone when ``tail_row[r]`` is −1.
+
+    k0, k1, tail_row : (m,); h : the rows' H concatenated, Σ(k1 − k0); tail_spectra : (m_t, n_fft/2 + 1)
+    complex; tail_gain : the tails' g concatenated, one band per row with a tail. Returns (m, u1 − u0) complex,
+    column j being bin u0 + j. T·g as numpy multiplies a complex by a real (the real promoted:
+    (T_re·g − T_im·0) + j(T_re·0 + T_im·g)).
+    """
+    out = np.zeros((k0.shape[0], u1 - u0), np.complex128)
+    at_h = at_g = 0
+    for r in range(k0.shape[0]):
+        t = tail_row[r]
+        for k in range(k0[r], k1[r]):
+            v = h[at_h]
+            if t >= 0:
+                tr, ti, g = tail_spectra[t, k].real, tail_spectra[t, k].imag, tail_gain[at_g]
+                v += complex(tr * g - ti * 0.0, tr * 0.0 + ti * g)
+                at_g += 1
+            out[r, k - u0] = v
+            at_h += 1
+    return out
+
+
+@njit(cache=True)
+def band_responses(gain: np.ndarray, length_m: np.ndarray, delay_samples: np.ndarray, keep: np.ndarray,
+                   diffracted: np.ndarray, first_path: np.ndarray, n_paths: np.ndarray, alpha_db_m: np.ndarray,
+                   k0: np.ndarray, k1: np.ndarray, n_fft: np.ndarray, barrier_db: np.ndarray) -> np.ndarray:
+    """:func:`band_response` of each emission of a batch over its kept paths, the loss of path p on bin k
+    L_p[k] = α[k]·L_p (+ ΔL_p[k] for a diffracted path, Maekawa's barrier loss).
+
+    Paths of all emissions concatenated (gain, length_m, delay_samples, keep, diffracted : (Σp,)), emission e's
+    from ``first_path[e]``, ``n_paths[e]`` of them; alpha_db_m : α on each emission's band k0[e] … k1[e]−1,
+    concatenated; barrier_db : ΔL of each kept diffracted path on its emission's band, in path order,
+    concatenated. Returns the emissions' H concatenated, Σ(k1 − k0) complex.
+    """
+    out = np.empty(np.sum(k1 - k0), np.complex128)
+    at_h = at_barrier = 0
+    for e in range(k0.shape[0]):
+        n_bins = k1[e] - k0[e]
+        rows = np.flatnonzero(keep[first_path[e]:first_path[e] + n_paths[e]]) + first_path[e]
+        loss_db = np.empty((rows.shape[0], n_bins))
+        for r in range(rows.shape[0]):
+            p = rows[r]
+            for k in range(n_bins):
+                loss_db[r, k] = alpha_db_m[at_h + k] * length_m[p]
+            if diffracted[p]:
+                for k in range(n_bins):
+                    loss_db[r, k] += barrier_db[at_barrier + k]
+                at_barrier += n_bins
+        out[at_h:at_h + n_bins] = band_response(gain[rows], loss_db, delay_samples[rows], k0[e], n_fft[e])
+        at_h += n_bins
+    return out
+
+
+def _chirp_lengths(specs: list[ChirpSpec], fs_hz: float, eta: np.ndarray) -> np.ndarray:
+    """:func:`~simulation.acoustic.chirp.chirp_length` of each (spec, η): ceil(round(T·fs)/η), (n,) integers."""
+    if not np.all((eta > 0.9) & (eta < 1.1)):
+        raise ValueError(f"time_scale must lie near 1 (|v| << c), got {eta[~((eta > 0.9) & (eta < 1.1))][0]}")
+    n_ref = np.array([chirp_length(spec, fs_hz) for spec in specs])
+    return np.ceil(n_ref / eta).astype(np.int64)
 
 
 @functools.lru_cache(maxsize=4096)
@@ -396,10 +584,6 @@ def _fast_len(n: int) -> int:
 
 def _rfft_rows(x: np.ndarray, n: int) -> np.ndarray:
     return sfft.rfft(x, n, axis=-1)
-
-
-def _irfft_rows(x: np.ndarray, n: int) -> np.ndarray:
-    return sfft.irfft(x, n, axis=-1)
 
 
 def _by_length(transform, rows: list[tuple[int, np.ndarray | None]]) -> list[np.ndarray | None]:
@@ -456,11 +640,15 @@ class AmbientNoise:
                 site.atmosphere.temperature_c))
         # Pulses more than 10 dB below the in-band noise are not rendered (they are drawn all the same).
         self.pulse_floor_db_spl = cfg.inband_noise_db_spl - 10.0
+        self._rngs: dict[int, np.random.Generator] = {}
 
     def chunk(self, k: int, n: int) -> np.ndarray:
         """Ambient samples of chunk ``k`` (device samples k·CHUNK_SAMPLES …), length ``n`` plus click overhang."""
-        cfg, fs = self.cfg, self.cfg.fs_hz
-        rng = stream_rng(self.seed, "audio", "noise", k)
+        cfg = self.cfg
+        if k not in self._rngs:     # the next chunks' generators seeded at once (they are met in order)
+            self._rngs = dict(zip(range(k, k + 64), stream_rngs(self.seed, ("audio", "noise"),
+                                                               np.arange(k, k + 64)[:, None])))
+        rng = self._rngs.pop(k)
         click_len = self.discharges.template_len
         out = np.zeros(n + click_len)
         rng.standard_normal(n, out=out[:n])          # drawn in place: the same values as into a new array
@@ -470,14 +658,11 @@ class AmbientNoise:
         pos = np.column_stack([np.interp(grid, self.traj.t_s, self.traj.east_m),
                                np.interp(grid, self.traj.t_s, self.traj.north_m)])
         if self.tanks.shape[0] and cfg.hum_db_spl_1m > -np.inf:
-            t_true = self.true_start + (b0 + np.arange(n)) / self.fs_true
             d = np.maximum(_distance_to_boxes(pos, self.tanks), 1.0)
-            amp = np.interp(t_true, grid, _db_to_digital_rms(cfg.hum_db_spl_1m, cfg) * math.sqrt(2.0) / d)
-            # 2·mains and harmonics (magnetostriction), −3 dB each
-            hum = hum_samples(t_true, 1.0 / self.fs_true, 2.0 * np.pi * 2.0 * cfg.mains_hz, self.hum_phase,
-                              _HUM_WEIGHTS)
-            hum *= amp
-            out[:n] += hum
+            # 2·mains and harmonics (magnetostriction), −3 dB each, falling 1/r from the nearest tank
+            add_hum(out, n, self.true_start, b0, self.fs_true, grid,
+                    _db_to_digital_rms(cfg.hum_db_spl_1m, cfg) * math.sqrt(2.0) / d, 2.0 * np.pi * 2.0 * cfg.mains_hz,
+                    self.hum_phase, _HUM_WEIGHTS)
         if cfg.corona_rate_hz > 0:
             t0 = self.true_start + b0 / self.fs_true
             up = float(np.interp(grid[1], self.traj.t_s, self.traj.up_m))

@@ -41,7 +41,6 @@ declination_deg`` (the waist IMU's stated declination).
 
 from __future__ import annotations
 
-import io
 import math
 from dataclasses import dataclass
 
@@ -55,7 +54,7 @@ from features.fileio import atomic_write_text
 from features.site import Site
 
 from simulation.imu.magnetic import disturbance_ned_ut, earth_field_ned_ut, field_elements, site_steel_dipoles
-from simulation.imu.stream import IMU_RATE_HZ, stated_declination_error_deg
+from simulation.imu.stream import IMU_RATE_HZ, csv_rows, stated_declination_error_deg
 from simulation.imu.walker import ImuSamples, person_gait, place_steps
 from simulation.rng import stream_rng
 from simulation.streams import StreamContext, Trajectory
@@ -332,11 +331,9 @@ def simulate_foot_imu(ctx: StreamContext, rate_hz: float = FOOT_RATE_HZ, fg: Foo
 
 def foot_csv_text(imu: ImuSamples) -> str:
     """``t_s,ax,ay,az,gx,gy,gz,mx,my,mz`` rows (m/s², rad/s, µT), the columns of ``imu.csv``."""
-    buf = io.StringIO()
-    buf.write("t_s,ax,ay,az,gx,gy,gz,mx,my,mz\n")
-    np.savetxt(buf, np.column_stack([imu.t_s, imu.acc_m_s2, imu.gyro_rad_s, imu.mag_ut]), delimiter=",",
-               fmt=["%.4f"] + ["%.5f"] * 3 + ["%.6f"] * 3 + ["%.3f"] * 3)
-    return buf.getvalue()
+    return "t_s,ax,ay,az,gx,gy,gz,mx,my,mz\n" + csv_rows(
+        np.column_stack([imu.t_s, imu.acc_m_s2, imu.gyro_rad_s, imu.mag_ut]),
+        ["%.4f"] + ["%.5f"] * 3 + ["%.6f"] * 3 + ["%.3f"] * 3)
 
 
 def write_imu_foot(ctx: StreamContext) -> dict:

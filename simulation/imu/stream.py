@@ -19,7 +19,6 @@ simulator.
 
 from __future__ import annotations
 
-import io
 import math
 
 import numpy as np
@@ -59,22 +58,30 @@ def simulate_imu(ctx: StreamContext, errors: SensorErrors = SensorErrors()) -> t
     return imu, steps
 
 
+def csv_rows(data: np.ndarray, fmt: list[str], block_rows: int = 4096) -> str:
+    """The rows of ``data`` (n, k) as ``numpy.savetxt(buf, data, delimiter=",", fmt=fmt)`` writes them (each
+    value %-formatted, a newline after each row), formatted a block of rows per ``%`` operation instead of one
+    Python call per row; a block's text and its values as Python floats are what memory holds at once."""
+    if data.ndim != 2 or data.shape[1] != len(fmt):
+        raise ValueError(f"csv_rows: {len(fmt)} formats for data of shape {data.shape}")
+    line = ",".join(fmt) + "\n"
+    out = []
+    for i in range(0, data.shape[0], block_rows):
+        block = data[i:i + block_rows]
+        out.append((line * block.shape[0]) % tuple(block.ravel().tolist()))
+    return "".join(out)
+
+
 def imu_csv_text(imu: ImuSamples) -> str:
     """``t_s,ax,ay,az,gx,gy,gz,mx,my,mz`` rows (m/s², rad/s, µT)."""
-    buf = io.StringIO()
-    buf.write("t_s,ax,ay,az,gx,gy,gz,mx,my,mz\n")
     data = np.column_stack([imu.t_s, imu.acc_m_s2, imu.gyro_rad_s, imu.mag_ut])
-    np.savetxt(buf, data, delimiter=",", fmt=["%.2f"] + ["%.5f"] * 3 + ["%.6f"] * 3 + ["%.3f"] * 3)
-    return buf.getvalue()
+    return "t_s,ax,ay,az,gx,gy,gz,mx,my,mz\n" + csv_rows(data, ["%.2f"] + ["%.5f"] * 3 + ["%.6f"] * 3 + ["%.3f"] * 3)
 
 
 def truth_steps_csv_text(steps: StepTruth) -> str:
     """``t_s,step_length_m,heading_rad`` rows (heel strikes; heading of the step's displacement)."""
-    buf = io.StringIO()
-    buf.write("t_s,step_length_m,heading_rad\n")
-    np.savetxt(buf, np.column_stack([steps.t_s, steps.step_length_m, steps.heading_rad]), delimiter=",",
-               fmt=["%.3f", "%.4f", "%.5f"])
-    return buf.getvalue()
+    return "t_s,step_length_m,heading_rad\n" + csv_rows(
+        np.column_stack([steps.t_s, steps.step_length_m, steps.heading_rad]), ["%.3f", "%.4f", "%.5f"])
 
 
 def write_imu(ctx: StreamContext) -> dict:
