@@ -31,9 +31,13 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Iterable, Iterator, Literal, NamedTuple
 
+import numpy as np
+
 from features.errors import ConfigError, NmeaError
+from features.gnss.assemble import COUNTER_NAMES, SYSTEM_CODES, assemble_spans
 from features.gnss.tokens import (  # noqa: F401 - ReadStats and parse_sentence are re-exported
     TIMED_TYPES, USED_TYPES, ReadStats, fields_from_buffer, fields_from_lines, parse_sentence, pynmea2_fields,
+    sentence_spans,
 )
 from features.gnss.quirks import (
     FIX_QUALITY_FROM_MODE, gsa_fields, gsv_fields, parse_ddmmyy, parse_latlon, parse_time_of_day,
@@ -512,7 +516,50 @@ def epochs_from_bytes(buf: bytes, stats: ReadStats | None = None, *, require_che
     Gives exactly what :func:`iter_epochs` gives on the same bytes split into lines.
     """
     stats = ReadStats() if stats is None else stats
-    return list(_assemble(fields_from_buffer(bytes(buf), stats, require_checksum), stats, resync_after))
+    if not isinstance(resync_after, int) or resync_after < 1:
+        raise ConfigError(f"resync_after must be a positive integer, got {resync_after!r}")
+    buf = bytes(buf)
+    starts, ends = sentence_spans(buf, stats, require_checksum)
+    data = np.frombuffer(buf, dtype=np.uint8)
+    status, counts, epoch_f, epoch_i, sat_i, sat_f = assemble_spans(data, starts, ends, resync_after)
+    if status != 0:  # a field only Python's int()/float() can decide (assemble's docstring): the reference
+        text = buf.decode("latin-1")
+        return list(_assemble((text[a:b].split(",") for a, b in zip(starts.tolist(), ends.tolist())), stats,
+                              resync_after))
+    for name, value in zip(COUNTER_NAMES, counts.tolist()):
+        setattr(stats, name, getattr(stats, name) + value)
+    return _epochs_from_columns(epoch_f, epoch_i, sat_i, sat_f)
+
+
+def _nones(values: np.ndarray, missing: np.ndarray) -> list:
+    """``values`` as a list of Python scalars, None where ``missing``."""
+    out = values.astype(object)
+    out[missing] = None
+    return out.tolist()
+
+
+def _epochs_from_columns(epoch_f: np.ndarray, epoch_i: np.ndarray, sat_i: np.ndarray, sat_f: np.ndarray
+                         ) -> list[Epoch]:
+    """The epochs :func:`features.gnss.assemble.assemble_spans` wrote as columns, as :func:`_finish` builds them."""
+    system = np.array(SYSTEM_CODES, dtype=object)[sat_i[:, 0]].tolist()
+    signal = _nones(sat_i[:, 2], sat_i[:, 2] < 0)
+    el, az, cn0 = (_nones(sat_f[:, j], np.isnan(sat_f[:, j])) for j in range(3))
+    satellites = list(map(Satellite._make, zip(system, sat_i[:, 1].tolist(), signal, el, az, cn0,
+                                               (sat_i[:, 3] != 0).tolist())))
+    f = [_nones(epoch_f[:, j], np.isnan(epoch_f[:, j])) for j in range(epoch_f.shape[1])]
+    t_s, tod = epoch_f[:, 0].tolist(), epoch_f[:, 1].tolist()
+    date_ord, quality, sky, has_gst, first, end = (epoch_i[:, j].tolist() for j in (0, 1, 4, 5, 6, 7))
+    n_used, mode = (_nones(epoch_i[:, j], epoch_i[:, j] < 0) for j in (2, 3))
+    epochs = []
+    fromordinal, utc, seconds = dt.datetime.fromordinal, dt.timezone.utc, dt.timedelta
+    for i in range(len(t_s)):
+        when = None
+        if date_ord[i] >= 0:
+            when = fromordinal(date_ord[i]).replace(tzinfo=utc) + seconds(seconds=tod[i])
+        fix = Fix(f[2][i], f[3][i], f[4][i], f[5][i], quality[i], n_used[i], f[6][i], f[7][i], f[8][i], mode[i])
+        gst = _tuple_new(Gst, (f[9][i], f[10][i], f[11][i], f[12][i])) if has_gst[i] else None
+        epochs.append(Epoch(t_s[i], when, tod[i], fix, tuple(satellites[first[i]:end[i]]), bool(sky[i]), gst))
+    return epochs
 
 
 def read_nmea(path: str | os.PathLike, *, parser: Literal["fast", "pynmea2"] = "fast",
