@@ -17,18 +17,64 @@ no receiver writes those, fuzzed files do, and a file read twice that way costs 
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 from numba import njit
 
-__all__ = ["assemble_spans", "SYSTEM_CODES", "COUNTER_NAMES"]
+from features.gnss.quirks import SYSTEMS, primary_signal_rank
 
-SYSTEM_CODES = ("GPS", "SBAS", "GLONASS", "Galileo", "BeiDou", "QZSS", "NavIC")
-"""System names by code (the order of :data:`features.gnss.quirks.SYSTEMS`)."""
+__all__ = ["assemble_spans", "EpochColumns", "EPOCH_F", "EPOCH_I", "SYSTEM_CODES", "COUNTER_NAMES", "primary_rows"]
+
+SYSTEM_CODES = SYSTEMS
+"""System names by code: their order in :data:`features.gnss.quirks.SYSTEMS` (GPS 0, SBAS 1, GLONASS 2, ...)."""
 _GPS, _SBAS, _GLONASS, _GALILEO, _BEIDOU, _QZSS, _NAVIC = range(7)
 
 COUNTER_NAMES = ("used_sentences", "malformed", "no_time", "time_jumps", "time_resets", "gsv_incomplete",
                  "gsv_signal_continued", "gsv_before_time")
 """The :class:`~features.gnss.tokens.ReadStats` counters the assembly fills, in the order of its ``counts``."""
+
+
+
+@dataclass(frozen=True)
+class EpochColumns:
+    """A file's epochs as arrays (what :func:`assemble_spans` writes; :func:`features.gnss.nmea.epoch_columns`
+    turns :class:`~features.gnss.nmea.Epoch` objects into the same), None written NaN or -1.
+
+    ``epoch_f`` : float array of shape (n_epochs, 13), columns :data:`EPOCH_F`;
+    ``epoch_i`` : int64 array of shape (n_epochs, 8), columns :data:`EPOCH_I` (the satellites of epoch k are
+    rows ``sat_first[k]:sat_end[k]``);
+    ``sat_i`` : int64 array of shape (n_sats, 4): system code (:data:`SYSTEM_CODES`), number, signal id (-1
+    none), used; ``sat_f`` : float array of shape (n_sats, 3): elevation and azimuth (deg), C/N0 (dB-Hz).
+    """
+
+    epoch_f: np.ndarray
+    epoch_i: np.ndarray
+    sat_i: np.ndarray
+    sat_f: np.ndarray
+
+    def __len__(self) -> int:
+        return self.epoch_f.shape[0]
+
+    def col(self, name: str) -> np.ndarray:
+        """One epoch column by name (:data:`EPOCH_F`, :data:`EPOCH_I`)."""
+        if name in EPOCH_F:
+            return self.epoch_f[:, EPOCH_F.index(name)]
+        return self.epoch_i[:, EPOCH_I.index(name)]
+
+    def with_t_s(self, t_s: np.ndarray) -> "EpochColumns":
+        """The same epochs with ``t_s`` replaced."""
+        epoch_f = self.epoch_f.copy()
+        epoch_f[:, 0] = t_s
+        return EpochColumns(epoch_f, self.epoch_i, self.sat_i, self.sat_f)
+
+
+EPOCH_F = ("t_s", "time_of_day_s", "lat_deg", "lon_deg", "alt_m", "geoid_sep_m", "hdop", "pdop", "vdop",
+           "gst_rms_m", "gst_sigma_lat_m", "gst_sigma_lon_m", "gst_sigma_alt_m")
+"""Float columns of :class:`EpochColumns` (NaN for None)."""
+
+EPOCH_I = ("date_ordinal", "quality", "n_used", "mode", "sky_reported", "has_gst", "sat_first", "sat_end")
+"""Integer columns of :class:`EpochColumns` (-1 for None; the date as ``datetime.date.toordinal``)."""
 
 _OK, _EMPTY, _INVALID, _FALLBACK = 0, 1, 2, 3
 """Outcome of reading a field: a value; an empty field; one Python would refuse (the sentence is
@@ -844,3 +890,55 @@ def assemble_spans(data, starts, ends, resync_after):
     counts[0], counts[1], counts[2], counts[3] = used_sentences, malformed, no_time, time_jumps
     counts[4], counts[5], counts[6], counts[7] = time_resets, gsv_incomplete, gsv_continued, gsv_before
     return _OK, counts, epoch_f[:n_epochs], epoch_i[:n_epochs], sat_i[:n_sats], sat_f[:n_sats]
+
+
+# ----------------------------------------------------------------------------------------------------------
+# Primary signals (nmea.Epoch.primary_satellites)
+# ----------------------------------------------------------------------------------------------------------
+
+def _rank_table() -> np.ndarray:
+    """:func:`features.gnss.quirks.primary_signal_rank` as a table [system code, signal id + 1] (-1: never)."""
+    table = np.full((len(SYSTEM_CODES), 17), -1, dtype=np.int64)
+    for code, system in enumerate(SYSTEM_CODES):
+        for signal in range(-1, 16):
+            rank = primary_signal_rank(system, None if signal < 0 else signal)
+            table[code, signal + 1] = -1 if rank is None else rank
+    return table
+
+
+@njit(cache=True)
+def _primary(sat_i, first, end, ranks):
+    """Rows of each epoch's primary satellites, in :attr:`~features.gnss.nmea.Epoch.primary_satellites`' order:
+    per (system, number), the entry of lowest rank (the first of equal ones), placed where the satellite's
+    first ranked entry was. Returns (rows, counts per epoch)."""
+    rows = np.empty(sat_i.shape[0], dtype=np.int64)
+    held = np.empty(sat_i.shape[0], dtype=np.int64)
+    counts = np.zeros(first.size, dtype=np.int64)
+    n = 0
+    for k in range(first.size):
+        start = n
+        for q in range(first[k], end[k]):
+            signal = sat_i[q, 2]
+            rank = ranks[sat_i[q, 0], signal + 1] if -1 <= signal <= 15 else -1
+            if rank < 0:
+                continue
+            p = -1
+            for j in range(start, n):
+                if sat_i[rows[j], 0] == sat_i[q, 0] and sat_i[rows[j], 1] == sat_i[q, 1]:
+                    p = j
+                    break
+            if p < 0:
+                rows[n], held[n] = q, rank
+                n += 1
+            elif rank < held[p]:
+                rows[p], held[p] = q, rank
+        counts[k] = n - start
+    return rows[:n], counts
+
+
+_RANKS = _rank_table()
+
+
+def primary_rows(columns: EpochColumns) -> tuple[np.ndarray, np.ndarray]:
+    """(rows of ``columns.sat_i`` on their primary signal, their count per epoch); see :func:`_primary`."""
+    return _primary(columns.sat_i, columns.col("sat_first"), columns.col("sat_end"), _RANKS)
