@@ -6,11 +6,9 @@ kept, written as one loop so that a whole file costs what numba's machine code c
 sentence. Field interpretation follows :mod:`features.gnss.quirks` rule for rule (same checks, same order of
 arithmetic, so the same floats).
 
-Numbers are read only in their canonical NMEA spelling: digits, one optional sign (decimals), one optional
-decimal point, at most 15 significant digits and 22 decimals. Such a decimal ``M / 10^k`` with ``M < 2^53``
-and ``k ≤ 22`` is one correctly rounded division of two exact doubles (Clinger 1990, "How to read floating
-point numbers accurately", the "fast path"), hence bit-identical to Python's correctly rounded ``float()``.
-Any other spelling Python would still accept (``1e3``, ``nan``, ``1_0``, surrounding blanks, ``+5`` as an
+Numbers are read only in their canonical NMEA spelling (:mod:`features.numtext`: digits, one optional sign for
+decimals, one optional decimal point, at most 15 significant digits and 22 decimals; Clinger's fast path,
+bit-identical to Python's correctly rounded ``float()``). Any other spelling Python would still accept (``1e3``, ``nan``, ``1_0``, surrounding blanks, ``+5`` as an
 integer, more digits) makes the whole file go to the reference assembler instead (``status`` ``_FALLBACK``):
 no receiver writes those, fuzzed files do, and a file read twice that way costs only time.
 """
@@ -23,6 +21,7 @@ import numpy as np
 from numba import njit
 
 from features.gnss.quirks import SYSTEMS, primary_signal_rank
+from features.numtext import EMPTY, FALLBACK, INVALID, OK, read_float, read_int
 
 __all__ = ["assemble_spans", "EpochColumns", "EPOCH_F", "EPOCH_I", "SYSTEM_CODES", "COUNTER_NAMES", "primary_rows"]
 
@@ -76,16 +75,11 @@ EPOCH_F = ("t_s", "time_of_day_s", "lat_deg", "lon_deg", "alt_m", "geoid_sep_m",
 EPOCH_I = ("date_ordinal", "quality", "n_used", "mode", "sky_reported", "has_gst", "sat_first", "sat_end")
 """Integer columns of :class:`EpochColumns` (-1 for None; the date as ``datetime.date.toordinal``)."""
 
-_OK, _EMPTY, _INVALID, _FALLBACK = 0, 1, 2, 3
-"""Outcome of reading a field: a value; an empty field; one Python would refuse (the sentence is
-malformed); one only Python can decide (the file goes to the reference assembler)."""
+_OK, _EMPTY, _INVALID, _FALLBACK = OK, EMPTY, INVALID, FALLBACK
+"""Outcome of reading a field (:mod:`features.numtext`): a value; an empty field; one Python would refuse
+(the sentence is malformed); one only Python can decide (the file goes to the reference assembler)."""
 
-_POW10 = np.array([1e0, 1e1, 1e2, 1e3, 1e4, 1e5, 1e6, 1e7, 1e8, 1e9, 1e10, 1e11, 1e12, 1e13, 1e14, 1e15, 1e16,
-                   1e17, 1e18, 1e19, 1e20, 1e21, 1e22])
-"""10^k, k = 0..22: every one an exact double."""
-
-_INT_CAP = 10 ** 17
-"""Integers with more than 17 digits read as this (out of every range checked: the same refusal as Python's)."""
+_int, _float = read_int, read_float
 
 _MAX_DATE_ORDINAL = 3652059
 """``datetime.date.max.toordinal()`` (9999-12-31)."""
@@ -110,59 +104,6 @@ _GGA, _RMC, _GNS, _GLL, _ZDA, _GST, _GBS, _GSA, _GSV = (_kind_code(k) for k in
 # ----------------------------------------------------------------------------------------------------------
 # Fields (quirks.py's readers, on bytes [a, b) of the file)
 # ----------------------------------------------------------------------------------------------------------
-
-@njit(cache=True)
-def _int(data, a, b):
-    """``int(text)`` for ASCII digits: (status, value)."""
-    if a >= b:
-        return _EMPTY, 0
-    value = 0
-    for i in range(a, b):
-        c = data[i]
-        if c < 48 or c > 57:
-            return _FALLBACK, 0
-        if value < _INT_CAP:
-            value = value * 10 + (c - 48)
-    return _OK, min(value, _INT_CAP)
-
-
-@njit(cache=True)
-def _float(data, a, b):
-    """``float(text)`` for a canonical decimal (module docstring): (status, value)."""
-    if a >= b:
-        return _EMPTY, 0.0
-    i = a
-    negative = False
-    if data[i] == 45 or data[i] == 43:  # '-' '+'
-        negative = data[i] == 45
-        i += 1
-    mantissa = 0
-    significant = 0
-    decimals = 0
-    digits = 0
-    dot = False
-    for j in range(i, b):
-        c = data[j]
-        if 48 <= c <= 57:
-            digits += 1
-            if dot:
-                decimals += 1
-            if mantissa > 0 or c != 48:
-                significant += 1
-            mantissa = mantissa * 10 + (c - 48) if significant <= 18 else mantissa
-        elif c == 46 and not dot:
-            dot = True
-        elif c == 46 or c == 45 or c == 43:
-            return _INVALID, 0.0  # a second '.' or a sign inside: Python refuses it too
-        else:
-            return _FALLBACK, 0.0
-    if digits == 0:
-        return _INVALID, 0.0
-    if significant > 15 or decimals > 22:
-        return _FALLBACK, 0.0
-    value = mantissa / _POW10[decimals]
-    return _OK, -value if negative else value
-
 
 @njit(cache=True)
 def _opt_num(data, a, b):
