@@ -291,8 +291,7 @@ def repair_imu(t_s, acc_m_s2, gyro_rad_s=None, mag_ut=None, config: RepairConfig
     ok[ok] &= ~_time_outliers(t[ok], config.max_gap_s)
     report.n_bad_time += int((~ok).sum())
     t = t[ok]
-    if not ok.all():  # (each channel is this function's own copy already: no copy when nothing is dropped)
-        chans = {k: v[ok] for k, v in chans.items()}
+    chans = {k: v[ok] for k, v in chans.items()}
     if len(t) < 2:
         raise ImuError(f"fewer than 2 samples with a valid time ({len(t)})")
     if np.any(np.diff(t) < 0):
@@ -303,8 +302,7 @@ def repair_imu(t_s, acc_m_s2, gyro_rad_s=None, mag_ut=None, config: RepairConfig
     keep = np.r_[True, np.diff(t) > 0]
     report.n_duplicate_t += int((~keep).sum())
     t = t[keep]
-    if not keep.all():
-        chans = {k: v[keep] for k, v in chans.items()}
+    chans = {k: v[keep] for k, v in chans.items()}
     if len(t) < 2:
         raise ImuError("fewer than 2 distinct sample times")
     # clipped samples become NaN first, so they are interpolated like missing ones (never filtered as data)
