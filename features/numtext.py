@@ -26,16 +26,31 @@ _INT_CAP = 10 ** 17
 """Integers with more than 17 digits read as this (outside every range a caller checks)."""
 
 
+def _byte_table(chars: str) -> np.ndarray:
+    table = np.zeros(256, dtype=np.bool_)
+    for ch in chars:
+        table[ord(ch)] = True
+    return table
+
+
+_WHITE = "".join(chr(i) for i in range(256) if chr(i).isspace())
+_MAY_INT = _byte_table("+-_" + _WHITE)
+"""Bytes other than digits that ``int()`` may accept (sign, underscore, blanks): only Python decides."""
+_MAY_FLOAT = _byte_table("+-_." + _WHITE + "eEnNaAiIfFtTyY")
+"""Bytes other than digits that ``float()`` may accept (exponent, ``nan``, ``inf``, ``infinity``, ...)."""
+
+
 @njit(cache=True)
 def read_int(data, a, b):
-    """``int(data[a:b])`` for ASCII digits: (status, value); a sign or anything else is FALLBACK."""
+    """``int(data[a:b])`` for ASCII digits: (status, value); a sign, underscore or blank is FALLBACK, any
+    other byte INVALID (``int()`` refuses a letter, a point, ...)."""
     if a >= b:
         return EMPTY, 0
     value = 0
     for i in range(a, b):
         c = data[i]
         if c < 48 or c > 57:
-            return FALLBACK, 0
+            return (FALLBACK if _MAY_INT[c] else INVALID), 0
         if value < _INT_CAP:
             value = value * 10 + (c - 48)
     return OK, min(value, _INT_CAP)
@@ -43,7 +58,8 @@ def read_int(data, a, b):
 
 @njit(cache=True)
 def read_float(data, a, b):
-    """``float(data[a:b])`` for a canonical decimal (module docstring): (status, value)."""
+    """``float(data[a:b])`` for a canonical decimal (module docstring): (status, value); INVALID for text
+    ``float()`` refuses for sure (a second point, a sign inside, a byte no float spelling holds)."""
     if a >= b:
         return EMPTY, 0.0
     i = a
@@ -70,7 +86,7 @@ def read_float(data, a, b):
         elif c == 46 or c == 45 or c == 43:
             return INVALID, 0.0  # a second '.' or a sign inside: Python refuses it too
         else:
-            return FALLBACK, 0.0
+            return (FALLBACK if _MAY_FLOAT[c] else INVALID), 0.0
     if digits == 0:
         return INVALID, 0.0
     if significant > 15 or decimals > 22:

@@ -451,7 +451,7 @@ def assemble_spans(data, starts, ends, resync_after):
                     if s1 == _FALLBACK or s2 == _FALLBACK or s3 == _FALLBACK:
                         return _FALLBACK, counts, epoch_f[:0], epoch_i[:0], sat_i[:0], sat_f[:0]
                     date = _ordinal(year, month, day_)
-                    bad = date < 0 or year < 1980
+                    bad = s1 != _OK or s2 != _OK or s3 != _OK or date < 0 or year < 1980
                 if not bad and (kind == _GGA or kind == _GNS):
                     if nd < 9:
                         bad = True
@@ -576,7 +576,7 @@ def assemble_spans(data, starts, ends, resync_after):
                     s3, n_in_view = _int(data, field_a[3], field_b[3])
                     if s1 == _FALLBACK or s2 == _FALLBACK or s3 == _FALLBACK:
                         return _FALLBACK, counts, epoch_f[:0], epoch_i[:0], sat_i[:0], sat_f[:0]
-                    if s1 != _OK or s2 != _OK or not 1 <= msg_num <= n_msgs or n_msgs > 99 \
+                    if s1 != _OK or s2 != _OK or s3 == _INVALID or not 1 <= msg_num <= n_msgs or n_msgs > 99 \
                             or not n_in_view <= 999:
                         malformed += 1
                         continue
@@ -607,7 +607,7 @@ def assemble_spans(data, starts, ends, resync_after):
                         s_cn, cn0 = _float(data, field_a[f0 + 3], field_b[f0 + 3]) if g + 3 < n_body else (_EMPTY, 0.0)
                         if st == _FALLBACK or s_el == _FALLBACK or s_az == _FALLBACK or s_cn == _FALLBACK:
                             return _FALLBACK, counts, epoch_f[:0], epoch_i[:0], sat_i[:0], sat_f[:0]
-                        if s_el == _INVALID or s_az == _INVALID or s_cn == _INVALID \
+                        if st == _INVALID or s_el == _INVALID or s_az == _INVALID or s_cn == _INVALID \
                                 or (s_el == _OK and not -90.0 <= el <= 90.0) \
                                 or (s_az == _OK and not 0.0 <= az <= 360.0) \
                                 or (s_cn == _OK and not 0.0 <= cn0 <= 99.0):
@@ -639,7 +639,7 @@ def assemble_spans(data, starts, ends, resync_after):
                     st, mode = _int(data, field_a[2], field_b[2])
                     if st == _FALLBACK:
                         return _FALLBACK, counts, epoch_f[:0], epoch_i[:0], sat_i[:0], sat_f[:0]
-                    if st == _OK and not 1 <= mode <= 3:
+                    if st == _INVALID or (st == _OK and not 1 <= mode <= 3):
                         bad = True
                     gsa_mode_new = mode if st == _OK else -1
                     for f in range(p0, p1):
@@ -647,6 +647,9 @@ def assemble_spans(data, starts, ends, resync_after):
                             st, number = _int(data, field_a[f], field_b[f])
                             if st == _FALLBACK:
                                 return _FALLBACK, counts, epoch_f[:0], epoch_i[:0], sat_i[:0], sat_f[:0]
+                            if st == _INVALID:
+                                bad = True
+                                continue
                             sys_, prn = _satellite_id(t_sys, number, system)
                             if sys_ >= 0:
                                 gsa_sys[n_gsa], gsa_prn[n_gsa] = sys_, prn
