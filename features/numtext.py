@@ -6,6 +6,10 @@ correctly rounded division of two exact doubles (Clinger 1990, "How to read floa
 accurately", PLDI '90, the "fast path"), hence the double that Python's correctly rounded ``float()`` (and
 numpy's text reader, which calls it) gives. Every other spelling either one would accept (``1e3``, ``nan``,
 ``1_0``, blanks, more digits) is reported, so that the caller hands the text to them instead.
+
+Numba's on-disk cache of a compiled caller in another module (:mod:`features.gnss.assemble`) is keyed on
+that module's file only: after a change here, delete its cache (``features/gnss/__pycache__/assemble.*.nb?``)
+or it keeps the old readers inlined.
 """
 
 from __future__ import annotations
@@ -21,10 +25,6 @@ OK, EMPTY, INVALID, FALLBACK = 0, 1, 2, 3
 _POW10 = np.array([1e0, 1e1, 1e2, 1e3, 1e4, 1e5, 1e6, 1e7, 1e8, 1e9, 1e10, 1e11, 1e12, 1e13, 1e14, 1e15, 1e16,
                    1e17, 1e18, 1e19, 1e20, 1e21, 1e22])
 """10^k, k = 0..22: every one an exact double."""
-
-_INT_CAP = 10 ** 17
-"""Integers with more than 17 digits read as this (outside every range a caller checks)."""
-
 
 def _byte_table(chars: str) -> np.ndarray:
     table = np.zeros(256, dtype=np.bool_)
@@ -42,18 +42,19 @@ _MAY_FLOAT = _byte_table("+-_." + _WHITE + "eEnNaAiIfFtTyY")
 
 @njit(cache=True)
 def read_int(data, a, b):
-    """``int(data[a:b])`` for ASCII digits: (status, value); a sign, underscore or blank is FALLBACK, any
-    other byte INVALID (``int()`` refuses a letter, a point, ...)."""
+    """``int(data[a:b])`` for up to 17 ASCII digits: (status, value); more digits, a sign, an underscore or a
+    blank is FALLBACK, any other byte INVALID (``int()`` refuses a letter, a point, ...)."""
     if a >= b:
         return EMPTY, 0
+    if b - a > 17:
+        return FALLBACK, 0  # beyond int64, and beyond 4,300 digits int() refuses (sys.get_int_max_str_digits)
     value = 0
     for i in range(a, b):
         c = data[i]
         if c < 48 or c > 57:
             return (FALLBACK if _MAY_INT[c] else INVALID), 0
-        if value < _INT_CAP:
-            value = value * 10 + (c - 48)
-    return OK, min(value, _INT_CAP)
+        value = value * 10 + (c - 48)
+    return OK, value
 
 
 @njit(cache=True)

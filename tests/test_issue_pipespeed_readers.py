@@ -109,7 +109,8 @@ def test_integers_take_digits_only():
         with pytest.raises(ValueError):
             int(text)
     assert read_int(_text(""), 0, 0)[0] == EMPTY
-    assert read_int(_text("9" * 40), 0, 40) == (OK, 10 ** 17)  # outside every range checked, as in Python
+    assert read_int(_text("9" * 17), 0, 17) == (OK, 10 ** 17 - 1)
+    assert read_int(_text("9" * 18), 0, 18)[0] == FALLBACK   # Python's int() refuses > 4,300 digits: it decides
 
 
 # ---------------------------------------------------------------- NMEA: compiled assembly vs the Python assembler

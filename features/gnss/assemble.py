@@ -8,9 +8,11 @@ arithmetic, so the same floats).
 
 Numbers are read only in their canonical NMEA spelling (:mod:`features.numtext`: digits, one optional sign for
 decimals, one optional decimal point, at most 15 significant digits and 22 decimals; Clinger's fast path,
-bit-identical to Python's correctly rounded ``float()``). Any other spelling Python would still accept (``1e3``, ``nan``, ``1_0``, surrounding blanks, ``+5`` as an
-integer, more digits) makes the whole file go to the reference assembler instead (``status`` ``_FALLBACK``):
-no receiver writes those, fuzzed files do, and a file read twice that way costs only time.
+bit-identical to Python's correctly rounded ``float()``). Any other spelling Python would still accept
+(``1e3``, ``nan``, ``1_0``, surrounding blanks, ``+5`` or ``-1`` as an integer, more digits) makes the whole
+file go to the reference assembler instead (``status`` ``_FALLBACK``): none of the 18 shared receiver logs
+holds one, fuzzed files do (about half of the mutated batches of the tests), and such a file costs what it
+cost before.
 """
 
 from __future__ import annotations
@@ -274,6 +276,217 @@ def _nmea_system(sid):
     return -1
 
 
+@njit(cache=True)
+def _worse(a, b):
+    """The outcome of two fields read together: FALLBACK over INVALID over the rest (OK)."""
+    if a == _FALLBACK or b == _FALLBACK:
+        return _FALLBACK
+    if a == _INVALID or b == _INVALID:
+        return _INVALID
+    return _OK
+
+
+@njit(cache=True)
+def _read_date(data, fa, fb, nd, kind):
+    """The date of an RMC (``ddmmyy``, data field 8) or a ZDA (day, month, year: data fields 1-3) as a date
+    ordinal, -1 when the sentence states none: (status, ordinal). ``data[fa[k]:fb[k]]`` is field k (0 the
+    address), ``nd`` the number of data fields. (nmea._assemble, quirks.parse_ddmmyy)"""
+    if kind == _RMC and nd > 8:
+        a, b = fa[9], fb[9]
+        if a >= b:
+            return _OK, -1
+        st, ddmmyy = _int(data, a, b)
+        if b - a != 6 or st != _OK:
+            return _INVALID, -1  # "not text.isdigit()": Python refuses every other byte here
+        yy = ddmmyy % 100
+        date = _ordinal(1900 + yy if yy >= 80 else 2000 + yy, ddmmyy // 100 % 100, ddmmyy // 10000)
+        return (_OK if date >= 0 else _INVALID), date
+    if kind == _ZDA and nd >= 4 and fb[2] > fa[2] and fb[3] > fa[3] and fb[4] > fa[4]:
+        s1, day = _int(data, fa[2], fb[2])
+        s2, month = _int(data, fa[3], fb[3])
+        s3, year = _int(data, fa[4], fb[4])
+        st = _worse(_worse(s1, s2), s3)
+        if st != _OK:
+            return st, -1
+        date = _ordinal(year, month, day)
+        if date < 0 or year < 1980:  # GPS time began in 1980 (nmea._FIRST_GNSS_YEAR)
+            return _INVALID, -1
+        return _OK, date
+    return _OK, -1
+
+
+@njit(cache=True)
+def _read_fix(data, fa, fb, nd, kind, out):
+    """A GGA's or GNS's fix (nmea._timed_payload): (status, quality, n_used or -1); latitude, longitude,
+    altitude, geoid separation and HDOP (NaN for None) into ``out``, shape (5,)."""
+    if nd < 9:
+        return _INVALID, 0, -1
+    s1, lat = _latlon(data, fa[2], fb[2], fa[3], fb[3], True)
+    s2, lon = _latlon(data, fa[4], fb[4], fa[5], fb[5], False)
+    s3, hdop = _opt_num(data, fa[8], fb[8])
+    s4, alt = _opt_num(data, fa[9], fb[9])
+    sep_field = 11 if kind == _GGA else 10
+    s5, sep = _opt_num(data, fa[sep_field], fb[sep_field]) if nd >= sep_field else (_EMPTY, 0.0)
+    s6, n_used = _int(data, fa[7], fb[7])
+    if s6 == _OK and not 0 <= n_used <= 999:
+        s6 = _INVALID
+    s7 = _OK
+    quality = 0
+    if kind == _GGA:
+        if fb[6] > fa[6]:
+            s7, quality = _int(data, fa[6], fb[6])
+            if s7 == _OK and not 0 <= quality <= 9:
+                s7 = _INVALID
+    else:  # GNS: the best of the per-system mode characters, E (dead reckoning) only without any other
+        emergency = False
+        for i in range(fa[6], fb[6]):
+            c = data[i]
+            if c == 65 or c == 68 or c == 80 or c == 82 or c == 70:  # A D P R F
+                quality = max(quality, _MODE_QUALITY[c])
+            elif c == 69:
+                emergency = True
+        if quality == 0 and emergency:
+            quality = 6
+    status = _OK
+    for s_ in (s1, s2, s3, s4, s5, s6, s7):
+        status = _worse(status, s_)
+    out[0] = lat if s1 == _OK else np.nan
+    out[1] = lon if s2 == _OK else np.nan
+    out[2] = alt if s4 == _OK else np.nan
+    out[3] = sep if s5 == _OK else np.nan
+    out[4] = hdop if s3 == _OK and 0.0 < hdop < 99.0 else np.nan
+    return status, quality, (n_used if s6 == _OK else -1)
+
+
+@njit(cache=True)
+def _read_rmc(data, fa, fb, nd, out):
+    """An RMC's fix (nmea._timed_payload): (status, quality); latitude and longitude into ``out[:2]``."""
+    if nd < 6:
+        return _INVALID, 0
+    s1, lat = _latlon(data, fa[3], fb[3], fa[4], fb[4], True)
+    s2, lon = _latlon(data, fa[5], fb[5], fa[6], fb[6], False)
+    quality = 0
+    if _is(data, fa[2], fb[2], 65):  # status 'A': the mode character's quality, 1 without one
+        quality = 1
+        if nd > 11 and fb[12] > fa[12]:
+            q = _MODE_QUALITY[data[fa[12]]]
+            quality = q if q >= 0 else 1
+    out[0] = lat if s1 == _OK else np.nan
+    out[1] = lon if s2 == _OK else np.nan
+    return _worse(s1, s2), quality
+
+
+@njit(cache=True)
+def _read_gst(data, fa, fb, nd, out):
+    """A GST's RMS and σ_lat, σ_lon, σ_alt (data fields 1, 5, 6, 7) into ``out``, NaN unless in (0, 1e6)."""
+    status = _OK
+    out[:] = np.nan
+    for j in range(4):
+        f = (2, 6, 7, 8)[j]
+        if nd >= f:
+            st, v = _opt_num(data, fa[f], fb[f])
+            status = _worse(status, st)
+            if st == _OK and 0.0 < v < 1e6:
+                out[j] = v
+    return status
+
+
+@njit(cache=True)
+def _read_gsv(data, fa, fb, nd, t_sys, sys_out, prn_out, val_out):
+    """A GSV sentence (quirks.gsv_fields): (status, n_msgs, msg_num, signal id or -1, n_satellites); the
+    satellites' system code, number and (el, az, C/N0) into ``sys_out``, ``prn_out``, ``val_out``."""
+    if nd < 3:
+        return _INVALID, 0, 0, -1, 0
+    s1, n_msgs = _int(data, fa[1], fb[1])
+    s2, msg_num = _int(data, fa[2], fb[2])
+    s3, n_in_view = _int(data, fa[3], fb[3])
+    st = _worse(_worse(s1, s2), s3)
+    if st == _FALLBACK:
+        return st, 0, 0, -1, 0
+    if s1 != _OK or s2 != _OK or st == _INVALID or not 1 <= msg_num <= n_msgs or n_msgs > 99 \
+            or not n_in_view <= 999:
+        return _INVALID, 0, 0, -1, 0
+    n_body = nd - 3
+    signal = -1
+    hint = -1
+    last = 3 + n_body  # the field of the body's last
+    if n_body % 4 == 1:  # a trailing signal id (NMEA 4.10+)
+        signal = _single_hex(data, fa[last], fb[last])
+        if signal < 0 and fb[last] > fa[last]:
+            return _INVALID, 0, 0, -1, 0
+        n_body -= 1
+    elif n_body % 4 == 2 and _single_hex(data, fa[last - 1], fb[last - 1]) >= 0 \
+            and fb[last] - fa[last] == 1 and 49 <= data[fa[last]] <= 54:  # Quectel PQGSV: signal, system id
+        signal = _single_hex(data, fa[last - 1], fb[last - 1])
+        hint = _nmea_system(data[fa[last]] - 48)
+        n_body -= 2
+    n = 0
+    for g in range(0, n_body, 4):
+        f0 = 4 + g
+        if fb[f0] == fa[f0]:
+            continue  # no number: nothing to key the satellite by
+        st, number = _int(data, fa[f0], fb[f0])
+        # a last satellite cut short: its missing fields are empty
+        s_el, el = _float(data, fa[f0 + 1], fb[f0 + 1]) if g + 1 < n_body else (_EMPTY, 0.0)
+        s_az, az = _float(data, fa[f0 + 2], fb[f0 + 2]) if g + 2 < n_body else (_EMPTY, 0.0)
+        s_cn, cn0 = _float(data, fa[f0 + 3], fb[f0 + 3]) if g + 3 < n_body else (_EMPTY, 0.0)
+        st = _worse(_worse(st, s_el), _worse(s_az, s_cn))
+        if st == _FALLBACK:
+            return st, 0, 0, -1, 0
+        if st == _INVALID or (s_el == _OK and not -90.0 <= el <= 90.0) or (s_az == _OK and not 0.0 <= az <= 360.0) \
+                or (s_cn == _OK and not 0.0 <= cn0 <= 99.0):
+            return _INVALID, 0, 0, -1, 0
+        system, prn = _satellite_id(t_sys, number, hint)
+        if system < 0:
+            continue
+        sys_out[n], prn_out[n] = system, prn
+        val_out[n, 0] = el if s_el == _OK else np.nan
+        val_out[n, 1] = az if s_az == _OK else np.nan
+        val_out[n, 2] = cn0 if s_cn == _OK and cn0 != 0.0 else np.nan  # 0 dB-Hz: not tracked
+        n += 1
+    return _OK, n_msgs, msg_num, signal, n
+
+
+@njit(cache=True)
+def _read_gsa(data, fa, fb, nd, t_sys, sys_out, prn_out, dops_out):
+    """A GSA sentence (quirks.gsa_fields): (status, mode or -1, n_used); the used satellites' system code
+    and number into ``sys_out``, ``prn_out``; PDOP, HDOP, VDOP (NaN unless in (0, 99)) into ``dops_out``."""
+    if nd < 5:
+        return _INVALID, -1, 0
+    system = -1
+    if nd == 18:  # 4.10+: a system id after the DOPs
+        sid = _single_hex(data, fa[18], fb[18])
+        if sid >= 0:
+            system = _nmea_system(sid)
+        p0, p1, d0 = 3, 15, 15
+    else:
+        p0, p1, d0 = 3, max(3, nd - 2), nd - 2
+    status, mode = _int(data, fa[2], fb[2])
+    if status == _OK and not 1 <= mode <= 3:
+        status = _INVALID
+    mode = mode if status == _OK else -1
+    if status == _EMPTY:
+        status = _OK
+    n = 0
+    for f in range(p0, p1):
+        if fb[f] > fa[f]:
+            st, number = _int(data, fa[f], fb[f])
+            status = _worse(status, st)
+            if st != _OK:
+                continue
+            sys_, prn = _satellite_id(t_sys, number, system)
+            if sys_ >= 0:
+                sys_out[n], prn_out[n] = sys_, prn
+                n += 1
+    dops_out[:] = np.nan
+    for j in range(3):
+        st, v = _float(data, fa[d0 + j], fb[d0 + j])
+        status = _worse(status, st)
+        if st == _OK and 0.0 < v < 99.0:
+            dops_out[j] = v
+    return status, mode, n
+
+
 # ----------------------------------------------------------------------------------------------------------
 # The assembly (nmea._assemble, _add_gsv, _finish)
 # ----------------------------------------------------------------------------------------------------------
@@ -366,6 +579,7 @@ def assemble_spans(data, starts, ends, resync_after):
     ta = tb = -1
     kind = 0
     msg_num = n_msgs = signal = 0
+    n_gsv = n_gsa = 0
     has_first = False
     gst = np.empty(4)
     has_gst = False
@@ -397,7 +611,6 @@ def assemble_spans(data, starts, ends, resync_after):
             talker = np.int64(c0) * 256 + c1
             timed = kind == _GGA or kind == _RMC or kind == _GNS or kind == _GLL or kind == _ZDA \
                 or kind == _GST or kind == _GBS
-            bad = False
             tod = 0.0
             date = -1
             if timed:
@@ -428,109 +641,17 @@ def assemble_spans(data, starts, ends, resync_after):
                     malformed += 1
                     continue
                 # the date, then the fix content (nmea._timed_payload)
-                status = _OK
-                if kind == _RMC and nd > 8:
-                    a, b = field_a[9], field_b[9]
-                    if a < b:
-                        if b - a != 6:
-                            bad = True
-                        else:
-                            st, ddmmyy = _int(data, a, b)
-                            if st != _OK:
-                                bad = True  # "not text.isdigit()": Python refuses every non-digit here
-                            else:
-                                yy = ddmmyy % 100
-                                date = _ordinal(1900 + yy if yy >= 80 else 2000 + yy, ddmmyy // 100 % 100,
-                                                ddmmyy // 10000)
-                                bad = date < 0
-                elif kind == _ZDA and nd >= 4 and field_b[2] > field_a[2] and field_b[3] > field_a[3] \
-                        and field_b[4] > field_a[4]:
-                    s1, day_ = _int(data, field_a[2], field_b[2])
-                    s2, month = _int(data, field_a[3], field_b[3])
-                    s3, year = _int(data, field_a[4], field_b[4])
-                    if s1 == _FALLBACK or s2 == _FALLBACK or s3 == _FALLBACK:
-                        return _FALLBACK, counts, epoch_f[:0], epoch_i[:0], sat_i[:0], sat_f[:0]
-                    date = _ordinal(year, month, day_)
-                    bad = s1 != _OK or s2 != _OK or s3 != _OK or date < 0 or year < 1980
-                if not bad and (kind == _GGA or kind == _GNS):
-                    if nd < 9:
-                        bad = True
-                    else:
-                        s1, lat = _latlon(data, field_a[2], field_b[2], field_a[3], field_b[3], True)
-                        s2, lon = _latlon(data, field_a[4], field_b[4], field_a[5], field_b[5], False)
-                        s3, hdop = _opt_num(data, field_a[8], field_b[8])
-                        s4, alt = _opt_num(data, field_a[9], field_b[9])
-                        sep_field = 11 if kind == _GGA else 10
-                        s5, sep = (_opt_num(data, field_a[sep_field], field_b[sep_field]) if nd >= sep_field
-                                   else (_EMPTY, 0.0))
-                        s6, n_used = _int(data, field_a[7], field_b[7])
-                        if s6 == _OK and not 0 <= n_used <= 999:
-                            s6 = _INVALID
-                        qa, qb = field_a[6], field_b[6]
-                        s7 = _OK
-                        quality = 0
-                        if kind == _GGA:
-                            if qb > qa:
-                                s7, quality = _int(data, qa, qb)
-                                if s7 == _OK and not 0 <= quality <= 9:
-                                    s7 = _INVALID
-                        else:
-                            emergency = False
-                            for i in range(qa, qb):
-                                c = data[i]
-                                if c == 65 or c == 68 or c == 80 or c == 82 or c == 70:  # A D P R F
-                                    quality = max(quality, _MODE_QUALITY[c])
-                                elif c == 69:
-                                    emergency = True
-                            if quality == 0 and emergency:
-                                quality = 6
-                        for s_ in (s1, s2, s3, s4, s5, s6, s7):
-                            if s_ == _FALLBACK:
-                                status = _FALLBACK
-                            elif s_ == _INVALID:
-                                bad = True
-                        new_fix[0] = lat if s1 == _OK else nan
-                        new_fix[1] = lon if s2 == _OK else nan
-                        new_fix[2] = alt if s4 == _OK else nan
-                        new_fix[3] = sep if s5 == _OK else nan
-                        new_fix[4] = hdop if s3 == _OK and 0.0 < hdop < 99.0 else nan
-                        new_quality = quality
-                        new_n_used = n_used if s6 == _OK else -1
-                elif not bad and kind == _RMC:
-                    if nd < 6:
-                        bad = True
-                    else:
-                        s1, lat = _latlon(data, field_a[3], field_b[3], field_a[4], field_b[4], True)
-                        s2, lon = _latlon(data, field_a[5], field_b[5], field_a[6], field_b[6], False)
-                        for s_ in (s1, s2):
-                            if s_ == _FALLBACK:
-                                status = _FALLBACK
-                            elif s_ == _INVALID:
-                                bad = True
-                        quality = 0
-                        if _is(data, field_a[2], field_b[2], 65):  # status 'A'
-                            quality = 1
-                            if nd > 11 and field_b[12] > field_a[12]:
-                                q = _MODE_QUALITY[data[field_a[12]]]
-                                quality = q if q >= 0 else 1
-                        new_fix[0] = lat if s1 == _OK else nan
-                        new_fix[1] = lon if s2 == _OK else nan
-                        new_quality = quality
-                elif not bad and kind == _GST:
-                    new_gst[:] = nan
-                    for j in range(4):
-                        f = (2, 6, 7, 8)[j]
-                        if nd >= f:
-                            s_, v = _opt_num(data, field_a[f], field_b[f])
-                            if s_ == _FALLBACK:
-                                status = _FALLBACK
-                            elif s_ == _INVALID:
-                                bad = True
-                            elif s_ == _OK and 0.0 < v < 1e6:
-                                new_gst[j] = v
+                status, date = _read_date(data, field_a, field_b, nd, kind)
+                if status == _OK:
+                    if kind == _GGA or kind == _GNS:
+                        status, new_quality, new_n_used = _read_fix(data, field_a, field_b, nd, kind, new_fix)
+                    elif kind == _RMC:
+                        status, new_quality = _read_rmc(data, field_a, field_b, nd, new_fix)
+                    elif kind == _GST:
+                        status = _read_gst(data, field_a, field_b, nd, new_gst)
                 if status == _FALLBACK:
                     return _FALLBACK, counts, epoch_f[:0], epoch_i[:0], sat_i[:0], sat_f[:0]
-                if bad:
+                if status == _INVALID:
                     malformed += 1
                     continue
                 # on the clock (nmea._assemble's timed branch)
@@ -564,109 +685,19 @@ def assemble_spans(data, starts, ends, resync_after):
                     cur_date = date
             else:
                 # GSA / GSV (quirks.gsa_fields, gsv_fields)
-                n_gsv = 0
-                n_gsa = 0
                 t_sys = _talker_system(c0, c1)
                 if kind == _GSV:
-                    if nd < 3:
-                        malformed += 1
-                        continue
-                    s1, n_msgs = _int(data, field_a[1], field_b[1])
-                    s2, msg_num = _int(data, field_a[2], field_b[2])
-                    s3, n_in_view = _int(data, field_a[3], field_b[3])
-                    if s1 == _FALLBACK or s2 == _FALLBACK or s3 == _FALLBACK:
-                        return _FALLBACK, counts, epoch_f[:0], epoch_i[:0], sat_i[:0], sat_f[:0]
-                    if s1 != _OK or s2 != _OK or s3 == _INVALID or not 1 <= msg_num <= n_msgs or n_msgs > 99 \
-                            or not n_in_view <= 999:
-                        malformed += 1
-                        continue
-                    n_body = nd - 3
-                    signal = -1
-                    hint = -1
-                    rem = n_body % 4
-                    last = 3 + n_body  # field index of body[-1]
-                    if rem == 1:
-                        signal = _single_hex(data, field_a[last], field_b[last])
-                        if signal < 0 and field_b[last] > field_a[last]:
-                            malformed += 1
-                            continue
-                        n_body -= 1
-                    elif rem == 2 and _single_hex(data, field_a[last - 1], field_b[last - 1]) >= 0 \
-                            and field_b[last] - field_a[last] == 1 and 49 <= data[field_a[last]] <= 54:
-                        signal = _single_hex(data, field_a[last - 1], field_b[last - 1])
-                        hint = _nmea_system(data[field_a[last]] - 48)
-                        n_body -= 2
-                    for g in range(0, n_body, 4):
-                        f0 = 4 + g
-                        if field_b[f0] == field_a[f0]:
-                            continue
-                        st, number = _int(data, field_a[f0], field_b[f0])
-                        # a last satellite cut short: its missing fields are empty
-                        s_el, el = _float(data, field_a[f0 + 1], field_b[f0 + 1]) if g + 1 < n_body else (_EMPTY, 0.0)
-                        s_az, az = _float(data, field_a[f0 + 2], field_b[f0 + 2]) if g + 2 < n_body else (_EMPTY, 0.0)
-                        s_cn, cn0 = _float(data, field_a[f0 + 3], field_b[f0 + 3]) if g + 3 < n_body else (_EMPTY, 0.0)
-                        if st == _FALLBACK or s_el == _FALLBACK or s_az == _FALLBACK or s_cn == _FALLBACK:
-                            return _FALLBACK, counts, epoch_f[:0], epoch_i[:0], sat_i[:0], sat_f[:0]
-                        if st == _INVALID or s_el == _INVALID or s_az == _INVALID or s_cn == _INVALID \
-                                or (s_el == _OK and not -90.0 <= el <= 90.0) \
-                                or (s_az == _OK and not 0.0 <= az <= 360.0) \
-                                or (s_cn == _OK and not 0.0 <= cn0 <= 99.0):
-                            bad = True
-                            break
-                        system, prn = _satellite_id(t_sys, number, hint)
-                        if system < 0:
-                            continue
-                        gsv_sys[n_gsv], gsv_prn[n_gsv] = system, prn
-                        gsv_val[n_gsv, 0] = el if s_el == _OK else nan
-                        gsv_val[n_gsv, 1] = az if s_az == _OK else nan
-                        gsv_val[n_gsv, 2] = cn0 if s_cn == _OK and cn0 != 0.0 else nan
-                        n_gsv += 1
-                    if bad:
-                        malformed += 1
-                        continue
+                    status, n_msgs, msg_num, signal, n_gsv = _read_gsv(data, field_a, field_b, nd, t_sys, gsv_sys,
+                                                                       gsv_prn, gsv_val)
                 elif kind == _GSA:
-                    if nd < 5:
-                        malformed += 1
-                        continue
-                    system = -1
-                    if nd == 18:
-                        sid = _single_hex(data, field_a[18], field_b[18])
-                        if sid >= 0:
-                            system = _nmea_system(sid)
-                        p0, p1, d0 = 3, 15, 15
-                    else:
-                        p0, p1, d0 = 3, max(3, nd - 2), nd - 2
-                    st, mode = _int(data, field_a[2], field_b[2])
-                    if st == _FALLBACK:
-                        return _FALLBACK, counts, epoch_f[:0], epoch_i[:0], sat_i[:0], sat_f[:0]
-                    if st == _INVALID or (st == _OK and not 1 <= mode <= 3):
-                        bad = True
-                    gsa_mode_new = mode if st == _OK else -1
-                    for f in range(p0, p1):
-                        if field_b[f] > field_a[f]:
-                            st, number = _int(data, field_a[f], field_b[f])
-                            if st == _FALLBACK:
-                                return _FALLBACK, counts, epoch_f[:0], epoch_i[:0], sat_i[:0], sat_f[:0]
-                            if st == _INVALID:
-                                bad = True
-                                continue
-                            sys_, prn = _satellite_id(t_sys, number, system)
-                            if sys_ >= 0:
-                                gsa_sys[n_gsa], gsa_prn[n_gsa] = sys_, prn
-                                n_gsa += 1
-                    new_dops[:] = nan
-                    for j in range(3):
-                        st, v = _float(data, field_a[d0 + j], field_b[d0 + j])
-                        if st == _FALLBACK:
-                            return _FALLBACK, counts, epoch_f[:0], epoch_i[:0], sat_i[:0], sat_f[:0]
-                        if st == _INVALID:
-                            bad = True
-                        elif st == _OK and 0.0 < v < 99.0:
-                            new_dops[j] = v
-                    if bad:
-                        malformed += 1
-                        continue
+                    status, gsa_mode_new, n_gsa = _read_gsa(data, field_a, field_b, nd, t_sys, gsa_sys, gsa_prn,
+                                                            new_dops)
                 else:
+                    continue
+                if status == _FALLBACK:
+                    return _FALLBACK, counts, epoch_f[:0], epoch_i[:0], sat_i[:0], sat_f[:0]
+                if status == _INVALID:
+                    malformed += 1
                     continue
                 if not has_current:
                     if kind == _GSV:

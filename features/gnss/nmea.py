@@ -19,7 +19,13 @@ raises :class:`~features.errors.NmeaError`.
 Parsing: :mod:`features.gnss.tokens` turns bytes into checked sentences (a
 vectorised whole-file path by default, pynmea2 on request, both equal on every
 real log; types not used, e.g. VTG and vendor messages, are counted, not
-validated); :mod:`features.gnss.quirks` interprets their fields.
+validated); :mod:`features.gnss.quirks` interprets their fields. A whole file
+(:func:`read_nmea`, :func:`epochs_from_bytes`) is assembled by the compiled
+:mod:`features.gnss.assemble` (the same rules, equal epochs and counts: tests),
+into :class:`~features.gnss.assemble.EpochColumns` that :func:`read_nmea_columns`
+returns as they are (a walk's GNSS stream: no Python object per satellite) and
+:func:`read_nmea` as :class:`Epoch` objects; lines (:func:`iter_epochs`) and
+pynmea2 go through :func:`_assemble`, the reference.
 """
 
 from __future__ import annotations
