@@ -271,15 +271,3 @@ def test_any_other_imu_table_is_left_to_the_reference_parser(text):
 def test_csv_rows_without_final_newline():
     ok, rows = read_csv_table(_text("1.5,2\n-3,4.25"), 2)
     assert ok and rows.tolist() == [[1.5, 2.0], [-3.0, 4.25]]
-
-
-# ---------------------------------------------------------------- WLS threshold
-
-
-def test_raim_threshold_is_chi2_isf():
-    from scipy.special import chdtri
-    from scipy.stats import chi2
-
-    dof = np.arange(1, 300)
-    for p in (1e-5, 1e-3, 1e-2, 0.05, 0.2, 0.499):
-        assert np.array_equal(chdtri(dof, p), chi2.isf(p, dof))
