@@ -4,7 +4,7 @@ parser give exactly what the Python reference paths give.
 References, independent of the compiled code: Python's own ``float()`` (correctly rounded), the Python
 assembler (:func:`features.gnss.nmea.iter_epochs`, which the pynmea2 tokeniser also feeds), the Python
 :attr:`~features.gnss.nmea.Epoch.primary_satellites`, a dense loop over epoch objects for the sky arrays,
-numpy's ``loadtxt`` for the IMU table and ``scipy.stats.chi2`` for the RAIM threshold.
+numpy's ``loadtxt`` for the IMU table.
 """
 
 from __future__ import annotations
