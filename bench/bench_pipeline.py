@@ -215,7 +215,7 @@ def stage_breakdown(walk: Path, model_dir: Path, repeat: int = 5) -> dict:
     (events, the 14 window features, the classifier) and the ``adaptive`` filter.
     """
     from features.gnss.features import gnss_features, sky_arrays
-    from features.gnss.nmea import epochs_on_time_base, read_nmea
+    from features.gnss.nmea import epochs_on_time_base, read_nmea_columns
     from features.gnss.positions import fixes_to_enu
     from features.walk import load_walk
     from models.fusion.model import load_fusion_model
@@ -229,8 +229,8 @@ def stage_breakdown(walk: Path, model_dir: Path, repeat: int = 5) -> dict:
     o = site.origin
     state: dict = {}
 
-    def nmea():
-        state["epochs"] = epochs_on_time_base(read_nmea(info.path("gnss"))[0], info.start_utc)
+    def nmea():     # as walks.reader.read_gnss_stream reads it: the reader's columns
+        state["epochs"] = epochs_on_time_base(read_nmea_columns(info.path("gnss"))[0], info.start_utc)
 
     def gnss_positions():
         state["sky"] = sky_arrays(state["epochs"])
