@@ -622,8 +622,8 @@ def epoch_columns(epochs: Sequence[Epoch] | EpochColumns, satellites: bool = Tru
             epoch_f[:, 2 + j] = np.array([getattr(f, name) for f in fixes], dtype=float)
         epoch_f[:, 9:] = np.array(gsts, dtype=float).reshape(-1, 4)
         # the date of an epoch: its UTC time less its time of day (23:59:60.5 is still the day before)
-        epoch_i[:, 0] = [-1 if e.time_utc is None else (e.time_utc - dt.timedelta(seconds=e.time_of_day_s)).toordinal()
-                         for e in epochs]
+        epoch_i[:, 0] = [-1 if e.time_utc is None
+                         else (e.time_utc - dt.timedelta(seconds=e.time_of_day_s)).toordinal() for e in epochs]
         epoch_i[:, 1] = [f.quality for f in fixes]
         epoch_i[:, 2] = np.nan_to_num(np.array([f.n_used for f in fixes], dtype=float), nan=-1.0)
         epoch_i[:, 3] = np.nan_to_num(np.array([f.mode for f in fixes], dtype=float), nan=-1.0)

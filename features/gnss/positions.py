@@ -366,7 +366,8 @@ def fixes_to_enu(epochs: Sequence, lat0_deg: float, lon0_deg: float, alt0_m: flo
     quality = cols.col("quality")
     lat, lon = cols.col("lat_deg"), cols.col("lon_deg")
     # Fix.has_position, of a quality the UERE table knows
-    fixed = np.flatnonzero(np.isin(quality, list(UERE_BY_QUALITY_M)) & (quality > 0) & ~np.isnan(lat) & ~np.isnan(lon))
+    fixed = np.flatnonzero(np.isin(quality, list(UERE_BY_QUALITY_M)) & (quality > 0)
+                           & ~np.isnan(lat) & ~np.isnan(lon))
     n = fixed.size
     if n == 0:
         empty = np.zeros(0)

@@ -7,7 +7,9 @@ Two equivalent paths (tests hold them equal on every real log and under fuzzing)
   sentence (:func:`parse_sentence`, or ``pynmea2.parse(check=True)`` through
   :func:`pynmea2_fields`);
 * :func:`fields_from_buffer` — a whole file at once, with the line and ``$``
-  splitting and the checksums vectorised in numpy (prefix XOR).
+  splitting and the checksums vectorised in numpy (prefix XOR); its sentences'
+  byte ranges (:func:`sentence_spans`) are what the compiled epoch assembly
+  (:mod:`features.gnss.assemble`) reads.
 
 Why not pynmea2 alone: it costs about 8-11 µs a sentence here, as much as the
 whole GNSS path may spend (≥ 40 % of pynmea2's bare rate, ``bench/bench_gnss.py``);
@@ -26,7 +28,8 @@ from typing import Iterable
 
 import numpy as np
 
-__all__ = ["ReadStats", "parse_sentence", "pynmea2_fields", "fields_from_lines", "fields_from_buffer", "sentence_spans",
+__all__ = ["ReadStats", "parse_sentence", "pynmea2_fields", "fields_from_lines", "fields_from_buffer",
+           "sentence_spans",
            "TIMED_TYPES", "USED_TYPES"]
 
 TIMED_TYPES = frozenset(("GGA", "RMC", "GNS", "GLL", "ZDA", "GST", "GBS"))

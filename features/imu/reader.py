@@ -359,11 +359,11 @@ def repair_imu(t_s, acc_m_s2, gyro_rad_s=None, mag_ut=None, config: RepairConfig
 
 
 _ASCII_SPACE = b" \t\n\x0b\x0c\x1c\x1d\x1e\x1f"
-"""The ASCII bytes ``str.strip`` removes (``\r`` aside: a file holding one goes through :func:`_parse_table`)."""
+"""The ASCII bytes ``str.strip`` removes (``\\r`` aside: a file holding one goes through :func:`_parse_table`)."""
 
 
 def _plain_table(raw: bytes) -> tuple[list[str], np.ndarray, int] | None:
-    """:func:`_parse_table` of a plain file, compiled: ASCII, ``\n`` line ends, a header line, then rows
+    """:func:`_parse_table` of a plain file, compiled: ASCII, ``\\n`` line ends, a header line, then rows
     of canonical decimals and nothing else (:func:`features.numtext.read_csv_table`: the same doubles as
     numpy's ``loadtxt``, which reads with Python's correctly rounded conversion). None for any other file."""
     data = np.frombuffer(raw, dtype=np.uint8)
