@@ -6,6 +6,16 @@
    that rate divided by scipy's ``oaconvolve`` matched filter over the same
    audio timed in the same run (this VM's speed drifts 1.5–2× between days; the
    ratio is the figure to compare). Target: ≥ 500× real time.
+
+   The readers (branch ``pipespeed``, 2026-12-02; the third walk of ``--breakdown-only``, site 5 seed 42, CPU s
+   best of 5, main and branch alternated 3 rounds, load 2.6-4.5): ``read_gnss_stream`` 0.48-0.52 → 0.076-0.079
+   (NMEA assembly compiled, :mod:`features.gnss.assemble`, and the stream built from the reader's columns:
+   NMEA + time base 0.036-0.039, sky arrays + positions 0.015-0.016, features 0.027 unchanged); IMU read + PDR
+   0.089-0.096 → 0.068-0.069 (the CSV parsed compiled); ``read_walk`` without audio 0.57-0.61 → 0.18 (its UWB
+   stream, 0.045, unused by ``adaptive``, unchanged). Raw files → ``adaptive`` track, CPU, best of 3: 3.23-3.51
+   s → 2.91-3.00 s (171-186× → 200-206×); every track of every method on the 3 walks identical to main's
+   (``bench/track_identity.py --tol-m 0``). Before, the breakdown's "GNSS sky arrays + positions" stage read
+   0.04 s only because the epochs' ``primary_satellites`` were cached by its first repeat (0.07 uncached).
 2. **Fusion step alone**: events per second of each method on that walk's
    event stream (reading excluded). Target: ≥ 50,000 steps/s for ``adaptive``.
 3. **evaluate over 16 walks** (``--eval-walk-s`` each, default 60 s, simulated on the same site) with 1 and
@@ -241,7 +251,7 @@ def stage_breakdown(walk: Path, model_dir: Path, repeat: int = 5) -> dict:
     (events, the 14 window features, the classifier) and the ``adaptive`` filter.
     """
     from features.gnss.features import gnss_features, sky_arrays
-    from features.gnss.nmea import epochs_on_time_base, read_nmea
+    from features.gnss.nmea import epochs_on_time_base, read_nmea_columns
     from features.gnss.positions import fixes_to_enu
     from features.walk import load_walk
     from models.fusion.model import load_fusion_model
@@ -255,8 +265,8 @@ def stage_breakdown(walk: Path, model_dir: Path, repeat: int = 5) -> dict:
     o = site.origin
     state: dict = {}
 
-    def nmea():
-        state["epochs"] = epochs_on_time_base(read_nmea(info.path("gnss"))[0], info.start_utc)
+    def nmea():     # as walks.reader.read_gnss_stream reads it: the reader's columns
+        state["epochs"] = epochs_on_time_base(read_nmea_columns(info.path("gnss"))[0], info.start_utc)
 
     def gnss_positions():
         state["sky"] = sky_arrays(state["epochs"])

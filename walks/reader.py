@@ -50,7 +50,7 @@ from features.acoustic.features import AudioAnalysis, analyse_audio
 from features.acoustic.positions import PositionConfig
 from features.acoustic.timing import AudioTiming, timing_from_walk
 from features.gnss.features import gnss_features, sky_arrays
-from features.gnss.nmea import epochs_on_time_base, read_nmea
+from features.gnss.nmea import epochs_on_time_base, read_nmea_columns
 from features.gnss.positions import GnssPositions, fixes_to_enu
 from features.gnss.sat_features import pseudorange_features
 from features.gnss.wls import WlsConfig, solve_epochs, wls_positions
@@ -332,7 +332,7 @@ def _shift_pdr(pdr: PdrStream, d_east_m: float, d_north_m: float) -> PdrStream:
 
 def read_gnss_stream(walk: WalkInfo, site: Site) -> GnssStream:
     """The walk's NMEA: fixes in the site's ENU frame with σ, quality and HDOP, and the five GNSS windows."""
-    epochs, stats = read_nmea(walk.path("gnss"))
+    epochs, stats = read_nmea_columns(walk.path("gnss"))  # the epochs as columns: no object per satellite
     epochs = epochs_on_time_base(epochs, walk.start_utc)
     o = site.origin
     sky = sky_arrays(epochs)  # once, for both the positions' sigma and the features

@@ -56,8 +56,6 @@ from __future__ import annotations
 
 import math
 from dataclasses import asdict, dataclass
-from operator import itemgetter
-from typing import Sequence
 
 import numpy as np
 
@@ -181,29 +179,33 @@ def _median_step(t_s) -> float:
     return float(np.median(d)) if d.size else 0.0
 
 
-def sky_arrays(epochs: Sequence) -> SkyArrays:
+def sky_arrays(epochs) -> SkyArrays:
     """Stack the epochs that reported a sky into :class:`SkyArrays` (one column per satellite, in order
-    of first appearance), each satellite read on its primary signal (module docstring)."""
-    sky = [e for e in epochs if e.sky_reported]
-    primary = [e.primary_satellites for e in sky]
-    counts = np.fromiter((len(p) for p in primary), dtype=np.intp, count=len(sky))
-    flat = [s for p in primary for s in p]
-    n = len(sky)
-    if flat:
-        # Satellite fields: (system, prn, signal, el_deg, az_deg, cn0_dbhz, used); None → NaN
-        system, prn, el_l, az_l, cn0_l, used_l = (list(map(itemgetter(k), flat)) for k in (0, 1, 3, 4, 5, 6))
+    of first appearance), each satellite read on its primary signal (module docstring).
+
+    ``epochs``: a list of :class:`~features.gnss.nmea.Epoch` or their
+    :class:`~features.gnss.assemble.EpochColumns` (the reader's columns: no object per satellite).
+    """
+    from features.gnss.assemble import SYSTEM_CODES, primary_rows
+    from features.gnss.nmea import epoch_columns
+
+    cols = epoch_columns(epochs)
+    rows, counts = primary_rows(cols)        # Epoch.primary_satellites, in its order
+    is_sky = cols.col("sky_reported") != 0
+    sky = np.flatnonzero(is_sky)
+    rows, counts = rows[np.repeat(is_sky, counts)], counts[sky]
+    n = sky.size
+    sat_i, sat_f = cols.sat_i[rows], cols.sat_f[rows]
+    if rows.size:
         r = np.repeat(np.arange(n, dtype=np.intp), counts)
-        names = sorted(set(system))
-        code = {name: k for k, name in enumerate(names)}
-        key = np.array([code[x] for x in system], dtype=np.int64) * 100_000 \
-            + np.asarray(prn, dtype=np.int64)
+        key = sat_i[:, 0] * 100_000 + sat_i[:, 1]
         uniq, first, inv = np.unique(key, return_index=True, return_inverse=True)
         order = np.argsort(first, kind="stable")          # columns in order of first appearance
         rank = np.empty_like(order)
         rank[order] = np.arange(order.size)
         c = rank[inv.ravel()]
         m = uniq.size
-        index = tuple((names[int(k // 100_000)], int(k % 100_000)) for k in uniq[order].tolist())
+        index = tuple((SYSTEM_CODES[k // 100_000], k % 100_000) for k in uniq[order].tolist())
     else:
         m, index = 0, ()
     el = np.full((n, m), np.nan)
@@ -211,11 +213,9 @@ def sky_arrays(epochs: Sequence) -> SkyArrays:
     cn0 = np.full((n, m), np.nan)
     in_view = np.zeros((n, m), dtype=bool)
     used = np.zeros((n, m), dtype=bool)
-    if flat:
-        el_v = np.array(el_l, dtype=float)
-        az_v = np.array(az_l, dtype=float)
-        cn0_v = np.array(cn0_l, dtype=float)
-        used_v = np.array(used_l, dtype=bool)
+    if rows.size:
+        el_v, az_v, cn0_v = sat_f[:, 0], sat_f[:, 1], sat_f[:, 2]
+        used_v = sat_i[:, 3] != 0
         # One entry per (epoch, satellite): its primary signal's (a repeated GSV within one epoch
         # was already merged by the reader).
         np.fmax.at(cn0, (r, c), cn0_v)
@@ -225,10 +225,10 @@ def sky_arrays(epochs: Sequence) -> SkyArrays:
         az[r[has_az], c[has_az]] = az_v[has_az]
         in_view[r, c] = True
         np.logical_or.at(used, (r, c), used_v)
-    hdop = np.array([np.nan if e.fix.hdop is None else e.fix.hdop for e in sky], dtype=float)
-    t_s = np.array([e.t_s for e in sky], dtype=float)
-    interval = _median_step([e.t_s for e in epochs]) if len(epochs) > 1 else float("nan")
-    return SkyArrays(t_s, index, el, az, cn0, in_view, used, hdop, interval)
+    hdop = cols.col("hdop")[sky]
+    t_all = cols.col("t_s")
+    interval = _median_step(t_all.tolist()) if len(cols) > 1 else float("nan")
+    return SkyArrays(t_all[sky], index, el, az, cn0, in_view, used, hdop, interval)
 
 
 def _hdop(el_rad: np.ndarray, az_rad: np.ndarray, weight: np.ndarray, system_index: np.ndarray | None = None

@@ -19,7 +19,13 @@ raises :class:`~features.errors.NmeaError`.
 Parsing: :mod:`features.gnss.tokens` turns bytes into checked sentences (a
 vectorised whole-file path by default, pynmea2 on request, both equal on every
 real log; types not used, e.g. VTG and vendor messages, are counted, not
-validated); :mod:`features.gnss.quirks` interprets their fields.
+validated); :mod:`features.gnss.quirks` interprets their fields. A whole file
+(:func:`read_nmea`, :func:`epochs_from_bytes`) is assembled by the compiled
+:mod:`features.gnss.assemble` (the same rules, equal epochs and counts: tests),
+into :class:`~features.gnss.assemble.EpochColumns` that :func:`read_nmea_columns`
+returns as they are (a walk's GNSS stream: no Python object per satellite) and
+:func:`read_nmea` as :class:`Epoch` objects; lines (:func:`iter_epochs`) and
+pynmea2 go through :func:`_assemble`, the reference.
 """
 
 from __future__ import annotations
@@ -28,12 +34,17 @@ import datetime as dt
 import functools
 import os
 from dataclasses import dataclass
+from operator import itemgetter
 from pathlib import Path
-from typing import Iterable, Iterator, Literal, NamedTuple
+from typing import Iterable, Iterator, Literal, NamedTuple, Sequence
+
+import numpy as np
 
 from features.errors import ConfigError, NmeaError
+from features.gnss.assemble import COUNTER_NAMES, SYSTEM_CODES, EpochColumns, assemble_spans
 from features.gnss.tokens import (  # noqa: F401 - ReadStats and parse_sentence are re-exported
     TIMED_TYPES, USED_TYPES, ReadStats, fields_from_buffer, fields_from_lines, parse_sentence, pynmea2_fields,
+    sentence_spans,
 )
 from features.gnss.quirks import (
     FIX_QUALITY_FROM_MODE, gsa_fields, gsv_fields, parse_ddmmyy, parse_latlon, parse_time_of_day,
@@ -41,7 +52,7 @@ from features.gnss.quirks import (
 )
 
 __all__ = ["Satellite", "Fix", "Gst", "Epoch", "ReadStats", "read_nmea", "iter_epochs", "epochs_from_bytes",
-           "epochs_on_time_base",
+           "epochs_on_time_base", "read_nmea_columns", "epoch_columns", "EpochColumns",
            "parse_sentence"]
 
 _TIMED = TIMED_TYPES
@@ -50,6 +61,7 @@ _FIX_TYPES = frozenset(("GGA", "RMC", "GNS", "ZDA", "GST"))  # timed sentences t
 _EPOCH_GAP_DEFAULT_S = 1.0
 _FIRST_GNSS_YEAR = 1980
 """GPS time began on 1980-01-06: an earlier ZDA year is garbage (RMC's two-digit years map to 1980-2079)."""
+_NAN = float("nan")
 _tuple_new = tuple.__new__  # builds a NamedTuple without its Python-level __new__ (hot loop)
 _SKY_CACHE_SIZE = 8192
 """Distinct GSV/GSA sentences remembered by one read (cleared when full)."""
@@ -512,7 +524,142 @@ def epochs_from_bytes(buf: bytes, stats: ReadStats | None = None, *, require_che
     Gives exactly what :func:`iter_epochs` gives on the same bytes split into lines.
     """
     stats = ReadStats() if stats is None else stats
-    return list(_assemble(fields_from_buffer(bytes(buf), stats, require_checksum), stats, resync_after))
+    columns, epochs = _read_bytes(bytes(buf), stats, require_checksum, resync_after)
+    return epochs if epochs is not None else _epochs_from_columns(columns)
+
+
+def _read_bytes(buf: bytes, stats: ReadStats, require_checksum: bool, resync_after: int
+                ) -> tuple[EpochColumns | None, list[Epoch] | None]:
+    """The file's epochs as columns from the compiled assembly, or (None, epochs) from the reference
+    assembler when a field needs Python's number parsing (:mod:`features.gnss.assemble`)."""
+    if not isinstance(resync_after, int) or resync_after < 1:
+        raise ConfigError(f"resync_after must be a positive integer, got {resync_after!r}")
+    starts, ends = sentence_spans(buf, stats, require_checksum)
+    data = np.frombuffer(buf, dtype=np.uint8)
+    status, counts, epoch_f, epoch_i, sat_i, sat_f = assemble_spans(data, starts, ends, resync_after)
+    if status != 0:
+        text = buf.decode("latin-1")
+        return None, list(_assemble((text[a:b].split(",") for a, b in zip(starts.tolist(), ends.tolist())), stats,
+                                    resync_after))
+    for name, value in zip(COUNTER_NAMES, counts.tolist()):
+        setattr(stats, name, getattr(stats, name) + value)
+    return EpochColumns(epoch_f, epoch_i, sat_i, sat_f), None
+
+
+def _nones(values: np.ndarray, missing: np.ndarray) -> list:
+    """``values`` as a list of Python scalars, None where ``missing``."""
+    out = values.astype(object)
+    out[missing] = None
+    return out.tolist()
+
+
+def _utc_times(date_ordinal: list, tod: list) -> list:
+    """The UTC datetime of each epoch (None without a date), as :func:`_finish` builds it."""
+    midnight: dict = {}
+    out = []
+    for day, seconds in zip(date_ordinal, tod):
+        if day < 0:
+            out.append(None)
+            continue
+        base = midnight.get(day)
+        if base is None:
+            base = midnight[day] = dt.datetime.fromordinal(day).replace(tzinfo=dt.timezone.utc)
+        out.append(base + dt.timedelta(seconds=seconds))
+    return out
+
+
+def _epochs_from_columns(columns: EpochColumns) -> list[Epoch]:
+    """The epochs :func:`features.gnss.assemble.assemble_spans` wrote as columns, as :func:`_finish` builds them."""
+    epoch_f, epoch_i, sat_i, sat_f = columns.epoch_f, columns.epoch_i, columns.sat_i, columns.sat_f
+    system = np.array(SYSTEM_CODES, dtype=object)[sat_i[:, 0]].tolist()
+    signal = _nones(sat_i[:, 2], sat_i[:, 2] < 0)
+    el, az, cn0 = (_nones(sat_f[:, j], np.isnan(sat_f[:, j])) for j in range(3))
+    satellites = [_tuple_new(Satellite, row) for row in zip(system, sat_i[:, 1].tolist(), signal, el, az, cn0,
+                                                             (sat_i[:, 3] != 0).tolist())]
+    f = [_nones(epoch_f[:, j], np.isnan(epoch_f[:, j])) for j in range(epoch_f.shape[1])]
+    t_s, tod = epoch_f[:, 0].tolist(), epoch_f[:, 1].tolist()
+    date_ord, quality, sky, has_gst, first, end = (epoch_i[:, j].tolist() for j in (0, 1, 4, 5, 6, 7))
+    n_used, mode = (_nones(epoch_i[:, j], epoch_i[:, j] < 0) for j in (2, 3))
+    when = _utc_times(date_ord, tod)
+    epochs = []
+    for i in range(len(t_s)):
+        fix = Fix(f[2][i], f[3][i], f[4][i], f[5][i], quality[i], n_used[i], f[6][i], f[7][i], f[8][i], mode[i])
+        gst = _tuple_new(Gst, (f[9][i], f[10][i], f[11][i], f[12][i])) if has_gst[i] else None
+        epochs.append(Epoch(t_s[i], when[i], tod[i], fix, tuple(satellites[first[i]:end[i]]), bool(sky[i]), gst))
+    return epochs
+
+
+def epoch_columns(epochs: Sequence[Epoch] | EpochColumns, satellites: bool = True) -> EpochColumns:
+    """Epochs as :class:`~features.gnss.assemble.EpochColumns` (columns given are returned as they are);
+    ``satellites=False``: the epochs' columns only, no satellite rows (each epoch's range empty)."""
+    if isinstance(epochs, EpochColumns):
+        return epochs
+    code = {name: k for k, name in enumerate(SYSTEM_CODES)}
+    sats = [s for e in epochs for s in e.satellites] if satellites else []
+    counts = np.fromiter((len(e.satellites) if satellites else 0 for e in epochs), dtype=np.int64,
+                         count=len(epochs))
+    end = np.cumsum(counts)
+    sat_i = np.zeros((len(sats), 4), dtype=np.int64)
+    sat_f = np.zeros((len(sats), 3))
+    if sats:
+        n = len(sats)
+        # per field (zip(*sats) would build 72,000 iterators for a 10-minute walk)
+        system, prn, signal, el, az, cn0, used = (list(map(itemgetter(k), sats)) for k in range(7))
+        sat_i[:, 0] = np.fromiter(map(code.__getitem__, system), dtype=np.int64, count=n)
+        sat_i[:, 1] = np.fromiter(prn, dtype=np.int64, count=n)
+        sat_i[:, 2] = np.fromiter((-1 if v is None else v for v in signal), dtype=np.int64, count=n)
+        sat_i[:, 3] = np.fromiter(used, dtype=bool, count=n)
+        for j, values in enumerate((el, az, cn0)):
+            sat_f[:, j] = np.fromiter((_NAN if v is None else v for v in values), dtype=float, count=n)
+    fixes = [e.fix for e in epochs]
+    gsts = [e.gst if e.gst is not None else (None,) * 4 for e in epochs]
+    epoch_f = np.zeros((len(epochs), 13))
+    epoch_i = np.zeros((len(epochs), 8), dtype=np.int64)
+    if epochs:
+        epoch_f[:, 0] = [e.t_s for e in epochs]
+        epoch_f[:, 1] = [e.time_of_day_s for e in epochs]
+        for j, name in enumerate(("lat_deg", "lon_deg", "alt_m", "geoid_sep_m", "hdop", "pdop", "vdop")):
+            epoch_f[:, 2 + j] = np.array([getattr(f, name) for f in fixes], dtype=float)
+        epoch_f[:, 9:] = np.array(gsts, dtype=float).reshape(-1, 4)
+        # the date of an epoch: its UTC time less its time of day (23:59:60.5 is still the day before)
+        epoch_i[:, 0] = [-1 if e.time_utc is None
+                         else (e.time_utc - dt.timedelta(seconds=e.time_of_day_s)).toordinal() for e in epochs]
+        epoch_i[:, 1] = [f.quality for f in fixes]
+        epoch_i[:, 2] = np.nan_to_num(np.array([f.n_used for f in fixes], dtype=float), nan=-1.0)
+        epoch_i[:, 3] = np.nan_to_num(np.array([f.mode for f in fixes], dtype=float), nan=-1.0)
+        epoch_i[:, 4] = [e.sky_reported for e in epochs]
+        epoch_i[:, 5] = [e.gst is not None for e in epochs]
+        epoch_i[:, 6], epoch_i[:, 7] = end - counts, end
+    return EpochColumns(epoch_f, epoch_i, sat_i, sat_f)
+
+
+def _no_epoch_error(path: Path, stats: ReadStats) -> NmeaError:
+    if stats.gsv_before_time:
+        return NmeaError(f"{path}: {stats.gsv_before_time} GSV sentences list satellites in view, but no "
+                         f"sentence carries a time (GGA, RMC, GNS, GLL or ZDA), so they cannot be placed "
+                         f"on a time base; {stats.summary()}")
+    return NmeaError(f"{path}: no usable epoch (no fix and no satellites in view) in "
+                     f"{stats.lines} lines; {stats.summary()}")
+
+
+def read_nmea_columns(path: str | os.PathLike, *, require_checksum: bool = True, resync_after: int = 5
+                      ) -> tuple[EpochColumns, ReadStats]:
+    """:func:`read_nmea` (fast parser) as :class:`~features.gnss.assemble.EpochColumns`: the same epochs,
+    without a Python object per satellite (what a walk's GNSS stream reads)."""
+    path = Path(path)
+    stats = ReadStats()
+    try:
+        columns, epochs = _read_bytes(path.read_bytes(), stats, require_checksum, resync_after)
+    except FileNotFoundError:
+        raise NmeaError(f"NMEA file {path} does not exist") from None
+    except IsADirectoryError:
+        raise NmeaError(f"NMEA path {path} is a directory, not a file") from None
+    columns = columns if columns is not None else epoch_columns(epochs)
+    has_position = ((columns.col("quality") > 0) & ~np.isnan(columns.col("lat_deg"))
+                    & ~np.isnan(columns.col("lon_deg")))
+    if not (has_position | (columns.col("sky_reported") != 0)).any():
+        raise _no_epoch_error(path, stats)
+    return columns, stats
 
 
 def read_nmea(path: str | os.PathLike, *, parser: Literal["fast", "pynmea2"] = "fast",
@@ -538,16 +685,11 @@ def read_nmea(path: str | os.PathLike, *, parser: Literal["fast", "pynmea2"] = "
     except IsADirectoryError:
         raise NmeaError(f"NMEA path {path} is a directory, not a file") from None
     if not any(e.sky_reported or e.fix.has_position for e in epochs):
-        if stats.gsv_before_time:
-            raise NmeaError(f"{path}: {stats.gsv_before_time} GSV sentences list satellites in view, but no "
-                            f"sentence carries a time (GGA, RMC, GNS, GLL or ZDA), so they cannot be placed "
-                            f"on a time base; {stats.summary()}")
-        raise NmeaError(f"{path}: no usable epoch (no fix and no satellites in view) in "
-                        f"{stats.lines} lines; {stats.summary()}")
+        raise _no_epoch_error(path, stats)
     return epochs, stats
 
 
-def epochs_on_time_base(epochs: list[Epoch], start_utc) -> list[Epoch]:
+def epochs_on_time_base(epochs: list[Epoch] | EpochColumns, start_utc) -> list[Epoch] | EpochColumns:
     """Shift the epochs' ``t_s`` so that 0 is ``start_utc`` (a walk's time base).
 
     ``start_utc`` is a timezone-aware datetime (naive is taken as UTC). Every
@@ -556,18 +698,26 @@ def epochs_on_time_base(epochs: list[Epoch], start_utc) -> list[Epoch]:
     epochs after a cold start can carry a bogus date (the firmware's build date,
     1980-01-06, a week-rollover date) until it has decoded the real one, and one
     such epoch would move every epoch by years. A file without any date raises
-    :class:`NmeaError`.
+    :class:`NmeaError`. Epochs given as :class:`~features.gnss.assemble.EpochColumns` come back as such.
     """
     import dataclasses
-    import datetime as dt
     import statistics
 
     if start_utc.tzinfo is None:
         start_utc = start_utc.replace(tzinfo=dt.timezone.utc)
-    shifts = [(e.time_utc - start_utc).total_seconds() - e.t_s for e in epochs if e.time_utc is not None]
+    if isinstance(epochs, EpochColumns):
+        t_s = epochs.col("t_s")
+        dated = np.flatnonzero(epochs.col("date_ordinal") >= 0)
+        when = _utc_times(epochs.col("date_ordinal")[dated].tolist(), epochs.col("time_of_day_s")[dated].tolist())
+        pairs = zip(when, t_s[dated].tolist())
+    else:
+        pairs = ((e.time_utc, e.t_s) for e in epochs if e.time_utc is not None)
+    shifts = [(when - start_utc).total_seconds() - t for when, t in pairs]
     if not shifts:
         raise NmeaError("the NMEA file carries no date (no RMC/ZDA), so it cannot be put on the walk's time base")
     shift = statistics.median_low(shifts)
+    if isinstance(epochs, EpochColumns):
+        return epochs if shift == 0.0 else epochs.with_t_s(t_s + shift)
     if shift == 0.0:
         return list(epochs)
     return [dataclasses.replace(e, t_s=e.t_s + shift) for e in epochs]

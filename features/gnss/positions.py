@@ -304,13 +304,12 @@ class GnssPositions:
         return int(self.t_s.shape[0])
 
 
-def _sky_rows(epochs: Sequence, sky) -> np.ndarray:
-    """Row of ``sky`` (:class:`~features.gnss.features.SkyArrays` of these epochs) per epoch, −1 without a sky."""
-    t = np.fromiter((e.t_s for e in epochs), dtype=float, count=len(epochs))
+def _sky_rows(t: np.ndarray, has: np.ndarray, sky) -> np.ndarray:
+    """Row of ``sky`` (:class:`~features.gnss.features.SkyArrays` of these epochs) per epoch (times ``t``, (n,);
+    ``has``, (n,) bool: the epoch reported a sky), −1 without a sky."""
     if sky.n_epochs == 0:
-        return np.full(len(epochs), -1, dtype=np.intp)
+        return np.full(t.size, -1, dtype=np.intp)
     j = np.clip(np.searchsorted(sky.t_s, t), 0, sky.n_epochs - 1)
-    has = np.fromiter((e.sky_reported for e in epochs), dtype=bool, count=len(epochs))
     if not np.array_equal(sky.t_s[j[has]], t[has]):
         raise DataError("fixes_to_enu: the sky arrays given are not those of these epochs (times differ)")
     return np.where(has, j, -1)
@@ -361,25 +360,31 @@ def fixes_to_enu(epochs: Sequence, lat0_deg: float, lon0_deg: float, alt0_m: flo
     for name, value in (("lat0_deg", lat0_deg), ("lon0_deg", lon0_deg), ("alt0_m", alt0_m)):
         if not math.isfinite(value):
             raise DataError(f"site origin {name} must be finite, got {value}")
-    fixed = [e for e in epochs if e.fix.quality in UERE_BY_QUALITY_M and e.fix.has_position]
-    n = len(fixed)
+    from features.gnss.nmea import epoch_columns
+
+    cols = epoch_columns(epochs, satellites=sky is None)  # the satellites only to build the sky arrays
+    quality = cols.col("quality")
+    lat, lon = cols.col("lat_deg"), cols.col("lon_deg")
+    # Fix.has_position, of a quality the UERE table knows
+    fixed = np.flatnonzero(np.isin(quality, list(UERE_BY_QUALITY_M)) & (quality > 0)
+                           & ~np.isnan(lat) & ~np.isnan(lon))
+    n = fixed.size
     if n == 0:
         empty = np.zeros(0)
         return GnssPositions(empty, empty, empty, empty, empty, empty, np.zeros(0, int), np.zeros(0, int), empty,
                              np.zeros(0, bool), empty, empty, empty, np.zeros(0, dtype="<U6"), empty)
     if sky is None:
-        sky = sky_arrays(epochs)
+        sky = sky_arrays(cols)
     nan = float("nan")
-    cols = np.array([(e.t_s, f.lat_deg, f.lon_deg, nan if f.alt_m is None else f.alt_m,
-                      0.0 if f.geoid_sep_m is None else f.geoid_sep_m, f.quality, -1 if f.n_used is None else f.n_used,
-                      nan if f.hdop is None else f.hdop, nan if f.vdop is None else f.vdop, e.time_of_day_s)
-                     for e in fixed for f in (e.fix,)], dtype=float).reshape(n, 10)
-    t, lat, lon, alt_msl, sep, quality, n_used, hdop, vdop, tod = cols.T
-    quality = quality.astype(int)
+    t, lat, lon, alt_msl, hdop, vdop, tod = (cols.col(name)[fixed] for name in (
+        "t_s", "lat_deg", "lon_deg", "alt_m", "hdop", "vdop", "time_of_day_s"))
+    sep = np.nan_to_num(cols.col("geoid_sep_m")[fixed], nan=0.0)
+    quality = quality[fixed].astype(int)
+    n_used = cols.col("n_used")[fixed].astype(float)
     assumed = np.isnan(hdop)
     hdop = np.where(assumed, ASSUMED_HDOP, hdop)
     att_sky, g_sky, zeta_sky = sky_attenuation(sky, cn0_reference)
-    row = _sky_rows(fixed, sky)
+    row = _sky_rows(t, cols.col("sky_reported")[fixed] != 0, sky)
     has = row >= 0
     att = np.where(has, att_sky[np.maximum(row, 0)] if sky.n_epochs else 0.0, 0.0)
     g = np.where(has, g_sky[np.maximum(row, 0)] if sky.n_epochs else 1.0, 1.0)
@@ -401,14 +406,13 @@ def fixes_to_enu(epochs: Sequence, lat0_deg: float, lon0_deg: float, alt0_m: flo
     # The receiver's own GST where the epoch has it — unless a fitted table (calibrated against truth) holds the
     # fix's cell: GST is what the receiver believes, too small under NLOS.
     fitted_row = source == "fitted"
-    for i, e in enumerate(fixed):
-        own = getattr(e, "gst", None)
-        if (own is not None and own.sigma_lat_m is not None and own.sigma_lon_m is not None
-                and not fitted_row[i]):
-            s_n[i], s_e[i] = own.sigma_lat_m, own.sigma_lon_m
-            if own.sigma_alt_m is not None:
-                sigma_up[i] = own.sigma_alt_m
-            source[i] = "gst"
+    sig_lat, sig_lon, sig_alt = (cols.col(name)[fixed] for name in (
+        "gst_sigma_lat_m", "gst_sigma_lon_m", "gst_sigma_alt_m"))
+    own = (cols.col("has_gst")[fixed] != 0) & ~np.isnan(sig_lat) & ~np.isnan(sig_lon) & ~fitted_row
+    s_n[own], s_e[own] = sig_lat[own], sig_lon[own]
+    own_up = own & ~np.isnan(sig_alt)
+    sigma_up[own_up] = sig_alt[own_up]
+    source[own] = "gst"
     if gst:
         for i, key in enumerate(np.round(tod, 3).tolist()):
             stats = gst.get(key)

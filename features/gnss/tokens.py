@@ -7,7 +7,9 @@ Two equivalent paths (tests hold them equal on every real log and under fuzzing)
   sentence (:func:`parse_sentence`, or ``pynmea2.parse(check=True)`` through
   :func:`pynmea2_fields`);
 * :func:`fields_from_buffer` — a whole file at once, with the line and ``$``
-  splitting and the checksums vectorised in numpy (prefix XOR).
+  splitting and the checksums vectorised in numpy (prefix XOR); its sentences'
+  byte ranges (:func:`sentence_spans`) are what the compiled epoch assembly
+  (:mod:`features.gnss.assemble`) reads.
 
 Why not pynmea2 alone: it costs about 8-11 µs a sentence here, as much as the
 whole GNSS path may spend (≥ 40 % of pynmea2's bare rate, ``bench/bench_gnss.py``);
@@ -27,6 +29,7 @@ from typing import Iterable
 import numpy as np
 
 __all__ = ["ReadStats", "parse_sentence", "pynmea2_fields", "fields_from_lines", "fields_from_buffer",
+           "sentence_spans",
            "TIMED_TYPES", "USED_TYPES"]
 
 TIMED_TYPES = frozenset(("GGA", "RMC", "GNS", "GLL", "ZDA", "GST", "GBS"))
@@ -236,10 +239,20 @@ def fields_from_buffer(buf: bytes, stats: ReadStats, require_checksum: bool):
     checksums vectorised (numpy): the XOR of body bytes [a, b) is P[b] ^ P[a], P the prefix XOR
     of the file. Counts exactly what the line path counts (a test holds them equal on every log).
     """
+    text = buf.decode("latin-1")
+    for a, b in zip(*(x.tolist() for x in sentence_spans(buf, stats, require_checksum))):
+        yield text[a:b].split(",")
+
+
+def sentence_spans(buf: bytes, stats: ReadStats, require_checksum: bool) -> tuple[np.ndarray, np.ndarray]:
+    """Where :func:`fields_from_buffer`'s sentences lie in ``buf``: (starts, ends), int64 arrays of
+    shape (n_sentences,), the sentence being ``buf[start:end]`` (address first, no ``$``, no checksum).
+    Counts in ``stats`` what the tokenising skipped, as :func:`fields_from_lines` does."""
     data = np.frombuffer(buf, dtype=np.uint8)
     n = data.size
+    none = np.zeros(0, dtype=np.int64)
     if n == 0:
-        return
+        return none, none
     text = buf.decode("latin-1")
     nl = np.flatnonzero(data == 10)
     line_start = np.concatenate([[0], nl + 1])
@@ -266,7 +279,7 @@ def fields_from_buffer(buf: bytes, stats: ReadStats, require_checksum: bool):
     keep = ~comment[line_of]
     dollars, line_of = dollars[keep], line_of[keep]
     if dollars.size == 0:
-        return
+        return none, none
     end = np.minimum(np.concatenate([dollars[1:], [n]]), line_end[line_of])  # next '$' or end of line
     stars = np.flatnonzero(data == 42)
     k = np.searchsorted(stars, end, side="left") - 1  # last '*' before the fragment's end
@@ -287,12 +300,12 @@ def fields_from_buffer(buf: bytes, stats: ReadStats, require_checksum: bool):
     kind = (head[:, 2].astype(np.int64) << 16) | (head[:, 3].astype(np.int64) << 8) | head[:, 4]
     fast = (ok & ~inner_star & (star + 2 < end) & (head[:, 5] == 44) & _ADDRESS_BYTE[head[:, :5]].all(axis=1)
             & np.isin(kind, _USED_KIND_CODES) & ((head[:, 0] != 80) | (head[:, 1] == 81)))
-    for d, e, st_, has, good, quick in zip(dollars.tolist(), end.tolist(), star.tolist(), has_star.tolist(),
-                                           ok.tolist(), fast.tolist()):
-        if quick:
-            stats.sentences += 1
-            yield text[d + 1:st_].split(",")
-            continue
+    starts = dollars + 1
+    ends = star.copy()
+    keep = fast.copy()
+    stats.sentences += int(fast.sum())
+    for k in np.flatnonzero(~fast).tolist():
+        d, e, st_, has, good = int(dollars[k]), int(end[k]), int(star[k]), bool(has_star[k]), bool(ok[k])
         fragment = text[d + 1:e].rstrip()
         if not fragment:
             continue
@@ -306,7 +319,7 @@ def fields_from_buffer(buf: bytes, stats: ReadStats, require_checksum: bool):
             if require_checksum:
                 stats.no_checksum += 1
                 continue
-            fields = fragment.split(",")
+            ends[k] = d + 1 + len(fragment)
         elif not dig:
             stats.truncated += 1
             continue
@@ -316,9 +329,8 @@ def fields_from_buffer(buf: bytes, stats: ReadStats, require_checksum: bool):
         elif "*" in text[d + 1:st_]:
             stats.malformed += 1
             continue
-        else:
-            fields = text[d + 1:st_].split(",")
-        if not _address_ok(fields[0]):
+        if not _address_ok(text[d + 1:ends[k]].split(",", 1)[0]):
             stats.truncated += 1
             continue
-        yield fields
+        keep[k] = True
+    return starts[keep].astype(np.int64), ends[keep].astype(np.int64)

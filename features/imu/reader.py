@@ -64,6 +64,7 @@ from pathlib import Path
 import numpy as np
 
 from features.errors import ImuError
+from features.numtext import read_csv_table
 
 __all__ = ["ImuData", "ImuRepairReport", "RepairConfig", "read_imu_csv", "repair_imu", "REQUIRED_COLUMNS",
            "ACCEL_UNITS", "GYRO_UNITS", "detect_units"]
@@ -357,6 +358,26 @@ def repair_imu(t_s, acc_m_s2, gyro_rad_s=None, mag_ut=None, config: RepairConfig
                    valid=valid & ~long_clip[nearest], saturated=sat_u, rate_hz=float(rate), report=report)
 
 
+_ASCII_SPACE = b" \t\n\x0b\x0c\x1c\x1d\x1e\x1f"
+"""The ASCII bytes ``str.strip`` removes (``\\r`` aside: a file holding one goes through :func:`_parse_table`)."""
+
+
+def _plain_table(raw: bytes) -> tuple[list[str], np.ndarray, int] | None:
+    """:func:`_parse_table` of a plain file, compiled: ASCII, ``\\n`` line ends, a header line, then rows
+    of canonical decimals and nothing else (:func:`features.numtext.read_csv_table`: the same doubles as
+    numpy's ``loadtxt``, which reads with Python's correctly rounded conversion). None for any other file."""
+    data = np.frombuffer(raw, dtype=np.uint8)
+    if data.size == 0 or data.max() >= 128 or (data == 13).any():
+        return None
+    body = raw.lstrip(_ASCII_SPACE)
+    cut = body.find(b"\n")
+    if cut < 0:
+        return None
+    header = [h.strip().lower() for h in body[:cut].decode("ascii").split(",")]
+    ok, rows = read_csv_table(np.frombuffer(body, dtype=np.uint8)[cut + 1:], len(header))
+    return (header, rows, 0) if ok else None
+
+
 def _parse_table(text: str, path: str) -> tuple[list[str], np.ndarray, int]:
     """Header names and the numeric table; a table with bad lines is parsed line by line (bad ones counted)."""
     text = text.lstrip()
@@ -457,12 +478,17 @@ def read_imu_csv(path: str | os.PathLike, config: RepairConfig = RepairConfig(),
     """
     path = Path(path)
     try:
-        text = path.read_text(encoding="utf-8-sig", errors="replace")
+        raw = path.read_bytes()
     except FileNotFoundError:
         raise ImuError(f"{path}: file not found") from None
     except IsADirectoryError:
         raise ImuError(f"{path}: is a directory, expected an IMU CSV file") from None
-    header, data, n_bad = _parse_table(text, str(path))
+    table = _plain_table(raw)
+    if table is not None:
+        header, data, n_bad = table
+    else:  # as path.read_text(encoding="utf-8-sig", errors="replace") reads it (universal newlines)
+        text = raw.decode("utf-8-sig", errors="replace").replace("\r\n", "\n").replace("\r", "\n")
+        header, data, n_bad = _parse_table(text, str(path))
     missing = [c for c in REQUIRED_COLUMNS if c not in header]
     if missing:
         have = ", ".join(header)
