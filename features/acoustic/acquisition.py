@@ -344,16 +344,15 @@ class HoughAcquisition:
         """
         delta = _implied_offsets(pe, pn, bpos, float(self.site.device_height_m), rho, float(self.c))
         order = np.argsort(delta, axis=1)
-        sorted_delta = np.take_along_axis(delta, order, axis=1)
         offset = 2.0 * (np.abs(delta).max() + tol + 1.0)
-        count = _agreement_counts(sorted_delta, offset, tol)
+        count = _agreement_counts(delta, order, offset, tol)
         # Among equal counts the tightest agreement first: a hypothesis that is only just within
         # the tolerance is usually a chance alignment (ordering by smallest δ instead buried
         # the true one under chance alignments whenever the clock offset was positive).
-        n_distinct, first, rows, ks, ns = _ranked_hypotheses(sorted_delta, order, count, np.asarray(bi, dtype=np.int64),
+        n_distinct, first, rows, ks, ns = _ranked_hypotheses(delta, order, count, np.asarray(bi, dtype=np.int64),
                                                              np.round(arrivals, 4), n_best)
         east, north = pe[rows].tolist(), pn[rows].tolist()
-        return [(n, d, (e, nn), sorted_delta[row, k: k + m]) for n, d, e, nn, row, k, m in
+        return [(n, d, (e, nn), delta[row, order[row, k: k + m]]) for n, d, e, nn, row, k, m in
                 zip(n_distinct.tolist(), first.tolist(), east, north, rows.tolist(), ks.tolist(), ns.tolist())]
 
 
@@ -402,45 +401,92 @@ def _implied_offsets(pe: np.ndarray, pn: np.ndarray, bpos: np.ndarray, h: float,
 
 
 @njit(cache=True)
-def _agreement_counts(sorted_delta: np.ndarray, offset: float, tol: float) -> np.ndarray:
-    """For each (point, anchor) of the vote, flattened row-major: how many candidates of the point's row lie
-    within [δ, δ + tol] of the anchor's δ (the anchor included); ``sorted_delta`` (n_points, n_candidates), each
-    row ascending. The comparison is made, as it was by a global ``searchsorted`` over the flattened rows, on
-    δ + ``offset``·row (rows ``offset`` apart never meet), so that the counts are those of that search to the bit;
-    a two-pointer sweep per row (the upper end only moves forward) instead of a binary search per anchor.
+def _agreement_counts(delta: np.ndarray, order: np.ndarray, offset: float, tol: float) -> np.ndarray:
+    """For each (point, anchor) of the vote, flattened row-major in the ascending ``order`` of each row of ``delta``
+    (n_points, n_candidates) (an argsort): how many candidates of the point's row lie within [δ, δ + tol] of the
+    anchor's δ (the anchor included); shape (n_points·n_candidates,), int32.
 
-    >>> _agreement_counts(np.array([[0.0, 0.1, 0.25, 0.3], [0.0, 1.0, 1.05, 2.0]]), 10.0, 0.2).tolist()
+    The comparison is made, as it was by a global ``searchsorted`` over the flattened rows, on δ + ``offset``·row
+    (rows ``offset`` apart never meet), so that the counts are those of that search to the bit. Per row, a merge
+    of the ascending shifted δ with the ascending limits δ + tol (:func:`_merge_counts`), four rows at a time.
+
+    >>> _agreement_counts(np.array([[0.25, 0.0, 0.3, 0.1], [0.0, 1.0, 2.0, 1.05]]),
+    ...                   np.array([[1, 3, 0, 2], [0, 1, 3, 2]]), 10.0, 0.2).tolist()
     [2, 3, 2, 1, 1, 2, 1, 1]
     """
-    n_points, n = sorted_delta.shape
-    count = np.empty(n_points * n, dtype=np.int64)
-    for row in range(n_points):
-        base = offset * np.float64(row)
-        j = 0
-        for k in range(n):
-            limit = (sorted_delta[row, k] + base) + tol
-            if j < k:
-                j = k
-            while j < n and sorted_delta[row, j] + base <= limit:
-                j += 1
-            count[row * n + k] = j - k
-    return count
+    n_points, n = delta.shape
+    # Four rows' shifted δ (each ending in +inf, a sentinel the merge never passes) and their limits.
+    shifted = np.full((4, n + 1), np.inf)
+    limit = np.full((4, n), np.inf)
+    count = np.empty(4 * ((n_points + 3) // 4) * n, dtype=np.int32)
+    for r0 in range(0, n_points, 4):
+        for lane in range(4):
+            row = r0 + lane
+            if row < n_points:
+                base = offset * np.float64(row)
+                for k in range(n):
+                    shifted[lane, k] = delta[row, order[row, k]] + base
+                    limit[lane, k] = shifted[lane, k] + tol
+        _merge_counts(shifted, limit, count, r0 * n)
+    return count[: n_points * n]
+
+
+@njit(cache=True, inline="always")
+def _merge_step(a: np.ndarray, lim: np.ndarray, out: np.ndarray, at: int, row: int, j: int, k: int
+                ) -> tuple[int, int]:
+    """One step of :func:`_merge_counts` on row ``row``: out[at + row·n + k] = j − k, then j or k moves on."""
+    step = np.int64(a[row, j] <= lim[row, k])
+    out[at + row * lim.shape[1] + k] = np.int32(j - k)
+    return j + step, k + 1 - step
 
 
 @njit(cache=True)
-def _ranked_hypotheses(sorted_delta: np.ndarray, order: np.ndarray, count: np.ndarray, beacon_of: np.ndarray,
+def _merge_counts(shifted: np.ndarray, limit: np.ndarray, out: np.ndarray, at: int) -> None:
+    """For each of four rows: out[at + row·n + k] = #{j ≥ k : shifted[j] ≤ limit[k]}, both rows ascending,
+    limit[k] ≥ shifted[k] (``shifted`` (4, n + 1) ends in +inf). A branch-free merge: j, the first index past limit[k],
+    only moves forward, and out[k] is final when k moves on; each step waits on the load of the step before,
+    so four independent rows are interleaved to keep the processor busy.
+
+    >>> out = np.zeros(12, np.int32)
+    >>> _merge_counts(np.array([[0.0, 0.1, 0.5, np.inf]] * 4), np.array([[0.2, 0.3, 0.7]] * 4), out, 0)
+    >>> out[:3].tolist()
+    [2, 1, 1]
+    """
+    n = limit.shape[1]
+    j0 = j1 = j2 = j3 = 0
+    k0 = k1 = k2 = k3 = 0
+    while k0 < n:                       # the four rows have the same length and take 2n steps at most each
+        j0, k0 = _merge_step(shifted, limit, out, at, 0, j0, k0)
+        if k1 < n:
+            j1, k1 = _merge_step(shifted, limit, out, at, 1, j1, k1)
+        if k2 < n:
+            j2, k2 = _merge_step(shifted, limit, out, at, 2, j2, k2)
+        if k3 < n:
+            j3, k3 = _merge_step(shifted, limit, out, at, 3, j3, k3)
+    for _ in range(2 * n):
+        if k1 < n:
+            j1, k1 = _merge_step(shifted, limit, out, at, 1, j1, k1)
+        if k2 < n:
+            j2, k2 = _merge_step(shifted, limit, out, at, 2, j2, k2)
+        if k3 < n:
+            j3, k3 = _merge_step(shifted, limit, out, at, 3, j3, k3)
+
+
+@njit(cache=True)
+def _ranked_hypotheses(delta: np.ndarray, order: np.ndarray, count: np.ndarray, beacon_of: np.ndarray,
                        arrival_of: np.ndarray, n_best: int):
     """The ``n_best`` (point, anchor) pairs of largest ``count`` (ties in index order, as a stable sort of
-    −count), each recounted as min(distinct beacons ``beacon_of``, distinct arrivals ``arrival_of``) of its
-    members ``order[row, k : k + count]``, then ranked by (most distinct, smallest spread of δ, smallest δ),
+    −count; ``k`` a position in the ascending ``order`` of row ``row`` of ``delta``), each recounted as
+    min(distinct beacons ``beacon_of``, distinct arrivals ``arrival_of``) of its members
+    ``order[row, k : k + count]``, then ranked by (most distinct, smallest spread of δ, smallest δ),
     ties kept in that order: (n_distinct, anchor δ, row, k, count), each of shape (≤ n_best,).
 
-    >>> sd = np.array([[0.0, 0.1, 0.2], [0.0, 0.05, 0.5]])
-    >>> [a.tolist() for a in _ranked_hypotheses(sd, np.array([[0, 1, 2], [0, 2, 1]]), np.array([3, 2, 1, 2, 1, 1]),
+    >>> delta = np.array([[0.0, 0.1, 0.2], [0.0, 0.5, 0.05]])
+    >>> [a.tolist() for a in _ranked_hypotheses(delta, np.array([[0, 1, 2], [0, 2, 1]]), np.array([3, 2, 1, 2, 1, 1]),
     ...                                         np.array([0, 1, 2]), np.array([1.0, 2.0, 3.0]), 3)]
     [[3, 2, 2], [0.0, 0.0, 0.1], [0, 1, 0], [0, 0, 1], [3, 2, 2]]
     """
-    n_cand = sorted_delta.shape[1]
+    n_cand = delta.shape[1]
     m = min(n_best, count.shape[0])
     # Stable top-m by count (a counting sort: counts are at most n_candidates).
     top_count = 0
@@ -481,8 +527,8 @@ def _ranked_hypotheses(sorted_delta: np.ndarray, order: np.ndarray, count: np.nd
             beacons += new_b
             arrivals += new_t
         n_distinct[a] = min(beacons, arrivals)
-        first[a] = sorted_delta[row, k]
-        spread[a] = sorted_delta[row, k + n - 1] - sorted_delta[row, k]
+        first[a] = delta[row, order[row, k]]
+        spread[a] = delta[row, order[row, k + n - 1]] - first[a]
         rows[a], ks[a], ns[a] = row, k, n
     # Lexicographic (−n_distinct, spread, first) by stable sorts from the last key to the first.
     rank = np.argsort(first, kind="mergesort")
