@@ -95,7 +95,7 @@ class HoughAcquisition:
             if len(ee) == 0:
                 return {}
         arrivals = np.array([t for _, _, t in items])
-        hyps = self._vote(ee, nn, bi, rho, bpos, coarse * math.sqrt(2.0) / self.c + 5e-4, arrivals)
+        hyps, _ = self._vote(ee, nn, bi, rho, bpos, coarse * math.sqrt(2.0) / self.c + 5e-4, arrivals)
         if not hyps:
             return {}
         fine = self.grid_step_m
@@ -115,20 +115,20 @@ class HoughAcquisition:
         _, first = np.unique(np.round(np.column_stack([pe, pn]) / fine).astype(np.int64), axis=0, return_index=True)
         first.sort()
         pe, pn = pe[first], pn[first]
-        hyps = self._vote(pe, pn, bi, rho, bpos, self.tolerance_s, arrivals, n_best=400)
+        hyps, members = self._vote(pe, pn, bi, rho, bpos, self.tolerance_s, arrivals, n_best=400)
         # Verify the best distinct hypotheses by least squares (RANSAC-style, Fischler & Bolles
         # 1981): the one whose fix keeps the most beacons, then the smallest residual, wins.
         best, best_key, tried = {}, None, []
-        for n, _, point, member_delta in hyps:
+        for n, _, point, span in hyps:
             # Hypotheses come by decreasing vote; one two votes short of the best verified fix
             # has never been seen to beat it (re-association adds a beacon at most), so stop.
             if n < 3 or len(tried) >= 12 or (best_key is not None and n + 1 < best_key[0]):
                 break
-            d0 = statistics.median(member_delta.tolist())
+            d0 = statistics.median(members(span).tolist())
             if any(abs(point[0] - p[0]) < 2 and abs(point[1] - p[1]) < 2 and abs(d0 - q) < 2e-3 for p, q in tried):
                 continue
             tried.append((point, d0))
-            kept = self._associate(point, d0, bi, rho, bpos, items)
+            kept = self._associate(point, d0, bi, rho, bpos, arrivals)
             refined, fix = self._refine(kept, candidates)
             if fix is None:
                 continue
@@ -288,24 +288,12 @@ class HoughAcquisition:
                 out.append((i, tx, t))
         return out
 
-    def _associate(self, point, d0, bi, rho, bpos, items) -> dict:
-        """Each beacon's earliest candidate within ``tol`` of δ = d0 at ``point``; one arrival, one beacon."""
-        r = np.sqrt((point[0] - bpos[:, 0]) ** 2 + (point[1] - bpos[:, 1]) ** 2
-                    + (self.site.device_height_m - bpos[:, 2]) ** 2)
-        err = np.abs((rho - r) / self.c - d0)
-        chosen = {}
-        for k in np.flatnonzero(err <= self.tolerance_s).tolist():
-            # Within the tolerance, the earliest candidate: echoes come later.
-            i, t = int(bi[k]), items[k][2]
-            if i not in chosen or t < chosen[i][0]:
-                chosen[i] = (t, float(err[k]))
-        # One arrival belongs to one beacon: where two beacons took the same arrival (within
-        # 1 ms), the one whose δ fits the vote better keeps it.
-        kept = {}
-        for i, (t, err) in sorted(chosen.items(), key=lambda kv: kv[1][1]):
-            if all(abs(t - t2) > 1e-3 for t2 in kept.values()):
-                kept[i] = t
-        return kept
+    def _associate(self, point, d0, bi, rho, bpos, times) -> dict:
+        """Each beacon's earliest candidate within ``tol`` of δ = d0 at ``point``; one arrival, one beacon
+        (:func:`_associate_arrivals`; ``times`` the candidates' stated arrivals, s)."""
+        kept_i, kept_t = _associate_arrivals(float(point[0]), float(point[1]), float(d0), bi, rho, bpos,
+                                             float(self.site.device_height_m), float(self.c), self.tolerance_s, times)
+        return dict(zip(kept_i.tolist(), kept_t.tolist()))
 
     def _refine(self, kept: dict, candidates: dict):
         """Least-squares refinement of a voted association, then re-association: (association, fix).
@@ -332,8 +320,9 @@ class HoughAcquisition:
                 out[i] = t_best
         return (out if len(out) >= fix.n_beacons else kept), fix
 
-    def _vote(self, pe, pn, bi, rho, bpos, tol, arrivals, n_best: int = 200) -> list:
-        """Hypotheses (distinct beacons, anchor δ, (east, north), δ of the agreeing) best first.
+    def _vote(self, pe, pn, bi, rho, bpos, tol, arrivals, n_best: int = 200) -> tuple[list, object]:
+        """Hypotheses (distinct beacons, anchor δ, (east, north), span) best first, and a function giving the δ of
+        the agreeing candidates of a span, ascending (formed only for the few hypotheses verified).
 
         Candidates agreeing with an anchor's δ within [δ, δ + tol] are counted
         for all (point, anchor) pairs at once — each row sorted, then counted by one
@@ -352,8 +341,9 @@ class HoughAcquisition:
         n_distinct, first, rows, ks, ns = _ranked_hypotheses(delta, order, count, np.asarray(bi, dtype=np.int64),
                                                              np.round(arrivals, 4), n_best)
         east, north = pe[rows].tolist(), pn[rows].tolist()
-        return [(n, d, (e, nn), delta[row, order[row, k: k + m]]) for n, d, e, nn, row, k, m in
+        hyps = [(n, d, (e, nn), (row, k, m)) for n, d, e, nn, row, k, m in
                 zip(n_distinct.tolist(), first.tolist(), east, north, rows.tolist(), ks.tolist(), ns.tolist())]
+        return hyps, lambda span: delta[span[0], order[span[0], span[1]: span[1] + span[2]]]
 
 
 @njit(cache=True)
@@ -535,6 +525,63 @@ def _ranked_hypotheses(delta: np.ndarray, order: np.ndarray, count: np.ndarray, 
     rank = rank[np.argsort(spread[rank], kind="mergesort")]
     rank = rank[np.argsort(-n_distinct[rank], kind="mergesort")]
     return n_distinct[rank], first[rank], rows[rank], ks[rank], ns[rank]
+
+
+@njit(cache=True)
+def _associate_arrivals(pe: float, pn: float, d0: float, bi: np.ndarray, rho: np.ndarray, bpos: np.ndarray, h: float,
+                        c: float, tol: float, times: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The association of a voted hypothesis (:meth:`HoughAcquisition._associate`): (beacon indices, arrival times)
+    in the order they are kept.
+
+    A candidate (beacon ``bi[k]`` at ``bpos[k]``, pseudorange ``rho[k]``, arrival ``times[k]``) agrees when its
+    implied clock offset at (``pe``, ``pn``) (the device at height ``h``) lies within ``tol`` of ``d0``; each
+    beacon takes its earliest agreeing candidate (echoes come later), beacons in the order first met. One
+    arrival belongs to one beacon: by increasing misfit (ties in that order) a beacon keeps its arrival unless
+    one within 1 ms is kept already.
+
+    Beacon 0 has two agreeing candidates (the earlier, 0.1 s, kept); beacon 1's arrival is beacon 0's within
+    0.5 ms and fits worse, so it is dropped; beacon 2's (misfit 0.5 ms) is kept:
+
+    >>> [a.tolist() for a in _associate_arrivals(0.0, 0.0, 0.0, np.array([0, 0, 1, 2]),
+    ...     np.array([10.0, 10.2, 10.4, 10.5]), np.array([[10.0, 0.0, 0.0]] * 4), 0.0, 1000.0, 1e-3,
+    ...     np.array([0.2, 0.1, 0.1005, 0.5]))]
+    [[0, 2], [0.1, 0.5]]
+    """
+    n = rho.shape[0]
+    chosen_i = np.empty(n, dtype=np.int64)
+    chosen_t = np.empty(n)
+    chosen_err = np.empty(n)
+    m = 0
+    for k in range(n):
+        de, dn, du = pe - bpos[k, 0], pn - bpos[k, 1], h - bpos[k, 2]
+        r = math.sqrt(de * de + dn * dn + du * du)
+        err = abs((rho[k] - r) / c - d0)
+        if not err <= tol:
+            continue
+        at = -1
+        for q in range(m):
+            if chosen_i[q] == bi[k]:
+                at = q
+                break
+        if at < 0:
+            chosen_i[m], chosen_t[m], chosen_err[m] = bi[k], times[k], err
+            m += 1
+        elif times[k] < chosen_t[at]:
+            chosen_t[at], chosen_err[at] = times[k], err
+    by_fit = np.argsort(chosen_err[:m], kind="mergesort")
+    kept_i = np.empty(m, dtype=np.int64)
+    kept_t = np.empty(m)
+    n_kept = 0
+    for q in by_fit:
+        free = True
+        for p in range(n_kept):
+            if not abs(chosen_t[q] - kept_t[p]) > 1e-3:
+                free = False
+                break
+        if free:
+            kept_i[n_kept], kept_t[n_kept] = chosen_i[q], chosen_t[q]
+            n_kept += 1
+    return kept_i[:n_kept], kept_t[:n_kept]
 
 
 def _inside(x, site: Site, margin_m: float = 5.0) -> bool:
