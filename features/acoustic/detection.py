@@ -217,13 +217,17 @@ class _Stream:
     """Decimated matched-filter envelopes of the recent past, read on demand (impulses blanked first,
     :mod:`features.acoustic.impulses`)."""
 
-    def __init__(self, path, config: DetectorConfig, mf: StreamingMatchedFilter, stats: AudioStats | None):
-        self.blocks = iter_audio_blocks(path, block_s=config.block_s, fs_out_hz=int(config.fs_hz))
+    def __init__(self, path, config: DetectorConfig, mf: StreamingMatchedFilter, stats: AudioStats | None,
+                 first_sample: int = 0):
+        self.blocks = iter_audio_blocks(path, block_s=config.block_s, fs_out_hz=int(config.fs_hz),
+                                        first_index=first_sample)
         self.mf, self.stats, self.fs = mf, stats, float(config.fs_hz)
-        self.blanker = ImpulseBlanker(self.fs, config.impulse_ratio, hold_s=config.impulse_hold_s)
-        self.read_end = 0            # input samples filtered so far (the blanker may hold a few back)
+        self.first_sample = first_sample
+        self.blanker = ImpulseBlanker(self.fs, config.impulse_ratio, hold_s=config.impulse_hold_s,
+                                      first_index=first_sample)
+        self.read_end = first_sample  # input samples filtered so far (the blanker may hold a few back)
         self.env = np.zeros((mf.bank.n_templates, 0), dtype=np.float32)
-        self.env_j0 = 0
+        self.env_j0 = first_sample // mf.decimation   # the matched filter's first output (its decimation grid)
         self.eof = False
 
     def ensure(self, upto: int) -> None:
@@ -238,8 +242,9 @@ class _Stream:
                 e = np.concatenate([e, e2], axis=1)
                 self.read_end += len(rest)
             else:
-                if self.stats is not None:
-                    self.stats.add(block, self.fs)
+                if self.stats is not None:           # per-bin statistics from the file's first sample
+                    self.stats.add(dataclasses.replace(block, start_index=block.start_index - self.first_sample)
+                                   if self.first_sample else block, self.fs)
                 x = self.blanker.process(block.samples)
                 self.read_end += len(x)
                 _, e = self.mf.process(x)
@@ -262,7 +267,7 @@ class _Stream:
 def detect_frames(path: str | os.PathLike, site: Site, timing: AudioTiming,
                   config: DetectorConfig = DetectorConfig(), stats: AudioStats | None = None,
                   positions: PositionConfig | None = None, resume: ReceiverState | None = None,
-                  keep_state_from_s: float = math.inf) -> Iterator[FrameResult]:
+                  keep_state_from_s: float = math.inf, first_sample: int = 0) -> Iterator[FrameResult]:
     """Stream ``path`` frame by frame: the chirps detected in each TDMA frame and its fix.
 
     Per frame, in order (each step a method of :class:`_FrameDetector`):
@@ -287,19 +292,29 @@ def detect_frames(path: str | os.PathLike, site: Site, timing: AudioTiming,
     replaces the tracker's before its frame (the frames before it are the cut's warm-up: the audio buffers
     fill); ``keep_state_from_s``: the first frame starting at or after this walk time carries the receiver's
     state before it (:attr:`FrameResult.receiver_state`), for the next cut.
+
+    ``first_sample``: the index, in the whole recording, of the file's first sample when the file is such a
+    cut; ``timing`` is then the whole recording's (``start_s`` the time of its sample 0). Every sample index of
+    the receiver is then the whole recording's: the audio blocks, the impulse blanker's segments, the matched
+    filter's FFT blocks and decimation grid lie where the whole run's do, and the search windows and arrival
+    times are computed from the same numbers, so that once the buffers have filled (and the tracker is resumed)
+    the cut's detections are the whole run's to the bit (whereas aligned on the cut's first sample, a round-off
+    difference near a threshold could flip a detection or a tracking decision). 0 (a whole recording) is the
+    recording's own alignment.
     """
     if not site.beacons:
         return
     fs = float(config.fs_hz)
     info = audio_info(path)
-    n_total = int(math.ceil(info.n_frames * fs / info.fs_hz))
+    n_file = int(math.ceil(info.n_frames * fs / info.fs_hz))
+    n_total = first_sample + n_file
     if stats is not None:
         stats.truncated = info.truncated
-        stats.duration_s = n_total / fs
+        stats.duration_s = n_file / fs
     timing = _frame_safe_timing(site, timing, config)
     if positions is None:
         positions = PositionConfig(max_clock_offset_s=timing.start_uncertainty_s + 0.05)
-    det = _FrameDetector(path, site, timing, config, stats, positions, n_total)
+    det = _FrameDetector(path, site, timing, config, stats, positions, n_total, first_sample)
     yield from det.frames(resume, keep_state_from_s)
 
 
@@ -678,9 +693,10 @@ class _FrameDetector:
     """State of one recording's detection: matched filter, envelope history, tracker, pending CIRs."""
 
     def __init__(self, path, site: Site, timing: AudioTiming, config: DetectorConfig,
-                 stats: AudioStats | None, positions: PositionConfig, n_total: int):
+                 stats: AudioStats | None, positions: PositionConfig, n_total: int, first_sample: int = 0):
         fs = float(config.fs_hz)
         self.site, self.timing, self.config, self.fs, self.n_total = site, timing, config, fs, n_total
+        self.first_sample = first_sample
         self.c = speed_of_sound_m_s(site.atmosphere.temperature_c)
         self.r_max = config.max_range_m if config.max_range_m is not None else max_site_range_m(site)
         specs = [beacon_chirp_spec(site, b) for b in site.beacons]
@@ -688,12 +704,12 @@ class _FrameDetector:
         self.template_of = [unique.index(s) for s in specs]
         self.bandwidth = {b.id: s.bandwidth_hz for b, s in zip(site.beacons, specs)}
         self.bank = bank = MatchedFilterBank(unique, fs)
-        mf = StreamingMatchedFilter(bank)
+        mf = StreamingMatchedFilter(bank, first_index=first_sample)
         self.dec = dec = mf.decimation
         self.lead = lead = int(math.ceil(config.max_lead_s * fs))
         self.span = span = int(math.ceil(config.cir_span_s * fs))
         self.history = int(math.ceil(site.acoustic.frame_s * fs))
-        self.stream = _Stream(path, config, mf, stats)
+        self.stream = _Stream(path, config, mf, stats, first_sample)
         self.tracker = ClockPositionTracker(site, timing, fs, self.c, self.r_max, positions,
                                             {b.id: s.range_doppler_lag_s for b, s in zip(site.beacons, specs)})
         self.maxima: dict = {}       # template -> (decimated indices, heights), ascending lists, for the current frame
@@ -726,7 +742,8 @@ class _FrameDetector:
         frame_s = site.acoustic.frame_s
         u = timing.start_uncertainty_s
         end_s = timing.start_s + self.n_total / fs
-        k = math.floor((timing.start_s - u - min(self.r_max / self.c, frame_s) - timing.frame_phase_s) / frame_s)
+        first_s = timing.start_s + self.first_sample / fs          # the file's first sample
+        k = math.floor((first_s - u - min(self.r_max / self.c, frame_s) - timing.frame_phase_s) / frame_s)
         while True:
             frame_start = timing.frame_phase_s + k * frame_s
             if frame_start - u > end_s:
@@ -753,7 +770,7 @@ class _FrameDetector:
     def detect_frame(self, k: int, frame_start: float) -> tuple[list[ChirpDetection], bool]:
         """Track, detect, acquire, assign and time the chirps of frame ``k``; and whether it was tracked."""
         tracker = self.tracker
-        windows = [w for w in tracker.windows(frame_start) if w.hi >= 0 and w.lo < self.n_total]
+        windows = [w for w in tracker.windows(frame_start) if w.hi >= self.first_sample and w.lo < self.n_total]
         tracking = tracker.tracking_at(frame_start)
         if not windows:
             return [], tracking

@@ -237,13 +237,16 @@ class ImpulseBlanker:
 
     ``process(block)`` returns the cleaned samples released so far (float32, in stream
     order; fewer or more than the block), ``flush()`` the rest. ``ratio`` = 0 switches it
-    off (samples pass unchanged, nothing held back).
+    off (samples pass unchanged, nothing held back). ``first_index``: the stream index of the
+    first sample (a cut of a longer recording: its index in the whole), so that the segments
+    lie where the whole recording's do and the cut's decisions, once a segment's model is
+    fitted, are the whole's.
 
     Attributes: ``n_impulses`` (holes opened), ``n_blanked`` (samples replaced).
     """
 
     def __init__(self, fs_hz: float, ratio: float = 8.0, context_s: float = 0.001, guard_s: float = 0.0003,
-                 hold_s: float = 0.0005, order: int = 12, segment: int = 4096, pre: int = 1):
+                 hold_s: float = 0.0005, order: int = 12, segment: int = 4096, pre: int = 1, first_index: int = 0):
         if not all(math.isfinite(v) for v in (ratio, context_s, guard_s, hold_s)):
             raise ConfigError(f"impulse blanker parameters must be finite, got {ratio}, {context_s}, {guard_s}, {hold_s}")
         if ratio != 0 and not ratio >= 3.0:
@@ -262,10 +265,11 @@ class ImpulseBlanker:
         # The stream so far from ``_buf_pos``: p + context zeros stand before its start.
         self._reach = self.g + self.wh + 2 * self.order + 2
         self._buf = np.zeros(self._reach, dtype=np.float32)
-        self._buf_pos = -self._reach
-        self._end = 0                                  # samples of the stream read
-        self._dec = 0                                  # next undecided sample
-        self._rel = 0                                  # next unreleased sample
+        first = int(first_index)
+        self._buf_pos = first - self._reach
+        self._end = first                              # stream index after the last sample read
+        self._dec = first                              # next undecided sample
+        self._rel = first                              # next unreleased sample
         self._mask = np.zeros(0, dtype=bool)           # decisions of [_rel, _dec)
         self._hold_left = 0
         self._filters: dict[int, np.ndarray] = {}      # segment index → its prediction-error filter
@@ -355,7 +359,7 @@ class ImpulseBlanker:
             self._fill(out, mask)
         self._mask = self._mask[k:]
         self._rel = r
-        # Keep what the residual, the reference and the interpolation still need.
+        # Keep what the residual, the reference and the interpolation still need
         # (and the segment being read, whose model is fitted once it is complete).
         keep = min(self._rel - self.order - 1, self._dec - self._reach,
                    (self._end // self.segment) * self.segment) - self._buf_pos
