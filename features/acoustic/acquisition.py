@@ -382,11 +382,19 @@ def _implied_offsets(pe: np.ndarray, pn: np.ndarray, bpos: np.ndarray, h: float,
     ...                  2.0).tolist()
     [[5.0]]
     """
-    out = np.empty((pe.shape[0], rho.shape[0]))
+    n = rho.shape[0]
+    out = np.empty((pe.shape[0], n))
+    # The beacons' coordinates as contiguous columns, and the height term once: the inner loop vectorises.
+    be, bn = np.ascontiguousarray(bpos[:, 0]), np.ascontiguousarray(bpos[:, 1])
+    du2 = np.empty(n)
+    for i in range(n):
+        du = h - bpos[i, 2]
+        du2[i] = du * du
     for p in range(pe.shape[0]):
-        for i in range(rho.shape[0]):
-            de, dn, du = pe[p] - bpos[i, 0], pn[p] - bpos[i, 1], h - bpos[i, 2]
-            out[p, i] = (rho[i] - math.sqrt(de * de + dn * dn + du * du)) / c
+        e, nn = pe[p], pn[p]
+        for i in range(n):
+            de, dn = e - be[i], nn - bn[i]
+            out[p, i] = (rho[i] - math.sqrt(de * de + dn * dn + du2[i])) / c
     return out
 
 
