@@ -179,8 +179,10 @@ def _quantised_error(x: np.ndarray, coefs: np.ndarray, first_seg: int, segment: 
     ``coefs[seg − first_seg]``; ``x[i]`` is the sample at stream position ``x_pos + i``. Shape (hi − lo,), int64.
 
     e[n] = x[n] + Σ_k c_k·x[n − k], the non-zero taps in ascending k, each term one fused multiply-add (the
-    ``contract`` flag: only the pairs a·b + c are fused, nothing is reordered); the second difference, most segments' filter, has its own
-    loop. Scaling by 2²⁴ is exact, so the rounding is that of |e|·2²⁴ + 0.5.
+    ``contract`` flag: only the pairs a·b + c are fused, nothing is reordered). The second difference, most
+    segments' filter, has its own loop; an AR model's taps are applied one after the other over the segment
+    (the loop over the samples vectorises; each sample's terms still come in ascending k). Scaling by 2²⁴ is
+    exact, so the rounding is that of |e|·2²⁴ + 0.5.
 
     >>> _quantised_error(np.array([0, 0, 1, 0, 0], np.float32), np.array([[1.0, -2.0, 1.0]]), 0, 8, 0, 2,
     ...                  5).tolist()
@@ -188,6 +190,7 @@ def _quantised_error(x: np.ndarray, coefs: np.ndarray, first_seg: int, segment: 
     """
     q = np.empty(hi - lo, dtype=np.int64)
     lags = np.empty(coefs.shape[1], dtype=np.int64)
+    work = np.empty(min(segment, hi - lo))
     pos = lo
     while pos < hi:
         seg = pos // segment
@@ -207,11 +210,18 @@ def _quantised_error(x: np.ndarray, coefs: np.ndarray, first_seg: int, segment: 
                 e = e + c2 * np.float64(x[n - 2])
                 q[n - a + pos - lo] = np.int64(abs(e) * 16777216.0 + 0.5)
         else:
+            # Tap by tap over the segment's samples (each sample's sum still in ascending k): the loop over
+            # the samples vectorises.
+            e = work[: b - a]
             for n in range(a, b):
-                e = np.float64(x[n])
-                for t in range(n_taps):
-                    e = e + c[lags[t]] * np.float64(x[n - lags[t]])
-                q[n - a + pos - lo] = np.int64(abs(e) * 16777216.0 + 0.5)
+                e[n - a] = np.float64(x[n])
+            for t in range(n_taps):
+                k = lags[t]
+                ck = c[k]
+                for n in range(a, b):
+                    e[n - a] = e[n - a] + ck * np.float64(x[n - k])
+            for n in range(a, b):
+                q[n - a + pos - lo] = np.int64(abs(e[n - a]) * 16777216.0 + 0.5)
         pos = stop
     return q
 
