@@ -441,9 +441,9 @@ def _merge_step(a: np.ndarray, lim: np.ndarray, out: np.ndarray, at: int, row: i
 @njit(cache=True)
 def _merge_counts(shifted: np.ndarray, limit: np.ndarray, out: np.ndarray, at: int) -> None:
     """For each of four rows: out[at + row·n + k] = #{j ≥ k : shifted[j] ≤ limit[k]}, both rows ascending,
-    limit[k] ≥ shifted[k] (``shifted`` (4, n + 1) ends in +inf). A branch-free merge: j, the first index past limit[k],
-    only moves forward, and out[k] is final when k moves on; each step waits on the load of the step before,
-    so four independent rows are interleaved to keep the processor busy.
+    limit[k] ≥ shifted[k] (``shifted`` (4, n + 1) ends in +inf). A branch-free merge: j, the first index past
+    limit[k], only moves forward, and out[k] is final when k moves on; each step waits on the load of the step
+    before, so four independent rows are interleaved to keep the processor busy.
 
     >>> out = np.zeros(12, np.int32)
     >>> _merge_counts(np.array([[0.0, 0.1, 0.5, np.inf]] * 4), np.array([[0.2, 0.3, 0.7]] * 4), out, 0)
