@@ -121,3 +121,14 @@ def test_a_cuts_feature_windows_start_at_its_first_sample(whole_and_cut):
     t = [r["t_s"] for r in cut.rows]
     assert math.isclose(t[0], CUT / FS + 1.0, abs_tol=1e-9)
     assert len(t) == math.floor(cut.duration_s - 2.0 + 1e-9) + 1
+
+
+def test_a_negative_or_fractional_first_sample_is_refused(walk_dir):
+    """One clear message naming the parameter, before any audio is read."""
+    from features.errors import ConfigError
+
+    walk = load_walk(walk_dir)
+    site = walk.load_site()
+    for bad in (-1, 2.5):
+        with pytest.raises(ConfigError, match="first_sample"):
+            analyse_audio(walk.path("audio"), site, timing_from_walk(walk, site), first_sample=bad)

@@ -301,6 +301,8 @@ def detect_frames(path: str | os.PathLike, site: Site, timing: AudioTiming,
     difference near a threshold could flip a detection or a tracking decision). 0 (a whole recording) is the
     recording's own alignment.
     """
+    if not (isinstance(first_sample, (int, np.integer)) and first_sample >= 0):
+        raise ConfigError(f"first_sample must be a sample index >= 0, got {first_sample!r}")
     if not site.beacons:
         return
     fs = float(config.fs_hz)
