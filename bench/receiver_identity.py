@@ -9,7 +9,7 @@ criterion of the issue: same beacons, positions within 1e-9 m.
 
 The walks are made here from seeds with the command line (``envfuse simulate site --seed S``, ``envfuse
 simulate walk SITE --seed W --duration-s 300``), under ``--root`` (kept between runs): by default sites
-201–205 (the standard split's test sites) and walk seeds 1000·site + 1, three walks by default.
+201–205 (the standard split's test sites) and walk seeds 1000·site + 1 (``--walks-per-site N``: + 1 ... + N), three walks by default.
 
 Run: ``.venv/bin/python bench/receiver_identity.py --root /tmp/identity --record before.npz``, change the
 receiver, then ``... --compare before.npz``.
@@ -30,19 +30,22 @@ import numpy as np
 ENVFUSE = [sys.executable, "-m", "pipeline"]
 
 
-def walks(root: Path, sites, duration_s: float) -> list[Path]:
-    """Simulate (once) one walk per site under ``root`` with the CLI; their directories."""
+def walks(root: Path, sites, duration_s: float, per_site: int = 1) -> list[Path]:
+    """Simulate (once) ``per_site`` walks per site under ``root`` with the CLI (walk seeds 1000·site + 1, + 2, ...);
+    their directories."""
     out = []
     for s in sites:
-        site_dir, walk_dir = root / f"site{s}", root / f"site{s}_walk{1000 * s + 1}"
+        site_dir = root / f"site{s}"
         if not (site_dir / "site.toml").exists():
             subprocess.run(ENVFUSE + ["simulate", "site", "--seed", str(s), "--out", str(site_dir), "--force"],
                            check=True, capture_output=True)
-        if not (walk_dir / "walk.toml").exists():
-            subprocess.run(ENVFUSE + ["simulate", "walk", str(site_dir), "--seed", str(1000 * s + 1), "--duration-s",
-                                      str(duration_s), "--out", str(walk_dir), "--force"], check=True,
-                           capture_output=True)
-        out.append(walk_dir)
+        for k in range(1, per_site + 1):
+            walk_dir = root / f"site{s}_walk{1000 * s + k}"
+            if not (walk_dir / "walk.toml").exists():
+                subprocess.run(ENVFUSE + ["simulate", "walk", str(site_dir), "--seed", str(1000 * s + k),
+                                          "--duration-s", str(duration_s), "--out", str(walk_dir), "--force"],
+                               check=True, capture_output=True)
+            out.append(walk_dir)
     return out
 
 
@@ -102,11 +105,12 @@ def main(argv=None) -> int:
     ap.add_argument("--root", type=Path, required=True, help="where the walks are made and kept")
     ap.add_argument("--sites", type=int, nargs="+", default=[201, 202, 203])
     ap.add_argument("--duration-s", type=float, default=300.0)
+    ap.add_argument("--walks-per-site", type=int, default=1, help="walk seeds 1000·site + 1 ... + N")
     group = ap.add_mutually_exclusive_group(required=True)
     group.add_argument("--record", type=Path)
     group.add_argument("--compare", type=Path)
     args = ap.parse_args(argv)
-    dirs = walks(args.root, args.sites, args.duration_s)
+    dirs = walks(args.root, args.sites, args.duration_s, args.walks_per_site)
     if args.record:
         store = {}
         for d in dirs:

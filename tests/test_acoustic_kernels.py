@@ -204,3 +204,111 @@ def test_assign_equals_the_python_rounds():
         clashes += rounds
         assert got == want
     assert 50 < clashes < 450                          # both the common case and the rounds were exercised
+
+
+# --- issue 25 item 1, the second pass: candidates, the vote's counts, the association, the blanker's error ----
+
+def _candidates_reference(jj, hh, j_lo, j_hi, gamma, dec, delay, echo, max_candidates):
+    """The per-window numpy candidates the receiver computed before :func:`_candidates` (bisection, threshold,
+    echo shadowing by an outer comparison, numpy's argsort of the heights, strongest first)."""
+    a = int(np.searchsorted(jj, j_lo))
+    b = max(a, int(np.searchsorted(jj, j_hi)))
+    heights = hh[a:b].astype(np.float64)
+    above = heights > gamma
+    starts, heights = dec * jj[a:b][above] - delay, heights[above]
+    if not len(starts):
+        return []
+    lag = starts[None, :] - starts[:, None]
+    shadowed = np.any((lag > 0) & (lag <= echo) & (heights[:, None] > heights[None, :]), axis=0)
+    keep = np.flatnonzero(~shadowed)
+    keep = keep[np.argsort(heights[keep])[::-1][:max_candidates]]
+    return starts[keep].tolist()
+
+
+def test_candidates_equal_the_per_window_reference():
+    """200 frames of maxima (one or two templates) and random windows, heights quantised so that ties occur:
+    the same candidates in the same order — would catch a shadowing window off by one end (0 < lag ≤ echo), the
+    strongest-first order reversed, a window's threshold taken from its neighbour, a lost tie order (equal
+    heights are left to numpy's argsort, as before), or a template's maxima read from the other's."""
+    from features.acoustic.detection import _candidates
+
+    rng = np.random.default_rng(25)
+    ties = 0
+    for _ in range(200):
+        n_t = int(rng.integers(1, 3))
+        per = [np.sort(rng.choice(5000, int(rng.integers(0, 40)), replace=False)) for _ in range(n_t)]
+        jj = np.concatenate(per).astype(np.int64)
+        hh = (np.round(rng.uniform(1, 12, len(jj)) * 4) / 4).astype(np.float32)   # quarter steps: ties
+        t_off = np.cumsum([0] + [len(p) for p in per])
+        n_w = int(rng.integers(1, 8))
+        tmpl = rng.integers(0, n_t, n_w).astype(np.int64)
+        j_lo = rng.integers(0, 4000, n_w).astype(np.int64)
+        j_hi = j_lo + rng.integers(0, 1500, n_w)
+        gamma = rng.uniform(0.5, 6, n_w)
+        starts, heights, c_off, n_kept, tied = _candidates(jj, hh, t_off, tmpl, j_lo, j_hi, gamma, 4, 609, 720.0, 12)
+        for k in range(n_w):
+            lo, hi = t_off[tmpl[k]], t_off[tmpl[k] + 1]
+            want = _candidates_reference(jj[lo:hi], hh[lo:hi], j_lo[k], j_hi[k], gamma[k], 4, 609, 720.0, 12)
+            a, b = c_off[k], c_off[k + 1]
+            if tied[k]:
+                ties += 1
+                order = np.argsort(heights[a:b])[::-1][:12]          # as _FrameDetector.candidates does
+                got = starts[a:b][order].tolist()
+            else:
+                got = starts[a: a + n_kept[k]].tolist()
+            assert got == want
+    assert ties > 20
+
+
+def test_agreement_counts_equal_a_brute_force_count():
+    """Random offsets (with exact duplicates) on 37 rows (not a multiple of the four rows merged together):
+    each (row, anchor) count equals #{j ≥ k : δ_j + base ≤ (δ_k + base) + tol} counted directly — would catch a
+    merge that stops one short, a lane of the four interleaved rows read from another, the last partial group
+    dropped, or the count of an anchor taken before its pointer settled."""
+    from features.acoustic.acquisition import _agreement_counts
+
+    rng = np.random.default_rng(5)
+    for n in (1, 5, 64):
+        delta = rng.normal(0, 0.02, (37, n))
+        delta[:, n // 2] = delta[:, 0]
+        tol = 0.01
+        order = np.argsort(delta, axis=1)
+        offset = 2.0 * (np.abs(delta).max() + tol + 1.0)
+        got = _agreement_counts(delta, order, offset, tol).reshape(37, n)
+        for row in range(37):
+            s = delta[row, order[row]] + offset * row
+            want = [int(np.sum(s[k:] <= s[k] + tol)) for k in range(n)]
+            assert got[row].tolist() == want
+
+
+def test_associate_arrivals_hand_checked():
+    """Two beacons 30 m east and north of a receiver at the origin (device height 1 m, beacons at 1 m), c = 300
+    m/s, d0 = 10 ms. Beacon 0: candidates at ρ = 33 m (δ = 10 ms, fits) and 33.3 m (11 ms, outside tol 0.5 ms);
+    beacon 1: ρ = 33.09 m (δ = 10.3 ms, fits, misfit 0.3 ms) arriving 0.4 ms after beacon 0's, so one arrival
+    for two beacons: beacon 0 (misfit 0) keeps it. Beacon 2 at the same place as 1 with ρ = 33.03 m (misfit
+    0.1 ms) arriving 5 ms later is kept, after beacon 0 (smaller misfit first)."""
+    from features.acoustic.acquisition import _associate_arrivals
+
+    bpos = np.array([[30.0, 0.0, 1.0], [30.0, 0.0, 1.0], [0.0, 30.0, 1.0], [0.0, 30.0, 1.0]])
+    got = _associate_arrivals(0.0, 0.0, 0.010, np.array([0, 0, 1, 2]), np.array([33.0, 33.3, 33.09, 33.03]), bpos,
+                              1.0, 300.0, 5e-4, np.array([0.100, 0.101, 0.1004, 0.105]))
+    assert got[0].tolist() == [0, 2]
+    assert got[1].tolist() == [0.100, 0.105]
+
+
+def test_quantised_error_hand_checked():
+    """Dyadic samples (every product and sum exact), segments of 4 samples: position 3 (segment 0) through the
+    second difference x[n] − 2x[n−1] + x[n−2], positions 4–7 (segment 1) through the AR filter
+    [1, −0.5, 0, 0.25]; |e|·2²⁴ — would catch a segment given its neighbour's filter, a tap lag off by one, or
+    a lost absolute value."""
+    from features.acoustic.impulses import _quantised_error
+
+    x = np.array([0, 0, 0, 0.5, 0.25, -0.25, 0.125, 0.5, 1.0, -1.0, 0.0, 0.0], np.float32)
+    coefs = np.array([[1.0, -2.0, 1.0, 0.0], [1.0, -0.5, 0.0, 0.25]])
+    e = [0.5 - 2 * 0 + 0,                  # n = 3: x3 − 2·x2 + x1
+         0.25 - 0.5 * 0.5 + 0.25 * 0,      # n = 4: x4 − 0.5·x3 + 0.25·x1 = 0
+         -0.25 - 0.5 * 0.25 + 0.25 * 0,    # n = 5: −0.375
+         0.125 + 0.5 * 0.25 + 0.25 * 0.5,  # n = 6: 0.375
+         0.5 - 0.5 * 0.125 + 0.25 * 0.25]  # n = 7: 0.5
+    assert _quantised_error(x, coefs, 0, 4, 0, 3, 8).tolist() == [8388608, 0, 6291456, 6291456, 8388608]
+    assert [round(abs(v) * 2 ** 24) for v in e] == [8388608, 0, 6291456, 6291456, 8388608]

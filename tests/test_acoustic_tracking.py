@@ -189,12 +189,13 @@ def test_compiled_vote_equals_the_numpy_vote():
         fake.site, fake.c = _Fake(), C
         fake.site.device_height_m = 1.2
         n_best = int(rng.choice([200, 400]))
-        got = HoughAcquisition._vote(fake, ee.ravel(), nn.ravel(), bi, rho, beacons[bi], tol, arrivals, n_best=n_best)
+        got, members = HoughAcquisition._vote(fake, ee.ravel(), nn.ravel(), bi, rho, beacons[bi], tol, arrivals,
+                                              n_best=n_best)
         want = _vote_reference(ee.ravel(), nn.ravel(), bi, rho, beacons[bi], tol, arrivals, 1.2, C, n_best)
         assert len(got) == len(want) == min(n_best, ee.size * len(bi))
         for g, w in zip(got, want):
             assert g[:3] == w[:3]
-            assert np.array_equal(g[3], w[3])
+            assert np.array_equal(members(g[3]), w[3])
 
 
 def _candidates(site, frame_start, east, north, clock_s):

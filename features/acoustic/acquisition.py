@@ -95,7 +95,7 @@ class HoughAcquisition:
             if len(ee) == 0:
                 return {}
         arrivals = np.array([t for _, _, t in items])
-        hyps = self._vote(ee, nn, bi, rho, bpos, coarse * math.sqrt(2.0) / self.c + 5e-4, arrivals)
+        hyps, _ = self._vote(ee, nn, bi, rho, bpos, coarse * math.sqrt(2.0) / self.c + 5e-4, arrivals)
         if not hyps:
             return {}
         fine = self.grid_step_m
@@ -115,20 +115,20 @@ class HoughAcquisition:
         _, first = np.unique(np.round(np.column_stack([pe, pn]) / fine).astype(np.int64), axis=0, return_index=True)
         first.sort()
         pe, pn = pe[first], pn[first]
-        hyps = self._vote(pe, pn, bi, rho, bpos, self.tolerance_s, arrivals, n_best=400)
+        hyps, members = self._vote(pe, pn, bi, rho, bpos, self.tolerance_s, arrivals, n_best=400)
         # Verify the best distinct hypotheses by least squares (RANSAC-style, Fischler & Bolles
         # 1981): the one whose fix keeps the most beacons, then the smallest residual, wins.
         best, best_key, tried = {}, None, []
-        for n, _, point, member_delta in hyps:
+        for n, _, point, span in hyps:
             # Hypotheses come by decreasing vote; one two votes short of the best verified fix
             # has never been seen to beat it (re-association adds a beacon at most), so stop.
             if n < 3 or len(tried) >= 12 or (best_key is not None and n + 1 < best_key[0]):
                 break
-            d0 = statistics.median(member_delta.tolist())
+            d0 = statistics.median(members(span).tolist())
             if any(abs(point[0] - p[0]) < 2 and abs(point[1] - p[1]) < 2 and abs(d0 - q) < 2e-3 for p, q in tried):
                 continue
             tried.append((point, d0))
-            kept = self._associate(point, d0, bi, rho, bpos, items)
+            kept = self._associate(point, d0, bi, rho, bpos, arrivals)
             refined, fix = self._refine(kept, candidates)
             if fix is None:
                 continue
@@ -288,24 +288,12 @@ class HoughAcquisition:
                 out.append((i, tx, t))
         return out
 
-    def _associate(self, point, d0, bi, rho, bpos, items) -> dict:
-        """Each beacon's earliest candidate within ``tol`` of δ = d0 at ``point``; one arrival, one beacon."""
-        r = np.sqrt((point[0] - bpos[:, 0]) ** 2 + (point[1] - bpos[:, 1]) ** 2
-                    + (self.site.device_height_m - bpos[:, 2]) ** 2)
-        err = np.abs((rho - r) / self.c - d0)
-        chosen = {}
-        for k in np.flatnonzero(err <= self.tolerance_s).tolist():
-            # Within the tolerance, the earliest candidate: echoes come later.
-            i, t = int(bi[k]), items[k][2]
-            if i not in chosen or t < chosen[i][0]:
-                chosen[i] = (t, float(err[k]))
-        # One arrival belongs to one beacon: where two beacons took the same arrival (within
-        # 1 ms), the one whose δ fits the vote better keeps it.
-        kept = {}
-        for i, (t, err) in sorted(chosen.items(), key=lambda kv: kv[1][1]):
-            if all(abs(t - t2) > 1e-3 for t2 in kept.values()):
-                kept[i] = t
-        return kept
+    def _associate(self, point, d0, bi, rho, bpos, times) -> dict:
+        """Each beacon's earliest candidate within ``tol`` of δ = d0 at ``point``; one arrival, one beacon
+        (:func:`_associate_arrivals`; ``times`` the candidates' stated arrivals, s)."""
+        kept_i, kept_t = _associate_arrivals(float(point[0]), float(point[1]), float(d0), bi, rho, bpos,
+                                             float(self.site.device_height_m), float(self.c), self.tolerance_s, times)
+        return dict(zip(kept_i.tolist(), kept_t.tolist()))
 
     def _refine(self, kept: dict, candidates: dict):
         """Least-squares refinement of a voted association, then re-association: (association, fix).
@@ -332,8 +320,9 @@ class HoughAcquisition:
                 out[i] = t_best
         return (out if len(out) >= fix.n_beacons else kept), fix
 
-    def _vote(self, pe, pn, bi, rho, bpos, tol, arrivals, n_best: int = 200) -> list:
-        """Hypotheses (distinct beacons, anchor δ, (east, north), δ of the agreeing) best first.
+    def _vote(self, pe, pn, bi, rho, bpos, tol, arrivals, n_best: int = 200) -> tuple[list, object]:
+        """Hypotheses (distinct beacons, anchor δ, (east, north), span) best first, and a function giving the δ of
+        the agreeing candidates of a span, ascending (formed only for the few hypotheses verified).
 
         Candidates agreeing with an anchor's δ within [δ, δ + tol] are counted
         for all (point, anchor) pairs at once — each row sorted, then counted by one
@@ -344,17 +333,17 @@ class HoughAcquisition:
         """
         delta = _implied_offsets(pe, pn, bpos, float(self.site.device_height_m), rho, float(self.c))
         order = np.argsort(delta, axis=1)
-        sorted_delta = np.take_along_axis(delta, order, axis=1)
         offset = 2.0 * (np.abs(delta).max() + tol + 1.0)
-        count = _agreement_counts(sorted_delta, offset, tol)
+        count = _agreement_counts(delta, order, offset, tol)
         # Among equal counts the tightest agreement first: a hypothesis that is only just within
         # the tolerance is usually a chance alignment (ordering by smallest δ instead buried
         # the true one under chance alignments whenever the clock offset was positive).
-        n_distinct, first, rows, ks, ns = _ranked_hypotheses(sorted_delta, order, count, np.asarray(bi, dtype=np.int64),
+        n_distinct, first, rows, ks, ns = _ranked_hypotheses(delta, order, count, np.asarray(bi, dtype=np.int64),
                                                              np.round(arrivals, 4), n_best)
         east, north = pe[rows].tolist(), pn[rows].tolist()
-        return [(n, d, (e, nn), sorted_delta[row, k: k + m]) for n, d, e, nn, row, k, m in
+        hyps = [(n, d, (e, nn), (row, k, m)) for n, d, e, nn, row, k, m in
                 zip(n_distinct.tolist(), first.tolist(), east, north, rows.tolist(), ks.tolist(), ns.tolist())]
+        return hyps, lambda span: delta[span[0], order[span[0], span[1]: span[1] + span[2]]]
 
 
 @njit(cache=True)
@@ -393,54 +382,109 @@ def _implied_offsets(pe: np.ndarray, pn: np.ndarray, bpos: np.ndarray, h: float,
     ...                  2.0).tolist()
     [[5.0]]
     """
-    out = np.empty((pe.shape[0], rho.shape[0]))
+    n = rho.shape[0]
+    out = np.empty((pe.shape[0], n))
+    # The beacons' coordinates as contiguous columns, and the height term once: the inner loop vectorises.
+    be, bn = np.ascontiguousarray(bpos[:, 0]), np.ascontiguousarray(bpos[:, 1])
+    du2 = np.empty(n)
+    for i in range(n):
+        du = h - bpos[i, 2]
+        du2[i] = du * du
     for p in range(pe.shape[0]):
-        for i in range(rho.shape[0]):
-            de, dn, du = pe[p] - bpos[i, 0], pn[p] - bpos[i, 1], h - bpos[i, 2]
-            out[p, i] = (rho[i] - math.sqrt(de * de + dn * dn + du * du)) / c
+        e, nn = pe[p], pn[p]
+        for i in range(n):
+            de, dn = e - be[i], nn - bn[i]
+            out[p, i] = (rho[i] - math.sqrt(de * de + dn * dn + du2[i])) / c
     return out
 
 
 @njit(cache=True)
-def _agreement_counts(sorted_delta: np.ndarray, offset: float, tol: float) -> np.ndarray:
-    """For each (point, anchor) of the vote, flattened row-major: how many candidates of the point's row lie
-    within [δ, δ + tol] of the anchor's δ (the anchor included); ``sorted_delta`` (n_points, n_candidates), each
-    row ascending. The comparison is made, as it was by a global ``searchsorted`` over the flattened rows, on
-    δ + ``offset``·row (rows ``offset`` apart never meet), so that the counts are those of that search to the bit;
-    a two-pointer sweep per row (the upper end only moves forward) instead of a binary search per anchor.
+def _agreement_counts(delta: np.ndarray, order: np.ndarray, offset: float, tol: float) -> np.ndarray:
+    """For each (point, anchor) of the vote, flattened row-major in the ascending ``order`` of each row of ``delta``
+    (n_points, n_candidates) (an argsort): how many candidates of the point's row lie within [δ, δ + tol] of the
+    anchor's δ (the anchor included); shape (n_points·n_candidates,), int32.
 
-    >>> _agreement_counts(np.array([[0.0, 0.1, 0.25, 0.3], [0.0, 1.0, 1.05, 2.0]]), 10.0, 0.2).tolist()
+    The comparison is made, as it was by a global ``searchsorted`` over the flattened rows, on δ + ``offset``·row
+    (rows ``offset`` apart never meet), so that the counts are those of that search to the bit. Per row, a merge
+    of the ascending shifted δ with the ascending limits δ + tol (:func:`_merge_counts`), four rows at a time.
+
+    >>> _agreement_counts(np.array([[0.25, 0.0, 0.3, 0.1], [0.0, 1.0, 2.0, 1.05]]),
+    ...                   np.array([[1, 3, 0, 2], [0, 1, 3, 2]]), 10.0, 0.2).tolist()
     [2, 3, 2, 1, 1, 2, 1, 1]
     """
-    n_points, n = sorted_delta.shape
-    count = np.empty(n_points * n, dtype=np.int64)
-    for row in range(n_points):
-        base = offset * np.float64(row)
-        j = 0
-        for k in range(n):
-            limit = (sorted_delta[row, k] + base) + tol
-            if j < k:
-                j = k
-            while j < n and sorted_delta[row, j] + base <= limit:
-                j += 1
-            count[row * n + k] = j - k
-    return count
+    n_points, n = delta.shape
+    # Four rows' shifted δ (each ending in +inf, a sentinel the merge never passes) and their limits.
+    shifted = np.full((4, n + 1), np.inf)
+    limit = np.full((4, n), np.inf)
+    count = np.empty(4 * ((n_points + 3) // 4) * n, dtype=np.int32)
+    for r0 in range(0, n_points, 4):
+        for lane in range(4):
+            row = r0 + lane
+            if row < n_points:
+                base = offset * np.float64(row)
+                for k in range(n):
+                    shifted[lane, k] = delta[row, order[row, k]] + base
+                    limit[lane, k] = shifted[lane, k] + tol
+        _merge_counts(shifted, limit, count, r0 * n)
+    return count[: n_points * n]
+
+
+@njit(cache=True, inline="always")
+def _merge_step(a: np.ndarray, lim: np.ndarray, out: np.ndarray, at: int, row: int, j: int, k: int
+                ) -> tuple[int, int]:
+    """One step of :func:`_merge_counts` on row ``row``: out[at + row·n + k] = j − k, then j or k moves on."""
+    step = np.int64(a[row, j] <= lim[row, k])
+    out[at + row * lim.shape[1] + k] = np.int32(j - k)
+    return j + step, k + 1 - step
 
 
 @njit(cache=True)
-def _ranked_hypotheses(sorted_delta: np.ndarray, order: np.ndarray, count: np.ndarray, beacon_of: np.ndarray,
+def _merge_counts(shifted: np.ndarray, limit: np.ndarray, out: np.ndarray, at: int) -> None:
+    """For each of four rows: out[at + row·n + k] = #{j ≥ k : shifted[j] ≤ limit[k]}, both rows ascending,
+    limit[k] ≥ shifted[k] (``shifted`` (4, n + 1) ends in +inf). A branch-free merge: j, the first index past
+    limit[k], only moves forward, and out[k] is final when k moves on; each step waits on the load of the step
+    before, so four independent rows are interleaved to keep the processor busy.
+
+    >>> out = np.zeros(12, np.int32)
+    >>> _merge_counts(np.array([[0.0, 0.1, 0.5, np.inf]] * 4), np.array([[0.2, 0.3, 0.7]] * 4), out, 0)
+    >>> out[:3].tolist()
+    [2, 1, 1]
+    """
+    n = limit.shape[1]
+    j0 = j1 = j2 = j3 = 0
+    k0 = k1 = k2 = k3 = 0
+    while k0 < n:                       # the four rows have the same length and take 2n steps at most each
+        j0, k0 = _merge_step(shifted, limit, out, at, 0, j0, k0)
+        if k1 < n:
+            j1, k1 = _merge_step(shifted, limit, out, at, 1, j1, k1)
+        if k2 < n:
+            j2, k2 = _merge_step(shifted, limit, out, at, 2, j2, k2)
+        if k3 < n:
+            j3, k3 = _merge_step(shifted, limit, out, at, 3, j3, k3)
+    for _ in range(2 * n):
+        if k1 < n:
+            j1, k1 = _merge_step(shifted, limit, out, at, 1, j1, k1)
+        if k2 < n:
+            j2, k2 = _merge_step(shifted, limit, out, at, 2, j2, k2)
+        if k3 < n:
+            j3, k3 = _merge_step(shifted, limit, out, at, 3, j3, k3)
+
+
+@njit(cache=True)
+def _ranked_hypotheses(delta: np.ndarray, order: np.ndarray, count: np.ndarray, beacon_of: np.ndarray,
                        arrival_of: np.ndarray, n_best: int):
     """The ``n_best`` (point, anchor) pairs of largest ``count`` (ties in index order, as a stable sort of
-    −count), each recounted as min(distinct beacons ``beacon_of``, distinct arrivals ``arrival_of``) of its
-    members ``order[row, k : k + count]``, then ranked by (most distinct, smallest spread of δ, smallest δ),
+    −count; ``k`` a position in the ascending ``order`` of row ``row`` of ``delta``), each recounted as
+    min(distinct beacons ``beacon_of``, distinct arrivals ``arrival_of``) of its members
+    ``order[row, k : k + count]``, then ranked by (most distinct, smallest spread of δ, smallest δ),
     ties kept in that order: (n_distinct, anchor δ, row, k, count), each of shape (≤ n_best,).
 
-    >>> sd = np.array([[0.0, 0.1, 0.2], [0.0, 0.05, 0.5]])
-    >>> [a.tolist() for a in _ranked_hypotheses(sd, np.array([[0, 1, 2], [0, 2, 1]]), np.array([3, 2, 1, 2, 1, 1]),
+    >>> delta = np.array([[0.0, 0.1, 0.2], [0.0, 0.5, 0.05]])
+    >>> [a.tolist() for a in _ranked_hypotheses(delta, np.array([[0, 1, 2], [0, 2, 1]]), np.array([3, 2, 1, 2, 1, 1]),
     ...                                         np.array([0, 1, 2]), np.array([1.0, 2.0, 3.0]), 3)]
     [[3, 2, 2], [0.0, 0.0, 0.1], [0, 1, 0], [0, 0, 1], [3, 2, 2]]
     """
-    n_cand = sorted_delta.shape[1]
+    n_cand = delta.shape[1]
     m = min(n_best, count.shape[0])
     # Stable top-m by count (a counting sort: counts are at most n_candidates).
     top_count = 0
@@ -481,14 +525,71 @@ def _ranked_hypotheses(sorted_delta: np.ndarray, order: np.ndarray, count: np.nd
             beacons += new_b
             arrivals += new_t
         n_distinct[a] = min(beacons, arrivals)
-        first[a] = sorted_delta[row, k]
-        spread[a] = sorted_delta[row, k + n - 1] - sorted_delta[row, k]
+        first[a] = delta[row, order[row, k]]
+        spread[a] = delta[row, order[row, k + n - 1]] - first[a]
         rows[a], ks[a], ns[a] = row, k, n
     # Lexicographic (−n_distinct, spread, first) by stable sorts from the last key to the first.
     rank = np.argsort(first, kind="mergesort")
     rank = rank[np.argsort(spread[rank], kind="mergesort")]
     rank = rank[np.argsort(-n_distinct[rank], kind="mergesort")]
     return n_distinct[rank], first[rank], rows[rank], ks[rank], ns[rank]
+
+
+@njit(cache=True)
+def _associate_arrivals(pe: float, pn: float, d0: float, bi: np.ndarray, rho: np.ndarray, bpos: np.ndarray, h: float,
+                        c: float, tol: float, times: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The association of a voted hypothesis (:meth:`HoughAcquisition._associate`): (beacon indices, arrival times)
+    in the order they are kept.
+
+    A candidate (beacon ``bi[k]`` at ``bpos[k]``, pseudorange ``rho[k]``, arrival ``times[k]``) agrees when its
+    implied clock offset at (``pe``, ``pn``) (the device at height ``h``) lies within ``tol`` of ``d0``; each
+    beacon takes its earliest agreeing candidate (echoes come later), beacons in the order first met. One
+    arrival belongs to one beacon: by increasing misfit (ties in that order) a beacon keeps its arrival unless
+    one within 1 ms is kept already.
+
+    Beacon 0 has two agreeing candidates (the earlier, 0.1 s, kept); beacon 1's arrival is beacon 0's within
+    0.5 ms and fits worse, so it is dropped; beacon 2's (misfit 0.5 ms) is kept:
+
+    >>> [a.tolist() for a in _associate_arrivals(0.0, 0.0, 0.0, np.array([0, 0, 1, 2]),
+    ...     np.array([10.0, 10.2, 10.4, 10.5]), np.array([[10.0, 0.0, 0.0]] * 4), 0.0, 1000.0, 1e-3,
+    ...     np.array([0.2, 0.1, 0.1005, 0.5]))]
+    [[0, 2], [0.1, 0.5]]
+    """
+    n = rho.shape[0]
+    chosen_i = np.empty(n, dtype=np.int64)
+    chosen_t = np.empty(n)
+    chosen_err = np.empty(n)
+    m = 0
+    for k in range(n):
+        de, dn, du = pe - bpos[k, 0], pn - bpos[k, 1], h - bpos[k, 2]
+        r = math.sqrt(de * de + dn * dn + du * du)
+        err = abs((rho[k] - r) / c - d0)
+        if not err <= tol:
+            continue
+        at = -1
+        for q in range(m):
+            if chosen_i[q] == bi[k]:
+                at = q
+                break
+        if at < 0:
+            chosen_i[m], chosen_t[m], chosen_err[m] = bi[k], times[k], err
+            m += 1
+        elif times[k] < chosen_t[at]:
+            chosen_t[at], chosen_err[at] = times[k], err
+    by_fit = np.argsort(chosen_err[:m], kind="mergesort")
+    kept_i = np.empty(m, dtype=np.int64)
+    kept_t = np.empty(m)
+    n_kept = 0
+    for q in by_fit:
+        free = True
+        for p in range(n_kept):
+            if not abs(chosen_t[q] - kept_t[p]) > 1e-3:
+                free = False
+                break
+        if free:
+            kept_i[n_kept], kept_t[n_kept] = chosen_i[q], chosen_t[q]
+            n_kept += 1
+    return kept_i[:n_kept], kept_t[:n_kept]
 
 
 def _inside(x, site: Site, margin_m: float = 5.0) -> bool:

@@ -23,6 +23,7 @@ Choices (issue 4, "bad input"):
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import os
 import struct
@@ -173,8 +174,14 @@ def _read_dtype(subtype: str) -> tuple[str, float]:
 
 
 def iter_audio_blocks(path: str | os.PathLike, block_s: float = 4.0,
-                      fs_out_hz: int = AUDIO_FS_HZ) -> Iterator[AudioBlock]:
+                      fs_out_hz: int = AUDIO_FS_HZ, first_index: int = 0) -> Iterator[AudioBlock]:
     """Yield :class:`AudioBlock` s of about ``block_s`` seconds at ``fs_out_hz``, first channel only.
+
+    ``first_index``: the stream index of the file's first sample (a cut of a longer recording: its index in
+    the whole). Blocks then end at the same stream indices as the whole recording's (whole multiples of the
+    block length; the first block is shorter), so that what is computed block by block downstream is cut the
+    same way; ``start_index`` counts from it. (At 48 kHz in; a resampled file's blocks start at
+    ``first_index`` and are not aligned.)
 
     Warns (:class:`AudioWarning`) when resampling, dropping channels or reading a
     truncated file. Memory stays bounded by one block whatever the file length.
@@ -202,8 +209,10 @@ def iter_audio_blocks(path: str | os.PathLike, block_s: float = 4.0,
                 # are a fresh array, since callers may keep them. Cast, then scale in place: faster here
                 # than one mixed-type int16 × float32 multiply (bench/bench_frontend.py), same values.
                 raw = np.empty((block_in, fh.channels), dtype=dtype)
+                out_index = int(first_index)
                 while True:
-                    n = fh.buffer_read_into(raw, dtype)
+                    # Up to the next whole multiple of the block length on the stream's index.
+                    n = fh.buffer_read_into(raw[: block_in - out_index % block_in], dtype)
                     if n == 0:
                         break
                     samples = raw[:n, 0].astype(np.float32)
@@ -215,7 +224,8 @@ def iter_audio_blocks(path: str | os.PathLike, block_s: float = 4.0,
                     yield AudioBlock(out_index, samples, clipped)
                     out_index += len(samples)
                 return
-            yield from _resampled_blocks(fh, dtype, scale, block_in, ratio, info.n_frames, path)
+            for block in _resampled_blocks(fh, dtype, scale, block_in, ratio, info.n_frames, path):
+                yield dataclasses.replace(block, start_index=block.start_index + int(first_index))
     except sf.LibsndfileError as exc:
         raise AudioError(f"{path}: read failed ({exc})") from None
 

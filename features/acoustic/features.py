@@ -144,13 +144,16 @@ class AudioAnalysis:
 def analyse_audio(path: str | os.PathLike, site: Site, timing: AudioTiming,
                   detector: DetectorConfig = DetectorConfig(), windows: WindowConfig = WindowConfig(),
                   positions: PositionConfig | None = None, keep_frames: bool = False, resume=None,
-                  keep_state_from_s: float = math.inf) -> AudioAnalysis:
+                  keep_state_from_s: float = math.inf, first_sample: int = 0) -> AudioAnalysis:
     """Stream ``path`` once: feature windows and per-frame acoustic positions.
 
     ``positions``: solver settings (default: see :func:`features.acoustic.detection.detect_frames`).
     ``keep_frames`` also returns every :class:`~features.acoustic.detection.FrameResult`
     (for evaluation; memory then grows with the file). ``resume``, ``keep_state_from_s``: a recording read in
     cuts (:func:`~features.acoustic.detection.detect_frames`); the state kept is the result's ``receiver_state``.
+    ``first_sample``: the file is a cut of a longer recording starting at that sample of it, and ``timing`` the
+    whole recording's (:func:`~features.acoustic.detection.detect_frames`); the feature windows start at the
+    cut's first sample.
     """
     stats = AudioStats(bin_s=0.1, n_samples=[], n_clipped=[], sum_sq=[])
     bins = _HopBins()
@@ -159,7 +162,9 @@ def analyse_audio(path: str | os.PathLike, site: Site, timing: AudioTiming,
     kept = [] if keep_frames else None
     clock_s = 0.0          # the receiver clock offset (stated − true) of the latest fix: chirps go to windows by true time
     receiver_state = None
-    for frame in detect_frames(path, site, timing, detector, stats, positions, resume, keep_state_from_s):
+    first_s = timing.start_s + first_sample / detector.fs_hz      # the file's first sample
+    for frame in detect_frames(path, site, timing, detector, stats, positions, resume, keep_state_from_s,
+                               first_sample):
         if frame.receiver_state is not None:
             receiver_state = frame.receiver_state
         if kept is not None:
@@ -168,17 +173,17 @@ def analyse_audio(path: str | os.PathLike, site: Site, timing: AudioTiming,
             clock_s = frame.fix.clock_offset_s
         for det in frame.detections:
             n_det += 1
-            k = math.floor((det.arrival_s - clock_s - timing.start_s) / windows.hop_s)
+            k = math.floor((det.arrival_s - clock_s - first_s) / windows.hop_s)
             if k >= 0:
                 bins.add(k, det.features, det.snr_db, det.beacon_id)
         if frame.fix is not None:
             fixes.append(frame.fix)
     bins.flush()
-    rows = _window_rows(bins, stats, timing, windows)
+    rows = _window_rows(bins, stats, first_s, windows)
     return AudioAnalysis(rows, fixes, n_det, stats.duration_s, stats.truncated, kept, receiver_state)
 
 
-def _window_rows(bins: _HopBins, stats: AudioStats, timing: AudioTiming, cfg: WindowConfig) -> list[dict]:
+def _window_rows(bins: _HopBins, stats: AudioStats, first_s: float, cfg: WindowConfig) -> list[dict]:
     duration = stats.duration_s
     if duration <= 0:
         return []
@@ -218,7 +223,7 @@ def _window_rows(bins: _HopBins, stats: AudioStats, timing: AudioTiming, cfg: Wi
             flags.append("partial")
         if stats.truncated and w == n_windows - 1:
             flags.append("truncated")
-        row = {"t_s": timing.start_s + w * cfg.hop_s + cfg.window_s / 2}
+        row = {"t_s": first_s + w * cfg.hop_s + cfg.window_s / 2}
         row.update({name: (float(v) if n_chirps else float("nan")) for name, v in zip(FEATURE_NAMES, means)})
         row.update({"n_chirps": n_chirps, "n_beacons": len(beacons),
                     "snr_db_mean": snr_sum / n_chirps if n_chirps else float("nan"),

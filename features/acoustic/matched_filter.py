@@ -350,13 +350,19 @@ class StreamingMatchedFilter:
     at input sample ``decimation·(j0 + c) − delay_samples``. Output of a stream
     cut into any blocks equals the output of one block.
 
+    ``first_index``: the stream index of the first sample fed (a cut of a longer recording: its index in
+    the whole); ``j0`` and the decimation grid are then the whole stream's (column ``c`` of the first call is
+    for a chirp starting at ``decimation·(j0 + c) − delay_samples`` in the whole's samples), and a cut fed
+    the same blocks as the whole from some sample on gives the whole's outputs from there on (the segments of
+    each block start where the whole's do).
+
     ``nfft`` (segment length) defaults to :func:`default_nfft`. The input
     buffer (carried-over tail, block, zero padding) and the band products are
     allocated once and reused, so a block costs one real FFT call, one
     multiply, one inverse FFT call and one magnitude, with no concatenation.
     """
 
-    def __init__(self, bank: MatchedFilterBank, nfft: int | None = None, decimation: int = 4):
+    def __init__(self, bank: MatchedFilterBank, nfft: int | None = None, decimation: int = 4, first_index: int = 0):
         d = int(decimation)
         if d < 1:
             raise ConfigError(f"decimation {decimation} must be a positive integer")
@@ -385,8 +391,11 @@ class StreamingMatchedFilter:
         # doubles positive frequencies. Hence 2/N here and an unscaled inverse (norm="forward").
         self._spectra = (2.0 / self.nfft * spectra[:, self._k0: self._k0 + self._n_band]).astype(np.complex64)
         self._n_keep = n_keep
-        self._pending = np.zeros(0, dtype=np.float32)
-        self._next_j = 0
+        # A cut of a longer recording (``first_index``: its first sample's index in the whole) is preceded by
+        # zeros back to a whole multiple of D: its outputs fall on the whole's decimation grid and index.
+        phase = int(first_index) % d
+        self._pending = np.zeros(phase, dtype=np.float32)
+        self._next_j = (int(first_index) - phase) // d
         self._received = 0
         self._first_valid = (self.kernel_len - 1) // d
         # Work buffers, grown to the largest block seen (memory is bounded by the block size):

@@ -1,0 +1,134 @@
+"""Issue 25 (long walks in segments): a cut of a recording, read with its first sample's index in the whole
+(``first_sample``), detects what the whole run detects once its buffers have filled and its tracker is resumed.
+
+Before, the cut's audio blocks, impulse-blanker segments, matched-filter FFT blocks and decimation grid were
+aligned on the cut's first sample: float32 round-off then differed from the whole run's, and a detection near
+a threshold could move or flip (walks/segments.py: seed 78, one 300 s segment held 7 fixes more).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import soundfile as sf
+
+from features.acoustic.audio import iter_audio_blocks
+from features.acoustic.features import analyse_audio
+from features.acoustic.impulses import ImpulseBlanker
+from features.acoustic.matched_filter import ChirpSpec, MatchedFilterBank, StreamingMatchedFilter
+from features.acoustic.positions import PositionConfig
+from features.acoustic.timing import timing_from_walk
+from features.walk import load_walk
+
+FS = 48_000
+CUT = 20 * FS + 1237        # 20.026 s: not on a block (4 s), blanker segment (4096), FFT hop or decimation (4)
+RESUME_S = 30.0             # the cut's warm-up: 10 s, as walks/segments.py's RESUME_AFTER_S
+
+
+def test_audio_blocks_of_a_cut_end_where_the_whole_recordings_do(tmp_path):
+    """Blocks of 0.5 s (24,000 samples) of a file whose first sample is sample 30,000 of the whole: the first
+    block runs to 48,000, the next ones to whole multiples of 24,000; indices count from 30,000."""
+    sf.write(tmp_path / "a.wav", np.zeros(100_000, np.float32), FS, subtype="FLOAT")
+    blocks = list(iter_audio_blocks(tmp_path / "a.wav", block_s=0.5, first_index=30_000))
+    assert [b.start_index for b in blocks] == [30_000, 48_000, 72_000, 96_000, 120_000]
+    assert [len(b.samples) for b in blocks] == [18_000, 24_000, 24_000, 24_000, 10_000]
+
+
+def test_matched_filter_of_a_cut_is_on_the_whole_streams_grid():
+    """White noise filtered whole in 4 s blocks and from sample 10,003 on in blocks ending at the same indices:
+    the cut's outputs carry the whole's indices (10,003 // 4 = 2,500 first) and, from one block on, are the
+    whole's to the bit; the first block's outputs within a kernel length of the cut differ (zeros before it)."""
+    bank = MatchedFilterBank([ChirpSpec(17_000.0, 23_000.0, 0.010, 0.2)], FS)
+    x = np.random.default_rng(4).standard_normal(3 * 192_000).astype(np.float32)
+    whole = StreamingMatchedFilter(bank)
+    env_whole = np.concatenate([whole.process(x[i: i + 192_000])[1] for i in range(0, len(x), 192_000)], axis=1)
+    first = 10_003
+    cut = StreamingMatchedFilter(bank, first_index=first)
+    j0, e0 = cut.process(x[first: 192_000])
+    assert j0 == first // 4
+    envs = [e0] + [cut.process(x[i: i + 192_000])[1] for i in range(192_000, len(x), 192_000)]
+    env_cut = np.concatenate(envs, axis=1)
+    j_from = 192_000 // 4                                       # the second block on
+    assert np.array_equal(env_cut[:, j_from - j0:], env_whole[:, j_from:])
+    assert not np.array_equal(env_cut[:, :10], env_whole[:, j0: j0 + 10])
+
+
+def test_blanker_of_a_cut_decides_as_the_whole(tmp_path):
+    """Impulses of 50σ in noise with a 20 kHz tone (the AR model, not the second difference, whitens it): the
+    blanker run from sample 100,001 with ``first_index`` releases, from its second 4096-sample segment on,
+    the samples the whole run releases, bit for bit (the AR models of the same segments, the same holes)."""
+    rng = np.random.default_rng(7)
+    n = 4 * 192_000
+    x = (0.01 * rng.standard_normal(n) + 0.05 * np.sin(2 * np.pi * 20_000 / FS * np.arange(n))).astype(np.float32)
+    at = rng.integers(0, n, 400)
+    x[at] += 0.5 * np.sign(rng.standard_normal(400)).astype(np.float32)
+    blocks = [(i, min(i + 192_000, n)) for i in range(0, n, 192_000)]
+    whole = ImpulseBlanker(FS)
+    out_whole = np.concatenate([whole.process(x[a:b]) for a, b in blocks] + [whole.flush()])
+    first = 100_001
+    cut = ImpulseBlanker(FS, first_index=first)
+    out_cut = np.concatenate([cut.process(x[max(a, first):b]) for a, b in blocks if b > first] + [cut.flush()])
+    assert len(out_whole) == n and len(out_cut) == n - first
+    settled = (first // 4096 + 2) * 4096                     # the segment after the cut's first whole one
+    assert whole.n_impulses > 300
+    assert np.array_equal(out_cut[settled - first:], out_whole[settled:])
+
+
+@pytest.fixture(scope="module")
+def whole_and_cut(walk_dir, tmp_path_factory):
+    """The conftest walk (60 s) read whole, keeping the receiver's state at 30 s, and its audio from sample CUT
+    on written as its own file and read with ``first_sample`` = CUT and the whole walk's timing, resumed there."""
+    walk = load_walk(walk_dir)
+    site = walk.load_site()
+    timing = timing_from_walk(walk, site)
+    pos = PositionConfig(max_clock_offset_s=timing.start_uncertainty_s + 0.05, motion_speed_m_s=1.4)
+    whole = analyse_audio(walk.path("audio"), site, timing, positions=pos, keep_frames=True,
+                          keep_state_from_s=RESUME_S)
+    x, fs = sf.read(str(walk.path("audio")), dtype="int16")
+    assert fs == FS and len(x) > CUT + 20 * FS
+    d = tmp_path_factory.mktemp("cut")
+    sf.write(d / "audio.wav", x[CUT:], FS, subtype="PCM_16")
+    cut = analyse_audio(d / "audio.wav", site, timing, positions=pos, keep_frames=True,
+                        resume=whole.receiver_state, first_sample=CUT)
+    return whole, cut
+
+
+def _detections(frames, from_frame):
+    return [(f.frame, d.beacon_id, d.tx_s, d.arrival_s, d.snr_db, d.associated, tuple(d.features))
+            for f in frames if f.frame >= from_frame for d in f.detections]
+
+
+def test_a_cut_off_block_detects_what_the_whole_walk_detects(whole_and_cut):
+    """From the resumed frame on, every detection (beacon, emission, arrival, SNR, CIR features) and every fix
+    of the cut is the whole run's, bit for bit; the cut's first frames (warm-up) are its own."""
+    whole, cut = whole_and_cut
+    k0 = whole.receiver_state.frame
+    assert any(f.frame == k0 for f in cut.frames)
+    a, b = _detections(whole.frames, k0), _detections(cut.frames, k0)
+    assert len(a) > 50                                          # 30 s of chirps from several beacons
+    assert a == b
+    fa = [(f.t_s, f.east_m, f.north_m, f.clock_offset_s, f.used_ids) for f in whole.fixes if f.t_s >= RESUME_S + 1]
+    fb = [(f.t_s, f.east_m, f.north_m, f.clock_offset_s, f.used_ids) for f in cut.fixes if f.t_s >= RESUME_S + 1]
+    assert len(fa) >= 10 and fa == fb
+
+
+def test_a_cuts_feature_windows_start_at_its_first_sample(whole_and_cut):
+    """The cut's windows lie on the walk's time base from its first sample (20.026 s): the first centred at
+    20.026 + 1 s, and as many as its 40 s hold."""
+    _, cut = whole_and_cut
+    t = [r["t_s"] for r in cut.rows]
+    assert math.isclose(t[0], CUT / FS + 1.0, abs_tol=1e-9)
+    assert len(t) == math.floor(cut.duration_s - 2.0 + 1e-9) + 1
+
+
+def test_a_negative_or_fractional_first_sample_is_refused(walk_dir):
+    """One clear message naming the parameter, before any audio is read."""
+    from features.errors import ConfigError
+
+    walk = load_walk(walk_dir)
+    site = walk.load_site()
+    for bad in (-1, 2.5):
+        with pytest.raises(ConfigError, match="first_sample"):
+            analyse_audio(walk.path("audio"), site, timing_from_walk(walk, site), first_sample=bad)
