@@ -61,6 +61,10 @@ def fit_calibration(model, walks: list, config: CalibrationConfig = CalibrationC
             say(f"covariance of {name} left raw: {why}")
             continue
         c = cals[name]
-        say(f"calibrated {name}: NEES in the 95 % region {c.oof_share_raw_:.2f} -> {c.oof_share_:.2f} "
-            f"(out of fold, multiplier {c.multiplier_:.2f})")
+        if np.isfinite(c.oof_share_):
+            say(f"calibrated {name}: NEES in the 95 % region {c.oof_share_raw_:.2f} -> {c.oof_share_:.2f} "
+                f"(out of fold, multiplier {c.multiplier_:.2f})")
+        else:   # one training walk: no fold to hold out, so no honest figure of the calibrated share
+            say(f"calibrated {name}: NEES in the 95 % region {c.oof_share_raw_:.2f} before, multiplier "
+                f"{c.multiplier_:.2f}; no out-of-fold figure after (it needs two or more training walks)")
     return cals

@@ -232,6 +232,9 @@ def _run_env_finetune(args, data, diag: dict, base_dir: Path | None) -> int:
             raise DataError(f"--cell {', '.join(unlabelled)}: no map label in the library; fine-tuning learns "
                             "from labelled cells only (give the cell a map label, or leave it out)")
     if not (data.label >= 0).any():
+        if args.walks is not None:
+            raise DataError("fine-tuning needs labelled windows: with --walks the labels are each walk's truth "
+                            "classes (truth.csv), and none of the walks has one")
         raise DataError("fine-tuning needs labelled cells: none of the chosen cells has a map label")
     labelled = data.label >= 0
     n_classes = len(set(data.label[labelled].tolist()))
