@@ -160,8 +160,9 @@ class Segment:
     @property
     def states_from_s(self) -> float:
         """Walk time from which this segment's read keeps the readers' states for the next segment: the next
-        cut's start + :data:`RESUME_AFTER_S` (inf for the last segment)."""
-        return self.next_from_s + RESUME_AFTER_S
+        cut's start + :data:`RESUME_AFTER_S`; inf for the last segment and when the next cut starts at the walk's
+        start (−inf: it reads the walk from there as the whole walk's read does, resuming no reader)."""
+        return self.next_from_s + RESUME_AFTER_S if math.isfinite(self.next_from_s) else math.inf
 
     def owns(self, t_s):
         """Which of ``t_s`` (array) belong to this segment."""
@@ -238,8 +239,10 @@ def walk_cuts(walk_dir: str | os.PathLike, segment_s: float = SEGMENT_S, *,
             own_to = math.inf if k == n - 1 else (k + 1) * segment_s
             lo = -math.inf if k == 0 else align(own_from - WARMUP_S)
             hi = math.inf if k == n - 1 else own_to + TAIL_S
-            if k == 0:
-                hi = max(hi, GATE_REFERENCE_S)      # the heading gate's reference field, as the whole walk's
+            if lo == -math.inf:
+                # a cut holding the walk's start reads it as the whole walk's read does, the heading gate's
+                # reference field included (a segment shorter than the warm-up: the first cuts all start there)
+                hi = max(hi, GATE_REFERENCE_S)
             next_lo = align((k + 1) * segment_s - WARMUP_S)
             d = Path(tmp) / f"segment{k:04d}"
             d.mkdir()
