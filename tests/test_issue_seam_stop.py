@@ -24,7 +24,7 @@ STOP_S = (172.0, 278.0)
 
 @pytest.fixture(scope="module")
 def stop_walk(walk_dir, tmp_path_factory):
-    """The 60 s session walk looped 5 times (300 s), its IMU standing still over :data:`STOP_S`: every sample
+    """The 60 s session walk looped 5 times (300 s, its UWB log too), its IMU standing still over :data:`STOP_S`: every sample
     there the walk's mean specific force, angular rate and field (gravity, the gyro's bias, the Earth's field
     on a waist device at rest) plus white noise of a consumer MEMS unit at 100 Hz (0.02 m/s², 0.002 rad/s,
     0.3 µT; seed 5), so that no step is detected and the heading holds. GNSS and audio go on as recorded (the
@@ -33,7 +33,7 @@ def stop_walk(walk_dir, tmp_path_factory):
 
     from tests.long_walk import loop_walk
 
-    d = loop_walk(walk_dir, tmp_path_factory.mktemp("seam_stop") / "x5", 5)
+    d = loop_walk(walk_dir, tmp_path_factory.mktemp("seam_stop") / "x5", 5, extra=("uwb",))
     path = d / "imu.csv"
     with open(path, newline="") as fh:
         rows = list(csv.reader(fh))
@@ -69,6 +69,50 @@ def test_pdr_in_segments_shorter_than_the_warm_up_with_a_stop_across_a_cut(model
     d = _distances(whole, seg)
     print(f"{segment_s:g} s segments, owning no step: {own_none}; pdr max m: {d['pdr']:.2g}")
     assert d["pdr"] < PDR_SEAM_TOL_M
+
+
+def test_filters_in_segments_whose_cut_starts_in_a_stop(model_and_walk, stop_walk, monkeypatch):
+    """With a 40 s warm-up, the cut of the 60 s segment [240, 300) starts at 192 s, inside the stop (172-278 s),
+    so it holds no step before the stop's end: the EKF (``kf_quality``) must still stand there (the whole
+    walk's standing noise q_stand, not the walking one), and the UWB/PDR filter's PDR track must not depend
+    on the step before the stop (it spread the next step over the whole stop). Every filter track and its
+    ``+lag`` within FILTER_SEAM_TOL_M of the whole walk (measured ≤ 5e-9 m; merge32: ``kf_quality`` 34 m,
+    ``uwb_aoa_pdr`` 0.23 m, its ``+lag`` 0.45 m)."""
+    from tests.test_seam_resume import FILTER_SEAM_TOL_M
+    from walks import segments
+    from walks.fuse import fuse_walk, segmented_tracks
+
+    model, _ = model_and_walk
+    monkeypatch.setattr(segments, "WARMUP_S", 40.0)
+    methods = ("kf_quality", "uwb_aoa_pdr")
+    whole = fuse_walk(stop_walk, model, methods, force=True, smooth=False).tracks
+    seg = segmented_tracks(stop_walk, model, methods, 60.0, force=True, smooth=False)
+    d = _distances(whole, seg)
+    print("segmented vs whole, max m:", {k: f"{v:.2g}" for k, v in sorted(d.items())})
+    assert set(d) == {"kf_quality", "kf_quality+lag", "uwb_aoa_pdr", "uwb_aoa_pdr+lag"}
+    for name, dist in d.items():
+        assert dist < FILTER_SEAM_TOL_M, (name, dist)
+
+
+def test_stands_of_a_later_cut_and_the_uwb_pdr_track_through_a_stop():
+    """By hand: steps at 10, 10.5 and 100 s of a cut read from 5 s to 120 s: standing 11-99.5 s and from
+    100.5 s to the end; as a later cut of a long walk also 5-9.5 s (its start); a later cut without a step
+    stands throughout. The UWB/PDR filter's PDR track through the stop: still at the 10.5 s position until
+    the step after the stop starts (100 − 0.55 s), then linear over that step."""
+    from models.uwb_pdr import STAND_GAP_S as UWB_GAP, STEP_S, pdr_track_at
+    from walks.inputs import STAND_GAP_S, TYPICAL_STEP_S, _stands
+
+    assert (UWB_GAP, STEP_S) == (STAND_GAP_S, TYPICAL_STEP_S)
+    t = np.array([10.0, 10.5, 100.0])
+    whole = _stands(t, 120.0)
+    np.testing.assert_allclose(np.c_[whole.start_s, whole.end_s], [[11.0, 99.5], [100.5, 120.0]])
+    later = _stands(t, 120.0, 5.0)
+    np.testing.assert_allclose(np.c_[later.start_s, later.end_s], [[5.0, 9.5], [11.0, 99.5], [100.5, 120.0]])
+    np.testing.assert_allclose(later.standing_time(np.array([120.0])), [4.5 + 88.5 + 19.5])
+    empty = _stands(np.zeros(0), 120.0, 5.0)
+    np.testing.assert_allclose(np.c_[empty.start_s, empty.end_s], [[5.0, 120.0]])
+    e, _ = pdr_track_at([10.5, 50.0, 99.45, 99.725, 100.0], t, [0.7, 1.4, 2.1], [0.0, 0.0, 0.0], (0.0, 0.0))
+    np.testing.assert_allclose(e, [1.4, 1.4, 1.4, 1.75, 2.1], atol=1e-12)
 
 
 def test_cuts_holding_the_walks_start_read_it_as_the_whole_walk(stop_walk):

@@ -163,7 +163,7 @@ def fuse_walk(walk_dir: str | os.PathLike, model: FusionModel, methods=None, *, 
         raise DataError(f"{walk_dir}: no usable stream to fuse ({why})")
     try:
         inputs = walk_inputs(data, model.classifier, model.temporal, class_smoothing,
-                             None if resume is None else resume.classes)
+                             None if resume is None else resume.classes, resumed=resume is not None)
         if resume is not None and resume.filters:
             inputs = replace(inputs, resume=dict(resume.filters))
         want = methods
