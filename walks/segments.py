@@ -27,8 +27,18 @@ segment by segment:
     (``uwb_aoa_pdr`` and its twins) their corrected position, P and count of fixes gated in a row, on the cut's
     own PDR increments. The cut's earlier events are the warm-up, so the per-event quantities derived from
     their neighbours (time since the previous event, standing time, the GNSS bias resets on a quality change
-    or a gap) are the whole walk's;
+    or a gap) are the whole walk's; a cut whose walker stands from its start (a stop longer than the warm-up)
+    stands up to its first step, as the whole walk does (:func:`walks.inputs.walk_inputs`'s ``resumed``), and
+    the UWB/PDR filters' PDR track is still through a stop (:func:`models.uwb_pdr.pdr_track_at`);
   * ``pdr`` dead-reckons the segment's steps on from the position the previous segment's track reached;
+  * a segment that owns no epoch of a method (no step of ``pdr`` while the walker stands through it, or the
+    method skipped on its cut) hands on the state it was handed, as the class HMM does without a window of
+    its own (:meth:`walks.fuse.FusedWalk.handover`): its cut's last epoch before its end is a warm-up epoch,
+    filtered without the hand-over;
+  * segments shorter than the warm-up (``run --segment-s`` down to 60 s): the first cuts all reach back to the
+    walk's start; each such cut reads the walk as the whole walk's read does (at least the heading gate's
+    reference span, no reader state handed over: :attr:`Segment.states_from_s` is inf before it), its
+    filters resuming at its segment's start as any cut's;
   * the class HMM's forward probabilities take, at the cut's window that ended last before the segment, the
     whole walk's value there (:class:`walks.inputs.ClassResume`), and filter on from it;
   * the acoustic receiver resumes its tracker (lock, two-state clock filter, air estimate, acquisition memory)
@@ -55,9 +65,20 @@ epochs before a seam (the heading offset and step scale, near-constant states, c
 back over the whole walk): measured below (seed 77: 0.02-0.06 m at the seams' last epochs, medians 1e-6 to
 3e-4 m). A longer tail does not bound it tighter: with 30 s (``bench/seam_identity.py --tail-s 30``) seed 77
 reads 0.008 / 0.045 / 0.084 m for ``kf_quality`` / ``aekf`` / ``imm`` against 0.022 / 0.025 / 0.059 m at 10 s,
-the loss being that of whichever fixes lie past the cut. The UWB/PDR filters' ``+lag`` also loses, at a seam, a step that
-ends after the cut when the walker stands across the seam for longer than the tail (their PDR track spreads a
-step over the time since the previous one, a stop included: :func:`models.uwb_pdr.pdr_track_at`).
+the loss being that of whichever fixes lie past the cut. (The UWB/PDR filters' PDR track spread a step over
+the time since the previous one, a stop included, so a cut ending in a stop lost the step after it: 0.03-0.45 m
+at such seams, ``+lag`` and the filter alike; it is now still through a stop, :func:`models.uwb_pdr.pdr_track_at`.)
+
+Short segments and stops (seamfix; walk7 of the bad-input tour, 420 s, standing 260-388 s, and a 600 s walk of
+seed 21 on the same site standing 101-224 s and 334-515 s, with the tour's fusion model; ``envfuse run`` and
+``bench/seam_identity.py``): at 60, 90, 120 and 300 s segments every track of ``pdr``, ``acoustic``, ``kf_quality``,
+``aekf``, ``imm``, ``adaptive`` (and its family), ``uwb_aoa_pdr`` (and its twins) and their ``+lag`` lies within
+3e-6 m (``pdr``), 2e-5 m (the class-aware filters) and 1e-6 m (the others) of the whole walk's. Before:
+``pdr`` 21.4 m from 360 s on at 60 s segments and 56 of 411 epochs without a position at 90 s (a segment
+standing throughout handed on its warm-up's dead reckoning), 0.05-0.15 m from 60 s on at 60 s segments (a
+second cut holding the walk's start read the heading gate's reference field from 130 s of it, not 300 s);
+the filters 0.3-0.9 m after the 181 s stop at 60 s segments (a cut standing from its start walked), the
+UWB/PDR filters 0.03-0.45 m at seams inside a stop.
 
 Measured (``bench/seam_identity.py``: simulated 21-minute walks, site 201 of the demo split and its model, 300 s
 segments, largest distance from the whole walk's track at the same epoch over every owned epoch):
