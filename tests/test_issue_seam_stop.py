@@ -74,6 +74,26 @@ def test_pdr_in_segments_shorter_than_the_warm_up_with_a_stop_across_a_cut(model
     assert d["pdr"] < PDR_SEAM_TOL_M
 
 
+def test_run_writes_the_whole_walks_pdr_track_in_60_s_segments(model_and_walk, stop_walk, tmp_path):
+    """``envfuse run --method pdr --segment-s 60`` (its library path, :func:`walks.fuse.fuse_to_file`) on the
+    standing walk: the same rows as one segment, every one with a position, within PDR_SEAM_TOL_M."""
+    import csv
+
+    from walks.fuse import fuse_to_file
+
+    model, _ = model_and_walk
+    out = {}
+    for s in (60.0, 1e6):
+        done = fuse_to_file(stop_walk, model, "pdr", tmp_path / f"{s:g}.csv", "csv", force=True, segment_s=s)
+        assert done.placed == done.n > 0 and not done.skipped
+        with open(tmp_path / f"{s:g}.csv") as fh:
+            out[s] = np.array([[float(r["t_s"]), float(r["east_m"]), float(r["north_m"])] for r in csv.DictReader(fh)])
+    seg, whole = out[60.0], out[1e6]
+    assert seg.shape == whole.shape
+    np.testing.assert_allclose(seg[:, 0], whole[:, 0], rtol=0, atol=1e-6)
+    assert np.hypot(*(seg[:, 1:] - whole[:, 1:]).T).max() < PDR_SEAM_TOL_M
+
+
 def test_filters_in_segments_whose_cut_starts_in_a_stop(model_and_walk, stop_walk, monkeypatch):
     """With a 40 s warm-up, the cut of the 60 s segment [240, 300) starts at 192 s, inside the stop (172-278 s),
     so it holds no step before the stop's end: the EKF (``kf_quality``) must still stand there (the whole
