@@ -16,7 +16,8 @@ Indirect (error-state) filter, state δx = p_PDR − p (the PDR track's error, e
     # δx = δx⁻ + K ν,   P = (I − K) P⁻ (I − K)' + K R K'    (Joseph form: models.fusion.core.kalman_update)
     output  p̂ = p_PDR(t) − δx,   Cov(p̂) = P
 
-``p_PDR(t)`` is the dead-reckoned track interpolated linearly between step ends. The filter starts at the
+``p_PDR(t)`` is the dead-reckoned track interpolated linearly over each step, still through a stop
+(:func:`pdr_track_at`). The filter starts at the
 first UWB fix (δx₀ = z₀, P₀ = R₀). The paper handles no outliers; a UWB fix in NLOS is metres off, so the
 χ² gate of the core is on by default (``outlier="gate"``, ``gate_prob``); ``outlier="none"`` is the paper's
 form. A gate can lock the filter out when the PDR drifts faster than its noise says (a heading bias is
@@ -41,7 +42,8 @@ from models.fusion.core import kalman_update
 from models.fusion.ekf import OUTLIER_CODES, FilterError, FilterResume, FilterRun, empty_records
 from models.fusion.events import STEP
 
-__all__ = ["UwbPdrConfig", "UwbPdrFilter", "UWB_FIX", "pdr_track_at", "UwbNoisePrior", "uwb_nees"]
+__all__ = ["UwbPdrConfig", "UwbPdrFilter", "UWB_FIX", "pdr_track_at", "UwbNoisePrior", "uwb_nees", "STAND_GAP_S",
+           "STEP_S"]
 
 UWB_FIX = 3
 """Event kind of a UWB position fix in a :class:`~models.fusion.ekf.FilterRun` (after STEP, GNSS, ACOUSTIC)."""
@@ -130,17 +132,41 @@ class UwbNoisePrior:
         return prior
 
 
+STAND_GAP_S = 1.5
+"""Steps further apart than this have a stop between them, s (:data:`walks.inputs.STAND_GAP_S`, the event
+filters' standing intervals)."""
+
+STEP_S = 0.55
+"""Duration of a step that follows a stop (or none), s: a typical step (:data:`walks.inputs.TYPICAL_STEP_S`)."""
+
+
 def pdr_track_at(t_s, step_t_s, east_m, north_m, start_en) -> tuple[np.ndarray, np.ndarray]:
-    """The dead-reckoned position at times ``t_s``, linear between step ends (``start_en`` before the first
-    step's start, taken as the first step's time minus its duration ≈ the next step interval). Shapes (k,)."""
+    """The dead-reckoned position at times ``t_s``, linear over each step from its start to its end (``east_m``,
+    ``north_m`` at the step ends ``step_t_s``; ``start_en`` before the first step), and still between steps more
+    than :data:`STAND_GAP_S` apart. A step starts at the previous step's end, or :data:`STEP_S` before its own
+    end when it follows a stop or is the first: as the event filters split a step
+    (:func:`walks.inputs.split_steps`). So the position at t depends on no step ending more than
+    :data:`STAND_GAP_S` after t (a stop is not spread over by the step after it), as a long walk's cut that
+    ends in a stop needs (:mod:`walks.segments`). Shapes (k,).
+
+    >>> pdr_track_at([-1.0, 9.0, 9.725, 10.0], [0.5, 10.0], [1.0, 2.0], [0.0, 0.0], (0.0, 0.0))[0].tolist()
+    [0.0, 1.0, 1.5, 2.0]
+    """
     t = np.asarray(step_t_s, float)
     if t.size == 0:
         q = np.asarray(t_s, float)
         return np.full(q.shape, float(start_en[0])), np.full(q.shape, float(start_en[1]))
-    t0 = t[0] - (t[1] - t[0] if t.size > 1 else 0.5)
-    tt = np.concatenate([[t0], t])
-    return (np.interp(t_s, tt, np.concatenate([[start_en[0]], east_m])),
-            np.interp(t_s, tt, np.concatenate([[start_en[1]], north_m])))
+    e = np.concatenate([[float(start_en[0])], np.asarray(east_m, float)])
+    n = np.concatenate([[float(start_en[1])], np.asarray(north_m, float)])
+    gap = np.diff(t, prepend=-np.inf)
+    start = np.where(gap > STAND_GAP_S, t - STEP_S, t - gap)
+    # knots: each step's start (at the previous position) where a stop precedes it, and every step's end
+    stop = gap > STAND_GAP_S
+    tt = np.concatenate([start[stop], t])
+    ee = np.concatenate([e[:-1][stop], e[1:]])
+    nn = np.concatenate([n[:-1][stop], n[1:]])
+    order = np.argsort(tt, kind="stable")
+    return np.interp(t_s, tt[order], ee[order]), np.interp(t_s, tt[order], nn[order])
 
 
 class UwbPdrFilter:

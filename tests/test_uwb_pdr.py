@@ -41,9 +41,10 @@ def test_one_update_by_hand():
 
 
 def test_step_noise_is_along_and_across_track():
-    # one step east (ψ = 90°), L = 1: P⁻ = P + σ_L²·g g' + (L σ_ψ)²·h h', g = (1, 0), h = (0, −1)
+    # one step east (ψ = 90°), L = 1: P⁻ = P + σ_L²·g g' + (L σ_ψ)²·h h', g = (1, 0), h = (0, −1); the step
+    # (a first step lasts models.uwb_pdr.STEP_S = 0.55 s) ends at 0.6 s, so it starts after fix 0
     cfg = UwbPdrConfig(sigma_step_length_m=0.1, sigma_heading_rad=0.2, q_m2_s=0.0, outlier="none")
-    run = UwbPdrFilter(cfg).run(_steps([0.5], [1.0], [math.pi / 2]), (0.0, 0.0),
+    run = UwbPdrFilter(cfg).run(_steps([0.6], [1.0], [math.pi / 2]), (0.0, 0.0),
                                 _fixes([0.0, 1.0], [0.0, 1.0], [0.0, 0.0], [1.0, 1.0]))
     assert list(run.kind) == [UWB_FIX, STEP, UWB_FIX]
     np.testing.assert_allclose(run.P_prior[1], np.diag([1.0 + 0.01, 1.0 + 0.04]), atol=1e-12)

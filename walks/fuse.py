@@ -46,25 +46,54 @@ class FusedWalk:
     results: dict = field(default_factory=dict)
     """Every method's raw result by name, the first passes included (:func:`walks.methods.run_methods`)."""
 
+    resumed: "Handover | None" = None
+    """What the previous segment of a long walk handed this one (None for a walk fused whole or a first segment)."""
+
     def handover(self, t_s: float, states_from_s: float) -> "Handover":
         """What the next segment of a long walk resumes from (``fuse_walk(resume=...)``): each filter's state
         before walk time ``t_s`` (the next segment's start; :meth:`~models.fusion.ekf.FilterRun.state_before`),
         the heading filter's after the last IMU sample before ``states_from_s`` and the acoustic receiver's that
         the read kept from then on (``fuse_walk(keep_states_from_s=states_from_s)``;
-        :attr:`walks.segments.Segment.states_from_s`)."""
+        :attr:`walks.segments.Segment.states_from_s`); ``states_from_s`` not finite: no reader state (the next
+        cut reads from the walk's start, as the whole walk's read does).
+
+        What this segment was handed goes on where its own run has nothing newer: a filter (or ``pdr``) without
+        an event between the state it resumed from and ``t_s`` (the walker stood through the segment, or the
+        method could not run on the cut) hands that state on, as does the class HMM without a window ending in
+        that span, and the heading filter when the next cut resumes it no later than this cut did (a cut period
+        of the audio grid longer than a segment: the two cuts start together). Otherwise the cut's warm-up
+        epochs, filtered without the hand-over, would be handed as the whole walk's."""
+        got = self.resumed if self.resumed is not None else Handover()
         filters = {}
         for name, res in self.results.items():
             state = res.state_before(t_s) if isinstance(res, FilterRun) else track_state_before(name, res, t_s)
             if state is not None:
                 filters[name] = state
+        for name, old in got.filters.items():
+            new = filters.get(name)
+            if new is None or _event_time(new) < old.t_s:
+                filters[name] = replace(old, t_s=float(t_s))
+        classes = class_state_before(self.inputs, t_s)
+        if got.classes is not None and (classes is None or classes.t_end_s < got.classes.t_end_s):
+            classes = got.classes
+        if not math.isfinite(states_from_s):
+            return Handover(filters, ReaderStates(), classes)
         heading = None
         pdr = self.data.pdr
         if getattr(pdr, "imu", None) is not None and pdr.result.heading is not None:
             i = int(np.searchsorted(pdr.imu.t_s, states_from_s, side="left")) - 1
             if i >= 0:
                 heading = pdr.result.heading.state_at(i, float(pdr.imu.t_s[i]))
+        old = got.readers.heading
+        if old is not None and (heading is None or not heading.t_s > old.t_s):
+            heading = old
         receiver = self.data.acoustic.analysis.receiver_state if self.data.acoustic is not None else None
-        return Handover(filters, ReaderStates(heading, receiver), class_state_before(self.inputs, t_s))
+        return Handover(filters, ReaderStates(heading, receiver), classes)
+
+
+def _event_time(state) -> float:
+    """Walk time of the event a handed filter state follows (its hand-over time when it does not say)."""
+    return state.event_t_s if math.isfinite(state.event_t_s) else state.t_s
 
 
 @dataclass(frozen=True)
@@ -134,7 +163,7 @@ def fuse_walk(walk_dir: str | os.PathLike, model: FusionModel, methods=None, *, 
         raise DataError(f"{walk_dir}: no usable stream to fuse ({why})")
     try:
         inputs = walk_inputs(data, model.classifier, model.temporal, class_smoothing,
-                             None if resume is None else resume.classes)
+                             None if resume is None else resume.classes, resumed=resume is not None)
         if resume is not None and resume.filters:
             inputs = replace(inputs, resume=dict(resume.filters))
         want = methods
@@ -148,7 +177,7 @@ def fuse_walk(walk_dir: str | os.PathLike, model: FusionModel, methods=None, *, 
         if str(walk_dir) in str(exc):
             raise
         raise DataError(f"{walk_dir}: {exc}") from None
-    return FusedWalk(name, data, inputs, tracks, skipped, results)
+    return FusedWalk(name, data, inputs, tracks, skipped, results, resume)
 
 
 def fuse_in_segments(walk_dir: str | os.PathLike, model: FusionModel, methods=None, segment_s: float = SEGMENT_S,

@@ -155,16 +155,31 @@ def gnss_events(p) -> GnssEvents:
                       hdop=np.where(p.hdop_assumed, np.nan, p.hdop), gst_sigma_m=gst)
 
 
-def _stands(step_t: np.ndarray, end_s: float) -> StandIntervals:
+def _stands(step_t: np.ndarray, end_s: float, start_s: float | None = None) -> StandIntervals:
     """Standing between steps more than :data:`STAND_GAP_S` apart, and after the last step when the record
     (``end_s``, its last IMU sample) goes on for more than that: a stop is standing whether or not a step
-    follows it in the record (so a long walk's cut that ends in a stop stands where the whole walk does)."""
-    if step_t.size < 2:
-        return StandIntervals(np.zeros(0), np.zeros(0))
-    gaps = np.flatnonzero(np.diff(step_t) > STAND_GAP_S)
-    start, end = step_t[gaps] + 0.5, step_t[gaps + 1] - 0.5
-    if end_s - step_t[-1] > STAND_GAP_S:
-        start, end = np.r_[start, step_t[-1] + 0.5], np.r_[end, end_s]
+    follows it in the record (so a long walk's cut that ends in a stop stands where the whole walk does).
+
+    ``start_s``: the record is a later cut of a long walk (its first IMU sample): a stop is standing whether
+    or not a step precedes it in the cut either, so the cut's start stands up to its first step (the whole
+    cut when it holds none) when that is more than :data:`STAND_GAP_S` away. The whole walk stood there too
+    (its last step before lies before the cut, whose warm-up the segment's own events follow): a walker
+    standing through more than a cut's warm-up (walks/segments.py) gets the whole walk's standing noise.
+    None (a walk read whole, or from its start): nothing stands before the first step, as before."""
+    start, end = np.zeros(0), np.zeros(0)
+    if step_t.size >= 2:
+        gaps = np.flatnonzero(np.diff(step_t) > STAND_GAP_S)
+        start, end = step_t[gaps] + 0.5, step_t[gaps + 1] - 0.5
+        if end_s - step_t[-1] > STAND_GAP_S:
+            start, end = np.r_[start, step_t[-1] + 0.5], np.r_[end, end_s]
+    if start_s is not None:
+        if step_t.size == 0:
+            return StandIntervals(np.array([start_s]), np.array([end_s])) if end_s > start_s else \
+                StandIntervals(np.zeros(0), np.zeros(0))
+        if step_t.size == 1 and end_s - step_t[-1] > STAND_GAP_S:
+            start, end = np.r_[start, step_t[-1] + 0.5], np.r_[end, end_s]
+        if step_t[0] - start_s > STAND_GAP_S:
+            start, end = np.r_[start_s, start], np.r_[step_t[0] - 0.5, end]
     return StandIntervals(start, end)
 
 
@@ -253,11 +268,13 @@ def smooth_classes(proba: np.ndarray, t_end_s: np.ndarray, answered: np.ndarray,
 
 
 def walk_inputs(data: WalkData, classifier, temporal=None, smoothing: str = "forward",
-                class_resume: ClassResume | None = None) -> WalkInputs:
+                class_resume: ClassResume | None = None, resumed: bool = False) -> WalkInputs:
     """Events and class evidence of one walk (see the module docstring); ``classifier``: the online
     :class:`~models.environment.EnvironmentClassifier`; ``temporal``: the class HMM
     (:class:`models.temporal.ClassHMM`, None: each window on its own) applied as ``smoothing``
-    (:func:`smooth_classes`, resumed from ``class_resume``: a long walk's previous segment's)."""
+    (:func:`smooth_classes`, resumed from ``class_resume``: a long walk's previous segment's). ``resumed``:
+    ``data`` is a later cut of a long walk whose filters resume the previous segment's (:mod:`walks.segments`):
+    its start stands up to its first step (:func:`_stands`)."""
     steps = gnss = acoustic = stands = None
     fix_t = np.concatenate([data.gnss.positions.t_s if data.gnss is not None else np.zeros(0),
                             data.acoustic.t_s if data.acoustic is not None else np.zeros(0)])
@@ -267,8 +284,12 @@ def walk_inputs(data: WalkData, classifier, temporal=None, smoothing: str = "for
         r = data.pdr.result
         ok = np.isfinite(r.heading_rad) & np.isfinite(r.step_length_m)
         end = data.pdr.imu.t_s[-1] if data.pdr.imu is not None and len(data.pdr.imu.t_s) else r.t_s[-1]
-        stands = _stands(r.t_s[ok], float(end))
+        first = data.pdr.imu.t_s[0] if data.pdr.imu is not None and len(data.pdr.imu.t_s) else None
+        stands = _stands(r.t_s[ok], float(end), float(first) if resumed and first is not None else None)
         steps = StepEvents(*split_steps(r.t_s[ok], r.step_length_m[ok], r.heading_rad[ok], fix_t))
+    elif resumed and getattr(data.pdr, "imu", None) is not None and len(data.pdr.imu.t_s):
+        # a later cut of a long walk without a step: the walker stands through it, as in the whole walk
+        stands = _stands(np.zeros(0), float(data.pdr.imu.t_s[-1]), float(data.pdr.imu.t_s[0]))
     if data.gnss is not None and len(data.gnss.positions):
         gnss = gnss_events(data.gnss.positions)
     if data.acoustic is not None and len(data.acoustic.t_s):

@@ -27,8 +27,18 @@ segment by segment:
     (``uwb_aoa_pdr`` and its twins) their corrected position, P and count of fixes gated in a row, on the cut's
     own PDR increments. The cut's earlier events are the warm-up, so the per-event quantities derived from
     their neighbours (time since the previous event, standing time, the GNSS bias resets on a quality change
-    or a gap) are the whole walk's;
+    or a gap) are the whole walk's; a cut whose walker stands from its start (a stop longer than the warm-up)
+    stands up to its first step, as the whole walk does (:func:`walks.inputs.walk_inputs`'s ``resumed``), and
+    the UWB/PDR filters' PDR track is still through a stop (:func:`models.uwb_pdr.pdr_track_at`);
   * ``pdr`` dead-reckons the segment's steps on from the position the previous segment's track reached;
+  * a segment that owns no epoch of a method (no step of ``pdr`` while the walker stands through it, or the
+    method skipped on its cut) hands on the state it was handed, as the class HMM does without a window of
+    its own (:meth:`walks.fuse.FusedWalk.handover`): its cut's last epoch before its end is a warm-up epoch,
+    filtered without the hand-over;
+  * segments shorter than the warm-up (``run --segment-s`` down to 60 s): the first cuts all reach back to the
+    walk's start; each such cut reads the walk as the whole walk's read does (at least the heading gate's
+    reference span, no reader state handed over: :attr:`Segment.states_from_s` is inf before it), its
+    filters resuming at its segment's start as any cut's;
   * the class HMM's forward probabilities take, at the cut's window that ended last before the segment, the
     whole walk's value there (:class:`walks.inputs.ClassResume`), and filter on from it;
   * the acoustic receiver resumes its tracker (lock, two-state clock filter, air estimate, acquisition memory)
@@ -55,9 +65,24 @@ epochs before a seam (the heading offset and step scale, near-constant states, c
 back over the whole walk): measured below (seed 77: 0.02-0.06 m at the seams' last epochs, medians 1e-6 to
 3e-4 m). A longer tail does not bound it tighter: with 30 s (``bench/seam_identity.py --tail-s 30``) seed 77
 reads 0.008 / 0.045 / 0.084 m for ``kf_quality`` / ``aekf`` / ``imm`` against 0.022 / 0.025 / 0.059 m at 10 s,
-the loss being that of whichever fixes lie past the cut. The UWB/PDR filters' ``+lag`` also loses, at a seam, a step that
-ends after the cut when the walker stands across the seam for longer than the tail (their PDR track spreads a
-step over the time since the previous one, a stop included: :func:`models.uwb_pdr.pdr_track_at`).
+the loss being that of whichever fixes lie past the cut. (The UWB/PDR filters' PDR track spread a step over
+the time since the previous one, a stop included, so a cut ending in a stop lost the step after it: 0.03-0.45 m
+at such seams, ``+lag`` and the filter alike; it is now still through a stop, :func:`models.uwb_pdr.pdr_track_at`.)
+
+Short segments and stops (seamfix; walk7 of the bad-input tour, 420 s, standing 260-388 s, and a 600 s walk of
+seed 21 on the same site standing 101-224 s and 334-515 s, with the tour's fusion model; ``envfuse run`` and
+``bench/seam_identity.py``): at 60, 90, 120 and 300 s segments every track of ``pdr``, ``acoustic``, ``kf_quality``,
+``aekf``, ``imm``, ``adaptive`` (and its family), ``uwb_aoa_pdr`` (and its twins) and their ``+lag`` lies within
+3e-6 m (``pdr``), 2e-5 m (the class-aware filters) and 1e-6 m (the others) of the whole walk's. Before:
+``pdr`` 21.4 m from 360 s on at 60 s segments and 56 of 411 epochs without a position at 90 s (a segment
+standing throughout handed on its warm-up's dead reckoning), 0.05-0.15 m from 60 s on at 60 s segments (a
+second cut holding the walk's start read the heading gate's reference field from 130 s of it, not 300 s);
+the filters 0.3-0.9 m after the 181 s stop at 60 s segments (a cut standing from its start walked), the
+UWB/PDR filters 0.03-0.45 m at seams inside a stop. What is left at 60 s segments of the seed-21 walk: the
+class-aware tracks (``imm`` 2e-5 m, ``uwb_aoa_pdr_env`` 4e-5 m, ``adaptive_correction`` 6e-4 m) at 523-540 s,
+where the GNSS feature ``fluct_per_s`` of four windows differs (by 0.03-0.05 per s): its extremum detector
+(:func:`features.gnss.features.fluctuation_extrema`) judges each extremum's swing from the previous one, a memory
+that outlasts the warm-up while a satellite's C/N0 holds still through a stop, and is not handed over.
 
 Measured (``bench/seam_identity.py``: simulated 21-minute walks, site 201 of the demo split and its model, 300 s
 segments, largest distance from the whole walk's track at the same epoch over every owned epoch):
@@ -72,7 +97,7 @@ imm                    0.015 (c)     0.16          1.2 (b)       3.0
 adaptive_nobp_blind    1.5e-7        0.032         1.2 (b)       1.11
 adaptive               0.13 (c)      0.13          0.18 (b)      0.18
 pdr                    2.6e-6 (d)    5.6 (e)       5.0e-6 (d)    175 (e)
-uwb_aoa_pdr            0.051 (f)     skipped (e)   23.6 (f)      23.6 (e)
+uwb_aoa_pdr            5.8e-7 (f)    skipped (e)   1.8e-7 (f)    23.6 (e)
 kf_quality+rts         0.022         0.030         1.0           0.98
 aekf+rts               0.025         0.30          1.8           2.8
 imm+rts                0.059         0.11          0.69          0.96
@@ -89,8 +114,9 @@ chirp's, its SNR by 0.1-1 dB; the same chirps detected, every fix equal): the cl
 by 0.04 and the class-aware filters by up to 0.15 m (the blind twins by 1.5e-7 m); (d) the resumed heading
 agrees to 3-5e-8 rad, not to round-off, and dead reckoning accumulates it; (e) before, the steps of a later cut
 before its heading resumed had no heading, and ``pdr`` (NaN after them) and the UWB filter (skipped; on seed 78
-restarted at each seam, and skipped in the last segment, which holds no step) did not survive a seam; (f) seed 77 median 5e-8 m; on seed 78 the filter gates most fixes (125 resets over the walk) and
-the heading's 3e-8 rad grows to a flipped gate decision at 932 s. A walk holding a stream that cannot be cut by
+restarted at each seam, and skipped in the last segment, which holds no step) did not survive a seam; (f) since seamfix, whose PDR track for the UWB/PDR filter is
+still through a stop; before it 0.051 m (seed 77) and 23.6 m (seed 78: the filter gates most fixes, 125 resets
+over the walk, and a stop's step spread over the stop flipped a gate decision at 932 s). A walk holding a stream that cannot be cut by
 time (a drive's pseudoranges or odometry, whose dead reckoning is fitted to the whole drive's fixes) is not
 segmented (:func:`plan_segments` says why). Not resumed: ``foot_ins_fkf`` (its strapdown INS and local filters,
 :mod:`models.foot`; its 10 Hz track is also sampled from the cut's first IMU sample) and the factor-graph
@@ -160,8 +186,9 @@ class Segment:
     @property
     def states_from_s(self) -> float:
         """Walk time from which this segment's read keeps the readers' states for the next segment: the next
-        cut's start + :data:`RESUME_AFTER_S` (inf for the last segment)."""
-        return self.next_from_s + RESUME_AFTER_S
+        cut's start + :data:`RESUME_AFTER_S`; inf for the last segment and when the next cut starts at the walk's
+        start (−inf: it reads the walk from there as the whole walk's read does, resuming no reader)."""
+        return self.next_from_s + RESUME_AFTER_S if math.isfinite(self.next_from_s) else math.inf
 
     def owns(self, t_s):
         """Which of ``t_s`` (array) belong to this segment."""
@@ -238,8 +265,10 @@ def walk_cuts(walk_dir: str | os.PathLike, segment_s: float = SEGMENT_S, *,
             own_to = math.inf if k == n - 1 else (k + 1) * segment_s
             lo = -math.inf if k == 0 else align(own_from - WARMUP_S)
             hi = math.inf if k == n - 1 else own_to + TAIL_S
-            if k == 0:
-                hi = max(hi, GATE_REFERENCE_S)      # the heading gate's reference field, as the whole walk's
+            if lo == -math.inf:
+                # a cut holding the walk's start reads it as the whole walk's read does, the heading gate's
+                # reference field included (a segment shorter than the warm-up: the first cuts all start there)
+                hi = max(hi, GATE_REFERENCE_S)
             next_lo = align((k + 1) * segment_s - WARMUP_S)
             d = Path(tmp) / f"segment{k:04d}"
             d.mkdir()

@@ -7,7 +7,7 @@ from pathlib import Path
 
 from features.errors import ConfigError
 from features.fileio import atomic_write_text
-from pipeline.args import UsageError
+from pipeline.args import UsageError, bounded
 
 GROUP = None  # top-level commands, registered by register_top
 
@@ -33,6 +33,18 @@ late). Chosen on held-out evidence (``bench/fusion_study.py``, 5 sites × 3 walk
 The environment class is still computed and written with every position (``env_class``, its probability)."""
 
 
+MIN_SEGMENT_S = 60.0
+"""Shortest ``--segment-s``, s: every cut holds :data:`walks.segments.WARMUP_S` of warm-up (and the cuts holding
+the walk's start at least the heading gate's reference span), so shorter segments only multiply the reads
+without lowering the peak memory."""
+
+MAX_SEGMENT_S = 1e6
+"""Longest ``--segment-s``, s (11.6 days: longer than any walk, i.e. the whole walk as one segment)."""
+
+MAX_LAG_S = 3600.0
+"""Longest ``--lag-s``, s: a fixed-lag track an hour late is the RTS track of any patrol's hour (``+rts``)."""
+
+
 def register_top(sub) -> None:
     from walks.methods import method_names
     from walks.segments import SEGMENT_S, WARMUP_S
@@ -49,14 +61,15 @@ def register_top(sub) -> None:
     p.add_argument("--method", choices=method_names(smoothed=True), default=DEFAULT_METHOD,
                    help=f"fusion method (default {DEFAULT_METHOD}; a filter's +rts variant is its RTS-smoothed track, "
                         "+lag its fixed-lag track, --lag-s late)")
-    p.add_argument("--lag-s", type=float, default=None,
+    p.add_argument("--lag-s", type=bounded(0, MAX_LAG_S, "s"), default=None,
                    help="lag of a +lag track, s (default 3: the track a few seconds late, most of the smoother's gain)")
     p.add_argument("--format", choices=("csv", "geojson"), default=None,
                    help="output format (default: from the suffix, .geojson or .json → GeoJSON, else CSV)")
     p.add_argument("--force", action="store_true", help="fuse a walk of a site the model was not trained on")
-    p.add_argument("--segment-s", type=float, default=SEGMENT_S,
+    p.add_argument("--segment-s", type=bounded(MIN_SEGMENT_S, MAX_SEGMENT_S, "s"), default=SEGMENT_S,
                    help=f"a longer walk is fused in segments of this much walk time, each with {WARMUP_S:g} s of "
-                        f"warm-up, so memory does not grow with the walk (default {SEGMENT_S:g}; walks.segments)")
+                        f"warm-up, so memory does not grow with the walk (default {SEGMENT_S:g}, "
+                        f"{MIN_SEGMENT_S:g} to {MAX_SEGMENT_S:g}; walks.segments)")
     p.set_defaults(func=_run)
 
     p = sub.add_parser(
@@ -97,10 +110,6 @@ def _run(args) -> int:
     from walks.methods import LAG_S
 
     lag = LAG_S if args.lag_s is None else args.lag_s
-    if not (lag >= 0 and lag < 3600):
-        raise ConfigError(f"--lag-s must lie in [0, 3600), got {args.lag_s}")
-    if not (args.segment_s >= 60 and args.segment_s < 1e6):
-        raise ConfigError(f"--segment-s must lie in [60, 1e6) s, got {args.segment_s}")
     fmt = args.format or ("geojson" if args.out.suffix.lower() in (".geojson", ".json") else "csv")
     with atomic_path(args.out) as tmp:
         done = fuse_to_file(args.walk, load_model(args.model), args.method, tmp, fmt,
