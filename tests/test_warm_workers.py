@@ -109,3 +109,19 @@ def test_local_workers_are_forked_on_linux_unless_the_user_chose_dask_s_start_me
     assert method == ("fork" if sys.platform.startswith("linux") else "spawn")
     monkeypatch.setenv("DASK_DISTRIBUTED__WORKER__MULTIPROCESSING_METHOD", "spawn")
     assert "distributed.worker.multiprocessing-method" not in local_worker_config()
+
+
+def _worker_profiler_setting(walk):
+    import dask
+    from distributed import get_worker
+
+    return dask.config.get("distributed.worker.profile.enabled"), get_worker().name is not None
+
+
+def test_local_workers_run_without_dask_s_statistical_profiler():
+    """The profiler samples a worker's stack every 10 ms for a dashboard nobody is served: 2-5 % of a walk's time
+    on two workers (pipeline.parallel._LOCAL_WORKER_CONFIG). Checked where it counts, on the workers."""
+    from pipeline.parallel import map_walks
+
+    out = map_walks(_worker_profiler_setting, ["a", "b"], workers=2, progress=False)
+    assert out == [(False, True), (False, True)]
