@@ -453,15 +453,9 @@ def _merge_counts(shifted: np.ndarray, limit: np.ndarray, out: np.ndarray, at: i
     n = limit.shape[1]
     j0 = j1 = j2 = j3 = 0
     k0 = k1 = k2 = k3 = 0
-    while k0 < n:                       # the four rows have the same length and take 2n steps at most each
-        j0, k0 = _merge_step(shifted, limit, out, at, 0, j0, k0)
-        if k1 < n:
-            j1, k1 = _merge_step(shifted, limit, out, at, 1, j1, k1)
-        if k2 < n:
-            j2, k2 = _merge_step(shifted, limit, out, at, 2, j2, k2)
-        if k3 < n:
-            j3, k3 = _merge_step(shifted, limit, out, at, 3, j3, k3)
-    for _ in range(2 * n):
+    while k0 < n or k1 < n or k2 < n or k3 < n:     # each row takes 2n steps at most
+        if k0 < n:
+            j0, k0 = _merge_step(shifted, limit, out, at, 0, j0, k0)
         if k1 < n:
             j1, k1 = _merge_step(shifted, limit, out, at, 1, j1, k1)
         if k2 < n:
