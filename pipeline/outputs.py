@@ -150,17 +150,17 @@ def model_inputs(model_dir: str | os.PathLike, label: str) -> dict:
 
 def shipped_or_directory(spec, option: str) -> Path | None:
     """None when ``spec`` names the environment model shipped in envfuse (the word ``default``), else the model
-    directory it names. A file or folder called ``default`` in the working directory is read as the model folder
-    the user may mean (as before the shipped model existed) and said on stderr, so that neither reading is
-    silent; the same rule as :func:`training.default_env.resolve_env_model`."""
+    directory it names (:func:`training.default_env.names_shipped_model`). A file or folder called ``default``
+    in the working directory is read as the model folder the user may mean (as before the shipped model
+    existed) and said on stderr, so that neither reading is silent."""
     import sys
 
-    from training.default_env import DEFAULT
+    from training.default_env import DEFAULT, names_shipped_model
 
+    if names_shipped_model(spec):
+        return None
     if str(spec) != DEFAULT:
         return Path(spec)
-    if not Path(DEFAULT).exists():
-        return None
     print(f"envfuse: note: {option} default: ./{DEFAULT} exists in the working directory and is read as the model "
           f"folder it names, not as the model shipped in envfuse; to use the shipped one, run from another "
           f"directory or rename ./{DEFAULT}", file=sys.stderr)

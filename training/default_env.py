@@ -31,7 +31,7 @@ from training.env import TrainingSet, fit_env_model, load_env_model, save_env_mo
 
 __all__ = ["DEFAULT_CELL_M", "DEFAULT_CAPTURE_S", "DEFAULT_MODEL_DIR", "DEFAULT", "default_sites",
            "default_model_path", "load_default_model", "build_default_model", "finetune_env_model",
-           "resolve_env_model", "concat_sets", "DEFAULT_SIGMA", "check_library_windows"]
+           "resolve_env_model", "names_shipped_model", "concat_sets", "DEFAULT_SIGMA", "check_library_windows"]
 
 DEFAULT_CELL_M = 10.0
 """Survey cell size of the default model's training sites (the ``standard`` split's)."""
@@ -67,12 +67,16 @@ def load_default_model() -> tuple[EnvironmentClassifier, dict]:
         return load_env_model(path)
 
 
+def names_shipped_model(spec) -> bool:
+    """Whether ``spec`` names the shipped model: None, or the word ``default`` (:data:`DEFAULT`) with no file
+    or directory of that name in the working directory (one there is read as the model directory it is)."""
+    return spec is None or (str(spec) == DEFAULT and not Path(DEFAULT).exists())
+
+
 def resolve_env_model(spec) -> tuple[EnvironmentClassifier, dict]:
-    """An environment model by directory, or the shipped one for ``"default"`` (:data:`DEFAULT`) — unless a
-    directory of that name exists, which is then read as the model directory it is."""
-    if str(spec) == DEFAULT and not Path(str(spec)).exists():
-        return load_default_model()
-    return load_env_model(spec)
+    """An environment model by directory, or the shipped one where ``spec`` names it
+    (:func:`names_shipped_model`)."""
+    return load_default_model() if names_shipped_model(spec) else load_env_model(spec)
 
 
 def check_library_windows(meta: dict, data: TrainingSet, where: str) -> None:

@@ -78,8 +78,8 @@ def _run(args) -> int:
     from fingerprints.library import FingerprintLibrary
     from models.environment import combine_windows
     from pipeline.env_plots import confusion, plot_survey_map
-    from training.default_env import check_library_windows, load_default_model
-    from training.env import load_env_model, training_set
+    from training.default_env import check_library_windows, resolve_env_model
+    from training.env import training_set
 
     model_dir = shipped_or_directory(args.model, "--model")
     survey_files, survey_cells = survey_inputs(args.survey)
@@ -90,7 +90,7 @@ def _run(args) -> int:
     if not args.library.is_file():
         raise ConfigError(f"--library {args.library}: no such file")
     site = load_site(args.survey / "site.toml")
-    clf, meta = load_default_model() if model_dir is None else load_env_model(model_dir)
+    clf, meta = resolve_env_model(model_dir)
     data = training_set(args.library, [site.name])
     check_library_windows(meta, data, f"--model {args.model}")
     data = data.subset(np.isin(data.cell, _survey_cells_in(args.survey, args.library, site.name)))

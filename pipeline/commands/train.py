@@ -219,11 +219,11 @@ def _run_env_finetune(args, data, diag: dict, base_dir: Path | None) -> int:
     """``--mode finetune``: MAP adaptation of --base (``base_dir``; None: the shipped model) to the labelled
     windows (of --cell cells when given)."""
     from models.finetune import SIGMA_GRID
-    from training.default_env import DEFAULT_SIGMA, check_library_windows, finetune_env_model, load_default_model
-    from training.env import load_env_model, save_env_model
+    from training.default_env import DEFAULT_SIGMA, check_library_windows, finetune_env_model, resolve_env_model
+    from training.env import save_env_model
 
     base_name = "default" if args.base is None else str(args.base)
-    base, base_meta = load_default_model() if base_dir is None else load_env_model(base_dir)
+    base, base_meta = resolve_env_model(base_dir)
     check_library_windows(base_meta, data, f"--base {base_name}")
     if args.cell:
         data = data.subset(_chosen_cells(args.cell, data))
@@ -325,10 +325,9 @@ def _run_fusion(args) -> int:
     for w in args.walks:
         if not (w / "walk.toml").is_file():
             raise ConfigError(f"--walks {w}: no walk.toml (expected a walk directory)")
-    from training.default_env import load_default_model
-    from training.env import load_env_model
+    from training.default_env import resolve_env_model
 
-    clf, env_meta = load_default_model() if env_dir is None else load_env_model(env_dir)
+    clf, env_meta = resolve_env_model(env_dir)
     check_windows(env_meta, f"--env-model {args.env_model}")
     from models.fusion.ekf import EkfConfig
 
