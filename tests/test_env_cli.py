@@ -59,3 +59,16 @@ def test_env_cli_bad_input(library, tmp_path, capsys):
                  "--out", str(tmp_path / "map.png")]) == 1
     assert "not a model directory" in capsys.readouterr().err
     assert not (tmp_path / "map.png").exists()
+
+
+def test_survey_map_checks_both_outputs_before_writing_either(library, tmp_path, capsys):
+    """(Bad-input tour: with ``--csv`` under a file, the map was drawn and written, then the CSV failed.) Neither
+    output is written when one cannot be: one line naming the option, exit 1."""
+    survey, lib = library
+    blocker = tmp_path / "file"
+    blocker.write_text("x")
+    assert main(["survey", "map", str(survey), "--library", str(lib), "--model", "default",
+                 "--out", str(tmp_path / "map.png"), "--csv", str(blocker / "cells.csv")]) == 1
+    err = capsys.readouterr().err
+    assert "cannot write --csv" in err and len(err.strip().splitlines()) == 1
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["file"]

@@ -215,3 +215,14 @@ def test_check_writable_tries_the_folder_before_the_work(tmp_path):
         check_writable(blocker / "model", "--out")
     check_writable(tmp_path / "new" / "deeper" / "model", "--out")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["file"]
+
+
+def test_train_fusion_writes_nothing_inside_a_training_walk(walk_dir, tmp_path, capsys):
+    """As ``train env`` already did: a model folder inside one of the walks it is trained on is refused (exit 2)
+    before any reading, and the walk is left as it was."""
+    before = sorted(p.name for p in walk_dir.iterdir())
+    code = main(["train", "fusion", "--walks", str(walk_dir), "--env-model", "default", "--no-bp",
+                 "--out", str(walk_dir / "model")])
+    err = capsys.readouterr().err
+    assert code == 2 and "lies inside the input --walks" in err and len(err.strip().splitlines()) == 1
+    assert sorted(p.name for p in walk_dir.iterdir()) == before

@@ -7,7 +7,7 @@ from pathlib import Path
 
 from features.errors import ConfigError
 from pipeline.args import plot_path
-from pipeline.outputs import check_outputs, model_inputs, shipped_or_directory, survey_inputs
+from pipeline.outputs import check_outputs, check_writable, model_inputs, shipped_or_directory, survey_inputs
 
 GROUP = "survey"
 
@@ -73,7 +73,7 @@ def _survey_cells_in(survey: Path, library: Path, site_name: str) -> list[str]:
 def _run(args) -> int:
     import numpy as np
 
-    from features.fileio import atomic_write_text
+    from features.fileio import atomic_write_text, is_stdout
     from features.site import ENV_CLASSES, load_site
     from fingerprints.library import FingerprintLibrary
     from models.environment import combine_windows
@@ -85,6 +85,9 @@ def _run(args) -> int:
     survey_files, survey_cells = survey_inputs(args.survey)
     check_outputs({"--library": args.library, **survey_files}, {"--out": args.out, "--csv": args.csv},
                   sealed={**survey_cells, **({} if model_dir is None else model_inputs(model_dir, "--model"))})
+    for option, path in (("--out", args.out), ("--csv", args.csv)):    # both, before either is written
+        if path is not None and not is_stdout(path):
+            check_writable(path, option)
     if not (args.survey / "site.toml").is_file():
         raise ConfigError(f"{args.survey}: not a survey directory (no site.toml)")
     if not args.library.is_file():

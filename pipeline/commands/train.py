@@ -319,7 +319,10 @@ def _run_fusion(args) -> int:
     for w in args.walks:
         inputs.update(walk_files(w, f"training walk {w.name}"))
     env_dir = shipped_or_directory(args.env_model, "--env-model")
-    check_outputs(inputs, {}, {"--out": args.out}, {} if env_dir is None else model_inputs(env_dir, "--env-model"))
+    sealed = {f"--walks {w}": w for w in args.walks}           # as train env: nothing is written in a training walk
+    if env_dir is not None:
+        sealed.update(model_inputs(env_dir, "--env-model"))
+    check_outputs(inputs, {}, {"--out": args.out}, sealed)
     _refuse_existing(args.out, args.overwrite, "fusion model")
     check_writable(args.out, "--out")                # before minutes of fitting, not after
     for w in args.walks:
