@@ -309,3 +309,23 @@ PINNED_HELD_OUT = {"weinberg": (3.23, 0.08, 1.67, 1.80, 2.91), "improved": (-5.6
                    "selected": (2.95, -0.19, 1.39, 1.52, 2.63)}
 PINNED_PDR_PCT = (1.06, 0.41, 0.99, 0.57)  # change detector; (1.14, 0.69, 0.78, 0.92) before the site was redrawn (issue 13 label), (1.20, 1.12, 0.93, 2.36) before issue 10
 PINNED_HEADING_DEG = {21: (4.58, 17.35, 9.86), 22: (7.73, 87.91, 13.28)}  # change detector (seed 21 fused 5.27 -> 4.58 when the gate reference became the first 300 s median, issue 25; {21: (8.06, 26.97, 12.59), 22: (9.87, 95.02, 10.67)} before the issue-13 site redraw; seed 21 gyro-only 26.66 -> 26.97 when the static start measured against its own rate); was {21: (6.38, 13.02, 13.27), 22: (5.01, 19.25, 10.65)}
+
+
+def test_steps_of_a_walk_that_ends_held_perfectly_still():
+    """A walk (1.8 Hz, ±2.5 m/s² vertical) then the IMU held perfectly still: the running mean of squares behind
+    the prominence gate came out a round-off below zero after the walk (scipy's running sum), its square root
+    NaN with a RuntimeWarning. Now no warning, one step per stride cycle while walking (27 cycles in 15 s: a
+    hand count, ±1 for the edges) and none while still."""
+    import warnings
+
+    from features.imu.steps import detect_steps
+
+    fs = 100.0
+    t = np.arange(int(30 * fs)) / fs
+    az = 9.81 + 2.5 * np.sin(2 * np.pi * 1.8 * t) * (t < 15)
+    acc = np.c_[np.zeros_like(t), np.zeros_like(t), az]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        steps = detect_steps(acc, fs)
+    assert abs(len(steps.t_s) - 27) <= 1
+    assert np.all(steps.t_s < 15.5)

@@ -174,7 +174,9 @@ def detect_steps(acc_m_s2: np.ndarray, rate_hz: float, t_s: np.ndarray | None = 
     w = max(int(round(config.detrend_window_s * rate_hz)), 1)
     hp = a - ndimage.uniform_filter1d(a, w, mode="nearest")
     wr = max(int(round(config.rms_window_s * rate_hz)), 1)
-    rms = np.sqrt(ndimage.uniform_filter1d(hp * hp, wr, mode="nearest"))
+    # a running mean (scipy keeps a running sum) of squares can come out a round-off below zero where the signal
+    # falls from walking to an IMU held perfectly still: it is zero there, not NaN (which dropped any peak)
+    rms = np.sqrt(np.maximum(ndimage.uniform_filter1d(hp * hp, wr, mode="nearest"), 0.0))
     peaks, props = signal.find_peaks(hp, distance=max(int(round(config.min_interval_s * rate_hz)), 1),
                                      prominence=config.min_prominence_m_s2)
     keep = props["prominences"] >= config.prominence_rms_factor * rms[peaks]
