@@ -112,7 +112,10 @@ class HoughAcquisition:
         pe = np.concatenate([s[0] + oe.ravel() for s in seeds])
         pn = np.concatenate([s[1] + on.ravel() for s in seeds])
         # Neighbouring seeds' fine grids overlap: each point once (first occurrence, order kept).
-        _, first = np.unique(np.round(np.column_stack([pe, pn]) / fine).astype(np.int64), axis=0, return_index=True)
+        # (One integer key per point, each cell's east and north in 32 bits: a 1-D unique, several times cheaper
+        # than the row-wise one, with the same first occurrences.)
+        ie, i_n = np.round(pe / fine).astype(np.int64), np.round(pn / fine).astype(np.int64)
+        _, first = np.unique(ie * (1 << 32) + (i_n + (1 << 31)), return_index=True)
         first.sort()
         pe, pn = pe[first], pn[first]
         hyps, members = self._vote(pe, pn, bi, rho, bpos, self.tolerance_s, arrivals, n_best=400)

@@ -60,6 +60,7 @@ sliding sum, a vectorised test, and the holds set from the few hits). The output
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
@@ -265,18 +266,25 @@ def _quantised_error(x: np.ndarray, coefs: np.ndarray, first_seg: int, segment: 
     return q
 
 
+@functools.lru_cache(maxsize=512)
+def _fill_layout(m: int, p: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Where the taps of an order-``p`` filter stand in the convolution matrix of :func:`_ar_fill` for a hole of
+    ``m`` samples (it depends on the hole's length only): whether tap k = r + p − j exists at row r, column j
+    (shape (m + p, m + 2p)), that k clipped to [0, p], and the columns of the known samples (p before, p after)."""
+    k = np.arange(m + p)[:, None] + p - np.arange(m + 2 * p)[None, :]
+    return (k >= 0) & (k <= p), np.clip(k, 0, p), np.concatenate([np.arange(p), np.arange(p + m, m + 2 * p)])
+
+
 def _ar_fill(x: np.ndarray, a: int, b: int, c: np.ndarray) -> np.ndarray:
     """The samples x[a:b] that minimise Σ e² over n ∈ [a, b + p), e = c ∗ x (Janssen et al. 1986), from the
     p known samples before and after; shape (b − a,). ``x`` holds them (a ≥ p, b + p ≤ len(x))."""
     p, m = len(c) - 1, b - a
     # e[a + r] = Σ_k c_k·x[a + r − k], r = 0 … m + p − 1, over the samples x[a − p : b + p] (column j ↔ a − p + j).
-    rows = np.arange(m + p)[:, None]
-    cols = np.arange(m + 2 * p)[None, :]
-    k = rows + p - cols
-    conv = np.where((k >= 0) & (k <= p), c[np.clip(k, 0, p)], 0.0)
+    exists, tap, known_cols = _fill_layout(m, p)
+    conv = np.where(exists, c[tap], 0.0)
     seg = x[a - p: b + p].astype(np.float64)
     unknown = conv[:, p: p + m]
-    known = np.concatenate([conv[:, :p], conv[:, p + m:]], axis=1) @ np.concatenate([seg[:p], seg[p + m:]])
+    known = conv[:, known_cols] @ seg[known_cols]
     sol, *_ = np.linalg.lstsq(unknown, -known, rcond=None)
     return sol
 
