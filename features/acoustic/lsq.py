@@ -20,6 +20,14 @@ Two solvers, as before the port (their results are compared in ``bench/receiver_
 the last linearisation (cheap, for a handful of problems); :func:`gauss_newton_subsets` iterates
 a batch of subsets together until every step is below 1 µm and evaluates at the end (the
 exclusion search's many subsets).
+
+Speed (issue 25): :func:`_subset_normal` returns its sums as scalars (three small arrays per subset and
+iteration cost more than the sums) and skips the ranges a subset leaves out (they add exact zeros): the
+4,270 exclusion searches recorded on three held-out walks took 0.246 s, now 0.164 s (process CPU, best of 3),
+every result the same to the bit. Tried and left out: stopping each subset of a batch at its own convergence
+(0.12 s) moved fixes by up to 1.7e-7 m, since a batch's subsets keep stepping until the slowest has
+converged and that shared rule is part of the result; freezing a subset once a step leaves it bitwise
+unchanged (exact) gained nothing measurable.
 """
 
 from __future__ import annotations
