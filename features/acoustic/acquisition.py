@@ -13,9 +13,9 @@ The tracker that holds the lock is :class:`features.acoustic.tracking.ClockPosit
 Speed (issue 25): the fine vote's duplicate grid points are found by a one-dimensional ``np.unique`` of one
 integer key per point instead of a row-wise unique (the same first occurrences; 1.5 → 0.08 ms a call), and
 the clock-aided re-acquisition loops over Python floats with each candidate's emission time from a dict (it
-indexed numpy arrays one scalar at a time and searched the candidates linearly per beacon). On a 600 s walk
-(``/tmp/rx`` set-up of the issue's branch ``rxloop``) acquisition is about 16 % of the receiver's CPU, most of
-it the vote's row sorts (numpy's argsort, three times faster than numba's per row) and its compiled counts.
+indexed numpy arrays one scalar at a time and searched the candidates linearly per beacon). On a simulated
+600 s walk acquisition is about 16 % of the receiver's CPU, most of it the vote's row sorts (numpy's argsort,
+three times faster than numba's per row) and its compiled counts.
 """
 
 from __future__ import annotations
