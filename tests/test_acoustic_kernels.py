@@ -312,3 +312,41 @@ def test_quantised_error_hand_checked():
          0.5 - 0.5 * 0.125 + 0.25 * 0.25]  # n = 7: 0.5
     assert _quantised_error(x, coefs, 0, 4, 0, 3, 8).tolist() == [8388608, 0, 6291456, 6291456, 8388608]
     assert [round(abs(v) * 2 ** 24) for v in e] == [8388608, 0, 6291456, 6291456, 8388608]
+
+
+def _decide_reference(q, start, stop, wh, g, ratio, hold, hold_left):
+    """The impulse test of the module docstring sample by sample: reference = Σ q over [i − g − wh, i − g) and
+    (i + g, i + g + wh], each sum formed afresh; a hit masks itself and the ``hold`` samples after it."""
+    mask, opened = [], 0
+    for i in range(start, stop):
+        ref = int(q[i - g - wh: i - g].sum()) + int(q[i + g + 1: i + g + 1 + wh].sum())
+        if q[i] > 0 and float(q[i] * 2 * wh) > ratio * float(ref):
+            opened += hold_left == 0
+            hold_left = hold + 1
+        mask.append(hold_left > 0)
+        hold_left = max(hold_left - 1, 0)
+    return mask, hold_left, opened
+
+
+def test_decide_equals_the_per_sample_reference():
+    """Random |e| with clicks placed across the kernel's 4,096-sample chunks (a hit on a chunk's last sample
+    whose hold runs into the next chunk, two clicks within one hold, a hold carried in and one carried out of
+    the block): mask, hold left and holes opened equal the per-sample definition — would catch a sliding sum
+    that drops or doubles a sample at a chunk seam, a hold not extended by a second hit, or a hole counted
+    twice."""
+    from features.acoustic.impulses import _DECIDE_CHUNK, _decide
+
+    rng = np.random.default_rng(11)
+    wh, g, hold, ratio = 48, 14, 24, 8.0
+    margin = wh + g
+    n = 3 * _DECIDE_CHUNK + 500
+    q = rng.integers(0, 2 ** 20, n + 2 * margin).astype(np.int64)
+    for at in (margin + _DECIDE_CHUNK - 1, margin + 2 * _DECIDE_CHUNK - 10, margin + 2 * _DECIDE_CHUNK - 3,
+               margin + 17, margin + n - 2):
+        q[at] = 2 ** 40
+    for hold_in in (0, 7):
+        got = _decide(q, margin, margin + n, wh, g, ratio, hold, hold_in)
+        want = _decide_reference(q, margin, margin + n, wh, g, ratio, hold, hold_in)
+        assert got[0].tolist() == want[0]
+        assert (got[1], got[2]) == (want[1], want[2])
+    assert want[2] == 4 and want[1] > 0         # the two close clicks are one hole; the last one's hold runs on

@@ -9,6 +9,13 @@ prediction (:meth:`~HoughAcquisition._acquire_with_clock`), and checks a fix for
 mirror solution (:meth:`~HoughAcquisition.mirror_free`);
 :func:`acquisition_windows` narrows a frame's windows to the associated arrivals.
 The tracker that holds the lock is :class:`features.acoustic.tracking.ClockPositionTracker`.
+
+Speed (issue 25): the fine vote's duplicate grid points are found by a one-dimensional ``np.unique`` of one
+integer key per point instead of a row-wise unique (the same first occurrences; 1.5 → 0.08 ms a call), and
+the clock-aided re-acquisition loops over Python floats with each candidate's emission time from a dict (it
+indexed numpy arrays one scalar at a time and searched the candidates linearly per beacon). On a simulated
+600 s walk acquisition is about 16 % of the receiver's CPU, most of it the vote's row sorts (numpy's argsort,
+three times faster than numba's per row) and its compiled counts.
 """
 
 from __future__ import annotations
@@ -112,7 +119,10 @@ class HoughAcquisition:
         pe = np.concatenate([s[0] + oe.ravel() for s in seeds])
         pn = np.concatenate([s[1] + on.ravel() for s in seeds])
         # Neighbouring seeds' fine grids overlap: each point once (first occurrence, order kept).
-        _, first = np.unique(np.round(np.column_stack([pe, pn]) / fine).astype(np.int64), axis=0, return_index=True)
+        # (One integer key per point, each cell's east and north in 32 bits: a 1-D unique, several times cheaper
+        # than the row-wise one, with the same first occurrences.)
+        ie, i_n = np.round(pe / fine).astype(np.int64), np.round(pn / fine).astype(np.int64)
+        _, first = np.unique(ie * (1 << 32) + (i_n + (1 << 31)), return_index=True)
         first.sort()
         pe, pn = pe[first], pn[first]
         hyps, members = self._vote(pe, pn, bi, rho, bpos, self.tolerance_s, arrivals, n_best=400)
@@ -185,17 +195,22 @@ class HoughAcquisition:
                 seeds.append((float(ee[k]), float(nn[k])))
         best, best_key = {}, None
         prior = (clock.offset_s, math.sqrt(clock.p00 + 1e-14))
+        # Python floats for the loops below (numpy scalars, indexed one by one, cost more than the arithmetic)
+        rng_list, bi_list = rng_m.tolist(), bi.tolist()
+        tx_of: dict = {}                                             # (index, arrival) -> its emission time
+        for i, tx, t in items:
+            tx_of.setdefault((i, t), tx)
         for pe, pn in seeds:
-            rr = np.sqrt((pe - bpos[:, 0]) ** 2 + (pn - bpos[:, 1]) ** 2 + (h - bpos[:, 2]) ** 2)
+            rr = np.sqrt((pe - bpos[:, 0]) ** 2 + (pn - bpos[:, 1]) ** 2 + (h - bpos[:, 2]) ** 2).tolist()
             chosen: dict = {}
-            for k, i in enumerate(bi.tolist()):
-                if abs(rng_m[k] - rr[k]) <= tol and (i not in chosen or items[k][2] < chosen[i]):
+            for k, i in enumerate(bi_list):
+                if abs(rng_list[k] - rr[k]) <= tol and (i not in chosen or items[k][2] < chosen[i]):
                     chosen[i] = items[k][2]                          # the earliest: echoes come later
             # The frame's chirps are heard up to a frame apart while the receiver walks: the range
             # variance takes the walking term of PositionConfig (½·(v·(tᵢ − t̄))²).
             t_bar = sum(chosen.values()) / max(len(chosen), 1)
             v = self._track_config.motion_speed_m_s
-            ranges = [BeaconRange(b[i].id, b[i].east_m, b[i].north_m, b[i].up_m, c * (t - self._tx_of(items, i, t)),
+            ranges = [BeaconRange(b[i].id, b[i].east_m, b[i].north_m, b[i].up_m, c * (t - tx_of[i, t]),
                                   math.sqrt(0.05 ** 2 + 0.5 * (v * (t - t_bar)) ** 2), t) for i, t in chosen.items()]
             fix = solve_position(ranges, self.site, c, self._verify_config, np.array([pe, pn, clock.offset_s]),
                                  prior) if len(ranges) >= 3 else None
@@ -206,11 +221,6 @@ class HoughAcquisition:
                 kept = {i: t for i, t in chosen.items() if b[i].id in fix.used_ids}
                 best, best_key, self._reacquired = kept, key, fix
         return best
-
-    @staticmethod
-    def _tx_of(items: list, i: int, t: float) -> float:
-        """Emission time of beacon ``i``'s candidate arrival ``t`` among the (index, tx, t) items."""
-        return next(tx for j, tx, tt in items if j == i and tt == t)
 
     def mirror_free(self, fix: AcousticFix, ranges_fix) -> bool:
         """No second solution fits the same beacons (the mirror-solution check).
