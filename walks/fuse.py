@@ -88,7 +88,10 @@ class FusedWalk:
         if old is not None and (heading is None or not heading.t_s > old.t_s):
             heading = old
         receiver = self.data.acoustic.analysis.receiver_state if self.data.acoustic is not None else None
-        return Handover(filters, ReaderStates(heading, receiver), classes)
+        gnss = self.data.gnss.fluct_state if self.data.gnss is not None else None
+        if got.readers.gnss is not None and (gnss is None or not gnss.t_s > got.readers.gnss.t_s):
+            gnss = got.readers.gnss
+        return Handover(filters, ReaderStates(heading, receiver, gnss), classes)
 
 
 def _event_time(state) -> float:

@@ -49,7 +49,7 @@ from features.acoustic.audio import require_beacon_band
 from features.acoustic.features import AudioAnalysis, analyse_audio
 from features.acoustic.positions import PositionConfig
 from features.acoustic.timing import AudioTiming, timing_from_walk
-from features.gnss.features import gnss_features, sky_arrays
+from features.gnss.features import FluctuationState, fluctuation_state, gnss_features, sky_arrays
 from features.gnss.nmea import epochs_on_time_base, read_nmea_columns
 from features.gnss.positions import GnssPositions, fixes_to_enu
 from features.gnss.sat_features import pseudorange_features
@@ -95,6 +95,9 @@ class GnssStream:
     solution: object = None
     skipped_share: float = 0.0
     """Share of the file's sentences the NMEA reader skipped (bad checksum, truncated, ...)."""
+    fluct_state: FluctuationState | None = None
+    """The ``fluct_per_s`` extremum detector's memory kept for a later cut of a long walk (:func:`read_walk`'s
+    ``keep_states_from_s``), else None."""
 
 
 @dataclass(frozen=True)
@@ -178,10 +181,12 @@ class UwbStream:
 class ReaderStates:
     """The readers' states a cut of a long walk resumes from (:func:`read_walk`, :mod:`walks.segments`):
     ``heading``, the PDR heading filter's before the cut's first IMU sample; ``receiver``, the acoustic
-    receiver's before one of its frames. None: that reader starts afresh."""
+    receiver's before one of its frames; ``gnss``, the GNSS ``fluct_per_s`` extremum detector's before one of
+    the NMEA epochs (:class:`~features.gnss.features.FluctuationState`). None: that reader starts afresh."""
 
     heading: HeadingState | None = None
     receiver: ReceiverState | None = None
+    gnss: FluctuationState | None = None
 
 
 @dataclass(frozen=True)
@@ -218,13 +223,15 @@ def read_walk(walk_dir: str | os.PathLike, *, site: Site | None = None, pdr_k: f
     A long walk read in cuts (:mod:`walks.segments`): ``resume``, the readers' states the read of the
     preceding cut kept (:class:`ReaderStates`), and ``keep_states_from_s``, the walk time from which this read
     keeps them for the next cut: the acoustic receiver's state before its first frame from then on
-    (``acoustic.analysis.receiver_state``; the PDR heading's is taken from its per-sample record).
+    (``acoustic.analysis.receiver_state``), the GNSS extremum detector's before its first epoch from then on
+    (``gnss.fluct_state``; the PDR heading's is taken from its per-sample record).
     """
     walk = load_walk(walk_dir)
     site = walk.load_site() if site is None else site
     truth = read_truth(walk.directory) if truth and (walk.directory / "truth.csv").is_file() else None
     notes: list[str] = []
-    gnss = _optional(walk, "gnss", lambda: read_gnss_stream(walk, site), notes)
+    gnss = _optional(walk, "gnss", lambda: read_gnss_stream(walk, site, resume and resume.gnss,
+                                                            keep_states_from_s), notes)
     if gnss is None and not walk.streams.get("gnss"):
         gnss = _optional(walk, "gnss_pseudoranges", lambda: read_pseudorange_stream(walk, site), notes)
     acoustic = None
@@ -330,16 +337,19 @@ def _shift_pdr(pdr: PdrStream, d_east_m: float, d_north_m: float) -> PdrStream:
     return PdrStream(result=moved, config=pdr.config, start_en_m=start, imu=pdr.imu, repaired=pdr.repaired)
 
 
-def read_gnss_stream(walk: WalkInfo, site: Site) -> GnssStream:
-    """The walk's NMEA: fixes in the site's ENU frame with σ, quality and HDOP, and the five GNSS windows."""
+def read_gnss_stream(walk: WalkInfo, site: Site, resume: FluctuationState | None = None,
+                     keep_state_from_s: float = math.inf) -> GnssStream:
+    """The walk's NMEA: fixes in the site's ENU frame with σ, quality and HDOP, and the five GNSS windows
+    (``resume``, ``keep_state_from_s``: the ``fluct_per_s`` memory of a long walk's cut, :func:`read_walk`)."""
     epochs, stats = read_nmea_columns(walk.path("gnss"))  # the epochs as columns: no object per satellite
     epochs = epochs_on_time_base(epochs, walk.start_utc)
     o = site.origin
     sky = sky_arrays(epochs)  # once, for both the positions' sigma and the features
     positions = fixes_to_enu(epochs, o.lat_deg, o.lon_deg, o.alt_m, sky=sky)
     share = stats.skipped / max(stats.sentences + stats.non_nmea_lines, 1)
-    return GnssStream(positions=positions, features=gnss_features(sky), nmea_summary=stats.summary(),
-                      skipped_share=float(share))
+    kept = fluctuation_state(sky, keep_state_from_s, resume=resume) if math.isfinite(keep_state_from_s) else None
+    return GnssStream(positions=positions, features=gnss_features(sky, resume=resume), nmea_summary=stats.summary(),
+                      skipped_share=float(share), fluct_state=kept)
 
 
 def read_pseudorange_stream(walk: WalkInfo, site: Site, config: WlsConfig | None = None) -> GnssStream:

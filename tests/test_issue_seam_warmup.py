@@ -1,0 +1,114 @@
+"""What rode on a long walk's warm-up (issue 25 item 3, walks/segments.py): the GNSS ``fluct_per_s`` extremum
+detector judges each extremum's swing from the previous one, a memory that outlasts any warm-up while a
+satellite's C/N0 holds still (a stop), so a cut read it from scratch and marked other extrema than the whole
+log (the class-aware filters 2e-5..6e-4 m off at 60 s segments). It is now handed over
+(:class:`features.gnss.features.FluctuationState`), and the cuts' audio starts on the 1 s window grid, aligned
+on the whole recording by ``first_sample``, instead of the 32 s block grid."""
+
+import numpy as np
+import pytest
+
+from features.gnss.features import (
+    FluctuationState, GnssFeatureConfig, SkyArrays, fluctuation_extrema, fluctuation_state, gnss_features,
+)
+
+
+def _sky(t_s, cn0):
+    cn0 = np.asarray(cn0, float)
+    n, m = cn0.shape
+    el = np.tile(np.array([70.0, 40, 40, 40, 40, 25][:m]), (n, 1))
+    az = np.tile(np.array([0.0, 0, 90, 180, 270, 45][:m]), (n, 1))
+    return SkyArrays(np.asarray(t_s, float), tuple(("GPS", i + 1) for i in range(m)), el, az, cn0,
+                     np.ones((n, m), bool), np.isfinite(cn0), np.ones(n))
+
+
+def _cut(sky: SkyArrays, i: int) -> SkyArrays:
+    """The epochs from row ``i`` on, as a later cut of the log reads them (its columns in the same order)."""
+    return SkyArrays(sky.t_s[i:], sky.sat_keys, sky.el_deg[i:], sky.az_deg[i:], sky.cn0_dbhz[i:], sky.in_view[i:],
+                     sky.used[i:], sky.hdop[i:], sky.interval_s)
+
+
+def _plateau_log():
+    """1 Hz, two satellites: the first rises 40 → 41 → 44, holds 44 dB-Hz for 100 s (a stop), falls to 42 and
+    rises to 43, 43; the second flickers 45/46 (swings of 1 dB-Hz, below the 2 dB-Hz threshold: never marked)."""
+    a = np.r_[40.0, 41.0, np.full(100, 44.0), 42.0, 43.0, 43.0]
+    b = np.where(np.arange(a.size) % 2 == 0, 45.0, 46.0)
+    return _sky(np.arange(a.size, dtype=float), np.c_[a, b])
+
+
+def test_extrema_after_a_plateau_need_the_memory_from_before_it():
+    """By hand: the whole log marks the plateau's end (row 101: rise into it, fall after it, swing 44 − 40 = 4)
+    and the dip (row 102: swing 44 − 42 = 2); the flicker never. A cut from row 30 (inside the plateau) read
+    from scratch sees no rise into the plateau and measures the dip from its first value: it marks the dip
+    only. Resumed from the memory before row 30 (:func:`fluctuation_state` of the whole log), it marks both."""
+    sky = _plateau_log()
+    thr = GnssFeatureConfig().fluct_threshold_dbhz
+    tracked = np.isfinite(sky.cn0_dbhz)
+    whole = fluctuation_extrema(sky.cn0_dbhz, tracked, thr)
+    assert np.flatnonzero(whole[:, 0]).tolist() == [101, 102] and not whole[:, 1].any()
+    fresh = fluctuation_extrema(sky.cn0_dbhz[30:], tracked[30:], thr)
+    assert (np.flatnonzero(fresh[:, 0]) + 30).tolist() == [102]
+    state = fluctuation_state(sky, 30.0)
+    assert state.t_s == 30.0 and state.sat_keys == sky.sat_keys
+    # by hand: last value 44, last change up (41 → 44), swing reference 40 (no extremum yet: the first value)
+    assert state.last_dbhz[0] == 44.0 and state.direction[0] == 1.0 and state.extremum_dbhz[0] == 40.0
+    resumed = fluctuation_extrema(sky.cn0_dbhz[30:], tracked[30:], thr, state.columns(sky.sat_keys))
+    assert np.array_equal(resumed, whole[30:])
+
+
+def test_gnss_features_of_a_resumed_cut_are_the_whole_logs_from_the_resumption_on():
+    """``fluct_per_s`` of a cut from 20 s resumed at 30 s (the memory of the whole log there) equals the whole
+    log's in every window that holds no epoch before 30 s (bit for bit: sums of whole counts), and is 0 where
+    the fresh cut misses the plateau's end (the window centred at 100 s: tags [99, 101) s, 1 Hz epochs tagged t − 0.5); the other four features never depended
+    on the past (equal to the round-off of the running sums they are differenced from, 1e-12 of ~3 dB). The state of the resumed cut at 60 s is the whole log's there; one whose columns lie in another
+    order (a cut lists satellites in order of first appearance) maps them by key."""
+    sky = _plateau_log()
+    whole = gnss_features(sky)
+    at = 30.0
+    cut = _cut(sky, 20)
+    resumed = gnss_features(cut, resume=fluctuation_state(sky, at))
+    fresh = gnss_features(cut)
+    w = whole["t_s"] >= at + 1.0                 # windows [t − 1, t + 1): from 31 s all epochs ≥ 30 s
+    c = resumed["t_s"] >= at + 1.0
+    assert np.array_equal(whole["t_s"][w], resumed["t_s"][c])
+    assert np.array_equal(whole["fluct_per_s"][w], resumed["fluct_per_s"][c])
+    assert np.any(whole["fluct_per_s"][w] != fresh["fluct_per_s"][c])
+    for name in whole:
+        np.testing.assert_allclose(resumed[name][c], whole[name][w], rtol=0, atol=1e-9, err_msg=name)
+    k = np.flatnonzero(np.isclose(fresh["t_s"], 100.0))[0]
+    assert whole["fluct_per_s"][np.isclose(whole["t_s"], 100.0)][0] > 0 and fresh["fluct_per_s"][k] == 0.0
+    later_whole = fluctuation_state(sky, 60.0)
+    later_cut = fluctuation_state(cut, 60.0, resume=fluctuation_state(sky, at))
+    for a, b in zip(later_whole.columns(sky.sat_keys), later_cut.columns(sky.sat_keys)):
+        assert np.array_equal(a, b, equal_nan=True)
+    swapped = FluctuationState(at, sky.sat_keys[::-1], *(np.asarray(a)[::-1] for a in
+                                                         fluctuation_state(sky, at).columns(sky.sat_keys)))
+    assert np.array_equal(gnss_features(cut, resume=swapped)["fluct_per_s"], resumed["fluct_per_s"])
+
+
+def test_random_logs_cut_anywhere_mark_the_whole_logs_extrema():
+    """300 random integer C/N0 logs (random walks, plateaus, untracked epochs), each cut in up to four pieces,
+    every piece resumed from the memory the previous one reached at its end: the marks equal the whole log's
+    at every row but each piece's last (its mark needs the next row, which the next piece decides: in a long
+    walk's cut that row lies in the warm-up)."""
+    from features.gnss.features import _extrema_memory
+
+    rng = np.random.default_rng(1)
+    tested = 0
+    for _ in range(300):
+        n, m = int(rng.integers(1, 60)), int(rng.integers(1, 5))
+        x = np.round(40 + np.cumsum(rng.normal(0, 1, (n, m)), 0) * rng.choice([0, 1, 3], m))
+        tr = rng.random((n, m)) > 0.2
+        x = np.where(tr, x, np.nan)
+        whole = fluctuation_extrema(x, tr, 2.0)
+        cuts = sorted(set(rng.integers(1, n + 1, int(rng.integers(0, 4))).tolist()) - {n})
+        memory, parts, lo = None, [], 0
+        for hi in cuts + [n]:
+            parts.append(fluctuation_extrema(x[lo:hi], tr[lo:hi], 2.0, memory))
+            memory = _extrema_memory(x[lo:hi], tr[lo:hi], 2.0, hi - lo, memory)
+            lo = hi
+        keep = np.ones(n, bool)
+        keep[[c - 1 for c in cuts]] = False
+        assert np.array_equal(np.vstack(parts)[keep], whole[keep])
+        tested += int(whole[keep].sum())
+    assert tested > 1000
