@@ -392,11 +392,12 @@ def read_acoustic_stream(walk: WalkInfo, site: Site, positions: PositionConfig |
     require_beacon_band(walk.path("audio"), min(b.f0_hz if b.f0_hz is not None else site.acoustic.f0_hz
                                                 for b in site.beacons))
     timing = timing_from_walk(walk, site)
+    first_sample, timing = _cut_alignment(walk, timing)
     if positions is None:
         positions = PositionConfig(max_clock_offset_s=timing.start_uncertainty_s + 0.05,
                                    motion_speed_m_s=WALK_SPEED_PRIOR_M_S)
     res = analyse_audio(walk.path("audio"), site, timing, positions=positions, keep_frames=True, resume=resume,
-                        keep_state_from_s=keep_state_from_s)
+                        keep_state_from_s=keep_state_from_s, first_sample=first_sample)
     # the frames' ranges kept compactly (56 bytes per range), the frames themselves dropped
     ranges = range_rows(res.frames, res.fixes, site, positions)
     res = dataclasses.replace(res, frames=None)
@@ -404,6 +405,24 @@ def read_acoustic_stream(walk: WalkInfo, site: Site, positions: PositionConfig |
     cov = np.array([f.covariance[:2, :2] for f in res.fixes]).reshape(-1, 2, 2)
     return AcousticStream(t_s=arr[:, 0], east_m=arr[:, 1], north_m=arr[:, 2], covariance_en_m2=cov,
                           analysis=res, timing=timing, ranges=ranges)
+
+
+def _cut_alignment(walk: WalkInfo, timing: AudioTiming) -> tuple[int, AudioTiming]:
+    """(first_sample, timing) the receiver reads the walk's audio with: a long walk's cut
+    (:mod:`walks.segments`) whose ``[audio]`` states ``first_sample``, its first sample's index in the walk's
+    recording, and ``recording_start_s``, the walk time of that recording's first sample, is read aligned on
+    the recording (:func:`features.acoustic.features.analyse_audio`'s ``first_sample``, with the recording's
+    timing); any other audio from its own first sample (0, ``timing``)."""
+    table = walk.streams.get("audio", {})
+    first, start = table.get("first_sample"), table.get("recording_start_s")
+    if first is None and start is None:
+        return 0, timing
+    where = walk.directory / "walk.toml"
+    if not (isinstance(first, int) and not isinstance(first, bool) and first >= 0):
+        raise DataError(f"{where}: [audio] first_sample must be a sample index >= 0, got {first!r}")
+    if not (isinstance(start, (int, float)) and not isinstance(start, bool) and math.isfinite(start)):
+        raise DataError(f"{where}: [audio] recording_start_s must be a finite number of seconds, got {start!r}")
+    return first, dataclasses.replace(timing, start_s=float(start))
 
 
 def read_pdr_stream(walk: WalkInfo, start_en: tuple[float, float], k: float | None,

@@ -282,6 +282,25 @@ def walk_cuts(walk_dir: str | os.PathLike, segment_s: float = SEGMENT_S, *,
             cut.close()
 
 
+def audio_cut_step(fs_in_hz: int) -> int:
+    """Input samples between the audio samples a cut may start at: at the acoustic reader's own rate (48 kHz)
+    one hop of its feature windows (:class:`features.acoustic.features.WindowConfig`, 1 s), since the cut is
+    read with its first sample's index in the whole recording (``[audio] first_sample``, :func:`_AudioCutter`;
+    :func:`features.acoustic.features.analyse_audio`'s ``first_sample``), which puts its read blocks,
+    impulse-blanker segments and matched-filter decimation where the whole recording's lie, and its windows
+    then start on the whole recording's window grid. At another rate (resampled, whose blocks that index does
+    not align) :func:`audio_cut_period`. 48,000 samples (1 s) at 48 kHz."""
+    from features.acoustic.detection import DetectorConfig
+    from features.acoustic.features import WindowConfig
+
+    if int(fs_in_hz) != int(DetectorConfig().fs_hz):
+        return audio_cut_period(fs_in_hz)
+    hop = WindowConfig().hop_s * fs_in_hz
+    if abs(hop - round(hop)) > 1e-9:
+        return audio_cut_period(fs_in_hz)
+    return int(round(hop))
+
+
 def audio_cut_period(fs_in_hz: int) -> int:
     """Input samples between the audio samples a cut may start at, so that the acoustic reader processes every
     sample of the cut in the same blocks, impulse-blanker segments and decimation phase as in the whole walk
@@ -311,14 +330,14 @@ MATCHED_FILTER_DECIMATION = 4
 
 def _audio_grid(walk: WalkInfo):
     """The function moving a cut's start back to the last walk time at or before it whose audio sample lies on
-    :func:`audio_cut_period`'s grid counted from the WAV's first sample (identity without audio): the cut's
-    warm-up grows by less than one period (32 s at 48 kHz). A start moved back to the WAV's first sample (or
+    :func:`audio_cut_step`'s grid counted from the WAV's first sample (identity without audio): the cut's
+    warm-up grows by less than one step (1 s at 48 kHz; 32 s at another rate). A start moved back to the WAV's first sample (or
     before it) is −inf: that cut holds the walk from its start, as the whole walk's read does."""
     audio = walk.path("audio")
     if audio is None or not audio.is_file() or not audio.stat().st_size:
         return lambda t: t
     fs = sf.info(str(audio)).samplerate
-    step = audio_cut_period(fs)
+    step = audio_cut_step(fs)
     start = float(walk.streams["audio"].get("start_s", 0.0))
 
     def align(t: float) -> float:
@@ -376,6 +395,9 @@ def _write_walk_toml(walk: WalkInfo, d: Path, changes: dict) -> None:
         text = re.sub(r"^site\s*=.*$", lambda _: f"site = {_toml_str(str(site))}", text, count=1, flags=re.M)
     if "audio_start_s" in changes:
         text = _set_in_table(text, "audio", "start_s", repr(changes["audio_start_s"]))
+    if "audio_first_sample" in changes:
+        text = _set_in_table(text, "audio", "first_sample", str(changes["audio_first_sample"]))
+        text = _set_in_table(text, "audio", "recording_start_s", repr(changes["audio_recording_start_s"]))
     (d / "walk.toml").write_text(text)
 
 
@@ -507,7 +529,10 @@ class _NmeaCutter(_LineCutter):
 
 class _AudioCutter:
     """The WAV's samples of walk times [lo, hi), copied block by block (``soundfile``), its format kept (RF64
-    past 4 GiB); the cut's ``[audio] start_s`` is its first sample's walk time."""
+    past 4 GiB); the cut's ``[audio] start_s`` is its first sample's walk time. At the acoustic reader's rate
+    (48 kHz) the cut also states its first sample's index in the walk's WAV, ``first_sample``, and the walk
+    time of the WAV's first sample, ``recording_start_s`` (the walk's ``start_s``): the reader aligns its
+    receiver on the whole recording from them (:func:`walks.reader.read_acoustic_stream`)."""
 
     BLOCK = 1 << 18
 
@@ -532,7 +557,10 @@ class _AudioCutter:
                     break
                 out.write(x)
                 left -= len(x)
-        return {"audio_start_s": self.start_s + a0 / self.fs}
+        out = {"audio_start_s": self.start_s + a0 / self.fs}
+        if audio_cut_step(self.fs) != audio_cut_period(self.fs):      # aligned by index (48 kHz)
+            out.update(audio_first_sample=int(a0), audio_recording_start_s=self.start_s)
+        return out
 
     def close(self) -> None:
         pass
