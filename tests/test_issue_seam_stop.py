@@ -139,8 +139,9 @@ def test_stands_of_a_later_cut_and_the_uwb_pdr_track_through_a_stop():
 
 
 def test_cuts_holding_the_walks_start_read_it_as_the_whole_walk(stop_walk):
-    """60 s segments of the 300 s walk: the cuts of segments 0-2 start at the walk's start (their 120 s warm-up
-    reaches before it) and reach at least the heading gate's 300 s reference span, as the whole walk's read
+    """60 s segments of the 300 s walk with the 120 s warm-up of the methods that start afresh on each cut
+    (walks.segments.FRESH_WARMUP_S): the cuts of segments 0-2 start at the walk's start (the warm-up reaches
+    before it) and reach at least the heading gate's 300 s reference span, as the whole walk's read
     does; a segment whose next cut holds the walk's start keeps no reader state (states_from_s inf), the
     others keep them 10 s into the next cut."""
     import tomllib
@@ -149,7 +150,7 @@ def test_cuts_holding_the_walks_start_read_it_as_the_whole_walk(stop_walk):
     from walks.segments import RESUME_AFTER_S, walk_cuts
 
     seen = []
-    for seg in walk_cuts(stop_walk, 60.0):
+    for seg in walk_cuts(stop_walk, 60.0, warmup_s=120.0):
         audio_start = float(tomllib.loads((seg.directory / "walk.toml").read_text())["audio"]["start_s"])
         imu_t = np.loadtxt(seg.directory / "imu.csv", delimiter=",", skiprows=1, usecols=0)
         seen.append((seg.index, audio_start, imu_t[0], imu_t[-1], seg.next_from_s, seg.states_from_s))

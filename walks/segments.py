@@ -141,7 +141,8 @@ from features.imu.heading import GATE_REFERENCE_S
 from features.fileio import read_toml
 from features.walk import WalkInfo, load_walk
 
-__all__ = ["SEGMENT_S", "WARMUP_S", "TAIL_S", "RESUME_AFTER_S", "Segment", "plan_segments", "walk_cuts"]
+__all__ = ["SEGMENT_S", "WARMUP_S", "FRESH_WARMUP_S", "TAIL_S", "RESUME_AFTER_S", "Segment", "plan_segments",
+           "walk_cuts"]
 
 SEGMENT_S = 300.0
 """Walk time each segment owns by default, s: with the filters and readers resumed across the seams they cost
@@ -149,10 +150,19 @@ nothing measurable, so the segment is short and the peak memory of a long walk t
 462 s since the cuts start on the acoustic reader's 32 s block grid): a 10-minute walk (two segments) and a
 2-hour one peak within 3 % of each other (``bench/bench_pipeline.py --memory-only``, measured before the grid)."""
 
-WARMUP_S = 120.0
-"""Walk time a cut reaches before its segment (then moved back to the audio block grid, :func:`audio_cut_period`),
-s: what is not handed over settles in it (step bouts, feature windows; the readers resume
-:data:`RESUME_AFTER_S` into it, the filters and the class HMM at the segment's start)."""
+WARMUP_S = 20.0
+"""Walk time a cut reaches before its segment when every method fused resumes what the previous segment handed
+over (then moved back to the audio grid, :func:`audio_cut_step`: up to 1 s more at 48 kHz), s: the readers
+resume :data:`RESUME_AFTER_S` into it, so their states hold from 10 s before the segment; what is not handed
+over is local and settles within that (step detection's zero-phase filter and its bouts, the 2 s feature
+windows, the GNSS bias resets on the fixes' neighbours), and the filters and the class HMM resume at the
+segment's start. Was 120 s (plus up to 32 s of the block grid): the GNSS ``fluct_per_s`` extremum memory rode
+on it (:class:`features.gnss.features.FluctuationState`, now handed over); measured in the module docstring."""
+
+FRESH_WARMUP_S = 120.0
+"""Walk time a cut reaches before its segment when a method fused starts afresh on each cut (nothing handed
+over: the factor graphs ``fg_*``, ``ekf_rtk_pdr``, ``foot_ins_fkf``, :data:`walks.fuse.RESUMED_METHODS`), s:
+such a method converges within it (``walks.fuse.warmup_for``)."""
 
 TAIL_S = 10.0
 """Walk time a cut reaches after its segment, s: ≥ the fixed-lag smoother's lag (3 s), a step split at the
@@ -248,9 +258,11 @@ def _csv_time(line: bytes) -> float | None:
 
 
 def walk_cuts(walk_dir: str | os.PathLike, segment_s: float = SEGMENT_S, *,
-              workdir: str | os.PathLike | None = None) -> Iterator[Segment]:
+              workdir: str | os.PathLike | None = None, warmup_s: float | None = None) -> Iterator[Segment]:
     """The walk's segments in time order (module docstring), each cut written just before it is yielded and
-    deleted when the next is asked for. A walk of one segment yields its own folder."""
+    deleted when the next is asked for; ``warmup_s``: the cuts' warm-up (default :data:`WARMUP_S`). A walk of
+    one segment yields its own folder."""
+    warmup = WARMUP_S if warmup_s is None else float(warmup_s)
     n, _ = plan_segments(walk_dir, segment_s)
     if n == 1:
         yield Segment(0, -math.inf, math.inf, Path(walk_dir), math.inf)
@@ -263,13 +275,13 @@ def walk_cuts(walk_dir: str | os.PathLike, segment_s: float = SEGMENT_S, *,
         for k in range(n):
             own_from = -math.inf if k == 0 else k * segment_s
             own_to = math.inf if k == n - 1 else (k + 1) * segment_s
-            lo = -math.inf if k == 0 else align(own_from - WARMUP_S)
+            lo = -math.inf if k == 0 else align(own_from - warmup)
             hi = math.inf if k == n - 1 else own_to + TAIL_S
             if lo == -math.inf:
                 # a cut holding the walk's start reads it as the whole walk's read does, the heading gate's
                 # reference field included (a segment shorter than the warm-up: the first cuts all start there)
                 hi = max(hi, GATE_REFERENCE_S)
-            next_lo = align((k + 1) * segment_s - WARMUP_S)
+            next_lo = align((k + 1) * segment_s - warmup)
             d = Path(tmp) / f"segment{k:04d}"
             d.mkdir()
             toml = {}
