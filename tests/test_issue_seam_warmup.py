@@ -112,3 +112,73 @@ def test_random_logs_cut_anywhere_mark_the_whole_logs_extrema():
         assert np.array_equal(np.vstack(parts)[keep], whole[keep])
         tested += int(whole[keep].sum())
     assert tested > 1000
+
+
+@pytest.fixture(scope="module")
+def looped(walk_dir, tmp_path_factory):
+    """The 60 s session walk looped 3 times (180 s)."""
+    from tests.long_walk import loop_walk
+
+    return loop_walk(walk_dir, tmp_path_factory.mktemp("warmup") / "x3", 3)
+
+
+def test_a_cut_reads_its_epochs_samples_and_fixes_at_the_whole_walks_times(looped):
+    """Each 60 s segment's cut (20 s warm-up: its first NMEA epoch, IMU sample and audio sample are not the
+    walk's) read with the readers alone: every GNSS epoch and IMU sample of the cut is at the whole walk's time
+    bit for bit (the microsecond grid; before, the times carried the cut's first epoch in their round-off,
+    ~1e-11 s), and every acoustic fix from the receiver's resumption on (10 s into the cut) is the whole walk's
+    bit for bit (read with ``first_sample`` on the walk's recording, the cut starting on a whole second, not on
+    the 32 s block grid). The cut states its first sample and the recording's start in walk.toml."""
+    import tomllib
+
+    from walks.reader import read_walk
+    from walks.segments import RESUME_AFTER_S, WARMUP_S, walk_cuts
+
+    assert WARMUP_S == 20.0
+    whole = read_walk(looped, truth=False)
+    resume, later = None, 0
+    for seg in walk_cuts(looped, 60.0):
+        data = read_walk(seg.directory, truth=False, resume=resume, keep_states_from_s=seg.states_from_s)
+        resume = _reader_states(data, seg.states_from_s)
+        tg, ti = data.gnss.positions.t_s, data.pdr.imu.t_s
+        assert np.all(np.isin(tg, whole.gnss.positions.t_s)) and np.all(np.isin(ti, whole.pdr.imu.t_s))
+        if seg.index == 0:
+            continue
+        later += 1
+        audio = tomllib.loads((seg.directory / "walk.toml").read_text())["audio"]
+        first = audio["first_sample"]
+        assert audio["recording_start_s"] == 0.0 and first == round(audio["start_s"] * 48_000)
+        assert first % 48_000 == 0 and 0 <= seg.own_from_s - first / 48_000 - WARMUP_S < 1.0
+        t0 = first / 48_000 + RESUME_AFTER_S + 1.0
+        a = whole.acoustic
+        mine = data.acoustic.t_s >= t0
+        theirs = (a.t_s >= t0) & (a.t_s <= data.acoustic.t_s[-1])
+        assert mine.sum() >= 5
+        assert np.array_equal(data.acoustic.t_s[mine], a.t_s[theirs])
+        assert np.array_equal(data.acoustic.east_m[mine], a.east_m[theirs])
+    assert later == 2
+
+
+def _reader_states(data, states_from_s):
+    """The readers' states a cut's read kept for the next (as walks.fuse.FusedWalk.handover takes them)."""
+    from walks.reader import ReaderStates
+
+    if not np.isfinite(states_from_s):
+        return ReaderStates()
+    imu = data.pdr.imu
+    i = int(np.searchsorted(imu.t_s, states_from_s)) - 1
+    return ReaderStates(data.pdr.result.heading.state_at(i, float(imu.t_s[i])),
+                        data.acoustic.analysis.receiver_state, data.gnss.fluct_state)
+
+
+def test_warm_up_by_method():
+    """20 s for methods that resume the previous segment (their smoothed tracks too), 120 s as soon as one
+    starts afresh on each cut, and every registered method is one or the other."""
+    from walks.fuse import RESUMED_METHODS, warmup_for
+    from walks.graph_methods import GRAPH_METHODS
+    from walks.methods import method_names
+
+    assert warmup_for(("adaptive_blind+lag",)) == warmup_for(("pdr", "uwb_aoa_pdr+rts", "kf")) == 20.0
+    assert warmup_for(("kf", "fg_isam2")) == warmup_for(("foot_ins_fkf",)) == warmup_for(None) == 120.0
+    fresh = set(GRAPH_METHODS) | {"foot_ins_fkf"}
+    assert set(method_names()) <= RESUMED_METHODS | fresh and not RESUMED_METHODS & fresh
