@@ -13,8 +13,10 @@ segment by segment:
   file): NMEA sentences by the epoch they belong to (placed on the walk's time base from ``start_utc`` and the
   times of day, midnight crossings counted), IMU, UWB, foot-IMU and truth CSV rows by ``t_s``, audio samples by
   ``[audio] start_s`` (the cut's ``start_s`` moved to its first sample, so the TDMA frame phase is unchanged);
-  the cut reaches :data:`WARMUP_S` before the segment, moved back to the acoustic reader's block grid
-  (:func:`audio_cut_period`, 32 s at 48 kHz), and :data:`TAIL_S` after it (the fixed-lag smoother's 3 s, a
+  the cut reaches :data:`WARMUP_S` before the segment (:data:`FRESH_WARMUP_S` when a method fused starts
+  afresh on each cut, :func:`walks.fuse.warmup_for`), moved back to a whole second of the audio
+  (:func:`audio_cut_step`; 32 s, :func:`audio_cut_period`, for audio at another rate than 48 kHz), and
+  :data:`TAIL_S` after it (the fixed-lag smoother's 3 s, a
   step's split at the next fix, the last feature window); the first cut reaches at least the heading gate's
   reference span (:data:`features.imu.heading.GATE_REFERENCE_S`);
 - the cut is fused by the pipeline (:func:`walks.fuse.fuse_walk`) with what the previous segment handed over
@@ -43,20 +45,30 @@ segment by segment:
     whole walk's value there (:class:`walks.inputs.ClassResume`), and filter on from it;
   * the acoustic receiver resumes its tracker (lock, two-state clock filter, air estimate, acquisition memory)
     at its first frame :data:`RESUME_AFTER_S` into the cut, once its audio buffers are full
-    (:class:`features.acoustic.tracking.ReceiverState`); since the cut's audio starts on the reader's block
-    grid, every later sample passes the same read blocks, impulse-blanker segments and matched-filter
-    decimation phase as in the whole walk, so the matched filter's float32 round-off is the same;
+    (:class:`features.acoustic.tracking.ReceiverState`); the cut states its first sample's index in the walk's
+    recording (``[audio] first_sample``) and the reader passes it to the receiver
+    (:func:`features.acoustic.features.analyse_audio`), so every sample passes the same read blocks,
+    impulse-blanker segments and matched-filter decimation phase as in the whole walk and the matched
+    filter's float32 round-off is the same (before, the cut started on the 32 s grid where they coincide);
+  * the GNSS feature ``fluct_per_s``'s extremum detector resumes its memory (each satellite's last C/N0, the
+    direction of its last change and the value the next swing is measured from) at the reader's first epoch
+    :data:`RESUME_AFTER_S` into the cut (:class:`features.gnss.features.FluctuationState`): while a
+    satellite's C/N0 holds still (a stop) that memory outlasts any warm-up;
+  * the NMEA epochs and IMU samples are placed on the microsecond grid (:func:`walks.reader.on_time_grid`), so
+    that an epoch has the same walk time in every cut (the readers' time bases carry the file's first epoch
+    or sample in their round-off);
   * the PDR heading filter resumes its heading, gyro bias, gyro-only heading and gate offset
     :data:`RESUME_AFTER_S` into the cut, after its low-pass filters' transients, with the record's start
     statistics (turn-on bias, gate reference field) of the walk
     (:class:`features.imu.heading.HeadingState`);
   * the rest is local in time and has settled within the warm-up: GNSS fixes (the NMEA time base and epoch
     interval are medians that agree on a steady log), steps (a 2nd-order zero-phase filter, bouts of seconds),
-    feature windows.
+    feature windows. What rode on the 120 s warm-up of before was the GNSS extremum memory (now handed over):
+    at 30 s of warm-up on main, seed 78's ``fluct_per_s`` differs at 925 s, the class probabilities by 0.009.
 
 A walk that fits in one segment is fused exactly as before, from its own folder. Memory is bounded by one cut's
-pipeline (S + :data:`WARMUP_S` + up to 32 s + :data:`TAIL_S` of walk) whatever the walk's length, plus what the
-caller keeps of each segment (``envfuse run`` writes its rows to the output's temporary file and keeps nothing).
+pipeline (S + :data:`WARMUP_S` + up to 1 s + :data:`TAIL_S` of walk; :data:`FRESH_WARMUP_S` for the methods
+that start afresh) whatever the walk's length, plus what the caller keeps of each segment (``envfuse run`` writes its rows to the output's temporary file and keeps nothing).
 
 What a segment cannot have: the future past its cut. A ``+rts`` track is the RTS smoother over its cut, i.e. at
 an owned epoch t the whole walk's smoother with the data after the cut's end (at least :data:`TAIL_S` after t)
@@ -82,7 +94,7 @@ UWB/PDR filters 0.03-0.45 m at seams inside a stop. What is left at 60 s segment
 class-aware tracks (``imm`` 2e-5 m, ``uwb_aoa_pdr_env`` 4e-5 m, ``adaptive_correction`` 6e-4 m) at 523-540 s,
 where the GNSS feature ``fluct_per_s`` of four windows differs (by 0.03-0.05 per s): its extremum detector
 (:func:`features.gnss.features.fluctuation_extrema`) judges each extremum's swing from the previous one, a memory
-that outlasts the warm-up while a satellite's C/N0 holds still through a stop, and is not handed over.
+that outlasts the warm-up while a satellite's C/N0 holds still through a stop; it is now handed over (warmup).
 
 Measured (``bench/seam_identity.py``: simulated 21-minute walks, site 201 of the demo split and its model, 300 s
 segments, largest distance from the whole walk's track at the same epoch over every owned epoch):
