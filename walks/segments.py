@@ -97,42 +97,59 @@ where the GNSS feature ``fluct_per_s`` of four windows differs (by 0.03-0.05 per
 that outlasts the warm-up while a satellite's C/N0 holds still through a stop; it is now handed over (warmup).
 
 Measured (``bench/seam_identity.py``: simulated 21-minute walks, site 201 of the demo split and its model, 300 s
-segments, largest distance from the whole walk's track at the same epoch over every owned epoch):
+segments, largest distance from the whole walk's track at the same epoch over every owned epoch, m; "main":
+da9cdfe, 120 s warm-up on the 32 s grid, measured in the same session on the same walks; now: 20 s on the 1 s
+grid for the resumed methods, 120 s for the others):
 
 =====================  ============  ============  ============  ============
-track                  seed 77       (before)      seed 78       (before)
+track                  seed 77       (main)        seed 78       (main)
 =====================  ============  ============  ============  ============
-acoustic fixes         8.0e-11       0.0030 (a)    8.0e-11 (b)   0.0065 (a)
-kf_quality             1.0e-7        0.040         0.71 (b)      0.58
-aekf                   7.2e-8        0.39          0.53 (b)      5.75
-imm                    0.015 (c)     0.16          1.2 (b)       3.0
-adaptive_nobp_blind    1.5e-7        0.032         1.2 (b)       1.11
-adaptive               0.13 (c)      0.13          0.18 (b)      0.18
-pdr                    2.6e-6 (d)    5.6 (e)       5.0e-6 (d)    175 (e)
-uwb_aoa_pdr            5.8e-7 (f)    skipped (e)   1.8e-7 (f)    23.6 (e)
-kf_quality+rts         0.022         0.030         1.0           0.98
-aekf+rts               0.025         0.30          1.8           2.8
-imm+rts                0.059         0.11          0.69          0.96
+acoustic fixes         0 (g)         8.0e-11       0 (g)         8.0e-11 (b)
+kf_quality             1.4e-7        1.0e-7        1.5e-7        0.71 (b)
+aekf                   6.3e-8        7.2e-8        1.2e-7        0.096 (b)
+imm                    2.2e-7        0.015 (c)     2.4e-7        1.2 (b)
+adaptive_nobp_blind    2.2e-7        1.5e-7        2.1e-7        0.18 (b)
+adaptive               1.9e-7        0.13 (c)      4.5e-7        0.18 (b)
+uwb_aoa_pdr_env        1.8e-6        5.6e-4 (c)    4.4e-7        0.0094
+pdr                    5.4e-6 (d)    2.6e-6 (d)    5.0e-6 (d)    5.0e-6 (d)
+uwb_aoa_pdr            7.3e-7 (f)    5.8e-7 (f)    2.3e-7 (f)    1.8e-7 (f)
+kf_quality+rts         0.022         0.022         0.94          1.0
+aekf+rts               0.025         0.025         1.8           1.8
+imm+rts                0.059         0.059         0.32          0.69
+ekf_rtk_pdr (h)        1.7e-10       1.2e-9        0.013         0.013
+fg_isam2 (h)           0.087         0.11          2.4           2.4
+fg_lag (h)             0.037         0.051         1.4           1.0
+fg_tight (h)           0.066         0.074         2.7           2.5
 =====================  ============  ============  ============  ============
 
-``envfuse run --method adaptive_blind+lag`` on seed 77 (300 s segments) writes positions within 1.0e-7 m of the
-whole walk's (main: 0.024 m), peak memory 302.8 MiB against main's 300.3 MiB (the cuts up to 32 s longer), CPU
-14.2 against 14.0 s. (before: main at the start of this change; the ``adaptive_nobp+rts``, ``kf+rts`` and ``adaptive+rts`` rows read
-like the other ``+rts`` ones, median 1e-6 to 5e-4 m.) (a) the cut's float32 blocks not on the walk's: 324 of 841
-(seed 78: 716 of 1091) fixes at times that differ by 1 µs to 0.4 ms; (b) one acoustic fix of seed 78 (342.83 s)
-the segmented read does not give, every other fix equal to 8e-11 m: the filters move by up to 0.7 m after it
-(their medians are 4e-10 m); (c) three feature windows of seed 77 (1137-1139 s) whose CIR features differ (one
-chirp's, its SNR by 0.1-1 dB; the same chirps detected, every fix equal): the class probabilities there differ
-by 0.04 and the class-aware filters by up to 0.15 m (the blind twins by 1.5e-7 m); (d) the resumed heading
-agrees to 3-5e-8 rad, not to round-off, and dead reckoning accumulates it; (e) before, the steps of a later cut
-before its heading resumed had no heading, and ``pdr`` (NaN after them) and the UWB filter (skipped; on seed 78
-restarted at each seam, and skipped in the last segment, which holds no step) did not survive a seam; (f) since seamfix, whose PDR track for the UWB/PDR filter is
-still through a stop; before it 0.051 m (seed 77) and 23.6 m (seed 78: the filter gates most fixes, 125 resets
-over the walk, and a stop's step spread over the stop flipped a gate decision at 932 s). A walk holding a stream that cannot be cut by
+With 20 s of warm-up before the GNSS memory was handed over, on the 1 s grid, the tracks of both walks were
+these; on main with 30 s, seed 78's ``fluct_per_s`` at 925 s differed (class probabilities by 0.009). The
+``+rts`` tracks lose the data past the cut's end whatever the warm-up (above). (a) (before issue 25's
+alignment) the cut's float32 blocks not on the walk's; (b) one acoustic fix of seed 78 (342.83 s) main's
+segmented read does not give (its cut aligned on the 32 s grid; aligned by ``first_sample`` every fix is the
+whole walk's to the bit): the filters move by up to 2.95 m (``kf_map``) after it; (c) three feature windows of
+seed 77 (1137-1139 s) whose CIR features differ on main (one chirp's SNR by 0.1-1 dB): the class-aware filters
+move by up to 0.15 m; equal now; (d) the resumed heading agrees to 3-5e-8 rad, not to round-off (the 0.3 Hz
+zero-phase low-pass's transients at the cut's ends, e^-13 after 10 s), and dead reckoning accumulates it over
+the segment; (e) before issue 25's heading resume, ``pdr`` and the UWB filter did not survive a seam; (f) since
+seamfix, whose PDR track for the UWB/PDR filter is still through a stop; (g) bit for bit; (h) not resumed,
+fused in cuts of :data:`FRESH_WARMUP_S` (``walks.fuse.warmup_for``): with 20 s ``ekf_rtk_pdr`` reads 1.23 m and
+``fg_isam2`` 0.71 m on seed 77; the other ``fg_*`` within 0.008-0.02 m (seed 77) and 0.21-0.25 m (seed 78;
+``fg_ins`` 11.1 m on both, as main).
+
+``envfuse run --method adaptive_blind+lag`` (one core, best of 3 alternated fresh processes, load 4.5-6 from
+other sessions; CPU of the process, imports and model load included), main → now: a 10-minute walk (seed 79)
+segmented 5.43 → 4.88 s, unsegmented 3.86 → 3.81 s; a 21-minute walk (seed 77) segmented 12.29 → 10.41 s,
+unsegmented 7.23 → 6.79 s. Peak memory (ru_maxrss) segmented: 292.3 → 285.7 MiB (10 minutes), 293.3 → 285.2
+MiB (21 minutes); unsegmented 299 and 340 MiB on both. What the segmented read still costs besides the
+warm-up's audio: writing the cuts (:func:`walk_cuts`' line-by-line Python copy of the NMEA, IMU, foot-IMU, UWB
+and truth files: about 5 of 40 s of a profiled segmented run of seed 77, against 25-29 s unsegmented) and the
+receiver's acquisition in each cut's first 10 s, before it resumes.
+A walk holding a stream that cannot be cut by
 time (a drive's pseudoranges or odometry, whose dead reckoning is fitted to the whole drive's fixes) is not
 segmented (:func:`plan_segments` says why). Not resumed: ``foot_ins_fkf`` (its strapdown INS and local filters,
-:mod:`models.foot`; its 10 Hz track is also sampled from the cut's first IMU sample) and the factor-graph
-methods (``fg_*``, :mod:`walks.graph_methods`; within 0.008-0.08 m at 300 s segments on seed 77).
+:mod:`models.foot`; its 10 Hz track is also sampled from the cut's first IMU sample), the factor-graph
+methods (``fg_*``) and ``ekf_rtk_pdr`` (:mod:`walks.graph_methods`): their cuts take :data:`FRESH_WARMUP_S`.
 """
 
 from __future__ import annotations
