@@ -95,7 +95,8 @@ def test_run_writes_the_whole_walks_pdr_track_in_60_s_segments(model_and_walk, s
 
 
 def test_filters_in_segments_whose_cut_starts_in_a_stop(model_and_walk, stop_walk, monkeypatch):
-    """With a 40 s warm-up, the cut of the 60 s segment [240, 300) starts at 192 s, inside the stop (172-278 s),
+    """With a 40 s warm-up, the cut of the 60 s segment [240, 300) starts at 200 s (192 s on the 32 s grid of
+    before), inside the stop (172-278 s),
     so it holds no step before the stop's end: the EKF (``kf_quality``) must still stand there (the whole
     walk's standing noise q_stand, not the walking one), and the UWB/PDR filter's PDR track must not depend
     on the step before the stop (it spread the next step over the whole stop). Every filter track and its
@@ -107,6 +108,7 @@ def test_filters_in_segments_whose_cut_starts_in_a_stop(model_and_walk, stop_wal
 
     model, _ = model_and_walk
     monkeypatch.setattr(segments, "WARMUP_S", 40.0)
+    monkeypatch.setattr(segments, "FRESH_WARMUP_S", 40.0)      # the UWB/PDR filter's (walks.fuse.warmup_for)
     methods = ("kf_quality", "uwb_aoa_pdr")
     whole = fuse_walk(stop_walk, model, methods, force=True, smooth=False).tracks
     seg = segmented_tracks(stop_walk, model, methods, 60.0, force=True, smooth=False)

@@ -110,9 +110,9 @@ aekf                   6.3e-8        7.2e-8        1.2e-7        0.096 (b)
 imm                    2.2e-7        0.015 (c)     2.4e-7        1.2 (b)
 adaptive_nobp_blind    2.2e-7        1.5e-7        2.1e-7        0.18 (b)
 adaptive               1.9e-7        0.13 (c)      4.5e-7        0.18 (b)
-uwb_aoa_pdr_env        1.8e-6        5.6e-4 (c)    4.4e-7        0.0094
+uwb_aoa_pdr_env (i)    1.8e-6        5.6e-4 (c)    4.4e-7        0.0094
 pdr                    5.4e-6 (d)    2.6e-6 (d)    5.0e-6 (d)    5.0e-6 (d)
-uwb_aoa_pdr            7.3e-7 (f)    5.8e-7 (f)    2.3e-7 (f)    1.8e-7 (f)
+uwb_aoa_pdr (i)        7.3e-7 (f)    5.8e-7 (f)    2.3e-7 (f)    1.8e-7 (f)
 kf_quality+rts         0.022         0.022         0.94          1.0
 aekf+rts               0.025         0.025         1.8           1.8
 imm+rts                0.059         0.059         0.32          0.69
@@ -135,7 +135,9 @@ the segment; (e) before issue 25's heading resume, ``pdr`` and the UWB filter di
 seamfix, whose PDR track for the UWB/PDR filter is still through a stop; (g) bit for bit; (h) not resumed,
 fused in cuts of :data:`FRESH_WARMUP_S` (``walks.fuse.warmup_for``): with 20 s ``ekf_rtk_pdr`` reads 1.23 m and
 ``fg_isam2`` 0.71 m on seed 77; the other ``fg_*`` within 0.008-0.02 m (seed 77) and 0.21-0.25 m (seed 78;
-``fg_ins`` 11.1 m on both, as main).
+``fg_ins`` 11.1 m on both, as main); (i) measured with 20 s; the UWB/PDR filters now take
+:data:`FRESH_WARMUP_S`: their run never fuses the cut's first UWB fix (:data:`walks.fuse.RESUMED_METHODS`), and
+a cut whose 20 s of warm-up held none lost one (0.055 m on a walk standing in a UWB gap, 60 s segments).
 
 ``envfuse run --method adaptive_blind+lag`` (one core, best of 3 alternated fresh processes, load 4.5-6 from
 other sessions; CPU of the process, imports and model load included), main → now: a 10-minute walk (seed 79)
@@ -190,8 +192,9 @@ on it (:class:`features.gnss.features.FluctuationState`, now handed over); measu
 
 FRESH_WARMUP_S = 120.0
 """Walk time a cut reaches before its segment when a method fused starts afresh on each cut (nothing handed
-over: the factor graphs ``fg_*``, ``ekf_rtk_pdr``, ``foot_ins_fkf``, :data:`walks.fuse.RESUMED_METHODS`), s:
-such a method converges within it (``walks.fuse.warmup_for``)."""
+over: the factor graphs ``fg_*``, ``ekf_rtk_pdr``, ``foot_ins_fkf``) or needs a UWB fix in the warm-up (the
+UWB/PDR filters; :data:`walks.fuse.RESUMED_METHODS`), s: such a method converges within it
+(``walks.fuse.warmup_for``)."""
 
 TAIL_S = 10.0
 """Walk time a cut reaches after its segment, s: ≥ the fixed-lag smoother's lag (3 s), a step split at the
