@@ -368,7 +368,10 @@ def on_time_grid(t_s: np.ndarray) -> np.ndarray:
     reader's uniform time base, first sample + k / (1 / median interval) (:func:`features.imu.reader.read_imu_csv`),
     moves with the cut's first sample and median. Where a step ends at a fix's time (IMU samples and fixes share
     the 10 ms grid) a cut and the whole walk then read the step and the fix in opposite orders (measured: 0.7-28
-    mm on a 300 s walk in 60 s segments)."""
+    mm on a 300 s walk in 60 s segments). A walk read whole changes too, where a fix lay a few ulps before a
+    step's end: the step is no longer split there, and the fix follows it (``run`` on a 21-minute simulated
+    walk, seed 77: 11,309 → 11,266 epochs, positions within 0.013 m of before, median 7e-7 m; 10 minutes,
+    seed 79: 5,224 → 5,195, 0.008 m)."""
     return np.round(np.asarray(t_s, float) * (1.0 / NMEA_TIME_GRID_S)) / (1.0 / NMEA_TIME_GRID_S)
 
 
