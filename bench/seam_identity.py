@@ -4,7 +4,11 @@ For each track (``<method>``, ``+lag``, ``+rts``) the epochs the segments own ar
 by time (within 1 µs) and the largest and median horizontal distance between the two positions printed, with
 the epochs only one side has. ``--no-handover`` drops what a segment hands the next (each segment started
 afresh at its cut, the state before issue 25's hand-over); ``--warmup-s`` changes
-:data:`walks.segments.WARMUP_S`. The segment loop is written here (``walk_cuts`` → ``fuse_walk`` →
+:data:`walks.segments.WARMUP_S`, the warm-up of the methods that resume the previous segment
+(:data:`walks.fuse.RESUMED_METHODS`); the others (factor graphs, ``ekf_rtk_pdr``, ``foot_ins_fkf``), which start
+afresh on each cut, are fused in segments of their own warm-up, :data:`walks.segments.FRESH_WARMUP_S`
+(``--fresh-warmup-s``), as ``envfuse run`` fuses them (:func:`walks.fuse.warmup_for`). On a checkout without
+that split every method takes ``WARMUP_S``. The segment loop is written here (``walk_cuts`` → ``fuse_walk`` →
 ``handover``) rather than taken from :func:`walks.fuse.segmented_tracks`, so that the same script measures an
 older checkout (``PYTHONPATH`` at it) for a before/after table::
 
@@ -80,12 +84,30 @@ def compare(whole: dict, seg: dict) -> list[dict]:
     return rows
 
 
+def _warmup_groups(methods) -> list[tuple[float, tuple | None]]:
+    """[(warm-up s, methods)]: the resumed methods at ``WARMUP_S``, the others at ``FRESH_WARMUP_S``
+    (:func:`walks.fuse.warmup_for`); one group at ``WARMUP_S`` on a checkout without the split."""
+    from walks import segments
+    try:
+        from walks.fuse import RESUMED_METHODS
+    except ImportError:
+        return [(segments.WARMUP_S, methods)]
+    from walks.methods import method_names
+
+    names = method_names() if methods is None else methods
+    resumed = tuple(m for m in names if m.split("+")[0] in RESUMED_METHODS)
+    fresh = tuple(m for m in names if m.split("+")[0] not in RESUMED_METHODS)
+    out = [(segments.WARMUP_S, resumed)] if resumed else []
+    return out + ([(max(segments.WARMUP_S, segments.FRESH_WARMUP_S), fresh)] if fresh else [])
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("walks", nargs="+")
     ap.add_argument("--model", required=True)
     ap.add_argument("--segment-s", type=float, default=300.0)
     ap.add_argument("--warmup-s", type=float, default=None)
+    ap.add_argument("--fresh-warmup-s", type=float, default=None, help="walks.segments.FRESH_WARMUP_S")
     ap.add_argument("--tail-s", type=float, default=None, help="walks.segments.TAIL_S")
     ap.add_argument("--resume-after-s", type=float, default=None, help="walks.segments.RESUME_AFTER_S")
     ap.add_argument("--methods", default=None, help="comma-separated (default: every registered one)")
@@ -97,20 +119,29 @@ def main(argv=None) -> int:
     from walks import segments
     from walks.fuse import fuse_walk
 
-    for name, v in (("WARMUP_S", args.warmup_s), ("TAIL_S", args.tail_s), ("RESUME_AFTER_S", args.resume_after_s)):
+    for name, v in (("WARMUP_S", args.warmup_s), ("TAIL_S", args.tail_s), ("RESUME_AFTER_S", args.resume_after_s),
+                    ("FRESH_WARMUP_S", args.fresh_warmup_s)):
         if v is not None:
             setattr(segments, name, v)
     model = load_model(args.model)
     methods = None if args.methods is None else tuple(args.methods.split(","))
+    groups = _warmup_groups(methods)
     for walk in args.walks:
         c0 = time.process_time()
         fused = fuse_walk(walk, model, methods, class_map_for=class_map_for, force=True)
         whole = {n: (tr.t_s, tr.east_m, tr.north_m) for n, tr in fused.tracks.items()}
         del fused
         c1 = time.process_time()
-        seg = segmented(walk, model, methods, args.segment_s, not args.no_handover, class_map_for)
+        seg = {}
+        for warmup, group in groups:
+            saved, segments.WARMUP_S = segments.WARMUP_S, warmup
+            try:
+                seg.update(segmented(walk, model, group, args.segment_s, not args.no_handover, class_map_for))
+            finally:
+                segments.WARMUP_S = saved
         c2 = time.process_time()
-        print(f"\n{walk}: segments of {args.segment_s:g} s, warm-up {segments.WARMUP_S:g} s, "
+        warm = ", ".join(f"{w:g} s ({'all' if g is None else len(g)} methods)" for w, g in groups)
+        print(f"\n{walk}: segments of {args.segment_s:g} s, warm-up {warm}, "
               f"tail {segments.TAIL_S:g} s, resume after {segments.RESUME_AFTER_S:g} s, "
               f"hand-over {'off' if args.no_handover else 'on'}; CPU whole {c1 - c0:.1f} s, segmented {c2 - c1:.1f} s")
         print(f"{'track':28s} {'matched':>8s} {'whole-only':>10s} {'seg-only':>9s} {'nan-1side':>9s} "

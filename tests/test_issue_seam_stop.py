@@ -95,7 +95,8 @@ def test_run_writes_the_whole_walks_pdr_track_in_60_s_segments(model_and_walk, s
 
 
 def test_filters_in_segments_whose_cut_starts_in_a_stop(model_and_walk, stop_walk, monkeypatch):
-    """With a 40 s warm-up, the cut of the 60 s segment [240, 300) starts at 192 s, inside the stop (172-278 s),
+    """With a 40 s warm-up, the cut of the 60 s segment [240, 300) starts at 200 s (192 s on the 32 s grid of
+    before), inside the stop (172-278 s),
     so it holds no step before the stop's end: the EKF (``kf_quality``) must still stand there (the whole
     walk's standing noise q_stand, not the walking one), and the UWB/PDR filter's PDR track must not depend
     on the step before the stop (it spread the next step over the whole stop). Every filter track and its
@@ -107,6 +108,7 @@ def test_filters_in_segments_whose_cut_starts_in_a_stop(model_and_walk, stop_wal
 
     model, _ = model_and_walk
     monkeypatch.setattr(segments, "WARMUP_S", 40.0)
+    monkeypatch.setattr(segments, "FRESH_WARMUP_S", 40.0)      # the UWB/PDR filter's (walks.fuse.warmup_for)
     methods = ("kf_quality", "uwb_aoa_pdr")
     whole = fuse_walk(stop_walk, model, methods, force=True, smooth=False).tracks
     seg = segmented_tracks(stop_walk, model, methods, 60.0, force=True, smooth=False)
@@ -139,8 +141,9 @@ def test_stands_of_a_later_cut_and_the_uwb_pdr_track_through_a_stop():
 
 
 def test_cuts_holding_the_walks_start_read_it_as_the_whole_walk(stop_walk):
-    """60 s segments of the 300 s walk: the cuts of segments 0-2 start at the walk's start (their 120 s warm-up
-    reaches before it) and reach at least the heading gate's 300 s reference span, as the whole walk's read
+    """60 s segments of the 300 s walk with the 120 s warm-up of the methods that start afresh on each cut
+    (walks.segments.FRESH_WARMUP_S): the cuts of segments 0-2 start at the walk's start (the warm-up reaches
+    before it) and reach at least the heading gate's 300 s reference span, as the whole walk's read
     does; a segment whose next cut holds the walk's start keeps no reader state (states_from_s inf), the
     others keep them 10 s into the next cut."""
     import tomllib
@@ -149,7 +152,7 @@ def test_cuts_holding_the_walks_start_read_it_as_the_whole_walk(stop_walk):
     from walks.segments import RESUME_AFTER_S, walk_cuts
 
     seen = []
-    for seg in walk_cuts(stop_walk, 60.0):
+    for seg in walk_cuts(stop_walk, 60.0, warmup_s=120.0):
         audio_start = float(tomllib.loads((seg.directory / "walk.toml").read_text())["audio"]["start_s"])
         imu_t = np.loadtxt(seg.directory / "imu.csv", delimiter=",", skiprows=1, usecols=0)
         seen.append((seg.index, audio_start, imu_t[0], imu_t[-1], seg.next_from_s, seg.states_from_s))

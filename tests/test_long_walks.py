@@ -16,7 +16,7 @@ from walks.fuse import fuse_to_file, fuse_walk
 from walks.inputs import window_features
 from walks.reader import read_walk
 from features.imu.heading import GATE_REFERENCE_S
-from walks.segments import TAIL_S, WARMUP_S, audio_cut_period, plan_segments, walk_cuts
+from walks.segments import TAIL_S, WARMUP_S, audio_cut_step, plan_segments, walk_cuts
 from walks.track import TrackWriter, track_rows, track_text
 
 
@@ -72,7 +72,7 @@ def test_cuts_own_every_sample_and_line_once(looped, tmp_path):
         t = np.array([float(r.split(",")[0]) for r in rows])
         lo = -math.inf if seg.index == 0 else seg.own_from_s - WARMUP_S
         hi = math.inf if seg.index == n - 1 else seg.own_to_s + TAIL_S
-        if lo < audio_cut_period(fs) / fs:
+        if lo < audio_cut_step(fs) / fs:
             # a cut moved back to the walk's start (the first; with 60 s segments the next two too) holds the
             # heading gate's reference span, as the whole walk's read
             hi = max(hi, GATE_REFERENCE_S)

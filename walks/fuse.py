@@ -27,7 +27,35 @@ from walks.segments import SEGMENT_S, walk_cuts
 from walks.track import TrackWriter, track_rows
 
 __all__ = ["FusedWalk", "fuse_walk", "check_site", "check_windows", "walk_name", "RunSummary", "fuse_to_file",
-           "fuse_in_segments", "segmented_tracks"]
+           "fuse_in_segments", "segmented_tracks", "RESUMED_METHODS", "warmup_for"]
+
+RESUMED_METHODS = frozenset((
+    "gnss", "acoustic", "uwb", "pdr", "kf", "kf_quality", "kf_map", "aekf", "imm", "adaptive", "adaptive_blind",
+    "adaptive_correction", "adaptive_nobp", "adaptive_nobp_blind"))
+"""Methods whose track at a long walk's segment is the whole walk's with a short warm-up
+(:data:`walks.segments.WARMUP_S`): the fixes' own tracks (``gnss``, ``acoustic``, ``uwb``: no state), ``pdr`` and
+the event filters, which resume what the previous segment handed over (:meth:`FusedWalk.handover`). Any other
+takes :data:`walks.segments.FRESH_WARMUP_S`: the factor graphs ``fg_*`` and ``ekf_rtk_pdr``
+(:mod:`walks.graph_methods`) and ``foot_ins_fkf`` start afresh on each cut; the UWB/PDR filters
+(``uwb_aoa_pdr`` and its twins) resume, but their run starts at the cut's first UWB fix and never fuses that
+fix, nor a step before it (:meth:`models.uwb_pdr.UwbPdrFilter.run`), so a cut whose warm-up holds no UWB fix
+loses one (a 600 s walk of seed 21 standing 37-218 s in a UWB gap, 60 s segments: 0.055 m with 20 s of
+warm-up, 2e-7 m with 40 s); a method registered later, too."""
+
+
+def warmup_for(methods) -> float:
+    """The warm-up a long walk's cuts need to fuse ``methods`` (None: every registered one), s:
+    :data:`walks.segments.WARMUP_S` (read when called) when each is in :data:`RESUMED_METHODS` (its ``+lag`` /
+    ``+rts`` tracks too), else :data:`walks.segments.FRESH_WARMUP_S` (measured on a 21-minute walk with 20 s:
+    ``ekf_rtk_pdr`` 1.2 m and ``fg_isam2`` 0.7 m from the whole walk's, against 1e-9 and 0.11 m with 120 s)."""
+    from walks import segments
+
+    if methods is None:
+        from walks.methods import method_names
+        methods = method_names()
+    bases = {str(m).split("+")[0] for m in methods}
+    return segments.WARMUP_S if bases <= RESUMED_METHODS else max(segments.WARMUP_S, segments.FRESH_WARMUP_S)
+
 
 ROWS_PER_WRITE = 20_000
 """Track rows turned into text and written at a time by :func:`fuse_to_file`."""
@@ -88,7 +116,10 @@ class FusedWalk:
         if old is not None and (heading is None or not heading.t_s > old.t_s):
             heading = old
         receiver = self.data.acoustic.analysis.receiver_state if self.data.acoustic is not None else None
-        return Handover(filters, ReaderStates(heading, receiver), classes)
+        gnss = self.data.gnss.fluct_state if self.data.gnss is not None else None
+        if got.readers.gnss is not None and (gnss is None or not gnss.t_s > got.readers.gnss.t_s):
+            gnss = got.readers.gnss
+        return Handover(filters, ReaderStates(heading, receiver, gnss), classes)
 
 
 def _event_time(state) -> float:
@@ -187,7 +218,7 @@ def fuse_in_segments(walk_dir: str | os.PathLike, model: FusionModel, methods=No
     :class:`FusedWalk`) in time order, the cut deleted once the next is asked for. ``fuse_kw``: as
     :func:`fuse_walk`. A walk of one segment yields its whole-walk fusion."""
     resume = None
-    for seg in walk_cuts(walk_dir, segment_s, workdir=workdir):
+    for seg in walk_cuts(walk_dir, segment_s, workdir=workdir, warmup_s=warmup_for(methods)):
         fused = fuse_walk(seg.directory, model, methods, resume=resume, keep_states_from_s=seg.states_from_s,
                           **fuse_kw)
         resume = fused.handover(seg.own_to_s, seg.states_from_s)
@@ -238,7 +269,8 @@ def fuse_to_file(walk_dir: str | os.PathLike, model: FusionModel, method: str, p
     writer = TrackWriter(path, fmt, properties)
     resume = None
     try:
-        for seg in walk_cuts(walk_dir, segment_s, workdir=os.path.dirname(os.path.abspath(path))):
+        for seg in walk_cuts(walk_dir, segment_s, workdir=os.path.dirname(os.path.abspath(path)),
+                             warmup_s=warmup_for((base,))):
             where = str(walk_dir) if seg.own_from_s == -math.inf and seg.own_to_s == math.inf else \
                 f"{walk_dir} (segment {seg.index}: walk times {max(seg.own_from_s, 0):g}-{seg.own_to_s:g} s)"
             try:

@@ -13,8 +13,10 @@ segment by segment:
   file): NMEA sentences by the epoch they belong to (placed on the walk's time base from ``start_utc`` and the
   times of day, midnight crossings counted), IMU, UWB, foot-IMU and truth CSV rows by ``t_s``, audio samples by
   ``[audio] start_s`` (the cut's ``start_s`` moved to its first sample, so the TDMA frame phase is unchanged);
-  the cut reaches :data:`WARMUP_S` before the segment, moved back to the acoustic reader's block grid
-  (:func:`audio_cut_period`, 32 s at 48 kHz), and :data:`TAIL_S` after it (the fixed-lag smoother's 3 s, a
+  the cut reaches :data:`WARMUP_S` before the segment (:data:`FRESH_WARMUP_S` when a method fused starts
+  afresh on each cut, :func:`walks.fuse.warmup_for`), moved back to a whole second of the audio
+  (:func:`audio_cut_step`; 32 s, :func:`audio_cut_period`, for audio at another rate than 48 kHz), and
+  :data:`TAIL_S` after it (the fixed-lag smoother's 3 s, a
   step's split at the next fix, the last feature window); the first cut reaches at least the heading gate's
   reference span (:data:`features.imu.heading.GATE_REFERENCE_S`);
 - the cut is fused by the pipeline (:func:`walks.fuse.fuse_walk`) with what the previous segment handed over
@@ -43,20 +45,30 @@ segment by segment:
     whole walk's value there (:class:`walks.inputs.ClassResume`), and filter on from it;
   * the acoustic receiver resumes its tracker (lock, two-state clock filter, air estimate, acquisition memory)
     at its first frame :data:`RESUME_AFTER_S` into the cut, once its audio buffers are full
-    (:class:`features.acoustic.tracking.ReceiverState`); since the cut's audio starts on the reader's block
-    grid, every later sample passes the same read blocks, impulse-blanker segments and matched-filter
-    decimation phase as in the whole walk, so the matched filter's float32 round-off is the same;
+    (:class:`features.acoustic.tracking.ReceiverState`); the cut states its first sample's index in the walk's
+    recording (``[audio] first_sample``) and the reader passes it to the receiver
+    (:func:`features.acoustic.features.analyse_audio`), so every sample passes the same read blocks,
+    impulse-blanker segments and matched-filter decimation phase as in the whole walk and the matched
+    filter's float32 round-off is the same (before, the cut started on the 32 s grid where they coincide);
+  * the GNSS feature ``fluct_per_s``'s extremum detector resumes its memory (each satellite's last C/N0, the
+    direction of its last change and the value the next swing is measured from) at the reader's first epoch
+    :data:`RESUME_AFTER_S` into the cut (:class:`features.gnss.features.FluctuationState`): while a
+    satellite's C/N0 holds still (a stop) that memory outlasts any warm-up;
+  * the NMEA epochs and IMU samples are placed on the microsecond grid (:func:`walks.reader.on_time_grid`), so
+    that an epoch has the same walk time in every cut (the readers' time bases carry the file's first epoch
+    or sample in their round-off);
   * the PDR heading filter resumes its heading, gyro bias, gyro-only heading and gate offset
     :data:`RESUME_AFTER_S` into the cut, after its low-pass filters' transients, with the record's start
     statistics (turn-on bias, gate reference field) of the walk
     (:class:`features.imu.heading.HeadingState`);
   * the rest is local in time and has settled within the warm-up: GNSS fixes (the NMEA time base and epoch
     interval are medians that agree on a steady log), steps (a 2nd-order zero-phase filter, bouts of seconds),
-    feature windows.
+    feature windows. What rode on the 120 s warm-up of before was the GNSS extremum memory (now handed over):
+    at 30 s of warm-up on main, seed 78's ``fluct_per_s`` differs at 925 s, the class probabilities by 0.009.
 
 A walk that fits in one segment is fused exactly as before, from its own folder. Memory is bounded by one cut's
-pipeline (S + :data:`WARMUP_S` + up to 32 s + :data:`TAIL_S` of walk) whatever the walk's length, plus what the
-caller keeps of each segment (``envfuse run`` writes its rows to the output's temporary file and keeps nothing).
+pipeline (S + :data:`WARMUP_S` + up to 1 s + :data:`TAIL_S` of walk; :data:`FRESH_WARMUP_S` for the methods
+that start afresh) whatever the walk's length, plus what the caller keeps of each segment (``envfuse run`` writes its rows to the output's temporary file and keeps nothing).
 
 What a segment cannot have: the future past its cut. A ``+rts`` track is the RTS smoother over its cut, i.e. at
 an owned epoch t the whole walk's smoother with the data after the cut's end (at least :data:`TAIL_S` after t)
@@ -82,45 +94,67 @@ UWB/PDR filters 0.03-0.45 m at seams inside a stop. What is left at 60 s segment
 class-aware tracks (``imm`` 2e-5 m, ``uwb_aoa_pdr_env`` 4e-5 m, ``adaptive_correction`` 6e-4 m) at 523-540 s,
 where the GNSS feature ``fluct_per_s`` of four windows differs (by 0.03-0.05 per s): its extremum detector
 (:func:`features.gnss.features.fluctuation_extrema`) judges each extremum's swing from the previous one, a memory
-that outlasts the warm-up while a satellite's C/N0 holds still through a stop, and is not handed over.
+that outlasts the warm-up while a satellite's C/N0 holds still through a stop; it is now handed over (warmup):
+on a 600 s walk of seed 21 on the tests' site (generated site 3; standing 37-218, 243-367 and 380-563 s, the
+tests' fusion model), 60 s segments, ``imm`` 0.017 → 5.1e-7 m and ``uwb_aoa_pdr_env`` 0.23 → 4.8e-7 m from the
+whole walk (``kf_quality`` 2.5e-7, ``pdr`` 9.5e-7, ``uwb_aoa_pdr`` 2.8e-7 m, as before).
 
 Measured (``bench/seam_identity.py``: simulated 21-minute walks, site 201 of the demo split and its model, 300 s
-segments, largest distance from the whole walk's track at the same epoch over every owned epoch):
+segments, largest distance from the whole walk's track at the same epoch over every owned epoch, m; "main":
+da9cdfe, 120 s warm-up on the 32 s grid, measured in the same session on the same walks; now: 20 s on the 1 s
+grid for the resumed methods, 120 s for the others):
 
 =====================  ============  ============  ============  ============
-track                  seed 77       (before)      seed 78       (before)
+track                  seed 77       (main)        seed 78       (main)
 =====================  ============  ============  ============  ============
-acoustic fixes         8.0e-11       0.0030 (a)    8.0e-11 (b)   0.0065 (a)
-kf_quality             1.0e-7        0.040         0.71 (b)      0.58
-aekf                   7.2e-8        0.39          0.53 (b)      5.75
-imm                    0.015 (c)     0.16          1.2 (b)       3.0
-adaptive_nobp_blind    1.5e-7        0.032         1.2 (b)       1.11
-adaptive               0.13 (c)      0.13          0.18 (b)      0.18
-pdr                    2.6e-6 (d)    5.6 (e)       5.0e-6 (d)    175 (e)
-uwb_aoa_pdr            5.8e-7 (f)    skipped (e)   1.8e-7 (f)    23.6 (e)
-kf_quality+rts         0.022         0.030         1.0           0.98
-aekf+rts               0.025         0.30          1.8           2.8
-imm+rts                0.059         0.11          0.69          0.96
+acoustic fixes         0 (g)         8.0e-11       0 (g)         8.0e-11 (b)
+kf_quality             1.4e-7        1.0e-7        1.5e-7        0.71 (b)
+aekf                   6.3e-8        7.2e-8        1.2e-7        0.096 (b)
+imm                    2.2e-7        0.015 (c)     2.4e-7        1.2 (b)
+adaptive_nobp_blind    2.2e-7        1.5e-7        2.1e-7        0.18 (b)
+adaptive               1.9e-7        0.13 (c)      4.5e-7        0.18 (b)
+uwb_aoa_pdr_env (i)    1.8e-6        5.6e-4 (c)    4.4e-7        0.0094
+pdr                    5.4e-6 (d)    2.6e-6 (d)    5.0e-6 (d)    5.0e-6 (d)
+uwb_aoa_pdr (i)        7.3e-7 (f)    5.8e-7 (f)    2.3e-7 (f)    1.8e-7 (f)
+kf_quality+rts         0.022         0.022         0.94          1.0
+aekf+rts               0.025         0.025         1.8           1.8
+imm+rts                0.059         0.059         0.32          0.69
+ekf_rtk_pdr (h)        1.7e-10       1.2e-9        0.013         0.013
+fg_isam2 (h)           0.087         0.11          2.4           2.4
+fg_lag (h)             0.037         0.051         1.4           1.0
+fg_tight (h)           0.066         0.074         2.7           2.5
 =====================  ============  ============  ============  ============
 
-``envfuse run --method adaptive_blind+lag`` on seed 77 (300 s segments) writes positions within 1.0e-7 m of the
-whole walk's (main: 0.024 m), peak memory 302.8 MiB against main's 300.3 MiB (the cuts up to 32 s longer), CPU
-14.2 against 14.0 s. (before: main at the start of this change; the ``adaptive_nobp+rts``, ``kf+rts`` and ``adaptive+rts`` rows read
-like the other ``+rts`` ones, median 1e-6 to 5e-4 m.) (a) the cut's float32 blocks not on the walk's: 324 of 841
-(seed 78: 716 of 1091) fixes at times that differ by 1 µs to 0.4 ms; (b) one acoustic fix of seed 78 (342.83 s)
-the segmented read does not give, every other fix equal to 8e-11 m: the filters move by up to 0.7 m after it
-(their medians are 4e-10 m); (c) three feature windows of seed 77 (1137-1139 s) whose CIR features differ (one
-chirp's, its SNR by 0.1-1 dB; the same chirps detected, every fix equal): the class probabilities there differ
-by 0.04 and the class-aware filters by up to 0.15 m (the blind twins by 1.5e-7 m); (d) the resumed heading
-agrees to 3-5e-8 rad, not to round-off, and dead reckoning accumulates it; (e) before, the steps of a later cut
-before its heading resumed had no heading, and ``pdr`` (NaN after them) and the UWB filter (skipped; on seed 78
-restarted at each seam, and skipped in the last segment, which holds no step) did not survive a seam; (f) since seamfix, whose PDR track for the UWB/PDR filter is
-still through a stop; before it 0.051 m (seed 77) and 23.6 m (seed 78: the filter gates most fixes, 125 resets
-over the walk, and a stop's step spread over the stop flipped a gate decision at 932 s). A walk holding a stream that cannot be cut by
+With 20 s of warm-up before the GNSS memory was handed over, on the 1 s grid, the tracks of both walks were
+these; on main with 30 s, seed 78's ``fluct_per_s`` at 925 s differed (class probabilities by 0.009). The
+``+rts`` tracks lose the data past the cut's end whatever the warm-up (above). (a) (before issue 25's
+alignment) the cut's float32 blocks not on the walk's; (b) one acoustic fix of seed 78 (342.83 s) main's
+segmented read does not give (its cut aligned on the 32 s grid; aligned by ``first_sample`` every fix is the
+whole walk's to the bit): the filters move by up to 2.95 m (``kf_map``) after it; (c) three feature windows of
+seed 77 (1137-1139 s) whose CIR features differ on main (one chirp's SNR by 0.1-1 dB): the class-aware filters
+move by up to 0.15 m; equal now; (d) the resumed heading agrees to 3-5e-8 rad, not to round-off (the 0.3 Hz
+zero-phase low-pass's transients at the cut's ends, e^-13 after 10 s), and dead reckoning accumulates it over
+the segment; (e) before issue 25's heading resume, ``pdr`` and the UWB filter did not survive a seam; (f) since
+seamfix, whose PDR track for the UWB/PDR filter is still through a stop; (g) bit for bit; (h) not resumed,
+fused in cuts of :data:`FRESH_WARMUP_S` (``walks.fuse.warmup_for``): with 20 s ``ekf_rtk_pdr`` reads 1.23 m and
+``fg_isam2`` 0.71 m on seed 77; the other ``fg_*`` within 0.008-0.02 m (seed 77) and 0.21-0.25 m (seed 78;
+``fg_ins`` 11.1 m on both, as main); (i) measured with 20 s; the UWB/PDR filters now take
+:data:`FRESH_WARMUP_S`: their run never fuses the cut's first UWB fix (:data:`walks.fuse.RESUMED_METHODS`), and
+a cut whose 20 s of warm-up held none lost one (0.055 m on a walk standing in a UWB gap, 60 s segments).
+
+``envfuse run --method adaptive_blind+lag`` (one core, best of 3 alternated fresh processes, load 4.5-6 from
+other sessions; CPU of the process, imports and model load included), main → now: a 10-minute walk (seed 79)
+segmented 5.43 → 4.88 s, unsegmented 3.86 → 3.81 s; a 21-minute walk (seed 77) segmented 12.29 → 10.41 s,
+unsegmented 7.23 → 6.79 s. Peak memory (ru_maxrss) segmented: 292.3 → 285.7 MiB (10 minutes), 293.3 → 285.2
+MiB (21 minutes); unsegmented 299 and 340 MiB on both. What the segmented read still costs besides the
+warm-up's audio: writing the cuts (:func:`walk_cuts`' line-by-line Python copy of the NMEA, IMU, foot-IMU, UWB
+and truth files: about 5 of 40 s of a profiled segmented run of seed 77, against 25-29 s unsegmented) and the
+receiver's acquisition in each cut's first 10 s, before it resumes.
+A walk holding a stream that cannot be cut by
 time (a drive's pseudoranges or odometry, whose dead reckoning is fitted to the whole drive's fixes) is not
 segmented (:func:`plan_segments` says why). Not resumed: ``foot_ins_fkf`` (its strapdown INS and local filters,
-:mod:`models.foot`; its 10 Hz track is also sampled from the cut's first IMU sample) and the factor-graph
-methods (``fg_*``, :mod:`walks.graph_methods`; within 0.008-0.08 m at 300 s segments on seed 77).
+:mod:`models.foot`; its 10 Hz track is also sampled from the cut's first IMU sample), the factor-graph
+methods (``fg_*``) and ``ekf_rtk_pdr`` (:mod:`walks.graph_methods`): their cuts take :data:`FRESH_WARMUP_S`.
 """
 
 from __future__ import annotations
@@ -141,7 +175,8 @@ from features.imu.heading import GATE_REFERENCE_S
 from features.fileio import read_toml
 from features.walk import WalkInfo, load_walk
 
-__all__ = ["SEGMENT_S", "WARMUP_S", "TAIL_S", "RESUME_AFTER_S", "Segment", "plan_segments", "walk_cuts"]
+__all__ = ["SEGMENT_S", "WARMUP_S", "FRESH_WARMUP_S", "TAIL_S", "RESUME_AFTER_S", "Segment", "plan_segments",
+           "walk_cuts"]
 
 SEGMENT_S = 300.0
 """Walk time each segment owns by default, s: with the filters and readers resumed across the seams they cost
@@ -149,10 +184,20 @@ nothing measurable, so the segment is short and the peak memory of a long walk t
 462 s since the cuts start on the acoustic reader's 32 s block grid): a 10-minute walk (two segments) and a
 2-hour one peak within 3 % of each other (``bench/bench_pipeline.py --memory-only``, measured before the grid)."""
 
-WARMUP_S = 120.0
-"""Walk time a cut reaches before its segment (then moved back to the audio block grid, :func:`audio_cut_period`),
-s: what is not handed over settles in it (step bouts, feature windows; the readers resume
-:data:`RESUME_AFTER_S` into it, the filters and the class HMM at the segment's start)."""
+WARMUP_S = 20.0
+"""Walk time a cut reaches before its segment when every method fused resumes what the previous segment handed
+over (then moved back to the audio grid, :func:`audio_cut_step`: up to 1 s more at 48 kHz), s: the readers
+resume :data:`RESUME_AFTER_S` into it, so their states hold from 10 s before the segment; what is not handed
+over is local and settles within that (step detection's zero-phase filter and its bouts, the 2 s feature
+windows, the GNSS bias resets on the fixes' neighbours), and the filters and the class HMM resume at the
+segment's start. Was 120 s (plus up to 32 s of the block grid): the GNSS ``fluct_per_s`` extremum memory rode
+on it (:class:`features.gnss.features.FluctuationState`, now handed over); measured in the module docstring."""
+
+FRESH_WARMUP_S = 120.0
+"""Walk time a cut reaches before its segment when a method fused starts afresh on each cut (nothing handed
+over: the factor graphs ``fg_*``, ``ekf_rtk_pdr``, ``foot_ins_fkf``) or needs a UWB fix in the warm-up (the
+UWB/PDR filters; :data:`walks.fuse.RESUMED_METHODS`), s: such a method converges within it
+(``walks.fuse.warmup_for``)."""
 
 TAIL_S = 10.0
 """Walk time a cut reaches after its segment, s: ≥ the fixed-lag smoother's lag (3 s), a step split at the
@@ -248,9 +293,11 @@ def _csv_time(line: bytes) -> float | None:
 
 
 def walk_cuts(walk_dir: str | os.PathLike, segment_s: float = SEGMENT_S, *,
-              workdir: str | os.PathLike | None = None) -> Iterator[Segment]:
+              workdir: str | os.PathLike | None = None, warmup_s: float | None = None) -> Iterator[Segment]:
     """The walk's segments in time order (module docstring), each cut written just before it is yielded and
-    deleted when the next is asked for. A walk of one segment yields its own folder."""
+    deleted when the next is asked for; ``warmup_s``: the cuts' warm-up (default :data:`WARMUP_S`). A walk of
+    one segment yields its own folder."""
+    warmup = WARMUP_S if warmup_s is None else float(warmup_s)
     n, _ = plan_segments(walk_dir, segment_s)
     if n == 1:
         yield Segment(0, -math.inf, math.inf, Path(walk_dir), math.inf)
@@ -263,13 +310,13 @@ def walk_cuts(walk_dir: str | os.PathLike, segment_s: float = SEGMENT_S, *,
         for k in range(n):
             own_from = -math.inf if k == 0 else k * segment_s
             own_to = math.inf if k == n - 1 else (k + 1) * segment_s
-            lo = -math.inf if k == 0 else align(own_from - WARMUP_S)
+            lo = -math.inf if k == 0 else align(own_from - warmup)
             hi = math.inf if k == n - 1 else own_to + TAIL_S
             if lo == -math.inf:
                 # a cut holding the walk's start reads it as the whole walk's read does, the heading gate's
                 # reference field included (a segment shorter than the warm-up: the first cuts all start there)
                 hi = max(hi, GATE_REFERENCE_S)
-            next_lo = align((k + 1) * segment_s - WARMUP_S)
+            next_lo = align((k + 1) * segment_s - warmup)
             d = Path(tmp) / f"segment{k:04d}"
             d.mkdir()
             toml = {}
@@ -280,6 +327,25 @@ def walk_cuts(walk_dir: str | os.PathLike, segment_s: float = SEGMENT_S, *,
             shutil.rmtree(d)
         for cut in cutters.values():
             cut.close()
+
+
+def audio_cut_step(fs_in_hz: int) -> int:
+    """Input samples between the audio samples a cut may start at: at the acoustic reader's own rate (48 kHz)
+    one hop of its feature windows (:class:`features.acoustic.features.WindowConfig`, 1 s), since the cut is
+    read with its first sample's index in the whole recording (``[audio] first_sample``, :func:`_AudioCutter`;
+    :func:`features.acoustic.features.analyse_audio`'s ``first_sample``), which puts its read blocks,
+    impulse-blanker segments and matched-filter decimation where the whole recording's lie, and its windows
+    then start on the whole recording's window grid. At another rate (resampled, whose blocks that index does
+    not align) :func:`audio_cut_period`. 48,000 samples (1 s) at 48 kHz."""
+    from features.acoustic.detection import DetectorConfig
+    from features.acoustic.features import WindowConfig
+
+    if int(fs_in_hz) != int(DetectorConfig().fs_hz):
+        return audio_cut_period(fs_in_hz)
+    hop = WindowConfig().hop_s * fs_in_hz
+    if abs(hop - round(hop)) > 1e-9:
+        return audio_cut_period(fs_in_hz)
+    return int(round(hop))
 
 
 def audio_cut_period(fs_in_hz: int) -> int:
@@ -311,14 +377,14 @@ MATCHED_FILTER_DECIMATION = 4
 
 def _audio_grid(walk: WalkInfo):
     """The function moving a cut's start back to the last walk time at or before it whose audio sample lies on
-    :func:`audio_cut_period`'s grid counted from the WAV's first sample (identity without audio): the cut's
-    warm-up grows by less than one period (32 s at 48 kHz). A start moved back to the WAV's first sample (or
+    :func:`audio_cut_step`'s grid counted from the WAV's first sample (identity without audio): the cut's
+    warm-up grows by less than one step (1 s at 48 kHz; 32 s at another rate). A start moved back to the WAV's first sample (or
     before it) is −inf: that cut holds the walk from its start, as the whole walk's read does."""
     audio = walk.path("audio")
     if audio is None or not audio.is_file() or not audio.stat().st_size:
         return lambda t: t
     fs = sf.info(str(audio)).samplerate
-    step = audio_cut_period(fs)
+    step = audio_cut_step(fs)
     start = float(walk.streams["audio"].get("start_s", 0.0))
 
     def align(t: float) -> float:
@@ -376,6 +442,9 @@ def _write_walk_toml(walk: WalkInfo, d: Path, changes: dict) -> None:
         text = re.sub(r"^site\s*=.*$", lambda _: f"site = {_toml_str(str(site))}", text, count=1, flags=re.M)
     if "audio_start_s" in changes:
         text = _set_in_table(text, "audio", "start_s", repr(changes["audio_start_s"]))
+    if "audio_first_sample" in changes:
+        text = _set_in_table(text, "audio", "first_sample", str(changes["audio_first_sample"]))
+        text = _set_in_table(text, "audio", "recording_start_s", repr(changes["audio_recording_start_s"]))
     (d / "walk.toml").write_text(text)
 
 
@@ -507,7 +576,10 @@ class _NmeaCutter(_LineCutter):
 
 class _AudioCutter:
     """The WAV's samples of walk times [lo, hi), copied block by block (``soundfile``), its format kept (RF64
-    past 4 GiB); the cut's ``[audio] start_s`` is its first sample's walk time."""
+    past 4 GiB); the cut's ``[audio] start_s`` is its first sample's walk time. At the acoustic reader's rate
+    (48 kHz) the cut also states its first sample's index in the walk's WAV, ``first_sample``, and the walk
+    time of the WAV's first sample, ``recording_start_s`` (the walk's ``start_s``): the reader aligns its
+    receiver on the whole recording from them (:func:`walks.reader.read_acoustic_stream`)."""
 
     BLOCK = 1 << 18
 
@@ -532,7 +604,10 @@ class _AudioCutter:
                     break
                 out.write(x)
                 left -= len(x)
-        return {"audio_start_s": self.start_s + a0 / self.fs}
+        out = {"audio_start_s": self.start_s + a0 / self.fs}
+        if audio_cut_step(self.fs) != audio_cut_period(self.fs):      # aligned by index (48 kHz)
+            out.update(audio_first_sample=int(a0), audio_recording_start_s=self.start_s)
+        return out
 
     def close(self) -> None:
         pass

@@ -65,6 +65,7 @@ from features.errors import ConfigError, DataError
 __all__ = [
     "FEATURE_COLUMNS", "COUNT_COLUMNS", "GnssFeatureConfig", "Cn0Reference", "SkyArrays",
     "sky_arrays", "gnss_features", "fit_cn0_reference", "epoch_dop_growth", "fluctuation_extrema",
+    "FluctuationState", "fluctuation_state",
 ]
 
 FEATURE_COLUMNS = ("att_mean_db", "att_std_db", "fluct_per_s", "invisible_ratio", "dop_growth")
@@ -308,7 +309,41 @@ def _ffill_rows(x: np.ndarray, valid: np.ndarray) -> np.ndarray:
     return np.where(idx >= 0, out, np.nan)
 
 
-def fluctuation_extrema(cn0_dbhz: np.ndarray, tracked: np.ndarray, threshold_dbhz: float = 1.0) -> np.ndarray:
+@dataclass(frozen=True)
+class FluctuationState:
+    """The memory :func:`fluctuation_extrema` carries into epoch ``t_s`` of a C/N0 series, per satellite
+    ``sat_keys`` (m tuples (system, prn)), each array of shape (m,): ``last_dbhz`` the C/N0 of its last tracked
+    epoch before (NaN: none yet), ``direction`` the sign (±1) of the last change of its tracked C/N0 before
+    that epoch (NaN: none yet), ``extremum_dbhz`` the value the next extremum's swing is measured from (the
+    previous extremum's C/N0, else the first tracked value; NaN: none yet) and ``tracked`` whether the epoch
+    before was tracked. A run over a later piece of the series resumed from it (``resume``) marks every
+    extremum from ``t_s`` on as the run over the whole series does: the memory outlasts any fixed span while a
+    satellite's C/N0 holds still (a long walk's cut, ``walks/segments.py``)."""
+
+    t_s: float
+    sat_keys: tuple
+    last_dbhz: np.ndarray
+    direction: np.ndarray
+    extremum_dbhz: np.ndarray
+    tracked: np.ndarray
+
+    def columns(self, sat_keys) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(last_dbhz, direction, extremum_dbhz, tracked) for the columns ``sat_keys`` (each (m',)): NaN and
+        False for a satellite the state does not hold (none of its epochs before ``t_s`` were seen)."""
+        where = {k: i for i, k in enumerate(self.sat_keys)}
+        idx = np.array([where.get(tuple(k), -1) for k in sat_keys], dtype=np.intp)
+        have = idx >= 0
+
+        def take(a, fill):
+            out = np.full(idx.shape, fill, dtype=np.asarray(a).dtype)
+            out[have] = np.asarray(a)[idx[have]]
+            return out
+        return (take(self.last_dbhz, np.nan), take(self.direction, np.nan), take(self.extremum_dbhz, np.nan),
+                take(self.tracked, False))
+
+
+def fluctuation_extrema(cn0_dbhz: np.ndarray, tracked: np.ndarray, threshold_dbhz: float = 1.0,
+                        resume: tuple | None = None) -> np.ndarray:
     """Mark C/N0 local extrema whose swing from the previous extremum is ≥ ``threshold_dbhz``.
 
     Per column (satellite) of ``cn0_dbhz`` (n, m), over the epochs where
@@ -317,33 +352,77 @@ def fluctuation_extrema(cn0_dbhz: np.ndarray, tracked: np.ndarray, threshold_dbh
     their end); its swing is the difference to the previous extremum (or to
     the first tracked value). Returns a bool array (n, m).
 
+    ``resume``: the series' memory before its first row, (last_dbhz, direction, extremum_dbhz, tracked), each
+    (m,) (:meth:`FluctuationState.columns`; :func:`_extrema_memory`): the rows are then marked as in the run
+    over the series they continue (the memory's epoch is prepended, its own mark decided by the first row).
+
     >>> x = np.array([40, 42, 40, 40, 43, 43.5, 43], float)[:, None]
     >>> fluctuation_extrema(x, np.ones_like(x, bool))[:, 0].astype(int).tolist()
     [0, 1, 0, 1, 0, 1, 0]
     >>> fluctuation_extrema(x, np.ones_like(x, bool), 2.5)[:, 0].astype(int).tolist()
     [0, 0, 0, 0, 0, 1, 0]
+    >>> m = _extrema_memory(x[:4], np.ones((4, 1), bool), 2.5, 4)   # before the 5th epoch: 40 after 40
+    >>> fluctuation_extrema(x[4:], np.ones((3, 1), bool), 2.5, m)[:, 0].astype(int).tolist()
+    [0, 1, 0]
     """
+    return _extrema(cn0_dbhz, tracked, threshold_dbhz, resume)[0]
+
+
+def _extrema(cn0_dbhz: np.ndarray, tracked: np.ndarray, threshold_dbhz: float, resume: tuple | None
+             ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(marks (n, m), y (n, m) the bridged series, direction (n, m) the sign of the last change before each
+    row, reference (n, m) the value each row's swing is measured from): :func:`fluctuation_extrema` with what
+    :func:`_extrema_memory` reads its memory from."""
     n, m = cn0_dbhz.shape
-    if n < 3:
-        return np.zeros((n, m), dtype=bool)
-    y = _ffill_rows(cn0_dbhz, tracked)
+    tracked = np.asarray(tracked, bool)
+    if resume is not None:
+        last, direction, ref, was_tracked = (np.asarray(a) for a in resume)
+        # the memory's epoch as row 0: its bridged value, tracked as it was; its direction and reference given
+        cn0_dbhz = np.vstack([np.where(np.isfinite(last), last, np.nan)[None, :], cn0_dbhz])
+        valid = np.vstack([np.isfinite(last)[None, :], tracked])
+        tracked = np.vstack([np.asarray(was_tracked, bool)[None, :], tracked])
+        n += 1
+    else:
+        valid = tracked
+    if n == 0:
+        return np.zeros((0, m), dtype=bool), *(np.zeros((0, m)),) * 3
+    y = _ffill_rows(cn0_dbhz, valid)
     d = np.nan_to_num(np.diff(y, axis=0))  # (n-1, m); d[i] = y[i+1] − y[i]
     sgn = np.sign(d)
     # last non-zero direction before point i (from d[0..i-1])
     last = _ffill_rows(sgn, sgn != 0)  # last[i] = last non-zero sign among d[0..i]
-    before = np.vstack([np.full((1, m), np.nan), last[:-1]])  # for point i: direction into it
+    start = np.full((1, m), np.nan) if resume is None else np.asarray(direction, float)[None, :]
+    last = np.where(np.isnan(last), start, last)
+    before = np.vstack([start, last])  # for point i: direction into it (n, m)
     is_ext = np.zeros((n, m), dtype=bool)
-    is_ext[:-1] = (sgn != 0) & np.isfinite(before) & (before != sgn) & tracked[:-1]
-    is_ext[0] = False
+    is_ext[:-1] = (sgn != 0) & np.isfinite(before[:-1]) & (before[:-1] != sgn) & tracked[:-1]
     # swing from the previous (unfiltered) extremum, or from the first tracked value
     first = _ffill_rows(y, np.isfinite(y))
     first_val = np.take_along_axis(first, np.argmax(np.isfinite(y), axis=0)[None, :], axis=0)
     ext_val = np.where(is_ext, y, np.nan)
     prev = _ffill_rows(ext_val, is_ext)
-    prev = np.vstack([np.full((1, m), np.nan), prev[:-1]])
+    prev = np.vstack([np.full((1, m), np.nan) if resume is None else np.asarray(ref, float)[None, :], prev[:-1]])
+    if resume is not None:
+        prev = np.where(np.isnan(prev), np.asarray(ref, float)[None, :], prev)
     prev = np.where(np.isfinite(prev), prev, first_val)
     with np.errstate(invalid="ignore"):
-        return is_ext & (np.abs(y - prev) >= threshold_dbhz)
+        marks = is_ext & (np.abs(y - prev) >= threshold_dbhz)
+    if resume is not None:
+        return marks[1:], y[1:], before[1:], prev[1:]
+    return marks, y, before, prev
+
+
+def _extrema_memory(cn0_dbhz: np.ndarray, tracked: np.ndarray, threshold_dbhz: float, i: int,
+                    resume: tuple | None = None) -> tuple:
+    """The memory of :func:`fluctuation_extrema` (run from ``resume``) before row ``i`` of the series, as its
+    ``resume`` argument takes it: the memory given (or none) for ``i`` = 0."""
+    n, m = cn0_dbhz.shape
+    if i <= 0:
+        return resume if resume is not None else (np.full(m, np.nan), np.full(m, np.nan), np.full(m, np.nan),
+                                                  np.zeros(m, bool))
+    # the rows up to i only: row i−1's own mark needs row i, which the resumed run decides
+    _, y, before, prev = _extrema(cn0_dbhz[:i], tracked[:i], threshold_dbhz, resume)
+    return y[i - 1].copy(), before[i - 1].copy(), prev[i - 1].copy(), np.asarray(tracked, bool)[i - 1].copy()
 
 
 def _window_sums(cum: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
@@ -351,8 +430,58 @@ def _window_sums(cum: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
     return cum[hi] - cum[lo]
 
 
+def _view_tracked(sky: SkyArrays, config: GnssFeatureConfig) -> tuple[np.ndarray, np.ndarray]:
+    """(in view above the mask, tracked there), each (n, m)."""
+    with np.errstate(invalid="ignore"):
+        view = sky.in_view & (sky.el_deg >= config.elevation_mask_deg)
+    return view, view & np.isfinite(sky.cn0_dbhz)
+
+
+def _sky_extrema(sky: SkyArrays, config: GnssFeatureConfig, tracked: np.ndarray,
+                 resume: FluctuationState | None) -> np.ndarray:
+    """:func:`fluctuation_extrema` of the sky's tracked C/N0, its epochs from ``resume.t_s`` on resumed from it
+    (the earlier ones, a cut's warm-up, from scratch)."""
+    cn0 = np.where(tracked, sky.cn0_dbhz, np.nan)
+    thr = config.fluct_threshold_dbhz
+    if resume is None:
+        return fluctuation_extrema(cn0, tracked, thr)
+    b = _resume_row(sky.t_s, resume.t_s)
+    return np.vstack([fluctuation_extrema(cn0[:b], tracked[:b], thr),
+                      fluctuation_extrema(cn0[b:], tracked[b:], thr, resume.columns(sky.sat_keys))])
+
+
+RESUME_MATCH_S = 1e-6
+"""Tolerance of an epoch's time against a handed state's (:class:`FluctuationState`), s: a cut's NMEA epochs lie
+where the whole log's do (the same times of day), up to the round-off of placing them on the walk's time base."""
+
+
+def _resume_row(t_s: np.ndarray, at_s: float) -> int:
+    """Index of the first epoch at or after ``at_s`` (within :data:`RESUME_MATCH_S`)."""
+    return int(np.searchsorted(np.asarray(t_s, float), at_s - RESUME_MATCH_S, side="left"))
+
+
+def fluctuation_state(sky: SkyArrays, t_s: float, config: GnssFeatureConfig | None = None,
+                      resume: FluctuationState | None = None) -> FluctuationState:
+    """The memory :func:`gnss_features`' extremum detector (``fluct_per_s``) carries into the first epoch of
+    ``sky`` at or after walk time ``t_s`` (:class:`FluctuationState`; the read run from ``resume`` as
+    :func:`gnss_features` runs it): what a later cut of the same log resumes from (``walks/segments.py``)."""
+    config = config or GnssFeatureConfig()
+    _, tracked = _view_tracked(sky, config)
+    cn0 = np.where(tracked, sky.cn0_dbhz, np.nan)
+    thr = config.fluct_threshold_dbhz
+    i = _resume_row(sky.t_s, t_s)
+    if resume is None:
+        memory = _extrema_memory(cn0, tracked, thr, i)
+    else:
+        b = min(_resume_row(sky.t_s, resume.t_s), i)
+        memory = _extrema_memory(cn0[b:], tracked[b:], thr, i - b, resume.columns(sky.sat_keys))
+    at = float(sky.t_s[i]) if i < sky.n_epochs else float(t_s)
+    return FluctuationState(at, tuple(sky.sat_keys), *memory)
+
+
 def gnss_features(sky: SkyArrays, config: GnssFeatureConfig | None = None,
-                  reference: Cn0Reference | None = None) -> dict[str, np.ndarray]:
+                  reference: Cn0Reference | None = None, resume: FluctuationState | None = None
+                  ) -> dict[str, np.ndarray]:
     """The five features and their counts per window.
 
     Returns a dict of arrays of shape (n_windows,): ``t_s`` (window centre),
@@ -371,6 +500,11 @@ def gnss_features(sky: SkyArrays, config: GnssFeatureConfig | None = None,
     early, 0.1 s at 5 Hz and 0.5 s at 1 Hz (issue 11). A
     feature is NaN when its inputs are absent (no tracked satellite above the
     mask for μ, σ, β; none in view for ζ, λ).
+
+    ``resume``: the log is a later cut of a longer one (``walks/segments.py``) and ``fluct_per_s``'s extremum
+    detector resumes, at its first epoch at or after ``resume.t_s``, the memory the read of the log before
+    reached there (:func:`fluctuation_state`); from the window holding no earlier epoch on, every feature is
+    then the whole log's.
     """
     config = config or GnssFeatureConfig()
     reference = reference or Cn0Reference()
@@ -380,11 +514,9 @@ def gnss_features(sky: SkyArrays, config: GnssFeatureConfig | None = None,
     t = sky.t_s
     if not np.all(np.isfinite(t)) or np.any(np.diff(t) <= 0):
         raise DataError("GNSS epochs must have finite, strictly increasing t_s")
-    with np.errstate(invalid="ignore"):
-        view = sky.in_view & (sky.el_deg >= config.elevation_mask_deg)
-    tracked = view & np.isfinite(sky.cn0_dbhz)
+    view, tracked = _view_tracked(sky, config)
     att = np.where(tracked, np.maximum(0.0, reference.cref_dbhz(sky.el_deg) - sky.cn0_dbhz), 0.0)
-    ext = fluctuation_extrema(np.where(tracked, sky.cn0_dbhz, np.nan), tracked, config.fluct_threshold_dbhz)
+    ext = _sky_extrema(sky, config, tracked, resume)
     systems = sorted({k[0] for k in sky.sat_keys})
     system_index = np.array([systems.index(k[0]) for k in sky.sat_keys], dtype=int)
     lam = epoch_dop_growth(sky.el_deg, sky.az_deg, view, tracked, config.dop_growth_cap, system_index)

@@ -34,7 +34,8 @@ The environment class is still computed and written with every position (``env_c
 
 
 MIN_SEGMENT_S = 60.0
-"""Shortest ``--segment-s``, s: every cut holds :data:`walks.segments.WARMUP_S` of warm-up (and the cuts holding
+"""Shortest ``--segment-s``, s: every cut holds :data:`walks.segments.WARMUP_S` of warm-up (a method that starts
+afresh on each cut :data:`walks.segments.FRESH_WARMUP_S`; and the cuts holding
 the walk's start at least the heading gate's reference span), so shorter segments only multiply the reads
 without lowering the peak memory."""
 
@@ -47,7 +48,7 @@ MAX_LAG_S = 3600.0
 
 def register_top(sub) -> None:
     from walks.methods import method_names
-    from walks.segments import SEGMENT_S, WARMUP_S
+    from walks.segments import FRESH_WARMUP_S, SEGMENT_S, WARMUP_S
 
     p = sub.add_parser(
         "run", help="fuse one walk into a track (CSV or GeoJSON)",
@@ -68,7 +69,8 @@ def register_top(sub) -> None:
     p.add_argument("--force", action="store_true", help="fuse a walk of a site the model was not trained on")
     p.add_argument("--segment-s", type=bounded(MIN_SEGMENT_S, MAX_SEGMENT_S, "s"), default=SEGMENT_S,
                    help=f"a longer walk is fused in segments of this much walk time, each with {WARMUP_S:g} s of "
-                        f"warm-up, so memory does not grow with the walk (default {SEGMENT_S:g}, "
+                        f"warm-up ({FRESH_WARMUP_S:g} s for fg_*, ekf_rtk_pdr and foot_ins_fkf, which start afresh "
+                        f"on each), so memory does not grow with the walk (default {SEGMENT_S:g}, "
                         f"{MIN_SEGMENT_S:g} to {MAX_SEGMENT_S:g}; walks.segments)")
     p.set_defaults(func=_run)
 

@@ -1,0 +1,185 @@
+"""What rode on a long walk's warm-up (issue 25 item 3, walks/segments.py): the GNSS ``fluct_per_s`` extremum
+detector judges each extremum's swing from the previous one, a memory that outlasts any warm-up while a
+satellite's C/N0 holds still (a stop), so a cut read it from scratch and marked other extrema than the whole
+log (the class-aware filters 2e-5..6e-4 m off at 60 s segments). It is now handed over
+(:class:`features.gnss.features.FluctuationState`), and the cuts' audio starts on the 1 s window grid, aligned
+on the whole recording by ``first_sample``, instead of the 32 s block grid."""
+
+import numpy as np
+import pytest
+
+from features.gnss.features import (
+    FluctuationState, GnssFeatureConfig, SkyArrays, fluctuation_extrema, fluctuation_state, gnss_features,
+)
+
+
+def _sky(t_s, cn0):
+    cn0 = np.asarray(cn0, float)
+    n, m = cn0.shape
+    el = np.tile(np.array([70.0, 40, 40, 40, 40, 25][:m]), (n, 1))
+    az = np.tile(np.array([0.0, 0, 90, 180, 270, 45][:m]), (n, 1))
+    return SkyArrays(np.asarray(t_s, float), tuple(("GPS", i + 1) for i in range(m)), el, az, cn0,
+                     np.ones((n, m), bool), np.isfinite(cn0), np.ones(n))
+
+
+def _cut(sky: SkyArrays, i: int) -> SkyArrays:
+    """The epochs from row ``i`` on, as a later cut of the log reads them (its columns in the same order)."""
+    return SkyArrays(sky.t_s[i:], sky.sat_keys, sky.el_deg[i:], sky.az_deg[i:], sky.cn0_dbhz[i:], sky.in_view[i:],
+                     sky.used[i:], sky.hdop[i:], sky.interval_s)
+
+
+def _plateau_log():
+    """1 Hz, two satellites: the first rises 40 → 41 → 44, holds 44 dB-Hz for 100 s (a stop), falls to 42 and
+    rises to 43, 43; the second flickers 45/46 (swings of 1 dB-Hz, below the 2 dB-Hz threshold: never marked)."""
+    a = np.r_[40.0, 41.0, np.full(100, 44.0), 42.0, 43.0, 43.0]
+    b = np.where(np.arange(a.size) % 2 == 0, 45.0, 46.0)
+    return _sky(np.arange(a.size, dtype=float), np.c_[a, b])
+
+
+def test_extrema_after_a_plateau_need_the_memory_from_before_it():
+    """By hand: the whole log marks the plateau's end (row 101: rise into it, fall after it, swing 44 − 40 = 4)
+    and the dip (row 102: swing 44 − 42 = 2); the flicker never. A cut from row 30 (inside the plateau) read
+    from scratch sees no rise into the plateau and measures the dip from its first value: it marks the dip
+    only. Resumed from the memory before row 30 (:func:`fluctuation_state` of the whole log), it marks both."""
+    sky = _plateau_log()
+    thr = GnssFeatureConfig().fluct_threshold_dbhz
+    tracked = np.isfinite(sky.cn0_dbhz)
+    whole = fluctuation_extrema(sky.cn0_dbhz, tracked, thr)
+    assert np.flatnonzero(whole[:, 0]).tolist() == [101, 102] and not whole[:, 1].any()
+    fresh = fluctuation_extrema(sky.cn0_dbhz[30:], tracked[30:], thr)
+    assert (np.flatnonzero(fresh[:, 0]) + 30).tolist() == [102]
+    state = fluctuation_state(sky, 30.0)
+    assert state.t_s == 30.0 and state.sat_keys == sky.sat_keys
+    # by hand: last value 44, last change up (41 → 44), swing reference 40 (no extremum yet: the first value)
+    assert state.last_dbhz[0] == 44.0 and state.direction[0] == 1.0 and state.extremum_dbhz[0] == 40.0
+    resumed = fluctuation_extrema(sky.cn0_dbhz[30:], tracked[30:], thr, state.columns(sky.sat_keys))
+    assert np.array_equal(resumed, whole[30:])
+
+
+def test_gnss_features_of_a_resumed_cut_are_the_whole_logs_from_the_resumption_on():
+    """``fluct_per_s`` of a cut from 20 s resumed at 30 s (the memory of the whole log there) equals the whole
+    log's in every window that holds no epoch before 30 s (bit for bit: sums of whole counts), and is 0 where
+    the fresh cut misses the plateau's end (the window centred at 100 s: tags [99, 101) s, 1 Hz epochs tagged t − 0.5); the other four features never depended
+    on the past (equal to the round-off of the running sums they are differenced from, 1e-12 of ~3 dB). The state of the resumed cut at 60 s is the whole log's there; one whose columns lie in another
+    order (a cut lists satellites in order of first appearance) maps them by key."""
+    sky = _plateau_log()
+    whole = gnss_features(sky)
+    at = 30.0
+    cut = _cut(sky, 20)
+    resumed = gnss_features(cut, resume=fluctuation_state(sky, at))
+    fresh = gnss_features(cut)
+    w = whole["t_s"] >= at + 1.0                 # windows [t − 1, t + 1): from 31 s all epochs ≥ 30 s
+    c = resumed["t_s"] >= at + 1.0
+    assert np.array_equal(whole["t_s"][w], resumed["t_s"][c])
+    assert np.array_equal(whole["fluct_per_s"][w], resumed["fluct_per_s"][c])
+    assert np.any(whole["fluct_per_s"][w] != fresh["fluct_per_s"][c])
+    for name in whole:
+        np.testing.assert_allclose(resumed[name][c], whole[name][w], rtol=0, atol=1e-9, err_msg=name)
+    k = np.flatnonzero(np.isclose(fresh["t_s"], 100.0))[0]
+    assert whole["fluct_per_s"][np.isclose(whole["t_s"], 100.0)][0] > 0 and fresh["fluct_per_s"][k] == 0.0
+    later_whole = fluctuation_state(sky, 60.0)
+    later_cut = fluctuation_state(cut, 60.0, resume=fluctuation_state(sky, at))
+    for a, b in zip(later_whole.columns(sky.sat_keys), later_cut.columns(sky.sat_keys)):
+        assert np.array_equal(a, b, equal_nan=True)
+    swapped = FluctuationState(at, sky.sat_keys[::-1], *(np.asarray(a)[::-1] for a in
+                                                         fluctuation_state(sky, at).columns(sky.sat_keys)))
+    assert np.array_equal(gnss_features(cut, resume=swapped)["fluct_per_s"], resumed["fluct_per_s"])
+
+
+def test_random_logs_cut_anywhere_mark_the_whole_logs_extrema():
+    """300 random integer C/N0 logs (random walks, plateaus, untracked epochs), each cut in up to four pieces,
+    every piece resumed from the memory the previous one reached at its end: the marks equal the whole log's
+    at every row but each piece's last (its mark needs the next row, which the next piece decides: in a long
+    walk's cut that row lies in the warm-up)."""
+    from features.gnss.features import _extrema_memory
+
+    rng = np.random.default_rng(1)
+    tested = 0
+    for _ in range(300):
+        n, m = int(rng.integers(1, 60)), int(rng.integers(1, 5))
+        x = np.round(40 + np.cumsum(rng.normal(0, 1, (n, m)), 0) * rng.choice([0, 1, 3], m))
+        tr = rng.random((n, m)) > 0.2
+        x = np.where(tr, x, np.nan)
+        whole = fluctuation_extrema(x, tr, 2.0)
+        cuts = sorted(set(rng.integers(1, n + 1, int(rng.integers(0, 4))).tolist()) - {n})
+        memory, parts, lo = None, [], 0
+        for hi in cuts + [n]:
+            parts.append(fluctuation_extrema(x[lo:hi], tr[lo:hi], 2.0, memory))
+            memory = _extrema_memory(x[lo:hi], tr[lo:hi], 2.0, hi - lo, memory)
+            lo = hi
+        keep = np.ones(n, bool)
+        keep[[c - 1 for c in cuts]] = False
+        assert np.array_equal(np.vstack(parts)[keep], whole[keep])
+        tested += int(whole[keep].sum())
+    assert tested > 1000
+
+
+@pytest.fixture(scope="module")
+def looped(walk_dir, tmp_path_factory):
+    """The 60 s session walk looped 3 times (180 s)."""
+    from tests.long_walk import loop_walk
+
+    return loop_walk(walk_dir, tmp_path_factory.mktemp("warmup") / "x3", 3)
+
+
+def test_a_cut_reads_its_epochs_samples_and_fixes_at_the_whole_walks_times(looped):
+    """Each 60 s segment's cut (20 s warm-up: its first NMEA epoch, IMU sample and audio sample are not the
+    walk's) read with the readers alone: every GNSS epoch and IMU sample of the cut is at the whole walk's time
+    bit for bit (the microsecond grid; before, the times carried the cut's first epoch in their round-off,
+    ~1e-11 s), and every acoustic fix from the receiver's resumption on (10 s into the cut) is the whole walk's
+    bit for bit (read with ``first_sample`` on the walk's recording, the cut starting on a whole second, not on
+    the 32 s block grid). The cut states its first sample and the recording's start in walk.toml."""
+    import tomllib
+
+    from walks.reader import read_walk
+    from walks.segments import RESUME_AFTER_S, WARMUP_S, walk_cuts
+
+    assert WARMUP_S == 20.0
+    whole = read_walk(looped, truth=False)
+    resume, later = None, 0
+    for seg in walk_cuts(looped, 60.0):
+        data = read_walk(seg.directory, truth=False, resume=resume, keep_states_from_s=seg.states_from_s)
+        resume = _reader_states(data, seg.states_from_s)
+        tg, ti = data.gnss.positions.t_s, data.pdr.imu.t_s
+        assert np.all(np.isin(tg, whole.gnss.positions.t_s)) and np.all(np.isin(ti, whole.pdr.imu.t_s))
+        if seg.index == 0:
+            continue
+        later += 1
+        audio = tomllib.loads((seg.directory / "walk.toml").read_text())["audio"]
+        first = audio["first_sample"]
+        assert audio["recording_start_s"] == 0.0 and first == round(audio["start_s"] * 48_000)
+        assert first % 48_000 == 0 and 0 <= seg.own_from_s - first / 48_000 - WARMUP_S < 1.0
+        t0 = first / 48_000 + RESUME_AFTER_S + 1.0
+        a = whole.acoustic
+        mine = data.acoustic.t_s >= t0
+        theirs = (a.t_s >= t0) & (a.t_s <= data.acoustic.t_s[-1])
+        assert mine.sum() >= 5
+        assert np.array_equal(data.acoustic.t_s[mine], a.t_s[theirs])
+        assert np.array_equal(data.acoustic.east_m[mine], a.east_m[theirs])
+    assert later == 2
+
+
+def _reader_states(data, states_from_s):
+    """The readers' states a cut's read kept for the next (as walks.fuse.FusedWalk.handover takes them)."""
+    from walks.reader import ReaderStates
+
+    if not np.isfinite(states_from_s):
+        return ReaderStates()
+    imu = data.pdr.imu
+    i = int(np.searchsorted(imu.t_s, states_from_s)) - 1
+    return ReaderStates(data.pdr.result.heading.state_at(i, float(imu.t_s[i])),
+                        data.acoustic.analysis.receiver_state, data.gnss.fluct_state)
+
+
+def test_warm_up_by_method():
+    """20 s for the methods whose resumed track needs no more (their smoothed tracks too), 120 s as soon as one
+    starts afresh on each cut or is a UWB/PDR filter, and every registered method is one or the other."""
+    from walks.fuse import RESUMED_METHODS, warmup_for
+    from walks.graph_methods import GRAPH_METHODS
+    from walks.methods import method_names
+
+    assert warmup_for(("adaptive_blind+lag",)) == warmup_for(("pdr", "imm+rts", "kf", "uwb")) == 20.0
+    assert warmup_for(("kf", "fg_isam2")) == warmup_for(("foot_ins_fkf",)) == warmup_for(None) == 120.0
+    assert warmup_for(("uwb_aoa_pdr+lag",)) == 120.0      # its run never fuses the cut's first UWB fix
+    fresh = set(GRAPH_METHODS) | {"foot_ins_fkf", "uwb_aoa_pdr", "uwb_aoa_pdr_env", "uwb_aoa_pdr_blind"}
+    assert set(method_names()) <= RESUMED_METHODS | fresh and not RESUMED_METHODS & fresh
