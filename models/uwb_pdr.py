@@ -195,7 +195,10 @@ class UwbPdrFilter:
         gates = np.full(n_fix, cfg.gate_prob) if gate_prob is None else np.asarray(gate_prob, float)
         t0 = float(fixes.t_s[0])
         st = np.asarray(steps.t_s, float)
-        keep = st > t0
+        # the events start at the first fix, which starts the filter; a resumed run also holds every step and fix
+        # from the handed state's time on, fix 0 included (a cut whose warm-up holds no UWB fix: its first fix
+        # lies after the resumption and is fused like any other, not taken as a fresh start)
+        keep = st > t0 if resume is None else (st > t0) | (st >= float(resume.t_s))
         t = np.concatenate([st[keep], fixes.t_s])
         kind = np.concatenate([np.full(int(keep.sum()), STEP), np.full(n_fix, UWB_FIX)])
         idx = np.concatenate([np.flatnonzero(keep), np.arange(n_fix)])
@@ -234,7 +237,7 @@ class UwbPdrFilter:
                 # P⁻ = P + σ_L² g g' + (L σ_ψ)² h h'
                 P = P + sl2 * np.outer(g, g) + L * L * sp2 * np.outer(h, h)
             rec["x_prior"][k], rec["P_prior"][k] = p_pdr - dx, P
-            if kind[k] == UWB_FIX and idx[k] > 0:          # fix 0 started the filter
+            if kind[k] == UWB_FIX and (idx[k] > 0 or 0 <= restart <= k):     # fix 0 started the filter unless resumed
                 j = idx[k]
                 z = p_pdr - np.array([fixes.east_m[j], fixes.north_m[j]])
                 R = fixes.cov_en[j] * scale[j]

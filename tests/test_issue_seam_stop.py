@@ -108,7 +108,6 @@ def test_filters_in_segments_whose_cut_starts_in_a_stop(model_and_walk, stop_wal
 
     model, _ = model_and_walk
     monkeypatch.setattr(segments, "WARMUP_S", 40.0)
-    monkeypatch.setattr(segments, "FRESH_WARMUP_S", 40.0)      # the UWB/PDR filter's (walks.fuse.warmup_for)
     methods = ("kf_quality", "uwb_aoa_pdr")
     whole = fuse_walk(stop_walk, model, methods, force=True, smooth=False).tracks
     seg = segmented_tracks(stop_walk, model, methods, 60.0, force=True, smooth=False)

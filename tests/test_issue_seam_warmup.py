@@ -172,14 +172,15 @@ def _reader_states(data, states_from_s):
 
 
 def test_warm_up_by_method():
-    """20 s for the methods whose resumed track needs no more (their smoothed tracks too), 120 s as soon as one
-    starts afresh on each cut or is a UWB/PDR filter, and every registered method is one or the other."""
+    """20 s for the methods whose resumed track needs no more (their smoothed tracks too, the UWB/PDR filters
+    since their resumed run fuses the cut's first fix), 120 s as soon as one starts afresh on each cut, and every
+    registered method is one or the other."""
     from walks.fuse import RESUMED_METHODS, warmup_for
     from walks.graph_methods import GRAPH_METHODS
     from walks.methods import method_names
 
     assert warmup_for(("adaptive_blind+lag",)) == warmup_for(("pdr", "imm+rts", "kf", "uwb")) == 20.0
     assert warmup_for(("kf", "fg_isam2")) == warmup_for(("foot_ins_fkf",)) == warmup_for(None) == 120.0
-    assert warmup_for(("uwb_aoa_pdr+lag",)) == 120.0      # its run never fuses the cut's first UWB fix
-    fresh = set(GRAPH_METHODS) | {"foot_ins_fkf", "uwb_aoa_pdr", "uwb_aoa_pdr_env", "uwb_aoa_pdr_blind"}
+    assert warmup_for(("uwb_aoa_pdr+lag", "uwb_aoa_pdr_env", "uwb_aoa_pdr_blind+rts")) == 20.0
+    fresh = set(GRAPH_METHODS) | {"foot_ins_fkf", "ekf_rtk_pdr"}
     assert set(method_names()) <= RESUMED_METHODS | fresh and not RESUMED_METHODS & fresh

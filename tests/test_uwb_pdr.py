@@ -164,3 +164,35 @@ def test_prior_scales_each_fix_covariance_in_the_filter():
     u = scaled.updated
     np.testing.assert_allclose(scaled.R[u], 4.0 * plain.R[u])
     assert np.trace(scaled.P[-1]) > np.trace(plain.P[-1])
+
+
+@pytest.mark.parametrize("gap_s", [0.0, 6.0])
+def test_a_resumed_run_fuses_the_cuts_first_fix_and_the_steps_before_it(gap_s):
+    """A long walk's cut resumed at t_s = 50 s from the whole run's state there (a segment's hand-over). Its
+    first UWB fix lies ``gap_s`` after t_s (6 s: the cut's warm-up held no fix, a UWB gap). From t_s on the
+    cut's run must be the whole run's, event for event, to round-off; before, the cut's first fix was taken as
+    a fresh start (never fused) and the steps before it were dropped (0.055 m on a simulated walk)."""
+    truth, pdr, fixes = _drifting_walk(seed=3)
+    t_cut = 50.0
+    far = (fixes.t_s < t_cut) | (fixes.t_s >= t_cut + gap_s)        # the whole walk's UWB gap after t_cut
+    whole_fixes = _fixes(fixes.t_s[far], fixes.east_m[far], fixes.north_m[far], fixes.cov_en[far, 0, 0])
+    cfg = UwbPdrConfig()
+    whole = UwbPdrFilter(cfg).run(pdr, (0.0, 0.0), whole_fixes)
+    resume = whole.state_before(t_cut)
+    # the cut: its PDR track starts elsewhere (only increments enter), its fixes from 40 s or the gap's end
+    lo = t_cut - 10.0 if gap_s == 0 else t_cut
+    keep = whole_fixes.t_s >= lo
+    cut_fixes = _fixes(whole_fixes.t_s[keep], whole_fixes.east_m[keep], whole_fixes.north_m[keep],
+                       whole_fixes.cov_en[keep, 0, 0])
+    s = pdr.t_s > lo - 5.0
+    cut_steps = _steps(pdr.t_s[s], pdr.step_length_m[s], pdr.heading_rad[s], start=(3.0, -2.0))
+    cut = UwbPdrFilter(cfg).run(cut_steps, (3.0, -2.0), cut_fixes, resume=resume)
+    a = whole.t_s >= t_cut
+    b = cut.t_s >= t_cut
+    assert gap_s == 0 or cut_fixes.t_s[0] > t_cut
+    np.testing.assert_array_equal(cut.t_s[b], whole.t_s[a])
+    np.testing.assert_array_equal(cut.kind[b], whole.kind[a])
+    # positions: the cut's PDR track is offset by a constant, which δx absorbs
+    np.testing.assert_allclose(cut.x[b], whole.x[a], atol=1e-9)
+    np.testing.assert_allclose(cut.P[b], whole.P[a], atol=1e-12)
+    assert int(cut.updated[b].sum()) == int(whole.updated[a].sum())

@@ -138,9 +138,10 @@ the segment; (e) before issue 25's heading resume, ``pdr`` and the UWB filter di
 seamfix, whose PDR track for the UWB/PDR filter is still through a stop; (g) bit for bit; (h) not resumed,
 fused in cuts of :data:`FRESH_WARMUP_S` (``walks.fuse.warmup_for``): with 20 s ``ekf_rtk_pdr`` reads 1.23 m and
 ``fg_isam2`` 0.71 m on seed 77; the other ``fg_*`` within 0.008-0.02 m (seed 77) and 0.21-0.25 m (seed 78;
-``fg_ins`` 11.1 m on both, as main); (i) measured with 20 s; the UWB/PDR filters now take
-:data:`FRESH_WARMUP_S`: their run never fuses the cut's first UWB fix (:data:`walks.fuse.RESUMED_METHODS`), and
-a cut whose 20 s of warm-up held none lost one (0.055 m on a walk standing in a UWB gap, 60 s segments).
+``fg_ins`` 11.1 m on both, as main); (i) measured with 20 s; the UWB/PDR filters took :data:`FRESH_WARMUP_S`
+for a while, their run never fusing the cut's first UWB fix: a cut whose 20 s of warm-up held none lost one
+(0.056 m on a walk standing in a UWB gap, 60 s segments); a resumed run now fuses it and the steps before it
+(2.8e-7 m there, :data:`walks.fuse.RESUMED_METHODS`), and they take :data:`WARMUP_S` again.
 
 ``envfuse run --method adaptive_blind+lag`` (one core, best of 3 alternated fresh processes, load 4.5-6 from
 other sessions; CPU of the process, imports and model load included), main → now: a 10-minute walk (seed 79)
@@ -195,9 +196,8 @@ on it (:class:`features.gnss.features.FluctuationState`, now handed over); measu
 
 FRESH_WARMUP_S = 120.0
 """Walk time a cut reaches before its segment when a method fused starts afresh on each cut (nothing handed
-over: the factor graphs ``fg_*``, ``ekf_rtk_pdr``, ``foot_ins_fkf``) or needs a UWB fix in the warm-up (the
-UWB/PDR filters; :data:`walks.fuse.RESUMED_METHODS`), s: such a method converges within it
-(``walks.fuse.warmup_for``)."""
+over: the factor graphs ``fg_*``, ``ekf_rtk_pdr``, ``foot_ins_fkf``; :data:`walks.fuse.RESUMED_METHODS`), s:
+such a method converges within it (``walks.fuse.warmup_for``)."""
 
 TAIL_S = 10.0
 """Walk time a cut reaches after its segment, s: ≥ the fixed-lag smoother's lag (3 s), a step split at the
