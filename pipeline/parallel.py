@@ -10,7 +10,13 @@ and a distributed run give identical results, in the input order.
 - ``workers=N`` (default: one per core): a ``dask.distributed.LocalCluster`` of
   N single-threaded worker processes (forked on Linux: :data:`_LOCAL_WORKER_CONFIG`), started and shut
   down here;
-- ``scheduler="tcp://host:8786"``: an existing Dask cluster.
+- ``scheduler="tcp://host:8786"``: an existing Dask cluster, run as whoever started it chose. The settings of
+  the local cluster (:data:`_LOCAL_WORKER_CONFIG`) help it the same way; Dask reads them from its processes'
+  environment: ``DASK_DISTRIBUTED__WORKER__PROFILE__ENABLED=False DASK_DISTRIBUTED__ADMIN__TICK__INTERVAL=1s
+  DASK_DISTRIBUTED__ADMIN__SYSTEM_MONITOR__INTERVAL=5s DASK_DISTRIBUTED__WORKER__MEMORY__MONITOR_INTERVAL=1s
+  dask worker ...`` (and the scheduler's), with the nanny's ``MALLOC_TRIM_THRESHOLD_`` left unset in a Dask
+  config file (``distributed: {nanny: {pre-spawn-environ: {MALLOC_TRIM_THRESHOLD_: null}}}``; a ``DASK_``
+  variable cannot name it, Dask lower-cases those names).
 
 On Dask the walks are handed out largest first (:func:`longest_first`), the results still returned in input order.
 
@@ -105,8 +111,9 @@ used without its parallel threading layer and gtsam is built without TBB. Elsewh
 unsafe or absent and the workers are spawned. A user's own cluster (``--scheduler``) starts its workers its
 own way; they keep their imports and model across runs.
 
-A setting (other than a worker's environment variables) the user chose for Dask through its environment variable (``DASK_DISTRIBUTED__ADMIN__TICK__INTERVAL=20ms``,
-``DASK_DISTRIBUTED__WORKER__MULTIPROCESSING_METHOD=spawn``) stands (:func:`local_worker_config`)."""
+A setting (other than a worker's environment variables) the user chose for Dask through its environment
+variable (``DASK_DISTRIBUTED__ADMIN__TICK__INTERVAL=20ms``, ``DASK_DISTRIBUTED__WORKER__MULTIPROCESSING_METHOD=spawn``)
+stands (:func:`local_worker_config`)."""
 
 
 def _dask_env_name(key: str) -> str:
