@@ -33,6 +33,34 @@
    all over 3 runs. ``envfuse evaluate`` as a user runs it: 0.78 forked against 0.72-0.73 spawned (its parent
    has only read the model, so each worker still pays the first walk's caches and lazy imports).
 
+   Where the rest went (branch ``evalspeed``, 2026-12-02; the machine shared, load 4.2-10, so wall times and
+   efficiencies of that day say little and CPU seconds from /proc are the measure; ``dask_overhead`` prints them
+   for Dask's pace and ``map_walks``'): Dask's periodic callbacks. The tick (every 20 ms), the system monitor
+   (500 ms) and the memory monitor (100 ms) run on the event loop of the scheduler and both nannies (this
+   process) and of each worker, beside its task thread: 72-111 ms of CPU per second of run outside the walks
+   (3.6-7.0 s per run; on a 17 s run on a quiet machine ~1.5 s of the 34 s the two cores give), ~150-180
+   wake-ups per second of each worker's event loop, and 58-109 GIL waits per second of the task threads (their
+   voluntary context switches; a plain process: 1-2 per walk). At 1 s / 5 s / 1 s
+   (``pipeline.parallel._LOCAL_WORKER_CONFIG``, main and branch alternated, 2 + 2 runs and 3 exploratory): 19-26
+   ms/s (0.7-1.6 s per run), 6-11 GIL waits/s. Per-task machinery is not what costs: a result pickles to 0.77 MB
+   in 1.5 ms; the gaps between one walk's end and the next's start on a worker add up to 0.02-0.05 s per run;
+   the cluster starts in 0.16 s and closes in 0.14 s. The walks are now handed out largest first (Graham's LPT
+   rule on their bytes on disk; equal-length walks here, so it changes nothing in this section, and keeps one
+   long walk from being the run's tail elsewhere). ``envfuse evaluate --workers 2`` as a user runs it, CPU of all
+   its processes (``cli_runs``): main 43.4 / 47.9 s, branch 41.1 / 41.2 s, ``--workers 1`` 35.9-37.4 s, 24,500 ->
+   4,800 voluntary context switches. Why the user's run reads lower than this section's (0.77-0.78 against
+   0.85): its fixed costs count twice in T1 / (2 T2), being paid before or beside the 8 walks of each worker
+   and only once beside the 16 walks of one: its own start (imports, 1.4-1.5 s CPU), ``distributed``'s import
+   (0.23-0.30 s, the 2-worker run only), and each forked worker's first walk's caches (0.6-1.0 s: numba's
+   on-disk cache of 31 compiled functions rebuilt, 106 lazily imported modules: numba 72, gtsam 13; a forked
+   worker of this bench's warm process has them already); and two plain processes on these two vCPUs need
+   ~20 % more CPU for the same walks than one (31.5 s in one process, 38.2 s in two, load 5), which the 1-worker
+   run never pays. A long-lived cluster started with Dask's defaults (what ``--scheduler`` reaches when its
+   ``dask worker`` processes were started without settings) pays the profiler, the malloc threshold and the
+   callbacks: a warm run of 8 walks 2.18 s of CPU outside the walks (97 ms/s; event loops 54 ms/s, 427
+   wake-ups/s; 196,000 minor page faults) against 0.53 s (21 ms/s; 7 ms/s, 43 wake-ups/s; 16,000) started with
+   ``map_walks``' settings, as :mod:`pipeline.parallel` tells how (``long_lived_cluster(tuned=True)``).
+
 4. **The simulator** (issue 25 item 2, :func:`simulator_section`): a 10-minute walk on the benchmark site
    (site seed 5, walk seed 40) simulated end to end by ``simulate_walk`` (every file: gnss.nmea, imu.csv,
    truth_steps.csv, audio.wav, audio_truth.csv, uwb.csv, imu_foot.csv, truth.csv, walk.toml), each run in a

@@ -78,12 +78,15 @@ the limit); the *system monitor* samples CPU, memory, disk and network counters 
 served, ``dashboard_address=None``); the *memory monitor* of each worker and nanny checks the worker's memory
 against its pause (80 %) and terminate (95 %) thresholds of its limit (total memory / workers: 12 GiB each on
 this 24 GiB VM against a walk's few hundred MiB): checked once a second, a worker still cannot run away from
-it. Measured (``bench/bench_pipeline.py`` section 3 and /proc per-thread counters; 2026-12-02, 2-core VM shared with
-other jobs, load 4.6-5.9): on a 2-worker run of the 16 evaluations, the CPU of every process of the run outside
-the tasks' own threads 101-111 ms per second of run with Dask's pace, 20-26 ms with this one; the task threads'
-voluntary context switches (each one a wait for the GIL) 77-109 per second -> 6-10; a CPU-bound pure-Python
-task alone on the cluster, per second: this process 33 -> 7.5 ms CPU, each worker's event loop 15 -> 3.4 ms and
-180 -> 15 wake-ups (the tick 29 of the 63 ms, the memory monitors 11, the system monitors 9).
+it. Measured (``bench/bench_pipeline.py`` section 3's ``dask_overhead`` and /proc per-thread counters; 2026-12-02,
+2-core VM shared with other jobs, load 4.2-5.9; a 2-worker run of the 16 evaluations of 60 s walks, main and this
+setting alternated): the CPU of every process of the run outside the tasks' own threads, 3.6-7.0 s a run,
+72-111 ms per second of run, with Dask's pace; 0.7-1.6 s, 19-26 ms per second, with this one (on a 17 s run on a
+quiet machine: ~1.5 s -> ~0.4 s of the 34 s the two cores give); the task threads' voluntary context switches
+(each a wait for the GIL) 58-109 per second -> 6-11; ``envfuse evaluate --workers 2`` as a user runs it, CPU of
+all its processes 43.4 / 47.9 s -> 41.1 / 41.2 s (``--workers 1``: 35.9-37.4 s). A CPU-bound pure-Python task
+alone on the cluster, per second: this process 33 -> 7.5 ms CPU, each worker's event loop 15 -> 3.4 ms and
+180 -> 15 wake-ups (of the 63 ms in all, the tick 29, the memory monitors 11, the system monitors 9).
 
 The statistical profiler off: each Dask worker samples its task thread's stack every 10 ms for the dashboard's
 profile page (``distributed.worker.profile``), which takes the GIL from the task each time; no dashboard is
