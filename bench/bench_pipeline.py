@@ -60,6 +60,15 @@
    callbacks: a warm run of 8 walks 2.18 s of CPU outside the walks (97 ms/s; event loops 54 ms/s, 427
    wake-ups/s; 196,000 minor page faults) against 0.53 s (21 ms/s; 7 ms/s, 43 wake-ups/s; 16,000) started with
    ``map_walks``' settings, as :mod:`pipeline.parallel` tells how (``long_lived_cluster(tuned=True)``).
+   This section in one run (``--evaluate-only``'s section on the same 16 walks, the test suite running beside it,
+   load 3.0-10: its walls and efficiencies are not figures): Dask's pace 1.50 s in a 16.6 s run (90 ms/s) and
+   2.38 s in 31.4 s (76 ms/s), GIL waits 25-67/s, the workers' event loops 391-404 wake-ups/s; ``map_walks``'
+   0.64 s in 32.0 s (20 ms/s) and 0.59 s in 30.7 s (19 ms/s), 11/s, 61-63/s; ``envfuse evaluate`` CPU of all
+   processes: ``--workers 1`` 33.7 s, 2 forked 40.2 s, 2 spawned 43.9 s. Wall efficiency (``evaluate`` in a warm
+   process as ``evaluate_scaling`` runs it, main and branch alternated, 3 pairs, load 1.8-5.1): main 0.86 / 0.58 /
+   0.52, branch 0.74 / 0.61 / 0.48, 2-worker runs of the same code moving 17-63 s from one run to the next: the
+   machine gave the two workers one to two cores at random, and no wall figure of that day can show a 3-5 %
+   change either way; the target (0.9) is to be read again on a quiet machine.
 
 4. **The simulator** (issue 25 item 2, :func:`simulator_section`): a 10-minute walk on the benchmark site
    (site seed 5, walk seed 40) simulated end to end by ``simulate_walk`` (every file: gnss.nmea, imu.csv,
