@@ -33,6 +33,43 @@
    all over 3 runs. ``envfuse evaluate`` as a user runs it: 0.78 forked against 0.72-0.73 spawned (its parent
    has only read the model, so each worker still pays the first walk's caches and lazy imports).
 
+   Where the rest went (branch ``evalspeed``, 2026-12-02; the machine shared, load 4.2-10, so wall times and
+   efficiencies of that day say little and CPU seconds from /proc are the measure; ``dask_overhead`` prints them
+   for Dask's pace and ``map_walks``'): Dask's periodic callbacks. The tick (every 20 ms), the system monitor
+   (500 ms) and the memory monitor (100 ms) run on the event loop of the scheduler and both nannies (this
+   process) and of each worker, beside its task thread: 72-111 ms of CPU per second of run outside the walks
+   (3.6-7.0 s per run; on a 17 s run on a quiet machine ~1.5 s of the 34 s the two cores give), ~150-180
+   wake-ups per second of each worker's event loop, and 58-109 GIL waits per second of the task threads (their
+   voluntary context switches; a plain process: 1-2 per walk). At 1 s / 5 s / 1 s
+   (``pipeline.parallel._LOCAL_WORKER_CONFIG``, main and branch alternated, 2 + 2 runs and 3 exploratory): 19-26
+   ms/s (0.7-1.6 s per run), 6-11 GIL waits/s. Per-task machinery is not what costs: a result pickles to 0.77 MB
+   in 1.5 ms; the gaps between one walk's end and the next's start on a worker add up to 0.02-0.05 s per run;
+   the cluster starts in 0.16 s and closes in 0.14 s. The walks are now handed out largest first (Graham's LPT
+   rule on their bytes on disk; equal-length walks here, so it changes nothing in this section, and keeps one
+   long walk from being the run's tail elsewhere). ``envfuse evaluate --workers 2`` as a user runs it, CPU of all
+   its processes (``cli_runs``): main 43.4 / 47.9 s, branch 41.1 / 41.2 s, ``--workers 1`` 35.9-37.4 s, 24,500 ->
+   4,800 voluntary context switches. Why the user's run reads lower than this section's (0.77-0.78 against
+   0.85): its fixed costs count twice in T1 / (2 T2), being paid before or beside the 8 walks of each worker
+   and only once beside the 16 walks of one: its own start (imports, 1.4-1.5 s CPU), ``distributed``'s import
+   (0.23-0.30 s, the 2-worker run only), and each forked worker's first walk's caches (0.6-1.0 s: numba's
+   on-disk cache of 31 compiled functions rebuilt, 106 lazily imported modules: numba 72, gtsam 13; a forked
+   worker of this bench's warm process has them already); and two plain processes on these two vCPUs need
+   ~20 % more CPU for the same walks than one (31.5 s in one process, 38.2 s in two, load 5), which the 1-worker
+   run never pays. A long-lived cluster started with Dask's defaults (what ``--scheduler`` reaches when its
+   ``dask worker`` processes were started without settings) pays the profiler, the malloc threshold and the
+   callbacks: a warm run of 8 walks 2.18 s of CPU outside the walks (97 ms/s; event loops 54 ms/s, 427
+   wake-ups/s; 196,000 minor page faults) against 0.53 s (21 ms/s; 7 ms/s, 43 wake-ups/s; 16,000) started with
+   ``map_walks``' settings, as :mod:`pipeline.parallel` tells how (``long_lived_cluster(tuned=True)``).
+   This section in one run (``--evaluate-only``'s section on the same 16 walks, the test suite running beside it,
+   load 3.0-10: its walls and efficiencies are not figures): Dask's pace 1.50 s in a 16.6 s run (90 ms/s) and
+   2.38 s in 31.4 s (76 ms/s), GIL waits 25-67/s, the workers' event loops 391-404 wake-ups/s; ``map_walks``'
+   0.64 s in 32.0 s (20 ms/s) and 0.59 s in 30.7 s (19 ms/s), 11/s, 61-63/s; ``envfuse evaluate`` CPU of all
+   processes: ``--workers 1`` 33.7 s, 2 forked 40.2 s, 2 spawned 43.9 s. Wall efficiency (``evaluate`` in a warm
+   process as ``evaluate_scaling`` runs it, main and branch alternated, 3 pairs, load 1.8-5.1): main 0.86 / 0.58 /
+   0.52, branch 0.74 / 0.61 / 0.48, 2-worker runs of the same code moving 17-63 s from one run to the next: the
+   machine gave the two workers one to two cores at random, and no wall figure of that day can show a 3-5 %
+   change either way; the target (0.9) is to be read again on a quiet machine.
+
 4. **The simulator** (issue 25 item 2, :func:`simulator_section`): a 10-minute walk on the benchmark site
    (site seed 5, walk seed 40) simulated end to end by ``simulate_walk`` (every file: gnss.nmea, imu.csv,
    truth_steps.csv, audio.wav, audio_truth.csv, uwb.csv, imu_foot.csv, truth.csv, walk.toml), each run in a
@@ -335,21 +372,27 @@ def evaluate_scaling(walks, model_dir: Path, tmp: Path, repeat: int = 2) -> dict
     return out
 
 
-def long_lived_cluster(walks, model_dir: Path, tmp: Path, runs: int = 3) -> dict:
+def long_lived_cluster(walks, model_dir: Path, tmp: Path, runs: int = 3, tuned: bool = False) -> dict:
     """``evaluate --scheduler`` on one 2-worker ``LocalCluster`` kept across ``runs`` runs (as a long-lived
     cluster would be; its workers spawned, as ``dask worker`` processes are): each run's wall time, the model
     loads each worker has made after it (one per worker in all when the workers keep their model across walks
     and runs), and the peak resident memory of a worker (VmHWM; a spawned worker shares no pages with this
-    process, which a forked one would count)."""
+    process, which a forked one would count). With Dask's defaults, as a ``dask worker`` started without
+    settings runs; ``tuned``: with the local cluster's settings but the start method
+    (``pipeline.parallel._LOCAL_WORKER_CONFIG``, as :mod:`pipeline.parallel`'s docstring tells a user to start one)."""
     import logging
 
+    import dask
     from distributed import Client, LocalCluster
 
     from pipeline.evaluate import evaluate, model_loads
+    from pipeline.parallel import _LOCAL_WORKER_CONFIG
 
+    settings = {k: v for k, v in _LOCAL_WORKER_CONFIG.items() if "multiprocessing-method" not in k} if tuned else {}
     t0 = time.perf_counter()
-    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None,
-                      silence_logs=logging.ERROR) as cluster, Client(cluster) as client:
+    with dask.config.set(settings), LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                                                 dashboard_address=None, silence_logs=logging.ERROR) as cluster, \
+            Client(cluster) as client:
         client.wait_for_workers(2)
         start = time.perf_counter() - t0
         walls, loads = [], []
@@ -409,19 +452,23 @@ def fresh_imports_s(repeat: int = 3) -> float:
 def cli_runs(walks, model_dir: Path, tmp: Path) -> dict:
     """``envfuse evaluate --workers N --no-plots`` on the walks as a user runs it (a new process: its imports,
     the model read, for N = 2 the local cluster): wall seconds for N = 1, N = 2 (workers forked on Linux) and
-    N = 2 with the workers spawned (Dask's default, what evaluate did before), one run each."""
+    N = 2 with the workers spawned (Dask's default, what evaluate did before), one run each; and the CPU seconds
+    of each run, its process and every process it started (``RUSAGE_CHILDREN``: a worker is counted once its
+    parent has reaped it): what N = 2 spends beyond N = 1, however busy the machine."""
+    import resource
     import subprocess
 
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}
-    out = {}
+    out, cpu = {}, {}
     for name, n, extra in ((1, 1, {}), (2, 2, {}), ("2 spawned", 2,
                                                    {"DASK_DISTRIBUTED__WORKER__MULTIPROCESSING_METHOD": "spawn"})):
-        t0 = time.perf_counter()
+        r0, t0 = resource.getrusage(resource.RUSAGE_CHILDREN), time.perf_counter()
         subprocess.run([sys.executable, "-m", "pipeline", "evaluate", *map(str, walks), "--model", str(model_dir),
                         "--report", str(tmp / f"cli{n}"), "--workers", str(n), "--no-plots"], env={**env, **extra},
                        check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-        out[name] = time.perf_counter() - t0
-    return out
+        out[name], r1 = time.perf_counter() - t0, resource.getrusage(resource.RUSAGE_CHILDREN)
+        cpu[name] = (r1.ru_utime + r1.ru_stime) - (r0.ru_utime + r0.ru_stime)
+    return {**out, "cpu": cpu}
 
 
 def fixed_cost(walk, model_dir: Path) -> dict:
@@ -481,6 +528,73 @@ def _ceiling_worker(args) -> float:
     return time.perf_counter() - t0
 
 
+_DASK_PACE = {"distributed.admin.tick.interval": "20ms", "distributed.admin.system-monitor.interval": "500ms",
+              "distributed.worker.memory.monitor-interval": "100ms"}
+"""Dask's own pace for the periodic callbacks ``map_walks`` slows (``pipeline.parallel._LOCAL_WORKER_CONFIG``)."""
+
+
+def _overhead_task(walk, model_dir, methods) -> dict:
+    """:func:`pipeline.evaluate.evaluate_walk` on a worker, with its own CPU (this thread's) and voluntary context
+    switches (each one a wait, mostly for the GIL), then the worker's whole CPU so far and its event loop's
+    (the main thread of a Dask worker process), read from /proc."""
+    import resource
+    import threading
+
+    from pipeline.evaluate import evaluate_walk
+
+    r0, t0 = resource.getrusage(resource.RUSAGE_THREAD), time.thread_time()
+    evaluate_walk(walk, model_dir, methods, False)
+    task_cpu, r1 = time.thread_time() - t0, resource.getrusage(resource.RUSAGE_THREAD)
+    loop = threading.main_thread().native_id
+    with open(f"/proc/self/task/{loop}/stat") as f:
+        fields = f.read().rsplit(")", 1)[1].split()
+    with open(f"/proc/self/task/{loop}/status") as f:
+        loop_vcs = next(int(line.split()[1]) for line in f if line.startswith("voluntary_ctxt_switches"))
+    return {"pid": os.getpid(), "task_cpu": task_cpu, "task_vcs": r1.ru_nvcsw - r0.ru_nvcsw,
+            "process_cpu": time.process_time(),       # a forked worker's clock starts at its fork
+            "loop_cpu": (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK"), "loop_vcs": loop_vcs}
+
+
+def dask_overhead(walks, model_dir: Path, rounds: int = 2) -> dict:
+    """CPU a 2-worker run spends outside its tasks, with Dask's pace of periodic callbacks (set as a user would,
+    through ``DASK_...`` variables, which ``map_walks`` leaves standing) and with ``map_walks``' own, alternated
+    ``rounds`` times: this process's CPU over the run (scheduler, nannies, client, the cluster's start and stop)
+    plus each worker's up to its last walk, minus the walks' own thread CPU. Counted in CPU seconds, it does not
+    depend on how busy the machine is the way wall time does (only through the run's length: the callbacks come
+    per second); also per second of run, the workers' event loops' CPU and wake-ups, and the task threads'
+    voluntary context switches per second."""
+    import dask
+
+    from pipeline.parallel import _dask_env_name, map_walks
+    from walks.methods import method_names
+
+    out: dict = {"dask": [], "envfuse": []}
+    for _ in range(rounds):
+        for pace in out:
+            names = [_dask_env_name(k) for k in _DASK_PACE] if pace == "dask" else []
+            for name, value in zip(names, _DASK_PACE.values()):
+                os.environ[name] = value
+            dask.config.refresh()
+            try:
+                c0, w0 = time.process_time(), time.perf_counter()
+                res = map_walks(_overhead_task, [str(w) for w in walks], str(model_dir), method_names(), workers=2,
+                                progress=False)
+                main_cpu, wall = time.process_time() - c0, time.perf_counter() - w0
+            finally:
+                for name in names:
+                    del os.environ[name]
+                dask.config.refresh()
+            last = {r["pid"]: r for r in sorted(res, key=lambda r: r["process_cpu"])}     # each worker's last walk
+            task_cpu = sum(r["task_cpu"] for r in res)
+            out[pace].append({"wall_s": wall, "overhead_s": main_cpu + sum(r["process_cpu"] for r in last.values())
+                              - task_cpu, "main_s": main_cpu, "task_s": task_cpu,
+                              "loop_ms_per_s": 1e3 * sum(r["loop_cpu"] for r in last.values()) / wall,
+                              "loop_wakeups_per_s": sum(r["loop_vcs"] for r in last.values()) / wall,
+                              "task_waits_per_s": sum(r["task_vcs"] for r in res) / wall,
+                              "load": os.getloadavg()[0]})
+    return out
+
+
 def build_eval_walks(tmp: Path, walk_s: float, n: int = 16) -> list[Path]:
     """``n`` more walks of ``walk_s`` seconds on the site :func:`build` drew (seeds 100...)."""
     from simulation.walk import simulate_walk
@@ -497,22 +611,38 @@ def evaluate_section(walks, model_dir: Path, tmp: Path, walk_s: float) -> None:
     eff = times[1] / (2 * times[2])
     lived = long_lived_cluster(walks, model_dir, tmp)
     warm = min(lived["walls"][1:])
+    tuned = long_lived_cluster(walks, model_dir, tmp, tuned=True)
     fc = fixed_cost(walks[0], model_dir)
     cli = cli_runs(walks, model_dir, tmp)
     ceiling = machine_ceiling(walks, model_dir)
+    over = dask_overhead(walks, model_dir)
     print(f"yardstick in this run: oaconvolve over one {walk_s:.0f} s walk's audio, first run {yard:,.0f}x, "
           f"best of 3 {yard_warm:,.0f}x real time")
     print(f"evaluate {n} walks of {walk_s:.0f} s, every method (best of 2, interleaved): 1 worker (this process, "
           f"warm) {times[1]:.1f} s = {times[1] / n:.2f} s/walk; 2 workers (a new local cluster per run) "
           f"{times[2]:.1f} s: parallel efficiency {eff:.2f} (target 0.9); the same work in two warmed-up plain "
           f"processes: {ceiling:.2f}")
+    for pace, label in (("dask", "Dask's pace (tick 20 ms, system monitor 500 ms, memory monitor 100 ms)"),
+                        ("envfuse", "map_walks' pace (1 s, 5 s, 1 s)")):
+        runs = over[pace]
+        print(f"CPU outside the walks of a 2-worker run, {label}: "
+              + "; ".join(f"{r['overhead_s']:.2f} s in a {r['wall_s']:.1f} s run "
+                          f"({1e3 * r['overhead_s'] / r['wall_s']:.0f} ms/s; this process {r['main_s']:.2f} s, worker "
+                          f"event loops {r['loop_ms_per_s']:.1f} ms/s, {r['loop_wakeups_per_s']:.0f} wake-ups/s; task "
+                          f"threads' GIL waits {r['task_waits_per_s']:.0f}/s; load {r['load']:.1f})" for r in runs))
     print(f"as a user runs it (envfuse evaluate --no-plots, a new process each): --workers 1 {cli[1]:.1f} s, "
           f"--workers 2 {cli[2]:.1f} s: efficiency {cli[1] / (2 * cli[2]):.2f}; --workers 2 with spawned "
-          f"workers (as before) {cli['2 spawned']:.1f} s: {cli[1] / (2 * cli['2 spawned']):.2f}")
+          f"workers (as before) {cli['2 spawned']:.1f} s: {cli[1] / (2 * cli['2 spawned']):.2f}; CPU of all their "
+          f"processes {cli['cpu'][1]:.1f} / {cli['cpu'][2]:.1f} / {cli['cpu']['2 spawned']:.1f} s (2 workers - 1: "
+          f"{cli['cpu'][2] - cli['cpu'][1]:+.2f} s forked, {cli['cpu']['2 spawned'] - cli['cpu'][1]:+.2f} s spawned)")
     print(f"long-lived 2-worker cluster (evaluate --scheduler), started in {lived['start_s']:.1f} s: runs "
           + ", ".join(f"{w:.1f} s" for w in lived["walls"])
           + f"; efficiency of a warm run {times[1] / (2 * warm):.2f}; model loads per worker after each run "
           + ", ".join(str(x) for x in lived["loads"]) + f"; peak RSS of a worker {lived['rss_mib']:.0f} MiB")
+    print(f"the same started with map_walks' settings (profiler off, malloc's threshold left alone, callbacks at 1 s / "
+          f"5 s / 1 s; its workers spawned): runs " + ", ".join(f"{w:.1f} s" for w in tuned["walls"])
+          + f"; efficiency of a warm run {times[1] / (2 * min(tuned['walls'][1:])):.2f}; peak RSS of a worker "
+          f"{tuned['rss_mib']:.0f} MiB")
     first = fc["first_s"] - fc["again_s"]
     print(f"fixed cost of a run on a new 2-worker cluster (as evaluate --workers 2 starts it): cluster start "
           f"{fc['start_s']:.2f} s; on a worker, imports {fc['imports_s']:.2f} s ({fc['modules']} modules; a new "

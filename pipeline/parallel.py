@@ -10,7 +10,15 @@ and a distributed run give identical results, in the input order.
 - ``workers=N`` (default: one per core): a ``dask.distributed.LocalCluster`` of
   N single-threaded worker processes (forked on Linux: :data:`_LOCAL_WORKER_CONFIG`), started and shut
   down here;
-- ``scheduler="tcp://host:8786"``: an existing Dask cluster.
+- ``scheduler="tcp://host:8786"``: an existing Dask cluster, run as whoever started it chose. The settings of
+  the local cluster (:data:`_LOCAL_WORKER_CONFIG`) help it the same way; Dask reads them from its processes'
+  environment: ``DASK_DISTRIBUTED__WORKER__PROFILE__ENABLED=False DASK_DISTRIBUTED__ADMIN__TICK__INTERVAL=1s
+  DASK_DISTRIBUTED__ADMIN__SYSTEM_MONITOR__INTERVAL=5s DASK_DISTRIBUTED__WORKER__MEMORY__MONITOR_INTERVAL=1s
+  dask worker ...`` (and the scheduler's), with the nanny's ``MALLOC_TRIM_THRESHOLD_`` left unset in a Dask
+  config file (``distributed: {nanny: {pre-spawn-environ: {MALLOC_TRIM_THRESHOLD_: null}}}``; a ``DASK_``
+  variable cannot name it, Dask lower-cases those names).
+
+On Dask the walks are handed out largest first (:func:`longest_first`), the results still returned in input order.
 
 A task that raises (an :class:`~features.errors.EnvfuseError` for bad data in
 one walk, or any other exception, on this process or on a Dask worker, or a
@@ -31,7 +39,7 @@ from typing import Callable, Sequence
 
 from features.errors import ConfigError, EnvfuseError
 
-__all__ = ["TaskFailure", "map_walks", "default_workers", "check_scheduler", "local_worker_config"]
+__all__ = ["TaskFailure", "map_walks", "default_workers", "check_scheduler", "local_worker_config", "longest_first"]
 
 
 @dataclass(frozen=True)
@@ -53,8 +61,32 @@ def default_workers() -> int:
 _LOCAL_WORKER_CONFIG = {"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None,
                         "distributed.worker.multiprocessing-method":
                             "fork" if sys.platform.startswith("linux") else "spawn",
-                        "distributed.worker.profile.enabled": False}
-"""Three settings of the local cluster ``map_walks`` starts.
+                        "distributed.worker.profile.enabled": False,
+                        "distributed.admin.tick.interval": "1s",
+                        "distributed.admin.system-monitor.interval": "5s",
+                        "distributed.worker.memory.monitor-interval": "1s"}
+"""The settings of the local cluster ``map_walks`` starts.
+
+The three periodic callbacks slowed (Dask's defaults: 20 ms, 500 ms, 100 ms): every Dask server runs them on its
+event loop, the scheduler and the two nannies in this process, each worker beside its task thread. Each call
+wakes a thread that must take the GIL: on a worker it takes it from the task (the task thread gives it up at
+the next switch interval and waits to get it back), and in this process it takes CPU from one of the two cores
+the workers run on. What they are for, and why a slower pace loses nothing here: the *tick* only measures how
+late the event loop runs (an INFO log line after 3 s of delay, and the dashboard's and Prometheus' latency
+figures; ``distributed.admin.tick.limit`` is unchanged, so a blocked loop is still noticed within a second of
+the limit); the *system monitor* samples CPU, memory, disk and network counters for the dashboard (none is
+served, ``dashboard_address=None``); the *memory monitor* of each worker and nanny checks the worker's memory
+against its pause (80 %) and terminate (95 %) thresholds of its limit (total memory / workers: 12 GiB each on
+this 24 GiB VM against a walk's few hundred MiB): checked once a second, a worker still cannot run away from
+it. Measured (``bench/bench_pipeline.py`` section 3's ``dask_overhead`` and /proc per-thread counters; 2026-12-02,
+2-core VM shared with other jobs, load 4.2-5.9; a 2-worker run of the 16 evaluations of 60 s walks, main and this
+setting alternated): the CPU of every process of the run outside the tasks' own threads, 3.6-7.0 s a run,
+72-111 ms per second of run, with Dask's pace; 0.7-1.6 s, 19-26 ms per second, with this one (on a 17 s run on a
+quiet machine: ~1.5 s -> ~0.4 s of the 34 s the two cores give); the task threads' voluntary context switches
+(each a wait for the GIL) 58-109 per second -> 6-11; ``envfuse evaluate --workers 2`` as a user runs it, CPU of
+all its processes 43.4 / 47.9 s -> 41.1 / 41.2 s (``--workers 1``: 35.9-37.4 s). A CPU-bound pure-Python task
+alone on the cluster, per second: this process 33 -> 7.5 ms CPU, each worker's event loop 15 -> 3.4 ms and
+180 -> 15 wake-ups (of the 63 ms in all, the tick 29, the memory monitors 11, the system monitors 9).
 
 The statistical profiler off: each Dask worker samples its task thread's stack every 10 ms for the dashboard's
 profile page (``distributed.worker.profile``), which takes the GIL from the task each time; no dashboard is
@@ -80,17 +112,30 @@ threads at that moment wait on queues and sockets (Dask's event loop, its watch 
 model was trained in this process, which no worker calls: the fusion model runs on numpy and numba); numba is
 used without its parallel threading layer and gtsam is built without TBB. Elsewhere (macOS, Windows) fork is
 unsafe or absent and the workers are spawned. A user's own cluster (``--scheduler``) starts its workers its
-own way; they keep their imports and model across runs. A user's own choice of Dask's start method stands
-(:func:`local_worker_config`)."""
+own way; they keep their imports and model across runs.
+
+A setting (other than a worker's environment variables) the user chose for Dask through its environment
+variable (``DASK_DISTRIBUTED__ADMIN__TICK__INTERVAL=20ms``, ``DASK_DISTRIBUTED__WORKER__MULTIPROCESSING_METHOD=spawn``)
+stands (:func:`local_worker_config`)."""
+
+
+def _dask_env_name(key: str) -> str:
+    """The environment variable through which Dask reads the setting ``key`` (``distributed.admin.tick.interval``
+    -> ``DASK_DISTRIBUTED__ADMIN__TICK__INTERVAL``; Dask treats ``-`` and ``_`` alike)."""
+    return "DASK_" + "__".join(part.upper().replace("-", "_") for part in key.split("."))
 
 
 def local_worker_config() -> dict:
-    """The Dask settings a local cluster of ``map_walks`` is started with (:data:`_LOCAL_WORKER_CONFIG`); a
-    start method the user chose for Dask (``DASK_DISTRIBUTED__WORKER__MULTIPROCESSING_METHOD=spawn``) stands."""
-    cfg = dict(_LOCAL_WORKER_CONFIG)
-    if os.environ.get("DASK_DISTRIBUTED__WORKER__MULTIPROCESSING_METHOD"):
-        del cfg["distributed.worker.multiprocessing-method"]
-    return cfg
+    """The Dask settings a local cluster of ``map_walks`` is started with (:data:`_LOCAL_WORKER_CONFIG`), less
+    those the user set for Dask through its environment (``DASK_DISTRIBUTED__WORKER__MULTIPROCESSING_METHOD=spawn``):
+    theirs stand."""
+    return {k: v for k, v in _LOCAL_WORKER_CONFIG.items()
+            if k.startswith(_PRE_SPAWN) or not os.environ.get(_dask_env_name(k))}
+
+
+_PRE_SPAWN = "distributed.nanny.pre-spawn-environ."
+"""Settings of a worker's environment: Dask lower-cases the names it reads from ``DASK_...`` variables, so these
+are not set that way; a user sets the variable itself (``MALLOC_TRIM_THRESHOLD_``), which the worker inherits."""
 
 
 def _failure(walk, exc: BaseException) -> TaskFailure:
@@ -196,6 +241,31 @@ def check_scheduler(address: str, timeout_s: float = 3.0) -> str:
     return f"{scheme}://{m.group(2)}:{port}"
 
 
+def _bytes_on_disk(walk) -> int:
+    """A walk's size, what its task's time grows with: the bytes of a file, or of the files in a walk folder (its
+    audio is most of it); 0 for anything else."""
+    try:
+        if os.path.isdir(walk):
+            with os.scandir(walk) as entries:
+                return sum(e.stat().st_size for e in entries if e.is_file())
+        return os.path.getsize(walk)
+    except (OSError, TypeError, ValueError):
+        return 0
+
+
+def longest_first(walks: Sequence) -> list[int]:
+    """Indices of ``walks``, largest on disk first (ties in input order): the order their tasks are handed to the
+    workers in.
+
+    Graham's LPT rule (longest processing time first; R. L. Graham, "Bounds on multiprocessing timing
+    anomalies", SIAM J. Appl. Math. 17(2), 1969): each free worker takes the longest task left, so the shortest
+    come last and the run ends within one short task of the other workers, where input order could leave one
+    worker on an 8-hour walk while the others idle. Only the order of work changes: each result is a function of
+    its walk alone and is put back in its input place."""
+    sizes = [_bytes_on_disk(w) for w in walks]
+    return sorted(range(len(walks)), key=lambda i: -sizes[i])
+
+
 def _map_dask(func, walks, args, workers, scheduler, bar) -> list:
     import logging
 
@@ -216,9 +286,12 @@ def _map_dask(func, walks, args, workers, scheduler, bar) -> list:
         except (OSError, TimeoutError, ValueError) as exc:
             raise ConfigError(f"--scheduler {scheduler}: cannot connect ({exc})") from None
     try:
-        futures = [client.submit(_guarded, func, w, *args, key=f"walk-{i}-{os.path.basename(str(w))}", pure=False)
-                   for i, w in enumerate(walks)]
-        index = {f.key: i for i, f in enumerate(futures)}
+        # longest first (LPT); the priority makes the scheduler hand them out in that order, not only receive them
+        order = longest_first(walks)
+        futures = [client.submit(_guarded, func, walks[i], *args, key=f"walk-{i}-{os.path.basename(str(walks[i]))}",
+                                 pure=False, priority=len(walks) - rank)
+                   for rank, i in enumerate(order)]
+        index = {f.key: i for f, i in zip(futures, order)}
         out = [None] * len(walks)
         for fut in as_completed(futures):
             i = index[fut.key]

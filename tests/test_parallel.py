@@ -96,3 +96,94 @@ def test_local_workers_keep_mallocs_dynamic_mmap_threshold(monkeypatch):
     assert map_walks(os.getenv, names, workers=2, progress=False) == [None, None]
     monkeypatch.setenv("MALLOC_TRIM_THRESHOLD_", "131072")
     assert map_walks(os.getenv, names, workers=2, progress=False) == ["131072", "131072"]
+
+
+def test_longest_first_orders_by_bytes_on_disk_ties_in_input_order(tmp_path):
+    """Graham's LPT rule on the walks' sizes: files by their bytes, folders by the bytes of the files in them
+    (sizes worked out by hand), anything that is not on disk as 0; equal sizes keep their input order."""
+    from pipeline.parallel import longest_first
+
+    small = tmp_path / "small.bin"
+    small.write_bytes(b"x" * 10)
+    folder = tmp_path / "walk"
+    folder.mkdir()
+    (folder / "audio.wav").write_bytes(b"a" * 300)
+    (folder / "gnss.nmea").write_bytes(b"g" * 50)            # folder: 350 bytes
+    (folder / "sub").mkdir()                                 # a sub-folder adds nothing
+    big = tmp_path / "big.bin"
+    big.write_bytes(b"y" * 400)
+    twin = tmp_path / "twin.bin"
+    twin.write_bytes(b"z" * 10)
+    walks = [small, "not-a-walk", folder, big, twin]
+    assert longest_first(walks) == [3, 2, 0, 4, 1]           # 400, 350, 10, 10 (input order), 0
+    assert longest_first([]) == []
+
+
+def started_task(walk):
+    """The walk's name, this worker's process id and when the task started (for the order of work)."""
+    import os
+    import time
+
+    t0 = time.time()
+    time.sleep(0.3)
+    return Path(walk).name, os.getpid(), t0
+
+
+def test_dask_hands_out_the_largest_walks_first_and_returns_results_in_input_order(tmp_path):
+    """Six walks given smallest first: on two workers each worker takes its walks largest first and the largest
+    walk starts before the smallest, yet the results come back in the input order."""
+    walks = []
+    for i in range(6):
+        p = tmp_path / f"w{i}.bin"
+        p.write_bytes(b"x" * (1000 * (i + 1)))
+        walks.append(p)
+    out = map_walks(started_task, walks, workers=2, progress=False)
+    assert [name for name, _, _ in out] == [w.name for w in walks]          # input order
+    size = {w.name: w.stat().st_size for w in walks}
+    for pid in {p for _, p, _ in out}:
+        mine = sorted((t0, name) for name, p, t0 in out if p == pid)
+        assert [size[n] for _, n in mine] == sorted((size[n] for _, n in mine), reverse=True)
+    start = {name: t0 for name, _, t0 in out}
+    assert start["w5.bin"] < start["w0.bin"]
+
+
+def _periodic_ms():
+    """On a Dask worker: its event loop's periodic callbacks (ms) and its nanny's memory monitor interval."""
+    from distributed import get_worker
+
+    pcs = get_worker().periodic_callbacks
+    return {name: pcs[name].callback_time for name in ("tick", "monitor", "memory_monitor")}
+
+
+def test_local_workers_run_dask_s_periodic_callbacks_at_the_slower_pace():
+    """The tick, the system monitor and the memory monitor at 1 s, 5 s and 1 s (Dask's 20 ms, 500 ms, 100 ms):
+    checked where they run, on the workers' event loops (pipeline.parallel._LOCAL_WORKER_CONFIG)."""
+    out = map_walks(_worker_callbacks_task, ["a", "b"], workers=2, progress=False)
+    assert out == [{"tick": 1000.0, "monitor": 5000.0, "memory_monitor": 1000.0}] * 2
+
+
+def _worker_callbacks_task(walk):
+    return _periodic_ms()
+
+
+def test_a_dask_setting_the_user_chose_in_the_environment_stands(monkeypatch):
+    """Each key of the local cluster's settings is left out when its DASK_... variable is set, the name being the
+    one Dask itself reads (checked against dask.config.collect_env)."""
+    import dask.config
+
+    from pipeline.parallel import _LOCAL_WORKER_CONFIG, _dask_env_name, local_worker_config
+
+    for key in [k for k in _LOCAL_WORKER_CONFIG if "pre-spawn-environ" not in k]:
+        parsed = dask.config.collect_env({_dask_env_name(key): "7"})
+        node = parsed
+        for part in key.split("."):
+            node = node[dask.config.canonical_name(part, node)]
+        assert node == 7
+    monkeypatch.delenv("DASK_DISTRIBUTED__ADMIN__TICK__INTERVAL", raising=False)
+    assert local_worker_config()["distributed.admin.tick.interval"] == "1s"
+    monkeypatch.setenv("DASK_DISTRIBUTED__ADMIN__TICK__INTERVAL", "20ms")
+    cfg = local_worker_config()
+    assert "distributed.admin.tick.interval" not in cfg and cfg["distributed.worker.memory.monitor-interval"] == "1s"
+    # a worker's environment variable is set as itself (MALLOC_TRIM_THRESHOLD_, test above), never through DASK_...
+    monkeypatch.setenv("DASK_DISTRIBUTED__NANNY__PRE_SPAWN_ENVIRON__MALLOC_TRIM_THRESHOLD_", "1")
+    assert local_worker_config()["distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_"] is None
