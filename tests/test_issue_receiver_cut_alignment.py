@@ -132,3 +132,48 @@ def test_a_negative_or_fractional_first_sample_is_refused(walk_dir):
     for bad in (-1, 2.5):
         with pytest.raises(ConfigError, match="first_sample"):
             analyse_audio(walk.path("audio"), site, timing_from_walk(walk, site), first_sample=bad)
+
+
+
+def test_feature_batches_do_not_change_the_fixes(site_dir, tmp_path_factory, monkeypatch):
+    """The receiver computes CIR features for 32 frames at a time and then releases them; an acquisition fix is
+    reported only once the next frame confirms it, and is handed to the frame before. Frames released in batches
+    of 1, 2 or 7 give the same fixes and detections as one batch of the whole walk (the reference: nothing
+    released before the end). Before, a batch's last frame was released before the next frame could hand it its
+    confirmed acquisition fix, so every batch boundary falling there lost a fix (with batches of 1, all three of
+    this walk's), and a long walk's cut, whose batches start at its own first frame, lost other fixes than the
+    whole walk."""
+    import features.acoustic.detection as detection
+    from features.acoustic.tracking import ClockPositionTracker
+    from simulation.walk import simulate_walk
+
+    walk = load_walk(simulate_walk(site_dir, tmp_path_factory.mktemp("walks") / "w1", seed=1, duration_s=60.0))
+    site = walk.load_site()
+    timing = timing_from_walk(walk, site)
+    pos = PositionConfig(max_clock_offset_s=timing.start_uncertainty_s + 0.05, motion_speed_m_s=1.4)
+    confirmed = []
+    take = ClockPositionTracker.take_confirmed_tentative
+
+    def counted(self):
+        fix = take(self)
+        if fix is not None:
+            confirmed.append(fix.t_s)
+        return fix
+
+    monkeypatch.setattr(ClockPositionTracker, "take_confirmed_tentative", counted)
+
+    def read(batch):
+        monkeypatch.setattr(detection, "_FEATURE_BATCH_FRAMES", batch)
+        a = analyse_audio(walk.path("audio"), site, timing, positions=pos, keep_frames=True)
+        fixes = [(f.t_s, f.east_m, f.north_m, f.clock_offset_s, f.used_ids) for f in a.fixes]
+        return fixes, _detections(a.frames, -10**9), [f.frame for f in a.frames]
+
+    reference = read(10**9)
+    assert len(confirmed) >= 2                              # acquisition fixes confirmed a frame later
+    assert all(any(f[0] == t for f in reference[0]) for t in confirmed)
+    assert len(reference[0]) >= 20
+    for batch in (1, 2, 7):
+        got = read(batch)
+        assert got[2] == reference[2]                       # every frame once, in order
+        assert got[0] == reference[0], f"batches of {batch}: {len(got[0])} fixes, whole {len(reference[0])}"
+        assert got[1] == reference[1]

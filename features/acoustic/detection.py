@@ -763,7 +763,7 @@ class _FrameDetector:
                 held[-1][3] = earlier          # the acquisition fix this frame confirmed
             held.append([k, frame_start, detections, fix, tracking, kept])
             if len(held) >= _FEATURE_BATCH_FRAMES:
-                yield from self.release()
+                yield from self.release(keep_last=True)
             next_lo = int(math.floor((frame_start + frame_s - u - 0.05 - timing.start_s) * fs))
             stream.trim(next_lo - self.history - self.lead - 64)
             k += 1
@@ -793,12 +793,18 @@ class _FrameDetector:
         found = dict(zip(map(id, windows), self.candidates(windows, gammas)))
         return acquisition_windows(windows, lambda w: found[id(w)], self.tracker, self.timing, self.fs, self.lead)
 
-    def release(self) -> Iterator[FrameResult]:
-        """Compute the held frames' features and yield them."""
-        self.flush_features(self.held)
-        for k_, start_, dets_, fix_, tracking_, kept_ in self.held:
+    def release(self, keep_last: bool = False) -> Iterator[FrameResult]:
+        """Compute the held frames' features and yield the frames; ``keep_last``: all but the last, which stays
+        held (its features computed) for the next frame to hand it the acquisition fix that frame may confirm
+        (:meth:`ClockPositionTracker.take_confirmed_tentative`). Released with the rest, a batch's last frame lost
+        that fix whenever the confirmation came in the next batch's first frame: where the 32-frame batches fall
+        depends on the read's first frame, so a long walk's cut and the whole walk lost different fixes."""
+        held = self.held
+        self.flush_features(held)
+        n = len(held) - 1 if keep_last else len(held)
+        for k_, start_, dets_, fix_, tracking_, kept_ in held[:n]:
             yield FrameResult(k_, start_, tuple(sorted(dets_, key=lambda d: d.tx_s)), fix_, tracking_, kept_)
-        self.held.clear()
+        del held[:n]
 
     # -- detect ---------------------------------------------------------------------------------
     def noise_scales(self, windows: list[SearchWindow]) -> np.ndarray:
