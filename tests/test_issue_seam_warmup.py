@@ -86,6 +86,49 @@ def test_gnss_features_of_a_resumed_cut_are_the_whole_logs_from_the_resumption_o
     assert np.array_equal(gnss_features(cut, resume=swapped)["fluct_per_s"], resumed["fluct_per_s"])
 
 
+
+def _listed(sky: SkyArrays, lo: float, hi: float) -> SkyArrays:
+    """The epochs of walk times [lo, hi) with only the satellites they list (a receiver's GSV naming tracked
+    satellites only: a satellite blocked through the whole cut is not a column of it)."""
+    k = (sky.t_s >= lo) & (sky.t_s < hi)
+    cols = np.flatnonzero(np.isfinite(sky.cn0_dbhz[k]).any(axis=0))
+    return SkyArrays(sky.t_s[k], tuple(sky.sat_keys[j] for j in cols), sky.el_deg[k][:, cols],
+                     sky.az_deg[k][:, cols], sky.cn0_dbhz[k][:, cols], sky.in_view[k][:, cols],
+                     sky.used[k][:, cols], sky.hdop[k], sky.interval_s)
+
+
+def test_a_satellite_absent_from_a_whole_cut_keeps_its_memory():
+    """1 Hz, 300 s; G1 flickers 45/46 (never marked), G2 rises 40 → 44 over rows 0–9, is blocked (not listed)
+    from 10 to 199 s, comes back at 44, dips to 42 at row 205 and holds 43 after. By hand, the whole log marks
+    G2 at 204 (it rose into 44 before the gap, falls after: swing 44 − 40 = 4) and 205 (swing 44 − 42 = 2).
+    Read in cuts [0, 110), [90, 200), [180, 300) with the memory handed on at 100 s and 190 s, the middle cut
+    lists no G2: the state it hands on must still hold G2's memory (last 44, rising, reference 40), so the last
+    cut marks 204 too and its ``fluct_per_s`` from 191 s on is the whole log's. Before, G2 was dropped from
+    that state and the last cut marked 205 only."""
+    t = np.arange(300, dtype=float)
+    g1 = 45.0 + (np.arange(300) % 2)
+    g2 = np.full(300, np.nan)
+    g2[:10] = np.linspace(40.0, 44.0, 10)
+    g2[200:], g2[205], g2[206:] = 44.0, 42.0, 43.0
+    whole = _sky(t, np.c_[g1, g2])
+    thr = GnssFeatureConfig().fluct_threshold_dbhz
+    marks = fluctuation_extrema(whole.cn0_dbhz, np.isfinite(whole.cn0_dbhz), thr)
+    assert np.flatnonzero(marks[:, 1]).tolist() == [204, 205] and not marks[:, 0].any()
+    c0, c1, c2 = _listed(whole, 0, 110), _listed(whole, 90, 200), _listed(whole, 180, 300)
+    assert c1.sat_keys == (("GPS", 1),)
+    s1 = fluctuation_state(c0, 100.0)
+    s2 = fluctuation_state(c1, 190.0, resume=s1)
+    g2_memory = [np.asarray(a)[0] for a in s2.columns([("GPS", 2)])]
+    assert g2_memory[:3] == [44.0, 1.0, 40.0] and not g2_memory[3]       # by hand: as before the gap, untracked
+    cut_marks = fluctuation_extrema(np.where(np.isfinite(c2.cn0_dbhz), c2.cn0_dbhz, np.nan),
+                                    np.isfinite(c2.cn0_dbhz), thr, s2.columns(c2.sat_keys))
+    rows = c2.t_s[cut_marks[:, c2.sat_keys.index(("GPS", 2))]].astype(int).tolist()
+    assert [r for r in rows if r >= 190] == [204, 205]
+    fw, fc = gnss_features(whole), gnss_features(c2, resume=s2)
+    w, c = fw["t_s"] >= 191.0, fc["t_s"] >= 191.0
+    assert np.array_equal(fw["t_s"][w], fc["t_s"][c]) and np.array_equal(fw["fluct_per_s"][w], fc["fluct_per_s"][c])
+
+
 def test_random_logs_cut_anywhere_mark_the_whole_logs_extrema():
     """300 random integer C/N0 logs (random walks, plateaus, untracked epochs), each cut in up to four pieces,
     every piece resumed from the memory the previous one reached at its end: the marks equal the whole log's

@@ -470,13 +470,26 @@ def fluctuation_state(sky: SkyArrays, t_s: float, config: GnssFeatureConfig | No
     cn0 = np.where(tracked, sky.cn0_dbhz, np.nan)
     thr = config.fluct_threshold_dbhz
     i = _resume_row(sky.t_s, t_s)
+    keys = tuple(tuple(k) for k in sky.sat_keys)
     if resume is None:
         memory = _extrema_memory(cn0, tracked, thr, i)
     else:
         b = min(_resume_row(sky.t_s, resume.t_s), i)
         memory = _extrema_memory(cn0[b:], tracked[b:], thr, i - b, resume.columns(sky.sat_keys))
+        # A satellite of the handed state that no epoch of this cut lists (blocked for longer than a cut, or a
+        # receiver listing only tracked satellites): the whole log's column keeps its memory through the gap
+        # (its last C/N0 bridged, its direction and extremum as they were), untracked once any epoch passed.
+        have = set(keys)
+        gone = [j for j, k in enumerate(resume.sat_keys) if tuple(k) not in have]
+        if gone:
+            g = np.array(gone, dtype=np.intp)
+            was = np.asarray(resume.tracked, bool)[g] if i == b else np.zeros(len(g), bool)
+            memory = tuple(np.concatenate([a, extra]) for a, extra in zip(memory, (
+                np.asarray(resume.last_dbhz, float)[g], np.asarray(resume.direction, float)[g],
+                np.asarray(resume.extremum_dbhz, float)[g], was)))
+            keys = keys + tuple(tuple(resume.sat_keys[j]) for j in gone)
     at = float(sky.t_s[i]) if i < sky.n_epochs else float(t_s)
-    return FluctuationState(at, tuple(sky.sat_keys), *memory)
+    return FluctuationState(at, keys, *memory)
 
 
 def gnss_features(sky: SkyArrays, config: GnssFeatureConfig | None = None,
