@@ -225,5 +225,6 @@ def test_warm_up_by_method():
     assert warmup_for(("adaptive_blind+lag",)) == warmup_for(("pdr", "imm+rts", "kf", "uwb")) == 20.0
     assert warmup_for(("kf", "fg_isam2")) == warmup_for(("foot_ins_fkf",)) == warmup_for(None) == 120.0
     assert warmup_for(("uwb_aoa_pdr+lag", "uwb_aoa_pdr_env", "uwb_aoa_pdr_blind+rts")) == 20.0
-    fresh = set(GRAPH_METHODS) | {"foot_ins_fkf", "ekf_rtk_pdr"}
+    assert warmup_for(("adaptive_correction",)) == 120.0    # its BP inputs reach back to the last fix
+    fresh = set(GRAPH_METHODS) | {"foot_ins_fkf", "ekf_rtk_pdr", "adaptive_correction"}
     assert set(method_names()) <= RESUMED_METHODS | fresh and not RESUMED_METHODS & fresh

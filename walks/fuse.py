@@ -31,14 +31,16 @@ __all__ = ["FusedWalk", "fuse_walk", "check_site", "check_windows", "walk_name",
 
 RESUMED_METHODS = frozenset((
     "gnss", "acoustic", "uwb", "pdr", "kf", "kf_quality", "kf_map", "aekf", "imm", "adaptive", "adaptive_blind",
-    "adaptive_correction", "adaptive_nobp", "adaptive_nobp_blind", "uwb_aoa_pdr", "uwb_aoa_pdr_env",
-    "uwb_aoa_pdr_blind"))
+    "adaptive_nobp", "adaptive_nobp_blind", "uwb_aoa_pdr", "uwb_aoa_pdr_env", "uwb_aoa_pdr_blind"))
 """Methods whose track at a long walk's segment is the whole walk's with a short warm-up
 (:data:`walks.segments.WARMUP_S`): the fixes' own tracks (``gnss``, ``acoustic``, ``uwb``: no state), ``pdr``, the
 event filters and the UWB/PDR filters, which resume what the previous segment handed over
 (:meth:`FusedWalk.handover`). Any other takes :data:`walks.segments.FRESH_WARMUP_S`: the factor graphs ``fg_*``
 and ``ekf_rtk_pdr`` (:mod:`walks.graph_methods`) and ``foot_ins_fkf`` start afresh on each cut; a method
-registered later, too. (The UWB/PDR filters took the long warm-up until a resumed run fused its cut's first UWB
+registered later, too; and ``adaptive_correction``, whose base filter resumes but whose BP correction reads the
+filter's last update however long ago (its gain, innovation and the time since it, :func:`models.bp.bp_inputs`) and
+whose innovation guard the last ten fixes (:func:`models.bp._innovation_off`), none handed over: after 20 s without
+a fix before a seam the cut would feed it other inputs than the whole walk does. (The UWB/PDR filters took the long warm-up until a resumed run fused its cut's first UWB
 fix and the steps before it, :meth:`models.uwb_pdr.UwbPdrFilter.run`: a 600 s walk of seed 21 standing 37-218 s
 in a UWB gap, 60 s segments, 20 s of warm-up: ``uwb_aoa_pdr`` 0.056 → 2.8e-7 m from the whole walk's,
 ``uwb_aoa_pdr_env`` 0.026 → 5.5e-7 m, ``uwb_aoa_pdr_blind`` 0.019 → 5.1e-7 m, ``bench/seam_identity.py``.)"""

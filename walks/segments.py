@@ -181,9 +181,10 @@ __all__ = ["SEGMENT_S", "WARMUP_S", "FRESH_WARMUP_S", "TAIL_S", "RESUME_AFTER_S"
 
 SEGMENT_S = 300.0
 """Walk time each segment owns by default, s: with the filters and readers resumed across the seams they cost
-nothing measurable, so the segment is short and the peak memory of a long walk that of one cut of 430 s (up to
-462 s since the cuts start on the acoustic reader's 32 s block grid): a 10-minute walk (two segments) and a
-2-hour one peak within 3 % of each other (``bench/bench_pipeline.py --memory-only``, measured before the grid)."""
+nothing measurable, so the segment is short and the peak memory of a long walk that of one cut: 300 s, the
+warm-up (:data:`WARMUP_S`, or :data:`FRESH_WARMUP_S`), up to 1 s of the audio grid and :data:`TAIL_S` (331 s, or
+431 s): a 10-minute walk (two segments) and an 8-hour one peak within 1 % of each other
+(``bench/bench_pipeline.py --memory-only``)."""
 
 WARMUP_S = 20.0
 """Walk time a cut reaches before its segment when every method fused resumes what the previous segment handed
@@ -196,8 +197,9 @@ on it (:class:`features.gnss.features.FluctuationState`, now handed over); measu
 
 FRESH_WARMUP_S = 120.0
 """Walk time a cut reaches before its segment when a method fused starts afresh on each cut (nothing handed
-over: the factor graphs ``fg_*``, ``ekf_rtk_pdr``, ``foot_ins_fkf``; :data:`walks.fuse.RESUMED_METHODS`), s:
-such a method converges within it (``walks.fuse.warmup_for``)."""
+over: the factor graphs ``fg_*``, ``ekf_rtk_pdr``, ``foot_ins_fkf``; ``adaptive_correction``, whose BP inputs
+reach back to the last fix; :data:`walks.fuse.RESUMED_METHODS`), s: such a method converges within it
+(``walks.fuse.warmup_for``)."""
 
 TAIL_S = 10.0
 """Walk time a cut reaches after its segment, s: ≥ the fixed-lag smoother's lag (3 s), a step split at the

@@ -9,7 +9,9 @@ Detection (any carrying position: waist, hand, pockets, bag, armband, neck)
     3. Peaks (``scipy.signal.find_peaks``) at least ``min_interval_s`` apart
        whose prominence exceeds both an absolute floor and a multiple of the
        local RMS of the detrended signal (amplitude constraint, adaptive to
-       the carrying position).
+       the carrying position). The prominence is taken within ``max_interval_s``
+       either side of the peak (``wlen``), so a step is judged by its own
+       cycle, never by samples beyond a stop (a long walk's cut reads the same).
     4. Count regulation: peaks are grouped into bouts in which consecutive
        peaks are at most ``max_interval_s`` apart, and bouts of fewer than
        ``min_bout_steps`` peaks are discarded (Zhao 2010, "Full-featured
@@ -177,8 +179,12 @@ def detect_steps(acc_m_s2: np.ndarray, rate_hz: float, t_s: np.ndarray | None = 
     # a running mean (scipy keeps a running sum) of squares can come out a round-off below zero where the signal
     # falls from walking to an IMU held perfectly still: it is zero there, not NaN (which dropped any peak)
     rms = np.sqrt(np.maximum(ndimage.uniform_filter1d(hp * hp, wr, mode="nearest"), 0.0))
+    # prominence judged within one longest step interval either side (``wlen``): without it a peak's bases were
+    # sought out to the next higher peak, across a stop of any length, so whether the last step before a stop
+    # (the first after one) counted depended on samples minutes away, and on where a long walk was cut
     peaks, props = signal.find_peaks(hp, distance=max(int(round(config.min_interval_s * rate_hz)), 1),
-                                     prominence=config.min_prominence_m_s2)
+                                     prominence=config.min_prominence_m_s2,
+                                     wlen=2 * max(int(round(config.max_interval_s * rate_hz)), 1) + 1)
     keep = props["prominences"] >= config.prominence_rms_factor * rms[peaks]
     if valid is not None:
         keep &= np.asarray(valid, bool)[peaks]
