@@ -228,3 +228,25 @@ def test_warm_up_by_method():
     assert warmup_for(("adaptive_correction",)) == 120.0    # its BP inputs reach back to the last fix
     fresh = set(GRAPH_METHODS) | {"foot_ins_fkf", "ekf_rtk_pdr", "adaptive_correction"}
     assert set(method_names()) <= RESUMED_METHODS | fresh and not RESUMED_METHODS & fresh
+
+
+def test_steps_before_a_stop_do_not_depend_on_what_follows_it(site_dir, tmp_path):
+    """A 600 s walk (IMU only, seed 5 on the tests' site) stands from ~371 s to ~477 s. Its steps read from the
+    whole file and from the file cut at 430 s (inside the stop, as a long walk's cut ends) are the same up to
+    420 s. Before, a step's prominence was measured against bases sought out to the next higher peak, across the
+    stop: the last step before it (371.33 s) counted in the whole walk (its right base at 477 s) and not in the
+    cut, and ``pdr`` was 0.48 m off from there at 60 s segments."""
+    from features.imu.reader import read_imu_csv
+    from features.imu.steps import detect_steps
+    from simulation.walk import simulate_walk
+
+    walk = simulate_walk(site_dir, tmp_path / "w5", seed=5, duration_s=600.0,
+                         writers=("simulation.imu.stream:write_imu",), progress=False)
+    true_steps = np.loadtxt(walk / "truth_steps.csv", delimiter=",", skiprows=1, ndmin=2)[:, 0]
+    assert not np.any((true_steps > 373.0) & (true_steps < 476.0))          # the stop the cut ends in
+    imu = read_imu_csv(walk / "imu.csv")
+    whole = detect_steps(imu.acc_m_s2, imu.rate_hz, imu.t_s, imu.valid)
+    k = imu.t_s < 430.0
+    cut = detect_steps(imu.acc_m_s2[k], imu.rate_hz, imu.t_s[k], imu.valid[k])
+    a, b = whole.t_s[whole.t_s < 420.0], cut.t_s[cut.t_s < 420.0]
+    assert len(a) > 250 and np.array_equal(a, b)
