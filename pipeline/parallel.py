@@ -276,10 +276,12 @@ def _map_dask(func, walks, args, workers, scheduler, bar) -> list:
     cluster = None
     if scheduler is None:
         n = workers or default_workers()
-        # the local workers' own log: CRITICAL only. At shutdown a worker's heartbeat can meet the scheduler's
-        # closed socket and Dask logs that at ERROR with a traceback (seen once in ~20 cluster shutdowns of
-        # bench/bench_pipeline.py --evaluate-only); a task's error or a worker's death reaches this process as
-        # the future's exception and is reported as a TaskFailure, so nothing a user needs goes unsaid
+        # the local cluster's log: CRITICAL only, its workers' and (silence_logs sets the "distributed" loggers'
+        # level in this process too) its scheduler's and nannies'. At shutdown a worker's heartbeat can meet the
+        # scheduler's closed socket and Dask logs that at ERROR with a traceback (seen once in ~20 cluster
+        # shutdowns of bench/bench_pipeline.py --evaluate-only); a task's error or a worker's death (killed for
+        # memory, crashed) reaches this process as the future's exception and is reported as a TaskFailure, so
+        # nothing a user needs goes unsaid
         with dask.config.set(local_worker_config()):
             cluster = LocalCluster(n_workers=min(n, len(walks)), threads_per_worker=1, processes=True,
                                    dashboard_address=None, silence_logs=logging.CRITICAL)
