@@ -70,8 +70,8 @@ def register_top(sub) -> None:
     p.add_argument("--segment-s", type=bounded(MIN_SEGMENT_S, MAX_SEGMENT_S, "s"), default=SEGMENT_S,
                    help=f"a longer walk is fused in segments of this much walk time, each with {WARMUP_S:g} s of "
                         f"warm-up ({FRESH_WARMUP_S:g} s for fg_*, ekf_rtk_pdr and foot_ins_fkf, which start afresh "
-                        f"on each, and adaptive_correction), so memory does not grow with the walk (default {SEGMENT_S:g}, "
-                        f"{MIN_SEGMENT_S:g} to {MAX_SEGMENT_S:g}; walks.segments)")
+                        f"on each, and adaptive_correction), so memory does not grow with the walk (default "
+                        f"{SEGMENT_S:g}, {MIN_SEGMENT_S:g} to {MAX_SEGMENT_S:g}; walks.segments)")
     p.set_defaults(func=_run)
 
     p = sub.add_parser(
