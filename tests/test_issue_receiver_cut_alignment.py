@@ -177,3 +177,66 @@ def test_feature_batches_do_not_change_the_fixes(site_dir, tmp_path_factory, mon
         assert got[2] == reference[2]                       # every frame once, in order
         assert got[0] == reference[0], f"batches of {batch}: {len(got[0])} fixes, whole {len(reference[0])}"
         assert got[1] == reference[1]
+
+
+def test_a_resumed_cut_places_chirps_in_the_whole_walks_windows(walk_dir, whole_and_cut, tmp_path):
+    """The feature windows (CIR statistics, chirp counts, SNR) of a cut on the 1 s window grid (at 20 s, as a long
+    walk's cuts lie), from the resumed frame on, are the whole run's, bit for bit: a chirp goes to a window by its
+    arrival less the latest fix's clock offset, and the cut resumes that offset with the receiver
+    (``ReceiverState.window_clock_s``) instead of taking its own warm-up's (no fix yet: 0). On this walk a fix
+    follows the resumption at once, so the windows agreed before that too; the stand-in detector below checks
+    the resumed offset where no fix follows."""
+    whole, _ = whole_and_cut
+    walk = load_walk(walk_dir)
+    site = walk.load_site()
+    timing = timing_from_walk(walk, site)
+    pos = PositionConfig(max_clock_offset_s=timing.start_uncertainty_s + 0.05, motion_speed_m_s=1.4)
+    x, _ = sf.read(str(walk.path("audio")), dtype="int16")
+    sf.write(tmp_path / "audio.wav", x[20 * FS:], FS, subtype="PCM_16")
+    cut = analyse_audio(tmp_path / "audio.wav", site, timing, positions=pos, resume=whole.receiver_state,
+                        first_sample=20 * FS)
+    assert whole.receiver_state.window_clock_s != 0.0          # a clock offset was known at the resumption
+    t0 = RESUME_S + 2.0                                          # windows holding nothing before the resumption
+    a = [r for r in whole.rows if r["t_s"] >= t0 and r["t_s"] <= cut.rows[-1]["t_s"]]
+    b = [r for r in cut.rows if r["t_s"] >= t0]
+    assert len(a) >= 20 and len(a) == len(b)
+    for ra, rb in zip(a, b):
+        assert ra.keys() == rb.keys()
+        for key in ra:
+            assert ra[key] == rb[key] or (ra[key] != ra[key] and rb[key] != rb[key]), (ra["t_s"], key)
+
+
+def test_window_clock_is_resumed_with_the_receiver(walk_dir, monkeypatch):
+    """By hand, with a stand-in detector (frames of 1 s; the windows 2 s long, 1 s apart): the whole run's latest
+    fix before frame 5 put the clock 0.3 s ahead (``window_clock_s`` = 0.3 kept at frame 5); the cut, resumed
+    at frame 5, had its own warm-up fix at frame 3 with offset 0, and frames 5-7 hold one chirp each, stated
+    at 5.2, 6.2 and 7.2 s, but no fix. Placed by the resumed 0.3 s they arrive at 4.9, 5.9 and 6.9 s true time:
+    one chirp in each of hops 4, 5 and 6, so the windows [4, 6), [5, 7), [6, 8) count 2, 2 and 1. Placed by
+    the cut's 0, hops 5, 6, 7: the window [4, 6) would count 1 and [7, 9) 1."""
+    import dataclasses
+    import types
+
+    import features.acoustic.features as features
+    from features.acoustic.detection import ChirpDetection, FrameResult
+    from features.acoustic.tracking import ReceiverState
+
+    walk = load_walk(walk_dir)
+    site = walk.load_site()
+    timing = timing_from_walk(walk, site)
+    fix0 = types.SimpleNamespace(clock_offset_s=0.0)
+    chirp = np.full(len(features.FEATURE_NAMES), 1.0)
+
+    def fake_detect_frames(path, site, timing_, detector, stats, positions, resume, keep_state_from_s,
+                           first_sample):
+        stats.duration_s = 10.0
+        stats.n_samples, stats.n_clipped, stats.sum_sq = [4800] * 100, [0] * 100, [1.0] * 100
+        for k in range(3, 10):
+            dets = (ChirpDetection(k, "B1", k + 0.1, k + 0.2 - timing_.start_s, 20.0, chirp, True),) \
+                if 5 <= k <= 7 else ()
+            yield FrameResult(k, float(k), dets, fix0 if k == 3 else None, False)
+
+    monkeypatch.setattr(features, "detect_frames", fake_detect_frames)
+    resume = ReceiverState(5, None, window_clock_s=0.3)
+    a = features.analyse_audio(walk.path("audio"), site, dataclasses.replace(timing, start_s=0.0), resume=resume)
+    counts = {round(r["t_s"]): r["n_chirps"] for r in a.rows}
+    assert [counts[t] for t in (5, 6, 7, 8)] == [2, 2, 1, 0]

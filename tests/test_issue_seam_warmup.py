@@ -250,3 +250,37 @@ def test_steps_before_a_stop_do_not_depend_on_what_follows_it(site_dir, tmp_path
     cut = detect_steps(imu.acc_m_s2[k], imu.rate_hz, imu.t_s[k], imu.valid[k])
     a, b = whole.t_s[whole.t_s < 420.0], cut.t_s[cut.t_s < 420.0]
     assert len(a) > 250 and np.array_equal(a, b)
+
+
+def test_a_bouts_first_step_does_not_depend_on_the_bouts_end(site_dir, tmp_path):
+    """A bout's first step has no step before it to time it by: it takes the median of its bout's next three
+    intervals (by hand from the step times here), in samples for its window. Cut 6 s after a bout starts (as a
+    long walk's cut ends inside a bout), the record gives that step the same duration, window and extremes as
+    the whole walk. Before, it took the median of the whole bout's intervals, which the cut did not hold."""
+    from features.imu.reader import read_imu_csv
+    from features.imu.steps import detect_steps
+    from simulation.walk import simulate_walk
+
+    walk = simulate_walk(site_dir, tmp_path / "w5", seed=5, duration_s=600.0,
+                         writers=("simulation.imu.stream:write_imu",), progress=False)
+    imu = read_imu_csv(walk / "imu.csv")
+    whole = detect_steps(imu.acc_m_s2, imu.rate_hz, imu.t_s, imu.valid)
+    starts = np.flatnonzero(whole.bout_start)
+    tested = 0
+    for i in starts:
+        nxt = starts[starts > i]
+        if (nxt[0] if len(nxt) else len(whole)) - i < 25 or whole.t_s[i] < 5.0:
+            continue                      # a long bout: its median differs from its first intervals'
+        tb = whole.t_s[i]
+        dt = np.diff(whole.t_s[i: i + 4])
+        assert whole.duration_s[i] == np.median(dt)                       # by hand: the next three intervals
+        k = imu.t_s < tb + 6.0
+        cut = detect_steps(imu.acc_m_s2[k], imu.rate_hz, imu.t_s[k], imu.valid[k])
+        j = int(np.flatnonzero(np.isclose(cut.t_s, tb, atol=1e-9))[0])
+        assert cut.bout_start[j]
+        for name in ("index", "window_start", "duration_s"):
+            assert getattr(cut, name)[j] == getattr(whole, name)[i], (tb, name)
+        for name in ("a_max_m_s2", "a_min_m_s2", "mean_change_m_s2"):     # the zero-phase filter's round-off
+            assert abs(getattr(cut, name)[j] - getattr(whole, name)[i]) <= 1e-9, (tb, name)
+        tested += 1
+    assert tested >= 3

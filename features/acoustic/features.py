@@ -28,6 +28,7 @@ as they stream past; nothing grows with the file but a few numbers per second.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import os
 from dataclasses import dataclass
@@ -165,8 +166,10 @@ def analyse_audio(path: str | os.PathLike, site: Site, timing: AudioTiming,
     first_s = timing.start_s + first_sample / detector.fs_hz      # the file's first sample
     for frame in detect_frames(path, site, timing, detector, stats, positions, resume, keep_state_from_s,
                                first_sample):
+        if resume is not None and frame.frame == resume.frame:
+            clock_s = resume.window_clock_s       # the whole recording's, not this cut's warm-up fixes'
         if frame.receiver_state is not None:
-            receiver_state = frame.receiver_state
+            receiver_state = dataclasses.replace(frame.receiver_state, window_clock_s=clock_s)
         if kept is not None:
             kept.append(frame)
         if frame.fix is not None:

@@ -436,3 +436,7 @@ class ReceiverState:
 
     frame: int
     tracker: ClockPositionTracker
+    window_clock_s: float = 0.0
+    """The clock offset :func:`features.acoustic.features.analyse_audio` places the chirps of this frame's
+    detections in feature windows with, until the frame's own fix (the latest fix's before it; 0 before any): a
+    stretch without fixes across a cut's resumption would otherwise place them by the cut's own warm-up fixes."""

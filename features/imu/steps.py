@@ -106,7 +106,7 @@ class Steps:
     index : int sample index of the peak; ``t_s`` its time.
     window_start, window_end : int, the step's samples are ``[window_start, window_end)``
         (after the previous peak up to and including this one).
-    duration_s : step time T (peak-to-peak; the bout's median for its first step).
+    duration_s : step time T (peak-to-peak; for a bout's first step the median of its next three).
     a_max_m_s2, a_min_m_s2 : extremes of the filtered norm over the step.
     mean_change_m_s2 : mean |Δa| between consecutive samples over the step.
     bout_start : bool, first step of a walking bout.
@@ -195,6 +195,12 @@ def detect_steps(acc_m_s2: np.ndarray, rate_hz: float, t_s: np.ndarray | None = 
     return _step_features(a, t, peaks, bout_start, rate_hz)
 
 
+FIRST_STEP_INTERVALS = 3
+"""Intervals after a bout's first step whose median stands for its duration: odd (the median is one of them),
+and as many as the shortest bout has by default (``min_bout_steps`` 4: three intervals); a shorter bout (a
+lower ``min_bout_steps``) takes what it has."""
+
+
 def _step_features(a: np.ndarray, t: np.ndarray, peaks: np.ndarray, bout_start: np.ndarray, rate_hz: float) -> Steps:
     m = len(peaks)
     if m == 0:
@@ -202,15 +208,21 @@ def _step_features(a: np.ndarray, t: np.ndarray, peaks: np.ndarray, bout_start: 
         zi = np.zeros(0, dtype=int)
         return Steps(zi, z, zi, zi, z, z, z, z, np.zeros(0, bool))
     interval = np.diff(t[peaks], prepend=np.nan)
-    # first step of a bout: the median interval of its bout (or 0.55 s, a typical step, for a lone step)
+    gap = np.diff(peaks, prepend=0)                        # the same in samples
+    # first step of a bout: the median of its bout's next FIRST_STEP_INTERVALS intervals, in seconds for its
+    # duration and in samples for its window (or 0.55 s, a typical step, for a lone step). Local: the median of
+    # the whole bout depended on steps minutes later, and a long walk's cut ending inside the bout read another.
     bout_id = np.cumsum(bout_start) - 1
     inner = ~bout_start
     med = np.full(bout_id.max() + 1, 0.55)
+    med_n = np.full(bout_id.max() + 1, int(round(0.55 * rate_hz)))
     for b in np.unique(bout_id[inner]):
-        med[b] = float(np.median(interval[inner & (bout_id == b)]))
+        mine = np.flatnonzero(inner & (bout_id == b))[:FIRST_STEP_INTERVALS]
+        med[b] = float(np.median(interval[mine]))
+        med_n[b] = int(np.median(gap[mine]))             # an odd count of whole samples: one of them
     duration = np.where(bout_start, med[bout_id], interval)
     end = peaks + 1
-    start = np.where(bout_start, peaks - np.round(duration * rate_hz).astype(int) + 1, np.r_[0, peaks[:-1]] + 1)
+    start = np.where(bout_start, peaks - med_n[bout_id] + 1, np.r_[0, peaks[:-1]] + 1)
     start = np.maximum(start, np.r_[0, end[:-1]])
     start = np.minimum(np.maximum(start, 0), peaks)
     # windows are contiguous or separated: reduce over [start_k, end_k) via interleaved reduceat
