@@ -76,14 +76,20 @@ def test_blanker_of_a_cut_decides_as_the_whole(tmp_path):
     assert np.array_equal(out_cut[settled - first:], out_whole[settled:])
 
 
+def _receiver_setup(walk):
+    """(site, timing, solver settings) the receiver reads ``walk`` with, as walks.reader does (walking prior
+    1.4 m/s)."""
+    site = walk.load_site()
+    timing = timing_from_walk(walk, site)
+    return site, timing, PositionConfig(max_clock_offset_s=timing.start_uncertainty_s + 0.05, motion_speed_m_s=1.4)
+
+
 @pytest.fixture(scope="module")
 def whole_and_cut(walk_dir, tmp_path_factory):
     """The conftest walk (60 s) read whole, keeping the receiver's state at 30 s, and its audio from sample CUT
     on written as its own file and read with ``first_sample`` = CUT and the whole walk's timing, resumed there."""
     walk = load_walk(walk_dir)
-    site = walk.load_site()
-    timing = timing_from_walk(walk, site)
-    pos = PositionConfig(max_clock_offset_s=timing.start_uncertainty_s + 0.05, motion_speed_m_s=1.4)
+    site, timing, pos = _receiver_setup(walk)
     whole = analyse_audio(walk.path("audio"), site, timing, positions=pos, keep_frames=True,
                           keep_state_from_s=RESUME_S)
     x, fs = sf.read(str(walk.path("audio")), dtype="int16")
@@ -134,7 +140,6 @@ def test_a_negative_or_fractional_first_sample_is_refused(walk_dir):
             analyse_audio(walk.path("audio"), site, timing_from_walk(walk, site), first_sample=bad)
 
 
-
 def test_feature_batches_do_not_change_the_fixes(site_dir, tmp_path_factory, monkeypatch):
     """The receiver computes CIR features for 32 frames at a time and then releases them; an acquisition fix is
     reported only once the next frame confirms it, and is handed to the frame before. Frames released in batches
@@ -148,9 +153,7 @@ def test_feature_batches_do_not_change_the_fixes(site_dir, tmp_path_factory, mon
     from simulation.walk import simulate_walk
 
     walk = load_walk(simulate_walk(site_dir, tmp_path_factory.mktemp("walks") / "w1", seed=1, duration_s=60.0))
-    site = walk.load_site()
-    timing = timing_from_walk(walk, site)
-    pos = PositionConfig(max_clock_offset_s=timing.start_uncertainty_s + 0.05, motion_speed_m_s=1.4)
+    site, timing, pos = _receiver_setup(walk)
     confirmed = []
     take = ClockPositionTracker.take_confirmed_tentative
 
@@ -188,9 +191,7 @@ def test_a_resumed_cut_places_chirps_in_the_whole_walks_windows(walk_dir, whole_
     the resumed offset where no fix follows."""
     whole, _ = whole_and_cut
     walk = load_walk(walk_dir)
-    site = walk.load_site()
-    timing = timing_from_walk(walk, site)
-    pos = PositionConfig(max_clock_offset_s=timing.start_uncertainty_s + 0.05, motion_speed_m_s=1.4)
+    site, timing, pos = _receiver_setup(walk)
     x, _ = sf.read(str(walk.path("audio")), dtype="int16")
     sf.write(tmp_path / "audio.wav", x[20 * FS:], FS, subtype="PCM_16")
     cut = analyse_audio(tmp_path / "audio.wav", site, timing, positions=pos, resume=whole.receiver_state,

@@ -86,7 +86,6 @@ def test_gnss_features_of_a_resumed_cut_are_the_whole_logs_from_the_resumption_o
     assert np.array_equal(gnss_features(cut, resume=swapped)["fluct_per_s"], resumed["fluct_per_s"])
 
 
-
 def _listed(sky: SkyArrays, lo: float, hi: float) -> SkyArrays:
     """The epochs of walk times [lo, hi) with only the satellites they list (a receiver's GSV naming tracked
     satellites only: a satellite blocked through the whole cut is not a column of it)."""
