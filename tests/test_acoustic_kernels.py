@@ -272,11 +272,10 @@ def test_agreement_counts_equal_a_brute_force_count():
         delta = rng.normal(0, 0.02, (37, n))
         delta[:, n // 2] = delta[:, 0]
         tol = 0.01
-        order = np.argsort(delta, axis=1)
         offset = 2.0 * (np.abs(delta).max() + tol + 1.0)
-        got = _agreement_counts(delta, order, offset, tol).reshape(37, n)
+        got = _agreement_counts(np.sort(delta, axis=1), offset, tol).reshape(37, n)
         for row in range(37):
-            s = delta[row, order[row]] + offset * row
+            s = np.sort(delta[row]) + offset * row
             want = [int(np.sum(s[k:] <= s[k] + tol)) for k in range(n)]
             assert got[row].tolist() == want
 
@@ -350,3 +349,17 @@ def test_decide_equals_the_per_sample_reference():
         assert got[0].tolist() == want[0]
         assert (got[1], got[2]) == (want[1], want[2])
     assert want[2] == 4 and want[1] > 0         # the two close clicks are one hole; the last one's hold runs on
+
+
+def test_top_counts_equal_a_stable_sort():
+    """The vote's top-k by count equals numpy's stable argsort of −count cut to k, on random counts with many ties,
+    k below, at and above the length (and 0): would catch the smallest value taken filled past k, ties out of
+    index order, or a count skipped when the histogram's last value is the one cut."""
+    from features.acoustic.acquisition import _top_counts
+
+    rng = np.random.default_rng(11)
+    for _ in range(500):
+        n = int(rng.integers(0, 200))
+        count = rng.integers(0, int(rng.integers(1, 12)), n).astype(np.int32)
+        for k in (0, 1, n // 3, n, n + 5):
+            assert _top_counts(count, k).tolist() == np.argsort(-count, kind="stable")[:k].tolist()
