@@ -363,3 +363,26 @@ def test_top_counts_equal_a_stable_sort():
         count = rng.integers(0, int(rng.integers(1, 12)), n).astype(np.int32)
         for k in (0, 1, n // 3, n, n + 5):
             assert _top_counts(count, k).tolist() == np.argsort(-count, kind="stable")[:k].tolist()
+
+
+def test_range_votes_count_distinct_agreeing_beacons():
+    """The clock-aided vote at each point equals the number of distinct beacons with a candidate range within tol
+    of the point's range to it, counted by brute force over every (point, candidate) pair: would catch a beacon's
+    echoes voting twice, a beacon's run of candidates cut short (its range formed from another beacon), or an
+    empty candidate list read out of bounds."""
+    from features.acoustic.acquisition import _range_votes
+
+    rng = np.random.default_rng(3)
+    for n in (0, 1, 7, 60):
+        n_beacons = 6
+        bi = np.sort(rng.integers(0, n_beacons, n))
+        bpos = rng.uniform(0, 50, (n_beacons, 3))[bi]
+        ee, nn = rng.uniform(0, 50, 300), rng.uniform(0, 50, 300)
+        rng_m = rng.uniform(0, 60, n)
+        r = np.sqrt((ee[:, None] - bpos[None, :, 0]) ** 2 + (nn[:, None] - bpos[None, :, 1]) ** 2
+                    + (1.2 - bpos[None, :, 2]) ** 2)
+        agree = np.abs(rng_m[None, :] - r) <= 3.0
+        want = [len({int(bi[k]) for k in np.flatnonzero(agree[p])}) for p in range(300)]
+        got = _range_votes(ee, nn, bpos, 1.2, rng_m, bi, 3.0)
+        assert got.tolist() == want
+        assert n < 7 or max(want) >= 2                  # the random draw exercises multi-beacon agreement

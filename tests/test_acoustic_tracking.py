@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import csv
 import math
+import statistics
 
 import numpy as np
 import pytest
@@ -162,7 +163,7 @@ def _vote_reference(pe, pn, bi, rho, bpos, tol, arrivals, h, c, n_best):
 
 
 def test_compiled_vote_equals_the_numpy_vote():
-    """The compiled vote (two-pointer counts, counting-sort top-k, compiled recount) ranks exactly as the numpy
+    """The compiled vote (two-pointer counts, counting-sort top-k, compiled recount, medians) ranks exactly as the numpy
     vote it replaced, on random grids with echoes (several candidates per beacon), one arrival in two beacons'
     windows, and many tied counts."""
     from features.acoustic.acquisition import HoughAcquisition
@@ -193,9 +194,10 @@ def test_compiled_vote_equals_the_numpy_vote():
                                               n_best=n_best)
         want = _vote_reference(ee.ravel(), nn.ravel(), bi, rho, beacons[bi], tol, arrivals, 1.2, C, n_best)
         assert len(got) == len(want) == min(n_best, ee.size * len(bi))
-        for g, w in zip(got, want):
+        for a, (g, w) in enumerate(zip(got, want)):
             assert g[:3] == w[:3]
             assert np.array_equal(members(g[3]), w[3])
+            assert got.medians[a] == statistics.median(w[3].tolist())      # the anchor δ₀ each one is verified at
 
 
 def _candidates(site, frame_start, east, north, clock_s):

@@ -21,7 +21,6 @@ three times faster than numba's per row) and its compiled counts.
 from __future__ import annotations
 
 import math
-import statistics
 
 import numpy as np
 from numba import njit
@@ -107,12 +106,7 @@ class HoughAcquisition:
         fine = self.grid_step_m
         offsets = np.arange(-coarse, coarse + fine / 2, fine)
         oe, on = np.meshgrid(offsets, offsets)
-        seeds = []
-        for h in hyps:
-            if h[0] >= 3 and h[2] not in seeds:
-                seeds.append(h[2])
-            if len(seeds) == 30:
-                break
+        seeds = hyps.points(min_distinct=3, n=30)
         if not seeds:
             return {}
         pe = np.concatenate([s[0] + oe.ravel() for s in seeds])
@@ -127,16 +121,26 @@ class HoughAcquisition:
         hyps, members = self._vote(pe, pn, bi, rho, bpos, self.tolerance_s, arrivals, n_best=400)
         # Verify the best distinct hypotheses by least squares (RANSAC-style, Fischler & Bolles
         # 1981): the one whose fix keeps the most beacons, then the smallest residual, wins.
-        best, best_key, tried = {}, None, []
-        for n, _, point, span in hyps:
+        best, best_key, tried = {}, None, 0
+        # A hypothesis within 2 m and 2 ms of one verified already is not verified again: each verified one
+        # closes its neighbours among the rest (a mask over the ranked list, instead of a test against every
+        # one verified so far, per hypothesis read).
+        n_distinct, east, north, d0s = hyps.columns[0], hyps.columns[2], hyps.columns[3], hyps.medians
+        open_ = np.ones(len(hyps), dtype=bool)
+        a = 0
+        while True:
+            rest = np.flatnonzero(open_[a:])
+            if len(rest) == 0:
+                break
+            a += int(rest[0])
+            n = int(n_distinct[a])
             # Hypotheses come by decreasing vote; one two votes short of the best verified fix
             # has never been seen to beat it (re-association adds a beacon at most), so stop.
-            if n < 3 or len(tried) >= 12 or (best_key is not None and n + 1 < best_key[0]):
+            if n < 3 or tried >= 12 or (best_key is not None and n + 1 < best_key[0]):
                 break
-            d0 = statistics.median(members(span).tolist())
-            if any(abs(point[0] - p[0]) < 2 and abs(point[1] - p[1]) < 2 and abs(d0 - q) < 2e-3 for p, q in tried):
-                continue
-            tried.append((point, d0))
+            point, d0 = (float(east[a]), float(north[a])), float(d0s[a])
+            tried += 1
+            open_ &= ~((np.abs(east - point[0]) < 2) & (np.abs(north - point[1]) < 2) & (np.abs(d0s - d0) < 2e-3))
             kept = self._associate(point, d0, bi, rho, bpos, arrivals)
             refined, fix = self._refine(kept, candidates)
             if fix is None:
@@ -352,7 +356,8 @@ class HoughAcquisition:
         """
         delta = _implied_offsets(pe, pn, bpos, float(self.site.device_height_m), rho, float(self.c))
         ascending = np.sort(delta, axis=1)
-        offset = 2.0 * (np.abs(delta).max() + tol + 1.0)
+        # max |δ| from each row's ends (the largest magnitude is one of the extremes)
+        offset = 2.0 * (max(-ascending[:, 0].min(), ascending[:, -1].max()) + tol + 1.0)
         count = _agreement_counts(ascending, offset, tol)
         top = _top_counts(count, n_best)
         # Each needed row argsorted once (np.unique: ascending), and each hypothesis's row's place among them.
@@ -365,7 +370,7 @@ class HoughAcquisition:
         n_distinct, first, rows, ks, ns = _ranked_hypotheses(ascending, order, slot, top, count,
                                                              np.asarray(bi, dtype=np.int64), np.round(arrivals, 4))
         # The tuples are formed as the caller reads them: it reads a few dozen of the n_best.
-        hyps = _Hypotheses(n_distinct, first, pe[rows], pn[rows], rows, ks, ns)
+        hyps = _Hypotheses(n_distinct, first, pe[rows], pn[rows], rows, ks, ns, ascending)
         return hyps, lambda span: ascending[span[0], span[1]: span[1] + span[2]]
 
 
@@ -373,8 +378,13 @@ class _Hypotheses:
     """The ranked hypotheses of :meth:`HoughAcquisition._vote` as a sequence of (distinct beacons, anchor δ,
     (east, north), (row, k, count)), each tuple formed (of Python numbers) when read."""
 
-    def __init__(self, n_distinct, first, east, north, rows, ks, ns):
+    def __init__(self, n_distinct, first, east, north, rows, ks, ns, ascending):
         self.columns = (n_distinct, first, east, north, rows, ks, ns)
+        # Each hypothesis's median δ of its agreeing candidates (ascending[row, k : k + n]), as
+        # statistics.median takes it: the middle one, or the mean of the middle two.
+        mid = ks + ns // 2
+        upper = ascending[rows, mid]
+        self.medians = np.where(ns % 2 == 1, upper, (ascending[rows, np.maximum(mid - 1, 0)] + upper) / 2)
 
     def __len__(self) -> int:
         return len(self.columns[0])
@@ -385,6 +395,15 @@ class _Hypotheses:
 
     def __iter__(self):
         return (self[a] for a in range(len(self)))
+
+    def points(self, min_distinct: int, n: int) -> list[tuple[float, float]]:
+        """The first ``n`` distinct (east, north) of the hypotheses of at least ``min_distinct`` beacons, in rank
+        order (the points are a grid's, so one row, one point)."""
+        n_distinct, _, east, north, rows, _, _ = self.columns
+        enough = n_distinct >= min_distinct
+        _, first = np.unique(rows[enough], return_index=True)
+        first = np.sort(first)[:n]
+        return list(zip(east[enough][first].tolist(), north[enough][first].tolist()))
 
 
 @njit(cache=True)
@@ -400,16 +419,23 @@ def _range_votes(ee: np.ndarray, nn: np.ndarray, bpos: np.ndarray, h: float, rng
     """
     votes = np.zeros(ee.shape[0], dtype=np.int64)
     n = rng_m.shape[0]
+    if n == 0:
+        return votes
+    # Each beacon's candidates (a run of equal bi) share its position: its range is formed once per point.
+    starts = [0]
+    for k in range(1, n):
+        if bi[k] != bi[k - 1]:
+            starts.append(k)
+    starts.append(n)
     for p in range(ee.shape[0]):
-        k = 0
-        while k < n:
-            beacon, agree = bi[k], False
-            while k < n and bi[k] == beacon:
-                if not agree:
-                    de, dn, du = ee[p] - bpos[k, 0], nn[p] - bpos[k, 1], h - bpos[k, 2]
-                    agree = abs(rng_m[k] - math.sqrt(de * de + dn * dn + du * du)) <= tol
-                k += 1
-            votes[p] += agree
+        for s in range(len(starts) - 1):
+            k0 = starts[s]
+            de, dn, du = ee[p] - bpos[k0, 0], nn[p] - bpos[k0, 1], h - bpos[k0, 2]
+            r = math.sqrt(de * de + dn * dn + du * du)
+            for k in range(k0, starts[s + 1]):
+                if abs(rng_m[k] - r) <= tol:
+                    votes[p] += 1
+                    break
     return votes
 
 
