@@ -12,7 +12,7 @@ simulate walk SITE --seed W --duration-s 300``), under ``--root`` (kept between 
 201–205 (the standard split's test sites) and walk seeds 1000·site + 1 (``--walks-per-site N``: + 1 ... + N), three walks by default.
 
 Run: ``.venv/bin/python bench/receiver_identity.py --root /tmp/identity --record before.npz``, change the
-receiver, then ``... --compare before.npz``.
+receiver, then ``... --compare before.npz``. ``--walks DIR ...`` runs given walk folders instead of ``--root``'s.
 """
 
 from __future__ import annotations
@@ -102,15 +102,21 @@ def compare(before: dict, after: dict) -> dict:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--root", type=Path, required=True, help="where the walks are made and kept")
+    ap.add_argument("--root", type=Path, help="where the walks are made and kept (unless --walks)")
     ap.add_argument("--sites", type=int, nargs="+", default=[201, 202, 203])
     ap.add_argument("--duration-s", type=float, default=300.0)
     ap.add_argument("--walks-per-site", type=int, default=1, help="walk seeds 1000·site + 1 ... + N")
+    ap.add_argument("--walks", type=Path, nargs="+", default=None,
+                    help="walk folders to run instead of the simulated ones (other sites, longer walks, real data)")
     group = ap.add_mutually_exclusive_group(required=True)
     group.add_argument("--record", type=Path)
     group.add_argument("--compare", type=Path)
     args = ap.parse_args(argv)
-    dirs = walks(args.root, args.sites, args.duration_s, args.walks_per_site)
+    if not (args.walks or args.root):
+        ap.error("give --root (simulated walks made and kept there) or --walks")
+    dirs = args.walks if args.walks else walks(args.root, args.sites, args.duration_s, args.walks_per_site)
+    if args.walks and len({d.name for d in dirs}) < len(dirs):
+        ap.error("--walks: the folders' names must differ (the record is keyed by name)")
     if args.record:
         store = {}
         for d in dirs:
