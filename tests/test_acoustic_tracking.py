@@ -165,7 +165,7 @@ def _vote_reference(pe, pn, bi, rho, bpos, tol, arrivals, h, c, n_best):
 def test_compiled_vote_equals_the_numpy_vote():
     """The compiled vote (two-pointer counts, counting-sort top-k, compiled recount, medians) ranks exactly as the numpy
     vote it replaced, on random grids with echoes (several candidates per beacon), one arrival in two beacons'
-    windows, and many tied counts."""
+    windows, candidates repeated (equal δ: members read through the argsort), and many tied counts."""
     from features.acoustic.acquisition import HoughAcquisition
 
     rng = np.random.default_rng(0)
@@ -183,6 +183,12 @@ def test_compiled_vote_equals_the_numpy_vote():
         rho = ranges + C * clock + np.where(rng.random(len(bi)) < 0.5, 0.0, rng.uniform(0, 20, len(bi)))
         arrivals = rng.uniform(0, 1, len(bi))
         arrivals[1::7] = arrivals[0::7][: len(arrivals[1::7])]          # one arrival in two windows
+        if trial % 2:
+            # Candidates repeated with other arrivals: equal δ at every point, so hypotheses whose span starts
+            # or ends between equals (their members the argsort's choice, read through it)
+            dup = rng.choice(len(bi), 4)
+            bi, rho = np.concatenate([bi, bi[dup]]), np.concatenate([rho, rho[dup]])
+            arrivals = np.concatenate([arrivals, rng.uniform(0, 1, 4)])
         step = float(rng.choice([1.0, 4.0]))
         ee, nn = np.meshgrid(np.arange(0, 60 + step, step), np.arange(0, 60 + step, step))
         tol = step * math.sqrt(2.0) / C + 5e-4

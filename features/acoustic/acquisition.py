@@ -366,14 +366,22 @@ class HoughAcquisition:
         offset = 2.0 * (max(-ascending[:, 0].min(), ascending[:, -1].max()) + tol + 1.0)
         count = _agreement_counts(ascending, offset, tol)
         top = _top_counts(count, n_best)
-        # Each needed row argsorted once (np.unique: ascending), and each hypothesis's row's place among them.
-        rows_needed = np.unique(top // delta.shape[1])
-        order = np.argsort(delta[rows_needed], axis=1)
-        slot = np.searchsorted(rows_needed, top // delta.shape[1])
+        # A hypothesis's members are the candidates of its row with δ in [its first, its last]: read by value,
+        # unless the δ before its first or after its last is equal to it, when which of the equals are members
+        # is the argsort's choice: those rows (almost never any) are argsorted, and each such hypothesis's row's
+        # place among them given (−1: read by value).
+        n = delta.shape[1]
+        row_of, k_of = top // n, top % n
+        last = k_of + count[top] - 1
+        tied = (((k_of > 0) & (ascending[row_of, np.maximum(k_of - 1, 0)] == ascending[row_of, k_of]))
+                | ((last + 1 < n) & (ascending[row_of, np.minimum(last + 1, n - 1)] == ascending[row_of, last])))
+        rows_tied = np.unique(row_of[tied])
+        order = np.argsort(delta[rows_tied], axis=1)
+        slot = np.where(tied, np.searchsorted(rows_tied, row_of), -1)
         # Among equal counts the tightest agreement first: a hypothesis that is only just within
         # the tolerance is usually a chance alignment (ordering by smallest δ instead buried
         # the true one under chance alignments whenever the clock offset was positive).
-        n_distinct, first, rows, ks, ns = _ranked_hypotheses(ascending, order, slot, top, count,
+        n_distinct, first, rows, ks, ns = _ranked_hypotheses(delta, ascending, order, slot, top, count,
                                                              np.asarray(bi, dtype=np.int64), np.round(arrivals, 4))
         # The tuples are formed as the caller reads them: it reads a few dozen of the n_best.
         hyps = _Hypotheses(n_distinct, first, pe[rows], pn[rows], rows, ks, ns, ascending)
@@ -576,18 +584,26 @@ def _top_counts(count: np.ndarray, n_best: int) -> np.ndarray:
 
 
 @njit(cache=True)
-def _ranked_hypotheses(ascending: np.ndarray, order: np.ndarray, slot: np.ndarray, top: np.ndarray,
-                       count: np.ndarray, beacon_of: np.ndarray, arrival_of: np.ndarray):
+def _ranked_hypotheses(delta: np.ndarray, ascending: np.ndarray, order: np.ndarray, slot: np.ndarray,
+                       top: np.ndarray, count: np.ndarray, beacon_of: np.ndarray, arrival_of: np.ndarray):
     """The (point, anchor) pairs ``top`` (flat indices ``row·n + k`` into ``count``; ``k`` a position in row
-    ``row`` of ``ascending``, each row of implied offsets in ascending order), each recounted as
-    min(distinct beacons ``beacon_of``, distinct arrivals ``arrival_of``) of its members, the candidates at
-    positions ``k … k + count − 1`` of the row's argsort (``order[slot[a]]`` for the a-th pair), then ranked by
+    ``row`` of ``ascending``, each row of the implied offsets ``delta`` in ascending order), each recounted as
+    min(distinct beacons ``beacon_of``, distinct arrivals ``arrival_of``) of its members, then ranked by
     (most distinct, smallest spread of δ, smallest δ), ties kept in the order of ``top``:
     (n_distinct, anchor δ, row, k, count), each of shape (len(top),).
 
-    >>> asc = np.array([[0.0, 0.1, 0.2], [0.0, 0.05, 0.5]])
-    >>> [a.tolist() for a in _ranked_hypotheses(asc, np.array([[0, 1, 2], [0, 2, 1]]), np.array([0, 0, 1]),
-    ...     np.array([0, 1, 3]), np.array([3, 2, 1, 2, 1, 1]), np.array([0, 1, 2]), np.array([1.0, 2.0, 3.0]))]
+    The members of a pair are the candidates at positions ``k … k + count − 1`` of its row's argsort: read from
+    ``order[slot[a]]`` where ``slot[a]`` ≥ 0 (the caller's argsort of the row, for a pair with a δ equal to its
+    first or last just outside it), else by value, the candidates of the row with δ in [its first, its last]
+    (the same set when no equal δ lies just outside). The counts are sets, whatever order the members come in.
+
+    Pair 0 (row 0, k 0, 3 members: beacons 0, 1, 2) first; pairs 1 and 2 have 2 distinct each, pair 1 (row 1,
+    δ 0 and 0.05) the smaller spread; pair 1 read through an argsort, the others by value:
+
+    >>> delta = np.array([[0.0, 0.1, 0.2], [0.0, 0.5, 0.05]])
+    >>> [a.tolist() for a in _ranked_hypotheses(delta, np.sort(delta, axis=1), np.array([[0, 2, 1]]),
+    ...     np.array([-1, -1, 0]), np.array([0, 1, 3]), np.array([3, 2, 1, 2, 1, 1]), np.array([0, 1, 2]),
+    ...     np.array([1.0, 2.0, 3.0]))]
     [[3, 2, 2], [0.0, 0.0, 0.1], [0, 1, 0], [0, 0, 1], [3, 2, 2]]
     """
     n_cand = ascending.shape[1]
@@ -598,17 +614,27 @@ def _ranked_hypotheses(ascending: np.ndarray, order: np.ndarray, slot: np.ndarra
     rows = np.empty(m, dtype=np.int64)
     ks = np.empty(m, dtype=np.int64)
     ns = np.empty(m, dtype=np.int64)
+    members = np.empty(n_cand, dtype=np.int64)
     for a in range(m):
         f = top[a]
         row, k = f // n_cand, f % n_cand
-        members = order[slot[a]]
         n = count[f]
+        lo, hi = ascending[row, k], ascending[row, k + n - 1]
+        if slot[a] >= 0:
+            for i in range(n):
+                members[i] = order[slot[a], k + i]
+        else:
+            got = 0
+            for j in range(n_cand):
+                if lo <= delta[row, j] <= hi:
+                    members[got] = j
+                    got += 1
         beacons = 0
         arrivals = 0
-        for i in range(k, k + n):
+        for i in range(n):
             bi, ti = beacon_of[members[i]], arrival_of[members[i]]
             new_b, new_t = True, True
-            for j in range(k, i):
+            for j in range(i):
                 if beacon_of[members[j]] == bi:
                     new_b = False
                 if arrival_of[members[j]] == ti:
@@ -616,8 +642,8 @@ def _ranked_hypotheses(ascending: np.ndarray, order: np.ndarray, slot: np.ndarra
             beacons += new_b
             arrivals += new_t
         n_distinct[a] = min(beacons, arrivals)
-        first[a] = ascending[row, k]
-        spread[a] = ascending[row, k + n - 1] - first[a]
+        first[a] = lo
+        spread[a] = hi - lo
         rows[a], ks[a], ns[a] = row, k, n
     # Lexicographic (−n_distinct, spread, first) by stable sorts from the last key to the first.
     rank = np.argsort(first, kind="mergesort")
