@@ -208,9 +208,23 @@ def chi2_limit(dof: int, alpha: float) -> float:
 
 
 def _arrays(ranges: list[BeaconRange]) -> tuple[np.ndarray, ...]:
-    """Beacon east, north, up (m), pseudorange (m) and σ (m) of ``ranges``: five contiguous float arrays (n,)."""
-    a = np.array([(r.east_m, r.north_m, r.up_m, r.pseudorange_m, r.sigma_m) for r in ranges], dtype=float)
-    return tuple(np.ascontiguousarray(a.reshape(-1, 5).T))
+    """Beacon east, north, up (m), pseudorange (m) and σ (m) of ``ranges``: five contiguous float arrays (n,).
+    (The named tuples read whole, their fields by position: a third of the time of a tuple built per range.)"""
+    a = np.array(ranges, dtype=float).reshape(-1, len(BeaconRange._fields))
+    return tuple(np.ascontiguousarray(a[:, 1:6].T))
+
+
+@functools.lru_cache(maxsize=64)
+def _chi2_limits(n: int, alpha: float) -> np.ndarray:
+    """:func:`chi2_limit` of 0 … ``n`` degrees of freedom (∞ for 0): the exclusion's tests. Cached and shared:
+    read it, never write it (left writeable: numba would compile a second, read-only specialisation).
+
+    The 0.999 quantiles of 1, 2, 3 degrees of freedom (tables: 10.828, 13.816, 16.266):
+
+    >>> _chi2_limits(3, 1e-3).round(3).tolist()
+    [inf, 10.828, 13.816, 16.266]
+    """
+    return np.array([chi2_limit(dof, alpha) if dof > 0 else math.inf for dof in range(n + 1)])
 
 
 def _clock_prior(clock_prior: tuple[float, float] | None) -> tuple[float, float]:
@@ -306,7 +320,7 @@ def _exclude(ranges: list[BeaconRange], h: float, c: float, config: PositionConf
     se, sn, su, rho, sig = _arrays(ranges)
     n = len(ranges)
     prior_d, prior_w = _clock_prior(clock_prior)
-    limits = np.array([chi2_limit(dof, config.chi2_alpha) if dof > 0 else math.inf for dof in range(n + 1)])
+    limits = _chi2_limits(n, config.chi2_alpha)
     pos_prior = np.zeros(3) if position_prior is None else np.array(position_prior, dtype=float)
     found, keep, x, cov, res, _ = lsq.exclude(se, sn, su, rho, sig, float(h), float(c), int(config.max_iterations),
                                               np.array(start, dtype=float).reshape(3), prior_d, prior_w, pos_prior,
