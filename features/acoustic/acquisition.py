@@ -18,10 +18,11 @@ its rows by value and argsorts only the rows its best hypotheses lie on (:meth:`
 verification reads each hypothesis's median from the sorted row and closes the neighbours of each one verified
 by a mask, and the clock-aided vote forms a beacon's range once per grid point. Acquisition's share of the
 receiver depends on how often the lock is lost: on the bench's walk (site 5, seed 42, 600 s, standing 80 % of
-it, a fix in 30 % of its frames) it ran in 283 of 627 frames and took 1.0 s of CPU of the receiver's 1.7-2.0
-(best of 5); now 0.75 s (2026-12-03, same day, same walk), with fixes and detections
-bit-identical on the 15 held-out walks of ``bench/receiver_identity.py``. On a walk that keeps its lock it is a
-few per cent.
+it, a fix in 30 % of its frames) it ran in 283 of 627 frames and took 1.05-1.17 s of CPU of the receiver's
+1.8-2.3 (best of 5, two runs); now 0.68-0.89 s, and on a 600 s walk of site 7 (96 fixes) 1.75-2.39 → 1.20-1.49 s
+(2026-12-03, main and the change alternated on a noisy day), with fixes and detections bit-identical on the 15
+held-out walks of ``bench/receiver_identity.py`` and 15 more of sites 3, 5 and 7 (``--walks``). On a walk that
+keeps its lock it is a few per cent.
 """
 
 from __future__ import annotations
