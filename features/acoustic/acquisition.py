@@ -125,14 +125,14 @@ class HoughAcquisition:
         _, first = np.unique(ie * (1 << 32) + (i_n + (1 << 31)), return_index=True)
         first.sort()
         pe, pn = pe[first], pn[first]
-        hyps, members = self._vote(pe, pn, bi, rho, bpos, self.tolerance_s, arrivals, n_best=400)
+        hyps, _ = self._vote(pe, pn, bi, rho, bpos, self.tolerance_s, arrivals, n_best=400)
         # Verify the best distinct hypotheses by least squares (RANSAC-style, Fischler & Bolles
         # 1981): the one whose fix keeps the most beacons, then the smallest residual, wins.
         best, best_key, tried = {}, None, 0
         # A hypothesis within 2 m and 2 ms of one verified already is not verified again: each verified one
         # closes its neighbours among the rest (a mask over the ranked list, instead of a test against every
         # one verified so far, per hypothesis read).
-        n_distinct, east, north, d0s = hyps.columns[0], hyps.columns[2], hyps.columns[3], hyps.medians
+        n_distinct, east, north, d0s = hyps.n_distinct, hyps.east, hyps.north, hyps.medians
         open_ = np.ones(len(hyps), dtype=bool)
         a = 0
         while True:
@@ -356,10 +356,11 @@ class HoughAcquisition:
         must not vote for each of them), :func:`_ranked_hypotheses`.
 
         The counts need each row's δ in ascending order, not which candidate is where: the rows are sorted by
-        value (numpy's vectorised sort, about four times faster than its argsort here), and only the rows that
-        hold one of the ``n_best`` hypotheses (about an eighth of them on simulated walks) are argsorted, for
-        the recount of their members. The sorted values are the argsorted ones whatever order ties take, so the
-        counts and spans are those of the argsort of every row to the bit.
+        value (numpy's vectorised sort, about four times faster than its argsort here), and a hypothesis's
+        members are read by value from its row; only a row where a δ equal to a span's first or last lies just
+        outside the span is argsorted (which of the equals are members is then the argsort's choice). The sorted
+        values are the argsorted ones whatever order ties take, so the counts, spans and members are those of
+        the argsort of every row to the bit.
         """
         delta = _implied_offsets(pe, pn, bpos, float(self.site.device_height_m), rho, float(self.c))
         ascending = np.sort(delta, axis=1)
@@ -395,6 +396,7 @@ class _Hypotheses:
 
     def __init__(self, n_distinct, first, east, north, rows, ks, ns, ascending):
         self.columns = (n_distinct, first, east, north, rows, ks, ns)
+        self.n_distinct, self.east, self.north = n_distinct, east, north
         # Each hypothesis's median δ of its agreeing candidates (ascending[row, k : k + n]), as
         # statistics.median takes it: the middle one, or the mean of the middle two.
         mid = ks + ns // 2
@@ -414,11 +416,11 @@ class _Hypotheses:
     def points(self, min_distinct: int, n: int) -> list[tuple[float, float]]:
         """The first ``n`` distinct (east, north) of the hypotheses of at least ``min_distinct`` beacons, in rank
         order (the points are a grid's, so one row, one point)."""
-        n_distinct, _, east, north, rows, _, _ = self.columns
-        enough = n_distinct >= min_distinct
+        rows = self.columns[4]
+        enough = self.n_distinct >= min_distinct
         _, first = np.unique(rows[enough], return_index=True)
         first = np.sort(first)[:n]
-        return list(zip(east[enough][first].tolist(), north[enough][first].tolist()))
+        return list(zip(self.east[enough][first].tolist(), self.north[enough][first].tolist()))
 
 
 @njit(cache=True)

@@ -419,7 +419,7 @@ def run_ekf_events(kind, avail, z, length_m, heading_rad, phi, q, h_idx, H, x0, 
 def rts_step(x, P, xp_next, Pp_next, C, xs_next, Ps_next, xs, Ps, T):
     """One backward step of the RTS smoother (Rauch, Tung & Striebel 1965), written into ``xs`` (n,) and ``Ps``
     (n, n); ``T`` (n, n) is work space. The smoothers run it tens of times per event (:func:`fixed_lag_pass`),
-    so it writes into buffers rather than allocating five arrays a step (a third of the fixed-lag pass's time);
+    so it writes into buffers rather than allocating five arrays a step (over a third of the fixed-lag pass's time);
     each sum is the one :func:`mv` / :func:`mm` form, in the same order, so the result is theirs to the bit."""
     n = x.shape[0]
     # x^s = x + C (x^s_{k+1} − x⁻_{k+1})
