@@ -155,12 +155,12 @@ def test_held_out_walks_weinberg_versus_improved_model(walks, more_walks, weinbe
     walks 22-26 at other speeds (PINNED_HELD_OUT, %): Weinberg +3.23 −0.05 +1.67 +1.80 +2.91 (mean |e|
     1.93), improved −5.63 +2.25 −2.08 −1.85 −3.58 (mean |e| 3.08); walk 23 read +0.08 / +2.37 before step
     prominence was judged within 1 s (one step fewer), the improved model −5.69 +2.26 −2.10 −1.88 −3.62 before
-    a bout's first step took the median of its next three intervals, not of the whole bout's. Before the satellite-sky label redrew
-    the site (issue 13) they were Weinberg +2.51 +0.06 +0.94 +0.80 +2.48 (1.36) and improved −1.29 +1.21
-    −0.45 −0.64 −0.28 (0.77), with both held to ±3 %: the walks' routes changed, and with them the
-    cadence mix; walk 22 now reads +3.23 %, so the bound is ±3.5 % for Weinberg and ±6 % for the improved
-    model. Weinberg's K drifts with cadence (K ∝ f^¼ for a pendulum), which β absorbs on some route
-    mixes and not on others, so the improved model's advantage is route- and walker-dependent and Weinberg
+    a bout's first step took the median of its next three intervals, not of the whole bout's. Before the
+    satellite-sky label redrew the site (issue 13) they were Weinberg +2.51 +0.06 +0.94 +0.80 +2.48 (1.36) and
+    improved −1.29 +1.21 −0.45 −0.64 −0.28 (0.77), with both held to ±3 %: the walks' routes changed, and with them
+    the cadence mix; walk 22 now reads +3.23 %, so the bound is ±3.5 % for Weinberg and ±6 % for the improved model.
+    Weinberg's K drifts with cadence (K ∝ f^¼ for a pendulum), which β absorbs on some route mixes and not on
+    others, so the improved model's advantage is route- and walker-dependent and Weinberg
     stays the default until real walks with GNSS segments say otherwise. Leave-one-segment-out inside walk
     21 drops β here ("selected"); selecting on walk 23 of known length also falls back to Weinberg."""
     cal = walks[21].pdr()
@@ -307,7 +307,9 @@ def test_improved_model_fit_recovers_a_known_beta_and_falls_back_to_weinberg(wal
 # Change detectors: every PINNED_* figure below was measured from this code's own output on simulated walks.
 # They catch an unintended change; they do not prove correctness (the simulator's closed forms and the
 # Oxford step counts, against their own truth, do that).
-PINNED_DISTANCE_PCT = (3.23, -0.05)  # (3.23, 0.08) before step prominence was judged within 1 s (walk 23: 530 -> 529 of 531 steps); (2.51, 0.06) before the satellite-sky label redrew the site
+# (3.23, 0.08) before step prominence was judged within 1 s (walk 23: 530 -> 529 of 531 steps); (2.51, 0.06)
+# before the satellite-sky label redrew the site
+PINNED_DISTANCE_PCT = (3.23, -0.05)
 PINNED_HELD_OUT = {"weinberg": (3.23, -0.05, 1.67, 1.80, 2.91), "improved": (-5.63, 2.25, -2.08, -1.85, -3.58),
                    "selected": (2.95, -0.32, 1.39, 1.52, 2.63)}
 PINNED_PDR_PCT = (1.06, 0.41, 0.99, 0.57)  # change detector; (1.14, 0.69, 0.78, 0.92) before the site was redrawn (issue 13 label), (1.20, 1.12, 0.93, 2.36) before issue 10

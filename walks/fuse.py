@@ -41,9 +41,10 @@ registered later, too; and ``adaptive_correction``, whose base filter resumes bu
 filter's last update however long ago (its gain, innovation and the time since it, :func:`models.bp.bp_inputs`) and
 whose innovation guard the last ten fixes (:func:`models.bp._innovation_off`), none handed over: after 20 s without
 a fix before a seam the cut would feed it other inputs than the whole walk does. (The UWB/PDR filters took the
-long warm-up until a resumed run fused its cut's first UWB fix and the steps before it, :meth:`models.uwb_pdr.UwbPdrFilter.run`: a 600 s walk of seed 21 standing 37-218 s
-in a UWB gap, 60 s segments, 20 s of warm-up: ``uwb_aoa_pdr`` 0.056 → 2.8e-7 m from the whole walk's,
-``uwb_aoa_pdr_env`` 0.026 → 5.5e-7 m, ``uwb_aoa_pdr_blind`` 0.019 → 5.1e-7 m, ``bench/seam_identity.py``.)"""
+long warm-up until a resumed run fused its cut's first UWB fix and the steps before it,
+:meth:`models.uwb_pdr.UwbPdrFilter.run`: a 600 s walk of seed 21 standing 37-218 s in a UWB gap, 60 s segments, 20 s
+of warm-up: ``uwb_aoa_pdr`` 0.056 → 2.8e-7 m from the whole walk's, ``uwb_aoa_pdr_env`` 0.026 → 5.5e-7 m,
+``uwb_aoa_pdr_blind`` 0.019 → 5.1e-7 m, ``bench/seam_identity.py``.)"""
 
 
 def warmup_for(methods) -> float:
