@@ -4,10 +4,11 @@ from __future__ import annotations
 
 import argparse
 import math
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 __all__ = ["seed", "positive", "non_negative", "finite", "bounded", "open_interval", "UsageError", "check_outputs",
-           "plot_path"]
+           "plot_path", "LazyChoices"]
 
 
 class UsageError(Exception):
@@ -86,6 +87,38 @@ def open_interval(lo: float, hi: float, unit: str = ""):
         return value
     parse.__name__ = f"open_interval({lo:g},{hi:g})"
     return parse
+
+
+class LazyChoices(Sequence):
+    """An option's choices read when first needed (a value to check, a help page to print), not when the parser
+    is built: ``run`` and ``evaluate`` take theirs from the method registry, whose import (the fusion methods,
+    GTSAM, scipy.stats: ~1.4 s) ``envfuse --help`` and every other command would otherwise pay.
+
+    argparse reads ``choices`` as a container (``in``) and iterates it for messages; an option with lazy choices
+    needs a ``metavar`` (argparse spells out the choices of one without it while the parser is built).
+
+    >>> names = LazyChoices(lambda: ("kf", "aekf"))
+    >>> "aekf" in names, "x" in names, list(names)
+    (True, False, ['kf', 'aekf'])
+    """
+
+    def __init__(self, load: Callable[[], Sequence[str]]):
+        self._load = load
+        self._items: tuple | None = None
+
+    def _get(self) -> tuple:
+        if self._items is None:
+            self._items = tuple(self._load())
+        return self._items
+
+    def __getitem__(self, i):
+        return self._get()[i]
+
+    def __len__(self) -> int:
+        return len(self._get())
+
+    def __contains__(self, value) -> bool:
+        return value in self._get()
 
 
 def check_outputs(inputs: dict, outputs: dict, directory_outputs: dict | None = None, sealed: dict | None = None) -> None:

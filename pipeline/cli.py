@@ -43,10 +43,19 @@ GROUPS = {
 
 
 class CliParser(argparse.ArgumentParser):
-    """ArgumentParser whose errors are one line, not a usage dump."""
+    """ArgumentParser whose errors are one line, not a usage dump, and whose options may give their ``help`` as
+    a function returning the text, called when a help page is printed: a help naming a constant of a heavy
+    module (``run --segment-s``'s warm-ups, the method registry) then does not import it while the parser is
+    built for every command."""
 
     def error(self, message):  # noqa: D401 - argparse API
         raise UsageError(f"{self.prog}: {message} (see '{self.prog} --help')")
+
+    def format_help(self) -> str:
+        for action in self._actions:
+            if callable(action.help):
+                action.help = action.help()
+        return super().format_help()
 
 
 def _version() -> str:

@@ -7,7 +7,7 @@ from pathlib import Path
 
 from features.errors import ConfigError
 from features.fileio import atomic_write_text
-from pipeline.args import UsageError, bounded
+from pipeline.args import LazyChoices, UsageError, bounded
 
 GROUP = None  # top-level commands, registered by register_top
 
@@ -46,10 +46,33 @@ MAX_LAG_S = 3600.0
 """Longest ``--lag-s``, s: a fixed-lag track an hour late is the RTS track of any patrol's hour (``+rts``)."""
 
 
-def register_top(sub) -> None:
+def _method_names(smoothed: bool = False) -> tuple[str, ...]:
     from walks.methods import method_names
+
+    return method_names(smoothed=smoothed)
+
+
+def _method_help() -> str:
+    from walks.methods import method, method_names
+
+    names = method_names()
+    return (f"fusion method (default {DEFAULT_METHOD}): one of {', '.join(names)}; a filter's name with +rts is its "
+            f"RTS-smoothed track, with +lag its fixed-lag track, --lag-s late (the filters: "
+            f"{', '.join(n for n in names if method(n).filter)})")
+
+
+def _segment_help() -> str:
     from walks.segments import FRESH_WARMUP_S, SEGMENT_S, WARMUP_S
 
+    return (f"a longer walk is fused in segments of this much walk time, each with {WARMUP_S:g} s of warm-up "
+            f"({FRESH_WARMUP_S:g} s for fg_*, ekf_rtk_pdr and foot_ins_fkf, which start afresh on each, and "
+            f"adaptive_correction), so memory does not grow with the walk (default {SEGMENT_S:g}, "
+            f"{MIN_SEGMENT_S:g} to {MAX_SEGMENT_S:g}; walks.segments)")
+
+
+def register_top(sub) -> None:
+    # The method names and the segments' constants are read when a value is checked or a help page printed
+    # (pipeline.args.LazyChoices, LazyHelpFormatter): the registry's import is most of a second.
     p = sub.add_parser(
         "run", help="fuse one walk into a track (CSV or GeoJSON)",
         description="Read a walk directory (NMEA, audio, IMU), classify its environment window by window and "
@@ -59,19 +82,14 @@ def register_top(sub) -> None:
     p.add_argument("walk", type=Path, help="walk directory")
     p.add_argument("--model", type=Path, required=True, help="fusion model directory (train fusion)")
     p.add_argument("--out", type=Path, required=True, help="track file to write (CSV, or GeoJSON with --format)")
-    p.add_argument("--method", choices=method_names(smoothed=True), default=DEFAULT_METHOD,
-                   help=f"fusion method (default {DEFAULT_METHOD}; a filter's +rts variant is its RTS-smoothed track, "
-                        "+lag its fixed-lag track, --lag-s late)")
+    p.add_argument("--method", choices=LazyChoices(lambda: _method_names(smoothed=True)), default=DEFAULT_METHOD,
+                   metavar="METHOD", help=_method_help)
     p.add_argument("--lag-s", type=bounded(0, MAX_LAG_S, "s"), default=None,
                    help="lag of a +lag track, s (default 3: the track a few seconds late, most of the smoother's gain)")
     p.add_argument("--format", choices=("csv", "geojson"), default=None,
                    help="output format (default: from the suffix, .geojson or .json → GeoJSON, else CSV)")
     p.add_argument("--force", action="store_true", help="fuse a walk of a site the model was not trained on")
-    p.add_argument("--segment-s", type=bounded(MIN_SEGMENT_S, MAX_SEGMENT_S, "s"), default=SEGMENT_S,
-                   help=f"a longer walk is fused in segments of this much walk time, each with {WARMUP_S:g} s of "
-                        f"warm-up ({FRESH_WARMUP_S:g} s for fg_*, ekf_rtk_pdr and foot_ins_fkf, which start afresh "
-                        f"on each, and adaptive_correction), so memory does not grow with the walk (default "
-                        f"{SEGMENT_S:g}, {MIN_SEGMENT_S:g} to {MAX_SEGMENT_S:g}; walks.segments)")
+    p.add_argument("--segment-s", type=bounded(MIN_SEGMENT_S, MAX_SEGMENT_S, "s"), default=None, help=_segment_help)
     p.set_defaults(func=_run)
 
     p = sub.add_parser(
@@ -89,8 +107,8 @@ def register_top(sub) -> None:
     p.add_argument("--report", type=Path, required=True,
                    help="directory for metrics.csv and the PNGs: new, empty or an earlier report (its plots of "
                         "walks no longer evaluated are removed)")
-    p.add_argument("--methods", nargs="+", choices=method_names(), default=list(method_names()),
-                   help="methods (default all)")
+    p.add_argument("--methods", nargs="+", choices=LazyChoices(_method_names), default=None, metavar="METHOD",
+                   help=lambda: f"methods (default all: {', '.join(_method_names())})")
     p.add_argument("--workers", type=int, default=None, help="local worker processes (default one per core; "
                                                                 "1 = serial, no Dask)")
     p.add_argument("--scheduler", default=None, help="address of an existing Dask scheduler (tcp://host:8786)")
@@ -110,8 +128,11 @@ def _run(args) -> int:
     if not (args.walk / "walk.toml").is_file():
         raise ConfigError(f"{args.walk}: no walk.toml (expected a walk directory)")
     from walks.methods import LAG_S
+    from walks.segments import SEGMENT_S
 
     lag = LAG_S if args.lag_s is None else args.lag_s
+    if args.segment_s is None:
+        args.segment_s = SEGMENT_S
     fmt = args.format or ("geojson" if args.out.suffix.lower() in (".geojson", ".json") else "csv")
     with atomic_path(args.out) as tmp:
         done = fuse_to_file(args.walk, load_model(args.model), args.method, tmp, fmt,
@@ -167,7 +188,8 @@ def _evaluate(args) -> int:
     for w in args.walks:
         if not (w / "walk.toml").is_file():
             raise ConfigError(f"{w}: no walk.toml (expected a walk directory)")
-    out = evaluate(args.walks, args.model, args.report, methods=tuple(args.methods), workers=args.workers,
+    methods = None if args.methods is None else tuple(args.methods)
+    out = evaluate(args.walks, args.model, args.report, methods=methods, workers=args.workers,
                    scheduler=args.scheduler, force=args.force, progress=True, plots=not args.no_plots)
     for f in out["failures"]:
         text = f.message if f.message.startswith(f.walk) else f"{f.walk}: {f.message}"
