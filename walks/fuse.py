@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 import os
+from contextlib import ExitStack
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Callable
@@ -18,11 +19,13 @@ from typing import Callable
 import numpy as np
 
 from features.errors import ConfigError, DataError, EnvfuseError
+from models.fusion.calibration import NIS_WINDOWS_S
 from models.fusion.ekf import FilterRun
 from models.fusion.model import FusionModel
 from walks.inputs import HOP_S, WINDOW_S, ClassResume, WalkInputs, class_state_before, walk_inputs
 from walks.methods import LAG_S, run_methods, track_state_before
 from walks.reader import ReaderStates, WalkData, read_walk
+from walks.segment_rts import SegmentedRts, add_rts_track, rts_rows
 from walks.segments import SEGMENT_S, walk_cuts
 from walks.track import TrackWriter, track_rows
 
@@ -61,6 +64,11 @@ def warmup_for(methods) -> float:
     return segments.WARMUP_S if bases <= RESUMED_METHODS else max(segments.WARMUP_S, segments.FRESH_WARMUP_S)
 
 
+NIS_HISTORY_S = max(NIS_WINDOWS_S)
+"""How far back a handed-over filter state carries its run's NIS (:meth:`~models.fusion.ekf.FilterRun.state_before`):
+the covariance calibrator's longest running mean (:data:`models.fusion.calibration.NIS_WINDOWS_S`), so that a
+segment's calibrated covariance reads the whole walk's NIS, not its warm-up's (:func:`walks.calibrate.track_inputs`)."""
+
 ROWS_PER_WRITE = 20_000
 """Track rows turned into text and written at a time by :func:`fuse_to_file`."""
 
@@ -98,7 +106,8 @@ class FusedWalk:
         got = self.resumed if self.resumed is not None else Handover()
         filters = {}
         for name, res in self.results.items():
-            state = res.state_before(t_s) if isinstance(res, FilterRun) else track_state_before(name, res, t_s)
+            state = res.state_before(t_s, NIS_HISTORY_S) if isinstance(res, FilterRun) else \
+                track_state_before(name, res, t_s)
             if state is not None:
                 filters[name] = state
         for name, old in got.filters.items():
@@ -271,30 +280,50 @@ def fuse_to_file(walk_dir: str | os.PathLike, model: FusionModel, method: str, p
     base = method.split("+")[0]
     out = RunSummary()
     writer = TrackWriter(path, fmt, properties)
+    workdir = os.path.dirname(os.path.abspath(path))
     resume = None
     try:
-        for seg in walk_cuts(walk_dir, segment_s, workdir=os.path.dirname(os.path.abspath(path)),
-                             warmup_s=warmup_for((base,))):
-            where = str(walk_dir) if seg.own_from_s == -math.inf and seg.own_to_s == math.inf else \
-                f"{walk_dir} (segment {seg.index}: walk times {max(seg.own_from_s, 0):g}-{seg.own_to_s:g} s)"
-            try:
-                fused = fuse_walk(seg.directory, model, (base,), smooth=method.endswith("+rts"),
-                                  lag_s=lag_s if method.endswith("+lag") else None, class_map_for=class_map_for,
-                                  force=force, truth=False, resume=resume,
-                                  keep_states_from_s=seg.states_from_s)
-            except EnvfuseError as exc:
-                raise type(exc)(str(exc).replace(str(seg.directory), where)) from None
-            resume = fused.handover(seg.own_to_s, seg.states_from_s)
-            out.segments += 1
-            out.notes += [n for n in fused.data.notes if n not in out.notes]
-            if method not in fused.tracks:
-                out.skipped.append((where, fused.skipped.get(base, "no output")))
-                continue
-            note = fused.tracks[method].info.get("note")
-            if note and f"{method}: {note}" not in out.notes:
-                out.notes.append(f"{method}: {note}")
-            _write_owned(writer, fused, fused.tracks[method], seg, out)
-            del fused
+        with ExitStack() as stack:
+            # a +rts track of a walk in several segments: the whole walk's smoother (walks.segment_rts), its
+            # rows written once the backward pass is done
+            rts = stack.enter_context(SegmentedRts(workdir)) if method.endswith("+rts") else None
+            origin = None
+            for seg in walk_cuts(walk_dir, segment_s, workdir=workdir, warmup_s=warmup_for((base,))):
+                whole = seg.own_from_s == -math.inf and seg.own_to_s == math.inf
+                where = str(walk_dir) if whole else \
+                    f"{walk_dir} (segment {seg.index}: walk times {max(seg.own_from_s, 0):g}-{seg.own_to_s:g} s)"
+                try:
+                    fused = fuse_walk(seg.directory, model, (base,), smooth=method.endswith("+rts"),
+                                      lag_s=lag_s if method.endswith("+lag") else None, class_map_for=class_map_for,
+                                      force=force, truth=False, resume=resume,
+                                      keep_states_from_s=seg.states_from_s)
+                except EnvfuseError as exc:
+                    raise type(exc)(str(exc).replace(str(seg.directory), where)) from None
+                resume = fused.handover(seg.own_to_s, seg.states_from_s)
+                out.segments += 1
+                out.notes += [n for n in fused.data.notes if n not in out.notes]
+                if method not in fused.tracks:
+                    out.skipped.append((where, fused.skipped.get(base, "no output")))
+                    continue
+                note = fused.tracks[method].info.get("note")
+                if note and f"{method}: {note}" not in out.notes:
+                    out.notes.append(f"{method}: {note}")
+                if rts is not None and not whole and \
+                        add_rts_track(rts, fused, method, seg.owns(fused.tracks[method].t_s)):
+                    origin = fused.data.site.origin
+                else:
+                    _write_owned(writer, fused, fused.tracks[method], seg, out)
+                del fused
+            if rts is not None and len(rts):
+                rts.smooth()
+                calibrator = (getattr(model, "calibration", None) or {}).get(method)
+                for part in rts.segments():
+                    for lo in range(0, len(part["t_s"]), ROWS_PER_WRITE):
+                        rows = rts_rows({k: v[lo:lo + ROWS_PER_WRITE] for k, v in part.items()}, calibrator, origin)
+                        writer.write(rows)
+                        out.n += len(rows)
+                        out.placed += sum(math.isfinite(r["east_m"]) and math.isfinite(r["north_m"]) for r in rows)
+                        out.ood += sum(r["ood"] for r in rows)
     finally:
         writer.close()
     return out

@@ -22,7 +22,7 @@ import numpy as np
 from features.geodesy import enu_to_geodetic
 from features.schema import ENV_CLASSES
 
-__all__ = ["Track", "TRACK_COLUMNS", "track_rows", "track_text", "TrackWriter"]
+__all__ = ["Track", "TRACK_COLUMNS", "POSITION_COLUMNS", "track_rows", "position_columns", "track_text", "TrackWriter"]
 
 TRACK_COLUMNS = ("t_s", "time_utc", "east_m", "north_m", "lat_deg", "lon_deg", "h_ell_m", "var_east_m2",
                  "cov_en_m2", "var_north_m2", "env_class", "class_probability", "ood", "nis", "bp_correction_m")
@@ -62,13 +62,10 @@ def track_rows(track: Track, inputs, up_m: float = 0.0) -> list[dict]:
     height above the origin is not estimated).
     """
     data = inputs.data
-    o = data.site.origin
     n = len(track.t_s)
-    up = np.full(n, float(up_m))
-    lat, lon, h = enu_to_geodetic(track.east_m, track.north_m, up, o.lat_deg, o.lon_deg, o.alt_m)
+    pos = position_columns(track.east_m, track.north_m, track.cov_m2, data.site.origin, up_m)
     proba = inputs.classes.at(track.t_s)
     ood = inputs.ood_at(track.t_s)
-    cov = track.cov_m2 if track.cov_m2 is not None else np.full((n, 2, 2), np.nan)
     nis = track.info.get("nis", np.full(n, np.nan))
     bp = track.info.get("bp_delta_m")
     bpn = np.hypot(bp[:, 0], bp[:, 1]) if bp is not None else np.zeros(n)
@@ -77,13 +74,27 @@ def track_rows(track: Track, inputs, up_m: float = 0.0) -> list[dict]:
     for i in range(n):
         c = int(np.argmax(proba[i]))
         utc = "" if start is None else _iso_ms(start + timedelta(seconds=float(track.t_s[i])))
-        rows.append({"t_s": float(track.t_s[i]), "time_utc": utc, "east_m": float(track.east_m[i]),
-                     "north_m": float(track.north_m[i]), "lat_deg": float(lat[i]), "lon_deg": float(lon[i]),
-                     "h_ell_m": float(h[i]), "var_east_m2": float(cov[i, 0, 0]), "cov_en_m2": float(cov[i, 0, 1]),
-                     "var_north_m2": float(cov[i, 1, 1]), "env_class": ENV_CLASSES[c],
-                     "class_probability": float(proba[i, c]), "ood": bool(ood[i]), "nis": float(nis[i]),
-                     "bp_correction_m": float(bpn[i])})
+        row = {"t_s": float(track.t_s[i]), "time_utc": utc}
+        row.update((k, float(v[i])) for k, v in pos.items())
+        row.update(env_class=ENV_CLASSES[c], class_probability=float(proba[i, c]), ood=bool(ood[i]),
+                   nis=float(nis[i]), bp_correction_m=float(bpn[i]))
+        rows.append(row)
     return rows
+
+
+POSITION_COLUMNS = ("east_m", "north_m", "lat_deg", "lon_deg", "h_ell_m", "var_east_m2", "cov_en_m2", "var_north_m2")
+"""The columns of :data:`TRACK_COLUMNS` a track's position and covariance give (:func:`position_columns`)."""
+
+
+def position_columns(east_m: np.ndarray, north_m: np.ndarray, cov_m2: np.ndarray | None, origin,
+                     up_m: float = 0.0) -> dict:
+    """:data:`POSITION_COLUMNS` of track rows, (m,) each: site ENU, WGS-84 at the site ``origin`` (its
+    ``lat_deg``, ``lon_deg``, ``alt_m``; ``up_m`` above it) and the covariance's entries (NaN without one)."""
+    n = len(east_m)
+    lat, lon, h = enu_to_geodetic(east_m, north_m, np.full(n, float(up_m)), origin.lat_deg, origin.lon_deg,
+                                  origin.alt_m)
+    cov = cov_m2 if cov_m2 is not None else np.full((n, 2, 2), np.nan)
+    return dict(zip(POSITION_COLUMNS, (east_m, north_m, lat, lon, h, cov[:, 0, 0], cov[:, 0, 1], cov[:, 1, 1])))
 
 
 def _iso_ms(t) -> str:

@@ -46,7 +46,7 @@ from scipy.special import chdtri, digamma
 
 from features.errors import DataError
 
-__all__ = ["CalibrationConfig", "CovarianceCalibrator", "calibration_inputs", "running_mean",
+__all__ = ["CalibrationConfig", "CovarianceCalibrator", "calibration_inputs", "with_covariance", "running_mean",
            "E_LOG_CHI2_2", "GNSS_AGE_S", "NIS_WINDOWS_S", "QUALITY_COLUMNS"]
 
 E_LOG_CHI2_2 = float(digamma(1.0) + math.log(2.0))
@@ -115,6 +115,15 @@ def calibration_inputs(t_s: np.ndarray, cov_m2: np.ndarray, nis_t_s: np.ndarray,
     X = np.column_stack(cols)
     if class_proba is not None:
         X = np.hstack([X, np.asarray(class_proba, float)])
+    return X
+
+
+def with_covariance(X: np.ndarray, cov_m2: np.ndarray) -> np.ndarray:
+    """Calibrator inputs ``X`` (:func:`calibration_inputs`) with the covariance column computed from ``cov_m2``
+    (m, 2, 2) instead: the inputs of another track at the same epochs of the same run (a smoothed track's
+    whole-walk covariance, :mod:`walks.segment_rts`). A copy."""
+    X = np.array(X, float)
+    X[:, 0] = np.log(np.maximum(np.trace(np.asarray(cov_m2, float), axis1=1, axis2=2), 1e-12))
     return X
 
 

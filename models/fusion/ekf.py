@@ -129,7 +129,9 @@ class FilterResume:
     (M, n), ``mode_P`` (M, n, n), ``mode_proba`` (M,) the per-mode states and mode probabilities of the IMM
     (:class:`~models.fusion.imm.IMMFilter`); ``rejected_in_row`` the fixes gated in a row before it (the UWB
     filter's reset count, :class:`models.uwb_pdr.UwbPdrFilter`); ``event_t_s`` the time of the event the state
-    follows."""
+    follows; ``nis_t_s``, ``nis`` (k,) the times and NIS of the run's events in the ``history_s`` before ``t_s``
+    (:meth:`FilterRun.state_before`): what the covariance calibrator's running means of the NIS read back over
+    (:func:`walks.calibrate.track_inputs`), where the later run's own first events are its warm-up's."""
 
     t_s: float
     x: np.ndarray
@@ -141,6 +143,8 @@ class FilterResume:
     mode_proba: np.ndarray | None = None
     event_t_s: float = math.nan
     rejected_in_row: int = 0
+    nis_t_s: np.ndarray | None = None
+    nis: np.ndarray | None = None
 
 
 @dataclass
@@ -204,11 +208,13 @@ class FilterRun:
         """Posterior position covariance, (m, 2, 2)."""
         return self.P[:, :2, :2]
 
-    def state_before(self, t_s: float) -> FilterResume | None:
-        """The posterior after the last event before ``t_s`` (None when no event precedes it)."""
+    def state_before(self, t_s: float, history_s: float = 0.0) -> FilterResume | None:
+        """The posterior after the last event before ``t_s`` (None when no event precedes it), with the NIS of
+        the events in the ``history_s`` before ``t_s``."""
         i = int(np.searchsorted(self.t_s, t_s, side="left")) - 1
         if i < 0:
             return None
+        lo = int(np.searchsorted(self.t_s, t_s - history_s, side="left"))
 
         def row(a):
             return None if a is None else a[i].copy()
@@ -216,7 +222,8 @@ class FilterRun:
         rejected = self.info.get("rejected_in_row")
         return FilterResume(float(t_s), self.x[i].copy(), self.P[i].copy(), row(self.vb_alpha), row(self.vb_beta),
                             row(self.mode_x), row(self.mode_P), row(self.mode_proba), float(self.t_s[i]),
-                            0 if rejected is None else int(rejected[i]))
+                            0 if rejected is None else int(rejected[i]), self.t_s[lo:i + 1].copy(),
+                            self.nis[lo:i + 1].copy())
 
 
 def empty_records(m: int, n: int) -> dict:
