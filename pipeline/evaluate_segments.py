@@ -9,19 +9,24 @@ float32, the truth class as int8: 21 bytes) and the error and NEES as float64 fo
 is O(walk length) by what ``evaluate`` reports (exact medians and 95th percentiles over every epoch, error
 CDFs); everything else is bounded by one segment's pipeline.
 
-Methods that are whole-walk by nature are run per segment here: a ``+rts`` track is the RTS smoother over
-its segment's cut (warm-up and tail included), not over the whole walk: what that loses near a seam is measured
-in :mod:`walks.segments`.
+A ``+rts`` track is the whole walk's RTS smoother (:class:`walks.segment_rts.SegmentedRts`: each segment's
+owned filter events stored in a temporary folder, one backward pass once the walk is read), scored against the
+truth each segment kept at its epochs. The factor graphs (``fg_*``) are still each cut's own (their cuts start
+afresh, :data:`walks.fuse.RESUMED_METHODS`).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
+from contextlib import ExitStack
+
 from features.errors import DataError
 from walks.inputs import WINDOW_S
-from walks.score import metric_rows, track_errors
+from walks.score import errors_at, metric_rows, track_errors
+from walks.segment_rts import SegmentedRts, add_rts_track, smoothed_covariance
 from walks.segments import SEGMENT_S
+from walks.track import Track
 
 __all__ = ["evaluate_segmented"]
 
@@ -36,30 +41,19 @@ def evaluate_segmented(walk, model, methods, class_map_for, force: bool, name: s
     truth_parts, window_parts, notes, skipped = [], [], [], {}
     shares = {"bp_disabled_share": [], "bp_guard_share": []}
     site = None
-    for seg, fused in fuse_in_segments(walk, model, methods, segment_s, class_map_for=class_map_for, force=force):
-        data = fused.data
-        if data.truth is None:
-            raise DataError(f"{walk}: no truth.csv, so no error to measure (evaluate scores tracks against truth; "
-                            "'envfuse run' writes a walk's track without one)")
-        site = data.site.name
-        notes += [n for n in data.notes if n not in notes]
-        for m, why in fused.skipped.items():
-            skipped.setdefault(m, why)
-        for m, tr in fused.tracks.items():
-            own = tr.take(seg.owns(tr.t_s))
-            te = track_errors(own, data.truth)
-            parts.setdefault(m, []).append((te, own.east_m[te["ok"]], own.north_m[te["ok"]]))
-        _shares(fused.tracks, shares)
-        t = data.truth
-        k = seg.owns(t.t_s)
-        truth_parts.append((t.t_s[k], t.env_class[k], t.east_m[k], t.north_m[k]))
-        w = fused.inputs
-        if len(w.window_t_s):
-            k = seg.owns(w.window_t_s)
-            window_parts.append((w.window_t_s[k], w.classes.proba[1:][k]))
-        del fused, data
+    smoothers: dict = {}        # +rts track name → its SegmentedRts
+    with ExitStack() as stack:
+        for seg, fused in fuse_in_segments(walk, model, methods, segment_s, class_map_for=class_map_for,
+                                           force=force):
+            site = _score_segment(walk, seg, fused, parts, smoothers, stack, truth_parts, window_parts, notes,
+                                  skipped, shares)
+            del fused
+        for m, store in smoothers.items():
+            _score_smoothed(m, store, (getattr(model, "calibration", None) or {}).get(m), parts)
     rows, series = [], {}
     for m, segs in parts.items():
+        if not segs:            # a +rts track whose filter owned no event in any segment
+            continue
         err = np.concatenate([te["err_m"] for te, _, _ in segs])
         nees = np.concatenate([te["nees"] for te, _, _ in segs])
         cls = np.concatenate([te["cls"] for te, _, _ in segs])
@@ -82,6 +76,58 @@ def evaluate_segmented(walk, model, methods, class_map_for, force: bool, name: s
                                                                           if m not in parts},
             "series": series, "site": site, "notes": notes,
             **{k: (float(np.mean(v)) if v else None) for k, v in shares.items()}}
+
+
+def _score_segment(walk, seg, fused, parts, smoothers, stack, truth_parts, window_parts, notes, skipped,
+                   shares) -> str:
+    """Score one segment's owned epochs into ``parts`` (a ``+rts`` track's events into its smoother in
+    ``smoothers``, scored by :func:`_score_smoothed` once the walk is read); returns the walk's site."""
+    data = fused.data
+    if data.truth is None:
+        raise DataError(f"{walk}: no truth.csv, so no error to measure (evaluate scores tracks against truth; "
+                        "'envfuse run' writes a walk's track without one)")
+    notes += [n for n in data.notes if n not in notes]
+    for m, why in fused.skipped.items():
+        skipped.setdefault(m, why)
+    truth = data.truth
+    for m, tr in fused.tracks.items():
+        keep = seg.owns(tr.t_s)
+        if m.endswith("+rts"):
+            if m not in smoothers:
+                smoothers[m] = stack.enter_context(SegmentedRts())
+            # the truth at the owned epochs inside its span, for scoring the whole walk's smoothed track
+            t = tr.t_s[keep]
+            in_span = (t >= truth.t_s[0]) & (t <= truth.t_s[-1])
+            te, tn = np.full(len(t), np.nan), np.full(len(t), np.nan)
+            te[in_span], tn[in_span] = truth.at(t[in_span])
+            cls = np.full(len(t), -1)
+            cls[in_span] = truth.class_at(t[in_span])
+            extras = {"in_span": in_span, "truth_east": te, "truth_north": tn, "truth_cls": cls}
+            if add_rts_track(smoothers[m], fused, m, keep, rows=False, extras=extras):
+                parts.setdefault(m, [])         # the report's order of methods: the first segment's
+                continue
+        own = tr.take(keep)
+        te = track_errors(own, truth)
+        parts.setdefault(m, []).append((te, own.east_m[te["ok"]], own.north_m[te["ok"]]))
+    _shares(fused.tracks, shares)
+    t = data.truth
+    k = seg.owns(t.t_s)
+    truth_parts.append((t.t_s[k], t.env_class[k], t.east_m[k], t.north_m[k]))
+    w = fused.inputs
+    if len(w.window_t_s):
+        k = seg.owns(w.window_t_s)
+        window_parts.append((w.window_t_s[k], w.classes.proba[1:][k]))
+    return data.site.name
+
+
+def _score_smoothed(m: str, store: SegmentedRts, calibrator, parts: dict) -> None:
+    """The whole walk's ``+rts`` track ``m`` (the backward pass over ``store``) scored into ``parts``."""
+    store.smooth()
+    for part in store.segments():
+        tr = Track(m, part["t_s"], part["east_m"], part["north_m"], smoothed_covariance(part, calibrator))
+        ok = part["in_span"] & np.isfinite(tr.east_m)
+        te = errors_at(tr, ok, part["truth_east"][ok], part["truth_north"][ok], part["truth_cls"][ok])
+        parts.setdefault(m, []).append((te, tr.east_m[ok], tr.north_m[ok]))
 
 
 def _shares(tracks: dict, shares: dict) -> None:

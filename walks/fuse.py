@@ -242,15 +242,28 @@ def fuse_in_segments(walk_dir: str | os.PathLike, model: FusionModel, methods=No
 def segmented_tracks(walk_dir: str | os.PathLike, model: FusionModel, methods=None, segment_s: float = SEGMENT_S,
                      **fuse_kw) -> dict:
     """Every track of a walk fused in segments (:func:`fuse_in_segments`) as ``{name: (t_s, east_m, north_m)}``,
-    each the concatenation of the epochs its segments own: what the whole walk's ``fuse_walk(...).tracks`` give,
-    for comparing the two (bench/seam_identity.py). Holds every epoch: for measuring, not for long runs."""
+    each the concatenation of the epochs its segments own (a ``+rts`` track the whole walk's smoother over them,
+    :mod:`walks.segment_rts`, as ``run`` and ``evaluate`` give it): what the whole walk's ``fuse_walk(...).tracks``
+    give, for comparing the two (bench/seam_identity.py). Holds every epoch: for measuring, not for long runs."""
     parts: dict = {}
-    for seg, fused in fuse_in_segments(walk_dir, model, methods, segment_s, **fuse_kw):
-        for name, tr in fused.tracks.items():
-            k = seg.owns(tr.t_s)
-            parts.setdefault(name, []).append((tr.t_s[k], tr.east_m[k], tr.north_m[k]))
-        del fused
-    return {name: tuple(np.concatenate(c) for c in zip(*p)) for name, p in parts.items()}
+    with ExitStack() as stack:
+        smoothers: dict = {}        # the +rts tracks: the whole walk's smoother, as run and evaluate give them
+        for seg, fused in fuse_in_segments(walk_dir, model, methods, segment_s, **fuse_kw):
+            whole = seg.own_from_s == -math.inf and seg.own_to_s == math.inf
+            for name, tr in fused.tracks.items():
+                k = seg.owns(tr.t_s)
+                if name.endswith("+rts") and not whole:
+                    if name not in smoothers:
+                        smoothers[name] = stack.enter_context(SegmentedRts())
+                    if add_rts_track(smoothers[name], fused, name, k, rows=False):
+                        parts.setdefault(name, [])
+                        continue
+                parts.setdefault(name, []).append((tr.t_s[k], tr.east_m[k], tr.north_m[k]))
+            del fused
+        for name, store in smoothers.items():
+            store.smooth()
+            parts[name] += [(p["t_s"], p["east_m"], p["north_m"]) for p in store.segments()]
+    return {name: tuple(np.concatenate(c) for c in zip(*p)) for name, p in parts.items() if p}
 
 
 @dataclass
@@ -272,7 +285,9 @@ def fuse_to_file(walk_dir: str | os.PathLike, model: FusionModel, method: str, p
     """``envfuse run``: one method's track of a walk written to ``path`` (the output's temporary file) in
     ``fmt`` (``csv`` / ``geojson``), segment by segment (:mod:`walks.segments`) and a block of rows at a time,
     so that memory does not grow with the walk. ``method``: a registered name, ``+rts`` / ``+lag`` for its
-    smoothed tracks (``lag_s``). A walk of one segment gives the bytes its whole-walk track gives.
+    smoothed tracks (``lag_s``). A walk of one segment gives the bytes its whole-walk track gives; a ``+rts`` track of
+    a longer walk is the whole walk's smoother (:mod:`walks.segment_rts`), its rows written once every segment is
+    filtered.
 
     A segment where the method cannot run (no fix in it, ...) is left out with its reason in ``skipped``
     (``n`` is 0 when it ran on none).

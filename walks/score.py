@@ -16,7 +16,7 @@ import numpy as np
 from features.schema import ENV_CLASSES
 from models.fusion.consistency import chi2_bounds
 
-__all__ = ["METRIC_COLUMNS", "track_errors", "metric_rows", "score"]
+__all__ = ["METRIC_COLUMNS", "track_errors", "errors_at", "metric_rows", "score"]
 
 METRIC_COLUMNS = ("walk", "method", "env_class", "n", "mean_m", "median_m", "p95_m", "max_m", "nees_in_bounds")
 """Columns of a metric row (``metrics.csv``)."""
@@ -28,6 +28,13 @@ def track_errors(tr, truth) -> dict:
     ``cls`` (k,) truth class, ``ok`` (m,) which of the track's epochs these are."""
     ok = np.isfinite(tr.east_m) & (tr.t_s >= truth.t_s[0]) & (tr.t_s <= truth.t_s[-1])
     te, tn = truth.at(tr.t_s[ok])
+    return errors_at(tr, ok, te, tn, truth.class_at(tr.t_s[ok]))
+
+
+def errors_at(tr, ok: np.ndarray, te: np.ndarray, tn: np.ndarray, cls: np.ndarray) -> dict:
+    """:func:`track_errors` of the track's epochs ``ok`` (bool, (m,)) given the truth there: east ``te``, north
+    ``tn`` and class ``cls`` (k,) each (a long walk's segments keep those for a track smoothed once the walk is
+    done, :mod:`pipeline.evaluate_segments`)."""
     e = np.stack([tr.east_m[ok] - te, tr.north_m[ok] - tn], axis=1)
     nees = np.full(len(e), np.nan)
     if tr.cov_m2 is not None:
@@ -35,8 +42,7 @@ def track_errors(tr, truth) -> dict:
         good = np.all(np.isfinite(c), axis=(1, 2)) & (np.linalg.det(c) > 0)
         # ε = e' P⁻¹ e
         nees[good] = np.einsum("ni,nij,nj->n", e[good], np.linalg.inv(c[good]), e[good])
-    return {"ok": ok, "t_s": tr.t_s[ok], "e": e, "err_m": np.hypot(e[:, 0], e[:, 1]), "nees": nees,
-            "cls": truth.class_at(tr.t_s[ok])}
+    return {"ok": ok, "t_s": tr.t_s[ok], "e": e, "err_m": np.hypot(e[:, 0], e[:, 1]), "nees": nees, "cls": cls}
 
 
 def metric_rows(err_m: np.ndarray, nees: np.ndarray, cls: np.ndarray, walk: str, method: str) -> list[dict]:

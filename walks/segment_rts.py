@@ -17,10 +17,11 @@ states by the smoothed position and covariance; :meth:`~SegmentedRts.segments` r
 Given the forward runs, the result is the RTS smoother over their concatenation to the bit (the same gains, the
 same steps in the same order): ``tests/test_segment_rts.py``.
 
-What it costs: one file per segment in a temporary folder beside the output, (3n² + 2n + 1) float64 per event
-for n filter states before the backward pass (n = 2 to 8 for the built-in filters: 2 KiB an event, ~140 MB for an
-8-hour walk of ``kf_quality``'s 5-10 events a second) and the caller's per-event columns; memory holds one segment's
-arrays.
+What it costs: one file per segment in a temporary folder (beside the output for ``run``), (3n² + 2n + 1)
+float64 per event for n filter states, and the caller's per-event columns; memory holds one segment's arrays.
+Measured on a 600 s walk (6.7 events a second): n = 4 for ``kf_quality``, ``aekf``, ``imm`` (456 B an event,
+88 MB for an 8-hour walk), n = 6 for the ``adaptive`` family (968 B, 188 MB), n = 2 for the UWB/PDR filters
+(9.2 events a second, 36 MB); ``run``'s rows add ~0.2 KB an event (the UTC time and class as text).
 """
 
 from __future__ import annotations
@@ -40,7 +41,7 @@ from models.fusion.smoother import smoother_gains
 from walks.calibrate import CALIBRATED, track_inputs
 from walks.track import POSITION_COLUMNS, TRACK_COLUMNS, position_columns, track_rows
 
-__all__ = ["SegmentedRts", "add_rts_track", "rts_rows"]
+__all__ = ["SegmentedRts", "add_rts_track", "smoothed_covariance", "rts_rows"]
 
 _STATES = ("t_s", "x", "P", "x_prior", "P_prior", "F")
 """The filter run's per-event arrays the backward pass reads."""
@@ -66,7 +67,7 @@ class SegmentedRts:
     """
 
     def __init__(self, workdir: str | os.PathLike | None = None):
-        self._dir = Path(tempfile.mkdtemp(prefix=".envfuse-rts-", dir=workdir))
+        self._dir = Path(tempfile.mkdtemp(prefix=".envfuse-rts.", dir=workdir))
         self._files: list[Path] = []
         self._smoothed = False
         self._last_t = -np.inf
@@ -162,12 +163,14 @@ _ROW_COLUMNS = {"time_utc": str, "env_class": str, "class_probability": float, "
 assert set(_ROW_COLUMNS) | set(POSITION_COLUMNS) | {"t_s"} == set(TRACK_COLUMNS)
 
 
-def add_rts_track(store: SegmentedRts, fused, name: str, keep: np.ndarray) -> bool:
+def add_rts_track(store: SegmentedRts, fused, name: str, keep: np.ndarray, rows: bool = True,
+                  extras: dict | None = None) -> bool:
     """Store in ``store`` the events of the filter run behind ``name`` (``<filter>+rts``) of a segment's
     ``fused`` walk (:class:`walks.fuse.FusedWalk`) where ``keep`` holds (the events the segment owns), with what
-    their rows need besides the position (:func:`rts_rows`): the other columns of the cut's own ``+rts`` track
-    and, when the model calibrates that track's covariance, the calibrator's inputs. False (nothing stored)
-    when the method's result is not a filter run."""
+    the smoothed track needs besides the position: when the model calibrates that track's covariance, the
+    calibrator's inputs (:func:`smoothed_covariance`); with ``rows``, the other columns of the cut's own ``+rts``
+    track (:func:`rts_rows`); the caller's ``extras`` (per kept event). False (nothing stored) when the method's
+    result is not a filter run."""
     base = name.removesuffix("+rts")
     run = fused.results.get(base)
     track = fused.tracks.get(name)
@@ -178,13 +181,25 @@ def add_rts_track(store: SegmentedRts, fused, name: str, keep: np.ndarray) -> bo
     keep = np.asarray(keep, bool)
     if not keep.any():
         return True
-    rows = track_rows(track.take(keep), fused.inputs)
-    extras = {f"row_{c}": np.array([r[c] for r in rows]) for c in _ROW_COLUMNS}
+    out = dict(extras or {})
+    if rows:
+        cut_rows = track_rows(track.take(keep), fused.inputs)
+        out.update((f"row_{c}", np.array([r[c] for r in cut_rows])) for c in _ROW_COLUMNS)
     if "cov_scale" in track.info:
         resumed = (fused.inputs.resume or {}).get(base)
-        extras["calibration_x"] = track_inputs(track, run, fused.inputs, CALIBRATED.get(base, False), resumed)[keep]
-    store.add(run, keep, extras)
+        out["calibration_x"] = track_inputs(track, run, fused.inputs, CALIBRATED.get(base, False), resumed)[keep]
+    store.add(run, keep, out)
     return True
+
+
+def smoothed_covariance(part: dict, calibrator) -> np.ndarray:
+    """The covariance (k, 2, 2) of one segment of :meth:`SegmentedRts.segments` stored by :func:`add_rts_track`:
+    the smoother's, times the ``calibrator``'s scale at it (a
+    :class:`~models.fusion.calibration.CovarianceCalibrator`) when the segment stored the calibrator's inputs."""
+    cov = part["cov_m2"]
+    if "calibration_x" in part:
+        cov = cov * calibrator.scale(with_covariance(part["calibration_x"], cov))[:, None, None]
+    return cov
 
 
 def rts_rows(part: dict, calibrator, origin) -> list[dict]:
@@ -192,10 +207,7 @@ def rts_rows(part: dict, calibrator, origin) -> list[dict]:
     :func:`add_rts_track`: the smoothed position, its covariance times the ``calibrator``'s scale at it (a
     :class:`~models.fusion.calibration.CovarianceCalibrator`, used when the segment stored its inputs), WGS-84
     at the site ``origin``, and the cut's other columns."""
-    cov = part["cov_m2"]
-    if "calibration_x" in part:
-        cov = cov * calibrator.scale(with_covariance(part["calibration_x"], cov))[:, None, None]
-    pos = position_columns(part["east_m"], part["north_m"], cov, origin)
+    pos = position_columns(part["east_m"], part["north_m"], smoothed_covariance(part, calibrator), origin)
     rows = []
     for i, t in enumerate(part["t_s"]):
         row = {"t_s": float(t)}

@@ -70,14 +70,14 @@ A walk that fits in one segment is fused exactly as before, from its own folder.
 pipeline (S + :data:`WARMUP_S` + up to 1 s + :data:`TAIL_S` of walk; :data:`FRESH_WARMUP_S` for the methods
 that start afresh) whatever the walk's length, plus what the caller keeps of each segment (``envfuse run`` writes its rows to the output's temporary file and keeps nothing).
 
-What a segment cannot have: the future past its cut. A ``+rts`` track is the RTS smoother over its cut, i.e. at
-an owned epoch t the whole walk's smoother with the data after the cut's end (at least :data:`TAIL_S` after t)
-left out: a fixed-lag smoother of lag ≥ own end − t + :data:`TAIL_S`. What it loses is largest at the last
-epochs before a seam (the heading offset and step scale, near-constant states, carry the later fixes' evidence
-back over the whole walk): measured below (seed 77: 0.02-0.06 m at the seams' last epochs, medians 1e-6 to
-3e-4 m). A longer tail does not bound it tighter: with 30 s (``bench/seam_identity.py --tail-s 30``) seed 77
-reads 0.008 / 0.045 / 0.084 m for ``kf_quality`` / ``aekf`` / ``imm`` against 0.022 / 0.025 / 0.059 m at 10 s,
-the loss being that of whichever fixes lie past the cut. (The UWB/PDR filters' PDR track spread a step over
+What a segment cannot have: the future past its cut. A ``+rts`` track is therefore not smoothed per cut (that
+left out every fix after the cut's end: the rows ``+rts`` of the table below, up to 1.8 m, measured that way) but
+over the whole walk, :mod:`walks.segment_rts`: each segment's owned filter events are stored beside the output
+and one backward pass runs once the last segment is filtered (``run`` and ``evaluate``; 1.5-1.6 m → 7e-6 m on a
+600 s walk at 120 s segments). The covariance calibrator's running means of the NIS (15 s at most) read the
+previous segment's NIS, which the hand-over carries (:attr:`models.fusion.ekf.FilterResume.nis`), not the cut's
+warm-up filtered without it (the default method's variance was up to 2.9× off in the 15 s after each seam).
+(The UWB/PDR filters' PDR track spread a step over
 the time since the previous one, a stop included, so a cut ending in a stop lost the step after it: 0.03-0.45 m
 at such seams, ``+lag`` and the filter alike; it is now still through a stop, :func:`models.uwb_pdr.pdr_track_at`.)
 
@@ -127,7 +127,7 @@ fg_tight (h)           0.066         0.074         2.7           2.5
 
 With 20 s of warm-up before the GNSS memory was handed over, on the 1 s grid, the tracks of both walks were
 these; on main with 30 s, seed 78's ``fluct_per_s`` at 925 s differed (class probabilities by 0.009). The
-``+rts`` tracks lose the data past the cut's end whatever the warm-up (above). (a) (before issue 25's
+``+rts`` tracks lost the data past the cut's end whatever the warm-up (now smoothed over the whole walk). (a) (before issue 25's
 alignment) the cut's float32 blocks not on the walk's; (b) one acoustic fix of seed 78 (342.83 s) main's
 segmented read does not give (its cut aligned on the 32 s grid; aligned by ``first_sample`` every fix is the
 whole walk's to the bit): the filters move by up to 2.95 m (``kf_map``) after it; (c) three feature windows of
