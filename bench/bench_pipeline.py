@@ -722,8 +722,9 @@ def evaluate_section(walks, model_dir: Path, tmp: Path, walk_s: float) -> None:
 
 
 def memory_section(tmp: Path, model_dir: Path, base_s: float = 300.0, long_h: float = 8.0,
-                   segment_s: float | None = None) -> None:
-    """Peak memory of ``envfuse run`` (default method) on a 10-minute and an ``long_h``-hour walk, each in a
+                   segment_s: float | None = None, method: str | None = None) -> None:
+    """Peak memory of ``envfuse run`` (default method, or ``method``: e.g. a ``+rts`` track, smoothed over the whole
+    walk from per-segment files, walks/segment_rts.py, whose largest temporary file is also printed) on a 10-minute and an ``long_h``-hour walk, each in a
     fresh process (its VmHWM), and the long run's wall time and × real time beside the ``oaconvolve``
     yardstick over the base walk's audio. Both walks are one simulated walk of ``base_s`` looped
     (``tests/long_walk.py``: timestamps continued, audio appended block by block), so they differ in length
@@ -741,17 +742,49 @@ def memory_section(tmp: Path, model_dir: Path, base_s: float = 300.0, long_h: fl
         made = time.perf_counter() - t0
         t0 = time.perf_counter()
         seg = [] if segment_s is None else ["--segment-s", f"{segment_s:g}"]
+        seg += [] if method is None else ["--method", method]
+        watch = _TempWatch(tmp) if method is not None and method.endswith("+rts") else None
         peaks[label] = peak_rss_mib(["run", str(walk), "--model", str(model_dir), "--out", str(tmp / f"{loops}.csv")]
                                     + seg)
         wall = time.perf_counter() - t0
         dur = loops * base_s
-        print(f"envfuse run, {label} walk ({loops} x {base_s:.0f} s, written in {made:.0f} s): peak RSS "
+        if watch is not None:
+            print(f"  {method}: the whole walk's smoother's temporary files reached {watch.stop() / 2**20:,.0f} MiB")
+        print(f"envfuse run{'' if method is None else ' --method ' + method}, {label} walk ({loops} x {base_s:.0f} s, written in {made:.0f} s): peak RSS "
               f"{peaks[label]:.0f} MiB, {wall:.0f} s wall, {dur / wall:,.0f}x real time (oaconvolve in the same run: "
               f"first {yard:,.0f}x, best of 3 {yard_warm:,.0f}x; ratio {dur / wall / yard_warm:.3f})", flush=True)
         for f in walk.iterdir():
             f.unlink()
     a, b = peaks.values()
     print(f"peak memory {long_h:g} h / 10 min: {b / a:.3f} (target within 10 %)")
+
+
+class _TempWatch:
+    """The largest total size of ``run``'s ``.envfuse-rts.*`` folders in ``folder`` while it runs, bytes (polled by a
+    thread every 0.5 s)."""
+
+    def __init__(self, folder: Path):
+        import threading
+
+        self.folder, self.peak, self._done = folder, 0, threading.Event()
+        self._thread = threading.Thread(target=self._poll, daemon=True)
+        self._thread.start()
+
+    def _poll(self) -> None:
+        while not self._done.wait(0.5):
+            size = 0
+            for d in self.folder.glob(".envfuse-rts.*"):
+                for f in d.glob("*"):
+                    try:
+                        size += f.stat().st_size
+                    except OSError:         # removed as we looked
+                        pass
+            self.peak = max(self.peak, size)
+
+    def stop(self) -> int:
+        self._done.set()
+        self._thread.join()
+        return self.peak
 
 
 def main() -> None:
@@ -768,6 +801,7 @@ def main() -> None:
                     help="2 training walks of 120 s, then only the peak memory of run on 10-minute and 8-hour walks")
     ap.add_argument("--long-h", type=float, default=8.0, help="length of --memory-only's long walk, hours")
     ap.add_argument("--segment-s", type=float, default=None, help="run's --segment-s in section 5 (default: run's)")
+    ap.add_argument("--method", default=None, help="run's --method in section 5 (default: run's)")
     args = ap.parse_args()
     if args.simulator_only:
         with tempfile.TemporaryDirectory() as d:
@@ -776,7 +810,7 @@ def main() -> None:
     if args.memory_only:
         with tempfile.TemporaryDirectory() as d:
             walks, model_dir = build(Path(d), 120.0, 2)
-            memory_section(Path(d), model_dir, long_h=args.long_h, segment_s=args.segment_s)
+            memory_section(Path(d), model_dir, long_h=args.long_h, segment_s=args.segment_s, method=args.method)
         return
     walk_s, n_walks = (120.0, 4) if args.quick else (600.0, 8)
     if args.breakdown_only:
@@ -798,7 +832,7 @@ def main() -> None:
         evaluate_section(eval_walks, model_dir, tmp, args.eval_walk_s)
         if not (args.evaluate_only or args.breakdown_only):     # every figure of issue 25 in one run
             simulator_section(tmp, walk_s)
-            memory_section(tmp, model_dir, long_h=args.long_h, segment_s=args.segment_s)
+            memory_section(tmp, model_dir, long_h=args.long_h, segment_s=args.segment_s, method=args.method)
 
 
 def timing_sections(walks, model_dir: Path, walk_s: float) -> None:
