@@ -204,3 +204,18 @@ def test_peak_memory_of_run_does_not_grow_with_the_walk(looped, model_dir, tmp_p
     growth = peak_growth_mib(looped, model_dir, tmp_path, 60.0)
     print("peak growth 5 -> 11 min, MiB:", growth)
     assert growth < GROWTH_BOUND_MIB, growth
+
+
+def test_run_of_a_long_walk_reports_its_progress_segment_by_segment(looped, model_dir, tmp_path, capsys):
+    """``envfuse run`` on the 3-minute walk at 60 s segments writes one progress line per segment on stderr (a log,
+    not a terminal: plain lines, one per tenth of the work), the last at 3/3; the walk fused whole writes none."""
+    from pipeline.cli import main
+
+    assert main(["run", str(looped[3]), "--model", str(model_dir), "--out", str(tmp_path / "seg.csv"),
+                 "--segment-s", "60", "--force"]) == 0
+    err = capsys.readouterr().err
+    lines = [line for line in err.splitlines() if line.startswith("run x3:")]
+    assert lines == ["run x3: 1/3 segments (33 %)", "run x3: 2/3 segments (67 %)", "run x3: 3/3 segments (100 %)"]
+    assert main(["run", str(looped[3]), "--model", str(model_dir), "--out", str(tmp_path / "whole.csv"),
+                 "--segment-s", "1000", "--force"]) == 0
+    assert "segments (" not in capsys.readouterr().err

@@ -281,7 +281,8 @@ class RunSummary:
 
 def fuse_to_file(walk_dir: str | os.PathLike, model: FusionModel, method: str, path, fmt: str, *,
                  properties: dict | None = None, lag_s: float | None = LAG_S, class_map_for: Callable | None = None,
-                 force: bool = False, segment_s: float = SEGMENT_S) -> RunSummary:
+                 force: bool = False, segment_s: float = SEGMENT_S,
+                 progress: Callable[[int], None] | None = None) -> RunSummary:
     """``envfuse run``: one method's track of a walk written to ``path`` (the output's temporary file) in
     ``fmt`` (``csv`` / ``geojson``), segment by segment (:mod:`walks.segments`) and a block of rows at a time,
     so that memory does not grow with the walk. ``method``: a registered name, ``+rts`` / ``+lag`` for its
@@ -290,7 +291,8 @@ def fuse_to_file(walk_dir: str | os.PathLike, model: FusionModel, method: str, p
     filtered.
 
     A segment where the method cannot run (no fix in it, ...) is left out with its reason in ``skipped``
-    (``n`` is 0 when it ran on none).
+    (``n`` is 0 when it ran on none). ``progress``: called with the number of segments fused so far after each
+    (:func:`walks.segments.plan_segments` says how many there will be).
     """
     base = method.split("+")[0]
     out = RunSummary()
@@ -316,6 +318,8 @@ def fuse_to_file(walk_dir: str | os.PathLike, model: FusionModel, method: str, p
                     raise type(exc)(str(exc).replace(str(seg.directory), where)) from None
                 resume = fused.handover(seg.own_to_s, seg.states_from_s)
                 out.segments += 1
+                if progress is not None:
+                    progress(out.segments)
                 out.notes += [n for n in fused.data.notes if n not in out.notes]
                 if method not in fused.tracks:
                     out.skipped.append((where, fused.skipped.get(base, "no output")))

@@ -122,22 +122,28 @@ def _run(args) -> int:
     from pipeline.evaluate import load_model
     from pipeline.outputs import check_outputs, model_inputs, walk_files
     from pipeline.site_map import class_map_for
+    from simulation.progress import Progress
     from walks.fuse import fuse_to_file
 
     check_outputs(walk_files(args.walk), {"--out": args.out}, sealed=model_inputs(args.model, "--model"))
     if not (args.walk / "walk.toml").is_file():
         raise ConfigError(f"{args.walk}: no walk.toml (expected a walk directory)")
     from walks.methods import LAG_S
-    from walks.segments import SEGMENT_S
+    from walks.segments import SEGMENT_S, plan_segments
 
     lag = LAG_S if args.lag_s is None else args.lag_s
     if args.segment_s is None:
         args.segment_s = SEGMENT_S
     fmt = args.format or ("geojson" if args.out.suffix.lower() in (".geojson", ".json") else "csv")
-    with atomic_path(args.out) as tmp:
+    # a walk of several segments (a shift: minutes of work) shows its progress segment by segment on stderr: a
+    # bar on a terminal, a line per tenth in a log
+    n_segments = plan_segments(args.walk, args.segment_s)[0]
+    with atomic_path(args.out) as tmp, Progress(n_segments, f"run {args.walk.name}", unit="segments",
+                                                enabled=n_segments > 1) as bar:
         done = fuse_to_file(args.walk, load_model(args.model), args.method, tmp, fmt,
                             properties={"walk": str(args.walk), "method": args.method}, lag_s=lag,
-                            class_map_for=class_map_for, force=args.force, segment_s=args.segment_s)
+                            class_map_for=class_map_for, force=args.force, segment_s=args.segment_s,
+                            progress=bar.set)
         for note in done.notes:
             print(f"envfuse: note: {args.walk}: {note}", file=sys.stderr)
         if done.n == 0 and done.skipped:
