@@ -724,9 +724,9 @@ def evaluate_section(walks, model_dir: Path, tmp: Path, walk_s: float) -> None:
 def memory_section(tmp: Path, model_dir: Path, base_s: float = 300.0, long_h: float = 8.0,
                    segment_s: float | None = None, method: str | None = None) -> None:
     """Peak memory of ``envfuse run`` (default method, or ``method``: e.g. a ``+rts`` track, smoothed over the whole
-    walk from per-segment files, walks/segment_rts.py, whose largest temporary file is also printed) on a 10-minute and an ``long_h``-hour walk, each in a
-    fresh process (its VmHWM), and the long run's wall time and × real time beside the ``oaconvolve``
-    yardstick over the base walk's audio. Both walks are one simulated walk of ``base_s`` looped
+    walk from per-segment files, walks/segment_rts.py, whose peak size is also printed) on a 10-minute and an
+    ``long_h``-hour walk, each in a fresh process (its VmHWM), and the long run's wall time and × real time beside
+    the ``oaconvolve`` yardstick over the base walk's audio. Both walks are one simulated walk of ``base_s`` looped
     (``tests/long_walk.py``: timestamps continued, audio appended block by block), so they differ in length
     only. Target: the two peaks within 10 %. ``segment_s``: run's ``--segment-s`` (None: its default)."""
     from simulation.walk import simulate_walk
@@ -750,7 +750,8 @@ def memory_section(tmp: Path, model_dir: Path, base_s: float = 300.0, long_h: fl
         dur = loops * base_s
         if watch is not None:
             print(f"  {method}: the whole walk's smoother's temporary files reached {watch.stop() / 2**20:,.0f} MiB")
-        print(f"envfuse run{'' if method is None else ' --method ' + method}, {label} walk ({loops} x {base_s:.0f} s, written in {made:.0f} s): peak RSS "
+        name = "" if method is None else " --method " + method
+        print(f"envfuse run{name}, {label} walk ({loops} x {base_s:.0f} s, written in {made:.0f} s): peak RSS "
               f"{peaks[label]:.0f} MiB, {wall:.0f} s wall, {dur / wall:,.0f}x real time (oaconvolve in the same run: "
               f"first {yard:,.0f}x, best of 3 {yard_warm:,.0f}x; ratio {dur / wall / yard_warm:.3f})", flush=True)
         for f in walk.iterdir():
