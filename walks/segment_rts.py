@@ -15,7 +15,9 @@ back to its first, a segment at a time, each one's last event taking its gain C_
 from the next segment's first event and its smoothed state from that event's, and replaces each file's filter
 states by the smoothed position and covariance; :meth:`~SegmentedRts.segments` reads them back in time order.
 Given the forward runs, the result is the RTS smoother over their concatenation to the bit (the same gains, the
-same steps in the same order): ``tests/test_segment_rts.py``.
+same steps in the same order): ``tests/test_segment_rts.py``. A calibrated track's covariance is scaled after the
+pass, by the calibrator at the inputs each segment stored, their covariance column computed from the smoothed
+covariance (:func:`smoothed_covariance`).
 
 What it costs: one file per segment in a temporary folder (beside the output for ``run``), (3n² + 2n + 1)
 float64 per event for n filter states, and the caller's per-event columns; memory holds one segment's arrays.
@@ -108,8 +110,9 @@ class SegmentedRts:
         self._last_t = float(t[-1])
         for k, v in (extras or {}).items():
             v = np.asarray(v)
-            if v.shape[:1] != t.shape or k in _STATES or k.startswith("_"):
-                raise ValueError(f"SegmentedRts.add: extra {k!r} must be a new name with one row per kept event")
+            if v.shape[:1] != t.shape or k in _STATES or k.startswith("_") or v.dtype == object:
+                raise ValueError(f"SegmentedRts.add: extra {k!r} must be a new name with one row per kept event, "
+                                 "of numbers, booleans or text (the files are read without pickle)")
             arrays[f"extra_{k}"] = v
         self._files.append(self._save(len(self._files), arrays))
 
@@ -130,8 +133,8 @@ class SegmentedRts:
         for i in range(len(self._files) - 1, -1, -1):
             with np.load(self._files[i], allow_pickle=False) as z:
                 arrays = {k: z[k] for k in z.files}
-            ev = [arrays[k] for k in ("x", "P", "x_prior", "P_prior", "F")]
-            k = ev[0].shape[0]
+            ev = [arrays[name] for name in ("x", "P", "x_prior", "P_prior", "F")]
+            m = ev[0].shape[0]
             if nxt is not None:
                 # the next segment's first event ends this piece: its smoothed state is the recursion's start
                 # (rts_pass leaves the last row as given) and its prior and Jacobian give this piece's last gain
@@ -140,9 +143,9 @@ class SegmentedRts:
                 xs, Ps = rts_pass(*ev[:4], smoother_gains(_Events(*ev)))
             else:
                 xs, Ps = ev[0].copy(), ev[1].copy()
-            xs, Ps = xs[:k], Ps[:k]
+            xs, Ps = xs[:m], Ps[:m]
             nxt = (xs[0], Ps[0], arrays["x_prior"][0], arrays["P_prior"][0], arrays["F"][0])
-            out = {k_: v for k_, v in arrays.items() if k_.startswith("extra_")}
+            out = {name: v for name, v in arrays.items() if name.startswith("extra_")}
             out.update(t_s=arrays["t_s"], east_m=xs[:, 0].copy(), north_m=xs[:, 1].copy(),
                        cov_m2=Ps[:, :2, :2].copy())
             self._save(i, out)
