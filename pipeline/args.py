@@ -8,7 +8,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 
 __all__ = ["seed", "positive", "non_negative", "finite", "bounded", "open_interval", "UsageError", "check_outputs",
-           "plot_path", "LazyChoices"]
+           "plot_path", "LazyChoices", "lazy_help"]
 
 
 class UsageError(Exception):
@@ -87,6 +87,15 @@ def open_interval(lo: float, hi: float, unit: str = ""):
         return value
     parse.__name__ = f"open_interval({lo:g},{hi:g})"
     return parse
+
+
+def lazy_help(action: argparse.Action, text: Callable[[], str]) -> argparse.Action:
+    """Give ``action`` (what ``add_argument`` returned) a help text computed when a help page is printed
+    (:class:`pipeline.cli.CliParser`): a help naming a constant of a heavy module (the method registry, the
+    segments' warm-ups) then does not import it while the parser is built for every command. Set after
+    ``add_argument``, which checks a help string as it adds it (Python 3.14) and would refuse a function."""
+    action.lazy_help = text
+    return action
 
 
 class LazyChoices(Sequence):

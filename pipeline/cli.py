@@ -43,18 +43,17 @@ GROUPS = {
 
 
 class CliParser(argparse.ArgumentParser):
-    """ArgumentParser whose errors are one line, not a usage dump, and whose options may give their ``help`` as
-    a function returning the text, called when a help page is printed: a help naming a constant of a heavy
-    module (``run --segment-s``'s warm-ups, the method registry) then does not import it while the parser is
-    built for every command."""
+    """ArgumentParser whose errors are one line, not a usage dump, and whose options' help may be computed when
+    a help page is printed (:func:`pipeline.args.lazy_help`)."""
 
     def error(self, message):  # noqa: D401 - argparse API
         raise UsageError(f"{self.prog}: {message} (see '{self.prog} --help')")
 
     def format_help(self) -> str:
         for action in self._actions:
-            if callable(action.help):
-                action.help = action.help()
+            text = getattr(action, "lazy_help", None)
+            if text is not None:
+                action.help = text()
         return super().format_help()
 
 

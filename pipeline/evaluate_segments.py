@@ -11,8 +11,10 @@ CDFs); everything else is bounded by one segment's pipeline.
 
 A ``+rts`` track is the whole walk's RTS smoother (:class:`walks.segment_rts.SegmentedRts`: each segment's
 owned filter events stored in a temporary folder, one backward pass once the walk is read), scored against the
-truth each segment kept at its epochs. The factor graphs (``fg_*``) are still each cut's own (their cuts start
-afresh, :data:`walks.fuse.RESUMED_METHODS`).
+truth each segment kept at its epochs. The factor graphs (``fg_*``) and ``ekf_rtk_pdr+rts`` are still each cut's
+own (their cuts start afresh, :data:`walks.fuse.RESUMED_METHODS`). The stores take temporary disk (``$TMPDIR``)
+in proportion to the walk: about 0.1-1 KB per filter event for each filter's ``+rts`` (walks/segment_rts.py), about
+1.3 GB for an 8-hour walk when every method is evaluated; evaluating fewer methods (``--methods``) takes less.
 """
 
 from __future__ import annotations

@@ -79,10 +79,6 @@ def test_pieces_give_the_whole_run_s_smoother(tmp_path, cuts):
     np.testing.assert_allclose(north, ref_x[:, 1], rtol=0, atol=1e-9)
     np.testing.assert_allclose(cov, ref_P[:, :2, :2], rtol=0, atol=1e-9)
     assert np.array_equal(east, whole.x[:, 0]) and np.array_equal(cov, whole.P[:, :2, :2])
-    # smoothing each piece alone (what a segment did before) is not it: the later pieces' fixes are missing
-    alone = rts_smooth(SimpleNamespace(**{k: getattr(run, k)[:60] for k in ("t_s", "kind", "x", "P", "x_prior",
-                                                                           "P_prior", "F")}, method="cv"))
-    assert np.max(np.abs(alone.x[:, 0] - ref_x[:60, 0])) > 1e-3
 
 
 def test_bad_use_is_refused_and_the_folder_removed(tmp_path):
@@ -211,3 +207,33 @@ def test_evaluate_scores_the_whole_walk_s_rts_track(model_and_walk, looped):
         np.testing.assert_allclose(s["nees"], ref["nees"], rtol=1e-3)
         row = next(r for r in seg["rows"] if r["method"] == m and r["env_class"] == "all")
         assert row["n"] == len(ref["err_m"]) and row["mean_m"] == pytest.approx(ref["err_m"].mean(), rel=1e-5)
+
+
+def test_the_handed_nis_history_skips_a_short_segment_s_warm_up():
+    """A segment shorter than the calibrator's 15 s window hands on, before its own resume time (100 s), the
+    history it was handed, not its warm-up's NIS (walks.fuse._join_nis). By hand: handed [88, 95, 99] at 100 s;
+    this run's events before the 110 s hand-over [96 (warm-up), 101, 105] → [95, 99, 101, 105] (88 is older
+    than 110 − 15)."""
+    from models.fusion.ekf import FilterResume
+    from walks.fuse import _join_nis
+
+    got = FilterResume(100.0, np.zeros(2), np.eye(2), nis_t_s=np.array([88.0, 95.0, 99.0]),
+                       nis=np.array([1.0, 2.0, 3.0]))
+    mine = FilterResume(110.0, np.ones(2), np.eye(2), nis_t_s=np.array([96.0, 101.0, 105.0]),
+                        nis=np.array([40.0, 5.0, 6.0]))
+    joined = _join_nis(mine, got, 110.0)
+    assert joined.nis_t_s.tolist() == [95.0, 99.0, 101.0, 105.0] and joined.nis.tolist() == [2.0, 3.0, 5.0, 6.0]
+    assert joined.x.tolist() == [1.0, 1.0]
+    assert _join_nis(mine, None, 110.0) is mine
+
+
+def test_a_filter_that_starts_afresh_on_each_cut_keeps_its_cut_s_smoother(tmp_path):
+    """ekf_rtk_pdr's cuts are separate runs (walks.fuse.RESUMED_METHODS): chaining their smoothers would join
+    unrelated states, so add_rts_track declines it (the caller writes each cut's own +rts) and stores nothing."""
+    from walks.segment_rts import add_rts_track
+
+    run, _, _ = _cv_run(5, 20)
+    fused = SimpleNamespace(results={"ekf_rtk_pdr": run}, tracks={"ekf_rtk_pdr+rts": None})
+    with SegmentedRts(tmp_path) as store:
+        assert add_rts_track(store, fused, "ekf_rtk_pdr+rts", np.ones(20, bool)) is False
+        assert len(store) == 0

@@ -109,7 +109,7 @@ class FusedWalk:
             state = res.state_before(t_s, NIS_HISTORY_S) if isinstance(res, FilterRun) else \
                 track_state_before(name, res, t_s)
             if state is not None:
-                filters[name] = state
+                filters[name] = _join_nis(state, got.filters.get(name), t_s)
         for name, old in got.filters.items():
             new = filters.get(name)
             if new is None or _event_time(new) < old.t_s:
@@ -133,6 +133,19 @@ class FusedWalk:
         if got.readers.gnss is not None and (gnss is None or not gnss.t_s > got.readers.gnss.t_s):
             gnss = got.readers.gnss
         return Handover(filters, ReaderStates(heading, receiver, gnss), classes)
+
+
+def _join_nis(state, resumed, t_s: float):
+    """``state``'s NIS history with its events before the state this run ``resumed`` from (the cut's warm-up,
+    filtered without it: a segment shorter than :data:`NIS_HISTORY_S`) replaced by that state's own history."""
+    if resumed is None or resumed.nis_t_s is None or state.nis_t_s is None:
+        return state
+    old = (resumed.nis_t_s >= t_s - NIS_HISTORY_S) & (resumed.nis_t_s < resumed.t_s)
+    mine = state.nis_t_s >= resumed.t_s
+    if mine.all() and not old.any():
+        return state
+    return replace(state, nis_t_s=np.concatenate([resumed.nis_t_s[old], state.nis_t_s[mine]]),
+                   nis=np.concatenate([resumed.nis[old], state.nis[mine]]))
 
 
 def _event_time(state) -> float:

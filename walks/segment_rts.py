@@ -176,8 +176,13 @@ def add_rts_track(store: SegmentedRts, fused, name: str, keep: np.ndarray, rows:
     the smoothed track needs besides the position: when the model calibrates that track's covariance, the
     calibrator's inputs (:func:`smoothed_covariance`); with ``rows``, the other columns of the cut's own ``+rts``
     track (:func:`rts_rows`); the caller's ``extras`` (per kept event). False (nothing stored) when the method's
-    result is not a filter run."""
+    result is not a filter run, or not one that resumes across seams (a cut of ``ekf_rtk_pdr`` starts afresh:
+    the cuts' runs are not one run, and each keeps its own smoother)."""
+    from walks.fuse import RESUMED_METHODS       # walks.fuse imports this module
+
     base = name.removesuffix("+rts")
+    if base not in RESUMED_METHODS:
+        return False
     run = fused.results.get(base)
     track = fused.tracks.get(name)
     if not isinstance(run, FilterRun) or track is None:

@@ -72,8 +72,9 @@ that start afresh) whatever the walk's length, plus what the caller keeps of eac
 
 What a segment cannot have: the future past its cut. A ``+rts`` track is therefore not smoothed per cut (that
 left out every fix after the cut's end: the rows ``+rts`` of the table below, up to 1.8 m, measured that way) but
-over the whole walk, :mod:`walks.segment_rts`: each segment's owned filter events are stored beside the output
-and one backward pass runs once the last segment is filtered (``run`` and ``evaluate``; 1.5-1.6 m → 7e-6 m on a
+over the whole walk, :mod:`walks.segment_rts` (the filters that resume, :data:`walks.fuse.RESUMED_METHODS`;
+``ekf_rtk_pdr``, which starts afresh on each cut, keeps its cut's smoother): each segment's owned filter events
+are stored beside the output and one backward pass runs once the last segment is filtered (``run`` and ``evaluate``; 1.5-1.6 m → 7e-6 m on a
 600 s walk at 120 s segments). The covariance calibrator's running means of the NIS (15 s at most) read the
 previous segment's NIS, which the hand-over carries (:attr:`models.fusion.ekf.FilterResume.nis`), not the cut's
 warm-up filtered without it (the default method's variance was up to 2.9× off in the 15 s after each seam).

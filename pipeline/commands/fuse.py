@@ -7,7 +7,7 @@ from pathlib import Path
 
 from features.errors import ConfigError
 from features.fileio import atomic_write_text
-from pipeline.args import LazyChoices, UsageError, bounded
+from pipeline.args import LazyChoices, UsageError, bounded, lazy_help
 
 GROUP = None  # top-level commands, registered by register_top
 
@@ -72,7 +72,7 @@ def _segment_help() -> str:
 
 def register_top(sub) -> None:
     # The method names and the segments' constants are read when a value is checked or a help page printed
-    # (pipeline.args.LazyChoices, LazyHelpFormatter): the registry's import is most of a second.
+    # (pipeline.args.LazyChoices, lazy_help): the registry's import is most of a second.
     p = sub.add_parser(
         "run", help="fuse one walk into a track (CSV or GeoJSON)",
         description="Read a walk directory (NMEA, audio, IMU), classify its environment window by window and "
@@ -82,14 +82,15 @@ def register_top(sub) -> None:
     p.add_argument("walk", type=Path, help="walk directory")
     p.add_argument("--model", type=Path, required=True, help="fusion model directory (train fusion)")
     p.add_argument("--out", type=Path, required=True, help="track file to write (CSV, or GeoJSON with --format)")
-    p.add_argument("--method", choices=LazyChoices(lambda: _method_names(smoothed=True)), default=DEFAULT_METHOD,
-                   metavar="METHOD", help=_method_help)
+    lazy_help(p.add_argument("--method", choices=LazyChoices(lambda: _method_names(smoothed=True)),
+                             default=DEFAULT_METHOD, metavar="METHOD", help="fusion method"), _method_help)
     p.add_argument("--lag-s", type=bounded(0, MAX_LAG_S, "s"), default=None,
                    help="lag of a +lag track, s (default 3: the track a few seconds late, most of the smoother's gain)")
     p.add_argument("--format", choices=("csv", "geojson"), default=None,
                    help="output format (default: from the suffix, .geojson or .json → GeoJSON, else CSV)")
     p.add_argument("--force", action="store_true", help="fuse a walk of a site the model was not trained on")
-    p.add_argument("--segment-s", type=bounded(MIN_SEGMENT_S, MAX_SEGMENT_S, "s"), default=None, help=_segment_help)
+    lazy_help(p.add_argument("--segment-s", type=bounded(MIN_SEGMENT_S, MAX_SEGMENT_S, "s"), default=None,
+                             help="segment length, s"), _segment_help)
     p.set_defaults(func=_run)
 
     p = sub.add_parser(
@@ -107,8 +108,9 @@ def register_top(sub) -> None:
     p.add_argument("--report", type=Path, required=True,
                    help="directory for metrics.csv and the PNGs: new, empty or an earlier report (its plots of "
                         "walks no longer evaluated are removed)")
-    p.add_argument("--methods", nargs="+", choices=LazyChoices(_method_names), default=None, metavar="METHOD",
-                   help=lambda: f"methods (default all: {', '.join(_method_names())})")
+    lazy_help(p.add_argument("--methods", nargs="+", choices=LazyChoices(_method_names), default=None,
+                             metavar="METHOD", help="methods (default all)"),
+              lambda: f"methods (default all: {', '.join(_method_names())})")
     p.add_argument("--workers", type=int, default=None, help="local worker processes (default one per core; "
                                                                 "1 = serial, no Dask)")
     p.add_argument("--scheduler", default=None, help="address of an existing Dask scheduler (tcp://host:8786)")
