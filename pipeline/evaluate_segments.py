@@ -19,9 +19,9 @@ in proportion to the walk: about 0.1-1 KB per filter event for each filter's ``+
 
 from __future__ import annotations
 
-import numpy as np
-
 from contextlib import ExitStack
+
+import numpy as np
 
 from features.errors import DataError
 from walks.inputs import WINDOW_S

@@ -74,11 +74,11 @@ What a segment cannot have: the future past its cut. A ``+rts`` track is therefo
 left out every fix after the cut's end: the rows ``+rts`` of the table below, up to 1.8 m, measured that way) but
 over the whole walk, :mod:`walks.segment_rts` (the filters that resume, :data:`walks.fuse.RESUMED_METHODS`;
 ``ekf_rtk_pdr``, which starts afresh on each cut, keeps its cut's smoother): each segment's owned filter events
-are stored beside the output and one backward pass runs once the last segment is filtered (``run`` and ``evaluate``; 1.5-1.6 m → 7e-6 m on a
-600 s walk at 120 s segments). The covariance calibrator's running means of the NIS (15 s at most) read the
-previous segment's NIS, which the hand-over carries (:attr:`models.fusion.ekf.FilterResume.nis`), not the cut's
-warm-up filtered without it (the default method's variance was up to 2.9× off in the 15 s after each seam).
-(The UWB/PDR filters' PDR track spread a step over
+are stored beside the output and one backward pass runs once the last segment is filtered (``run`` and
+``evaluate``; 1.5-1.6 m → 7e-6 m on a 600 s walk at 120 s segments). The covariance calibrator's running means of
+the NIS (15 s at most) read the previous segment's NIS, which the hand-over carries
+(:attr:`models.fusion.ekf.FilterResume.nis`), not the cut's warm-up filtered without it (the default method's
+variance was up to 2.9× off in the 15 s after each seam). (The UWB/PDR filters' PDR track spread a step over
 the time since the previous one, a stop included, so a cut ending in a stop lost the step after it: 0.03-0.45 m
 at such seams, ``+lag`` and the filter alike; it is now still through a stop, :func:`models.uwb_pdr.pdr_track_at`.)
 
@@ -128,8 +128,8 @@ fg_tight (h)           0.066         0.074         2.7           2.5
 
 With 20 s of warm-up before the GNSS memory was handed over, on the 1 s grid, the tracks of both walks were
 these; on main with 30 s, seed 78's ``fluct_per_s`` at 925 s differed (class probabilities by 0.009). The
-``+rts`` tracks lost the data past the cut's end whatever the warm-up (now smoothed over the whole walk). (a) (before issue 25's
-alignment) the cut's float32 blocks not on the walk's; (b) one acoustic fix of seed 78 (342.83 s) main's
+``+rts`` tracks lost the data past the cut's end whatever the warm-up (now smoothed over the whole walk). (a)
+(before issue 25's alignment) the cut's float32 blocks not on the walk's; (b) one acoustic fix of seed 78 (342.83 s) main's
 segmented read does not give (its cut aligned on the 32 s grid; aligned by ``first_sample`` every fix is the
 whole walk's to the bit): the filters move by up to 2.95 m (``kf_map``) after it; (c) three feature windows of
 seed 77 (1137-1139 s) whose CIR features differ on main (one chirp's SNR by 0.1-1 dB): the class-aware filters
