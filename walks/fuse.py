@@ -262,10 +262,9 @@ def segmented_tracks(walk_dir: str | os.PathLike, model: FusionModel, methods=No
     with ExitStack() as stack:
         smoothers: dict = {}        # the +rts tracks: the whole walk's smoother, as run and evaluate give them
         for seg, fused in fuse_in_segments(walk_dir, model, methods, segment_s, **fuse_kw):
-            whole = seg.own_from_s == -math.inf and seg.own_to_s == math.inf
             for name, tr in fused.tracks.items():
                 k = seg.owns(tr.t_s)
-                if name.endswith("+rts") and not whole:
+                if name.endswith("+rts") and not seg.whole:
                     if name not in smoothers:
                         smoothers[name] = stack.enter_context(SegmentedRts())
                     if add_rts_track(smoothers[name], fused, name, k, rows=False):
@@ -319,8 +318,7 @@ def fuse_to_file(walk_dir: str | os.PathLike, model: FusionModel, method: str, p
             rts = stack.enter_context(SegmentedRts(workdir)) if method.endswith("+rts") else None
             origin = None
             for seg in walk_cuts(walk_dir, segment_s, workdir=workdir, warmup_s=warmup_for((base,))):
-                whole = seg.own_from_s == -math.inf and seg.own_to_s == math.inf
-                where = str(walk_dir) if whole else \
+                where = str(walk_dir) if seg.whole else \
                     f"{walk_dir} (segment {seg.index}: walk times {max(seg.own_from_s, 0):g}-{seg.own_to_s:g} s)"
                 try:
                     fused = fuse_walk(seg.directory, model, (base,), smooth=method.endswith("+rts"),
@@ -340,7 +338,7 @@ def fuse_to_file(walk_dir: str | os.PathLike, model: FusionModel, method: str, p
                 note = fused.tracks[method].info.get("note")
                 if note and f"{method}: {note}" not in out.notes:
                     out.notes.append(f"{method}: {note}")
-                if rts is not None and not whole and \
+                if rts is not None and not seg.whole and \
                         add_rts_track(rts, fused, method, seg.owns(fused.tracks[method].t_s)):
                     origin = fused.data.site.origin
                 else:
@@ -351,11 +349,8 @@ def fuse_to_file(walk_dir: str | os.PathLike, model: FusionModel, method: str, p
                 calibrator = (getattr(model, "calibration", None) or {}).get(method)
                 for part in rts.segments():
                     for lo in range(0, len(part["t_s"]), ROWS_PER_WRITE):
-                        rows = rts_rows({k: v[lo:lo + ROWS_PER_WRITE] for k, v in part.items()}, calibrator, origin)
-                        writer.write(rows)
-                        out.n += len(rows)
-                        out.placed += sum(math.isfinite(r["east_m"]) and math.isfinite(r["north_m"]) for r in rows)
-                        out.ood += sum(r["ood"] for r in rows)
+                        _write_rows(writer, rts_rows({k: v[lo:lo + ROWS_PER_WRITE] for k, v in part.items()},
+                                                     calibrator, origin), out)
     finally:
         writer.close()
     return out
@@ -369,8 +364,12 @@ def _write_owned(writer: TrackWriter, fused: FusedWalk, track, seg, out: RunSumm
         keep = np.zeros(len(track), bool)
         keep[own[lo:lo + ROWS_PER_WRITE]] = True
         part = track if own.size == len(track) <= ROWS_PER_WRITE else track.take(keep)
-        rows = track_rows(part, fused.inputs)
-        writer.write(rows)
-        out.n += len(rows)
-        out.placed += int(np.sum(np.isfinite(part.east_m) & np.isfinite(part.north_m)))
-        out.ood += sum(r["ood"] for r in rows)
+        _write_rows(writer, track_rows(part, fused.inputs), out)
+
+
+def _write_rows(writer: TrackWriter, rows: list[dict], out: RunSummary) -> None:
+    """Write ``rows``; count them, those with a position and those out of distribution into ``out``."""
+    writer.write(rows)
+    out.n += len(rows)
+    out.placed += sum(math.isfinite(r["east_m"]) and math.isfinite(r["north_m"]) for r in rows)
+    out.ood += sum(r["ood"] for r in rows)

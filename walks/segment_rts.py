@@ -44,7 +44,7 @@ from models.fusion.core import rts_pass
 from models.fusion.ekf import FilterRun
 from models.fusion.smoother import smoother_gains
 from walks.calibrate import CALIBRATED, track_inputs
-from walks.track import POSITION_COLUMNS, TRACK_COLUMNS, position_columns, track_rows
+from walks.track import POSITION_COLUMNS, TRACK_COLUMNS, position_columns, rows_from_columns, track_columns
 
 __all__ = ["SegmentedRts", "add_rts_track", "smoothed_covariance", "rts_rows"]
 
@@ -163,10 +163,8 @@ class SegmentedRts:
 
 # -- a +rts track written by ``envfuse run`` ------------------------------------------------------------------------
 
-_ROW_COLUMNS = {"time_utc": str, "env_class": str, "class_probability": float, "ood": bool, "nis": float,
-                "bp_correction_m": float}
-"""The columns of a track row besides ``t_s`` and :data:`walks.track.POSITION_COLUMNS`, with their types."""
-assert set(_ROW_COLUMNS) | set(POSITION_COLUMNS) | {"t_s"} == set(TRACK_COLUMNS)
+_ROW_COLUMNS = tuple(c for c in TRACK_COLUMNS if c != "t_s" and c not in POSITION_COLUMNS)
+"""The columns of a track row besides ``t_s`` and :data:`walks.track.POSITION_COLUMNS`."""
 
 
 def add_rts_track(store: SegmentedRts, fused, name: str, keep: np.ndarray, rows: bool = True,
@@ -194,8 +192,8 @@ def add_rts_track(store: SegmentedRts, fused, name: str, keep: np.ndarray, rows:
         return True
     out = dict(extras or {})
     if rows:
-        cut_rows = track_rows(track.take(keep), fused.inputs)
-        out.update((f"row_{c}", np.array([r[c] for r in cut_rows])) for c in _ROW_COLUMNS)
+        columns = track_columns(track.take(keep), fused.inputs)
+        out.update((f"row_{c}", np.asarray(columns[c])) for c in _ROW_COLUMNS)
     if "cov_scale" in track.info:
         resumed = (fused.inputs.resume or {}).get(base)
         out["calibration_x"] = track_inputs(track, run, fused.inputs, CALIBRATED.get(base, False), resumed)[keep]
@@ -218,11 +216,7 @@ def rts_rows(part: dict, calibrator, origin) -> list[dict]:
     :func:`add_rts_track`: the smoothed position, its covariance times the ``calibrator``'s scale at it (a
     :class:`~models.fusion.calibration.CovarianceCalibrator`, used when the segment stored its inputs), WGS-84
     at the site ``origin``, and the cut's other columns."""
-    pos = position_columns(part["east_m"], part["north_m"], smoothed_covariance(part, calibrator), origin)
-    rows = []
-    for i, t in enumerate(part["t_s"]):
-        row = {"t_s": float(t)}
-        row.update((k, float(v[i])) for k, v in pos.items())
-        row.update((c, kind(part[f"row_{c}"][i])) for c, kind in _ROW_COLUMNS.items())
-        rows.append(row)
-    return rows
+    columns = {c: part[f"row_{c}"] for c in _ROW_COLUMNS}
+    columns.update(position_columns(part["east_m"], part["north_m"], smoothed_covariance(part, calibrator), origin),
+                   t_s=part["t_s"])
+    return rows_from_columns(columns)

@@ -246,6 +246,11 @@ class Segment:
         start (−inf: it reads the walk from there as the whole walk's read does, resuming no reader)."""
         return self.next_from_s + RESUME_AFTER_S if math.isfinite(self.next_from_s) else math.inf
 
+    @property
+    def whole(self) -> bool:
+        """The segment owns the whole walk (a walk of one segment, fused from its own folder)."""
+        return self.own_from_s == -math.inf and self.own_to_s == math.inf
+
     def owns(self, t_s):
         """Which of ``t_s`` (array) belong to this segment."""
         return (t_s >= self.own_from_s) & (t_s < self.own_to_s)

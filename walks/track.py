@@ -22,7 +22,8 @@ import numpy as np
 from features.geodesy import enu_to_geodetic
 from features.schema import ENV_CLASSES
 
-__all__ = ["Track", "TRACK_COLUMNS", "POSITION_COLUMNS", "track_rows", "position_columns", "track_text", "TrackWriter"]
+__all__ = ["Track", "TRACK_COLUMNS", "POSITION_COLUMNS", "track_rows", "track_columns", "rows_from_columns",
+           "position_columns", "track_text", "TrackWriter"]
 
 TRACK_COLUMNS = ("t_s", "time_utc", "east_m", "north_m", "lat_deg", "lon_deg", "h_ell_m", "var_east_m2",
                  "cov_en_m2", "var_north_m2", "env_class", "class_probability", "ood", "nis", "bp_correction_m")
@@ -61,25 +62,40 @@ def track_rows(track: Track, inputs, up_m: float = 0.0) -> list[dict]:
     Heights: the track is horizontal; ``h_ell_m`` is the site origin's height plus ``up_m`` (the device
     height above the origin is not estimated).
     """
+    return rows_from_columns(track_columns(track, inputs, up_m))
+
+
+def track_columns(track: Track, inputs, up_m: float = 0.0) -> dict:
+    """:func:`track_rows`'s values column by column: (m,) arrays, the text columns as (m,) lists."""
     data = inputs.data
     n = len(track.t_s)
-    pos = position_columns(track.east_m, track.north_m, track.cov_m2, data.site.origin, up_m)
-    proba = inputs.classes.at(track.t_s)
-    ood = inputs.ood_at(track.t_s)
-    nis = track.info.get("nis", np.full(n, np.nan))
+    proba = np.asarray(inputs.classes.at(track.t_s))
+    c = np.argmax(proba, axis=1)
     bp = track.info.get("bp_delta_m")
-    bpn = np.hypot(bp[:, 0], bp[:, 1]) if bp is not None else np.zeros(n)
     start = data.walk.start_utc
-    rows = []
-    for i in range(n):
-        c = int(np.argmax(proba[i]))
-        utc = "" if start is None else _iso_ms(start + timedelta(seconds=float(track.t_s[i])))
-        row = {"t_s": float(track.t_s[i]), "time_utc": utc}
-        row.update((k, float(v[i])) for k, v in pos.items())
-        row.update(env_class=ENV_CLASSES[c], class_probability=float(proba[i, c]), ood=bool(ood[i]),
-                   nis=float(nis[i]), bp_correction_m=float(bpn[i]))
-        rows.append(row)
-    return rows
+    return {"t_s": track.t_s,
+            "time_utc": [""] * n if start is None else
+            [_iso_ms(start + timedelta(seconds=t)) for t in np.asarray(track.t_s, float).tolist()],
+            **position_columns(track.east_m, track.north_m, track.cov_m2, data.site.origin, up_m),
+            "env_class": [ENV_CLASSES[k] for k in c.tolist()],
+            "class_probability": proba[np.arange(n), c],
+            "ood": np.asarray(inputs.ood_at(track.t_s), bool),
+            "nis": track.info.get("nis", np.full(n, np.nan)),
+            "bp_correction_m": np.hypot(bp[:, 0], bp[:, 1]) if bp is not None else np.zeros(n)}
+
+
+def rows_from_columns(columns: dict) -> list[dict]:
+    """Rows (dicts in :data:`TRACK_COLUMNS` order, Python values) of :func:`track_columns`' columns, or of any
+    arrays of those columns (numbers as floats, ``ood`` as bool, text as text)."""
+    def values(k):
+        v = columns[k]
+        if isinstance(v, list):
+            return v
+        v = np.asarray(v)
+        return v.astype(bool).tolist() if k == "ood" else v.tolist() if v.dtype.kind == "U" else \
+            v.astype(float).tolist()
+
+    return [dict(zip(TRACK_COLUMNS, row)) for row in zip(*(values(k) for k in TRACK_COLUMNS))]
 
 
 POSITION_COLUMNS = ("east_m", "north_m", "lat_deg", "lon_deg", "h_ell_m", "var_east_m2", "cov_en_m2", "var_north_m2")

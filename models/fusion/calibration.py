@@ -99,8 +99,7 @@ def calibration_inputs(t_s: np.ndarray, cov_m2: np.ndarray, nis_t_s: np.ndarray,
     squared innovation over 5 and 15 s and the share of down-weighted updates, 0.891.
     """
     t = np.asarray(t_s, float)
-    tr = np.trace(np.asarray(cov_m2, float), axis1=1, axis2=2)
-    cols = [np.log(np.maximum(tr, 1e-12))]
+    cols = [_log_trace(cov_m2)]
     for w in NIS_WINDOWS_S:
         r = running_mean(t, np.asarray(nis_t_s, float), nis, w)
         cols.append(np.where(np.isfinite(r), np.log(np.maximum(r, 1e-6)), _LOG_NIS_NONE))
@@ -123,8 +122,13 @@ def with_covariance(X: np.ndarray, cov_m2: np.ndarray) -> np.ndarray:
     (m, 2, 2) instead: the inputs of another track at the same epochs of the same run (a smoothed track's
     whole-walk covariance, :mod:`walks.segment_rts`). A copy."""
     X = np.array(X, float)
-    X[:, 0] = np.log(np.maximum(np.trace(np.asarray(cov_m2, float), axis1=1, axis2=2), 1e-12))
+    X[:, 0] = _log_trace(cov_m2)
     return X
+
+
+def _log_trace(cov_m2: np.ndarray) -> np.ndarray:
+    """The calibrator's covariance column: ln tr P (m,), P floored at 1e-12 m²."""
+    return np.log(np.maximum(np.trace(np.asarray(cov_m2, float), axis1=1, axis2=2), 1e-12))
 
 
 @dataclass(frozen=True)
