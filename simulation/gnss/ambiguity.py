@@ -206,22 +206,56 @@ def _search(lo, d, zs, max_loops):
     return zn, sn, nn
 
 
+@njit(cache=True)
+def _lambda(a, q):
+    """:func:`lambda_search` compiled, for the RTK engine's loop: (ok, best, second, q_best, q_second, d, found);
+    ok False when Q is not positive definite. Z⁻ᵀ as numpy's ``inv`` forms it (LAPACK gesv against I)."""
+    lo, d, ok = _ld(q)
+    n = a.shape[0]
+    if not ok:
+        return False, np.zeros(n), np.zeros(n), np.inf, np.inf, d, 0
+    z = _decorrelate(lo, d)
+    zs = z.T @ a
+    zn, sn, nn = _search(lo, d, zs, 100_000)
+    zi = np.linalg.solve(z.T, np.eye(n))
+    best = np.rint(zi @ zn[0])
+    second = np.rint(zi @ zn[1]) if nn > 1 else best
+    return True, best, second, sn[0], sn[1] if nn > 1 else np.inf, d, nn
+
+
 def lambda_search(a_float: np.ndarray, q: np.ndarray) -> LambdaResult:
-    """Integer least-squares estimate of the float ambiguities ``a_float`` (n,) with covariance ``q`` (n, n), cycles.
+    """Integer least-squares estimate of the float ambiguities ``a_float`` (n,) with covariance ``q`` (n, n), cycles;
+    raises ``np.linalg.LinAlgError`` if ``q`` is not positive definite.
 
     >>> r = lambda_search(np.array([0.1, 2.9]), np.diag([0.01, 0.01]))
     >>> r.best.tolist(), round(r.q_best, 3), round(r.ratio, 2)
     ([0.0, 3.0], 2.0, 41.0)
     """
-    a = np.asarray(a_float, float)
-    lo, d = ld_factor(q)
-    z = decorrelate(lo, d)
-    zs = z.T @ a
-    zn, sn, nn = _search(lo, d, zs, 100_000)
-    zi = np.linalg.inv(z.T)
-    best = np.rint(zi @ zn[0])
-    second = np.rint(zi @ zn[1]) if nn > 1 else best
-    return LambdaResult(best, second, float(sn[0]), float(sn[1]) if nn > 1 else math.inf, d.copy())
+    ok, best, second, q_best, q_second, d, _ = _lambda(np.asarray(a_float, np.float64),
+                                                       np.ascontiguousarray(q, dtype=np.float64))
+    if not ok:
+        raise np.linalg.LinAlgError("ambiguity covariance is not positive definite")
+    return LambdaResult(best, second, float(q_best), float(q_second), d)
+
+
+@njit(cache=True)
+def _ndtr(x: float) -> float:
+    """Φ(x) by Cephes' formula, as scipy's ``ndtr`` forms it (0.5 + 0.5·erf(x/√2) near 0, 0.5·erfc(|x|/√2) beyond),
+    on the C library's erf and erfc."""
+    t = x * 0.7071067811865476
+    z = abs(t)
+    if z < 0.7071067811865476:
+        return 0.5 + 0.5 * math.erf(t)
+    y = 0.5 * math.erfc(z)
+    return 1.0 - y if t > 0.0 else y
+
+
+@njit(cache=True)
+def _bootstrap(d):
+    p = 1.0
+    for i in range(d.shape[0]):
+        p *= 2.0 * _ndtr(1.0 / (2.0 * math.sqrt(d[i]))) - 1.0
+    return p
 
 
 def bootstrap_success_rate(d: np.ndarray) -> float:
@@ -230,8 +264,7 @@ def bootstrap_success_rate(d: np.ndarray) -> float:
     >>> round(bootstrap_success_rate(np.array([0.04, 0.01])), 4)      # σ 0.2 and 0.1 cycles
     0.9876
     """
-    sig = np.sqrt(np.asarray(d, float))
-    return float(np.prod(2.0 * ndtr(1.0 / (2.0 * sig)) - 1.0))
+    return float(_bootstrap(np.asarray(d, np.float64).ravel()))
 
 
 def biased_bootstrap_success_rate(d: np.ndarray, bias_cycles: np.ndarray) -> float:

@@ -58,6 +58,14 @@ Per epoch (arrays (n, k) unless noted; ranges in metres):
    wrong fix therefore persists until lock is lost (fewer than
    ``hold_min_sats`` held) or the geometry has moved enough for validation to
    catch it.
+
+The epoch loop is compiled with numba (:func:`_engine`; issue 25 item 2):
+a dozen numpy calls on arrays of a few satellites per epoch cost ~0.3 ms in
+Python, 0.84 s of a 600 s walk, against 0.06 s compiled. It takes the same
+decisions as the numpy loop it replaced (fixed, wrong, ratio identical on six
+walks); sums run in order rather than numpy's pairwise, and Φ comes from the C
+library's erf, so positions differ by ≤ 3e-14 m and every file written was
+byte-identical.
 """
 
 from __future__ import annotations
@@ -65,9 +73,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 from scipy.stats import chi2
 
-from simulation.gnss.ambiguity import bootstrap_success_rate, lambda_search
+from simulation.gnss.ambiguity import _bootstrap, _lambda
 from simulation.gnss.gst import gst_fields
 
 __all__ = ["RtkConfig", "RtkResult", "carrier_model_var_m2", "float_solution", "rtk_engine"]
@@ -162,51 +171,190 @@ def float_solution(g, use, carrier_err_m, amb_err_m, s2_m2, sig_phi2_m2):
     return theta, cov, w_f
 
 
+@njit(cache=True)
 def _dd_matrix(sel: np.ndarray, sys_idx: np.ndarray, el: np.ndarray) -> np.ndarray:
     """Double-difference operator (m − n_sys, m) over the satellites ``sel`` (indices), reference = highest of each
     system; a system with one satellite gives no row."""
-    rows = []
-    m = len(sel)
-    for s in np.unique(sys_idx[sel]):
-        members = np.flatnonzero(sys_idx[sel] == s)
+    m = sel.shape[0]
+    sys_sel = sys_idx[sel]
+    systems = np.unique(sys_sel)
+    n_rows = 0
+    for s in systems:
+        n_rows += max(int(np.sum(sys_sel == s)) - 1, 0)
+    dmat = np.zeros((n_rows, m))
+    row = 0
+    for s in systems:
+        members = np.flatnonzero(sys_sel == s)
         if members.size < 2:
             continue
         ref = members[np.argmax(el[sel[members]])]
         for j in members:
             if j != ref:
-                r = np.zeros(m)
-                r[j], r[ref] = 1.0, -1.0
-                rows.append(r)
-    return np.array(rows).reshape(-1, m)
+                dmat[row, j], dmat[row, ref] = 1.0, -1.0
+                row += 1
+    return dmat
 
 
-def _fixed_solution(g_i, y_i, w_i, chi2_tab, pfa_tab_len, min_sats):
-    """Fixed solution on the held satellites with outlier dropping; returns (θ, cov, residuals, kept mask) or None."""
+@njit(cache=True)
+def _inv(a: np.ndarray) -> np.ndarray:
+    """a⁻¹ as ``numpy.linalg.inv`` forms it: LAPACK gesv against the identity."""
+    return np.linalg.solve(a, np.eye(a.shape[0]))
+
+
+@njit(cache=True)
+def _fixed_solution(g_i, y_i, w_i, chi2_tab, min_sats):
+    """Fixed solution on the satellites with w > 0, the worst carrier dropped while the residuals fail the χ² test.
+
+    Returns (ok, θ (p,), its covariance's position block (3, 3), residuals (k,), kept (k,), a-posteriori variance
+    factor); ok False when fewer than ``min_sats`` remain or the normal matrix is singular."""
+    k, p = g_i.shape
     keep = w_i > 0
     while True:
         n_keep = int(keep.sum())
         if n_keep < min_sats:
-            return None
+            break
         gk, yk, wk = g_i[keep], y_i[keep], w_i[keep]
-        cols = [0, 1, 2] + [c for c in range(3, g_i.shape[1]) if gk[:, c].any()]
-        gk = gk[:, cols]
-        nmat = (gk * wk[:, None]).T @ gk
+        cols = [0, 1, 2]
+        for c in range(3, p):
+            if np.any(gk[:, c] != 0.0):
+                cols.append(c)
+        gk = gk[:, np.array(cols)]
+        gw = gk * wk[:, None]
         try:
-            cov = np.linalg.inv(nmat)
-        except np.linalg.LinAlgError:
-            return None
-        theta = cov @ ((gk * wk[:, None]).T @ yk)
+            cov = _inv(gw.T @ gk)
+        except Exception:       # LinAlgError: singular
+            break
+        theta = cov @ (gw.T @ yk)
         r = yk - gk @ theta
         dof = n_keep - len(cols)
-        t = float((wk * r * r).sum())
-        if dof < 1 or t <= chi2_tab[min(dof, pfa_tab_len - 1)]:
-            full = np.zeros(g_i.shape[1])
-            full[cols] = theta
-            res = np.zeros(len(w_i))
+        wr2 = wk * r * r
+        t = wr2.sum()
+        if dof < 1 or t <= chi2_tab[min(dof, chi2_tab.shape[0] - 1)]:
+            full = np.zeros(p)
+            for j in range(len(cols)):
+                full[cols[j]] = theta[j]
+            res = np.zeros(k)
             res[keep] = r
-            return full, cov[:3, :3], res, keep, t / max(dof, 1)
-        worst = np.flatnonzero(keep)[np.argmax(wk * r * r)]
-        keep[worst] = False
+            return True, full, cov[:3, :3].copy(), res, keep, t / max(dof, 1)
+        keep[np.flatnonzero(keep)[np.argmax(wr2)]] = False
+    return False, np.zeros(p), np.zeros((3, 3)), np.zeros(k), keep, np.nan
+
+
+@njit(cache=True)
+def _attempt(i, g, ar_ok, el, sys_idx, e_n, s2, sig_phi2, a_gain, w_f, cov_float, resid_f, carrier_err, w_phi, lam,
+             held, chi_val, ratio, p_s, min_sats, hold_min_sats, ratio_threshold, min_success_rate, max_drops):
+    """One epoch's ambiguity resolution (item 2); on success fills ``held`` and returns the fixed solution
+    (:func:`_fixed_solution`'s tuple; ok False on failure). Writes the last search's ratio and success rate."""
+    k = g.shape[1]
+    sel = np.flatnonzero(ar_ok[i])
+    norm = np.abs(resid_f[i]) * np.sqrt(w_f[i])
+    for _ in range(max_drops + 1):
+        if sel.size < min_sats:
+            break
+        dmat = _dd_matrix(sel, sys_idx, el[i])
+        if dmat.shape[0] < 3:
+            break
+        g_sel = g[i][sel]
+        u = a_gain[i][sel][:, None] * g_sel
+        q_n = np.diag(1.0 / (1.0 / sig_phi2[i][sel] + 1.0 / s2[i][sel])) + (u @ cov_float[i]) @ u.T
+        q_dd = (dmat @ q_n) @ dmat.T / lam ** 2
+        f = dmat @ e_n[i][sel] / lam
+        ok, best, _, q_best, q_second, d, _ = _lambda(f, 0.5 * (q_dd + q_dd.T))
+        if not ok:
+            break
+        ratio[i] = q_second / max(q_best, 1e-300)
+        p_s[i] = _bootstrap(d)
+        if ratio[i] >= ratio_threshold and p_s[i] >= min_success_rate:
+            # Undifferenced integer errors: 0 on each reference, the DD integer on the others (clocks absorb the rest).
+            c = np.zeros(sel.size)
+            for r in range(dmat.shape[0]):
+                c[np.flatnonzero(dmat[r] > 0)[0]] = best[r]
+            y = np.zeros(k)
+            w = np.zeros(k)
+            y[sel] = carrier_err[i][sel] - lam * c
+            w[sel] = w_phi[i][sel]
+            sol = _fixed_solution(g[i], y, w, chi_val, hold_min_sats)
+            if sol[0]:
+                held[:] = np.nan
+                for j in range(sel.size):
+                    held[sel[j]] = c[j] if sol[4][sel[j]] else np.nan
+            return sol
+        sel = np.delete(sel, np.argmax(norm[sel]))
+    return False, np.zeros(g.shape[2]), np.zeros((3, 3)), np.zeros(k), np.zeros(k, np.bool_), np.nan
+
+
+@njit(cache=True)
+def _engine(g, locked, restart, ar_ok, el, sys_idx, carrier_err_m, e_n, s2_m2, sig_phi2, w_phi, a_gain, w_f,
+            cov_float, resid_f, ok, lam, theta_code, cov_code, chi_val, chi3, every, min_sats, hold_min_sats,
+            ratio_threshold, min_success_rate, max_drops, join_max_frac, revalidate_shift_m, n_systems):
+    """The engine's epoch loop (module docstring, items 2–3), compiled: one Python call for the walk instead of
+    a dozen numpy calls on arrays of a few satellites per epoch."""
+    n, k, _ = g.shape
+    fixed = np.zeros(n, np.bool_)
+    err_fix = np.full((n, 3), np.nan)
+    cov_fix = np.full((n, 3, 3), np.nan)
+    var_fix = np.full(n, np.nan)
+    rms_fix = np.full(n, np.nan)
+    wrong = np.zeros(n, np.bool_)
+    ratio = np.full(n, np.nan)
+    p_s = np.full(n, np.nan)
+    held = np.full(k, np.nan)          # integer error of each held ambiguity (NaN: not held)
+    for i in range(n):
+        held[restart[i] | ~locked[i]] = np.nan
+        if not ok[i]:
+            held[:] = np.nan
+            continue
+        sol = (False, np.zeros(g.shape[2]), np.zeros((3, 3)), np.zeros(k), np.zeros(k, np.bool_), np.nan)
+        h = np.isfinite(held)
+        if h.any():
+            y = np.where(h, carrier_err_m[i] - lam * held, 0.0)
+            sol = _fixed_solution(g[i], y, np.where(h, w_phi[i], 0.0), chi_val, hold_min_sats)
+            if sol[0]:
+                held[h & ~sol[4]] = np.nan          # phase outliers: their ambiguities reset
+                d = sol[1][:3] - theta_code[i, :3]
+                try:
+                    t_f = np.dot(d, np.linalg.solve(cov_code[i, :3, :3], d))
+                except Exception:       # LinAlgError: singular
+                    t_f = np.inf
+                if t_f > chi3:
+                    sol = (False, sol[1], sol[2], sol[3], sol[4], sol[5])
+            if not sol[0]:
+                held[:] = np.nan
+            elif i % every == 0:
+                trial = held.copy()
+                fresh = _attempt(i, g, ar_ok, el, sys_idx, e_n, s2_m2, sig_phi2, a_gain, w_f, cov_float, resid_f,
+                                 carrier_err_m, w_phi, lam, trial, chi_val, ratio, p_s, min_sats, hold_min_sats,
+                                 ratio_threshold, min_success_rate, max_drops)
+                if fresh[0]:
+                    shift = fresh[1][:3] - sol[1][:3]
+                    if np.sqrt(np.dot(shift, shift)) > revalidate_shift_m:
+                        held[:] = trial
+                        sol = fresh
+        if not sol[0]:
+            sol = _attempt(i, g, ar_ok, el, sys_idx, e_n, s2_m2, sig_phi2, a_gain, w_f, cov_float, resid_f,
+                           carrier_err_m, w_phi, lam, held, chi_val, ratio, p_s, min_sats, hold_min_sats,
+                           ratio_threshold, min_success_rate, max_drops)
+        if not sol[0]:
+            continue
+        # Newly locked satellites join the held set with the integer the fixed position gives them.
+        join = np.flatnonzero(ar_ok[i] & ~np.isfinite(held))
+        if join.size:
+            x = (carrier_err_m[i][join] - g[i][join] @ sol[1]) / lam
+            for j in range(join.size):
+                c = np.rint(x[j])
+                if abs(x[j] - c) < join_max_frac:
+                    held[join[j]] = c
+        fixed[i] = True
+        err_fix[i] = sol[1][:3]
+        cov_fix[i], var_fix[i] = sol[2], sol[5]
+        kept = sol[3][sol[4]]
+        rms_fix[i] = np.sqrt(np.mean(kept ** 2)) if kept.size else np.nan
+        # Right integers differ from the truth by one common integer per system (the clock takes it).
+        for s in range(n_systems):
+            v = held[(sys_idx == s) & np.isfinite(held)]
+            if v.size and v.min() != v.max():
+                wrong[i] = True
+    return fixed, err_fix, cov_fix, var_fix, rms_fix, wrong, ratio, p_s
 
 
 def rtk_engine(g: np.ndarray, used: np.ndarray, lock_s: np.ndarray, cn0_mask_ok: np.ndarray, el: np.ndarray,
@@ -226,7 +374,6 @@ def rtk_engine(g: np.ndarray, used: np.ndarray, lock_s: np.ndarray, cn0_mask_ok:
     dt_s : epoch interval, s
     """
     n, k, _ = g.shape
-    lam = wavelength_m
     sig_phi2 = carrier_model_var_m2(el, cfg)
     w_phi = 1.0 / sig_phi2
     a_gain = s2_m2 / (s2_m2 + sig_phi2)
@@ -241,107 +388,15 @@ def rtk_engine(g: np.ndarray, used: np.ndarray, lock_s: np.ndarray, cn0_mask_ok:
     chi_val = chi2.ppf(1.0 - cfg.validation_pfa, np.arange(1, 61))
     chi_val = np.concatenate([[np.inf], chi_val])
     chi3 = float(chi2.ppf(1.0 - cfg.float_check_pfa, 3))
-
-    fixed = np.zeros(n, bool)
-    err_fix = np.full((n, 3), np.nan)
-    cov_fix = np.full((n, 3, 3), np.nan)
-    var_fix = np.full(n, np.nan)
-    rms_fix = np.full(n, np.nan)
-    wrong = np.zeros(n, bool)
-    ratio = np.full(n, np.nan)
-    p_s = np.full(n, np.nan)
-    held = np.full(k, np.nan)          # integer error of each held ambiguity (NaN: not held)
     every = max(1, int(round(cfg.revalidate_s / dt_s)))
-    sys_masks = [sys_idx == s for s in np.unique(sys_idx)]
-    for i in range(n):
-        held[restart[i] | ~locked[i]] = np.nan
-        if not ok[i]:
-            held[:] = np.nan
-            continue
-        sol = None
-        if np.isfinite(held).any():
-            h = np.isfinite(held)
-            y = np.where(h, carrier_err_m[i] - lam * np.nan_to_num(held), 0.0)
-            sol = _fixed_solution(g[i], y, np.where(h, w_phi[i], 0.0), chi_val, len(chi_val), cfg.hold_min_sats)
-            if sol is not None:
-                held[h & ~sol[3]] = np.nan          # phase outliers: their ambiguities reset
-                d = sol[0][:3] - theta_code[i, :3]
-                try:
-                    t_f = float(d @ np.linalg.solve(cov_code[i, :3, :3], d))
-                except np.linalg.LinAlgError:
-                    t_f = np.inf
-                if t_f > chi3:
-                    sol = None
-            if sol is None:
-                held[:] = np.nan
-            elif i % every == 0:
-                trial = held.copy()
-                fresh = _attempt(i, g, ar_ok, el, sys_idx, e_n, s2_m2, sig_phi2, a_gain, w_f, cov_float, resid_f,
-                                 carrier_err_m, w_phi, lam, trial, cfg, chi_val, ratio, p_s)
-                if fresh is not None and np.linalg.norm(fresh[0][:3] - sol[0][:3]) > cfg.revalidate_shift_m:
-                    held[:] = trial
-                    sol = fresh
-        if sol is None:
-            sol = _attempt(i, g, ar_ok, el, sys_idx, e_n, s2_m2, sig_phi2, a_gain, w_f, cov_float, resid_f,
-                           carrier_err_m, w_phi, lam, held, cfg, chi_val, ratio, p_s)
-        if sol is None:
-            continue
-        # Newly locked satellites join the held set with the integer the fixed position gives them.
-        join = ar_ok[i] & ~np.isfinite(held)
-        if join.any():
-            x = (carrier_err_m[i, join] - g[i, join] @ sol[0]) / lam
-            c = np.rint(x)
-            good = np.abs(x - c) < cfg.join_max_frac_cycles
-            idx = np.flatnonzero(join)[good]
-            held[idx] = c[good]
-        fixed[i] = True
-        err_fix[i] = sol[0][:3]
-        cov_fix[i], var_fix[i] = sol[1], sol[4]
-        rms_fix[i] = float(np.sqrt(np.mean(sol[2][sol[3]] ** 2))) if sol[3].any() else np.nan
-        # Right integers differ from the truth by one common integer per system (the clock takes it).
-        for s_mask in sys_masks:
-            v = held[s_mask]
-            v = v[np.isfinite(v)]
-            if v.size and v.min() != v.max():
-                wrong[i] = True
+    # systems numbered 0, 1, ... as the engine's per-system loops take them
+    systems, sys_num = np.unique(sys_idx, return_inverse=True)
+    c = np.ascontiguousarray
+    f64 = np.float64
+    fixed, err_fix, cov_fix, var_fix, rms_fix, wrong, ratio, p_s = _engine(
+        c(g, f64), c(locked), c(restart), c(ar_ok), c(el, f64), c(sys_num, np.int64), c(carrier_err_m, f64),
+        c(e_n, f64), c(s2_m2, f64), c(sig_phi2, f64), c(w_phi, f64), c(a_gain, f64), c(w_f, f64), c(cov_float, f64),
+        c(resid_f, f64), c(ok, bool), float(wavelength_m), c(theta_code, f64), c(cov_code, f64), chi_val, chi3,
+        every, int(cfg.min_sats), int(cfg.hold_min_sats), float(cfg.ratio_threshold), float(cfg.min_success_rate),
+        int(cfg.ar_max_drops), float(cfg.join_max_frac_cycles), float(cfg.revalidate_shift_m), len(systems))
     return RtkResult(fixed, err_fix, gst_fields(cov_fix, var_fix, rms_fix), wrong, ratio, p_s)
-
-
-def _attempt(i, g, ar_ok, el, sys_idx, e_n, s2, sig_phi2, a_gain, w_f, cov_float, resid_f, carrier_err, w_phi, lam,
-             held, cfg, chi_val, ratio, p_s):
-    """One epoch's ambiguity resolution (item 2); on success fills ``held`` and returns the fixed solution."""
-    sel = np.flatnonzero(ar_ok[i])
-    norm = np.abs(resid_f[i]) * np.sqrt(w_f[i])
-    for _ in range(cfg.ar_max_drops + 1):
-        if sel.size < cfg.min_sats:
-            return None
-        dmat = _dd_matrix(sel, sys_idx, el[i])
-        if dmat.shape[0] < 3:
-            return None
-        u = a_gain[i, sel, None] * g[i, sel]
-        q_n = np.diag(1.0 / (1.0 / sig_phi2[i, sel] + 1.0 / s2[i, sel])) + u @ cov_float[i] @ u.T
-        q_dd = dmat @ q_n @ dmat.T / lam ** 2
-        f = dmat @ e_n[i, sel] / lam
-        try:
-            res = lambda_search(f, 0.5 * (q_dd + q_dd.T))
-        except np.linalg.LinAlgError:
-            return None
-        ratio[i] = res.ratio
-        p_s[i] = bootstrap_success_rate(res.d)
-        if res.ratio >= cfg.ratio_threshold and p_s[i] >= cfg.min_success_rate:
-            # Undifferenced integer errors: 0 on each reference, the DD integer on the others (clocks absorb the rest).
-            c = np.zeros(sel.size)
-            for r, v in zip(dmat, res.best):
-                c[np.flatnonzero(r > 0)[0]] = v
-            y = np.zeros(g.shape[1])
-            w = np.zeros(g.shape[1])
-            y[sel] = carrier_err[i, sel] - lam * c
-            w[sel] = w_phi[i, sel]
-            sol = _fixed_solution(g[i], y, w, chi_val, len(chi_val), cfg.hold_min_sats)
-            if sol is None:
-                return None
-            held[:] = np.nan
-            held[sel] = np.where(sol[3][sel], c, np.nan)
-            return sol
-        sel = np.delete(sel, np.argmax(norm[sel]))
-    return None
