@@ -125,6 +125,23 @@ def test_steel_dipole_on_axis_closed_form_and_decay():
         b = disturbance_ned_ut(d, pos)[0]
         assert b[0] == pytest.approx(2 * 30.0 * (r_sphere / r) ** 3, rel=1e-9)
         assert abs(b[1]) < 1e-12 and abs(b[2]) < 1e-12
+        # on the equator (east of it) the field is antiparallel and half as strong: −B0·(R/r)³ (Jackson eq. 5.56)
+        b = disturbance_ned_ut(d, d.centre_ned_m[0] + np.array([[0.0, r, 0.0]]))[0]
+        assert b[0] == pytest.approx(-30.0 * (r_sphere / r) ** 3, rel=1e-9)
+        assert abs(b[1]) < 1e-12 and abs(b[2]) < 1e-12
+    # inside the sphere r is floored at its radius R (u = d/R, no longer a unit vector): B0·(3(0.1/R)² − 1)
+    inside = disturbance_ned_ut(d, d.centre_ned_m[:1] + [[0.1, 0.0, 0.0]])[0, 0]
+    assert inside == pytest.approx(30.0 * (3.0 * (0.1 / r_sphere) ** 2 - 1.0), rel=1e-9)
+    # two dipoles superpose, row by row (the compiled sum, issue 25)
+    two = SteelDipoles(np.vstack([d.centre_ned_m, d.centre_ned_m + [0.0, 0.0, -30.0]]),
+                       np.vstack([d.moment_ned_a_m2] * 2), np.repeat(d.radius_m, 2))
+    pos = d.centre_ned_m[0] + np.array([[8.0, 0.0, 0.0], [0.0, 0.0, -22.0]])
+    one_each = [SteelDipoles(two.centre_ned_m[j:j + 1], two.moment_ned_a_m2[j:j + 1], two.radius_m[j:j + 1])
+                for j in range(2)]
+    np.testing.assert_allclose(disturbance_ned_ut(two, pos), sum(disturbance_ned_ut(o, pos) for o in one_each),
+                               rtol=1e-12)
+    # 8 m straight below the second dipole, whose moment points north: on its equator, −B0·(R/8)³
+    assert disturbance_ned_ut(one_each[1], pos[1:])[0, 0] == pytest.approx(-30.0 * (r_sphere / 8.0) ** 3, rel=1e-9)
     empty = SteelDipoles(np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0))
     assert not disturbance_ned_ut(empty, np.zeros((2, 3))).any()
 

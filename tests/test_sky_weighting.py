@@ -20,6 +20,16 @@ def test_limits(sky):
     assert sky.blocked(np.full((1, 360), np.pi / 2))[0] == pytest.approx(1.0)
 
 
+def test_blocked_counts_samples_strictly_below_the_skyline_by_hand():
+    """Three bins holding elevations {0.2, 0.4, 0.6}, {} and {0.3}: a skyline (0.4, 1.0, 0.31) hides 0.2 (0.4
+    itself is not below it) and 0.3, 2 of 4 samples; (0.61, 0, 0) hides 3; an empty bin counts nothing."""
+    sky = SatelliteSky((np.array([0.2, 0.4, 0.6]), np.zeros(0), np.array([0.3])), 4)
+    np.testing.assert_array_equal(sky.blocked(np.array([[0.4, 1.0, 0.31], [0.61, 0.0, 0.0], [0.0, 1.5, 0.3]])),
+                                  [0.5, 0.75, 0.0])
+    with pytest.raises(ValueError, match="azimuth bins"):
+        sky.blocked(np.zeros((1, 2)))
+
+
 def test_no_gps_north_hole_but_beidou_south(sky):
     """At 31° N the 55° orbits leave the sky towards the celestial pole nearly empty (the 'north hole'), and the
     GEO and IGSO BeiDou satellites sit to the south: the southern 60° of azimuth hold far more samples than the

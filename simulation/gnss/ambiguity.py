@@ -240,8 +240,8 @@ def lambda_search(a_float: np.ndarray, q: np.ndarray) -> LambdaResult:
 
 @njit(cache=True)
 def _ndtr(x: float) -> float:
-    """Φ(x) by Cephes' formula, as scipy's ``ndtr`` forms it (0.5 + 0.5·erf(x/√2) near 0, 0.5·erfc(|x|/√2) beyond),
-    on the C library's erf and erfc."""
+    """Φ(x) by Cephes' formula, as scipy's ``ndtr`` forms it (0.5 + 0.5·erf(x/√2) near 0, 0.5·erfc(|x|/√2)
+    beyond), on the C library's erf and erfc."""
     t = x * 0.7071067811865476
     z = abs(t)
     if z < 0.7071067811865476:

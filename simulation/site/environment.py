@@ -25,6 +25,7 @@ from dataclasses import dataclass
 from datetime import datetime, timedelta, timezone
 
 import numpy as np
+from numba import njit
 
 from features.constants import ELEVATION_MASK_DEG
 from features.site import ENV_CLASSES, Site
@@ -45,6 +46,20 @@ SKY_STEP_S = 120.0
 """Sampling of the satellites' sky tracks over that day, s."""
 
 
+@njit(cache=True)
+def _samples_below(hor: np.ndarray, el_flat: np.ndarray, starts: np.ndarray) -> np.ndarray:
+    """Per skyline (row of ``hor``, (n, n_az)): the number of sky samples below it, Σ_b #{e in bin b : e < hor_b};
+    bin b's elevations are ``el_flat[starts[b]:starts[b + 1]]``, ascending (a binary search each, numpy's
+    ``searchsorted(side="left")``). Returns float counts (n,)."""
+    n, n_az = hor.shape
+    out = np.zeros(n)
+    for b in range(n_az):
+        e = el_flat[starts[b]:starts[b + 1]]
+        if e.shape[0]:
+            out += np.searchsorted(e, hor[:, b], side="left")
+    return out
+
+
 @dataclass(frozen=True)
 class SatelliteSky:
     """The satellites' sky tracks over a day, binned by azimuth.
@@ -58,14 +73,19 @@ class SatelliteSky:
     el_sorted: tuple
     n_samples: int
 
+    @functools.cached_property
+    def _flat(self) -> tuple[np.ndarray, np.ndarray]:
+        """The bins' elevations end to end and each bin's first index (n_az + 1,), for the compiled count."""
+        sizes = [len(e) for e in self.el_sorted]
+        flat = np.concatenate([np.asarray(e, np.float64) for e in self.el_sorted]) if sizes else np.zeros(0)
+        return flat, np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
+
     def blocked(self, hor_rad: np.ndarray) -> np.ndarray:
         """Shares (n,) of skylines ``hor_rad`` of shape (n, n_az)."""
-        hor = np.atleast_2d(hor_rad)
-        out = np.zeros(hor.shape[0])
-        for b, e in enumerate(self.el_sorted):
-            if len(e):
-                out += np.searchsorted(e, hor[:, b], side="left")
-        return out / max(self.n_samples, 1)
+        hor = np.ascontiguousarray(np.atleast_2d(hor_rad), dtype=np.float64)
+        if hor.shape[1] != len(self.el_sorted):
+            raise ValueError(f"skylines have {hor.shape[1]} azimuth bins, the sky {len(self.el_sorted)}")
+        return _samples_below(hor, *self._flat) / max(self.n_samples, 1)
 
 
 @functools.lru_cache(maxsize=16)
