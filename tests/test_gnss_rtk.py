@@ -140,6 +140,10 @@ def test_compiled_engine_parts_against_numpy_and_hand_figures():
     assert bootstrap_success_rate(dv) == pytest.approx(float(np.prod(2 * ndtr(1 / (2 * np.sqrt(dv))) - 1)), rel=1e-15)
     with pytest.raises(np.linalg.LinAlgError):
         lambda_search(np.zeros(2), np.array([[1.0, 2.0], [2.0, 1.0]]))
+    # non-finite input as numpy met it: a zero variance rounds for certain (a factor 1), a NaN matrix solves to NaN
+    assert bootstrap_success_rate(np.array([0.0, 0.01])) == pytest.approx(2 * ndtr(5.0) - 1, rel=1e-15)
+    from simulation.gnss.ambiguity import _gesv
+    assert np.isnan(_gesv(np.array([[1.0, np.nan], [0.0, 1.0]]), np.ones(2))).all()
 
 
 def test_float_ambiguity_keeps_a_bias_held_in_lock_until_a_slip():

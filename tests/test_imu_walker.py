@@ -129,9 +129,15 @@ def test_steel_dipole_on_axis_closed_form_and_decay():
         b = disturbance_ned_ut(d, d.centre_ned_m[0] + np.array([[0.0, r, 0.0]]))[0]
         assert b[0] == pytest.approx(-30.0 * (r_sphere / r) ** 3, rel=1e-9)
         assert abs(b[1]) < 1e-12 and abs(b[2]) < 1e-12
-    # inside the sphere r is floored at its radius R (u = d/R, no longer a unit vector): B0·(3(0.1/R)² − 1)
-    inside = disturbance_ned_ut(d, d.centre_ned_m[:1] + [[0.1, 0.0, 0.0]])[0, 0]
-    assert inside == pytest.approx(30.0 * (3.0 * (0.1 / r_sphere) ** 2 - 1.0), rel=1e-9)
+    # r is floored at the sphere's radius R, a cap (a walker never stands inside steel): continuous at R, and
+    # nowhere inside stronger than the surface's 2·B0
+    at = disturbance_ned_ut(d, d.centre_ned_m[0] + np.array([[r_sphere * (1 - 1e-9), 0.0, 0.0],
+                                                             [r_sphere * (1 + 1e-9), 0.0, 0.0]]))
+    assert at[0, 0] == pytest.approx(at[1, 0], rel=1e-6) and at[1, 0] == pytest.approx(60.0, rel=1e-6)
+    inside = d.centre_ned_m[0] + np.random.default_rng(1).uniform(-1, 1, (500, 3)) * r_sphere / np.sqrt(3)
+    assert np.linalg.norm(disturbance_ned_ut(d, inside), axis=1).max() <= 60.0 * (1 + 1e-9)
+    with pytest.raises(ValueError, match="dipole field"):
+        disturbance_ned_ut(SteelDipoles(d.centre_ned_m, d.moment_ned_a_m2[:, :2], d.radius_m), inside)
     # two dipoles superpose, row by row (the compiled sum, issue 25)
     two = SteelDipoles(np.vstack([d.centre_ned_m, d.centre_ned_m + [0.0, 0.0, -30.0]]),
                        np.vstack([d.moment_ned_a_m2] * 2), np.repeat(d.radius_m, 2))

@@ -207,6 +207,15 @@ def _search(lo, d, zs, max_loops):
 
 
 @njit(cache=True)
+def _gesv(a, b):
+    """``numpy.linalg.solve(a, b)`` (b (n,) or (n, m)) as LAPACK gesv gives it, raising on a singular ``a``; a
+    non-finite ``a`` or ``b`` gives NaN, as numpy hands them to LAPACK where numba's ``solve`` refuses them."""
+    if not (np.all(np.isfinite(a)) and np.all(np.isfinite(b))):
+        return np.full(b.shape, np.nan)
+    return np.linalg.solve(a, b)
+
+
+@njit(cache=True)
 def _lambda(a, q):
     """:func:`lambda_search` compiled, for the RTK engine's loop: (ok, best, second, q_best, q_second, d, found);
     ok False when Q is not positive definite. Z⁻ᵀ as numpy's ``inv`` forms it (LAPACK gesv against I)."""
@@ -217,7 +226,7 @@ def _lambda(a, q):
     z = _decorrelate(lo, d)
     zs = z.T @ a
     zn, sn, nn = _search(lo, d, zs, 100_000)
-    zi = np.linalg.solve(z.T, np.eye(n))
+    zi = _gesv(z.T, np.eye(n))
     best = np.rint(zi @ zn[0])
     second = np.rint(zi @ zn[1]) if nn > 1 else best
     return True, best, second, sn[0], sn[1] if nn > 1 else np.inf, d, nn
@@ -250,7 +259,7 @@ def _ndtr(x: float) -> float:
     return 1.0 - y if t > 0.0 else y
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _bootstrap(d):
     p = 1.0
     for i in range(d.shape[0]):

@@ -76,7 +76,7 @@ import numpy as np
 from numba import njit
 from scipy.stats import chi2
 
-from simulation.gnss.ambiguity import _bootstrap, _lambda
+from simulation.gnss.ambiguity import _bootstrap, _gesv, _lambda
 from simulation.gnss.gst import gst_fields
 
 __all__ = ["RtkConfig", "RtkResult", "carrier_model_var_m2", "float_solution", "rtk_engine"]
@@ -197,8 +197,8 @@ def _dd_matrix(sel: np.ndarray, sys_idx: np.ndarray, el: np.ndarray) -> np.ndarr
 
 @njit(cache=True)
 def _inv(a: np.ndarray) -> np.ndarray:
-    """a⁻¹ as ``numpy.linalg.inv`` forms it: LAPACK gesv against the identity."""
-    return np.linalg.solve(a, np.eye(a.shape[0]))
+    """a⁻¹ as ``numpy.linalg.inv`` forms it: LAPACK gesv against the identity (:func:`.ambiguity._gesv`)."""
+    return _gesv(a, np.eye(a.shape[0]))
 
 
 @njit(cache=True)
@@ -313,7 +313,7 @@ def _engine(g, locked, restart, ar_ok, el, sys_idx, carrier_err_m, e_n, s2_m2, s
                 held[h & ~sol[4]] = np.nan          # phase outliers: their ambiguities reset
                 d = sol[1][:3] - theta_code[i, :3]
                 try:
-                    t_f = np.dot(d, np.linalg.solve(cov_code[i, :3, :3], d))
+                    t_f = np.dot(d, _gesv(cov_code[i, :3, :3], d))
                 except Exception:       # LinAlgError: singular
                     t_f = np.inf
                 if t_f > chi3:

@@ -135,6 +135,10 @@ def disturbance_ned_ut(dipoles: SteelDipoles, pos_ned_m: np.ndarray) -> np.ndarr
     0.2
     """
     pos = np.ascontiguousarray(np.atleast_2d(np.asarray(pos_ned_m, dtype=float)))
+    k = len(dipoles.radius_m)
+    if pos.shape[1:] != (3,) or np.shape(dipoles.centre_ned_m) != (k, 3) or np.shape(dipoles.moment_ned_a_m2) != (k, 3):
+        raise ValueError(f"dipole field: positions {pos.shape} (n, 3), centres {np.shape(dipoles.centre_ned_m)} and "
+                         f"moments {np.shape(dipoles.moment_ned_a_m2)} ({k}, 3) for {k} radii")
     out = np.zeros_like(pos)
     _add_dipole_fields(pos, np.ascontiguousarray(dipoles.centre_ned_m, dtype=float),
                        np.ascontiguousarray(dipoles.moment_ned_a_m2, dtype=float),
@@ -142,7 +146,7 @@ def disturbance_ned_ut(dipoles: SteelDipoles, pos_ned_m: np.ndarray) -> np.ndarr
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _add_dipole_fields(pos: np.ndarray, centre: np.ndarray, moment: np.ndarray, radius: np.ndarray,
                        out: np.ndarray) -> None:
     """out[i] += Σ_j B_j(pos[i]) in µT, dipole by dipole in order (:func:`disturbance_ned_ut`). Compiled: numpy's

@@ -189,7 +189,8 @@ _EXACT_KEEP = 4096
 def _poll_rounds(rng, loop, t_rounds, block0, t_slot, pos_e, pos_n, pos_u, heard_dbm, heard_t, poll, xyz, bore,
                  delay, pdoa, ids, cache, path_at, path_len, path_power, path_excess, path_kind, path_off, rows,
                  first, q_noise, faded, faded_at, need, need_xyz, reach, max_per_round, discovery_every,
-                 channel_rate_hz, fading_db, per_floor, quality_noise_db, range_sigma_m, az_sigma, nlos_factor):
+                 channel_rate_hz, fading_db, per_floor, quality_noise_db, range_sigma_m, az_sigma, nlos_factor,
+                 sensitivity_dbm, fp_floor_dbm, fp_dynamic_db, direct):
     """The tag's poll rounds (module docstring), compiled, from where ``loop`` says until the walk's last round
     or until it needs what Python gives: the next block of rounds' poll times and positions (``t_slot``,
     ``pos_*`` (block, max_per_round) from round ``block0``), a channel (``need``: anchor, channel second, 0.5 m
@@ -203,7 +204,8 @@ def _poll_rounds(rng, loop, t_rounds, block0, t_slot, pos_e, pos_n, pos_u, heard
     noise, the range noise, the azimuth noise (each only where the branches before it let the packet through).
     rows : (cap, 7) t, anchor id, range, azimuth (deg) and, for benches, true distance, first path's kind, true
     azimuth (deg); first, q_noise : the first path's index and the quality noise; faded : each row's faded path
-    powers, row m's from ``faded_at[m]``.
+    powers, row m's from ``faded_at[m]``. The radio's constants come as arguments (a compiled function's cache
+    holds the globals it read, and would keep an edited module's old values).
     """
     n_ids = ids.shape[0]
     n_rounds = t_rounds.shape[0]
@@ -259,17 +261,17 @@ def _poll_rounds(rng, loop, t_rounds, block0, t_slot, pos_e, pos_n, pos_u, heard
             if not math.isfinite(peak):
                 loop[1] += 1
                 continue
-            margin = peak - SENSITIVITY_DBM
+            margin = peak - sensitivity_dbm
             if margin < 0 or rng.random() < per_floor + 1.0 / (1.0 + 10.0 ** (margin / 3.0)):
                 loop[1] += 1
                 continue
-            floor = max(FIRST_PATH_FLOOR_DBM, peak - FIRST_PATH_DYNAMIC_DB)
+            floor = max(fp_floor_dbm, peak - fp_dynamic_db)
             i = 0
             while i < n_paths - 1 and not p[i] >= floor:     # the peak itself clears the floor
                 i += 1
             qn = rng.normal(0.0, quality_noise_db)
             kind = path_kind[at + i]
-            fp_margin = p[i] - SENSITIVITY_DBM
+            fp_margin = p[i] - sensitivity_dbm
             heard_dbm[j], heard_t[j] = fp_margin, t
             scale = math.sqrt(1.0 + 10.0 ** (-fp_margin / 10.0))
             rng_m = d + path_excess[at + i] + delay[j] + rng.normal(0.0, range_sigma_m * scale)
@@ -277,7 +279,7 @@ def _poll_rounds(rng, loop, t_rounds, block0, t_slot, pos_e, pos_n, pos_u, heard
             rel = _wrap(true_rel + path_off[at + i] + pdoa[j])
             if abs(rel) > math.pi / 2:          # behind the array: its mirror image
                 rel = math.copysign(math.pi, rel) - rel
-            sig = az_sigma * scale / max(math.cos(rel), 0.26) * (1.0 if kind == PATH_DIRECT else nlos_factor)
+            sig = az_sigma * scale / max(math.cos(rel), 0.26) * (1.0 if kind == direct else nlos_factor)
             az = min(max(rel + rng.normal(0.0, sig), -math.pi / 2), math.pi / 2)
             m = loop[5]
             rows[m, 0], rows[m, 1], rows[m, 2], rows[m, 3] = t, ids[j], max(rng_m, 0.01), math.degrees(az)
@@ -368,7 +370,8 @@ def simulate_uwb(ctx: StreamContext, cfg: UwbSimConfig = UwbSimConfig()) -> tupl
                            reach, cfg.max_per_round, cfg.discovery_every, float(cfg.channel_rate_hz),
                            float(cfg.fading_db), float(cfg.per_floor), float(cfg.quality_noise_db),
                            float(cfg.range_sigma_m), math.radians(cfg.azimuth_sigma_deg),
-                           float(cfg.nlos_azimuth_factor))
+                           float(cfg.nlos_azimuth_factor), float(SENSITIVITY_DBM), float(FIRST_PATH_FLOOR_DBM),
+                           float(FIRST_PATH_DYNAMIC_DB), PATH_DIRECT)
         if why == _DONE:
             break
         if why == _NEXT_BLOCK:                   # every slot's time and tag position (np.interp is elementwise)
