@@ -78,15 +78,18 @@ def evaluate_walk(walk, model_dir: str, methods: tuple, force: bool = False, seg
 
     from features.errors import DataError
 
-    if plan_segments(walk, segment_s)[0] > 1:   # a long walk: segment by segment, memory bounded (pipeline.evaluate_segments)
+    n_segments = plan_segments(walk, segment_s)[0]
+    if n_segments > 1:   # a long walk: segment by segment, memory bounded (pipeline.evaluate_segments)
         from pipeline.evaluate_segments import evaluate_segmented
+        from pipeline.parallel import task_progress
 
         if class_smoothing != "forward":
             raise ConfigError(f"{walk}: a walk longer than {segment_s:g} s is evaluated segment by segment, with the "
                               f"causal ('forward') classes only, not {class_smoothing!r}")
 
+        # its segments' progress to the bar of the evaluate running it (a shift is minutes of work)
         return evaluate_segmented(walk, load_model(model_dir), methods, class_map_for, force, walk_name(walk),
-                                  segment_s)
+                                  segment_s, progress=lambda k: task_progress(k, n_segments))
     # by default the filters get the causal (forward) classes run gives them, not the HMM's forward-backward ones:
     # evaluate scores the tracks run would write (a zero-latency filter fed classes from its future is flattered)
     fused = fuse_walk(walk, load_model(model_dir), methods, class_map_for=class_map_for, force=force,
@@ -185,9 +188,12 @@ def _csv_text(rows: list[dict]) -> str:
 
 def evaluate(walks: list, model_dir: str | os.PathLike, report_dir: str | os.PathLike, methods=None,
              workers: int | None = None, scheduler: str | None = None, force: bool = False,
-             progress: bool = True, plots: bool = True, class_smoothing: str = "forward") -> dict:
+             progress: bool = True, plots: bool = True, class_smoothing: str = "forward",
+             segment_s: float = SEGMENT_S) -> dict:
     """Evaluate ``methods`` (default: every registered one) on ``walks``; writes ``metrics.csv`` and the plots
-    into ``report_dir``. ``class_smoothing``: the window classes the filters get (:func:`evaluate_walk`).
+    into ``report_dir``. ``class_smoothing``: the window classes the filters get (:func:`evaluate_walk`); a walk
+    longer than ``segment_s`` is fused in segments of that length (:mod:`walks.segments`), its progress shown
+    segment by segment.
 
     A walk whose task fails (any error, here or on a worker) is named in ``failures`` and left out; the
     others' report is written. An existing report is replaced consistently: its ``metrics.csv`` is removed
@@ -201,7 +207,7 @@ def evaluate(walks: list, model_dir: str | os.PathLike, report_dir: str | os.Pat
     report = Path(report_dir)
     if report.exists() and not report.is_dir():
         raise ConfigError(f"--report {report} exists and is not a directory")
-    results = map_walks(evaluate_walk, [str(w) for w in walks], str(model_dir), tuple(methods), force, SEGMENT_S,
+    results = map_walks(evaluate_walk, [str(w) for w in walks], str(model_dir), tuple(methods), force, segment_s,
                         class_smoothing, workers=workers, scheduler=scheduler, progress=progress, desc="evaluate")
     failures = [r for r in results if isinstance(r, TaskFailure)]
     ok = [r for r in results if not isinstance(r, TaskFailure)]

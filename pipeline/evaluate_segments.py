@@ -34,9 +34,10 @@ __all__ = ["evaluate_segmented"]
 
 
 def evaluate_segmented(walk, model, methods, class_map_for, force: bool, name: str,
-                       segment_s: float = SEGMENT_S) -> dict:
+                       segment_s: float = SEGMENT_S, progress=None) -> dict:
     """:func:`pipeline.evaluate.evaluate_walk`'s result for a walk fused in segments of ``segment_s`` (module
-    docstring); ``name``: the walk's report name."""
+    docstring); ``name``: the walk's report name; ``progress(k)``, if given, is called once the walk's k-th segment
+    is scored."""
     from walks.fuse import fuse_in_segments
 
     parts: dict = {}
@@ -45,11 +46,13 @@ def evaluate_segmented(walk, model, methods, class_map_for, force: bool, name: s
     site = None
     smoothers: dict = {}        # +rts track name → its SegmentedRts
     with ExitStack() as stack:
-        for seg, fused in fuse_in_segments(walk, model, methods, segment_s, class_map_for=class_map_for,
-                                           force=force):
+        for k, (seg, fused) in enumerate(fuse_in_segments(walk, model, methods, segment_s,
+                                                          class_map_for=class_map_for, force=force), 1):
             site = _score_segment(walk, seg, fused, parts, smoothers, stack, truth_parts, window_parts, notes,
                                   skipped, shares)
             del fused
+            if progress is not None:
+                progress(k)
         for m, store in smoothers.items():
             _score_smoothed(m, store, (getattr(model, "calibration", None) or {}).get(m), parts)
     rows, series = [], {}

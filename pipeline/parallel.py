@@ -28,18 +28,28 @@ only and the others' results are kept.
 
 Progress: a tqdm bar on a terminal; in a log (not a TTY) one plain line per
 finished walk (``evaluate: 3/10 walks (30 %)``), never carriage-return frames.
+A task that takes long (a walk of many segments: an 8-hour walk is minutes of
+work) tells how far it got with :func:`task_progress`: the bar moves by the
+share of the walk done, and a log gets a line at each tenth of that walk
+(``evaluate: long77: 4/11 segments (36 %)``). From a Dask worker the report is
+a Dask event (``Worker.log_event`` on a topic of this run, which the client
+subscribes to: ``Client.subscribe_topic``), so it reaches this process from a
+long-lived cluster too.
 """
 
 from __future__ import annotations
 
 import os
 import sys
+import threading
+import uuid
 from dataclasses import dataclass
 from typing import Callable, Sequence
 
 from features.errors import ConfigError, EnvfuseError
 
-__all__ = ["TaskFailure", "map_walks", "default_workers", "check_scheduler", "local_worker_config", "longest_first"]
+__all__ = ["TaskFailure", "map_walks", "task_progress", "default_workers", "check_scheduler", "local_worker_config",
+           "longest_first"]
 
 
 @dataclass(frozen=True)
@@ -149,9 +159,35 @@ def _failure(walk, exc: BaseException) -> TaskFailure:
     return TaskFailure(str(walk), text)
 
 
-def _guarded(func: Callable, walk, *args):
+_REPORT: dict = {"to": None, "index": 0}
+"""Where :func:`task_progress` sends the running task's progress: None (nowhere), a callable (this process's
+bar: ``to(index, done, total)``) or a Dask event topic (the task runs on a worker); set by :func:`_guarded`."""
+
+
+def task_progress(done: int, total: int) -> None:
+    """Tell the bar of the :func:`map_walks` running this task that ``done`` of its ``total`` parts are done (a
+    long walk's segments). Does nothing outside a task of :func:`map_walks` or with its progress off; never
+    raises (a lost report costs a bar update, not the walk)."""
+    to, index = _REPORT["to"], _REPORT["index"]
+    if to is None:
+        return
+    try:
+        if callable(to):
+            to(index, done, total)
+        else:
+            from distributed import get_worker
+
+            get_worker().log_event(to, (index, int(done), int(total)))
+    except Exception:  # noqa: BLE001 - progress is a courtesy; the task's result is what counts
+        pass
+
+
+def _guarded(func: Callable, walk, *args, report=None):
+    """``func(walk, *args)``, its failure returned as a :class:`TaskFailure`; ``report``: (where, index) for
+    :func:`task_progress` while it runs (where: a callable or a Dask event topic)."""
     import warnings
 
+    _REPORT["to"], _REPORT["index"] = report if report is not None else (None, 0)
     try:
         with warnings.catch_warnings():
             # numpy's RuntimeWarnings (empty slices, all-NaN windows) are not for the user's terminal; what
@@ -164,35 +200,70 @@ def _guarded(func: Callable, walk, *args):
 
             traceback.print_exc()
         return _failure(walk, exc)
+    finally:
+        _REPORT["to"] = None
 
 
 class _Progress:
     """A tqdm bar on a terminal; in a log (stderr not a TTY) one plain line per finished walk,
-    ``evaluate: 2/5 walks (40 %)``, never carriage-return frames."""
+    ``evaluate: 2/5 walks (40 %)``, never carriage-return frames. A task's share done (:meth:`part`) moves the bar
+    by that share of one walk, and in a log prints a line at each tenth of that walk's parts,
+    ``evaluate: long77: 4/11 segments (36 %)``. Thread-safe: on Dask the parts arrive on the client's event
+    loop thread while the walks' results arrive on this one."""
 
-    def __init__(self, total: int, desc: str, enabled: bool):
+    def __init__(self, total: int, desc: str, enabled: bool, names: Sequence[str] = ()):
         self.total, self.desc, self.enabled, self.n = total, desc, enabled, 0
+        self.names = list(names)
         self.bar = None
+        self.credited: dict[int, float] = {}     # per unfinished walk: the share of it the bar shows
+        self.tenth: dict[int, int] = {}          # per walk: the last tenth of its parts a log line told
+        self.finished: set[int] = set()
+        self.lock = threading.Lock()
         if enabled and sys.stderr.isatty():
             from tqdm import tqdm
 
-            self.bar = tqdm(total=total, desc=desc, unit="walk", file=sys.stderr, leave=False)
+            self.bar = tqdm(total=total, desc=desc, unit="walk", file=sys.stderr, leave=False,
+                            bar_format="{l_bar}{bar}| {n:.1f}/{total} walks [{elapsed}<{remaining}]")
 
-    def update(self, k: int = 1) -> None:
-        self.n += k
-        if self.bar is not None:
-            self.bar.update(k)
-        elif self.enabled:
-            print(f"{self.desc}: {self.n}/{self.total} walks ({100 * self.n / max(self.total, 1):.0f} %)",
-                  file=sys.stderr, flush=True)
+    def part(self, i: int, done: int, total: int) -> None:
+        """Walk ``i``'s task has done ``done`` of its ``total`` parts."""
+        if not self.enabled or total <= 0:
+            return
+        with self.lock:
+            if i in self.finished:
+                return                               # a report that arrived after the walk's result
+            share = min(max(done / total, 0.0), 1.0)
+            if self.bar is not None:
+                step = share - self.credited.get(i, 0.0)
+                if step > 0:
+                    self.credited[i] = share
+                    self.bar.update(step)
+                return
+            tenth = int(10 * done // total)
+            if tenth > self.tenth.get(i, 0):
+                self.tenth[i] = tenth
+                name = self.names[i] if i < len(self.names) else f"walk {i + 1}"
+                print(f"{self.desc}: {name}: {done}/{total} segments ({100 * share:.0f} %)", file=sys.stderr,
+                      flush=True)
+
+    def done(self, i: int) -> None:
+        """Walk ``i``'s result is in."""
+        with self.lock:
+            self.finished.add(i)
+            self.n += 1
+            if self.bar is not None:
+                self.bar.update(1.0 - self.credited.pop(i, 0.0))
+            elif self.enabled:
+                print(f"{self.desc}: {self.n}/{self.total} walks ({100 * self.n / max(self.total, 1):.0f} %)",
+                      file=sys.stderr, flush=True)
 
     def close(self) -> None:
         if self.bar is not None:
             self.bar.close()
 
 
-def _progress_bar(total: int, desc: str, enabled: bool) -> _Progress:
-    return _Progress(total, desc, enabled)
+def _progress_bar(total: int, desc: str, enabled: bool, names: Sequence[str] = ()) -> _Progress:
+    return _Progress(total, desc, enabled, names)
 
 
 def map_walks(func: Callable, walks: Sequence, *args, workers: int | None = None, scheduler: str | None = None,
@@ -207,13 +278,13 @@ def map_walks(func: Callable, walks: Sequence, *args, workers: int | None = None
     if not walks:
         return []
     client_address = check_scheduler(scheduler) if scheduler is not None else None
-    bar = _progress_bar(len(walks), desc, progress)
+    bar = _progress_bar(len(walks), desc, progress, [os.path.basename(os.path.normpath(str(w))) for w in walks])
     try:
         if scheduler is None and (workers == 1 or (workers is None and default_workers() == 1) or len(walks) == 1):
             out = []
-            for w in walks:
-                out.append(_guarded(func, w, *args))
-                bar.update(1)
+            for i, w in enumerate(walks):
+                out.append(_guarded(func, w, *args, report=(bar.part, i) if progress else None))
+                bar.done(i)
             return out
         return _map_dask(func, walks, args, workers, client_address, bar)
     finally:
@@ -291,11 +362,16 @@ def _map_dask(func, walks, args, workers, scheduler, bar) -> list:
             client = Client(scheduler, timeout="10s")
         except (OSError, TimeoutError, ValueError) as exc:
             raise ConfigError(f"--scheduler {scheduler}: cannot connect ({exc})") from None
+    topic = None
     try:
+        if bar.enabled:     # the tasks' progress: Dask events on a topic of this run (module docstring)
+            topic = f"envfuse-progress-{uuid.uuid4().hex}"
+            client.subscribe_topic(topic, lambda event: bar.part(*event[1]))
         # longest first (LPT); the priority makes the scheduler hand them out in that order, not only receive them
         order = longest_first(walks)
         futures = [client.submit(_guarded, func, walks[i], *args, key=f"walk-{i}-{os.path.basename(str(walks[i]))}",
-                                 pure=False, priority=len(walks) - rank)
+                                 pure=False, priority=len(walks) - rank,
+                                 report=(topic, i) if topic is not None else None)
                    for rank, i in enumerate(order)]
         index = {f.key: i for f, i in zip(futures, order)}
         out = [None] * len(walks)
@@ -305,9 +381,11 @@ def _map_dask(func, walks, args, workers, scheduler, bar) -> list:
                 out[i] = fut.result()
             except Exception as exc:  # noqa: BLE001 - a worker died under the task (KilledWorker, lost data)
                 out[i] = _failure(walks[i], exc)
-            bar.update(1)
+            bar.done(i)
         return out
     finally:
+        if topic is not None:
+            client.unsubscribe_topic(topic)
         client.close()
         if cluster is not None:
             cluster.close()

@@ -226,3 +226,30 @@ def test_run_of_a_long_walk_reports_its_progress_segment_by_segment(looped, mode
     assert main(["run", str(looped[3]), "--model", str(model_dir), "--out", str(tmp_path / "whole.csv"),
                  "--segment-s", "1000", "--force"]) == 0
     assert "segments (" not in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("workers", [1, 2])
+def test_evaluate_of_long_walks_reports_its_progress_segment_by_segment(looped, model_dir, tmp_path, capsys, workers):
+    """``envfuse evaluate`` of the 3- and 5-minute walks at 60 s segments tells each walk's segments as they are
+    scored (a log: one line at each tenth of a walk, here every segment) beside the walks finished; from Dask's
+    worker processes too (``--workers 2``: the workers' events reach this process through the scheduler, each
+    before its walk's result). A walk of one segment tells no segments."""
+    from pipeline.cli import main
+    from pipeline.parallel import task_progress
+
+    task_progress(1, 2)          # outside a task: nothing, no error
+    assert main(["evaluate", str(looped[3]), str(looped[5]), "--model", str(model_dir), "--report",
+                 str(tmp_path / "rep"), "--methods", "kf_quality", "--segment-s", "60", "--workers", str(workers),
+                 "--no-plots"]) == 0
+    lines = [line for line in capsys.readouterr().err.splitlines() if line.startswith("evaluate:")]
+    x3 = [f"evaluate: x3: {k}/3 segments ({100 * k / 3:.0f} %)" for k in (1, 2, 3)]
+    x5 = [f"evaluate: x5: {k}/5 segments ({20 * k} %)" for k in range(1, 6)]
+    assert sorted(lines) == sorted(x3 + x5 + ["evaluate: 1/2 walks (50 %)", "evaluate: 2/2 walks (100 %)"])
+    for walk in (x3, x5):           # each walk's segments in order, all before the last walk finished
+        at = [lines.index(line) for line in walk]
+        assert at == sorted(at) and at[-1] < lines.index("evaluate: 2/2 walks (100 %)")
+    if workers == 1:                # serially: the walks one after the other, in input order
+        assert lines == x3 + ["evaluate: 1/2 walks (50 %)"] + x5 + ["evaluate: 2/2 walks (100 %)"]
+    assert main(["evaluate", str(looped[3]), "--model", str(model_dir), "--report", str(tmp_path / "rep1"),
+                 "--methods", "kf_quality", "--workers", "1", "--no-plots"]) == 0
+    assert "segments (" not in capsys.readouterr().err

@@ -116,6 +116,8 @@ def register_top(sub) -> None:
     p.add_argument("--scheduler", default=None, help="address of an existing Dask scheduler (tcp://host:8786)")
     p.add_argument("--force", action="store_true", help="evaluate walks of sites the model was not trained on")
     p.add_argument("--no-plots", action="store_true", help="metrics only")
+    lazy_help(p.add_argument("--segment-s", type=bounded(MIN_SEGMENT_S, MAX_SEGMENT_S, "s"), default=None,
+                             help="segment length, s"), _segment_help)
     p.set_defaults(func=_evaluate)
 
 
@@ -197,8 +199,11 @@ def _evaluate(args) -> int:
         if not (w / "walk.toml").is_file():
             raise ConfigError(f"{w}: no walk.toml (expected a walk directory)")
     methods = None if args.methods is None else tuple(args.methods)
+    from walks.segments import SEGMENT_S
+
     out = evaluate(args.walks, args.model, args.report, methods=methods, workers=args.workers,
-                   scheduler=args.scheduler, force=args.force, progress=True, plots=not args.no_plots)
+                   scheduler=args.scheduler, force=args.force, progress=True, plots=not args.no_plots,
+                   segment_s=SEGMENT_S if args.segment_s is None else args.segment_s)
     for f in out["failures"]:
         text = f.message if f.message.startswith(f.walk) else f"{f.walk}: {f.message}"
         print(f"envfuse: warning: {text} (walk skipped)", file=sys.stderr)
