@@ -32,13 +32,14 @@ A task that takes long (a walk of many segments: an 8-hour walk is minutes of
 work) tells how far it got with :func:`task_progress`: the bar moves by the
 share of the walk done, and a log gets a line at each tenth of that walk
 (``evaluate: long77: 4/11 segments (36 %)``). From a Dask worker the report is
-a Dask event (``Worker.log_event`` on a topic of this run, which the client
+a Dask event (``Worker.log_event`` tagged with this run, on a topic the client
 subscribes to: ``Client.subscribe_topic``), so it reaches this process from a
 long-lived cluster too.
 """
 
 from __future__ import annotations
 
+import contextlib
 import os
 import sys
 import threading
@@ -159,16 +160,21 @@ def _failure(walk, exc: BaseException) -> TaskFailure:
     return TaskFailure(str(walk), text)
 
 
-_REPORT: dict = {"to": None, "index": 0}
-"""Where :func:`task_progress` sends the running task's progress: None (nowhere), a callable (this process's
-bar: ``to(index, done, total)``) or a Dask event topic (the task runs on a worker); set by :func:`_guarded`."""
+_PROGRESS_TOPIC = "envfuse-progress"
+"""The Dask event topic the tasks' progress goes out on, each event tagged with its run (a long-lived scheduler
+keeps a topic's last events: one topic for every run, not a new one per run)."""
+
+_REPORT = threading.local()
+"""Where :func:`task_progress` sends the running task's progress (per thread: a Dask worker may run several
+tasks at once): ``to`` None (nowhere), a callable (this process's bar: ``to(index, done, total)``) or a run id
+(the task runs on a Dask worker); set by :func:`_guarded`."""
 
 
 def task_progress(done: int, total: int) -> None:
     """Tell the bar of the :func:`map_walks` running this task that ``done`` of its ``total`` parts are done (a
     long walk's segments). Does nothing outside a task of :func:`map_walks` or with its progress off; never
     raises (a lost report costs a bar update, not the walk)."""
-    to, index = _REPORT["to"], _REPORT["index"]
+    to, index = getattr(_REPORT, "to", None), getattr(_REPORT, "index", 0)
     if to is None:
         return
     try:
@@ -177,17 +183,17 @@ def task_progress(done: int, total: int) -> None:
         else:
             from distributed import get_worker
 
-            get_worker().log_event(to, (index, int(done), int(total)))
+            get_worker().log_event(_PROGRESS_TOPIC, (to, index, int(done), int(total)))
     except Exception:  # noqa: BLE001 - progress is a courtesy; the task's result is what counts
         pass
 
 
 def _guarded(func: Callable, walk, *args, report=None):
     """``func(walk, *args)``, its failure returned as a :class:`TaskFailure`; ``report``: (where, index) for
-    :func:`task_progress` while it runs (where: a callable or a Dask event topic)."""
+    :func:`task_progress` while it runs (where: a callable or a run id for Dask events)."""
     import warnings
 
-    _REPORT["to"], _REPORT["index"] = report if report is not None else (None, 0)
+    _REPORT.to, _REPORT.index = report if report is not None else (None, 0)
     try:
         with warnings.catch_warnings():
             # numpy's RuntimeWarnings (empty slices, all-NaN windows) are not for the user's terminal; what
@@ -201,7 +207,7 @@ def _guarded(func: Callable, walk, *args, report=None):
             traceback.print_exc()
         return _failure(walk, exc)
     finally:
-        _REPORT["to"] = None
+        _REPORT.to, _REPORT.index = None, 0
 
 
 class _Progress:
@@ -234,10 +240,9 @@ class _Progress:
                 return                               # a report that arrived after the walk's result
             share = min(max(done / total, 0.0), 1.0)
             if self.bar is not None:
-                step = share - self.credited.get(i, 0.0)
-                if step > 0:
+                if share > self.credited.get(i, 0.0):
                     self.credited[i] = share
-                    self.bar.update(step)
+                    self._show()
                 return
             tenth = int(10 * done // total)
             if tenth > self.tenth.get(i, 0):
@@ -252,14 +257,28 @@ class _Progress:
             self.finished.add(i)
             self.n += 1
             if self.bar is not None:
-                self.bar.update(1.0 - self.credited.pop(i, 0.0))
+                self.credited.pop(i, None)
+                self._show()
             elif self.enabled:
                 print(f"{self.desc}: {self.n}/{self.total} walks ({100 * self.n / max(self.total, 1):.0f} %)",
                       file=sys.stderr, flush=True)
 
+    def _show(self) -> None:
+        """The bar at the walks finished plus the shares of those running (set, not summed: no float drift)."""
+        self.bar.n = self.n + sum(self.credited.values())
+        self.bar.refresh()
+
     def close(self) -> None:
         if self.bar is not None:
             self.bar.close()
+
+
+def _names(walks: Sequence) -> list[str]:
+    """How the progress lines name the walks: their folders' names, or their paths as given where two share a
+    name (walk01 of two sites)."""
+    paths = [os.path.normpath(str(w)) for w in walks]
+    names = [os.path.basename(p) for p in paths]
+    return names if len(set(names)) == len(names) else paths
 
 
 def _progress_bar(total: int, desc: str, enabled: bool, names: Sequence[str] = ()) -> _Progress:
@@ -278,7 +297,7 @@ def map_walks(func: Callable, walks: Sequence, *args, workers: int | None = None
     if not walks:
         return []
     client_address = check_scheduler(scheduler) if scheduler is not None else None
-    bar = _progress_bar(len(walks), desc, progress, [os.path.basename(os.path.normpath(str(w))) for w in walks])
+    bar = _progress_bar(len(walks), desc, progress, _names(walks))
     try:
         if scheduler is None and (workers == 1 or (workers is None and default_workers() == 1) or len(walks) == 1):
             out = []
@@ -362,16 +381,21 @@ def _map_dask(func, walks, args, workers, scheduler, bar) -> list:
             client = Client(scheduler, timeout="10s")
         except (OSError, TimeoutError, ValueError) as exc:
             raise ConfigError(f"--scheduler {scheduler}: cannot connect ({exc})") from None
-    topic = None
+    run = None
     try:
-        if bar.enabled:     # the tasks' progress: Dask events on a topic of this run (module docstring)
-            topic = f"envfuse-progress-{uuid.uuid4().hex}"
-            client.subscribe_topic(topic, lambda event: bar.part(*event[1]))
+        if bar.enabled:     # the tasks' progress: Dask events tagged with this run (module docstring)
+            run = uuid.uuid4().hex
+
+            def on_event(event) -> None:
+                tag, i, done, total = event[1]
+                if tag == run:                  # another run's on a shared cluster: not this bar's
+                    bar.part(i, done, total)
+            client.subscribe_topic(_PROGRESS_TOPIC, on_event)
         # longest first (LPT); the priority makes the scheduler hand them out in that order, not only receive them
         order = longest_first(walks)
         futures = [client.submit(_guarded, func, walks[i], *args, key=f"walk-{i}-{os.path.basename(str(walks[i]))}",
                                  pure=False, priority=len(walks) - rank,
-                                 report=(topic, i) if topic is not None else None)
+                                 report=(run, i) if run is not None else None)
                    for rank, i in enumerate(order)]
         index = {f.key: i for f, i in zip(futures, order)}
         out = [None] * len(walks)
@@ -384,8 +408,9 @@ def _map_dask(func, walks, args, workers, scheduler, bar) -> list:
             bar.done(i)
         return out
     finally:
-        if topic is not None:
-            client.unsubscribe_topic(topic)
+        if run is not None:
+            with contextlib.suppress(Exception):       # a client already closed (scheduler lost) must not hide
+                client.unsubscribe_topic(_PROGRESS_TOPIC)   # what went wrong, nor skip the closes below
         client.close()
         if cluster is not None:
             cluster.close()

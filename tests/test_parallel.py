@@ -187,3 +187,34 @@ def test_a_dask_setting_the_user_chose_in_the_environment_stands(monkeypatch):
     # a worker's environment variable is set as itself (MALLOC_TRIM_THRESHOLD_, test above), never through DASK_...
     monkeypatch.setenv("DASK_DISTRIBUTED__NANNY__PRE_SPAWN_ENVIRON__MALLOC_TRIM_THRESHOLD_", "1")
     assert local_worker_config()["distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_"] is None
+
+
+def reporting_task(walk, parts: int):
+    """Tells its progress ``parts`` times, 50 ms apart (two such tasks on a two-thread worker overlap)."""
+    import time
+
+    from pipeline.parallel import task_progress
+
+    for k in range(1, parts + 1):
+        time.sleep(0.05)
+        task_progress(k, parts)
+    return Path(walk).name
+
+
+def test_progress_of_tasks_running_at_once_on_one_worker_goes_to_their_own_walks(tmp_path, capsys):
+    """A long-lived cluster whose worker runs two tasks at once (``--scheduler``; threads_per_worker=2), used by
+    two runs one after the other: each walk's progress lines name that walk, once per part, each run's only its
+    own walks (a report kept per process rather than per thread sent one walk's parts as the other's)."""
+    from distributed import LocalCluster
+
+    walks = []
+    for i in range(2):
+        walks.append(tmp_path / f"walk{i}")
+        walks[-1].write_bytes(b"x" * (10 + i))
+    with LocalCluster(n_workers=1, threads_per_worker=2, processes=True, dashboard_address=None) as cluster:
+        for run in range(2):
+            assert map_walks(reporting_task, walks, 4, scheduler=cluster.scheduler_address, desc="t") == \
+                ["walk0", "walk1"]
+            lines = [line for line in capsys.readouterr().err.splitlines() if line.startswith("t:")]
+            parts = [f"t: walk{i}: {k}/4 segments ({25 * k} %)" for i in range(2) for k in range(1, 5)]
+            assert sorted(lines) == sorted(parts + ["t: 1/2 walks (50 %)", "t: 2/2 walks (100 %)"]), (run, lines)
