@@ -163,6 +163,27 @@
    (0.6 s: one generator's chain of draws whose order depends on each outcome; a leaner ``_measure`` measured
    no gain and was not kept) and the GNSS's RTK loop.
 
+   Fifth round (2026-12-03; main f5ff6ab against 0eeb718 and after, the VM slow and drifting within minutes:
+   the ``oaconvolve`` yardstick read 1,553-2,407x best of 3 in this section's runs). Compiled with numba, one
+   implementation each: the RTK engine's epoch loop (:func:`simulation.gnss.rtk._engine`, LAMBDA and the
+   bootstrapping success rate with it; 0.84 -> 0.06 s on this walk), the UWB tag's poll rounds
+   (:func:`simulation.uwb.stream._poll_rounds`, numba's Generator drawing numpy's numbers in the same order,
+   stopping for Python only for a channel not computed yet; 0.93 -> 0.45 s), the steel dipoles' field
+   (0.44 -> 0.18 s for the waist and foot IMUs' 300,000 positions) and the satellite sky's blocked share
+   (``plan_route`` 0.20 -> 0.11 s). Every file of six walks ((5, 40) 600 s, (1, 1), (9, 41), (3, 7), (6, 8)
+   300 s, (2, 5) 200 s: 54 files) and of a survey (site 3, 25 m cells, 8 s: 82 files) sha256-identical to
+   main's; inside, the RTK engine's decisions (fixed, wrong, ratio) identical, positions within 3e-14 m, UWB
+   ranges within 1.4e-14 m (sums in order where numpy summed pairwise or BLAS chose, ``math.dist``'s
+   rounding). ``simulate_walk`` alone, steady state (best of 3 in one process), 3 alternated pairs: main
+   6.62 / 6.83 / 6.42 s CPU (88-93x), this round 5.58 / 5.75 / 6.31 s (95-107x); this section, 2 alternated
+   pairs: main 79.7x / 68.5x (ratio 0.0352 / 0.0424), this round 87.3x / 83.3x (0.0379 / 0.0405; per stream,
+   GNSS 1.24-1.67 -> 0.60-0.67 s, foot IMU 1.03-1.04 -> 0.54-0.56 s, UWB 1.32-1.34 -> 0.97-1.10 s); an hour
+   earlier, with only the RTK engine compiled, 95.0x (yardstick 2,402x). So 100x is reached in steady state on
+   this VM and would be end to end on stop 34's faster day (ratio 0.040 x 2,613x = 105x), missed on a slow one. The first walk in a new process pays ~0.4 s of numba's
+   cache loads (the RTK engine's 65-78 ms with LAPACK's bindings, the footprint kernel's ~0.2 s with numba's
+   own start). Left: audio (~55 %, as the fourth round left it), UWB's channel (``uwb_paths`` in Python,
+   ~0.25 s), the ambient's Gaussian draws.
+
 5. **Long walks in bounded memory** (issue 25 item 3, :func:`memory_section`, ``--memory-only``): peak RSS
    (VmHWM of a fresh process) of ``envfuse run`` (default method) on a 10-minute and an 8-hour walk, both one
    simulated 300 s walk looped (``tests/long_walk.py``), and the 8-hour run's wall time and × real time
