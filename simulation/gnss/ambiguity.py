@@ -212,7 +212,7 @@ def _gesv(a, b):
     non-finite ``a`` or ``b`` gives NaN, as numpy hands them to LAPACK where numba's ``solve`` refuses them."""
     if not (np.all(np.isfinite(a)) and np.all(np.isfinite(b))):
         return np.full(b.shape, np.nan)
-    return np.linalg.solve(a, b)
+    return np.ascontiguousarray(np.linalg.solve(a, b))      # numba's is Fortran-ordered: one layout, C, for both
 
 
 @njit(cache=True)
