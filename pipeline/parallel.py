@@ -387,7 +387,10 @@ def _map_dask(func, walks, args, workers, scheduler, bar) -> list:
             run = uuid.uuid4().hex
 
             def on_event(event) -> None:
-                tag, i, done, total = event[1]
+                try:
+                    tag, i, done, total = event[1]
+                except (TypeError, ValueError):
+                    return                      # not one of ours: a courtesy channel never raises
                 if tag == run:                  # another run's on a shared cluster: not this bar's
                     bar.part(i, done, total)
             client.subscribe_topic(_PROGRESS_TOPIC, on_event)
