@@ -253,3 +253,58 @@ def test_evaluate_of_long_walks_reports_its_progress_segment_by_segment(looped, 
     assert main(["evaluate", str(looped[3]), "--model", str(model_dir), "--report", str(tmp_path / "rep1"),
                  "--methods", "kf_quality", "--workers", "1", "--no-plots"]) == 0
     assert "segments (" not in capsys.readouterr().err
+
+
+@pytest.fixture(scope="module")
+def midnight_walk(site_dir, tmp_path_factory):
+    """A 150 s walk on the session's site that starts at 23:59:00 UTC: it crosses midnight 60 s in (a morning
+    shift in China, UTC+8, that starts before 08:00)."""
+    from datetime import datetime, timezone
+
+    from simulation.walk import simulate_walk
+
+    return simulate_walk(site_dir, tmp_path_factory.mktemp("midnight") / "w11", seed=11, duration_s=150.0,
+                         start_utc=datetime(2026, 8, 4, 23, 59, 0, tzinfo=timezone.utc), progress=False)
+
+
+def test_cuts_of_a_walk_across_midnight_hold_their_own_nmea(midnight_walk, tmp_path):
+    """Each 60 s cut of the walk across midnight holds the NMEA epochs of its own span and only those, as the
+    reader places them on the walk's time base (from the RMC dates): the epochs of the whole walk, each in every
+    cut whose span holds it. Would catch a midnight counted twice (the cutter's bug until 2026-12-03: every
+    epoch after midnight was put a day late, so the cuts after it held no NMEA and the last one all of it)."""
+    from features.gnss.nmea import epochs_on_time_base, read_nmea_columns
+    from features.walk import load_walk
+
+    def epoch_times(walk):
+        info = load_walk(walk)
+        return epochs_on_time_base(read_nmea_columns(info.path("gnss"))[0], info.start_utc).col("t_s")
+
+    whole = epoch_times(midnight_walk)
+    assert whole.min() < 60.0 < whole.max()                 # the walk's own epochs run through midnight
+    n, _ = plan_segments(midnight_walk, 60.0)
+    held = []
+    for seg in walk_cuts(midnight_walk, 60.0, workdir=tmp_path):
+        t = epoch_times(seg.directory)
+        owned = whole[seg.owns(whole)]
+        span = min(seg.own_to_s, whole.max()) - max(seg.own_from_s, 0.0)
+        assert len(owned) > 0.9 * 5.0 * span, (seg.index, len(owned))    # 5 Hz
+        mine = t[seg.owns(t)]
+        assert np.array_equal(mine, owned), (seg.index, len(mine), len(owned))
+        assert t.max() <= whole.max()                       # nothing a day late
+        held.append(mine)
+    assert len(held) == n == 3 and np.array_equal(np.concatenate(held), whole)
+
+
+def test_a_walk_across_midnight_in_segments_gives_its_whole_track(model, midnight_walk, tmp_path):
+    """The walk across midnight fused in 60 s segments gives the whole walk's track, through midnight too (the
+    cut after it once had no GNSS at all)."""
+    whole, seg = tmp_path / "whole.csv", tmp_path / "seg.csv"
+    fuse_to_file(midnight_walk, model, "adaptive_blind+lag", whole, "csv", segment_s=1e6, force=True)
+    done = fuse_to_file(midnight_walk, model, "adaptive_blind+lag", seg, "csv", segment_s=60.0, force=True)
+    assert done.segments == 3
+    a = np.genfromtxt(whole, delimiter=",", names=True, dtype=None, encoding="utf-8")
+    b = np.genfromtxt(seg, delimiter=",", names=True, dtype=None, encoding="utf-8")
+    assert len(a) == len(b) and np.max(np.abs(a["t_s"] - b["t_s"])) < 1e-3
+    d = np.hypot(a["east_m"] - b["east_m"], a["north_m"] - b["north_m"])
+    print("across midnight, segmented vs whole, m: max", np.max(d))
+    assert np.max(d) < SEAM_TOLERANCE_M, np.max(d)

@@ -549,16 +549,20 @@ class _CsvCutter(_LineCutter):
 
 
 class _NmeaCutter(_LineCutter):
-    """NMEA sentences by the walk time of the epoch they belong to (the last sentence carrying a time):
-    the time of day against ``start_utc``'s, a fall of more than 12 h counted as a midnight crossing."""
+    """NMEA sentences by the walk time of the epoch they belong to (the last sentence carrying a time): the
+    first time of day placed within 12 h of ``start_utc``'s, each later one by its change from the one before,
+    taken within ±12 h (so a fall of more than 12 h, 23:59:59 → 00:00:00, is a midnight crossing: one second
+    on), a walk of any length unwrapped day by day.
+
+    (Before, a midnight crossing was counted twice, by the fold to ±12 h around the start's time of day and by a
+    day count on top: every epoch after midnight was put a day late, so each cut after it held no NMEA and the
+    last cut all of it, from midnight to the end.)"""
 
     def __init__(self, path: Path, walk: WalkInfo):
         super().__init__(path)
         s = walk.start_utc
         self.start_tod = s.hour * 3600 + s.minute * 60 + s.second + s.microsecond * 1e-6
-        self.first_tod = None
-        self.day = 0
-        self.prev_tod = None
+        self.prev = None        # (time of day, walk time) of the last timed sentence
 
     def line_time(self, line: bytes, current: float) -> float:
         if not line.startswith(b"$") or len(line) < 7:
@@ -572,22 +576,31 @@ class _NmeaCutter(_LineCutter):
             tod = int(f[0:2]) * 3600 + int(f[2:4]) * 60 + float(f[4:])
         except ValueError:
             return current
-        if self.prev_tod is not None and tod < self.prev_tod - 43200:
-            self.day += 1
-        self.prev_tod = tod
-        rel = (tod - self.start_tod + 43200) % 86400 - 43200 + 86400 * self.day
+        if not math.isfinite(tod):
+            return current
+        ref_tod, ref_t = (self.start_tod, 0.0) if self.prev is None else self.prev
+        rel = ref_t + _signed_day_fold(tod - ref_tod)
+        self.prev = (tod, rel)
         return rel
 
     def write(self, d: Path, lo: float, hi: float, next_lo: float) -> dict:
-        # the day count is that of the resume position: replay it from the state saved there
-        state = getattr(self, "_resume_state", (0, None))
-        self.day, self.prev_tod = state
+        # unwrap from the state saved at the resume position (the sentence there is read again)
+        self.prev = getattr(self, "_resume_state", None)
         out = super().write(d, lo, hi, next_lo)
         return out
 
     def resume_before(self, t: float) -> float:
-        self._resume_state = (self.day, self.prev_tod)
+        self._resume_state = self.prev
         return -math.inf
+
+
+def _signed_day_fold(dt_s: float) -> float:
+    """A change of time of day, s, as the change of time it is within ±12 h: [−43,200, 43,200).
+
+    >>> _signed_day_fold(0.0 - 86399.0), _signed_day_fold(3600.0), _signed_day_fold(80400.0 - 0.0)
+    (1.0, 3600.0, -6000.0)
+    """
+    return (dt_s + 43200.0) % 86400.0 - 43200.0
 
 
 class _AudioCutter:
