@@ -319,7 +319,6 @@ def walk_cuts(walk_dir: str | os.PathLike, segment_s: float = SEGMENT_S, *,
         yield Segment(0, -math.inf, math.inf, Path(walk_dir), math.inf)
         return
     walk = load_walk(walk_dir)
-    _fix_mmap_threshold()
     with tempfile.TemporaryDirectory(prefix=".envfuse-segments.", dir=workdir) as tmp:
         cutters = _cutters(walk)
         align = _audio_grid(walk)
@@ -408,29 +407,6 @@ def _audio_grid(walk: WalkInfo):
         return start + i / fs if i > 0 else -math.inf     # from the audio's first sample: from the walk's start
 
     return align
-
-
-MMAP_THRESHOLD_BYTES = 128 * 1024
-"""glibc's initial ``M_MMAP_THRESHOLD`` (mallopt(3)), fixed for a segmented walk (:func:`_fix_mmap_threshold`)."""
-
-
-def _fix_mmap_threshold() -> None:
-    """Keep glibc serving blocks of ≥ 128 KiB (numpy arrays) from their own mappings, returned to the system when
-    freed. By default glibc raises this threshold to the size of any such block freed (up to 32 MiB, mallopt(3),
-    "dynamic mmap threshold"), so after the first segment the next one's arrays come from the heap, which
-    fragments and does not shrink: measured on a 40-minute walk, the peak of the later segments 365 MiB against
-    327 MiB with the threshold fixed. Setting it disables the adjustment for this process. No-op off glibc."""
-    import ctypes
-    import ctypes.util
-
-    name = ctypes.util.find_library("c")
-    if name is None:
-        return
-    try:
-        libc = ctypes.CDLL(name)
-        libc.mallopt(-3, MMAP_THRESHOLD_BYTES)   # M_MMAP_THRESHOLD = -3 (malloc.h)
-    except (OSError, AttributeError):
-        return
 
 
 def _cutters(walk: WalkInfo) -> dict:
