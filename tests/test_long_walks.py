@@ -274,10 +274,11 @@ def test_cuts_of_a_walk_across_midnight_hold_their_own_nmea(midnight_walk, tmp_p
     epoch after midnight was put a day late, so the cuts after it held no NMEA and the last one all of it)."""
     from features.gnss.nmea import epochs_on_time_base, read_nmea_columns
     from features.walk import load_walk
+    from walks.reader import on_time_grid
 
-    def epoch_times(walk):
+    def epoch_times(walk):              # as the reader places them (read_gnss_stream)
         info = load_walk(walk)
-        return epochs_on_time_base(read_nmea_columns(info.path("gnss"))[0], info.start_utc).col("t_s")
+        return on_time_grid(epochs_on_time_base(read_nmea_columns(info.path("gnss"))[0], info.start_utc).col("t_s"))
 
     whole = epoch_times(midnight_walk)
     assert whole.min() < 60.0 < whole.max()                 # the walk's own epochs run through midnight
