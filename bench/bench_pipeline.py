@@ -20,6 +20,18 @@
    s → 2.91-3.00 s (171-186× → 200-206×); every track of every method on the 3 walks identical to main's
    (``bench/track_identity.py --tol-m 0``). Before, the breakdown's "GNSS sky arrays + positions" stage read
    0.04 s only because the epochs' ``primary_satellites`` were cached by its first repeat (0.07 uncached).
+   **As a user runs it** (:func:`cli_run_rate`): the figures above are of ``adaptive`` in a warm process (imports
+   made, numba's kernels loaded, the walk read whole). ``envfuse run`` on the same walk, a new interpreter each time
+   with ``run``'s defaults (``adaptive_blind+lag``, 300 s segments: a 10-minute walk is two cuts), is printed
+   beside them, with the same walk fused whole and the interpreter's start with ``run``'s imports alone.
+   Measured 2026-12-03 (this machine at load 0.7-1.2; main 3725418 and the branch ``userspeed`` alternated, best of
+   2 each): main 85-90x (6.67-7.04 s wall), the branch 98-105x (5.72-6.14 s), fused whole 5.1-5.4 s both, imports
+   1.6-2.0 s; in one ``--breakdown-only`` run 116x (5.17 s; whole 5.10 s; imports 1.52 s; warm ``adaptive`` 271x,
+   yardstick 1,750x). What the branch changed: a segmented walk no longer fixes glibc's mmap threshold at 128 KiB
+   (section 5), which had made every numpy array of 128 KiB or more a fresh mapping faulted in page by page (a
+   10-minute walk in two cuts: 410,000-450,000 minor faults and 1.6-2.2 s of system time, against 52,000 and
+   0.65-0.8 s). So a user's 10-minute run is a third start-up (the imports, scipy.signal and with it scipy.stats
+   0.7 s of them, needed by the PDR's filters; numba's cache loads) and two thirds the receiver.
 2. **Fusion step alone**: events per second of each method on that walk's
    event stream (reading excluded). Target: ≥ 50,000 steps/s for ``adaptive``.
 3. **evaluate over 16 walks** (``--eval-walk-s`` each, default 60 s, simulated on the same site) with 1 and
@@ -205,6 +217,16 @@
    machine at load 5-7: 10 min 338 MiB, 8 h 341 MiB (1,919 s wall, 15x real time; oaconvolve best of 3 301x,
    ratio 0.050): 8 h / 10 min **1.009**; ``--long-h 2`` in an earlier run: 350 / 341 MiB (0.975; its 10-minute
    process compiled the changed numba core).
+   Without the fixed mmap threshold (branch ``userspeed``, 2026-12-03: ``envfuse run`` with its defaults on the
+   bench's 600 s walk of seed 42 looped, /usr/bin/time, load 0.1-1.2): 10 min 291.6-292.6 MiB, 4 h 294.5-294.8,
+   8 h 293.2 MiB: 8 h / 10 min **1.002-1.006**; with the threshold fixed 286.9 / 288.7 MiB (4 h). Time: 4 h
+   83-99 s wall (2.9-5.0 s system, 54,000 minor faults) against 119-135 s (32-34 s system, 10.7-11.2 M faults);
+   8 h 162 s wall, **178x** real time. The fix had been measured on a 40-minute walk's later segments (365 vs 327
+   MiB) when the cuts held 120 s of warm-up and 600 s segments; today's cuts are 331 s. The same runs found a
+   long walk across midnight (UTC) cut wrongly: the NMEA cutter counted the midnight twice, every epoch after it
+   went a day late, the cuts after midnight held no NMEA (fused without GNSS) and the last one all of it (2.3 h of
+   NMEA read by one cut: a 4-hour walk from 22:20 UTC peaked at 725 MiB). Fixed; ``tests/test_long_walks.py`` has
+   a walk from 23:59 UTC. This section's walk (seed 90) starts at 01:09 UTC and never crossed midnight.
 
 Usage: ``python bench/bench_pipeline.py [--quick] [--evaluate-only | --simulator-only | --memory-only]``
 (``--quick``: 2-minute walks, 4 walks; ``--evaluate-only``: 2 training walks of 120 s, then section 3 only;
@@ -216,6 +238,7 @@ from __future__ import annotations
 
 import argparse
 import gc
+import math
 import os
 import sys
 import tempfile
@@ -304,6 +327,34 @@ def pipeline_rate(walk: Path, model_dir: Path) -> tuple[float, float, dict]:
         # a method that cannot run on this walk (kf_map without a site map) returns at once: say so, not a rate
         rates[m] = skipped[m] if m in skipped else n_events / wall
     return duration / best, (n_events, n_steps), rates
+
+
+def cli_run_rate(walk: Path, model_dir: Path, duration_s: float, repeat: int = 3) -> dict:
+    """``envfuse run`` on ``walk`` as a user runs it: a fresh interpreter each time, the default method and segment
+    length (``run``'s defaults), the track written; beside it the same walk fused whole (``--segment-s`` past its
+    length: one read, no cuts) and the interpreter's start with the imports ``run`` makes, alone. Best of
+    ``repeat`` of each, alternated; wall and CPU (user + system, of the child) seconds."""
+    import resource
+    import subprocess
+
+    env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    out = walk.parent / "cli_run.csv"
+    base = [sys.executable, "-m", "pipeline.cli", "run", str(walk), "--model", str(model_dir), "--out", str(out),
+            "--force"]
+    cases = {"default": base, "whole": base + ["--segment-s", f"{max(duration_s + 60.0, 600.0):g}"],
+             "imports": [sys.executable, "-c", "import pipeline.cli, pipeline.commands.fuse, pipeline.evaluate, "
+                                               "walks.fuse, walks.segments"]}
+    best = {k: (math.inf, math.inf) for k in cases}
+    for _ in range(repeat):
+        for name, cmd in cases.items():
+            r0 = resource.getrusage(resource.RUSAGE_CHILDREN)
+            t0 = time.perf_counter()
+            subprocess.run(cmd, env=env, check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+            wall = time.perf_counter() - t0
+            r1 = resource.getrusage(resource.RUSAGE_CHILDREN)
+            cpu = (r1.ru_utime - r0.ru_utime) + (r1.ru_stime - r0.ru_stime)
+            best[name] = min(best[name], (wall, cpu))
+    return best
 
 
 def stage_breakdown(walk: Path, model_dir: Path, repeat: int = 5) -> dict:
@@ -865,6 +916,12 @@ def timing_sections(walks, model_dir: Path, walk_s: float) -> None:
           f"{rate:,.0f}x real time (oaconvolve matched filter in the same run: first run {yard:,.0f}x, ratio "
           f"{rate / yard:.3f}; best of 3 {yard_warm:,.0f}x, ratio {rate / yard_warm:.3f}; target 1,000x and a "
           f"ratio of 0.5 to the best of 3)")
+    cli = cli_run_rate(walks[-1], model_dir, walk_s)
+    (w_def, c_def), (w_whole, c_whole), (w_imp, c_imp) = cli["default"], cli["whole"], cli["imports"]
+    print(f"envfuse run as a user runs it (a new process; default method and segments; best of 3 wall): "
+          f"{walk_s / w_def:,.0f}x real time ({w_def:.2f} s wall, CPU {c_def:.2f} s; ratio {walk_s / w_def / yard_warm:.3f}); "
+          f"fused whole (--segment-s past the walk) {walk_s / w_whole:,.0f}x ({w_whole:.2f} s, CPU {c_whole:.2f} s); "
+          f"of either, the interpreter's start and run's imports {w_imp:.2f} s (CPU {c_imp:.2f} s)")
     stages = stage_breakdown(walks[-1], model_dir)
     total = sum(stages.values())
     print(f"breakdown of one run (CPU s, best of 5; sum {total:.3f} s = {walk_s / total:,.0f}x real time, "
