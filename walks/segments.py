@@ -525,10 +525,11 @@ class _CsvCutter(_LineCutter):
 
 
 class _NmeaCutter(_LineCutter):
-    """NMEA sentences by the walk time of the epoch they belong to (the last sentence carrying a time): the
-    first time of day placed within 12 h of ``start_utc``'s, each later one by its change from the one before,
-    taken within ±12 h (so a fall of more than 12 h, 23:59:59 → 00:00:00, is a midnight crossing: one second
-    on), a walk of any length unwrapped day by day.
+    """NMEA sentences by the walk time of the epoch they belong to (the last sentence carrying a time): its time of
+    day less ``start_utc``'s plus a whole number of days, the number that puts it within 12 h of the sentence
+    before (the first: of the start), so a fall of more than 12 h, 23:59:59 → 00:00:00, is a midnight crossing,
+    one second on; a walk of any length is unwrapped day by day. Each time is formed from the start and its day
+    count, not from the time before, so no round-off accumulates over a long log.
 
     (Before, a midnight crossing was counted twice, by the fold to ±12 h around the start's time of day and by a
     day count on top: every epoch after midnight was put a day late, so each cut after it held no NMEA and the
@@ -538,7 +539,7 @@ class _NmeaCutter(_LineCutter):
         super().__init__(path)
         s = walk.start_utc
         self.start_tod = s.hour * 3600 + s.minute * 60 + s.second + s.microsecond * 1e-6
-        self.prev = None        # (time of day, walk time) of the last timed sentence
+        self.prev = None        # (days, walk time) of the last timed sentence
 
     def line_time(self, line: bytes, current: float) -> float:
         if not line.startswith(b"$") or len(line) < 7:
@@ -554,9 +555,8 @@ class _NmeaCutter(_LineCutter):
             return current
         if not math.isfinite(tod):
             return current
-        ref_tod, ref_t = (self.start_tod, 0.0) if self.prev is None else self.prev
-        rel = ref_t + _signed_day_fold(tod - ref_tod)
-        self.prev = (tod, rel)
+        days, rel = _unwrapped_day(tod - self.start_tod, self.prev)
+        self.prev = (days, rel)
         return rel
 
     def write(self, d: Path, lo: float, hi: float, next_lo: float) -> dict:
@@ -570,13 +570,28 @@ class _NmeaCutter(_LineCutter):
         return -math.inf
 
 
-def _signed_day_fold(dt_s: float) -> float:
-    """A change of time of day, s, as the change of time it is within ±12 h: [−43,200, 43,200).
+def _unwrapped_day(since_start_tod_s: float, prev: tuple[int, float] | None) -> tuple[int, float]:
+    """(days, walk time) of a time of day ``since_start_tod_s`` after the start's (−86,400 … 86,400 s): walk time
+    = that + 86,400·days, the days chosen to put it within 12 h of the previous sentence's walk time ``prev`` =
+    (its days, its walk time), or of the start (0) for the first.
 
-    >>> _signed_day_fold(0.0 - 86399.0), _signed_day_fold(3600.0), _signed_day_fold(80400.0 - 0.0)
-    (1.0, 3600.0, -6000.0)
+    From 22:20 UTC (80,400 s), 23:59:59 is 5,999 s on; 00:00:00 a day later 6,000 s; a first sentence a second
+    before the start, −1 s:
+
+    >>> _unwrapped_day(86399.0 - 80400.0, None), _unwrapped_day(0.0 - 80400.0, (0, 5999.0))
+    ((0, 5999.0), (1, 6000.0))
+    >>> _unwrapped_day(80399.0 - 80400.0, None)
+    (0, -1.0)
     """
-    return (dt_s + 43200.0) % 86400.0 - 43200.0
+    days, ref = (0, 0.0) if prev is None else prev
+    rel = since_start_tod_s + 86400.0 * days
+    while rel < ref - 43200.0:
+        days += 1
+        rel = since_start_tod_s + 86400.0 * days
+    while rel >= ref + 43200.0:
+        days -= 1
+        rel = since_start_tod_s + 86400.0 * days
+    return days, rel
 
 
 class _AudioCutter:
