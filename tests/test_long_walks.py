@@ -269,8 +269,8 @@ def midnight_walk(site_dir, tmp_path_factory):
 
 def test_cuts_of_a_walk_across_midnight_hold_their_own_nmea(midnight_walk, tmp_path):
     """Each 60 s cut of the walk across midnight holds the NMEA epochs of its own span and only those, as the
-    reader places them on the walk's time base (from the RMC dates): the epochs of the whole walk, each in every
-    cut whose span holds it. Would catch a midnight counted twice (the cutter's bug until 2026-12-03: every
+    reader places them on the walk's time base (from the RMC dates): each segment's own epochs, and together the
+    whole walk's. Would catch a midnight counted twice (the cutter's bug until 2026-12-03: every
     epoch after midnight was put a day late, so the cuts after it held no NMEA and the last one all of it)."""
     from features.gnss.nmea import epochs_on_time_base, read_nmea_columns
     from features.walk import load_walk
@@ -330,7 +330,8 @@ def test_nmea_cutter_places_a_day_long_log_without_drift(tmp_path):
             tod = (80400 * 5 + k) % (86400 * 5)                  # fifths of a second
             f.write(f"$GPGGA,{tod // 18000:02d}{tod // 300 % 60:02d}{tod % 300 / 5:05.2f},0,N*00\n")
     cutter = _NmeaCutter(path, SimpleNamespace(start_utc=start))
-    t = np.array([cutter.line_time(line, -math.inf) for line in open(path, "rb")])
+    with open(path, "rb") as lines:
+        t = np.array([cutter.line_time(line, -math.inf) for line in lines])
     exact = np.arange(n) / 5.0
     assert np.max(np.abs(t - exact)) < 2e-11 * 86400, np.max(np.abs(t - exact))  # ~1 ulp of a day's seconds
     at_boundary = np.arange(0, n, 1500)                                # every 300 s
