@@ -59,3 +59,29 @@ def test_every_filter_method_has_knobs_and_untunable_names_are_refused(untuned):
     model, inputs = untuned
     with pytest.raises(KeyError):
         tune_method(model, "gnss", [TuningWalk.of(inputs)])
+
+
+def test_a_method_that_runs_on_no_walk_is_not_searched(monkeypatch):
+    """kf_map without a site map is skipped on every training walk, so its objective is inf everywhere: the
+    knobs stay at 1 after the one evaluation that finds it, with no Nelder–Mead passes (there were up to
+    ``max_evals`` of them, ending in scipy's RuntimeWarning of inf − inf in its convergence test)."""
+    import math
+    import warnings
+
+    from training import tuning
+
+    calls = []
+
+    def objective(model, name, knobs, walks):
+        def f(log_k):
+            calls.append(np.array(log_k))
+            return math.inf
+        return f
+
+    monkeypatch.setattr(tuning, "_objective", objective)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        knobs, before, after = tuning.tune_method(None, "kf_map", [], max_evals=60)
+    assert knobs == {"gnss": 1.0, "acoustic": 1.0, "q_walk": 1.0}
+    assert math.isinf(before) and math.isinf(after)
+    assert len(calls) == 1 and not calls[0].any()

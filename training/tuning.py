@@ -110,12 +110,14 @@ def tune_method(model: FusionModel, name: str, walks: list[TuningWalk], max_eval
     f = _objective(model, name, knobs, walks)
     start = np.zeros(len(knobs))
     before = f(start)
+    if not math.isfinite(before):
+        # The method runs on none of the walks (kf_map without a site map): every trial would be inf too, so no
+        # search (it used to run its passes for nothing and warn of inf − inf in scipy's convergence test).
+        return {k: 1.0 for k in knobs}, before, before
     # an initial simplex of ±0.5 in log (×1.65): wide enough to leave the fit's basin, narrow enough to stay sane
     simplex = np.vstack([start] + [start + 0.5 * np.eye(len(knobs))[i] for i in range(len(knobs))])
     res = minimize(f, start, method="Nelder-Mead",
                    options={"maxfev": max_evals, "xatol": 0.05, "fatol": 1e-4, "initial_simplex": simplex})
-    if not math.isfinite(before):
-        return {k: 1.0 for k in knobs}, before, before           # the method runs on none of the walks
     best = res.x if res.fun < before else start
     k = np.exp(np.clip(best, *np.log(KNOB_RANGE)))
     return dict(zip(knobs, map(float, k))), before, float(min(res.fun, before))
