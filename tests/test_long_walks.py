@@ -337,3 +337,105 @@ def test_nmea_cutter_places_a_day_long_log_without_drift(tmp_path):
     at_boundary = np.arange(0, n, 1500)                                # every 300 s
     assert np.all(t[at_boundary] >= exact[at_boundary]) and t[-1] > 86400.0
     cutter.close()
+
+
+@pytest.fixture(scope="module")
+def garbled_walk(midnight_walk, tmp_path_factory):
+    """The walk across midnight with two single-line defects of real logs: the GGA at 00:00:40 UTC (walk time
+    100 s) with its hour 00 turned 01 and its checksum left as it was (a corrupted sentence, which the reader
+    refuses), and the IMU row at 70 s with 1,000 s added to its ``t_s`` (a garbled time, which the IMU reader
+    repairs)."""
+    import shutil
+
+    d = tmp_path_factory.mktemp("garbled") / "w11g"
+    shutil.copytree(midnight_walk, d)
+    nmea = (d / "gnss.nmea").read_text().splitlines(keepends=True)
+    k = next(i for i, line in enumerate(nmea) if line[3:7] == "GGA," and line[7:13] == "000040")
+    nmea[k] = nmea[k][:7] + "01" + nmea[k][9:]
+    (d / "gnss.nmea").write_text("".join(nmea))
+    imu = (d / "imu.csv").read_text().splitlines(keepends=True)
+    k = next(i for i, line in enumerate(imu[1:], 1) if float(line.split(",", 1)[0]) >= 70.0)
+    t, rest = imu[k].split(",", 1)
+    imu[k] = f"{float(t) + 1000.0:.2f},{rest}"
+    (d / "imu.csv").write_text("".join(imu))
+    return d
+
+
+def test_one_garbled_line_does_not_end_a_stream_in_the_later_cuts(garbled_walk, tmp_path):
+    """Each 60 s cut of the garbled walk holds the NMEA epochs and IMU rows the whole walk's readers place in its
+    span. A line whose time runs past its cut's end while the lines after it do not is one line out of place:
+    it goes with the line before it (the cut's reader refuses or repairs it as the whole walk's does). Until
+    2026-12-03 such a line ended its cut, and every later cut at its first line (each resumed there): the GGA at
+    100 s took every GNSS epoch from 100 s on from the segments, the IMU row at 70 s every IMU row from 70 s on."""
+    from features.gnss.nmea import epochs_on_time_base, read_nmea_columns
+    from features.walk import load_walk
+    from walks.reader import on_time_grid
+
+    def epoch_times(walk):
+        info = load_walk(walk)
+        return on_time_grid(epochs_on_time_base(read_nmea_columns(info.path("gnss"))[0], info.start_utc).col("t_s"))
+
+    def imu_rows(walk):                 # the rows as written, each with its stated t_s
+        lines = (walk / "imu.csv").read_text().splitlines()[1:]
+        return lines, np.array([float(line.split(",", 1)[0]) for line in lines])
+
+    g_whole = epoch_times(garbled_walk)
+    i_whole, t_whole = imu_rows(garbled_walk)
+    garbled = i_whole[int(np.argmax(t_whole))]
+    assert g_whole.max() > 140.0 and t_whole[-1] > 140.0 and float(garbled.split(",")[0]) > 1000.0
+    g_held, i_held = [], []
+    for seg in walk_cuts(garbled_walk, 60.0, workdir=tmp_path):
+        g = epoch_times(seg.directory)
+        g_held.append(g[seg.owns(g)])
+        assert np.array_equal(g_held[-1], g_whole[seg.owns(g_whole)]), (seg.index, len(g_held[-1]))
+        lines, t = imu_rows(seg.directory)
+        mine = [line for line, ti in zip(lines, t) if seg.owns(np.array([ti]))[0] and line != garbled]
+        assert mine == [line for line, ti in zip(i_whole, t_whole)
+                        if seg.owns(np.array([ti]))[0] and line != garbled], seg.index
+        i_held += mine
+        # the garbled row reaches the reader of every cut that holds rows on both sides of it (70 s)
+        fine = t[t < 1000.0]
+        assert (garbled in lines) == (fine.min() < 70.0 < fine.max()), seg.index
+    assert np.array_equal(np.concatenate(g_held), g_whole)
+    assert i_held == [line for line in i_whole if line != garbled]
+
+
+def test_a_garbled_walk_in_segments_gives_its_whole_track(model, garbled_walk, tmp_path):
+    whole, seg = tmp_path / "whole.csv", tmp_path / "seg.csv"
+    fuse_to_file(garbled_walk, model, "adaptive_blind+lag", whole, "csv", segment_s=1e6, force=True)
+    fuse_to_file(garbled_walk, model, "adaptive_blind+lag", seg, "csv", segment_s=60.0, force=True)
+    a = np.genfromtxt(whole, delimiter=",", names=True, dtype=None, encoding="utf-8")
+    b = np.genfromtxt(seg, delimiter=",", names=True, dtype=None, encoding="utf-8")
+    assert len(a) == len(b) and np.max(np.abs(a["t_s"] - b["t_s"])) < 1e-3
+    d = np.hypot(a["east_m"] - b["east_m"], a["north_m"] - b["north_m"])
+    assert np.max(d) < SEAM_TOLERANCE_M, np.max(d)
+
+
+def test_a_line_cutter_ends_a_cut_only_where_the_lines_after_confirm_it(tmp_path):
+    """A CSV of t_s 0, 0.1, … 9.9 s with row 30 garbled to 1003.0: cut [0, 5) holds rows 0-49 (the garbled one
+    with them, where the reader meets it), cut [4, 10) rows 40-99; a stream that really jumps past the end
+    (rows from 5 s on shifted by 100 s) ends the first cut at its jump, and the second cut gets nothing before
+    its end."""
+    from walks.segments import _CsvCutter
+
+    def cut(rows, spans):
+        p = tmp_path / "imu.csv"
+        p.write_text("t_s,x\n" + "".join(f"{t:.1f},{k}\n" for k, t in enumerate(rows)))
+        c = _CsvCutter(p, "imu")
+        out = []
+        for k, (lo, hi, next_lo) in enumerate(spans):
+            d = tmp_path / f"c{k}"
+            d.mkdir(exist_ok=True)
+            c.write(d, lo, hi, next_lo)
+            out.append([int(line.split(",")[1]) for line in (d / "imu.csv").read_text().splitlines()[1:]])
+        c.close()
+        return out
+
+    t = np.arange(100) / 10.0
+    garbled = t.copy()
+    garbled[30] = 1003.0
+    first, second = cut(garbled, [(0.0, 5.0, 4.0), (4.0, 10.0, 10.0)])
+    assert first == list(range(50)) and second == list(range(40, 100))
+    jumped = np.where(t >= 5.0, t + 100.0, t)
+    first, second = cut(jumped, [(0.0, 5.0, 4.0), (4.0, 10.0, 10.0)])
+    assert first == list(range(50)) and second == list(range(40, 50))

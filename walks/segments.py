@@ -169,6 +169,7 @@ methods (``fg_*``) and ``ekf_rtk_pdr`` (:mod:`walks.graph_methods`): their cuts 
 
 from __future__ import annotations
 
+import collections
 import math
 import os
 import re
@@ -214,6 +215,11 @@ reach back to the last fix; :data:`walks.fuse.RESUMED_METHODS`), s: such a metho
 TAIL_S = 10.0
 """Walk time a cut reaches after its segment, s: ≥ the fixed-lag smoother's lag (3 s), a step split at the
 following fix (≤ 0.6 s) and the last 2 s feature window."""
+
+LOOKAHEAD_LINES = 64
+"""Lines a cutter reads past a line at or beyond its cut's end before ending the cut there: if any of them lies
+before the end, that line is one out of place (a garbled time) and goes with the line before it. 64 lines are
+about 1.3 s of a 5 Hz NMEA log of ten sentences an epoch and 0.6 s of a 100 Hz IMU log."""
 
 RESUME_AFTER_S = 10.0
 """Walk time after its cut's start at which the readers resume the states handed over, s: the acoustic
@@ -461,7 +467,14 @@ def _set_in_table(text: str, table: str, key: str, value: str) -> str:
 
 class _LineCutter:
     """A text stream cut by the walk time of each line, read once from start to end over all the cuts: each
-    cut starts at the first line at or after the previous cut's ``next_lo``."""
+    cut starts at the first line at or after the previous cut's ``next_lo``.
+
+    A cut ends at the first line at or past its end that the lines after it confirm: one whose time runs ahead
+    of the :data:`LOOKAHEAD_LINES` lines after it (any of them before the end) is one line out of place, a
+    garbled time (a flipped digit, a corrupted sentence the reader will refuse by its checksum), and goes with
+    the line before it, where the whole walk's reader meets it and judges it. (Before, such a line ended the
+    cut, and every later cut at its first line, since each resumed there: one bad GGA or IMU row took the
+    stream from the rest of the walk, with nothing said but "empty" of the cuts.)"""
 
     def __init__(self, path: Path):
         self.path = path
@@ -473,17 +486,34 @@ class _LineCutter:
     def line_time(self, line: bytes, current: float) -> float:
         raise NotImplementedError
 
+    def state(self):
+        """What :meth:`line_time` carries from line to line (restored when a line proves out of place)."""
+        return None
+
+    def restore(self, state) -> None:
+        pass
+
     def write(self, d: Path, lo: float, hi: float, next_lo: float) -> dict:
         self.fh.seek(self.resume)
         pos, t = self.resume, self.resume_t
         marked = False
+        ahead: collections.deque = collections.deque()     # lines read to look past one, not yet cut
         with open(d / self.path.name, "wb") as out:
             out.write(self.head)
             while True:
-                line = self.fh.readline()
+                line = ahead.popleft() if ahead else self.fh.readline()
                 if not line:
                     break
-                t = self.line_time(line, t)
+                before = self.state()
+                t_line = self.line_time(line, t)
+                if t_line >= hi > t:
+                    after = self.state()
+                    if self._out_of_place(t, before, hi, ahead):
+                        self.restore(before)
+                        t_line = t
+                    else:
+                        self.restore(after)
+                t = t_line
                 if not marked and t >= next_lo:
                     self.resume, self.resume_t, marked = pos, self.resume_before(t), True
                 pos += len(line)
@@ -494,6 +524,24 @@ class _LineCutter:
         if not marked:
             self.resume, self.resume_t = pos, t
         return {}
+
+    def _out_of_place(self, t: float, before, hi: float, ahead: collections.deque) -> bool:
+        """Whether a line at or past ``hi``, read at stream time ``t`` from state ``before``, is followed, within
+        :data:`LOOKAHEAD_LINES` lines, by one before ``hi`` (those lines kept in ``ahead`` to be cut in turn)."""
+        while len(ahead) < LOOKAHEAD_LINES:
+            line = self.fh.readline()
+            if not line:
+                break
+            ahead.append(line)
+        self.restore(before)
+        found = False
+        for line in ahead:
+            t = self.line_time(line, t)
+            if t < hi:
+                found = True
+                break
+        self.restore(before)
+        return found
 
     def resume_before(self, t: float) -> float:
         return -math.inf
@@ -559,6 +607,12 @@ class _NmeaCutter(_LineCutter):
         days, rel = _unwrapped_day(tod - self.start_tod, self.prev)
         self.prev = (days, rel)
         return rel
+
+    def state(self):
+        return self.prev
+
+    def restore(self, state) -> None:
+        self.prev = state
 
     def write(self, d: Path, lo: float, hi: float, next_lo: float) -> dict:
         # unwrap from the state saved at the resume position (the sentence there is read again)
