@@ -439,3 +439,47 @@ def test_a_line_cutter_ends_a_cut_only_where_the_lines_after_confirm_it(tmp_path
     jumped = np.where(t >= 5.0, t + 100.0, t)
     first, second = cut(jumped, [(0.0, 5.0, 4.0), (4.0, 10.0, 10.0)])
     assert first == list(range(50)) and second == list(range(40, 50))
+
+
+def test_line_cutters_read_what_the_readers_read(tmp_path):
+    """Cuts of files the readers take as they are: an IMU CSV whose ``t_s`` is not its first column (the reader
+    finds it by name), one whose lines end in CR alone, and NMEA sentences behind a logger's time stamp. Each
+    cut [0, 5) / [4, 10) holds the rows of its span; before, the first file's rows were cut by ``ax`` (the first
+    cut took every row, the second none), the CR file went whole into the first cut as one line, and the
+    prefixed NMEA all into the first cut."""
+    from datetime import datetime, timezone
+    from types import SimpleNamespace
+
+    from walks.segments import _CsvCutter, _NmeaCutter
+
+    def cut(cutter, name, spans):
+        out = []
+        for k, (lo, hi, next_lo) in enumerate(spans):
+            d = tmp_path / f"{name}{k}"
+            d.mkdir()
+            cutter.write(d, lo, hi, next_lo)
+            out.append((d / cutter.path.name).read_bytes())
+        cutter.close()
+        return out
+
+    spans = [(0.0, 5.0, 4.0), (4.0, 10.0, 10.0)]
+    t = np.arange(100) / 10.0
+    (tmp_path / "a").mkdir()
+    p = tmp_path / "a" / "imu.csv"
+    p.write_text("ax,T_S ,gz\n" + "".join(f"{9.8 - k},{ti:.1f},{k}\n" for k, ti in enumerate(t)))
+    first, second = cut(_CsvCutter(p, "imu"), "a", spans)
+    assert [int(r.split(b",")[2]) for r in first.splitlines()[1:]] == list(range(50))
+    assert [int(r.split(b",")[2]) for r in second.splitlines()[1:]] == list(range(40, 100))
+    (tmp_path / "b").mkdir()
+    p = tmp_path / "b" / "imu.csv"
+    p.write_bytes(b"t_s,x\r" + b"".join(f"{ti:.1f},{k}\r".encode() for k, ti in enumerate(t)))
+    first, second = cut(_CsvCutter(p, "imu"), "b", spans)
+    assert first == b"t_s,x\r" + b"".join(f"{ti:.1f},{k}\r".encode() for k, ti in enumerate(t[:50]))
+    assert second == b"t_s,x\r" + b"".join(f"{t[k]:.1f},{k}\r".encode() for k in range(40, 100))
+    (tmp_path / "c").mkdir()
+    p = tmp_path / "c" / "gnss.nmea"
+    p.write_text("".join(f"{ti:.3f} $GPGGA,1200{ti:05.2f},0,N*00\n" for ti in t))
+    start = SimpleNamespace(start_utc=datetime(2026, 8, 4, 12, 0, 0, tzinfo=timezone.utc))
+    first, second = cut(_NmeaCutter(p, start), "c", spans)
+    assert len(first.splitlines()) == 50 and len(second.splitlines()) == 60
+    assert second.splitlines()[0].startswith(b"4.000 $GPGGA,120004.00")

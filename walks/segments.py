@@ -299,19 +299,43 @@ def _span_s(walk: WalkInfo) -> float:
 def _last_csv_time(path: Path) -> float | None:
     """``t_s`` of a CSV's last parseable row, read from its tail."""
     with open(path, "rb") as fh:
+        lines = fh.read(1 << 16).splitlines()
+        col = _time_column([next((line for line in lines if line.strip() and not line.lstrip().startswith(b"#")),
+                                 b"")])
         fh.seek(0, os.SEEK_END)
         fh.seek(max(0, fh.tell() - 4096))
         for line in reversed(fh.read().splitlines()):
-            t = _csv_time(line)
+            t = _csv_time(line, col)
             if t is not None:
                 return t
     return None
 
 
-def _csv_time(line: bytes) -> float | None:
+def _csv_header(fh) -> list[bytes]:
+    """The comment lines and the header line at the start of a CSV (the header last), read from ``fh`` (a file or
+    a :class:`_LineCutter`: anything with ``readline``)."""
+    head = []
+    while True:
+        line = fh.readline()
+        if not line:
+            break
+        head.append(line)
+        if line.strip() and not line.lstrip().startswith(b"#"):
+            break
+    return head
+
+
+def _time_column(head: list[bytes]) -> int:
+    """Index of the ``t_s`` column named in a CSV's header line (as the readers find it: by name, spaces and case
+    aside, a UTF-8 byte-order mark dropped); 0 when none is named ``t_s``."""
+    names = [h.strip().lower() for h in head[-1].decode("utf-8-sig", "replace").split(",")] if head else []
+    return names.index("t_s") if "t_s" in names else 0
+
+
+def _csv_time(line: bytes, col: int = 0) -> float | None:
     try:
-        return float(line.split(b",", 1)[0])
-    except ValueError:
+        return float(line.split(b",", col + 1)[col])
+    except (ValueError, IndexError):
         return None
 
 
@@ -479,9 +503,34 @@ class _LineCutter:
     def __init__(self, path: Path):
         self.path = path
         self.fh = open(path, "rb")
+        peek = self.fh.read(1 << 16)
+        self.fh.seek(0)
+        # Lines end in LF (or CR LF); a file whose lines end in CR alone (an old Mac logger's; the readers take
+        # it, reading universal newlines) is split on CR, else it would be one line and go whole into one cut.
+        self.cr_only = b"\r" in peek and b"\n" not in peek
+        self._buf, self._at = b"", 0
         self.head = b""
         self.resume = 0
         self.resume_t = -math.inf
+
+    def readline(self) -> bytes:
+        """The next line, its end included (b"" at the end of the file)."""
+        if not self.cr_only:
+            return self.fh.readline()
+        while True:
+            i = self._buf.find(b"\r", self._at)
+            if i >= 0:
+                line, self._at = self._buf[self._at:i + 1], i + 1
+                return line
+            chunk = self.fh.read(1 << 16)
+            if not chunk:
+                line, self._buf, self._at = self._buf[self._at:], b"", 0
+                return line
+            self._buf, self._at = self._buf[self._at:] + chunk, 0
+
+    def seek(self, pos: int) -> None:
+        self.fh.seek(pos)
+        self._buf, self._at = b"", 0
 
     def line_time(self, line: bytes, current: float) -> float:
         raise NotImplementedError
@@ -494,14 +543,14 @@ class _LineCutter:
         pass
 
     def write(self, d: Path, lo: float, hi: float, next_lo: float) -> dict:
-        self.fh.seek(self.resume)
+        self.seek(self.resume)
         pos, t = self.resume, self.resume_t
         marked = False
         ahead: collections.deque = collections.deque()     # lines read to look past one, not yet cut
         with open(d / self.path.name, "wb") as out:
             out.write(self.head)
             while True:
-                line = ahead.popleft() if ahead else self.fh.readline()
+                line = ahead.popleft() if ahead else self.readline()
                 if not line:
                     break
                 before = self.state()
@@ -529,7 +578,7 @@ class _LineCutter:
         """Whether a line at or past ``hi``, read at stream time ``t`` from state ``before``, is followed, within
         :data:`LOOKAHEAD_LINES` lines, by one before ``hi`` (those lines kept in ``ahead`` to be cut in turn)."""
         while len(ahead) < LOOKAHEAD_LINES:
-            line = self.fh.readline()
+            line = self.readline()
             if not line:
                 break
             ahead.append(line)
@@ -551,25 +600,19 @@ class _LineCutter:
 
 
 class _CsvCutter(_LineCutter):
-    """A CSV whose first column is ``t_s`` on the walk's time base (IMU, foot IMU, UWB, truth): its header (and the comment
+    """A CSV with a ``t_s`` column (found by name, as the readers find it) on the walk's time base (IMU, foot IMU, UWB, truth): its header (and the comment
     lines before it) in every cut, each row by its ``t_s``; a row without a readable ``t_s`` goes with the row
     before it (the reader judges it)."""
 
     def __init__(self, path: Path, stream: str | None):
         super().__init__(path)
-        head = []
-        while True:
-            line = self.fh.readline()
-            if not line:
-                break
-            head.append(line)
-            if line.strip() and not line.lstrip().startswith(b"#"):
-                break
+        head = _csv_header(self)
         self.head = b"".join(head)
         self.resume = len(self.head)
+        self.col = _time_column(head)       # the readers find t_s by name: it need not come first
 
     def line_time(self, line: bytes, current: float) -> float:
-        t = _csv_time(line)
+        t = _csv_time(line, self.col)
         return current if t is None or not math.isfinite(t) else t
 
 
@@ -591,7 +634,12 @@ class _NmeaCutter(_LineCutter):
         self.prev = None        # (days, walk time) of the last timed sentence
 
     def line_time(self, line: bytes, current: float) -> float:
-        if not line.startswith(b"$") or len(line) < 7:
+        if not line.startswith(b"$"):
+            at = line.find(b"$")        # a logger's prefix before the sentence (a time stamp), as the reader skips it
+            if at < 0:
+                return current
+            line = line[at:]
+        if len(line) < 7:
             return current
         fields = line.split(b"*", 1)[0].split(b",")
         i = _TIME_FIELD.get(fields[0][3:].decode("ascii", "replace"))
