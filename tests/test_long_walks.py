@@ -16,6 +16,7 @@ from walks.fuse import fuse_to_file, fuse_walk
 from walks.inputs import window_features
 from walks.reader import read_walk
 from features.imu.heading import GATE_REFERENCE_S
+from features.walk import load_walk
 from walks.segments import TAIL_S, WARMUP_S, audio_cut_step, plan_segments, walk_cuts
 from walks.track import TrackWriter, track_rows, track_text
 
@@ -272,13 +273,11 @@ def test_cuts_of_a_walk_across_midnight_hold_their_own_nmea(midnight_walk, tmp_p
     reader places them on the walk's time base (from the RMC dates): each segment's own epochs, and together the
     whole walk's. Would catch a midnight counted twice (the cutter's bug until 2026-12-03: every
     epoch after midnight was put a day late, so the cuts after it held no NMEA and the last one all of it)."""
-    from features.gnss.nmea import epochs_on_time_base, read_nmea_columns
     from features.walk import load_walk
-    from walks.reader import on_time_grid
+    from walks.reader import placed_nmea_epochs
 
     def epoch_times(walk):              # as the reader places them (read_gnss_stream)
-        info = load_walk(walk)
-        return on_time_grid(epochs_on_time_base(read_nmea_columns(info.path("gnss"))[0], info.start_utc).col("t_s"))
+        return placed_nmea_epochs(load_walk(walk))[0].col("t_s")
 
     whole = epoch_times(midnight_walk)
     assert whole.min() < 60.0 < whole.max()                 # the walk's own epochs run through midnight
@@ -367,13 +366,11 @@ def test_one_garbled_line_does_not_end_a_stream_in_the_later_cuts(garbled_walk, 
     it goes with the line before it (the cut's reader refuses or repairs it as the whole walk's does). Until
     2026-12-03 such a line ended its cut, and every later cut at its first line (each resumed there): the GGA at
     100 s took every GNSS epoch from 100 s on from the segments, the IMU row at 70 s every IMU row from 70 s on."""
-    from features.gnss.nmea import epochs_on_time_base, read_nmea_columns
     from features.walk import load_walk
-    from walks.reader import on_time_grid
+    from walks.reader import placed_nmea_epochs
 
     def epoch_times(walk):
-        info = load_walk(walk)
-        return on_time_grid(epochs_on_time_base(read_nmea_columns(info.path("gnss"))[0], info.start_utc).col("t_s"))
+        return placed_nmea_epochs(load_walk(walk))[0].col("t_s")
 
     def imu_rows(walk):                 # the rows as written, each with its stated t_s
         lines = (walk / "imu.csv").read_text().splitlines()[1:]
@@ -483,3 +480,100 @@ def test_line_cutters_read_what_the_readers_read(tmp_path):
     first, second = cut(_NmeaCutter(p, start), "c", spans)
     assert len(first.splitlines()) == 50 and len(second.splitlines()) == 60
     assert second.splitlines()[0].startswith(b"4.000 $GPGGA,120004.00")
+
+
+def _edit_rmc(walk, out, edit):
+    """A copy of ``walk`` whose RMC sentences pass through ``edit(walk time, fields) -> fields or None`` (None:
+    the sentence dropped), their checksums made good."""
+    import shutil
+
+    from tests.long_walk import _checksum
+
+    shutil.copytree(walk, out)
+    start = load_walk(walk).start_utc
+    start_tod = start.hour * 3600 + start.minute * 60 + start.second
+    lines = []
+    for line in (out / "gnss.nmea").read_text().splitlines(keepends=True):
+        if line[3:7] == "RMC,":
+            f = line[1:line.rindex("*")].split(",")
+            tod = int(f[1][0:2]) * 3600 + int(f[1][2:4]) * 60 + float(f[1][4:])
+            f = edit((tod - start_tod) % 86400.0, f)
+            if f is None:
+                continue
+            body = ",".join(f)
+            line = f"${body}*{_checksum(body)}\n"
+        lines.append(line)
+    (out / "gnss.nmea").write_text("".join(lines))
+    return out
+
+
+def _cut_epochs_are_the_whole_walks(walk, tmp_path, segment_s=60.0):
+    from walks.reader import placed_nmea_epochs
+
+    def epoch_times(w):
+        return placed_nmea_epochs(load_walk(w))[0].col("t_s")
+
+    whole = epoch_times(walk)
+    held = []
+    for seg in walk_cuts(walk, segment_s, workdir=tmp_path):
+        t = epoch_times(seg.directory)
+        held.append(t[seg.owns(t)])
+        assert np.array_equal(held[-1], whole[seg.owns(whole)]), (seg.index, len(held[-1]), t[:2])
+    assert np.array_equal(np.concatenate(held), whole)
+    return whole
+
+
+@pytest.mark.parametrize("defect", ["cold_start_dates", "rmc_stops"])
+def test_cuts_place_the_nmea_as_the_whole_walks_reader_does(midnight_walk, tmp_path, defect):
+    """The walk across midnight with a cold start's bogus RMC date (1980-01-06, the GPS epoch a receiver
+    reports before it decodes the real one) from 40 to 90 s: a third of the walk, so the whole walk's median
+    date is right, but most of the 60-130 s cut's dates (40-130 s); or with its RMC, its only dated sentence,
+    gone after 50 s (a logger set to drop it). Each cut's epochs lie where the whole walk's reader puts them:
+    the cut is placed by its times of day and the whole log's date offset. Before, by its own dates' median: the
+    first defect put the second cut's epochs 46 years early, the second left the later cuts without a date, so
+    fused without GNSS."""
+    if defect == "cold_start_dates":
+        walk = _edit_rmc(midnight_walk, tmp_path / "w", lambda t, f: f[:9] + ["060180"] + f[10:]
+                         if 40.0 <= t < 90.0 else f)
+    else:
+        walk = _edit_rmc(midnight_walk, tmp_path / "w", lambda t, f: f if t < 50.0 else None)
+    whole = _cut_epochs_are_the_whole_walks(walk, tmp_path)
+    assert 0.0 <= whole[0] < 0.5 and 149.0 < whole[-1] <= 150.0 and len(whole) > 0.99 * 5 * 150
+
+
+def test_the_log_date_offset_is_the_readers_median_of_its_epochs(tmp_path):
+    """The cutter's one pass over a log: each epoch weighed once with the date it carries on (a dated sentence
+    sets it for its epoch and the epochs after), the median_low of (date - start's date - the days unwrapped)
+    x 86,400 s over them. 10 epochs at 1 Hz from 23:59:55 UTC: RMC in epochs 0-3 (two of them with the bogus
+    1980 date), none after; the epochs after midnight carry 4 Aug + 0 days, the same date as 5 Aug + 1 day.
+    Offsets: epochs 0, 2 bogus (1980-01-06 less 2026-08-04, x 86,400 s); 1 and 3-9 good (0): the median_low of
+    10 values is the 5th smallest, 0. A bad checksum sets nothing: epoch 3's good date refused, epoch 2's bogus
+    one carries on to epoch 9, and the median is bogus, as with bogus dates in epochs 0 and 2-4."""
+    from datetime import datetime, timezone
+    from types import SimpleNamespace
+
+    from tests.long_walk import _checksum
+    from walks.segments import _NmeaCutter
+
+    def log(dates, bad=()):
+        lines = []
+        for k in range(10):
+            tod = (86395 + k) % 86400
+            hhmmss = f"{tod // 3600:02d}{tod // 60 % 60:02d}{tod % 60:02d}.00"
+            gga = f"GPGGA,{hhmmss},3112.0,N,11848.0,E,1,08,1.0,20.0,M,0.0,M,,"
+            lines.append(f"${gga}*{_checksum(gga)}\n")
+            if k < len(dates):
+                rmc = f"GPRMC,{hhmmss},A,3112.0,N,11848.0,E,0.0,,{dates[k]},,,A"
+                lines.append(f"${rmc}*{'00' if k in bad else _checksum(rmc)}\n")
+        p = tmp_path / "gnss.nmea"
+        p.write_text("".join(lines))
+        c = _NmeaCutter(p, SimpleNamespace(start_utc=datetime(2026, 8, 4, 23, 59, 55, tzinfo=timezone.utc)))
+        c.close()
+        return c.date_offset_s
+
+    bogus = (datetime(1980, 1, 6).toordinal() - datetime(2026, 8, 4).toordinal()) * 86400.0
+    assert log(["040826", "040826", "040826", "040826"]) == 0.0
+    assert log(["060180", "040826", "060180", "040826"]) == 0.0
+    assert log(["060180", "040826", "060180", "040826"], bad={3}) == bogus     # epoch 2's date carried on to 9
+    assert log(["060180", "040826", "060180", "060180", "060180"]) == bogus
+    assert log([]) is None

@@ -341,9 +341,7 @@ def read_gnss_stream(walk: WalkInfo, site: Site, resume: FluctuationState | None
                      keep_state_from_s: float = math.inf) -> GnssStream:
     """The walk's NMEA: fixes in the site's ENU frame with σ, quality and HDOP, and the five GNSS windows
     (``resume``, ``keep_state_from_s``: the ``fluct_per_s`` memory of a long walk's cut, :func:`read_walk`)."""
-    epochs, stats = read_nmea_columns(walk.path("gnss"))  # the epochs as columns: no object per satellite
-    epochs = epochs_on_time_base(epochs, walk.start_utc)
-    epochs = epochs.with_t_s(on_time_grid(epochs.col("t_s")))
+    epochs, stats = placed_nmea_epochs(walk)
     o = site.origin
     sky = sky_arrays(epochs)  # once, for both the positions' sigma and the features
     positions = fixes_to_enu(epochs, o.lat_deg, o.lon_deg, o.alt_m, sky=sky)
@@ -351,6 +349,36 @@ def read_gnss_stream(walk: WalkInfo, site: Site, resume: FluctuationState | None
     kept = fluctuation_state(sky, keep_state_from_s, resume=resume) if math.isfinite(keep_state_from_s) else None
     return GnssStream(positions=positions, features=gnss_features(sky, resume=resume), nmea_summary=stats.summary(),
                       skipped_share=float(share), fluct_state=kept)
+
+
+def placed_nmea_epochs(walk: WalkInfo):
+    """(epochs as :class:`~features.gnss.assemble.EpochColumns`, read statistics) of the walk's NMEA, on the walk's
+    time base (:func:`features.gnss.nmea.epochs_on_time_base`; a long walk's cut by :func:`_on_cut_time_base`)
+    and its microsecond grid (:func:`on_time_grid`)."""
+    epochs, stats = read_nmea_columns(walk.path("gnss"))  # the epochs as columns: no object per satellite
+    table = walk.streams.get("gnss", {})
+    if "date_offset_s" in table:        # a long walk's cut (walks.segments): placed as the whole walk's reader does
+        epochs = _on_cut_time_base(epochs, walk.start_utc, float(table["cut_from_s"]), float(table["date_offset_s"]))
+    else:
+        epochs = epochs_on_time_base(epochs, walk.start_utc)
+    return epochs.with_t_s(on_time_grid(epochs.col("t_s"))), stats
+
+
+def _on_cut_time_base(epochs, start_utc, cut_from_s: float, date_offset_s: float):
+    """A long walk's cut of the NMEA (:mod:`walks.segments`) on the walk's time base: its first epoch at its time
+    of day less ``start_utc``'s plus the whole days that put it within 12 h of ``cut_from_s`` (the cut's first walk
+    time; of the start for the first cut), plus ``date_offset_s``, the whole log's median offset of its dates
+    against its times of day (0 when they agree with ``start_utc``), and every epoch after it as the reader spaces
+    them. The whole walk's reader places each epoch the same way, through the median over the whole log's dated
+    epochs (:func:`features.gnss.nmea.epochs_on_time_base`); a cut's own dates may not say it: a cold start's
+    bogus dates can be most of one cut, and a log whose RMC stopped leaves later cuts without any (until
+    2026-12-03 such cuts were placed years off, or fused without GNSS)."""
+    s = start_utc
+    start_tod = s.hour * 3600 + s.minute * 60 + s.second + s.microsecond * 1e-6
+    base = float(epochs.col("time_of_day_s")[0]) - start_tod
+    ref = cut_from_s if math.isfinite(cut_from_s) else 0.0
+    first = base + 86400.0 * round((ref - base) / 86400.0)
+    return epochs.with_t_s(epochs.col("t_s") + (first + date_offset_s - float(epochs.col("t_s")[0])))
 
 
 NMEA_TIME_GRID_S = 1e-6

@@ -170,7 +170,10 @@ methods (``fg_*``) and ``ekf_rtk_pdr`` (:mod:`walks.graph_methods`): their cuts 
 from __future__ import annotations
 
 import collections
+import datetime as dt
+import functools
 import math
+import operator
 import os
 import re
 import shutil
@@ -182,6 +185,7 @@ from typing import Iterator
 import soundfile as sf
 
 from features.errors import DataError
+from features.gnss.quirks import parse_ddmmyy
 from features.imu.heading import GATE_REFERENCE_S
 from features.fileio import read_toml
 from features.walk import WalkInfo, load_walk
@@ -465,10 +469,17 @@ def _write_walk_toml(walk: WalkInfo, d: Path, changes: dict) -> None:
         text = re.sub(r"^site\s*=.*$", lambda _: f"site = {_toml_str(str(site))}", text, count=1, flags=re.M)
     if "audio_start_s" in changes:
         text = _set_in_table(text, "audio", "start_s", repr(changes["audio_start_s"]))
+    if "gnss_date_offset_s" in changes:
+        text = _set_in_table(text, "gnss", "cut_from_s", _toml_float(changes["gnss_cut_from_s"]))
+        text = _set_in_table(text, "gnss", "date_offset_s", _toml_float(changes["gnss_date_offset_s"]))
     if "audio_first_sample" in changes:
         text = _set_in_table(text, "audio", "first_sample", str(changes["audio_first_sample"]))
         text = _set_in_table(text, "audio", "recording_start_s", repr(changes["audio_recording_start_s"]))
     (d / "walk.toml").write_text(text)
+
+
+def _toml_float(x: float) -> str:
+    return ("-inf" if x < 0 else "inf") if math.isinf(x) else repr(float(x))
 
 
 def _toml_str(s: str) -> str:
@@ -631,7 +642,47 @@ class _NmeaCutter(_LineCutter):
         super().__init__(path)
         s = walk.start_utc
         self.start_tod = s.hour * 3600 + s.minute * 60 + s.second + s.microsecond * 1e-6
+        self.start_ordinal = s.date().toordinal()
         self.prev = None        # (days, walk time) of the last timed sentence
+        self.date_offset_s = self._date_offset_s()
+
+    def _date_offset_s(self) -> float | None:
+        """The log's dates against its times of day, as the whole walk's reader weighs them: each epoch (each
+        new time) takes the date of the last dated sentence (RMC, ZDA; checksum good) up to its end, as the
+        reader's clock carries a date on; the offset of an epoch is (its date − start_utc's date − the days its
+        walk time was unwrapped by)·86,400 s, 0 when its date agrees with start_utc and the times of day; the
+        median_low over the dated epochs, the reader's estimator (:func:`features.gnss.nmea.epochs_on_time_base`:
+        a receiver's bogus dates after a cold start, a minority, move nothing). None without any date. One pass
+        over the file before the first cut, a line at a time."""
+        counts: collections.Counter = collections.Counter()
+        t, epoch_days, last_days = -math.inf, None, None
+        self.seek(0)
+        self.prev = None
+        while True:
+            line = self.readline()
+            if not line:
+                break
+            t_new = self.line_time(line, t)
+            if t_new != t:
+                if epoch_days is not None:
+                    counts[epoch_days] += 1
+                epoch_days = last_days
+            t = t_new
+            date = _sentence_date(line)
+            if date is not None and self.prev is not None:
+                last_days = epoch_days = date.toordinal() - self.start_ordinal - self.prev[0]
+        if epoch_days is not None:
+            counts[epoch_days] += 1
+        self.seek(0)
+        self.prev = None
+        if not counts:
+            return None
+        at, seen = (sum(counts.values()) - 1) // 2, 0
+        for days in sorted(counts):
+            seen += counts[days]
+            if seen > at:
+                return 86400.0 * days
+        raise AssertionError("unreachable")
 
     def line_time(self, line: bytes, current: float) -> float:
         if not line.startswith(b"$"):
@@ -666,11 +717,39 @@ class _NmeaCutter(_LineCutter):
         # unwrap from the state saved at the resume position (the sentence there is read again)
         self.prev = getattr(self, "_resume_state", None)
         out = super().write(d, lo, hi, next_lo)
+        if self.date_offset_s is not None:
+            # the cut's reader places its epochs by their times of day and the whole log's date offset, not by
+            # the cut's own dates (walks.reader.read_gnss_stream): a cut whose dates are mostly a cold start's
+            # bogus ones, or that holds none, is placed where the whole walk's reader places it
+            out.update(gnss_cut_from_s=lo, gnss_date_offset_s=self.date_offset_s)
         return out
 
     def resume_before(self, t: float) -> float:
         self._resume_state = self.prev
         return -math.inf
+
+
+def _sentence_date(line: bytes) -> dt.date | None:
+    """The date an RMC or ZDA sentence states, as the NMEA reader takes it (RMC's ddmmyy whatever its status, ZDA's
+    day, month and year from 1980 on), None for any other line, a bad checksum or a date that does not parse."""
+    at = line.find(b"$")
+    if at < 0 or line[at + 3:at + 7] not in (b"RMC,", b"ZDA,"):
+        return None
+    body, star, tail = line[at + 1:].partition(b"*")
+    if not star or len(tail) < 2:
+        return None
+    try:
+        if int(tail[:2], 16) != functools.reduce(operator.xor, body, 0):
+            return None
+        f = body.split(b",")
+        if f[0][2:] == b"RMC":
+            return parse_ddmmyy(f[9].decode("ascii")) if len(f) > 9 else None
+        if len(f) > 4 and f[2] and f[3] and f[4]:
+            date = dt.date(int(f[4]), int(f[3]), int(f[2]))
+            return date if date.year >= 1980 else None
+    except (ValueError, UnicodeDecodeError):
+        return None
+    return None
 
 
 def _unwrapped_day(since_start_tod_s: float, prev: tuple[int, float] | None) -> tuple[int, float]:
