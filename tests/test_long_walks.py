@@ -577,3 +577,26 @@ def test_the_log_date_offset_is_the_readers_median_of_its_epochs(tmp_path):
     assert log(["060180", "040826", "060180", "040826"], bad={3}) == bogus     # epoch 2's date carried on to 9
     assert log(["060180", "040826", "060180", "060180", "060180"]) == bogus
     assert log([]) is None
+
+
+def test_an_imu_hole_across_a_seam_gives_the_whole_walks_track(model, midnight_walk, tmp_path):
+    """The walk across midnight without IMU rows from 112 to 132 s (a logger's hole across the 120 s seam of 60 s
+    segments). The whole walk stands through the hole (steps more than 1.5 s apart); the 60-120 s segment's cut
+    (40-130 s) holds no sample after 112 s, and its record now runs to the cut's end, so it stands there too and
+    hands the whole walk's filters over. Before, its record ended at its last sample, the walker walked on
+    through the hole's first 8 s, and the tracks parted (on a 700 s walk by up to 5.2 m for the next segment)."""
+    import shutil
+
+    walk = tmp_path / "w"
+    shutil.copytree(midnight_walk, walk)
+    lines = (walk / "imu.csv").read_text().splitlines(keepends=True)
+    (walk / "imu.csv").write_text("".join(lines[:1] + [line for line in lines[1:]
+                                                      if not 112.0 <= float(line.split(",", 1)[0]) < 132.0]))
+    whole, seg = tmp_path / "whole.csv", tmp_path / "seg.csv"
+    fuse_to_file(walk, model, "adaptive_blind+lag", whole, "csv", segment_s=1e6, force=True)
+    fuse_to_file(walk, model, "adaptive_blind+lag", seg, "csv", segment_s=60.0, force=True)
+    a = np.genfromtxt(whole, delimiter=",", names=True, dtype=None, encoding="utf-8")
+    b = np.genfromtxt(seg, delimiter=",", names=True, dtype=None, encoding="utf-8")
+    assert len(a) == len(b) and np.max(np.abs(a["t_s"] - b["t_s"])) < 1e-3
+    d = np.hypot(a["east_m"] - b["east_m"], a["north_m"] - b["north_m"])
+    assert np.max(d) < SEAM_TOLERANCE_M, np.max(d)

@@ -16,6 +16,7 @@ future; ``forward_backward`` (``evaluate``) uses the whole walk.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -284,12 +285,15 @@ def walk_inputs(data: WalkData, classifier, temporal=None, smoothing: str = "for
         r = data.pdr.result
         ok = np.isfinite(r.heading_rad) & np.isfinite(r.step_length_m)
         end = data.pdr.imu.t_s[-1] if data.pdr.imu is not None and len(data.pdr.imu.t_s) else r.t_s[-1]
+        # a long walk's cut: its IMU record runs to the cut's end (or the walk's IMU's), past a hole at its end
+        end = max(end, float(data.walk.streams.get("imu", {}).get("cut_to_s", end)))
         first = data.pdr.imu.t_s[0] if data.pdr.imu is not None and len(data.pdr.imu.t_s) else None
         stands = _stands(r.t_s[ok], float(end), float(first) if resumed and first is not None else None)
         steps = StepEvents(*split_steps(r.t_s[ok], r.step_length_m[ok], r.heading_rad[ok], fix_t))
     elif resumed and getattr(data.pdr, "imu", None) is not None and len(data.pdr.imu.t_s):
         # a later cut of a long walk without a step: the walker stands through it, as in the whole walk
-        stands = _stands(np.zeros(0), float(data.pdr.imu.t_s[-1]), float(data.pdr.imu.t_s[0]))
+        end = max(float(data.pdr.imu.t_s[-1]), float(data.walk.streams.get("imu", {}).get("cut_to_s", -math.inf)))
+        stands = _stands(np.zeros(0), end, float(data.pdr.imu.t_s[0]))
     if data.gnss is not None and len(data.gnss.positions):
         gnss = gnss_events(data.gnss.positions)
     if data.acoustic is not None and len(data.acoustic.t_s):
