@@ -19,6 +19,13 @@ segment by segment:
   :data:`TAIL_S` after it (the fixed-lag smoother's 3 s, a
   step's split at the next fix, the last feature window); the first cut reaches at least the heading gate's
   reference span (:data:`features.imu.heading.GATE_REFERENCE_S`);
+- the cutters read what the readers read: a CSV's ``t_s`` found by name, lines ending in CR alone, a logger's
+  prefix before each sentence; a line whose time runs past its cut's end while the lines after it do not (a
+  garbled time) goes with the line before it (:data:`LOOKAHEAD_LINES`); every cut's NMEA is placed by its
+  times of day and the whole log's date offset, found in one pass before the first cut (``[gnss]
+  date_offset_s``, ``cut_from_s``: :func:`walks.reader.placed_nmea_epochs`), not by the cut's own dates; and a
+  cut's IMU record runs to the cut's end (``[imu] cut_to_s``), so a hole across its end stands as in the whole
+  walk (:func:`walks.inputs._stands`);
 - the cut is fused by the pipeline (:func:`walks.fuse.fuse_walk`) with what the previous segment handed over
   (:meth:`walks.fuse.FusedWalk.handover`), and only the segment's own epochs are kept:
 
@@ -457,7 +464,7 @@ def _cutters(walk: WalkInfo) -> dict:
         out["gnss"] = _NmeaCutter(walk.path("gnss"), walk)
     if walk.path("imu") is not None and walk.path("imu").is_file():
         out["imu"] = _CsvCutter(walk.path("imu"), "imu")
-    for stream in ("uwb", "imu_foot"):           # CSVs whose first column is t_s on the walk's time base
+    for stream in ("uwb", "imu_foot"):           # CSVs with a t_s column on the walk's time base
         if walk.path(stream) is not None and walk.path(stream).is_file():
             out[stream] = _CsvCutter(walk.path(stream), stream)
     if (walk.directory / "truth.csv").is_file():
