@@ -158,6 +158,20 @@ SEAM_TOLERANCE_M = 1e-4
 this is "equal as written"). On the 21-minute walk of walks/segments.py's docstring the segments agree to 6.4e-8 m
 at 600 s; at 300 s a round-off flip in the receiver's float32 matched filter gave 0.022 m once."""
 
+def _segments_give_the_whole_track(walk, model, tmp_path, segment_s: float = 60.0) -> float:
+    """``adaptive_blind+lag`` of ``walk`` fused in ``segment_s`` segments against it fused whole: the same epochs,
+    positions within :data:`SEAM_TOLERANCE_M`; returns the largest distance, m."""
+    whole, seg = tmp_path / "whole.csv", tmp_path / "seg.csv"
+    fuse_to_file(walk, model, "adaptive_blind+lag", whole, "csv", segment_s=1e6, force=True)
+    fuse_to_file(walk, model, "adaptive_blind+lag", seg, "csv", segment_s=segment_s, force=True)
+    a = np.genfromtxt(whole, delimiter=",", names=True, dtype=None, encoding="utf-8")
+    b = np.genfromtxt(seg, delimiter=",", names=True, dtype=None, encoding="utf-8")
+    assert len(a) == len(b) and np.max(np.abs(a["t_s"] - b["t_s"])) < 1e-3
+    d = np.hypot(a["east_m"] - b["east_m"], a["north_m"] - b["north_m"])
+    assert np.max(d) < SEAM_TOLERANCE_M, np.max(d)
+    return float(np.max(d))
+
+
 
 GROWTH_BOUND_MIB = 12.0
 """Largest peak-memory growth allowed from the 5- to the 11-minute walk at 60 s segments, MiB. Both reach the
@@ -298,16 +312,8 @@ def test_cuts_of_a_walk_across_midnight_hold_their_own_nmea(midnight_walk, tmp_p
 def test_a_walk_across_midnight_in_segments_gives_its_whole_track(model, midnight_walk, tmp_path):
     """The walk across midnight fused in 60 s segments gives the whole walk's track, through midnight too (the
     cut after it once had no GNSS at all)."""
-    whole, seg = tmp_path / "whole.csv", tmp_path / "seg.csv"
-    fuse_to_file(midnight_walk, model, "adaptive_blind+lag", whole, "csv", segment_s=1e6, force=True)
-    done = fuse_to_file(midnight_walk, model, "adaptive_blind+lag", seg, "csv", segment_s=60.0, force=True)
-    assert done.segments == 3
-    a = np.genfromtxt(whole, delimiter=",", names=True, dtype=None, encoding="utf-8")
-    b = np.genfromtxt(seg, delimiter=",", names=True, dtype=None, encoding="utf-8")
-    assert len(a) == len(b) and np.max(np.abs(a["t_s"] - b["t_s"])) < 1e-3
-    d = np.hypot(a["east_m"] - b["east_m"], a["north_m"] - b["north_m"])
-    print("across midnight, segmented vs whole, m: max", np.max(d))
-    assert np.max(d) < SEAM_TOLERANCE_M, np.max(d)
+    assert plan_segments(midnight_walk, 60.0)[0] == 3
+    print("across midnight, segmented vs whole, m: max", _segments_give_the_whole_track(midnight_walk, model, tmp_path))
 
 
 def test_nmea_cutter_places_a_day_long_log_without_drift(tmp_path):
@@ -398,14 +404,7 @@ def test_one_garbled_line_does_not_end_a_stream_in_the_later_cuts(garbled_walk, 
 
 
 def test_a_garbled_walk_in_segments_gives_its_whole_track(model, garbled_walk, tmp_path):
-    whole, seg = tmp_path / "whole.csv", tmp_path / "seg.csv"
-    fuse_to_file(garbled_walk, model, "adaptive_blind+lag", whole, "csv", segment_s=1e6, force=True)
-    fuse_to_file(garbled_walk, model, "adaptive_blind+lag", seg, "csv", segment_s=60.0, force=True)
-    a = np.genfromtxt(whole, delimiter=",", names=True, dtype=None, encoding="utf-8")
-    b = np.genfromtxt(seg, delimiter=",", names=True, dtype=None, encoding="utf-8")
-    assert len(a) == len(b) and np.max(np.abs(a["t_s"] - b["t_s"])) < 1e-3
-    d = np.hypot(a["east_m"] - b["east_m"], a["north_m"] - b["north_m"])
-    assert np.max(d) < SEAM_TOLERANCE_M, np.max(d)
+    _segments_give_the_whole_track(garbled_walk, model, tmp_path)
 
 
 def test_a_line_cutter_ends_a_cut_only_where_the_lines_after_confirm_it(tmp_path):
@@ -592,11 +591,4 @@ def test_an_imu_hole_across_a_seam_gives_the_whole_walks_track(model, midnight_w
     lines = (walk / "imu.csv").read_text().splitlines(keepends=True)
     (walk / "imu.csv").write_text("".join(lines[:1] + [line for line in lines[1:]
                                                       if not 112.0 <= float(line.split(",", 1)[0]) < 132.0]))
-    whole, seg = tmp_path / "whole.csv", tmp_path / "seg.csv"
-    fuse_to_file(walk, model, "adaptive_blind+lag", whole, "csv", segment_s=1e6, force=True)
-    fuse_to_file(walk, model, "adaptive_blind+lag", seg, "csv", segment_s=60.0, force=True)
-    a = np.genfromtxt(whole, delimiter=",", names=True, dtype=None, encoding="utf-8")
-    b = np.genfromtxt(seg, delimiter=",", names=True, dtype=None, encoding="utf-8")
-    assert len(a) == len(b) and np.max(np.abs(a["t_s"] - b["t_s"])) < 1e-3
-    d = np.hypot(a["east_m"] - b["east_m"], a["north_m"] - b["north_m"])
-    assert np.max(d) < SEAM_TOLERANCE_M, np.max(d)
+    _segments_give_the_whole_track(walk, model, tmp_path)
