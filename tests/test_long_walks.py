@@ -592,3 +592,29 @@ def test_an_imu_hole_across_a_seam_gives_the_whole_walks_track(model, midnight_w
     (walk / "imu.csv").write_text("".join(lines[:1] + [line for line in lines[1:]
                                                       if not 112.0 <= float(line.split(",", 1)[0]) < 132.0]))
     _segments_give_the_whole_track(walk, model, tmp_path)
+
+
+def test_a_cuts_keys_in_a_walk_toml_are_numbers_or_one_clear_error(midnight_walk, tmp_path):
+    """The keys a long walk's cut writes into its walk.toml (``[gnss] cut_from_s``, ``date_offset_s``, ``[imu]
+    cut_to_s``), found in a walk with a value that is not a number: one error naming the file and key, not a
+    traceback; ``date_offset_s`` without ``cut_from_s`` is not a cut's and the walk is placed by its dates."""
+    import re
+    import shutil
+
+    from features.errors import EnvfuseError
+    from walks.inputs import walk_inputs
+    from walks.reader import placed_nmea_epochs
+
+    walk = tmp_path / "w"
+    shutil.copytree(midnight_walk, walk)
+    toml = (walk / "walk.toml").read_text()
+    whole = placed_nmea_epochs(load_walk(midnight_walk))[0].col("t_s")
+    (walk / "walk.toml").write_text(re.sub(r"^\[gnss\]$", "[gnss]\ndate_offset_s = 86400.0", toml, flags=re.M))
+    assert np.array_equal(placed_nmea_epochs(load_walk(walk))[0].col("t_s"), whole)
+    (walk / "walk.toml").write_text(re.sub(r"^\[gnss\]$", '[gnss]\ndate_offset_s = "a day"\ncut_from_s = 0.0',
+                                           toml, flags=re.M))
+    with pytest.raises(EnvfuseError, match=r"\[gnss\] date_offset_s must be a number, got 'a day'"):
+        placed_nmea_epochs(load_walk(walk))
+    (walk / "walk.toml").write_text(re.sub(r"^\[imu\]$", '[imu]\ncut_to_s = "end"', toml, flags=re.M))
+    with pytest.raises(EnvfuseError, match=r"\[imu\] cut_to_s must be a number, got 'end'"):
+        walk_inputs(read_walk(walk), None)

@@ -268,6 +268,17 @@ def smooth_classes(proba: np.ndarray, t_end_s: np.ndarray, answered: np.ndarray,
     return out
 
 
+def _cut_to_s(data: WalkData) -> float:
+    """Where a long walk's cut's IMU record ends (``[imu] cut_to_s``, :mod:`walks.segments`); −inf for a walk read
+    whole."""
+    value = data.walk.streams.get("imu", {}).get("cut_to_s", -math.inf)
+    try:
+        return float(value)
+    except (TypeError, ValueError):
+        raise ConfigError(f"{data.walk.directory / 'walk.toml'}: [imu] cut_to_s must be a number, got {value!r} "
+                          f"(a long walk's cut states it)") from None
+
+
 def walk_inputs(data: WalkData, classifier, temporal=None, smoothing: str = "forward",
                 class_resume: ClassResume | None = None, resumed: bool = False) -> WalkInputs:
     """Events and class evidence of one walk (see the module docstring); ``classifier``: the online
@@ -286,13 +297,13 @@ def walk_inputs(data: WalkData, classifier, temporal=None, smoothing: str = "for
         ok = np.isfinite(r.heading_rad) & np.isfinite(r.step_length_m)
         end = data.pdr.imu.t_s[-1] if data.pdr.imu is not None and len(data.pdr.imu.t_s) else r.t_s[-1]
         # a long walk's cut: its IMU record runs to the cut's end (or the walk's IMU's), past a hole at its end
-        end = max(end, float(data.walk.streams.get("imu", {}).get("cut_to_s", end)))
+        end = max(end, _cut_to_s(data))
         first = data.pdr.imu.t_s[0] if data.pdr.imu is not None and len(data.pdr.imu.t_s) else None
         stands = _stands(r.t_s[ok], float(end), float(first) if resumed and first is not None else None)
         steps = StepEvents(*split_steps(r.t_s[ok], r.step_length_m[ok], r.heading_rad[ok], fix_t))
     elif resumed and getattr(data.pdr, "imu", None) is not None and len(data.pdr.imu.t_s):
         # a later cut of a long walk without a step: the walker stands through it, as in the whole walk
-        end = max(float(data.pdr.imu.t_s[-1]), float(data.walk.streams.get("imu", {}).get("cut_to_s", -math.inf)))
+        end = max(float(data.pdr.imu.t_s[-1]), _cut_to_s(data))
         stands = _stands(np.zeros(0), end, float(data.pdr.imu.t_s[0]))
     if data.gnss is not None and len(data.gnss.positions):
         gnss = gnss_events(data.gnss.positions)

@@ -357,11 +357,22 @@ def placed_nmea_epochs(walk: WalkInfo):
     and its microsecond grid (:func:`on_time_grid`)."""
     epochs, stats = read_nmea_columns(walk.path("gnss"))  # the epochs as columns: no object per satellite
     table = walk.streams.get("gnss", {})
-    if "date_offset_s" in table:        # a long walk's cut (walks.segments): placed as the whole walk's reader does
-        epochs = _on_cut_time_base(epochs, walk.start_utc, float(table["cut_from_s"]), float(table["date_offset_s"]))
+    if "date_offset_s" in table and "cut_from_s" in table:     # a long walk's cut (walks.segments): placed as the
+        cut_from, offset = _cut_number(walk, "gnss", table, "cut_from_s"), \
+            _cut_number(walk, "gnss", table, "date_offset_s")           # whole walk's reader places it
+        epochs = _on_cut_time_base(epochs, walk.start_utc, cut_from, offset)
     else:
         epochs = epochs_on_time_base(epochs, walk.start_utc)
     return epochs.with_t_s(on_time_grid(epochs.col("t_s"))), stats
+
+
+def _cut_number(walk: WalkInfo, stream: str, table: dict, key: str) -> float:
+    """A number a long walk's cut states in its ``[stream]`` table (:mod:`walks.segments`), or one clear error."""
+    try:
+        return float(table[key])
+    except (TypeError, ValueError):
+        raise DataError(f"{walk.directory / 'walk.toml'}: [{stream}] {key} must be a number, got {table[key]!r} "
+                        f"(a long walk's cut states it)") from None
 
 
 def _on_cut_time_base(epochs, start_utc, cut_from_s: float, date_offset_s: float):
