@@ -178,9 +178,7 @@ from __future__ import annotations
 
 import collections
 import datetime as dt
-import functools
 import math
-import operator
 import os
 import re
 import shutil
@@ -193,6 +191,7 @@ import soundfile as sf
 
 from features.errors import DataError
 from features.gnss.quirks import parse_ddmmyy
+from features.gnss.tokens import ReadStats, parse_sentence
 from features.imu.heading import GATE_REFERENCE_S
 from features.fileio import read_toml
 from features.walk import WalkInfo, load_walk
@@ -672,6 +671,7 @@ class _NmeaCutter(_LineCutter):
         over the file before the first cut, a line at a time (1.6 s for a 4-hour walk's 5 Hz log of 53 MB)."""
         counts: collections.Counter = collections.Counter()
         t, epoch_days, last_days = -math.inf, None, None
+        stats = ReadStats()         # what the reader would count; not reported (the cuts' reads report theirs)
         self.seek(0)
         self.prev = None
         while True:
@@ -684,7 +684,7 @@ class _NmeaCutter(_LineCutter):
                     counts[epoch_days] += 1
                 epoch_days = last_days
             t = t_new
-            date = _sentence_date(line)
+            date = _sentence_date(line, stats)
             if date is not None and self.prev is not None:
                 last_days = epoch_days = date.toordinal() - self.start_ordinal - self.prev[0]
         if epoch_days is not None:
@@ -745,25 +745,24 @@ class _NmeaCutter(_LineCutter):
         return -math.inf
 
 
-def _sentence_date(line: bytes) -> dt.date | None:
-    """The date an RMC or ZDA sentence states, as the NMEA reader takes it (RMC's ddmmyy whatever its status, ZDA's
-    day, month and year from 1980 on), None for any other line, a bad checksum or a date that does not parse."""
+def _sentence_date(line: bytes, stats: ReadStats) -> dt.date | None:
+    """The date an RMC or ZDA sentence states, as the NMEA reader takes it: checked by the reader's own
+    :func:`~features.gnss.tokens.parse_sentence` (checksum, address), RMC's ddmmyy whatever its status, ZDA's day,
+    month and year from 1980 on; None for any other line, a sentence the reader refuses or a date that does not
+    parse."""
     at = line.find(b"$")
     if at < 0 or line[at + 3:at + 7] not in (b"RMC,", b"ZDA,"):
         return None
-    body, star, tail = line[at + 1:].partition(b"*")
-    if not star or len(tail) < 2:
+    fields = parse_sentence(line[at + 1:].decode("latin-1").split("$", 1)[0].strip(), stats)
+    if fields is None:
         return None
     try:
-        if int(tail[:2], 16) != functools.reduce(operator.xor, body, 0):
-            return None
-        f = body.split(b",")
-        if f[0][2:] == b"RMC":
-            return parse_ddmmyy(f[9].decode("ascii")) if len(f) > 9 else None
-        if len(f) > 4 and f[2] and f[3] and f[4]:
-            date = dt.date(int(f[4]), int(f[3]), int(f[2]))
+        if fields[0][2:] == "RMC":
+            return parse_ddmmyy(fields[9]) if len(fields) > 9 else None
+        if len(fields) > 4 and fields[2] and fields[3] and fields[4]:
+            date = dt.date(int(fields[4]), int(fields[3]), int(fields[2]))
             return date if date.year >= 1980 else None
-    except (ValueError, UnicodeDecodeError):
+    except ValueError:
         return None
     return None
 
