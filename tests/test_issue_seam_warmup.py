@@ -72,7 +72,8 @@ def test_gnss_features_of_a_resumed_cut_are_the_whole_logs_from_the_resumption_o
     c = resumed["t_s"] >= at + 1.0
     assert np.array_equal(whole["t_s"][w], resumed["t_s"][c])
     assert np.array_equal(whole["fluct_per_s"][w], resumed["fluct_per_s"][c])
-    assert np.any(whole["fluct_per_s"][w] != fresh["fluct_per_s"][c])
+    f = fresh["t_s"] >= at + 1.0                 # (the resumed cut also has the window reaching back to 19 s)
+    assert np.any(whole["fluct_per_s"][w] != fresh["fluct_per_s"][f])
     for name in whole:
         np.testing.assert_allclose(resumed[name][c], whole[name][w], rtol=0, atol=1e-9, err_msg=name)
     k = np.flatnonzero(np.isclose(fresh["t_s"], 100.0))[0]
@@ -81,8 +82,9 @@ def test_gnss_features_of_a_resumed_cut_are_the_whole_logs_from_the_resumption_o
     later_cut = fluctuation_state(cut, 60.0, resume=fluctuation_state(sky, at))
     for a, b in zip(later_whole.columns(sky.sat_keys), later_cut.columns(sky.sat_keys)):
         assert np.array_equal(a, b, equal_nan=True)
-    swapped = FluctuationState(at, sky.sat_keys[::-1], *(np.asarray(a)[::-1] for a in
-                                                         fluctuation_state(sky, at).columns(sky.sat_keys)))
+    state = fluctuation_state(sky, at)
+    swapped = FluctuationState(at, sky.sat_keys[::-1], *(np.asarray(a)[::-1] for a in state.columns(sky.sat_keys)),
+                               state.window_origin_s)
     assert np.array_equal(gnss_features(cut, resume=swapped)["fluct_per_s"], resumed["fluct_per_s"])
 
 
@@ -283,3 +285,27 @@ def test_a_bouts_first_step_does_not_depend_on_the_bouts_end(site_dir, tmp_path)
             assert abs(getattr(cut, name)[j] - getattr(whole, name)[i]) <= 1e-9, (tb, name)
         tested += 1
     assert tested >= 3
+
+
+def test_a_cut_after_a_gap_in_the_log_has_the_whole_logs_windows_that_reach_back_over_it():
+    """1 Hz epochs 0-29 s and 78-149 s (the receiver silent 30-77 s), tagged t − 0.5: the whole log has a
+    window starting at 76 s (holding only the 78 s epoch, tag 77.5) and one at 77 s. A cut from 78 s
+    resumed with the state the log's read before handed (its window grid's origin 0 s, -1 s for tags at -0.5)
+    has both, with the whole log's values, and so every window from there on. Before, its first window started
+    at 77 s and the window ending at 78 s was missing (the class filters took the prior there)."""
+    t = np.r_[np.arange(0.0, 30.0), np.arange(78.0, 150.0)]
+    rng = np.random.default_rng(3)
+    sky = _sky(t, 40.0 + rng.integers(0, 6, (t.size, 3)).astype(float))
+    whole = gnss_features(sky)
+    assert 76.0 + 1.0 in whole["t_s"].tolist() and whole["n_epochs"][whole["t_s"] == 77.0][0] == 1
+    state = fluctuation_state(sky, 60.0)
+    assert state.window_origin_s == -1.0
+    i = int(np.searchsorted(t, 78.0))
+    resumed = gnss_features(_cut(sky, i), resume=state)
+    w = whole["t_s"] >= 77.0
+    assert resumed["t_s"].tolist() == whole["t_s"][w].tolist()
+    for name in whole:
+        np.testing.assert_allclose(resumed[name], whole[name][w], rtol=0, atol=1e-9, err_msg=name)
+    # read from scratch (no state: the log's first cut) the first window holds the first epoch's tag at or
+    # after its start, as before
+    assert gnss_features(_cut(sky, i))["t_s"][0] == 78.0

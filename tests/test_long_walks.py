@@ -158,12 +158,13 @@ SEAM_TOLERANCE_M = 1e-4
 this is "equal as written"). On the 21-minute walk of walks/segments.py's docstring the segments agree to 6.4e-8 m
 at 600 s; at 300 s a round-off flip in the receiver's float32 matched filter gave 0.022 m once."""
 
-def _segments_give_the_whole_track(walk, model, tmp_path, segment_s: float = 60.0) -> float:
-    """``adaptive_blind+lag`` of ``walk`` fused in ``segment_s`` segments against it fused whole: the same epochs,
+def _segments_give_the_whole_track(walk, model, tmp_path, segment_s: float = 60.0,
+                                   method: str = "adaptive_blind+lag") -> float:
+    """``method`` of ``walk`` fused in ``segment_s`` segments against it fused whole: the same epochs,
     positions within :data:`SEAM_TOLERANCE_M`; returns the largest distance, m."""
     whole, seg = tmp_path / "whole.csv", tmp_path / "seg.csv"
-    fuse_to_file(walk, model, "adaptive_blind+lag", whole, "csv", segment_s=1e6, force=True)
-    fuse_to_file(walk, model, "adaptive_blind+lag", seg, "csv", segment_s=segment_s, force=True)
+    fuse_to_file(walk, model, method, whole, "csv", segment_s=1e6, force=True)
+    fuse_to_file(walk, model, method, seg, "csv", segment_s=segment_s, force=True)
     a = np.genfromtxt(whole, delimiter=",", names=True, dtype=None, encoding="utf-8")
     b = np.genfromtxt(seg, delimiter=",", names=True, dtype=None, encoding="utf-8")
     assert len(a) == len(b) and np.max(np.abs(a["t_s"] - b["t_s"])) < 1e-3
@@ -411,7 +412,8 @@ def test_a_line_cutter_ends_a_cut_only_where_the_lines_after_confirm_it(tmp_path
     """A CSV of t_s 0, 0.1, … 9.9 s with row 30 garbled to 1003.0: cut [0, 5) holds rows 0-49 (the garbled one
     with them, where the reader meets it), cut [4, 10) rows 40-99; a stream that really jumps past the end
     (rows from 5 s on shifted by 100 s) ends the first cut at its jump, and the second cut gets nothing before
-    its end."""
+    its end. Each of those two cuts ends in the jump's hole and so holds the two rows after it (an IMU's: the
+    reader fills the hole between them as the whole file's read does)."""
     from walks.segments import _CsvCutter
 
     def cut(rows, spans):
@@ -434,7 +436,7 @@ def test_a_line_cutter_ends_a_cut_only_where_the_lines_after_confirm_it(tmp_path
     assert first == list(range(50)) and second == list(range(40, 100))
     jumped = np.where(t >= 5.0, t + 100.0, t)
     first, second = cut(jumped, [(0.0, 5.0, 4.0), (4.0, 10.0, 10.0)])
-    assert first == list(range(50)) and second == list(range(40, 50))
+    assert first == list(range(52)) and second == list(range(40, 52))
 
 
 def test_line_cutters_read_what_the_readers_read(tmp_path):
@@ -618,3 +620,76 @@ def test_a_cuts_keys_in_a_walk_toml_are_numbers_or_one_clear_error(midnight_walk
     (walk / "walk.toml").write_text(re.sub(r"^\[imu\]$", '[imu]\ncut_to_s = "end"', toml, flags=re.M))
     with pytest.raises(EnvfuseError, match=r"\[imu\] cut_to_s must be a number, got 'end'"):
         walk_inputs(read_walk(walk), None)
+
+
+def _silenced(walk, out, lo_s: float, hi_s: float, streams=("gnss", "imu", "uwb", "imu_foot", "audio")):
+    """A copy of ``walk`` with ``streams`` silent over walk times [lo_s, hi_s): no NMEA epoch, IMU, UWB or foot-IMU
+    row there, and the audio's samples zero (a logger paused, a phone in a pocket against a steel door)."""
+    import shutil
+    from datetime import datetime
+
+    shutil.copytree(walk, out)
+    for name in ("imu", "uwb", "imu_foot"):
+        p = out / f"{name}.csv"
+        if name in streams and p.exists():
+            lines = p.read_text().splitlines(keepends=True)
+            p.write_text("".join(lines[:1] + [r for r in lines[1:] if not lo_s <= float(r.split(",", 1)[0]) < hi_s]))
+    if "gnss" in streams:
+        start = load_walk(out).start_utc
+        t0 = start.hour * 3600 + start.minute * 60 + start.second
+        keep = []
+        for line in (out / "gnss.nmea").read_text().splitlines(keepends=True):
+            f = line.split(",")
+            if len(f) > 1 and len(f[1]) >= 6 and f[1][:6].isdigit():
+                t = (int(f[1][:2]) * 3600 + int(f[1][2:4]) * 60 + float(f[1][4:]) - t0) % 86400.0
+                if lo_s <= t < hi_s:
+                    continue
+            keep.append(line)
+        (out / "gnss.nmea").write_text("".join(keep))
+    if "audio" in streams:
+        a, fs = sf.read(str(out / "audio.wav"), dtype="int16")
+        a[int(lo_s * fs):int(hi_s * fs)] = 0
+        sf.write(str(out / "audio.wav"), a, fs, subtype="PCM_16")
+    return out
+
+
+@pytest.fixture(scope="module")
+def silent_walk(midnight_walk, tmp_path_factory):
+    """The walk across midnight with every stream silent from 30 to 78 s: 48 s, across the 60 s seam of 60 s
+    segments and longer than the warm-up, so the 60-120 s segment's cut (40-130 s) holds no event before 78 s."""
+    return _silenced(midnight_walk, tmp_path_factory.mktemp("silent") / "w11s", 30.0, 78.0)
+
+
+@pytest.mark.parametrize("method", ["adaptive_blind+lag", "adaptive", "imm"])
+def test_a_walk_silent_across_a_seam_in_segments_gives_its_whole_track(model, silent_walk, tmp_path, method):
+    """Every stream silent for 48 s across a seam: the segments give the whole walk's track (measured 2.7e-7 m
+    on a 200 s walk of the same site). Before, the cut's first event took Δt = 0 and no standing time, its IMU
+    record began after the hole and the heading filter resumed on another branch (π off), the GNSS windows
+    that reach back over the silence to its first epoch were missing and the class in force before them was
+    the prior: 9.6 m off (``adaptive_blind``) on that walk, 0.26 m (``adaptive``)."""
+    _segments_give_the_whole_track(silent_walk, model, tmp_path, method=method)
+
+
+def test_an_imu_cut_starting_in_a_hole_holds_the_rows_around_it(midnight_walk, tmp_path):
+    """The IMU without rows from 95 to 135 s, across the 100 s start of the last segment's cut (60 s segments)
+    and the 130 s end of the one before: the last cut holds the two rows before the hole (94.98, 94.99 s), so its
+    reader fills the hole as the whole walk's does (the samples of both reads agree), and the cut before holds
+    the two rows after it (135.00, 135.01 s). One row alone would be taken for a garbled time by the reader and
+    dropped; none, and the cut's heading filter would resume 40 s late."""
+    from walks.reader import read_walk as read
+
+    walk = _silenced(midnight_walk, tmp_path / "w", 95.0, 135.0, streams=("imu",))
+    whole = read(walk, truth=False).pdr.imu
+    rows = {}
+    for seg in walk_cuts(walk, 60.0, workdir=tmp_path):
+        t = [float(r.split(",", 1)[0]) for r in (seg.directory / "imu.csv").read_text().splitlines()[1:]]
+        rows[seg.index] = t
+        if seg.index == 2:
+            assert t[:3] == [94.98, 94.99, 135.0]
+            imu = read(seg.directory, truth=False).pdr.imu
+            i0 = int(np.searchsorted(whole.t_s, imu.t_s[0] - 1e-6))
+            n = len(imu.t_s)
+            np.testing.assert_allclose(imu.t_s, whole.t_s[i0:i0 + n], atol=1e-9)
+            np.testing.assert_allclose(imu.acc_m_s2, whole.acc_m_s2[i0:i0 + n], atol=1e-6)
+            assert not imu.valid[2:3990].any() and imu.valid[4010:].all()
+    assert rows[1][-3:] == [94.99, 135.0, 135.01]

@@ -95,3 +95,93 @@ def test_a_stop_at_the_end_of_the_record_is_standing():
     np.testing.assert_allclose(st.end_s, [4.5, 10.0])
     st = _stands(np.array([0.0, 0.5, 1.0, 5.0]), 6.0)
     np.testing.assert_allclose(st.start_s, [1.5])
+
+
+def test_the_heading_resumed_inside_a_long_disturbed_spell_keeps_the_whole_records_branch():
+    """The record of the test above with its steel spell 60 s long (samples 5,000-11,000) and the field turning
+    within it by 6 rad against the gyro (a walker alongside a transformer's tank): resumed at sample 9,000 from
+    the whole run's state, the magnetometer and gyro headings stand more than π further apart than at the spell's
+    start. The piece's headings are the whole run's to round-off, through the spell and after it, when the
+    magnetometer takes over again. Before, the resumed gate offset and complementary heading were each put on
+    the branch nearest the piece's first magnetometer heading: 2π off here, so that when the spell ended the
+    filter pulled the heading the long way round (up to π off; a 48 s IMU hole across a long walk's seam did
+    the same, walks/segments.py)."""
+    rate = 100.0
+    n = 20_000
+    acc, gyro, mag = _imu(n, rate, 5)
+    k = np.arange(n)
+    spell = (k >= 5000) & (k < 11000)
+    turn = np.where(spell, 6.0 * np.clip((k - 5000) / 4000.0, 0.0, 1.0), 0.0)   # rad, rotating the field
+    c, s = np.cos(turn), np.sin(turn)
+    mx, my = mag[:, 0].copy(), mag[:, 1].copy()
+    mag[:, 0], mag[:, 1] = c * mx - s * my, s * mx + c * my
+    mag[spell, :2] *= 1.3
+    cfg = HeadingConfig()
+    whole = estimate_heading(acc, gyro, mag, rate, cfg)
+    assert whole.mag_disturbed[5200:10800].all() and whole.mag_disturbed[13000:].mean() < 0.05
+    state = whole.state_at(8999, 89.99)
+    drift = state.mag_minus_gyro_rad - state.gate_offset_rad
+    assert abs(drift) > math.pi                               # the case the branch rule got wrong
+    piece = estimate_heading(acc[8000:], gyro[8000:], mag[8000:], rate, cfg, state, 1000)
+    d = np.angle(np.exp(1j * (piece.fused[1000:] - whole.fused[9000:])))
+    assert np.max(np.abs(d)) < 1e-7, np.max(np.abs(d))
+    dg = np.angle(np.exp(1j * (piece.gyro_only[1000:] - whole.gyro_only[9000:])))
+    assert np.max(np.abs(dg)) < 1e-7
+    # the gate's offset is the unwrapped magnetometer − gyro heading at the spell's last undisturbed sample
+    good = np.flatnonzero(~whole.mag_disturbed[:9000])[-1]
+    assert state.gate_offset_rad == pytest.approx(float(whole.mag_minus_gyro[good]), abs=1e-12)
+    assert abs(np.angle(np.exp(1j * (state.gate_offset_rad - (whole.mag_only[good] - whole.gyro_only[good]))))) < 1e-9
+
+
+def test_a_cut_stands_from_the_whole_walks_last_step_before_it():
+    """``_stands`` of a cut handed the whole walk's last step before its segment (``last_step_s``), by hand:
+    steps at 80, 80.5, 81 s in a cut from 40 s whose walk last stepped at 29.6 s: standing 30.1-79.5 s (as the
+    whole walk stands between 29.6 and 80) and after 81 s to the record's end at 90 s; a handed step the cut
+    holds itself adds nothing; a walk with no step before (−inf) stands nothing before the cut's first step,
+    as the whole walk stands nothing before its first; a cut with no step stands from 0.5 s after the handed
+    one to its end. Before, a cut stood from its first IMU sample (here 78 s), 1.7 s of standing instead of 49.4."""
+    st = _stands(np.array([80.0, 80.5, 81.0]), 90.0, 40.0, last_step_s=29.6)
+    np.testing.assert_allclose(st.start_s, [30.1, 81.5])
+    np.testing.assert_allclose(st.end_s, [79.5, 90.0])
+    assert st.standing_time(np.array([80.0]))[0] - st.standing_time(np.array([29.8]))[0] == pytest.approx(49.4)
+    same = _stands(np.array([29.6, 80.0, 80.5, 81.0]), 90.0, 40.0, last_step_s=29.6 + 1e-6)
+    np.testing.assert_allclose(same.start_s, [30.1, 81.5])
+    none_before = _stands(np.array([80.0, 80.5, 81.0]), 90.0, 40.0, last_step_s=-math.inf)
+    np.testing.assert_allclose(none_before.start_s, [81.5])
+    still = _stands(np.zeros(0), 90.0, 40.0, last_step_s=29.6)
+    np.testing.assert_allclose([still.start_s[0], still.end_s[0]], [30.1, 90.0])
+    old = _stands(np.array([80.0, 80.5, 81.0]), 90.0, 78.0)
+    np.testing.assert_allclose(old.start_s, [78.0, 81.5])
+
+
+def test_the_stream_hand_over_carries_the_last_event_and_step_through_a_silent_segment():
+    """``events_state_before``: the last event and the last step before the seam (58.0 s and 57.5 s of a cut with
+    steps every 0.5 s to 57.5 s and a fix at 58 s); a segment whose cut has neither before its end hands on what
+    it was handed (a silence longer than a segment); the walk's first segment without a step hands −inf (no
+    step yet), not the handed value it never had."""
+    from types import SimpleNamespace
+
+    from walks.inputs import EventsResume, events_state_before
+
+    def inputs(steps, fixes):
+        ev = merge_events(StepEvents(steps, np.full(len(steps), 0.7), np.zeros(len(steps))) if len(steps) else None,
+                          GnssEvents.from_sigma(fixes, np.zeros(len(fixes)), np.zeros(len(fixes)),
+                                                np.ones(len(fixes))) if len(fixes) else None)
+        pdr = SimpleNamespace(result=_Steps(steps))
+        return SimpleNamespace(events=ev, data=SimpleNamespace(pdr=pdr))
+
+    walked = inputs(np.arange(40.0, 58.0, 0.5), np.array([45.0, 58.0, 61.0]))
+    assert events_state_before(walked, 60.0) == EventsResume(58.0, 57.5)
+    silent = inputs(np.zeros(0), np.array([125.0]))
+    assert events_state_before(silent, 120.0, EventsResume(58.0, 57.5)) == EventsResume(58.0, 57.5)
+    assert events_state_before(silent, 120.0) == EventsResume(-math.inf, -math.inf)
+
+
+class _Steps:
+    """A PDR result's step columns (the part ``events_state_before`` reads)."""
+
+    def __init__(self, t):
+        self.t_s, self.heading_rad, self.step_length_m = t, np.zeros(len(t)), np.full(len(t), 0.7)
+
+    def __len__(self):
+        return len(self.t_s)

@@ -22,7 +22,8 @@ from features.errors import ConfigError, DataError, EnvfuseError
 from models.fusion.calibration import NIS_WINDOWS_S
 from models.fusion.ekf import FilterRun
 from models.fusion.model import FusionModel
-from walks.inputs import HOP_S, WINDOW_S, ClassResume, WalkInputs, class_state_before, walk_inputs
+from walks.inputs import (HOP_S, WINDOW_S, ClassResume, EventsResume, WalkInputs, class_state_before,
+                          events_state_before, walk_inputs)
 from walks.methods import LAG_S, run_methods, track_state_before
 from walks.reader import ReaderStates, WalkData, read_walk
 from walks.segment_rts import SegmentedRts, add_rts_track, rts_rows
@@ -114,11 +115,12 @@ class FusedWalk:
             new = filters.get(name)
             if new is None or _event_time(new) < old.t_s:
                 filters[name] = replace(old, t_s=float(t_s))
+        events = events_state_before(self.inputs, t_s, got.events if self.resumed is not None else None)
         classes = class_state_before(self.inputs, t_s)
         if got.classes is not None and (classes is None or classes.t_end_s < got.classes.t_end_s):
             classes = got.classes
         if not math.isfinite(states_from_s):
-            return Handover(filters, ReaderStates(), classes)
+            return Handover(filters, ReaderStates(), classes, events)
         heading = None
         pdr = self.data.pdr
         if getattr(pdr, "imu", None) is not None and pdr.result.heading is not None:
@@ -132,7 +134,7 @@ class FusedWalk:
         gnss = self.data.gnss.fluct_state if self.data.gnss is not None else None
         if got.readers.gnss is not None and (gnss is None or not gnss.t_s > got.readers.gnss.t_s):
             gnss = got.readers.gnss
-        return Handover(filters, ReaderStates(heading, receiver, gnss), classes)
+        return Handover(filters, ReaderStates(heading, receiver, gnss), classes, events)
 
 
 def _join_nis(state, resumed, t_s: float):
@@ -158,11 +160,13 @@ class Handover:
     """What a segment of a long walk hands the next (:mod:`walks.segments`): ``filters``, by filter method name,
     the state (:class:`~models.fusion.ekf.FilterResume`) each resumes from at the segment's start, and
     ``readers``, the readers' states the cut is read from (:class:`~walks.reader.ReaderStates`); ``classes``,
-    the class HMM's forward state (:class:`~walks.inputs.ClassResume`, None without a window)."""
+    the class HMM's forward state (:class:`~walks.inputs.ClassResume`, None without a window); ``events``, what
+    the walk's event stream held before the segment (:class:`~walks.inputs.EventsResume`, None: not known)."""
 
     filters: dict = field(default_factory=dict)
     readers: ReaderStates = ReaderStates()
     classes: ClassResume | None = None
+    events: EventsResume | None = None
 
 
 def walk_name(walk_dir: str | os.PathLike) -> str:
@@ -220,7 +224,8 @@ def fuse_walk(walk_dir: str | os.PathLike, model: FusionModel, methods=None, *, 
         raise DataError(f"{walk_dir}: no usable stream to fuse ({why})")
     try:
         inputs = walk_inputs(data, model.classifier, model.temporal, class_smoothing,
-                             None if resume is None else resume.classes, resumed=resume is not None)
+                             None if resume is None else resume.classes, resumed=resume is not None,
+                             events_resume=None if resume is None else resume.events)
         if resume is not None and resume.filters:
             inputs = replace(inputs, resume=dict(resume.filters))
         want = methods

@@ -28,10 +28,15 @@ from models.fusion.events import EventStream
 from walks.reader import OdometryStream, WalkData
 
 __all__ = ["WalkInputs", "walk_inputs", "smooth_classes", "ClassResume", "class_state_before", "CLASS_SMOOTHING",
-           "window_features", "split_steps", "gnss_events", "STAND_GAP_S", "TYPICAL_STEP_S", "WINDOW_S", "HOP_S"]
+           "EventsResume", "events_state_before", "window_features", "split_steps", "gnss_events", "STAND_GAP_S",
+           "TYPICAL_STEP_S", "WINDOW_S", "HOP_S"]
 
 STAND_GAP_S = 1.5
 """A gap between steps longer than this is standing (from 0.5 s after the last step to 0.5 s before the next)."""
+
+SAME_STEP_S = 0.25
+"""Two step times closer than this are one step (a cut's and the whole walk's read of it agree to microseconds; a
+walker's steps are 0.4 s apart or more)."""
 
 TYPICAL_STEP_S = 0.55
 """Duration given to a step that follows a stop (no previous step within :data:`STAND_GAP_S`), s."""
@@ -57,11 +62,16 @@ class WalkInputs:
     classes: ClassTrack
     window_ood: np.ndarray
     resume: dict = field(default_factory=dict)
+    ood_before: bool = False
+    """Whether the window in force before the first (a long walk's cut: the one its class state was handed at,
+    :class:`ClassResume`) was out of the classifier's distribution; False for the prior."""
+    X_before: np.ndarray | None = None
+    """That window's features (14,), None for the prior (no window)."""
 
     def ood_at(self, t_s: np.ndarray) -> np.ndarray:
         """Whether the window in force at each of ``t_s`` (m,) was out of the classifier's distribution (m,);
-        False before the first complete window (the prior is in force then)."""
-        flags = np.concatenate([[False], np.asarray(self.window_ood, bool)])
+        before the first complete window :attr:`ood_before` (False: the prior is in force then)."""
+        flags = np.concatenate([[self.ood_before], np.asarray(self.window_ood, bool)])
         return flags[np.clip(self.classes.row_at(t_s), 0, len(flags) - 1)]
 
 
@@ -156,7 +166,8 @@ def gnss_events(p) -> GnssEvents:
                       hdop=np.where(p.hdop_assumed, np.nan, p.hdop), gst_sigma_m=gst)
 
 
-def _stands(step_t: np.ndarray, end_s: float, start_s: float | None = None) -> StandIntervals:
+def _stands(step_t: np.ndarray, end_s: float, start_s: float | None = None,
+            last_step_s: float | None = None) -> StandIntervals:
     """Standing between steps more than :data:`STAND_GAP_S` apart, and after the last step when the record
     (``end_s``, its last IMU sample) goes on for more than that: a stop is standing whether or not a step
     follows it in the record (so a long walk's cut that ends in a stop stands where the whole walk does).
@@ -166,13 +177,22 @@ def _stands(step_t: np.ndarray, end_s: float, start_s: float | None = None) -> S
     cut when it holds none) when that is more than :data:`STAND_GAP_S` away. The whole walk stood there too
     (its last step before lies before the cut, whose warm-up the segment's own events follow): a walker
     standing through more than a cut's warm-up (walks/segments.py) gets the whole walk's standing noise.
-    None (a walk read whole, or from its start): nothing stands before the first step, as before."""
+    None (a walk read whole, or from its start): nothing stands before the first step, as before.
+
+    ``last_step_s``: the walk's last step before the cut's segment (:attr:`EventsResume.last_step_t_s`; −inf:
+    none), which replaces ``start_s``: it stands before the cut's steps where it lies further back than their
+    first, so the cut stands from where the whole walk does (0.5 s after that step; from nowhere before the
+    walk's first step), a stop that began before the cut's warm-up included."""
+    if last_step_s is not None:
+        start_s = None
+        if math.isfinite(last_step_s) and (step_t.size == 0 or last_step_s < step_t[0] - SAME_STEP_S):
+            step_t = np.r_[last_step_s, step_t]
     start, end = np.zeros(0), np.zeros(0)
     if step_t.size >= 2:
         gaps = np.flatnonzero(np.diff(step_t) > STAND_GAP_S)
         start, end = step_t[gaps] + 0.5, step_t[gaps + 1] - 0.5
-        if end_s - step_t[-1] > STAND_GAP_S:
-            start, end = np.r_[start, step_t[-1] + 0.5], np.r_[end, end_s]
+    if step_t.size >= (2 if last_step_s is None else 1) and end_s - step_t[-1] > STAND_GAP_S:
+        start, end = np.r_[start, step_t[-1] + 0.5], np.r_[end, end_s]
     if start_s is not None:
         if step_t.size == 0:
             return StandIntervals(np.array([start_s]), np.array([end_s])) if end_s > start_s else \
@@ -212,10 +232,43 @@ CLASS_SMOOTHING = ("none", "forward", "forward_backward")
 class ClassResume:
     """The class HMM's forward state a long walk's segment hands the next (:mod:`walks.segments`): the filtered
     probabilities ``proba`` (k,) of the window ending at ``t_end_s``, the last window ending before the next
-    segment's start."""
+    segment's start, whether that window was out of the classifier's distribution (``ood``) and its features
+    ``X`` (14,) (None: not stated)."""
 
     t_end_s: float
     proba: np.ndarray
+    ood: bool = False
+    X: np.ndarray | None = None
+
+
+@dataclass(frozen=True)
+class EventsResume:
+    """What a long walk's event stream held before a segment's start, for the next segment's cut
+    (:mod:`walks.segments`): ``last_event_t_s``, the time of its last event (−inf: none), and ``last_step_t_s``,
+    of its last PDR step (−inf: the walk had none yet). A cut whose warm-up holds no event (every stream silent
+    longer than the warm-up across the seam) takes its first event's time since the previous one, and the
+    standing time within it, from them (:func:`walk_inputs`), as the whole walk's stream does; before, that
+    event's Δt was 0 and the segment parted from the whole walk by up to 9.6 m after a 48 s silence."""
+
+    last_event_t_s: float
+    last_step_t_s: float
+
+
+def events_state_before(inputs: "WalkInputs", t_s: float, got: EventsResume | None = None) -> EventsResume:
+    """The :class:`EventsResume` of ``inputs``' stream before walk time ``t_s``; ``got``: what the segment was
+    handed, which goes on where its cut holds no event (or no step) before ``t_s``; without it, the cut is the
+    walk's first and nothing came before it."""
+    ev = inputs.events
+    e = ev.t_s[ev.t_s < t_s]
+    pdr = inputs.data.pdr
+    steps = np.zeros(0)
+    if pdr is not None and len(pdr.result):
+        ok = np.isfinite(pdr.result.heading_rad) & np.isfinite(pdr.result.step_length_m)
+        steps = pdr.result.t_s[ok]
+        steps = steps[steps < t_s]
+    before = got if got is not None else EventsResume(-math.inf, -math.inf)
+    return EventsResume(float(e[-1]) if e.size else before.last_event_t_s,
+                        float(steps[-1]) if steps.size else before.last_step_t_s)
 
 
 def class_state_before(inputs: "WalkInputs", t_s: float) -> ClassResume | None:
@@ -224,7 +277,8 @@ def class_state_before(inputs: "WalkInputs", t_s: float) -> ClassResume | None:
     i = int(np.searchsorted(inputs.window_t_s, t_s, side="left")) - 1
     if i < 0:
         return None
-    return ClassResume(float(inputs.window_t_s[i]), inputs.classes.proba[1 + i].copy())
+    return ClassResume(float(inputs.window_t_s[i]), inputs.classes.proba[1 + i].copy(), bool(inputs.window_ood[i]),
+                       inputs.window_X[i].copy())
 
 
 def smooth_classes(proba: np.ndarray, t_end_s: np.ndarray, answered: np.ndarray, classifier, temporal,
@@ -280,13 +334,17 @@ def _cut_to_s(data: WalkData) -> float:
 
 
 def walk_inputs(data: WalkData, classifier, temporal=None, smoothing: str = "forward",
-                class_resume: ClassResume | None = None, resumed: bool = False) -> WalkInputs:
+                class_resume: ClassResume | None = None, resumed: bool = False,
+                events_resume: EventsResume | None = None) -> WalkInputs:
     """Events and class evidence of one walk (see the module docstring); ``classifier``: the online
     :class:`~models.environment.EnvironmentClassifier`; ``temporal``: the class HMM
     (:class:`models.temporal.ClassHMM`, None: each window on its own) applied as ``smoothing``
     (:func:`smooth_classes`, resumed from ``class_resume``: a long walk's previous segment's). ``resumed``:
     ``data`` is a later cut of a long walk whose filters resume the previous segment's (:mod:`walks.segments`):
-    its start stands up to its first step (:func:`_stands`)."""
+    its start stands up to its first step (:func:`_stands`); ``events_resume``: what the whole walk's stream held
+    before the cut's segment (:class:`EventsResume`), from which its stands run and, when the cut holds no
+    event before its segment, its first event's Δt."""
+    last_step = None if events_resume is None else events_resume.last_step_t_s
     steps = gnss = acoustic = stands = None
     fix_t = np.concatenate([data.gnss.positions.t_s if data.gnss is not None else np.zeros(0),
                             data.acoustic.t_s if data.acoustic is not None else np.zeros(0)])
@@ -299,18 +357,23 @@ def walk_inputs(data: WalkData, classifier, temporal=None, smoothing: str = "for
         # a long walk's cut: its IMU record runs to the cut's end (or the walk's IMU's), past a hole at its end
         end = max(end, _cut_to_s(data))
         first = data.pdr.imu.t_s[0] if data.pdr.imu is not None and len(data.pdr.imu.t_s) else None
-        stands = _stands(r.t_s[ok], float(end), float(first) if resumed and first is not None else None)
+        stands = _stands(r.t_s[ok], float(end), float(first) if resumed and first is not None else None, last_step)
         steps = StepEvents(*split_steps(r.t_s[ok], r.step_length_m[ok], r.heading_rad[ok], fix_t))
     elif resumed and getattr(data.pdr, "imu", None) is not None and len(data.pdr.imu.t_s):
         # a later cut of a long walk without a step: the walker stands through it, as in the whole walk
         end = max(float(data.pdr.imu.t_s[-1]), _cut_to_s(data))
-        stands = _stands(np.zeros(0), end, float(data.pdr.imu.t_s[0]))
+        stands = _stands(np.zeros(0), end, float(data.pdr.imu.t_s[0]), last_step)
     if data.gnss is not None and len(data.gnss.positions):
         gnss = gnss_events(data.gnss.positions)
     if data.acoustic is not None and len(data.acoustic.t_s):
         a = data.acoustic
         acoustic = AcousticEvents(a.t_s, a.east_m, a.north_m, a.covariance_en_m2)
-    events = merge_events(steps=steps, gnss=gnss, acoustic=acoustic, stands=stands)
+    t0 = None
+    if events_resume is not None and math.isfinite(events_resume.last_event_t_s):
+        first = min((float(src.t_s[0]) for src in (steps, gnss, acoustic) if src is not None and len(src)),
+                    default=math.inf)
+        t0 = events_resume.last_event_t_s if events_resume.last_event_t_s < first else None
+    events = merge_events(steps=steps, gnss=gnss, acoustic=acoustic, stands=stands, t0_s=t0)
     t_end, X = window_features(data)
     if len(t_end):
         proba = classifier.predict_proba(X)
@@ -318,9 +381,17 @@ def walk_inputs(data: WalkData, classifier, temporal=None, smoothing: str = "for
         proba = smooth_classes(proba, t_end, classifier.answers(X), classifier, temporal, smoothing, class_resume)
     else:
         proba, ood = np.tile(classifier.prior_, (1, 1)), np.ones(1, bool)
+        if class_resume is not None and smoothing == "forward":
+            # a cut without a window of its own: the whole walk's last one stays in force through it
+            proba, ood = np.asarray(class_resume.proba, float)[None, :], np.array([bool(class_resume.ood)])
         t_end = np.array([events.t_s[0]])
-    # Before the first complete window the filter knows nothing of the environment: the prior.
+    # Before the first complete window the filter knows nothing of the environment: the prior. A long walk's cut
+    # whose first window ends after the one its class state was handed at (no window in its warm-up: every
+    # stream silent across the seam) has that window's in force until then, as the whole walk has.
     t_cls = np.concatenate([[min(events.t_s[0], t_end[0]) - 1.0], t_end])
-    proba = np.vstack([classifier.prior_, proba])
+    before, ood_before, X_before = classifier.prior_, False, None
+    if class_resume is not None and smoothing == "forward" and class_resume.t_end_s < t_end[0] - 1e-6:
+        before, ood_before, X_before = np.asarray(class_resume.proba, float), bool(class_resume.ood), class_resume.X
+    proba = np.vstack([before, proba])
     return WalkInputs(data=data, events=events, window_t_s=t_end, window_X=X,
-                      classes=ClassTrack(t_cls, proba), window_ood=ood)
+                      classes=ClassTrack(t_cls, proba), window_ood=ood, ood_before=ood_before, X_before=X_before)

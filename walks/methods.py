@@ -328,11 +328,14 @@ def bp_features(run: FilterRun, inputs: WalkInputs) -> np.ndarray:
 
 def window_at(inputs: WalkInputs, t_s: np.ndarray) -> np.ndarray:
     """The window features in force at each of ``t_s`` (the last complete window) with the GNSS and acoustic
-    availability flags, (m, 16); zeros before the first window."""
+    availability flags, (m, 16); zeros before the first window (a long walk's cut
+    without a window of its own before its segment: the window its class state was handed at)."""
     from features.schema import modality_columns
 
     rows = inputs.classes.row_at(t_s)
-    X = np.vstack([np.full((1, inputs.window_X.shape[1]), np.nan), inputs.window_X])[rows]
+    before = getattr(inputs, "X_before", None)
+    before = np.full(inputs.window_X.shape[1], np.nan) if before is None else before
+    X = np.vstack([before[None, :], inputs.window_X])[rows]
     flags = [np.isfinite(X[:, list(modality_columns(m))]).any(axis=1) for m in ("gnss", "acoustic")]
     return np.column_stack([np.nan_to_num(X)] + [f.astype(float) for f in flags])
 

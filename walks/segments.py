@@ -193,6 +193,7 @@ from features.errors import DataError
 from features.gnss.quirks import parse_ddmmyy
 from features.gnss.tokens import ReadStats, parse_sentence
 from features.imu.heading import GATE_REFERENCE_S
+from features.imu.reader import RepairConfig
 from features.fileio import read_toml
 from features.walk import WalkInfo, load_walk
 
@@ -225,6 +226,10 @@ reach back to the last fix; :data:`walks.fuse.RESUMED_METHODS`), s: such a metho
 TAIL_S = 10.0
 """Walk time a cut reaches after its segment, s: ≥ the fixed-lag smoother's lag (3 s), a step split at the
 following fix (≤ 0.6 s) and the last 2 s feature window."""
+
+BRACKET_ROWS = 2
+"""Rows an IMU cut takes beyond a hole across its start or end (:class:`_CsvCutter`): two, as the IMU reader takes
+a lone row a hole away from the rest for a garbled time (``features.imu.reader._time_outliers``)."""
 
 LOOKAHEAD_LINES = 64
 """Lines a cutter reads past a line at or beyond its cut's end before ending the cut there: if any of them lies
@@ -538,6 +543,8 @@ class _LineCutter:
         self.head = b""
         self.resume = 0
         self.resume_t = -math.inf
+        self.bracket_gap_s: float | None = None
+        self.before_resume: list[tuple[bytes, float]] | None = None
 
     def readline(self) -> bytes:
         """The next line, its end included (b"" at the end of the file)."""
@@ -573,6 +580,10 @@ class _LineCutter:
         pos, t = self.resume, self.resume_t
         marked = False
         ahead: collections.deque = collections.deque()     # lines read to look past one, not yet cut
+        bracket = self.bracket_gap_s is not None
+        before_lo, self.before_resume = self.before_resume, None
+        last_lines: collections.deque = collections.deque(maxlen=BRACKET_ROWS)     # (line, t) before this one
+        written_t = -math.inf
         with open(d / self.path.name, "wb") as out:
             out.write(self.head)
             while True:
@@ -588,14 +599,27 @@ class _LineCutter:
                         t_line = t
                     else:
                         self.restore(after)
+                if not marked and t_line >= next_lo:
+                    self.resume, self.resume_t, marked = pos, self.resume_before(t_line), True
+                    if bracket:
+                        self.before_resume = list(last_lines)
                 t = t_line
-                if not marked and t >= next_lo:
-                    self.resume, self.resume_t, marked = pos, self.resume_before(t), True
                 pos += len(line)
                 if t >= hi:
+                    if bracket and t - written_t > self.bracket_gap_s:
+                        # the rows after a hole across the cut's end
+                        out.write(line)
+                        out.writelines(ahead.popleft() if ahead else self.readline()
+                                       for _ in range(BRACKET_ROWS - 1))
                     break
                 if t >= lo:
+                    if before_lo and t - before_lo[-1][1] > self.bracket_gap_s:
+                        # the rows before a hole across the cut's start
+                        out.writelines(row for row, _ in before_lo)
+                    before_lo = None
                     out.write(line)
+                    written_t = t
+                last_lines.append((line, t))
         if not marked:
             self.resume, self.resume_t = pos, t
         return {}
@@ -632,6 +656,11 @@ class _CsvCutter(_LineCutter):
 
     def __init__(self, path: Path, stream: str | None):
         super().__init__(path)
+        if stream in ("imu", "imu_foot"):
+            # the IMU reader fills a hole on its uniform grid between the rows around it: a cut whose start (or
+            # end) lies in a hole holds the row before (after) it too, so its read fills the hole as the whole
+            # walk's does and the heading filter runs through the same samples (features.imu.reader)
+            self.bracket_gap_s = RepairConfig().max_gap_s
         head = _csv_header(self)
         self.head = b"".join(head)
         self.resume = len(self.head)

@@ -326,6 +326,10 @@ class FluctuationState:
     direction: np.ndarray
     extremum_dbhz: np.ndarray
     tracked: np.ndarray
+    window_origin_s: float = math.nan
+    """Start of the whole log's first feature window (a whole multiple of the hop; NaN: not stated): a later cut
+    whose first epoch follows a gap in the log holds the windows of the whole log's grid that reach back over
+    it to that epoch, not only those starting at or after it (:func:`gnss_features`)."""
 
     def columns(self, sat_keys) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """(last_dbhz, direction, extremum_dbhz, tracked) for the columns ``sat_keys`` (each (m',)): NaN and
@@ -489,7 +493,16 @@ def fluctuation_state(sky: SkyArrays, t_s: float, config: GnssFeatureConfig | No
                 np.asarray(resume.extremum_dbhz, float)[g], was)))
             keys = keys + tuple(tuple(resume.sat_keys[j]) for j in gone)
     at = float(sky.t_s[i]) if i < sky.n_epochs else float(t_s)
-    return FluctuationState(at, keys, *memory)
+    origin = resume.window_origin_s if resume is not None and math.isfinite(resume.window_origin_s) else \
+        _first_window_start(sky, config)
+    return FluctuationState(at, keys, *memory, origin)
+
+
+def _first_window_start(sky: SkyArrays, config: GnssFeatureConfig) -> float:
+    """The first feature window's start of a log read from its first epoch: the hop multiple at or before the
+    first epoch's tag (:func:`gnss_features`)."""
+    tag0 = float(sky.t_s[0]) - 0.5 * sky.epoch_interval_s
+    return config.hop_s * math.floor(tag0 / config.hop_s + 1e-9)
 
 
 def gnss_features(sky: SkyArrays, config: GnssFeatureConfig | None = None,
@@ -547,7 +560,12 @@ def gnss_features(sky: SkyArrays, config: GnssFeatureConfig | None = None,
     # One window grid on the walk's time base: windows start at whole multiples of hop_s (as the
     # audio windows do from the audio's start, t = 0 on a walk), not at the first epoch.
     tag = t - 0.5 * sky.epoch_interval_s   # the middle of the interval each epoch measured (docstring)
-    first = config.hop_s * math.floor(tag[0] / config.hop_s + 1e-9)
+    first = _first_window_start(sky, config)
+    if resume is not None and math.isfinite(resume.window_origin_s):
+        # a later cut of the log: the whole log's windows that hold its first epoch, the ones starting before it
+        # included (after a gap in the log the whole read has them), none before the log's first window
+        reach = config.hop_s * (math.ceil(config.window_s / config.hop_s - 1e-9) - 1)
+        first = max(resume.window_origin_s, first - reach)
     span = tag[-1] - first
     n_win = 1 if span < config.window_s else int(math.floor((span - config.window_s) / config.hop_s + 1e-9)) + 2
     if n_win > MAX_WINDOWS:

@@ -49,7 +49,7 @@ needs. :func:`imufusion_heading` runs imufusion's AHRS for comparison.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from scipy import ndimage, signal
@@ -127,6 +127,14 @@ class HeadingState:
     dip_ref_rad: float
     t_s: float = math.nan
     """Time of the sample the state follows (the record's time base; NaN: not stated)."""
+    mag_rad: float = math.nan
+    """The magnetometer heading at that sample (wrapped; NaN without magnetometer)."""
+    mag_minus_gyro_rad: float = math.nan
+    mag_minus_fused_rad: float = math.nan
+    """The magnetometer heading less the gyro-only and the complementary heading there, unwrapped (each heading
+    followed continuously from the run's start): what puts the resumed run's headings on the branch of its own
+    unwrapped magnetometer heading as the whole run's stood, however far apart they drifted in a long disturbed
+    spell (:func:`_integrate`). With them ``gate_offset_rad`` is unwrapped too."""
 
 
 @dataclass(frozen=True)
@@ -148,19 +156,27 @@ class HeadingResult:
     dip_ref_rad: float = math.nan
     start_gate_offset_rad: float = math.nan
     """The gate offset the run resumed from (:class:`HeadingState`), NaN for a run from the record's start."""
+    mag_minus_gyro: np.ndarray | None = field(default=None, repr=False)
+    mag_minus_fused: np.ndarray | None = field(default=None, repr=False)
+    """(n,) the magnetometer heading less the gyro-only and the complementary heading, unwrapped (NaN where
+    there is none; None without magnetometer): what :meth:`state_at` hands a resumed run."""
 
     def state_at(self, i: int, t_s: float = math.nan) -> HeadingState:
         """The run's state after sample ``i`` (at time ``t_s``); the gate's offset from the last undisturbed
         sample at or before it with a heading (else the offset this run resumed from, else the first sample's)."""
         good = np.flatnonzero(~self.mag_disturbed[:i + 1] & np.isfinite(self.gyro_only[:i + 1]))
+        unwrapped = self.mag_minus_gyro is not None and self.mag_minus_fused is not None
         if good.size:
-            offset = float(wrap_pi(self.mag_only[good[-1]] - self.gyro_only[good[-1]]))
+            offset = float(self.mag_minus_gyro[good[-1]]) if unwrapped else \
+                float(wrap_pi(self.mag_only[good[-1]] - self.gyro_only[good[-1]]))
         elif math.isfinite(self.start_gate_offset_rad):
             offset = self.start_gate_offset_rad
         else:
-            offset = float(wrap_pi(self.mag_only[0] - self.gyro_only[0]))
+            offset = float(self.mag_minus_gyro[0]) if unwrapped else float(wrap_pi(self.mag_only[0] - self.gyro_only[0]))
+        extra = (float(self.mag_only[i]), float(self.mag_minus_gyro[i]), float(self.mag_minus_fused[i])) \
+            if unwrapped else ()
         return HeadingState(float(self.fused[i]), float(self.gyro_bias_rad_s[i]), float(self.gyro_only[i]), offset,
-                            self.static_bias_rad_s, self.intensity_ref, self.dip_ref_rad, float(t_s))
+                            self.static_bias_rad_s, self.intensity_ref, self.dip_ref_rad, float(t_s), *extra)
 
 
 def _lowpass(x: np.ndarray, cutoff_hz: float, rate_hz: float) -> np.ndarray:
@@ -320,22 +336,34 @@ def estimate_heading(acc_m_s2: np.ndarray, gyro_rad_s: np.ndarray | None, mag_ut
     if start is None:
         n_static = _static_start(acc, gyro, rate_hz, config.static_start_s)
         bias0 = float(np.mean(r[:n_static])) if n_static else 0.0
-        out = _integrate(r, None if mag_ut is None else mag_psi, disturbed, rate_hz, config, bias0, None)
-        return HeadingResult(*out, bias0, *ref)
+        *out, diffs = _integrate(r, None if mag_ut is None else mag_psi, disturbed, rate_hz, config, bias0, None)
+        return HeadingResult(*out, bias0, *ref, math.nan, *diffs)
     j = int(start_index)
-    out = _integrate(r[j:], None if mag_ut is None else mag_psi[j:], disturbed[j:], rate_hz, config,
-                     start.static_bias_rad_s, start)
-    fused, gyro_only, _, flags, bias = (np.concatenate([np.full(j, np.nan if x.dtype != bool else False), x])
-                                        for x in out)
+    *out, diffs = _integrate(r[j:], None if mag_ut is None else mag_psi[j:], disturbed[j:], rate_hz, config,
+                             start.static_bias_rad_s, start)
+
+    def padded(x):
+        return None if x is None else np.concatenate([np.full(j, np.nan if x.dtype != bool else False), x])
+
+    fused, gyro_only, _, flags, bias = (padded(x) for x in out)
     return HeadingResult(fused, gyro_only, mag_psi, disturbed | flags, bias, start.static_bias_rad_s, *ref,
-                         start.gate_offset_rad)
+                         start.gate_offset_rad, *(padded(x) for x in diffs))
 
 
 def _integrate(r: np.ndarray, mag_psi: np.ndarray | None, disturbed: np.ndarray, rate_hz: float,
                config: HeadingConfig, bias0: float, start: HeadingState | None) -> tuple:
-    """(fused, gyro_only, mag_only, disturbed, bias) from the yaw rate ``r`` and the magnetometer heading
-    ``mag_psi`` (None without one), gated by ``disturbed``: the gyro heading, the gate and the complementary
-    filter, from the record's start (``start`` None) or from the state ``start``."""
+    """(fused, gyro_only, mag_only, disturbed, bias, (mag − gyro, mag − fused)) from the yaw rate ``r`` and the
+    magnetometer heading ``mag_psi`` (None without one), gated by ``disturbed``: the gyro heading, the gate and
+    the complementary filter, from the record's start (``start`` None) or from the state ``start``; the last two
+    unwrapped (None, None without magnetometer).
+
+    Resumed from a state that states its unwrapped differences (:class:`HeadingState`), the run's headings are
+    put where they stood against the magnetometer's: its unwrapped heading before the first sample is the
+    first one's less the wrapped change from the state's, and the gyro, complementary and gate headings stand
+    the state's differences from it. (Before, the gate's offset and the complementary heading were each put on
+    the branch nearest the first sample's magnetometer heading, which is another branch when a disturbed
+    spell across the resumption lets gyro and magnetometer drift more than π apart: a 48 s hole in a walk's
+    IMU log across a long walk's seam turned the segment's headings by π.)"""
     n = len(r)
     dt = 1.0 / rate_hz
     if start is None:
@@ -346,15 +374,19 @@ def _integrate(r: np.ndarray, mag_psi: np.ndarray | None, disturbed: np.ndarray,
         psi_rel = np.cumsum((r - bias0) * dt)
     if mag_psi is None:
         psi_g = (config.initial_heading_rad if start is None else start.gyro_rad) + psi_rel
-        return wrap_pi(psi_g), wrap_pi(psi_g), np.full(n, np.nan), disturbed, np.full(n, bias0)
+        return wrap_pi(psi_g), wrap_pi(psi_g), np.full(n, np.nan), disturbed, np.full(n, bias0), (None, None)
     m_unw = np.unwrap(mag_psi)
+    # the state's branch: its magnetometer heading on this run's unwrapped one, and its headings from it
+    placed = start is not None and all(math.isfinite(v) for v in (start.mag_rad, start.mag_minus_gyro_rad,
+                                                                    start.mag_minus_fused_rad))
+    m_before = m_unw[0] - float(wrap_pi(mag_psi[0] - start.mag_rad)) if placed else math.nan
     disturbed = disturbed | _inconsistent_with_gyro(m_unw, psi_rel, rate_hz, config)
     if start is None:
         n0 = max(int(round(config.static_start_s * rate_hz)), 1)
         good0 = ~disturbed[:n0]
         psi0 = float(np.mean(m_unw[:n0][good0])) if good0.any() else float(m_unw[0])
     else:
-        psi0 = start.gyro_rad
+        psi0 = m_before - start.mag_minus_gyro_rad if placed else start.gyro_rad
     psi_g = psi0 + psi_rel
     # gate: inside disturbed spells follow the gyro from the last good magnetometer heading
     m_gated = m_unw.copy()
@@ -367,8 +399,11 @@ def _integrate(r: np.ndarray, mag_psi: np.ndarray | None, disturbed: np.ndarray,
         lg = np.maximum(last_good, 0)
         gated = m_unw[lg] + (psi_g - psi_g[lg])
         if before.any():
-            offset = start.gate_offset_rad if math.isfinite(start.gate_offset_rad) else m_unw[0] - psi_g[0]
-            offset += _branch(m_unw[0] - psi_g[0] - offset)
+            if placed:
+                offset = start.gate_offset_rad
+            else:
+                offset = start.gate_offset_rad if math.isfinite(start.gate_offset_rad) else m_unw[0] - psi_g[0]
+                offset += _branch(m_unw[0] - psi_g[0] - offset)
             gated = np.where(before, offset + psi_g, gated)
         m_gated = np.where(disturbed, gated, m_unw)
         if start is None:
@@ -376,9 +411,11 @@ def _integrate(r: np.ndarray, mag_psi: np.ndarray | None, disturbed: np.ndarray,
     if start is None:
         psi, bias = complementary_heading(r, m_gated, rate_hz, config.kp_per_s, config.ki_per_s2, bias0)
     else:
+        psi_start = m_before - start.mag_minus_fused_rad if placed else \
+            start.fused_rad + _branch(m_gated[0] - start.fused_rad)
         psi, bias = complementary_heading(r, m_gated, rate_hz, config.kp_per_s, config.ki_per_s2, start.bias_rad_s,
-                                          start.fused_rad + _branch(m_gated[0] - start.fused_rad))
-    return wrap_pi(psi), wrap_pi(psi_g), mag_psi, disturbed, bias
+                                          psi_start)
+    return wrap_pi(psi), wrap_pi(psi_g), mag_psi, disturbed, bias, (m_unw - psi_g, m_unw - psi)
 
 
 def _branch(delta_rad: float) -> float:
