@@ -20,6 +20,7 @@ in proportion to the walk: about 0.1-1 KB per filter event for each filter's ``+
 from __future__ import annotations
 
 from contextlib import ExitStack
+from pathlib import Path
 
 import numpy as np
 
@@ -88,10 +89,16 @@ def _score_segment(walk, seg, fused, parts, smoothers, stack, truth_parts, windo
     """Score one segment's owned epochs into ``parts`` (a ``+rts`` track's events into its smoother in
     ``smoothers``, scored by :func:`_score_smoothed` once the walk is read); returns the walk's site."""
     data = fused.data
-    if data.truth is None:
+    outside = data.truth is None and not seg.whole and (Path(walk) / "truth.csv").is_file()
+    if data.truth is None and not outside:
         raise DataError(f"{walk}: no truth.csv, so no error to measure (evaluate scores tracks against truth; "
                         "'envfuse run' writes a walk's track without one)")
     notes += [n for n in data.notes if n not in notes]
+    if outside:
+        # a cut outside the truth's span (walks.segments drops its truth): its epochs are not scored, as the
+        # whole walk scores none outside its truth's span; a +rts track still takes its events
+        notes.append(f"{seg.span_text}: no truth there, so their epochs "
+                     "are not scored")
     for m, why in fused.skipped.items():
         skipped.setdefault(m, why)
     truth = data.truth
@@ -102,24 +109,27 @@ def _score_segment(walk, seg, fused, parts, smoothers, stack, truth_parts, windo
                 smoothers[m] = stack.enter_context(SegmentedRts())
             # the truth at the owned epochs inside its span, for scoring the whole walk's smoothed track
             t = tr.t_s[keep]
-            in_span = (t >= truth.t_s[0]) & (t <= truth.t_s[-1])
+            in_span = np.zeros(len(t), bool) if truth is None else (t >= truth.t_s[0]) & (t <= truth.t_s[-1])
             te, tn = np.full(len(t), np.nan), np.full(len(t), np.nan)
-            te[in_span], tn[in_span] = truth.at(t[in_span])
             cls = np.full(len(t), -1)
-            cls[in_span] = truth.class_at(t[in_span])
+            if in_span.any():
+                te[in_span], tn[in_span] = truth.at(t[in_span])
+                cls[in_span] = truth.class_at(t[in_span])
             extras = {"in_span": in_span, "truth_east": te, "truth_north": tn, "truth_cls": cls}
             if add_rts_track(smoothers[m], fused, m, keep, rows=False, extras=extras):
                 parts.setdefault(m, [])         # the report's order of methods: the first segment's
                 continue
+        if truth is None:
+            continue
         own = tr.take(keep)
         te = track_errors(own, truth)
         parts.setdefault(m, []).append((te, own.east_m[te["ok"]], own.north_m[te["ok"]]))
     _shares(fused.tracks, shares)
-    t = data.truth
-    k = seg.owns(t.t_s)
-    truth_parts.append((t.t_s[k], t.env_class[k], t.east_m[k], t.north_m[k]))
+    if truth is not None:
+        k = seg.owns(truth.t_s)
+        truth_parts.append((truth.t_s[k], truth.env_class[k], truth.east_m[k], truth.north_m[k]))
     w = fused.inputs
-    if len(w.window_t_s):
+    if w is not None and len(w.window_t_s):        # (None: a cut without an event, walks.inputs.SilentCut)
         k = seg.owns(w.window_t_s)
         window_parts.append((w.window_t_s[k], w.classes.proba[1:][k]))
     return data.site.name

@@ -693,3 +693,61 @@ def test_an_imu_cut_starting_in_a_hole_holds_the_rows_around_it(midnight_walk, t
             np.testing.assert_allclose(imu.acc_m_s2, whole.acc_m_s2[i0:i0 + n], atol=1e-6)
             assert not imu.valid[2:3990].any() and imu.valid[4010:].all()
     assert rows[1][-3:] == [94.99, 135.0, 135.01]
+
+
+def test_a_segment_silent_throughout_hands_on_and_the_walk_runs_to_its_end(model, midnight_walk, tmp_path):
+    """Every stream silent from 30 to 140 s: the 60-120 s segment's cut (40-130 s) holds no event (nor, but for
+    the two IMU rows either side of the hole, any row). ``run`` goes on past it with a note, the segment handing
+    on what it was handed, and gives the whole walk's track (the whole walk has no epoch there either). Before,
+    ``run`` stopped with "no events" at that segment and ``evaluate`` skipped the walk; its scores are now the
+    whole walk's."""
+    walk = _silenced(midnight_walk, tmp_path / "w", 30.0, 140.0)
+    _segments_give_the_whole_track(walk, model, tmp_path)
+    done = fuse_to_file(walk, model, "adaptive", tmp_path / "a.csv", "csv", segment_s=60.0, force=True)
+    assert done.segments == 3 and not done.skipped and done.n > 0
+    assert any("walk times 60-120 s: no event in any stream" in n for n in done.notes)
+    from pipeline.evaluate_segments import evaluate_segmented
+
+    res = evaluate_segmented(walk, model, ("adaptive_blind", "imm"), None, True, "w", segment_s=60.0)
+    whole = evaluate_segmented(walk, model, ("adaptive_blind", "imm"), None, True, "w", segment_s=1e6)
+    assert len(res["rows"]) == len(whole["rows"]) > 0
+    for a, b in zip(res["rows"], whole["rows"]):
+        assert a.keys() == b.keys()
+        for k, v in a.items():
+            if isinstance(v, float):
+                assert v == pytest.approx(b[k], rel=1e-6, abs=1e-9, nan_ok=True), k
+            else:
+                assert v == b[k], k
+
+
+@pytest.mark.parametrize("keep", ["hole", "short"])
+def test_evaluate_in_segments_scores_a_walk_whose_truth_has_a_hole_or_ends_early(model, midnight_walk, tmp_path,
+                                                                                 keep):
+    """truth.csv without rows from 35 to 135 s ("hole": the 60-120 s segment's cut, 40-130 s, lies inside it), or
+    ending at 35 s ("short": two cuts hold none of it): ``evaluate`` in 60 s segments scores the walk as it
+    scores it whole (the whole walk interpolates its truth across the hole and scores nothing past its end).
+    Each cut holds the truth's two rows either side of it; a cut with fewer than two is read without truth and
+    its epochs are not scored, with a note. Before, ``evaluate`` skipped the walk ("truth.csv: has the columns
+    but no rows")."""
+    import shutil
+
+    from pipeline.evaluate_segments import evaluate_segmented
+
+    walk = tmp_path / "w"
+    shutil.copytree(midnight_walk, walk)
+    lines = (walk / "truth.csv").read_text().splitlines(keepends=True)
+    t = [float(r.split(",", 1)[0]) for r in lines[1:]]
+    cut = (lambda x: 35.0 <= x < 135.0) if keep == "hole" else (lambda x: x >= 35.0)
+    (walk / "truth.csv").write_text("".join(lines[:1] + [r for r, x in zip(lines[1:], t) if not cut(x)]))
+    methods = ("adaptive_blind", "kf_quality")          # (with their +rts and +lag tracks)
+    res = evaluate_segmented(walk, model, methods, None, True, "w", segment_s=60.0)
+    whole = evaluate_segmented(walk, model, methods, None, True, "w", segment_s=1e6)
+    assert len(res["rows"]) == len(whole["rows"]) > 0
+    for a, b in zip(res["rows"], whole["rows"]):
+        assert a.keys() == b.keys()
+        for k, v in a.items():
+            if isinstance(v, float):
+                assert v == pytest.approx(b[k], rel=1e-6, abs=1e-9, nan_ok=True), k
+            else:
+                assert v == b[k], k
+    assert any("no truth there" in n for n in res["notes"]) == (keep == "short")

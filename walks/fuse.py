@@ -22,7 +22,7 @@ from features.errors import ConfigError, DataError, EnvfuseError
 from models.fusion.calibration import NIS_WINDOWS_S
 from models.fusion.ekf import FilterRun
 from models.fusion.model import FusionModel
-from walks.inputs import (HOP_S, WINDOW_S, ClassResume, EventsResume, WalkInputs, class_state_before,
+from walks.inputs import (HOP_S, WINDOW_S, ClassResume, EventsResume, SilentCut, WalkInputs, class_state_before,
                           events_state_before, walk_inputs)
 from walks.methods import LAG_S, run_methods, track_state_before
 from walks.reader import ReaderStates, WalkData, read_walk
@@ -81,7 +81,9 @@ class FusedWalk:
 
     name: str
     data: WalkData
-    inputs: WalkInputs
+    inputs: WalkInputs | None
+    """None for a long walk's later cut without an event (:class:`walks.inputs.SilentCut`): no track, and the
+    hand-over is what the segment was handed."""
     tracks: dict
     skipped: dict
     results: dict = field(default_factory=dict)
@@ -115,8 +117,11 @@ class FusedWalk:
             new = filters.get(name)
             if new is None or _event_time(new) < old.t_s:
                 filters[name] = replace(old, t_s=float(t_s))
-        events = events_state_before(self.inputs, t_s, got.events if self.resumed is not None else None)
-        classes = class_state_before(self.inputs, t_s)
+        if self.inputs is None:                      # a silent cut: nothing newer than what it was handed
+            events, classes = got.events, None
+        else:
+            events = events_state_before(self.inputs, t_s, got.events if self.resumed is not None else None)
+            classes = class_state_before(self.inputs, t_s)
         if got.classes is not None and (classes is None or classes.t_end_s < got.classes.t_end_s):
             classes = got.classes
         if not math.isfinite(states_from_s):
@@ -220,12 +225,17 @@ def fuse_walk(walk_dir: str | os.PathLike, model: FusionModel, methods=None, *, 
     check_site(model, data.site.name, str(walk_dir), force)
     check_windows(model.meta.get("env_meta", {}), "the model's environment classifier")
     if data.gnss is None and data.acoustic is None and data.pdr is None:
+        if resume is not None:          # a later cut of a long walk, every stream silent through it
+            return FusedWalk(name, data, None, {}, {}, {}, resume)
         why = "; ".join(data.notes) if data.notes else "walk.toml names no gnss, audio or imu stream"
         raise DataError(f"{walk_dir}: no usable stream to fuse ({why})")
     try:
-        inputs = walk_inputs(data, model.classifier, model.temporal, class_smoothing,
-                             None if resume is None else resume.classes, resumed=resume is not None,
-                             events_resume=None if resume is None else resume.events)
+        try:
+            inputs = walk_inputs(data, model.classifier, model.temporal, class_smoothing,
+                                 None if resume is None else resume.classes, resumed=resume is not None,
+                                 events_resume=None if resume is None else resume.events)
+        except SilentCut:
+            return FusedWalk(name, data, None, {}, {}, {}, resume)
         if resume is not None and resume.filters:
             inputs = replace(inputs, resume=dict(resume.filters))
         want = methods
@@ -324,7 +334,7 @@ def fuse_to_file(walk_dir: str | os.PathLike, model: FusionModel, method: str, p
             origin = None
             for seg in walk_cuts(walk_dir, segment_s, workdir=workdir, warmup_s=warmup_for((base,))):
                 where = str(walk_dir) if seg.whole else \
-                    f"{walk_dir} (segment {seg.index}: walk times {max(seg.own_from_s, 0):g}-{seg.own_to_s:g} s)"
+                    f"{walk_dir} (segment {seg.index}: {seg.span_text})"
                 try:
                     fused = fuse_walk(seg.directory, model, (base,), smooth=method.endswith("+rts"),
                                       lag_s=lag_s if method.endswith("+lag") else None, class_map_for=class_map_for,
@@ -337,6 +347,10 @@ def fuse_to_file(walk_dir: str | os.PathLike, model: FusionModel, method: str, p
                 if progress is not None:
                     progress(out.segments)
                 out.notes += [n for n in fused.data.notes if n not in out.notes]
+                if fused.inputs is None:
+                    out.notes.append(f"{seg.span_text}: no event in any "
+                                     "stream (no step, GNSS or acoustic fix), so no epoch there")
+                    continue
                 if method not in fused.tracks:
                     out.skipped.append((where, fused.skipped.get(base, "no output")))
                     continue

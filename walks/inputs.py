@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from features.errors import ConfigError
+from features.errors import ConfigError, DataError
 from features.schema import ACOUSTIC_FEATURES, FEATURES, GNSS_FEATURES
 from models.fusion import AcousticEvents, ClassTrack, GnssEvents, StandIntervals, StepEvents, merge_events
 from models.fusion.events import EventStream
@@ -29,7 +29,13 @@ from walks.reader import OdometryStream, WalkData
 
 __all__ = ["WalkInputs", "walk_inputs", "smooth_classes", "ClassResume", "class_state_before", "CLASS_SMOOTHING",
            "EventsResume", "events_state_before", "window_features", "split_steps", "gnss_events", "STAND_GAP_S",
-           "TYPICAL_STEP_S", "WINDOW_S", "HOP_S"]
+           "TYPICAL_STEP_S", "WINDOW_S", "HOP_S", "SilentCut"]
+
+class SilentCut(DataError):
+    """A later cut of a long walk holds no event at all (every stream silent for longer than its segment, its
+    warm-up and its tail: a logger paused, ``duration_s`` longer than the recording): the whole walk has no
+    epoch there either, and the segment hands on what it was handed (:meth:`walks.fuse.FusedWalk.handover`)."""
+
 
 STAND_GAP_S = 1.5
 """A gap between steps longer than this is standing (from 0.5 s after the last step to 0.5 s before the next)."""
@@ -368,6 +374,8 @@ def walk_inputs(data: WalkData, classifier, temporal=None, smoothing: str = "for
     if data.acoustic is not None and len(data.acoustic.t_s):
         a = data.acoustic
         acoustic = AcousticEvents(a.t_s, a.east_m, a.north_m, a.covariance_en_m2)
+    if resumed and not any(src is not None and len(src) for src in (steps, gnss, acoustic)):
+        raise SilentCut(f"{data.walk.directory}: no event in the cut (no step, GNSS or acoustic fix)")
     t0 = None
     if events_resume is not None and math.isfinite(events_resume.last_event_t_s):
         first = min((float(src.t_s[0]) for src in (steps, gnss, acoustic) if src is not None and len(src)),
