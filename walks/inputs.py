@@ -4,7 +4,8 @@
 stream of :mod:`models.fusion.events` — PDR steps (each spread over the time
 it took, :func:`split_steps`), GNSS fixes with their reported σ, quality and
 HDOP, acoustic fixes with their covariance, standing intervals from the gaps
-between steps — and the online environment classifier's evidence over time. A vehicle's odometry
+between steps (not over a hole in the IMU log, where the walker may walk on unseen: :func:`_imu_holes`) — and
+the online environment classifier's evidence over time. A vehicle's odometry
 (:class:`~walks.reader.OdometryStream`) gives the steps instead, each with its own
 noise from the odometry's variances (:func:`_odometry_steps`).
 The classifier answers on each 2 s feature window only once the window is
@@ -210,6 +211,44 @@ def _stands(step_t: np.ndarray, end_s: float, start_s: float | None = None,
     return StandIntervals(start, end)
 
 
+def _imu_holes(imu) -> tuple[np.ndarray, np.ndarray]:
+    """(start, end) of the spans, longer than :data:`STAND_GAP_S`, where the IMU record holds no measured sample:
+    the holes the reader filled on its grid (``valid`` False; :mod:`features.imu.reader`). No step can be found
+    there, so a gap between steps across one is no evidence of standing."""
+    bad = ~np.asarray(imu.valid, bool)
+    if not bad.any():
+        return np.zeros(0), np.zeros(0)
+    edge = np.diff(np.r_[0, bad.astype(np.int8), 0])
+    first, stop = np.flatnonzero(edge == 1), np.flatnonzero(edge == -1)       # stop: the first valid after a run
+    t = np.asarray(imu.t_s, float)
+    dt = 1.0 / float(imu.rate_hz)
+    start = t[first]
+    end = np.where(stop < t.size, t[np.minimum(stop, t.size - 1)], t[-1] + dt)
+    keep = end - start > STAND_GAP_S
+    return start[keep], end[keep]
+
+
+def _without(stands: StandIntervals, hole_start: np.ndarray, hole_end: np.ndarray) -> StandIntervals:
+    """``stands`` less the spans [hole_start, hole_end) (an IMU record's holes, :func:`_imu_holes`)."""
+    if not hole_start.size or not stands.start_s.size:
+        return stands
+    out_a, out_b = [], []
+    for a, b in zip(stands.start_s.tolist(), stands.end_s.tolist()):
+        for hs, he in zip(hole_start.tolist(), hole_end.tolist()):
+            if he <= a or hs >= b:
+                continue
+            if hs > a:
+                out_a.append(a)
+                out_b.append(hs)
+            a = max(a, he)
+            if a >= b:
+                break
+        if a < b:
+            out_a.append(a)
+            out_b.append(b)
+    return StandIntervals(np.array(out_a), np.array(out_b))
+
+
 def _odometry_steps(r, fix_t: np.ndarray) -> tuple[StepEvents, StandIntervals]:
     """Odometry events (:class:`~features.vehicle.odometry.DeadReckoning`) as steps with their own noise, split at
     the fixes over their own segments; standing wherever no segment runs.
@@ -364,11 +403,14 @@ def walk_inputs(data: WalkData, classifier, temporal=None, smoothing: str = "for
         end = max(end, _cut_to_s(data))
         first = data.pdr.imu.t_s[0] if data.pdr.imu is not None and len(data.pdr.imu.t_s) else None
         stands = _stands(r.t_s[ok], float(end), float(first) if resumed and first is not None else None, last_step)
+        if data.pdr.imu is not None and len(data.pdr.imu.t_s):
+            # a hole in the IMU log is not a stop: the walker may have walked through it unseen
+            stands = _without(stands, *_imu_holes(data.pdr.imu))
         steps = StepEvents(*split_steps(r.t_s[ok], r.step_length_m[ok], r.heading_rad[ok], fix_t))
     elif resumed and getattr(data.pdr, "imu", None) is not None and len(data.pdr.imu.t_s):
         # a later cut of a long walk without a step: the walker stands through it, as in the whole walk
         end = max(float(data.pdr.imu.t_s[-1]), _cut_to_s(data))
-        stands = _stands(np.zeros(0), end, float(data.pdr.imu.t_s[0]), last_step)
+        stands = _without(_stands(np.zeros(0), end, float(data.pdr.imu.t_s[0]), last_step), *_imu_holes(data.pdr.imu))
     if data.gnss is not None and len(data.gnss.positions):
         gnss = gnss_events(data.gnss.positions)
     if data.acoustic is not None and len(data.acoustic.t_s):

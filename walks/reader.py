@@ -363,7 +363,33 @@ def placed_nmea_epochs(walk: WalkInfo):
         epochs = _on_cut_time_base(epochs, walk.start_utc, cut_from, offset)
     else:
         epochs = epochs_on_time_base(epochs, walk.start_utc)
+    _check_overlap(walk, epochs.col("t_s"))
     return epochs.with_t_s(on_time_grid(epochs.col("t_s"))), stats
+
+
+PLACE_MARGIN_S = 60.0
+"""How far outside the walk's span (0 to ``duration_s``) an NMEA log's epochs may all lie before the log is refused as
+not this walk's, s: a receiver started a minute early or stopped a minute late is still the walk's."""
+
+
+def _check_overlap(walk: WalkInfo, t_s: np.ndarray) -> None:
+    """Refuse (:class:`DataError`) an NMEA log none of whose epochs, placed by its dates against ``start_utc``, lies
+    within the walk's span: ``start_utc`` or the receiver's dates are wrong (a day off: a local date taken for
+    UTC's; the log of another day). Before, such a log was fused a day away from the other streams, silently."""
+    if not len(t_s):
+        return
+    end = walk.duration_s if walk.duration_s is not None else math.inf
+    inside = (t_s >= -PLACE_MARGIN_S) & (t_s <= end + PLACE_MARGIN_S)
+    if inside.any():
+        return
+    off = float(np.median(t_s))
+    days = off / 86400.0
+    hint = (f" — {abs(round(days)):.0f} whole day{'s' if abs(round(days)) != 1 else ''} "
+            f"{'before' if off < 0 else 'after'} it: a date taken in local time, or the log of another day"
+            if abs(round(days)) >= 1 and abs(days - round(days)) < 0.05 else "")
+    raise DataError(f"{walk.path('gnss')}: its epochs, placed by their own dates, lie {off:+,.0f} s (median) from the "
+                    f"walk's start_utc {walk.start_utc:%Y-%m-%dT%H:%M:%SZ}{hint}; none within the walk "
+                    f"(0 to {end:g} s): start_utc in walk.toml or the receiver's dates are wrong")
 
 
 def _cut_number(walk: WalkInfo, stream: str, table: dict, key: str) -> float:

@@ -122,7 +122,7 @@ def _fmt(v) -> str:
     if isinstance(v, bool):
         return "true" if v else "false"
     if isinstance(v, float):
-        return "" if math.isnan(v) else f"{v:.10g}"
+        return "" if math.isnan(v) else f"{v + 0.0:.10g}"       # (+ 0.0: −0.0, a time rounded to 0, reads "0")
     return str(v)
 
 

@@ -160,8 +160,7 @@ def _run(args) -> int:
     parts = [f"{n} epochs"]
     if placed < n:
         parts.append(f"{n - placed} without a position")
-    parts.append(f"{100 * ood / max(n, 1):.0f} % out of the environment model's training distribution"
-                 + (" (their class is a guess)" if ood else ""))
+    parts.append(ood_text(ood, n))
     if done.segments > 1:
         parts.append(f"fused in {done.segments} segments of {args.segment_s:g} s")
     print(f"{args.walk}: {args.method}, {', '.join(parts)} -> {args.out}")
@@ -223,3 +222,11 @@ def _evaluate(args) -> int:
           + (f", {len(out['pngs'])} plots" if out["pngs"] else "")
           + (f"; {len(out['failures'])} skipped (named above)" if out["failures"] else ""))
     return 1 if out["failures"] else 0
+
+
+def ood_text(ood: int, n: int) -> str:
+    """The run summary's share of epochs out of the environment model's training distribution: a few read
+    "<1 %", not "0 %" beside "their class is a guess"."""
+    share = 100 * ood / max(n, 1)
+    return (("<1" if 0 < share < 0.5 else f"{share:.0f}") + " % out of the environment model's training distribution"
+            + (" (their class is a guess)" if ood else ""))
