@@ -29,7 +29,7 @@ from walks.inputs import WINDOW_S
 from walks.score import errors_at, metric_rows, track_errors
 from walks.segment_rts import SegmentedRts, add_rts_track, smoothed_covariance
 from walks.segments import SEGMENT_S
-from walks.track import Track
+from walks.track import Track, latest_per_time
 
 __all__ = ["evaluate_segmented"]
 
@@ -140,7 +140,7 @@ def _score_smoothed(m: str, store: SegmentedRts, calibrator, parts: dict) -> Non
     store.smooth()
     for part in store.segments():
         tr = Track(m, part["t_s"], part["east_m"], part["north_m"], smoothed_covariance(part, calibrator))
-        ok = part["in_span"] & np.isfinite(tr.east_m)
+        ok = part["in_span"] & np.isfinite(tr.east_m) & latest_per_time(tr.t_s)
         te = errors_at(tr, ok, part["truth_east"][ok], part["truth_north"][ok], part["truth_cls"][ok])
         parts.setdefault(m, []).append((te, tr.east_m[ok], tr.north_m[ok]))
 

@@ -18,6 +18,7 @@ import numpy as np
 from features.site import ENV_CLASSES
 from features.imu.pdr import dead_reckon
 from walks.reader import OdometryStream, PdrStream, pdr_position_at, pdr_start_from_gnss, read_walk
+from walks.track import latest_per_time
 
 __all__ = ["SourceTrack", "WalkSources", "walk_sources", "error_table", "plot_walk"]
 
@@ -117,7 +118,9 @@ def error_table(src: WalkSources) -> dict:
     if src.truth is None:
         return out
     for name, tr in src.tracks.items():
-        ok = np.isfinite(tr.east_m) & (tr.t_s >= src.truth.t_s[0]) & (tr.t_s <= src.truth.t_s[-1])
+        # the last state of each instant, as evaluate scores it (walks.track.latest_per_time)
+        ok = np.isfinite(tr.east_m) & (tr.t_s >= src.truth.t_s[0]) & (tr.t_s <= src.truth.t_s[-1]) & \
+            latest_per_time(tr.t_s)
         if not ok.any():
             continue
         te, tn = src.truth.at(tr.t_s[ok])

@@ -28,7 +28,7 @@ from walks.methods import LAG_S, run_methods, track_state_before
 from walks.reader import ReaderStates, WalkData, read_walk
 from walks.segment_rts import SegmentedRts, add_rts_track, rts_rows
 from walks.segments import SEGMENT_S, walk_cuts
-from walks.track import TrackWriter, track_rows
+from walks.track import TrackWriter, latest_per_time, track_rows
 
 __all__ = ["FusedWalk", "fuse_walk", "check_site", "check_windows", "walk_name", "RunSummary", "fuse_to_file",
            "fuse_in_segments", "segmented_tracks", "RESUMED_METHODS", "warmup_for"]
@@ -367,6 +367,8 @@ def fuse_to_file(walk_dir: str | os.PathLike, model: FusionModel, method: str, p
                 rts.smooth()
                 calibrator = (getattr(model, "calibration", None) or {}).get(method)
                 for part in rts.segments():
+                    last = latest_per_time(part["t_s"])
+                    part = {k: v[last] for k, v in part.items()}
                     for lo in range(0, len(part["t_s"]), ROWS_PER_WRITE):
                         _write_rows(writer, rts_rows({k: v[lo:lo + ROWS_PER_WRITE] for k, v in part.items()},
                                                      calibrator, origin), out)
@@ -378,7 +380,7 @@ def fuse_to_file(walk_dir: str | os.PathLike, model: FusionModel, method: str, p
 def _write_owned(writer: TrackWriter, fused: FusedWalk, track, seg, out: RunSummary) -> None:
     """Write the epochs of ``track`` that ``seg`` owns, ROWS_PER_WRITE at a time; count them into ``out``."""
 
-    own = np.flatnonzero(seg.owns(track.t_s))
+    own = np.flatnonzero(seg.owns(track.t_s) & latest_per_time(track.t_s))
     for lo in range(0, own.size, ROWS_PER_WRITE):
         keep = np.zeros(len(track), bool)
         keep[own[lo:lo + ROWS_PER_WRITE]] = True

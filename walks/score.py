@@ -15,6 +15,7 @@ import numpy as np
 
 from features.schema import ENV_CLASSES
 from models.fusion.consistency import chi2_bounds
+from walks.track import latest_per_time
 
 __all__ = ["METRIC_COLUMNS", "track_errors", "errors_at", "metric_rows", "score"]
 
@@ -23,10 +24,11 @@ METRIC_COLUMNS = ("walk", "method", "env_class", "n", "mean_m", "median_m", "p95
 
 
 def track_errors(tr, truth) -> dict:
-    """A track (:class:`walks.track.Track`) against truth at its epochs inside the truth's span: ``t_s`` (k,),
+    """A track (:class:`walks.track.Track`) against truth at its epochs inside the truth's span (the last of each
+    instant, :func:`walks.track.latest_per_time`): ``t_s`` (k,),
     ``e`` (k, 2) east/north error, ``err_m`` (k,), ``nees`` (k,) e'P⁻¹e (NaN without a usable covariance),
     ``cls`` (k,) truth class, ``ok`` (m,) which of the track's epochs these are."""
-    ok = np.isfinite(tr.east_m) & (tr.t_s >= truth.t_s[0]) & (tr.t_s <= truth.t_s[-1])
+    ok = np.isfinite(tr.east_m) & (tr.t_s >= truth.t_s[0]) & (tr.t_s <= truth.t_s[-1]) & latest_per_time(tr.t_s)
     te, tn = truth.at(tr.t_s[ok])
     return errors_at(tr, ok, te, tn, truth.class_at(tr.t_s[ok]))
 

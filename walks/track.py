@@ -22,7 +22,7 @@ import numpy as np
 from features.geodesy import enu_to_geodetic
 from features.schema import ENV_CLASSES
 
-__all__ = ["Track", "TRACK_COLUMNS", "POSITION_COLUMNS", "track_rows", "track_columns", "rows_from_columns",
+__all__ = ["Track", "TRACK_COLUMNS", "POSITION_COLUMNS", "latest_per_time", "track_rows", "track_columns", "rows_from_columns",
            "position_columns", "track_text", "TrackWriter"]
 
 TRACK_COLUMNS = ("t_s", "time_utc", "east_m", "north_m", "lat_deg", "lon_deg", "h_ell_m", "var_east_m2",
@@ -54,6 +54,19 @@ class Track:
         info = {k: v[keep] for k, v in self.info.items() if isinstance(v, np.ndarray) and v.shape[:1] == (n,)}
         return Track(self.method, self.t_s[keep], self.east_m[keep], self.north_m[keep],
                      None if self.cov_m2 is None else self.cov_m2[keep], info)
+
+
+def latest_per_time(t_s: np.ndarray) -> np.ndarray:
+    """Which epochs of a track (time-ordered ``t_s`` (m,)) are the last at their instant, bool (m,).
+
+    A filter run has a state after every event, and a step's piece ending at a fix (:func:`walks.inputs.split_steps`)
+    and the fix are two events at one instant: the first state is superseded before the instant is over. A track
+    is written and scored at the last state of each instant only. Before 2026-12-03 it kept both: a third of a
+    filter's rows repeated a time, and its errors at fix instants (the lowest, a fix just fused) counted twice, which
+    flattered the filters against the single sources (one row per fix): on a 200 s walk ``adaptive``'s mean error
+    0.098 m with the repeats, 0.115 m without; ``adaptive+lag`` (two equal rows) 0.086 → 0.108 m."""
+    t = np.asarray(t_s, float)
+    return np.r_[t[1:] != t[:-1], True] if t.size else np.zeros(0, bool)
 
 
 def track_rows(track: Track, inputs, up_m: float = 0.0) -> list[dict]:
