@@ -108,9 +108,13 @@ def test_block_writer_gives_the_bytes_of_the_whole_text(model, walk_dir, tmp_pat
 
 def test_a_walk_of_one_segment_gives_todays_track_in_any_row_block(model, walk_dir, tmp_path, monkeypatch):
     """run's streamed path on a walk that fits in one segment writes exactly what the whole-walk path
-    (fuse_walk → track_rows → track_text, main's ``run`` before issue 25) writes, for any rows per write."""
+    (fuse_walk → track_rows → track_text, main's ``run`` before issue 25) writes, for any rows per write: the
+    last state of each instant (:func:`walks.track.latest_per_time`)."""
+    from walks.track import latest_per_time
+
     fused = fuse_walk(walk_dir, model, ("adaptive_blind",), smooth=False, truth=False)
-    want = track_text(track_rows(fused.tracks["adaptive_blind+lag"], fused.inputs), "csv")
+    track = fused.tracks["adaptive_blind+lag"]
+    want = track_text(track_rows(track.take(latest_per_time(track.t_s)), fused.inputs), "csv")
     for block in (13, 20_000):
         monkeypatch.setattr(fuse_module, "ROWS_PER_WRITE", block)
         out = tmp_path / f"b{block}.csv"
