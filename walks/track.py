@@ -1,6 +1,7 @@
 """A fused track: one method's positions over a walk, and how it is written (CSV or GeoJSON).
 
-The track file has one row per filter event (or fix, for a single source),
+The track file has one row per instant of the filter's events, the state after the last event at that
+time (:func:`latest_per_time`; one row per fix for a single source),
 columns :data:`TRACK_COLUMNS`: walk time ``t_s``, ``time_utc`` (ISO 8601,
 milliseconds), site ENU, WGS-84 latitude / longitude and ellipsoidal height,
 the position covariance, the environment class the classifier gave and its
