@@ -710,10 +710,16 @@ def test_a_segment_silent_throughout_hands_on_and_the_walk_runs_to_its_end(model
     done = fuse_to_file(walk, model, "adaptive", tmp_path / "a.csv", "csv", segment_s=60.0, force=True)
     assert done.segments == 3 and not done.skipped and done.n > 0
     assert any("walk times 60-120 s: no event in any stream" in n for n in done.notes)
+    _segments_score_as_whole(walk, model, ("adaptive_blind", "imm"))
+
+
+def _segments_score_as_whole(walk, model, methods) -> dict:
+    """evaluate's result of ``walk`` in 60 s segments, its metric rows those of the walk evaluated whole
+    (relative 1e-6: the segmented filters agree to 1e-7 m); returns the segmented result."""
     from pipeline.evaluate_segments import evaluate_segmented
 
-    res = evaluate_segmented(walk, model, ("adaptive_blind", "imm"), None, True, "w", segment_s=60.0)
-    whole = evaluate_segmented(walk, model, ("adaptive_blind", "imm"), None, True, "w", segment_s=1e6)
+    res = evaluate_segmented(walk, model, methods, None, True, "w", segment_s=60.0)
+    whole = evaluate_segmented(walk, model, methods, None, True, "w", segment_s=1e6)
     assert len(res["rows"]) == len(whole["rows"]) > 0
     for a, b in zip(res["rows"], whole["rows"]):
         assert a.keys() == b.keys()
@@ -722,6 +728,7 @@ def test_a_segment_silent_throughout_hands_on_and_the_walk_runs_to_its_end(model
                 assert v == pytest.approx(b[k], rel=1e-6, abs=1e-9, nan_ok=True), k
             else:
                 assert v == b[k], k
+    return res
 
 
 @pytest.mark.parametrize("keep", ["hole", "short"])
@@ -735,25 +742,13 @@ def test_evaluate_in_segments_scores_a_walk_whose_truth_has_a_hole_or_ends_early
     but no rows")."""
     import shutil
 
-    from pipeline.evaluate_segments import evaluate_segmented
-
     walk = tmp_path / "w"
     shutil.copytree(midnight_walk, walk)
     lines = (walk / "truth.csv").read_text().splitlines(keepends=True)
     t = [float(r.split(",", 1)[0]) for r in lines[1:]]
     cut = (lambda x: 35.0 <= x < 135.0) if keep == "hole" else (lambda x: x >= 35.0)
     (walk / "truth.csv").write_text("".join(lines[:1] + [r for r, x in zip(lines[1:], t) if not cut(x)]))
-    methods = ("adaptive_blind", "kf_quality")          # (with their +rts and +lag tracks)
-    res = evaluate_segmented(walk, model, methods, None, True, "w", segment_s=60.0)
-    whole = evaluate_segmented(walk, model, methods, None, True, "w", segment_s=1e6)
-    assert len(res["rows"]) == len(whole["rows"]) > 0
-    for a, b in zip(res["rows"], whole["rows"]):
-        assert a.keys() == b.keys()
-        for k, v in a.items():
-            if isinstance(v, float):
-                assert v == pytest.approx(b[k], rel=1e-6, abs=1e-9, nan_ok=True), k
-            else:
-                assert v == b[k], k
+    res = _segments_score_as_whole(walk, model, ("adaptive_blind", "kf_quality"))   # (+rts and +lag tracks too)
     assert any("no truth there" in n for n in res["notes"]) == (keep == "short")
 
 
