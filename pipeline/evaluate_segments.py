@@ -97,8 +97,7 @@ def _score_segment(walk, seg, fused, parts, smoothers, stack, truth_parts, windo
     if outside:
         # a cut outside the truth's span (walks.segments drops its truth): its epochs are not scored, as the
         # whole walk scores none outside its truth's span; a +rts track still takes its events
-        notes.append(f"{seg.span_text}: no truth there, so their epochs "
-                     "are not scored")
+        notes.append(f"{seg.span_text}: no truth there, so their epochs are not scored")
     for m, why in fused.skipped.items():
         skipped.setdefault(m, why)
     truth = data.truth

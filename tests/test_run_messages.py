@@ -2,6 +2,7 @@
 NMEA log that cannot be the walk's (placed a day away from it by a wrong ``start_utc`` or wrong dates)."""
 
 import shutil
+from datetime import timedelta
 
 import numpy as np
 import pytest
@@ -31,7 +32,7 @@ def test_a_log_a_day_away_from_start_utc_is_refused_with_what_is_wrong(walk_dir,
     shutil.copytree(walk_dir, walk)
     toml = (walk / "walk.toml").read_text()
     start = load_walk(walk).start_utc
-    later = start.replace(day=start.day + 1) if start.day < 28 else start.replace(day=1, month=start.month % 12 + 1)
+    later = start + timedelta(days=1)
     stamp = start.strftime("%Y-%m-%dT%H:%M:%S")
     assert stamp in toml
     (walk / "walk.toml").write_text(toml.replace(stamp, later.strftime("%Y-%m-%dT%H:%M:%S"), 1))

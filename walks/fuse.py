@@ -348,8 +348,8 @@ def fuse_to_file(walk_dir: str | os.PathLike, model: FusionModel, method: str, p
                     progress(out.segments)
                 out.notes += [n for n in fused.data.notes if n not in out.notes]
                 if fused.inputs is None:
-                    out.notes.append(f"{seg.span_text}: no event in any "
-                                     "stream (no step, GNSS or acoustic fix), so no epoch there")
+                    out.notes.append(f"{seg.span_text}: no event in any stream (no step, GNSS or acoustic fix), "
+                                     "so no epoch there")
                     continue
                 if method not in fused.tracks:
                     out.skipped.append((where, fused.skipped.get(base, "no output")))

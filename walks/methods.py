@@ -333,8 +333,7 @@ def window_at(inputs: WalkInputs, t_s: np.ndarray) -> np.ndarray:
     from features.schema import modality_columns
 
     rows = inputs.classes.row_at(t_s)
-    before = getattr(inputs, "X_before", None)
-    before = np.full(inputs.window_X.shape[1], np.nan) if before is None else before
+    before = np.full(inputs.window_X.shape[1], np.nan) if inputs.X_before is None else inputs.X_before
     X = np.vstack([before[None, :], inputs.window_X])[rows]
     flags = [np.isfinite(X[:, list(modality_columns(m))]).any(axis=1) for m in ("gnss", "acoustic")]
     return np.column_stack([np.nan_to_num(X)] + [f.astype(float) for f in flags])
