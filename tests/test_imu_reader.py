@@ -204,6 +204,35 @@ def test_a_real_huge_gap_is_rejected_with_one_line(tmp_path, capsys):
     assert d.report.n_gaps == 1 and (~d.valid).sum() == 30000     # 300.01 s at 100 Hz
 
 
+def test_a_break_of_up_to_an_hour_is_a_hole_and_a_longer_one_is_refused(tmp_path):
+    """A logger paused for 40 minutes over a break: the record on both sides of it is read on one grid, the
+    2,400.01 s between its rows 799 and 800 a hole of 240,000 samples not ``valid`` (100 Hz: the rows are
+    0.01 s apart, so the hole holds (2,400.01 − 0.01) / 0.01 samples), and PDR finds the file's steps on both
+    sides and none inside (before 2026-12-03 any gap past 600 s refused the whole record, so a walk lost its
+    PDR for a lunch break). A gap past the hour (3,600.5 s) is still refused, naming it."""
+    def moved(by):
+        def edit(rows):
+            for r in rows[800:]:
+                r[0] = f"{float(r[0]) + by:.2f}"
+        return edit
+
+    whole = run_pdr(read_imu_csv(DATA / "imu_good.csv"))
+    split_at = float(read_imu_csv(DATA / "imu_good.csv").t_s[800])
+    d = read_imu_csv(_edited(tmp_path, "break.csv", moved(2400.0)))
+    assert d.report.n_gaps == 1 and d.report.gap_total_s == pytest.approx(2400.01, abs=1e-6)
+    assert (~d.valid).sum() == 240000 and len(d) == 1567 + 240000
+    hole = (d.t_s > d.t_s[799] + 1e-6) & (d.t_s < d.t_s[799] + 2400.01 - 1e-6)
+    assert not d.valid[hole].any() and d.valid[~hole].all()
+    steps = run_pdr(d)
+    assert not np.any((steps.t_s > split_at) & (steps.t_s < split_at + 2400.0))
+    # the file's steps away from the cut (a step spanning it is lost), each 2,400 s later after it
+    far = np.abs(whole.t_s - split_at) > 1.0
+    got = np.where(steps.t_s > split_at, steps.t_s - 2400.0, steps.t_s)
+    assert all(np.min(np.abs(got - t)) < 0.02 for t in whole.t_s[far])
+    with pytest.raises(ImuError, match=r"t_s jumps by 3600.51 s .* more than 3600 s: split the record there"):
+        read_imu_csv(_edited(tmp_path, "too_long.csv", moved(3600.5)))
+
+
 def test_millisecond_timestamps_are_rejected_clearly(tmp_path, capsys):
     def edit(rows):
         for r in rows:

@@ -600,6 +600,21 @@ def test_an_imu_hole_across_a_seam_gives_the_whole_walks_track(model, midnight_w
     _segments_give_the_whole_track(walk, model, tmp_path)
 
 
+def test_a_break_of_ten_minutes_in_the_imu_log_keeps_the_walks_pdr(model, looped, tmp_path):
+    """The 11-minute looped walk without IMU rows from 25 to 640 s (615 s: a logger paused over a break). Whole,
+    the walk is read with its PDR, steps before the hole and after it and none inside; in 300 s segments (``run``'s
+    default), the track is the whole walk's. Before 2026-12-03 the reader refused any IMU record with a gap past
+    600 s: the whole walk lost its PDR (a note, no step at all), while the segments away from the hole kept theirs
+    and the two tracks parted."""
+    walk = _silenced(looped[11], tmp_path / "w", 25.0, 640.0, streams=("imu",))
+    data = read_walk(walk)
+    assert data.pdr is not None, data.notes
+    steps = data.pdr.result.t_s
+    assert np.sum(steps < 25.0) >= 10 and np.sum(steps >= 640.0) >= 10
+    assert not np.any((steps > 26.0) & (steps < 640.0))
+    _segments_give_the_whole_track(walk, model, tmp_path, segment_s=300.0)
+
+
 def test_a_cuts_keys_in_a_walk_toml_are_numbers_or_one_clear_error(midnight_walk, tmp_path):
     """The keys a long walk's cut writes into its walk.toml (``[gnss] cut_from_s``, ``date_offset_s``, ``[imu]
     cut_to_s``), found in a walk with a value that is not a number: one error naming the file and key, not a
