@@ -22,8 +22,10 @@ Repair (never an exception for a few bad samples; counts in
   time span. A gap up to an hour (a logger paused over a break in a shift) is
   a hole on the grid, flagged not ``valid``: no step in it, and the walk's
   fusion takes it for no stop (:func:`walks.inputs._imu_holes`). It costs
-  rate × gap samples (at 100 Hz and 9 channels, 26 MB for an hour), a bound
-  independent of the walk's length. (At 600 s, the default until 2026-12-03, a
+  rate × gap samples (at 100 Hz, 360,000 samples of 9 channels, 26 MB, for an
+  hour; ``run``'s peak on a 1-hour walk paused 100-3,600 s 382 MiB against 300
+  MiB unpaused, the cuts inside the hole each filling it), a bound independent
+  of the walk's length. (At 600 s, the default until 2026-12-03, a
   break of eleven minutes cost the whole walk its PDR: on a 1,000 s walk of
   the benchmark site without IMU rows from 150 to 800 s, ``run``'s mean error
   before the hole was 0.268 m without PDR, 0.046 m with it, as without the hole;
