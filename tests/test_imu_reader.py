@@ -209,7 +209,9 @@ def test_a_break_of_up_to_an_hour_is_a_hole_and_a_longer_one_is_refused(tmp_path
     2,400.01 s between its rows 799 and 800 a hole of 240,000 samples not ``valid`` (100 Hz: the rows are
     0.01 s apart, so the hole holds (2,400.01 − 0.01) / 0.01 samples), and PDR finds the file's steps on both
     sides and none inside (before 2026-12-03 any gap past 600 s refused the whole record, so a walk lost its
-    PDR for a lunch break). A gap past the hour (3,600.5 s) is still refused, naming it."""
+    PDR for a lunch break). A gap past the hour (3,600.5 s: more than 360,000 samples at 100 Hz) is still
+    refused, naming it; at 200 Hz the samples allow half an hour (1,800 s), at 1 kHz the 600 s that any rate
+    is allowed."""
     def moved(by):
         def edit(rows):
             for r in rows[800:]:
@@ -229,8 +231,18 @@ def test_a_break_of_up_to_an_hour_is_a_hole_and_a_longer_one_is_refused(tmp_path
     far = np.abs(whole.t_s - split_at) > 1.0
     got = np.where(steps.t_s > split_at, steps.t_s - 2400.0, steps.t_s)
     assert all(np.min(np.abs(got - t)) < 0.02 for t in whole.t_s[far])
-    with pytest.raises(ImuError, match=r"t_s jumps by 3600.51 s .* more than 3600 s: split the record there"):
+    with pytest.raises(ImuError, match=r"t_s jumps by 3600.51 s .* more than the 3600(\.\d+)? s filled at 100 Hz: "
+                                       r"split the record there"):
         read_imu_csv(_edited(tmp_path, "too_long.csv", moved(3600.5)))
+    for rate, ok_s, refused_s in ((200.0, 1700.0, 1900.0), (1000.0, 550.0, 650.0)):
+        n = int(rate)                           # a second before the gap and a second after it
+        t = np.r_[np.arange(n), np.arange(n) + n + ok_s * rate] / rate
+        acc = np.random.default_rng(1).normal([0.0, 0.0, -9.8], 0.05, (2 * n, 3))   # a device at rest
+        d = repair_imu(t, acc)
+        assert d.report.n_gaps == 1 and (~d.valid).sum() == round(ok_s * rate)
+        t[n:] += (refused_s - ok_s)
+        with pytest.raises(ImuError, match=f"more than the {max(600.0, 360_000 / rate):g} s filled"):
+            repair_imu(t, acc)
 
 
 def test_millisecond_timestamps_are_rejected_clearly(tmp_path, capsys):

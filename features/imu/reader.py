@@ -15,21 +15,23 @@ Repair (never an exception for a few bad samples; counts in
 - the median sample interval must give a rate in [``min_rate_hz``,
   ``max_rate_hz``] (10-2000 Hz): t_s in milliseconds (100 Hz → 0.1 Hz) is
   rejected with one clear message rather than guessed at;
-- a remaining gap longer than ``max_fill_gap_s`` (default 3600 s) is rejected
-  with one message naming it (split the file there), and so is a record
-  whose gaps would make the uniform grid more than 10× the sample count
-  (plus one ``max_fill_gap_s``): the grid is never allocated per a corrupt
-  time span. A gap up to an hour (a logger paused over a break in a shift) is
-  a hole on the grid, flagged not ``valid``: no step in it, and the walk's
-  fusion takes it for no stop (:func:`walks.inputs._imu_holes`). It costs
-  rate × gap samples (at 100 Hz, 360,000 samples of 9 channels, 26 MB, for an
-  hour; ``run``'s peak on a 1-hour walk paused 100-3,600 s 382 MiB against 300
-  MiB unpaused, the cuts inside the hole each filling it), a bound independent
-  of the walk's length. (At 600 s, the default until 2026-12-03, a
-  break of eleven minutes cost the whole walk its PDR: on a 1,000 s walk of
-  the benchmark site without IMU rows from 150 to 800 s, ``run``'s mean error
-  before the hole was 0.268 m without PDR, 0.046 m with it, as without the hole;
-  after it 0.063 → 0.022 m (0.018 m without the hole));
+- a remaining gap is filled only up to ``max_fill_gap_s`` (600 s) or, if
+  longer, as long as it fits ``max_fill_samples`` (360,000: an hour at 100 Hz,
+  half an hour at 200 Hz); a longer one is rejected with one message naming it
+  (split the file there), and so is a record whose gaps would make the uniform
+  grid more than 10× the sample count (plus that allowance): the grid is never
+  allocated per a corrupt time span. A filled gap (a logger paused over a
+  break in a shift) is a hole on the grid, flagged not ``valid``: no step in
+  it, and the walk's fusion takes it for no stop
+  (:func:`walks.inputs._imu_holes`). Its samples cost memory, a bound
+  independent of the walk's length and of the IMU's rate beyond 600 Hz (the
+  600 s allowance): 360,000 samples of 9 channels are 26 MB, and ``run``'s peak
+  on a 1-hour walk paused 100-3,600 s was 382 MiB against 300 MiB unpaused (the
+  cuts inside the hole each fill it). Until 2026-12-03 any gap past 600 s was
+  rejected, and a break of eleven minutes cost a walk its PDR: on a 1,000 s
+  walk of the benchmark site without IMU rows from 150 to 800 s, ``run``'s mean
+  error before the hole 0.268 m without PDR, 0.046 m with it, as without the
+  hole; after it 0.063 → 0.022 m (0.018 m without the hole);
 - unsorted rows are sorted (stable); duplicated timestamps keep the first row;
 - NaN / non-numeric channel values are interpolated from their neighbours;
 - clipped samples — at or beyond the stated full scale, or in runs of ≥ 3
@@ -105,7 +107,8 @@ class RepairConfig:
 
     rate_hz: float | None = None
     max_gap_s: float = 0.5
-    max_fill_gap_s: float = 3600.0
+    max_fill_gap_s: float = 600.0
+    max_fill_samples: int = 360_000
     max_clip_fill_s: float = 0.04
     min_rate_hz: float = 10.0
     max_rate_hz: float = 2000.0
@@ -121,6 +124,8 @@ class RepairConfig:
             raise ImuError(f"max_gap_s must be positive, got {self.max_gap_s}")
         if not (math.isfinite(self.max_fill_gap_s) and self.max_fill_gap_s >= self.max_gap_s):
             raise ImuError(f"max_fill_gap_s must be finite and >= max_gap_s, got {self.max_fill_gap_s}")
+        if not self.max_fill_samples >= 0:
+            raise ImuError(f"max_fill_samples must be >= 0, got {self.max_fill_samples}")
         if not (math.isfinite(self.max_clip_fill_s) and self.max_clip_fill_s >= 0):
             raise ImuError(f"max_clip_fill_s must be finite and >= 0, got {self.max_clip_fill_s}")
         if not (0 < self.min_rate_hz < self.max_rate_hz and math.isfinite(self.max_rate_hz)):
@@ -335,18 +340,19 @@ def repair_imu(t_s, acc_m_s2, gyro_rad_s=None, mag_ut=None, config: RepairConfig
         raise ImuError(f"median sample interval {median_dt:.6g} s ({1.0 / median_dt:.4g} Hz) is outside "
                        f"{config.min_rate_hz:g}-{config.max_rate_hz:g} Hz; t_s must be in seconds "
                        f"(milliseconds? divide by 1000)")
-    worst = int(np.argmax(dt_raw))
-    if dt_raw[worst] > config.max_fill_gap_s:
-        raise ImuError(f"t_s jumps by {dt_raw[worst]:.6g} s (from {t[worst]:.6g} to {t[worst + 1]:.6g} s), "
-                       f"more than {config.max_fill_gap_s:g} s: split the record there")
     rate = config.rate_hz or 1.0 / median_dt
     dt = 1.0 / rate
+    fill_s = max(config.max_fill_gap_s, config.max_fill_samples / rate)     # the longest gap filled
+    worst = int(np.argmax(dt_raw))
+    if dt_raw[worst] > fill_s:
+        raise ImuError(f"t_s jumps by {dt_raw[worst]:.6g} s (from {t[worst]:.6g} to {t[worst + 1]:.6g} s), "
+                       f"more than the {fill_s:.6g} s filled at {rate:.4g} Hz: split the record there")
     long_clip = _long_runs(sat, config.max_clip_fill_s * rate)
     gaps = dt_raw > max(config.max_gap_s, 2.5 * dt)
     report.n_gaps += int(gaps.sum())
     report.gap_total_s += float(dt_raw[gaps].sum())
     n_out = int(math.floor((t[-1] - t[0]) * rate + 1e-6)) + 1
-    n_bound = 10 * len(t) + int(rate * config.max_fill_gap_s)
+    n_bound = 10 * len(t) + int(rate * fill_s)
     if n_out > n_bound:
         raise ImuError(f"gaps fill {float(dt_raw[gaps].sum()):.6g} s of a {t[-1] - t[0]:.6g} s record with "
                        f"{len(t)} samples: resampling would need {n_out} samples (> {n_bound}); split the record")
