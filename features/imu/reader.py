@@ -23,9 +23,9 @@ Repair (never an exception for a few bad samples; counts in
   allocated per a corrupt time span. A filled gap (a logger paused over a
   break in a shift) is a hole on the grid, flagged not ``valid``: no step in
   it, and the walk's fusion takes it for no stop
-  (:func:`walks.inputs._imu_holes`). Its samples cost memory, a bound
-  independent of the walk's length and of the IMU's rate beyond 600 Hz (the
-  600 s allowance): 360,000 samples of 9 channels are 26 MB, and ``run``'s peak
+  (:func:`walks.inputs._imu_holes`). Its samples cost memory, at most
+  max(360,000, 600 s × rate) of them whatever the walk's length (the 600 s the
+  reader always filled): 360,000 samples of 9 channels are 26 MB, and ``run``'s peak
   on a 1-hour walk paused 100-3,600 s was 382 MiB against 300 MiB unpaused (the
   cuts inside the hole each fill it). Until 2026-12-03 any gap past 600 s was
   rejected, and a break of eleven minutes cost a walk its PDR: on a 1,000 s
