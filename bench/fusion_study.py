@@ -17,8 +17,9 @@ Prints, in Markdown, and writes ``<out>/study.json``:
    ``kf``, ``kf_quality``, their own environment-blind twin and the best single input, per class, with a
    95 % interval from a bootstrap over test sites (:mod:`pipeline.compare`), per-walk means first averaged
    over the seeds;
-3. sanity: ``run``'s default method (``adaptive_blind+lag``, :data:`pipeline.commands.fuse.DEFAULT_METHOD`), the
-   class-aware ``adaptive+lag`` and the zero-latency ``adaptive`` against the best single input, per class;
+3. sanity: ``run``'s default method (``kf_quality+lag``, :data:`pipeline.commands.fuse.DEFAULT_METHOD`; until
+   2026-12-03 ``adaptive_blind+lag``), the blind and class-aware context models at the same lag and the zero-latency
+   ``adaptive`` against the best single input, per class;
 4. BP: ``adaptive`` vs ``adaptive_nobp`` vs ``adaptive_correction``, and the guards' share;
 5. the oracle ceilings against ``adaptive_nobp``; 6. what tuning did on the training walks (seed 0).
 
@@ -50,9 +51,10 @@ AWARE = ("adaptive_nobp", "adaptive", "adaptive_nobp+lag", "adaptive_nobp+rts")
 TWIN = {"adaptive_nobp": "adaptive_nobp_blind", "adaptive": "adaptive_blind",
         "adaptive_nobp+lag": "adaptive_nobp_blind+lag", "adaptive_nobp+rts": "adaptive_nobp_blind+rts"}
 RIVALS = ("kf", "kf_quality", "best input")
-SANITY = ("adaptive_blind+lag", "adaptive+lag", "adaptive")
+SANITY = ("kf_quality+lag", "adaptive_blind+lag", "adaptive+lag", "adaptive")
 """The methods held to 'never worse than the best single input': run's default
-(:data:`pipeline.commands.fuse.DEFAULT_METHOD`), the class-aware one at the same lag, and the zero-latency one."""
+(:data:`pipeline.commands.fuse.DEFAULT_METHOD`; the study fails with one message if it is not listed here), the
+context model with and without the class at the same lag, and the zero-latency one."""
 
 
 def run_seed(layout, library: Path, out: Path, seed: int, env_mode: str, workers: int | None,
@@ -110,10 +112,14 @@ def _best_input(scores, env_class: str) -> str:
 
 def sanity(scores) -> list[dict]:
     """Print and return run's default method and the zero-latency one against the best single input per class."""
+    from pipeline.commands.fuse import DEFAULT_METHOD
     from pipeline.compare import compare
 
-    print("\nSanity: run's default (adaptive_blind+lag), the class-aware adaptive+lag and the zero-latency adaptive "
-          "against the best single input (must not be worse)\n")
+    if DEFAULT_METHOD not in SANITY:
+        raise SystemExit(f"fusion_study: run's default {DEFAULT_METHOD} is not among the methods held to the best "
+                         f"single input ({', '.join(SANITY)}): add it to SANITY")
+    print(f"\nSanity: run's default ({DEFAULT_METHOD}), the context models at the same lag and the zero-latency "
+          "adaptive against the best single input (must not be worse)\n")
     out = []
     for m in SANITY:
         for c in CLASSES:

@@ -87,13 +87,14 @@ def test_cli_train_run_evaluate(trained, walk_dir, tmp_path, capsys):
     rows = list(csv.DictReader(open(tmp_path / "t.csv")))
     assert len(rows) > 100 and rows[0]["time_utc"].endswith("Z") and rows[0]["env_class"] in ("open", "light", "heavy")
     assert abs(float(rows[0]["lat_deg"])) > 1 and float(rows[10]["var_east_m2"]) > 0
-    # run's default is the blind context filter's fixed-lag track: not its zero-latency one, not the class-aware one
-    for m in ("adaptive_blind+lag", "adaptive_blind", "adaptive+lag"):
+    # run's default is the quality-aware filter's fixed-lag track: not its zero-latency one, not the context
+    # model's (the default until 2026-12-03)
+    for m in ("kf_quality+lag", "kf_quality", "adaptive_blind+lag"):
         assert main(["run", str(walk_dir), "--model", str(tmp_path / "fm"), "--out", str(tmp_path / f"{m}.csv"),
                      "--method", m]) == 0
     text = (tmp_path / "t.csv").read_text()
-    assert text == (tmp_path / "adaptive_blind+lag.csv").read_text()
-    assert text != (tmp_path / "adaptive_blind.csv").read_text() and text != (tmp_path / "adaptive+lag.csv").read_text()
+    assert text == (tmp_path / "kf_quality+lag.csv").read_text()
+    assert text != (tmp_path / "kf_quality.csv").read_text() and text != (tmp_path / "adaptive_blind+lag.csv").read_text()
     assert main(["run", str(walk_dir), "--model", str(tmp_path / "fm"), "--out", str(tmp_path / "t.geojson"),
                  "--method", "kf+rts"]) == 0
     gj = json.loads((tmp_path / "t.geojson").read_text())

@@ -92,7 +92,7 @@ def test_method_choices_are_the_registry_s():
 
     parser = build_parser()
     base = ["run", "w", "--model", "m", "--out", "o.csv"]
-    assert parser.parse_args(base).method == "adaptive_blind+lag"
+    assert parser.parse_args(base).method == "kf_quality+lag"     # pipeline.commands.fuse.DEFAULT_METHOD
     assert parser.parse_args(base).segment_s is None  # the command reads walks.segments.SEGMENT_S
     for name in ("kf_quality+rts", "adaptive+lag", "fg_isam2", "foot_ins_fkf"):
         assert parser.parse_args(base + ["--method", name]).method == name

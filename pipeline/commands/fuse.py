@@ -12,23 +12,25 @@ from pipeline.args import LazyChoices, UsageError, bounded, lazy_help
 GROUP = None  # top-level commands, registered by register_top
 
 
-DEFAULT_METHOD = "adaptive_blind+lag"
-"""run's method when none is named: the context error model (GNSS bias states, outlier prior, the receiver's
-GST, the BP parameter network) *without* the environment class, as its fixed-lag track (:data:`walks.methods.LAG_S`
-late). Chosen on held-out evidence (``bench/fusion_study.py``, 5 sites × 3 walks × 3 seeds per split):
+DEFAULT_METHOD = "kf_quality+lag"
+"""run's method when none is named: the quality-aware EKF (each fix's R from what the device reports: GGA quality,
+GST, the acoustic fix's covariance) as its fixed-lag track (:data:`walks.methods.LAG_S` late). Chosen on held-out
+evidence (``bench/fusion_study.py``, 5 sites × 3 walks × 3 model seeds per split, scored one row per instant;
+2026-12-03), the rule being that a fused track must not be worse than its best single input:
 
-- it is never worse than the best single input in any class on either split (means; standard: open 0.046 vs the
-  RTK fixes' 0.056 m, light 0.132 vs 0.273 m; four weeks later: open 0.032 vs 0.041 m, light 0.186 vs 0.189 m);
-- the class-aware ``adaptive+lag`` ties it on new sites (−2.6 % [−16.5, +13.4]) and is worse four weeks later at
-  the same sites (+15.0 % [+4.2, +24.6]; open 0.051 vs the fixes' 0.041 m): per-(class, quality) error models
-  fitted on a few walks do not carry to another day's sky, and the class is wrong often enough to pick the
-  wrong one;
-- the zero-latency filters trail the RTK fixes in the open for a few seconds after each outage; the lag
-  smooths that out. A patrol track is rarely needed with zero latency (``--method adaptive_blind``).
-- its worst case: on one of the 30 held-out walks (standard 203/w0, a long heavy stretch) it drifts to 16 m
-  (mean 1.0 m, p95 6.5 m), as ``kf_quality+lag`` does (15.9 m), where the class-aware filter stays within 6.3 m
-  (mean 0.71 m): there the class's outlier prior kept it off a run of wrong fixes. One walk against two splits'
-  means; ``--method adaptive+lag`` is the choice for a site known to be mostly heavy.
+- it is better than the best single input in every class on both splits (Δ of the pooled mean, 95 % site-bootstrap
+  interval; new sites: open −54 % [−58, −36] against the RTK fixes, light −48 % [−70, −25], heavy −27 % [−65, +24]
+  against the acoustic fixes; the same sites four weeks later: open −31 % [−52, −10], light −17 % [−34, −2], heavy
+  −63 % [−69, −42]);
+- the context error model without the class, ``adaptive_blind+lag`` (the default until 2026-12-03), ties it (new
+  sites −7.3 % [−29, +16], four weeks later +1.1 % [−16, +17]) but was worse than the RTK fixes in light windows
+  four weeks later (+7.1 % [−41, +41]; 0.203 against 0.189 m), and its worst walk reaches 20.4 m (this one
+  15.9 m; both on one long heavy stretch of standard 203/w0); the class-aware ``adaptive+lag`` was worse than
+  the fixes in the open four weeks later (+42 % [−36, +97]) and worse than this filter there overall (+9.0 %
+  [+4.4, +18]), though it stays within 7.5 m on that heavy walk (``--method adaptive+lag`` for a site known to
+  be mostly heavy);
+- the zero-latency filters trail the RTK fixes in the open for a few seconds after each outage; the lag smooths
+  that out. A patrol track is rarely needed with zero latency (``--method kf_quality``).
 
 The environment class is still computed and written with every position (``env_class``, its probability)."""
 
