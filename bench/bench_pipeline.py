@@ -254,6 +254,19 @@ sorts alone, plus the other stages, leave at most 581-863x (the walk decides: ho
 re-acquires); reaching 1,000x needs less work, not less Python (an acquisition that does not vote over the
 site at every lost lock, fewer FFTs per frame), each such change judged on the fixes of held-out walks.
 
+**Issue 25, a run on 2026-12-03 evening** (every section, no flags, 16 min wall; this VM slower that evening: the
+yardstick's best of 3 1,981x in section 1 against 2,404x at the close above, 1,196x in section 4): raw files ->
+``adaptive`` on w7 298x (ratio 0.150); its stages 1.654 s CPU (363x, ratio 0.183), the receiver 1.347 s of it
+(445x, 81 %); the floor 0.403 s of the receiver's 1.131 s inside kernels, FFTs and sorts: at most 845x. ``envfuse
+run`` as a user runs it 144x (4.17 s, the interpreter and imports 1.24 s) against 134x (4.49 s, 1.53 s) at the
+close: :func:`user_env` (this VM sets ``PYTHONDONTWRITEBYTECODE``, so every child had compiled envfuse from
+source). ``evaluate`` over 16 walks: 34.1 s on 1 worker, 18.8 s on 2 (0.91); as a user runs it 0.96 (forked
+workers); a long-lived cluster with ``map_walks``' settings 0.89 warm, with Dask's defaults 0.82; fixed cost 0.46 s.
+Simulator 66.4x wall (CPU 67.5x; ratio 0.0555 to that section's slower yardstick, against 0.038-0.042 at the
+close and 0.0416 this morning at 94.8x: the machine, not the code). Memory: 10 min 277 MiB, 8 h 281 MiB (1.013),
+the 8-hour walk in 195 s (148x). ``run``'s default became ``kf_quality+lag`` after this run (README, "What the
+benchmark shows"); section 1 still measures ``adaptive`` (the heavier filter, comparable with the figures above).
+
 Usage: ``python bench/bench_pipeline.py [--quick] [--evaluate-only | --simulator-only | --memory-only]``
 (``--quick``: 2-minute walks, 4 walks; ``--evaluate-only``: 2 training walks of 120 s, then section 3 only;
 ``--simulator-only``: section 4 only, with ``--quick`` on a 120 s walk; ``--memory-only``: 2 training walks of
