@@ -16,6 +16,7 @@ import os
 import pkgutil
 import signal
 import sys
+import threading
 
 from features.errors import EnvfuseError
 from pipeline.args import UsageError
@@ -106,7 +107,29 @@ class Terminated(BaseException):
     removed by the ``except BaseException`` of :mod:`features.fileio`), and ends with status 143 (128 + 15)."""
 
 
-def _terminate(signum, frame):  # noqa: ARG001 - signal handler API
+_RETRY_S = 0.05
+"""Delay before a SIGTERM that landed inside a finalizer is sent again, s (:func:`_terminate`)."""
+
+_retries: list[threading.Timer] = []
+
+
+def _terminate(signum, frame):
+    """SIGTERM's handler: raise :class:`Terminated` where the signal landed, unless it landed inside a finalizer.
+
+    Python runs a signal's handler at the next bytecode of whatever code runs, finalizers (``__del__``) included,
+    and an exception raised inside a finalizer is printed ("Exception ignored in ...") and dropped: the command
+    then ran on to its end and exited 0, its output written. (Seen in CI: a survey's SIGTERM landed in llvmlite's
+    ``ObjectRef.__del__``.) Inside a finalizer the signal is sent again :data:`_RETRY_S` later instead, to land
+    in the code the finalizer interrupted."""
+    f = frame
+    while f is not None:
+        if f.f_code.co_name == "__del__":
+            timer = threading.Timer(_RETRY_S, os.kill, (os.getpid(), signum))
+            timer.daemon = True
+            _retries.append(timer)
+            timer.start()
+            return
+        f = f.f_back
     raise Terminated
 
 
@@ -120,6 +143,8 @@ def _sigterm_as_interrupt():
     try:
         yield
     finally:
+        while _retries:                 # a retry still pending must not reach the handler restored below
+            _retries.pop().cancel()
         signal.signal(signal.SIGTERM, previous)
 
 

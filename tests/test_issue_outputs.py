@@ -155,6 +155,34 @@ def test_sigterm_during_a_survey_leaves_nothing_behind(tmp_path):
     assert not list(tmp_path.glob(".survey*")) and not (tmp_path / "survey").exists()
 
 
+def test_a_sigterm_landing_in_a_finalizer_still_terminates():
+    """A SIGTERM whose handler runs inside a ``__del__`` (CI: a survey's, inside llvmlite's ``ObjectRef.__del__``):
+    Python drops any exception raised there, so the command ran on to its end and exited 0. The handler now sends
+    the signal again and Terminated comes out of the code the finalizer interrupted, within a second."""
+    import gc
+
+    from pipeline.cli import Terminated, _sigterm_as_interrupt
+
+    class Finalized:
+        def __del__(self):
+            os.kill(os.getpid(), signal.SIGTERM)
+            for _ in range(10_000):             # the handler runs here, inside the finalizer
+                pass
+
+    raised_at = None
+    with _sigterm_as_interrupt():
+        t0 = time.monotonic()
+        try:
+            obj = Finalized()
+            del obj
+            gc.collect()
+            while time.monotonic() - t0 < 3.0:
+                time.sleep(0.01)
+        except Terminated:
+            raised_at = time.monotonic() - t0
+    assert raised_at is not None and raised_at < 1.0, raised_at
+
+
 def test_plot_formats_follow_the_suffix(tmp_path):
     import matplotlib.pyplot as plt
 
