@@ -108,29 +108,30 @@ class Terminated(BaseException):
 
 
 _RETRY_S = 0.05
-"""Delay before a SIGTERM that landed inside a finalizer is sent again, s (:func:`_terminate`)."""
+"""Delay before a SIGTERM whose Terminated was dropped is sent again, s (:func:`_sigterm_as_interrupt`)."""
 
 _retries: list[threading.Timer] = []
 
 
-def _terminate(signum, frame):
-    """SIGTERM's handler: raise :class:`Terminated` where the signal landed, unless it landed inside a finalizer.
-
-    Python runs a signal's handler at the next bytecode of whatever code runs, finalizers (``__del__``) included,
-    and an exception raised inside a finalizer is printed ("Exception ignored in ...") and dropped: the command
-    then ran on to its end and exited 0, its output written. (Seen in CI: a survey's SIGTERM landed in llvmlite's
-    ``ObjectRef.__del__``.) Inside a finalizer the signal is sent again :data:`_RETRY_S` later instead, to land
-    in the code the finalizer interrupted."""
-    f = frame
-    while f is not None:
-        if f.f_code.co_name == "__del__":
-            timer = threading.Timer(_RETRY_S, os.kill, (os.getpid(), signum))
-            timer.daemon = True
-            _retries.append(timer)
-            timer.start()
-            return
-        f = f.f_back
+def _terminate(signum, frame):  # noqa: ARG001 - signal handler API
     raise Terminated
+
+
+def _on_unraisable(unraisable, previous) -> None:
+    """``sys.unraisablehook`` while SIGTERM is handled: a :class:`Terminated` that Python dropped is signalled again.
+
+    Python runs a signal's handler at the next bytecode of whatever code runs, finalizers (``__del__``) and garbage
+    collector callbacks included, and an exception raised there is dropped ("Exception ignored in ..."): the
+    command then ran on to its end and exited 0, its output written (seen in CI: a survey's SIGTERM landed in
+    llvmlite's ``ObjectRef.__del__``; in the test suite, in a gc callback). Such a Terminated sends SIGTERM again
+    :data:`_RETRY_S` later, to land in the code that was interrupted; any other exception goes to ``previous``."""
+    if isinstance(unraisable.exc_value, Terminated):
+        timer = threading.Timer(_RETRY_S, os.kill, (os.getpid(), signal.SIGTERM))
+        timer.daemon = True
+        _retries.append(timer)
+        timer.start()
+    else:
+        previous(unraisable)
 
 
 @contextlib.contextmanager
@@ -140,11 +141,14 @@ def _sigterm_as_interrupt():
     except ValueError:  # not the main thread: leave signals alone
         yield
         return
+    previous_hook = sys.unraisablehook
+    sys.unraisablehook = lambda unraisable: _on_unraisable(unraisable, previous_hook)
     try:
         yield
     finally:
         while _retries:                 # a retry still pending must not reach the handler restored below
             _retries.pop().cancel()
+        sys.unraisablehook = previous_hook
         signal.signal(signal.SIGTERM, previous)
 
 

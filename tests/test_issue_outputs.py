@@ -155,32 +155,52 @@ def test_sigterm_during_a_survey_leaves_nothing_behind(tmp_path):
     assert not list(tmp_path.glob(".survey*")) and not (tmp_path / "survey").exists()
 
 
-def test_a_sigterm_landing_in_a_finalizer_still_terminates():
-    """A SIGTERM whose handler runs inside a ``__del__`` (CI: a survey's, inside llvmlite's ``ObjectRef.__del__``):
-    Python drops any exception raised there, so the command ran on to its end and exited 0. The handler now sends
-    the signal again and Terminated comes out of the code the finalizer interrupted, within a second."""
+@pytest.mark.parametrize("where", ["__del__", "gc callback"])
+def test_a_sigterm_landing_in_a_finalizer_still_terminates(where):
+    """A SIGTERM whose handler runs inside a ``__del__`` (CI: a survey's, inside llvmlite's ``ObjectRef.__del__``)
+    or a gc callback (the suite: hypothesis's): Python drops any exception raised there, so the command ran on to
+    its end and exited 0. A dropped Terminated now sends the signal again, and Terminated comes out of the code
+    that was interrupted within a second; the previous unraisable hook and handler are back afterwards."""
     import gc
 
     from pipeline.cli import Terminated, _sigterm_as_interrupt
 
+    def signal_self(*_):
+        os.kill(os.getpid(), signal.SIGTERM)
+        for _ in range(10_000):                 # the handler runs here, inside the finalizer or callback
+            pass
+
     class Finalized:
         def __del__(self):
-            os.kill(os.getpid(), signal.SIGTERM)
-            for _ in range(10_000):             # the handler runs here, inside the finalizer
-                pass
+            signal_self()
+
+    fired = []
+
+    def callback(phase, info):                  # once: gc.collect() runs the callbacks at its start and end
+        if phase == "start" and not fired:
+            fired.append(phase)
+            signal_self()
 
     raised_at = None
+    hook_before, handler_before = sys.unraisablehook, signal.getsignal(signal.SIGTERM)
     with _sigterm_as_interrupt():
         t0 = time.monotonic()
         try:
-            obj = Finalized()
-            del obj
-            gc.collect()
+            if where == "__del__":
+                obj = Finalized()
+                del obj
+            else:
+                gc.callbacks.append(callback)
+                gc.collect()
             while time.monotonic() - t0 < 3.0:
                 time.sleep(0.01)
         except Terminated:
             raised_at = time.monotonic() - t0
+        finally:
+            if callback in gc.callbacks:
+                gc.callbacks.remove(callback)
     assert raised_at is not None and raised_at < 1.0, raised_at
+    assert sys.unraisablehook is hook_before and signal.getsignal(signal.SIGTERM) is handler_before
 
 
 def test_plot_formats_follow_the_suffix(tmp_path):
