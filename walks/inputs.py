@@ -211,6 +211,12 @@ def _stands(step_t: np.ndarray, end_s: float, start_s: float | None = None,
     return StandIntervals(start, end)
 
 
+def _usable_steps(r) -> np.ndarray:
+    """Which PDR steps (:class:`~features.imu.pdr.PdrResult`) the filters take: those with a length and a heading.
+    One rule for the walk's step events and for the last step a segment hands on (:func:`events_state_before`)."""
+    return np.isfinite(r.heading_rad) & np.isfinite(r.step_length_m)
+
+
 def _imu_holes(imu) -> tuple[np.ndarray, np.ndarray]:
     """(start, end) of the spans, longer than :data:`STAND_GAP_S`, where the IMU record holds no measured sample:
     the holes the reader filled on its grid (``valid`` False; :mod:`features.imu.reader`). No step can be found
@@ -308,8 +314,7 @@ def events_state_before(inputs: "WalkInputs", t_s: float, got: EventsResume | No
     pdr = inputs.data.pdr
     steps = np.zeros(0)
     if pdr is not None and len(pdr.result):
-        ok = np.isfinite(pdr.result.heading_rad) & np.isfinite(pdr.result.step_length_m)
-        steps = pdr.result.t_s[ok]
+        steps = pdr.result.t_s[_usable_steps(pdr.result)]
         steps = steps[steps < t_s]
     before = got if got is not None else EventsResume(-math.inf, -math.inf)
     return EventsResume(float(e[-1]) if e.size else before.last_event_t_s,
@@ -397,7 +402,7 @@ def walk_inputs(data: WalkData, classifier, temporal=None, smoothing: str = "for
         steps, stands = _odometry_steps(data.pdr.result, fix_t)
     elif data.pdr is not None and len(data.pdr.result):
         r = data.pdr.result
-        ok = np.isfinite(r.heading_rad) & np.isfinite(r.step_length_m)
+        ok = _usable_steps(r)
         end = data.pdr.imu.t_s[-1] if data.pdr.imu is not None and len(data.pdr.imu.t_s) else r.t_s[-1]
         # a long walk's cut: its IMU record runs to the cut's end (or the walk's IMU's), past a hole at its end
         end = max(end, _cut_to_s(data))
